@@ -1,0 +1,46 @@
+"""subtrace: ray tracing of exact Catmull-Clark and Loop subdivision surfaces.
+
+Public API: :func:`load_cage`, :func:`make_cage`, :class:`Cage`, :class:`Mesh` and the
+error types in :mod:`subtrace.errors`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+__version__ = "0.1.0"
+
+
+def _numba_cache_dir() -> None:
+    # Numba's on-disk cache only notices edits to the file of the cached function itself, not
+    # to jitted helpers it calls from other modules. Keying the cache folder on a hash of the
+    # package sources makes any change (or upgrade) start from a clean cache.
+    if "NUMBA_CACHE_DIR" in os.environ:
+        return
+    root = Path(__file__).resolve().parent
+    h = hashlib.sha1(__version__.encode())
+    for p in sorted(root.rglob("*.py")):
+        st = p.stat()
+        h.update(f"{p.relative_to(root)}:{st.st_size}:{st.st_mtime_ns}".encode())
+    base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
+    os.environ["NUMBA_CACHE_DIR"] = str(base / "subtrace" / f"numba-{h.hexdigest()[:16]}")
+
+
+_numba_cache_dir()
+
+from .cage import Cage, Mesh, load_cage, make_cage  # noqa: E402
+from .errors import ObjError, SceneError, SubtraceError, TopologyError  # noqa: E402
+
+__all__ = [
+    "Cage",
+    "Mesh",
+    "load_cage",
+    "make_cage",
+    "SubtraceError",
+    "ObjError",
+    "TopologyError",
+    "SceneError",
+    "__version__",
+]

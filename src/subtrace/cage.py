@@ -1,0 +1,260 @@
+"""The control cage: positions, faces, tags and options, and its subdivision queries.
+
+A :class:`Cage` is immutable. ``refine(level)`` gives a uniformly refined :class:`Mesh`,
+``limit(level)`` the exact limit positions and tangents of the level's vertices, and
+``evaluate(ptex_face, uv)`` the exact limit surface at parametric points (OpenSubdiv's ptex
+numbering and orientation). Refined levels are cached per cage.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import TopologyError
+from .mesh.topology import (
+    BOUNDARY_EDGE_ONLY,
+    Level,
+    Options,
+    base_edges,
+    build_level,
+    tag_base_level,
+)
+
+SCHEME_ALIASES = {
+    "catmark": "catmark",
+    "catmull-clark": "catmark",
+    "catmullclark": "catmark",
+    "catmull_clark": "catmark",
+    "cc": "catmark",
+    "loop": "loop",
+}
+
+
+@dataclass(frozen=True, eq=False)
+class Mesh:
+    """A uniformly refined mesh: points (n,3) float64, faces as sizes + flat 0-based indices."""
+
+    points: np.ndarray
+    face_sizes: np.ndarray
+    face_verts: np.ndarray
+    face_hole: np.ndarray
+    level: int
+
+    @property
+    def n_faces(self) -> int:
+        return len(self.face_sizes)
+
+
+@dataclass(frozen=True, eq=False)
+class Cage:
+    """A control cage ready for subdivision (build it with :func:`subtrace.load_cage`)."""
+
+    points: np.ndarray  # (n,3) float64
+    face_sizes: np.ndarray  # (F,) int32
+    face_verts: np.ndarray  # (sum,) int32
+    options: Options
+    base: Level
+    path: str | None = None
+    face_material: np.ndarray | None = None
+    materials: tuple = ()
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def scheme(self) -> str:
+        return self.options.scheme
+
+    @property
+    def n_faces(self) -> int:
+        return len(self.face_sizes)
+
+    @property
+    def face_hole(self) -> np.ndarray:
+        return self.base.face_hole
+
+    # ----------------------------------------------------------------------------------
+    # uniform refinement
+    # ----------------------------------------------------------------------------------
+
+    def _levels(self, level: int):
+        """[(Level, points)] for levels 0..level, computed once and cached."""
+        from .subdiv.refine import refine_level, refine_points
+
+        levels = self._cache.setdefault("levels", [(self.base, self.points, None)])
+        while len(levels) <= level:
+            lev, pts, _ = levels[-1]
+            ref = refine_level(lev, self.options)
+            levels.append((ref.child, refine_points(ref, pts), ref))
+        return levels
+
+    def refine(self, level: int) -> Mesh:
+        """Uniform refinement to ``level`` (0 is the cage itself)."""
+        level = _check_level(level)
+        lev, pts, _ = self._levels(level)[level]
+        return Mesh(
+            points=pts,
+            face_sizes=lev.face_sizes,
+            face_verts=lev.face_verts,
+            face_hole=lev.face_hole,
+            level=level,
+        )
+
+    def level_topology(self, level: int) -> Level:
+        return self._levels(_check_level(level))[level][0]
+
+    # ----------------------------------------------------------------------------------
+    # limit surface
+    # ----------------------------------------------------------------------------------
+
+    def limit(self, level: int = 0):
+        """Exact limit positions and tangents of the level-``level`` vertices.
+
+        Returns ``(P, du, dv)``, each (n,3) float64 in the order of ``refine(level).points``.
+        Tangents follow OpenSubdiv's limit-mask convention (du along the first edge of the
+        vertex's counter-clockwise ring; ``du x dv`` is the outward normal); only their
+        directions are meaningful at extraordinary vertices.
+        """
+        from .subdiv.limit import limit_points
+
+        level = _check_level(level)
+        lev, pts, _ = self._levels(level)[level]
+        return limit_points(lev, pts, self.options)
+
+    def evaluate(self, ptex_face, uv):
+        """Limit position and first derivatives at parametric points.
+
+        ``ptex_face`` (m,) int, ``uv`` (m,2) float in OpenSubdiv's ptex convention. Returns
+        ``(P, dPdu, dPdv)`` each (m,3) float64, derivatives with respect to the ptex (u,v).
+        """
+        from .patches.evaluate import evaluate
+
+        return evaluate(self, ptex_face, uv)
+
+    # ----------------------------------------------------------------------------------
+
+    def bounds(self):
+        """Axis-aligned bounds of the limit surface (the cage's hull bounds it too)."""
+        P, _, _ = self.limit(1 if self.n_faces < 200000 else 0)
+        return P.min(axis=0), P.max(axis=0)
+
+
+def _check_level(level) -> int:
+    if isinstance(level, bool) or not isinstance(level, (int, np.integer)) or level < 0:
+        raise ValueError(f"level must be a non-negative integer, got {level!r}")
+    return int(level)
+
+
+def make_cage(
+    points,
+    face_sizes,
+    face_verts,
+    scheme: str | None = None,
+    *,
+    boundary: int | None = None,
+    chaikin: bool = False,
+    smooth_triangles: bool = False,
+    crease_edges=(),
+    crease_sharpness=(),
+    corner_verts=(),
+    corner_sharpness=(),
+    hole_faces=(),
+    path=None,
+    face_material=None,
+    materials=(),
+) -> Cage:
+    """Build a :class:`Cage` from arrays (what :func:`subtrace.load_cage` does after parsing)."""
+    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    face_sizes = np.ascontiguousarray(face_sizes, dtype=np.int32)
+    face_verts = np.ascontiguousarray(face_verts, dtype=np.int32)
+    where = f"{path}: " if path else ""
+    if len(face_sizes) == 0:
+        raise TopologyError("empty", f"{where}the cage has no faces")
+    if np.any(face_sizes < 3):
+        raise TopologyError("face", f"{where}a face has fewer than 3 vertices")
+    if face_sizes.sum() != len(face_verts):
+        raise TopologyError("face", f"{where}face sizes do not match the face index list")
+    if len(face_verts) and (face_verts.min() < 0 or face_verts.max() >= len(points)):
+        raise TopologyError("index", f"{where}a face index is out of range")
+    if not np.all(np.isfinite(points)):
+        raise TopologyError("points", f"{where}a vertex coordinate is not finite")
+    all_tris = bool(np.all(face_sizes == 3))
+    if scheme is None:
+        scheme = "loop" if all_tris else "catmark"
+    key = str(scheme).strip().lower()
+    if key not in SCHEME_ALIASES:
+        raise TopologyError(
+            "scheme", f"{where}unknown scheme {scheme!r}: use 'catmark' (Catmull-Clark) or 'loop'"
+        )
+    scheme = SCHEME_ALIASES[key]
+    if scheme == "loop" and not all_tris:
+        bad = int(np.nonzero(face_sizes != 3)[0][0])
+        raise TopologyError(
+            "scheme",
+            f"{where}the Loop scheme needs an all-triangle cage, but face {bad} has "
+            f"{int(face_sizes[bad])} vertices (use scheme 'catmark')",
+        )
+    options = Options(
+        scheme=scheme,
+        boundary=BOUNDARY_EDGE_ONLY if boundary is None else int(boundary),
+        chaikin=bool(chaikin),
+        smooth_triangles=bool(smooth_triangles),
+    )
+    offsets = np.zeros(len(face_sizes) + 1, dtype=np.int64)
+    np.cumsum(face_sizes, out=offsets[1:])
+    edge_verts, face_edges, forward = base_edges(offsets, face_verts, len(points))
+    level = build_level(
+        len(points),
+        offsets,
+        face_verts,
+        edge_verts,
+        face_edges,
+        forward,
+        np.zeros(len(edge_verts), np.float32),
+        np.zeros(len(points), np.float32),
+        np.zeros(len(face_sizes), bool),
+    )
+    level = tag_base_level(
+        level,
+        options,
+        np.asarray(crease_edges, dtype=np.int64).reshape(-1, 2),
+        np.asarray(crease_sharpness, dtype=np.float32).ravel(),
+        np.asarray(corner_verts, dtype=np.int64).ravel(),
+        np.asarray(corner_sharpness, dtype=np.float32).ravel(),
+        np.asarray(hole_faces, dtype=np.int64).ravel(),
+    )
+    return Cage(
+        points=points,
+        face_sizes=face_sizes,
+        face_verts=face_verts,
+        options=options,
+        base=level,
+        path=None if path is None else str(path),
+        face_material=face_material,
+        materials=tuple(materials),
+    )
+
+
+def load_cage(path, scheme: str | None = None) -> Cage:
+    """Read an OBJ control cage (with OpenSubdiv ``t`` tags) and prepare it for subdivision."""
+    from .io.obj import read_obj
+
+    data = read_obj(path)
+    return make_cage(
+        data.points,
+        data.face_sizes,
+        data.face_verts,
+        scheme,
+        boundary=data.boundary,
+        chaikin=data.crease_method == "chaikin",
+        smooth_triangles=data.smooth_triangles == "smooth",
+        crease_edges=data.crease_edges,
+        crease_sharpness=data.crease_sharpness,
+        corner_verts=data.corner_verts,
+        corner_sharpness=data.corner_sharpness,
+        hole_faces=data.hole_faces,
+        path=Path(path),
+        face_material=data.face_material,
+        materials=data.materials,
+    )

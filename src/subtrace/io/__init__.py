@@ -1,0 +1,1 @@
+"""Readers of the files subtrace consumes: OBJ cages with OpenSubdiv tags."""

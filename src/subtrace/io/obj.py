@@ -1,0 +1,673 @@
+# subtrace.io.obj: Wavefront OBJ cages with OpenSubdiv `t` tags -> ObjData.
+#
+# Owns the text format only; topology checks beyond index ranges live in mesh/. Layout of
+# ObjData, every array C-contiguous:
+#   points (V,3) f8 from `v`; uvs (T,2) f8 from `vt`; normals (N,3) f8 from `vn`.
+#   Faces as written, never triangulated: face_sizes (F,) i4 and face_verts (sum,) i4,
+#   0-based, in file order and winding. face_uvs / face_normals (sum,) i4 are aligned with
+#   face_verts and hold -1 where a corner names no vt / vn.
+#   face_material / face_group / face_object (F,) i4 index the name tuples (-1: no material).
+#   Tags: crease_edges (k,2) i4 + crease_sharpness (k,) f4, corner_verts (c,) i4 +
+#   corner_sharpness (c,) f4, hole_faces (h,) i4, all 0-based; sharpness >= 10 is infinite.
+# Tags follow OpenSubdiv's regression reader (regression/common/shape_utils.cpp parses
+# `t name nI/nF/nS ints floats strings`, far_utils.h interprets it); see _Reader._tag.
+# Speed: one Python pass splits statements and keeps number tokens as strings; numpy
+# converts each block in bulk, and only a failed conversion walks the rows again to name
+# the first bad line.
+
+from __future__ import annotations
+
+import bisect
+import math
+import os
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from subtrace.errors import ObjError, SubtraceWarning
+
+DEFAULT_NAME = "default"  # group / object of faces before any `g` / `o`
+DEFAULT_DIFFUSE = (0.8, 0.8, 0.8)  # Kd of a material with no (readable) definition
+
+BOUNDARY_NONE = 0  # Sdc VTX_BOUNDARY_NONE
+BOUNDARY_EDGE_AND_CORNER = 1  # Sdc VTX_BOUNDARY_EDGE_AND_CORNER
+BOUNDARY_EDGE_ONLY = 2  # Sdc VTX_BOUNDARY_EDGE_ONLY (OpenSubdiv's default)
+
+_CREASE_METHODS = {"normal": "uniform", "chaikin": "chaikin"}
+_SMOOTH_TRIANGLES = ("catmark", "smooth")
+_TAGS = frozenset(
+    ("crease", "corner", "hole", "interpolateboundary", "creasemethod", "smoothtriangles")
+)
+# Free-form geometry and its body statements: polygons only are read.
+_FREEFORM = frozenset(
+    "cstype deg bmat step curv curv2 surf parm trim hole scrv sp end con vp".split()
+)
+
+
+@dataclass(frozen=True)
+class Material:
+    """A material named by `usemtl`: its name and `Kd` diffuse colour (linear RGB, 0..1)."""
+
+    name: str
+    diffuse: tuple[float, float, float]
+
+
+@dataclass(frozen=True, eq=False)
+class ObjData:
+    """Everything read from one OBJ file (see the module comment for the array layout)."""
+
+    path: str
+    points: np.ndarray  # (V,3) float64
+    face_sizes: np.ndarray  # (F,) int32
+    face_verts: np.ndarray  # (sum,) int32, 0-based
+    uvs: np.ndarray  # (T,2) float64
+    face_uvs: np.ndarray  # (sum,) int32, -1 where absent
+    normals: np.ndarray  # (N,3) float64
+    face_normals: np.ndarray  # (sum,) int32, -1 where absent
+    face_material: np.ndarray  # (F,) int32 into materials, -1 where none
+    materials: tuple  # tuple[Material, ...]
+    face_group: np.ndarray  # (F,) int32 into groups
+    groups: tuple  # tuple[str, ...]
+    face_object: np.ndarray  # (F,) int32 into objects
+    objects: tuple  # tuple[str, ...]
+    crease_edges: np.ndarray  # (k,2) int32 vertex pairs
+    crease_sharpness: np.ndarray  # (k,) float32
+    corner_verts: np.ndarray  # (c,) int32
+    corner_sharpness: np.ndarray  # (c,) float32
+    hole_faces: np.ndarray  # (h,) int32
+    boundary: int | None  # BOUNDARY_*; None without an interpolateboundary tag
+    crease_method: str | None  # "uniform" | "chaikin"; None without a creasemethod tag
+    smooth_triangles: str | None  # "catmark" | "smooth"; None without a smoothtriangles tag
+    warnings: tuple  # tuple[str, ...], each "path:line: message"
+
+
+def read_obj(path) -> ObjData:
+    """Read an OBJ file (UTF-8) with its MTL libraries and OpenSubdiv tags.
+
+    Raises ObjError naming the file, the 1-based line and the problem for anything malformed.
+    Ignored statements and missing MTL files become warnings: returned in `warnings` and
+    emitted as SubtraceWarning.
+    """
+    path = os.fspath(path)
+    if isinstance(path, bytes):
+        path = os.fsdecode(path)
+    text = _decode(path, _read_bytes(path))
+    data = _Reader(path).read(text)
+    for message in data.warnings:
+        warnings.warn(message, SubtraceWarning, stacklevel=2)
+    return data
+
+
+def _read_bytes(path: str) -> bytes:
+    try:
+        return Path(path).read_bytes()
+    except IsADirectoryError:
+        raise ObjError(path, None, "is a directory, expected an OBJ file") from None
+    except FileNotFoundError:
+        raise ObjError(path, None, "no such file") from None
+    except PermissionError:
+        raise ObjError(path, None, "cannot read the file: permission denied") from None
+    except OSError as err:
+        raise ObjError(path, None, f"cannot read the file: {err.strerror or err}") from None
+
+
+def _decode(path: str, data: bytes) -> str:
+    """UTF-8 text without a byte-order mark; a bad byte is an error naming its line."""
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        line = data.count(b"\n", 0, err.start) + 1
+        column = err.start - (data.rfind(b"\n", 0, err.start) + 1) + 1
+        raise ObjError(
+            path,
+            line,
+            f"byte 0x{data[err.start]:02x} at column {column} is not valid UTF-8; "
+            "save the file as UTF-8",
+        ) from None
+
+
+def _logical_lines(text: str):
+    """Statements with `\\` continuations joined, and the first physical line of each."""
+    if "\r" in text:
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    lines = text.split("\n")
+    if "\\" not in text:
+        return lines, range(1, len(lines) + 1)
+    joined, numbers = [], []
+    pending, start = None, 0
+    for number, line in enumerate(lines, 1):
+        if pending is None:
+            start = number
+        stripped = line.rstrip()
+        # A comment line never continues; any other line ending in `\` does.
+        if stripped.endswith("\\") and not (pending is None and stripped.lstrip()[:1] == "#"):
+            piece = stripped[:-1]
+            pending = piece if pending is None else f"{pending} {piece}"
+            continue
+        joined.append(line if pending is None else f"{pending} {line}")
+        numbers.append(start)
+        pending = None
+    if pending is not None:
+        joined.append(pending)
+        numbers.append(start)
+    return joined, numbers
+
+
+def _runs_to_array(runs: list, num_faces: int, ids: dict) -> np.ndarray:
+    """Per-face int32 ids from (first face, key) runs; keys get ids in order of first use."""
+    out = np.empty(num_faces, dtype=np.int32)
+    for k, (first, key) in enumerate(runs):
+        last = runs[k + 1][0] if k + 1 < len(runs) else num_faces
+        if last > first:
+            out[first:last] = -1 if key is None else ids.setdefault(key, len(ids))
+    return out
+
+
+class _Reader:
+    """One pass over the statements, then bulk conversion and validation."""
+
+    def __init__(self, path: str):
+        self.path = path
+        self.folder = Path(path).parent
+        self.warnings: list[tuple[int, str]] = []  # (OBJ line for ordering, message)
+        # Number tokens, kept as strings until the bulk conversion, and their lines.
+        self.point_tokens: list[str] = []
+        self.point_lines: list[int] = []
+        self.uv_tokens: list[str] = []
+        self.uv_lines: list[int] = []
+        self.normal_tokens: list[str] = []
+        self.normal_lines: list[int] = []
+        # Face corners: vertex / vt / vn index tokens, "" where absent.
+        self.corner_v: list[str] = []
+        self.corner_t: list[str] = []
+        self.corner_n: list[str] = []
+        self.face_sizes: list[int] = []
+        self.face_lines: list[int] = []
+        # (first face, key) runs of the active group / object / material name.
+        self.group_runs: list = [(0, DEFAULT_NAME)]
+        self.object_runs: list = [(0, DEFAULT_NAME)]
+        self.material_runs: list = [(0, None)]
+        self.material_first_use: dict[str, int] = {}  # usemtl name -> line of first use
+        self.mtl_diffuse: dict[str, tuple] = {}  # materials defined by MTL files, in order
+        self.unknown: dict[str, list] = {}  # keyword -> [first line, count]
+        # Tags, already validated except for index ranges.
+        self.creases: list = []  # (line, pairs (k,2), sharpness (k,))
+        self.corners: list = []  # (line, verts (c,), sharpness (c,))
+        self.holes: list = []  # (line, faces (h,))
+        self.boundary = None
+        self.crease_method = None
+        self.smooth_triangles = None
+
+    def fail(self, line, problem):
+        raise ObjError(self.path, line, problem)
+
+    def warn(self, line, message, where=None):
+        self.warnings.append((line, f"{where or self.path}:{line}: {message}"))
+
+    # -- the pass over statements --------------------------------------------------------
+
+    def read(self, text: str) -> ObjData:
+        lines, numbers = _logical_lines(text)
+        try:
+            self._scan(lines, numbers)
+        except ObjError:
+            # Bad numbers in earlier v / f lines are only found by the bulk conversion:
+            # report those first so the error is always the earliest line.
+            self._convert(check_forward=False)
+            raise
+        if not self.face_sizes:
+            empty = not any(line.split() for line in lines)
+            self.fail(None, "empty file: no faces" if empty else "no faces (no `f` statements)")
+        return self._finish(*self._convert(check_forward=True))
+
+    def _scan(self, lines, numbers):
+        point_tokens, point_lines = self.point_tokens, self.point_lines
+        corner_v, corner_t, corner_n = self.corner_v, self.corner_t, self.corner_n
+        face_sizes, face_lines = self.face_sizes, self.face_lines
+        for number, line in zip(numbers, lines):
+            if "#" in line:
+                line = line[: line.index("#")]
+            parts = line.split()
+            if not parts:
+                continue
+            keyword = parts[0]
+            if keyword == "v":
+                # x y z, then an optional w or r g b that are ignored.
+                if len(parts) < 4:
+                    self.fail(number, f"v needs 3 coordinates x y z, got {len(parts) - 1}")
+                point_tokens += parts[1:4]
+                point_lines.append(number)
+            elif keyword == "f":
+                size = len(parts) - 1
+                if size < 3:
+                    self.fail(number, f"face has {size} vertices; a face needs at least 3")
+                if "/" in line:
+                    # Split every corner before storing any, so a bad face leaves no trace.
+                    fields = [corner.split("/") for corner in parts[1:]]
+                    for corner, field in zip(parts[1:], fields):
+                        if len(field) > 3:
+                            self.fail(
+                                number,
+                                f"face corner '{corner}' has too many '/': "
+                                "expected v, v/vt, v//vn or v/vt/vn",
+                            )
+                    corner_v += [field[0] for field in fields]
+                    corner_t += [field[1] if len(field) > 1 else "" for field in fields]
+                    corner_n += [field[2] if len(field) > 2 else "" for field in fields]
+                else:
+                    corner_v += parts[1:]
+                    absent = [""] * size
+                    corner_t += absent
+                    corner_n += absent
+                face_sizes.append(size)
+                face_lines.append(number)
+            elif keyword == "vt":
+                # u [v [w]]: v defaults to 0, w is ignored.
+                if len(parts) < 2:
+                    self.fail(number, "vt needs texture coordinates u [v [w]], got none")
+                self.uv_tokens += (parts[1], parts[2] if len(parts) > 2 else "0")
+                self.uv_lines.append(number)
+            elif keyword == "vn":
+                if len(parts) < 4:
+                    self.fail(number, f"vn needs 3 coordinates x y z, got {len(parts) - 1}")
+                self.normal_tokens += parts[1:4]
+                self.normal_lines.append(number)
+            elif keyword == "t":
+                self._tag(number, parts)
+            elif keyword == "g":
+                self.group_runs.append((len(face_sizes), " ".join(parts[1:]) or DEFAULT_NAME))
+            elif keyword == "o":
+                self.object_runs.append((len(face_sizes), " ".join(parts[1:]) or DEFAULT_NAME))
+            elif keyword == "usemtl":
+                # `usemtl` without a name ends the active material.
+                name = " ".join(parts[1:]) or None
+                if name is not None:
+                    self.material_first_use.setdefault(name, number)
+                self.material_runs.append((len(face_sizes), name))
+            elif keyword == "mtllib":
+                self._mtllib(number, line.split(None, 1)[1].strip() if len(parts) > 1 else "")
+            elif keyword == "s":
+                pass  # smoothing groups do not affect subdivision surfaces
+            else:
+                seen = self.unknown.setdefault(keyword, [number, 0])
+                seen[1] += 1
+
+    # -- OpenSubdiv tags -----------------------------------------------------------------
+
+    def _tag(self, number, parts):
+        """Validate one `t name nI/nF/nS ints floats strings` line and record it.
+
+        Semantics as OpenSubdiv's far_utils.h applies shape_utils.cpp's tags; unlike
+        OpenSubdiv, which skips or misreads malformed tags silently, every problem is an error.
+        """
+        if len(parts) < 2:
+            self.fail(number, "t needs a tag name: t <name> <nInts>/<nFloats>/<nStrings> ...")
+        name = parts[1]
+        if name.lower().startswith("facevarying"):
+            self.warn(number, f"tag '{name}' ignored: subtrace interpolates no face-varying data")
+            return
+        if name not in _TAGS:
+            self.warn(number, f"unknown tag '{name}' ignored (known: {', '.join(sorted(_TAGS))})")
+            return
+        header = parts[2].split("/") if len(parts) > 2 else []
+        if len(header) != 3 or not all(h.isascii() and h.isdigit() for h in header):
+            got = f"'{parts[2]}'" if len(parts) > 2 else "nothing"
+            self.fail(
+                number,
+                f"tag '{name}': count header must be nInts/nFloats/nStrings (e.g. 2/1/0), "
+                f"got {got}",
+            )
+        n_ints, n_floats, n_strings = (int(h) for h in header)
+        values = parts[3:]
+        if len(values) != n_ints + n_floats + n_strings:
+            self.fail(
+                number,
+                f"tag '{name}': count header {parts[2]} announces "
+                f"{n_ints + n_floats + n_strings} values but the line has {len(values)}",
+            )
+        ints = []
+        for token in values[:n_ints]:
+            try:
+                ints.append(int(token))
+            except ValueError:
+                self.fail(number, f"tag '{name}': '{token}' is not an integer")
+        floats = []
+        for token in values[n_ints : n_ints + n_floats]:
+            try:
+                value = float(token)
+            except ValueError:
+                value = math.nan
+            if math.isnan(value):
+                self.fail(number, f"tag '{name}': '{token}' is not a number")
+            floats.append(value)
+        strings = values[n_ints + n_floats :]
+        counts = (n_ints, n_floats, n_strings)
+
+        if name in ("crease", "corner"):
+            # OpenSubdiv reads crease ints pairwise, (v0 v1) (v2 v3) ..., and both tags take
+            # one sharpness for all or one per edge / vertex.
+            items = n_ints // 2 if name == "crease" else n_ints
+            if name == "crease" and (n_ints < 2 or n_ints % 2):
+                self.fail(
+                    number,
+                    "tag 'crease' needs pairs of vertex indices v0 v1 [v2 v3 ...] "
+                    f"(one pair per edge), got {n_ints} integers",
+                )
+            if name == "corner" and n_ints < 1:
+                self.fail(number, "tag 'corner' needs at least one vertex index")
+            if n_floats not in (1, items) or n_strings:
+                per = "edge" if name == "crease" else "vertex"
+                self.fail(
+                    number,
+                    f"tag '{name}' needs 1 sharpness value or one per {per} ({items}) and "
+                    f"no strings, got {n_floats} floats and {n_strings} strings",
+                )
+            for value in floats:
+                if value < 0.0:
+                    self.fail(number, f"tag '{name}': negative sharpness {value:g}")
+            sharpness = np.array(floats * items if n_floats == 1 else floats, dtype=np.float32)
+            if name == "crease":
+                pairs = np.array(ints, dtype=np.int64).reshape(-1, 2)
+                loops = pairs[pairs[:, 0] == pairs[:, 1]]
+                if len(loops):
+                    self.fail(number, f"tag 'crease': edge {loops[0][0]} {loops[0][1]} "
+                              "joins a vertex to itself")
+                self.creases.append((number, pairs, sharpness))
+            else:
+                self.corners.append((number, np.array(ints, dtype=np.int64), sharpness))
+        elif name == "hole":
+            if n_floats or n_strings:
+                self.fail(number, f"tag 'hole' takes face indices only (n/0/0), got {parts[2]}")
+            self.holes.append((number, np.array(ints, dtype=np.int64)))
+        elif name == "interpolateboundary":
+            if counts != (1, 0, 0):
+                self.fail(
+                    number,
+                    "tag 'interpolateboundary' expects 1/0/0 and one integer: 0 (none), "
+                    f"1 (edge and corner) or 2 (edge only); got {parts[2]}",
+                )
+            if ints[0] not in (BOUNDARY_NONE, BOUNDARY_EDGE_AND_CORNER, BOUNDARY_EDGE_ONLY):
+                self.fail(
+                    number,
+                    f"tag 'interpolateboundary': unknown value {ints[0]}, expected 0 (none), "
+                    "1 (edge and corner) or 2 (edge only)",
+                )
+            self.boundary = ints[0]
+        elif name == "creasemethod":
+            if counts != (0, 0, 1) or strings[0] not in _CREASE_METHODS:
+                got = strings[0] if counts == (0, 0, 1) else parts[2]
+                self.fail(
+                    number,
+                    "tag 'creasemethod' expects 0/0/1 and the string 'normal' or 'chaikin', "
+                    f"got unknown '{got}'",
+                )
+            self.crease_method = _CREASE_METHODS[strings[0]]
+        else:  # smoothtriangles
+            if counts != (0, 0, 1) or strings[0] not in _SMOOTH_TRIANGLES:
+                got = strings[0] if counts == (0, 0, 1) else parts[2]
+                self.fail(
+                    number,
+                    "tag 'smoothtriangles' expects 0/0/1 and the string 'catmark' or "
+                    f"'smooth', got unknown '{got}'",
+                )
+            self.smooth_triangles = strings[0]
+
+    # -- material libraries --------------------------------------------------------------
+
+    def _mtllib(self, number, names: str):
+        if not names:
+            self.warn(number, "mtllib without a file name ignored")
+            return
+        # A name containing spaces is taken whole when such a file exists.
+        try:
+            whole = (self.folder / names).is_file()
+        except (OSError, ValueError):
+            whole = False
+        files = [names] if whole else names.split()
+        for name in files:
+            mtl_path = self.folder / name
+            try:
+                data = mtl_path.read_bytes()
+            except (OSError, ValueError) as err:
+                reason = ("no such file" if isinstance(err, FileNotFoundError)
+                          else getattr(err, "strerror", None) or str(err))
+                self.warn(number, f"material library '{name}' not read ({reason}); "
+                          f"its materials get diffuse {DEFAULT_DIFFUSE}")
+                continue
+            try:
+                text = data.decode("utf-8-sig")
+            except UnicodeDecodeError:
+                self.warn(number, f"material library '{name}' is not valid UTF-8; "
+                          "undecodable bytes replaced")
+                text = data.decode("utf-8", errors="replace")
+            self._parse_mtl(number, str(mtl_path), text)
+
+    def _parse_mtl(self, obj_line, mtl_path: str, text: str):
+        """Read `newmtl` and `Kd` statements; other MTL statements do not matter here."""
+        current = None
+        for number, line in enumerate(text.replace("\r", "\n").split("\n"), 1):
+            if "#" in line:
+                line = line[: line.index("#")]
+            parts = line.split()
+            if not parts:
+                continue
+            if parts[0] == "newmtl":
+                current = " ".join(parts[1:])
+                if not current:
+                    raise ObjError(mtl_path, number, "newmtl needs a material name")
+                self.mtl_diffuse[current] = DEFAULT_DIFFUSE
+            elif parts[0] == "Kd":
+                if current is None:
+                    self.warnings.append(
+                        (obj_line, f"{mtl_path}:{number}: Kd before any newmtl ignored"))
+                elif parts[1:2] in (["spectral"], ["xyz"]):
+                    self.warnings.append(
+                        (obj_line, f"{mtl_path}:{number}: Kd {parts[1]} is not supported; "
+                                   f"diffuse of '{current}' stays {DEFAULT_DIFFUSE}"))
+                else:
+                    try:
+                        rgb = [float(token) for token in parts[1:]]
+                    except ValueError:
+                        rgb = []
+                    if len(rgb) not in (1, 3) or not all(math.isfinite(c) for c in rgb):
+                        raise ObjError(
+                            mtl_path, number,
+                            f"Kd needs 3 numbers r g b (or 1 for grey), got '{' '.join(parts[1:])}'",
+                        )
+                    self.mtl_diffuse[current] = tuple(rgb * 3 if len(rgb) == 1 else rgb)
+
+    # -- bulk conversion -----------------------------------------------------------------
+
+    def _convert(self, check_forward: bool):
+        """Number blocks -> arrays; raises the earliest bad line over all blocks.
+
+        check_forward: also check positive indices against the final element counts (off
+        while reporting errors of a partial scan, where later lines may define them).
+        """
+        sizes = np.array(self.face_sizes, dtype=np.int64)
+        face_lines = np.array(self.face_lines, dtype=np.int64)
+        steps = [
+            lambda: self._floats(self.point_tokens, self.point_lines, 3, "v"),
+            lambda: self._floats(self.uv_tokens, self.uv_lines, 2, "vt"),
+            lambda: self._floats(self.normal_tokens, self.normal_lines, 3, "vn"),
+            lambda: self._indices(self.corner_v, self.point_lines, sizes, face_lines,
+                                  "vertex", "v", check_forward),
+            lambda: self._indices(self.corner_t, self.uv_lines, sizes, face_lines,
+                                  "texture coordinate", "vt", check_forward),
+            lambda: self._indices(self.corner_n, self.normal_lines, sizes, face_lines,
+                                  "normal", "vn", check_forward),
+        ]
+        results, errors = [], []
+        for step in steps:
+            try:
+                results.append(step())
+            except ObjError as err:
+                errors.append(err)
+        if errors:
+            raise min(errors, key=lambda err: err.line)
+        return results
+
+    def _floats(self, tokens, lines, width, keyword) -> np.ndarray:
+        """(n, width) float64 from n rows of `width` tokens, all finite."""
+        try:
+            values = np.array(tokens, dtype=np.float64)
+            good = bool(np.isfinite(values).all())
+        except (ValueError, OverflowError):
+            good = False
+        if good:
+            return values.reshape(-1, width)
+        for row, number in enumerate(lines):
+            for token in tokens[row * width : (row + 1) * width]:
+                try:
+                    value = float(token)
+                except ValueError:
+                    self.fail(number, f"{keyword}: '{token}' is not a number")
+                if not math.isfinite(value):
+                    self.fail(number, f"{keyword}: '{token}' is not a finite number "
+                              "(nan, inf or too large for a double)")
+        self.fail(lines[0] if lines else None, f"cannot convert the {keyword} values")
+
+    def _indices(self, tokens, element_lines, sizes, face_lines, what, keyword,
+                 check_forward) -> np.ndarray:
+        """0-based int32 corner indices; "" tokens become -1 (absent vt / vn)."""
+        total = len(element_lines)
+        if keyword != "v" and not any(tokens):
+            return np.full(len(tokens), -1, dtype=np.int32)
+        try:
+            raw_tokens = np.array(tokens, dtype=str)
+            present = raw_tokens != ""
+            raw = np.zeros(len(tokens), dtype=np.int64)
+            raw[present] = raw_tokens[present].astype(np.int64)
+        except (ValueError, OverflowError):
+            self._bad_index(tokens, element_lines, sizes, face_lines, what, keyword,
+                            check_forward)
+        # Negative indices count back from the elements read before the face's line.
+        before = np.searchsorted(np.array(element_lines, dtype=np.int64), face_lines)
+        resolved = np.where(raw < 0, raw + np.repeat(before, sizes), raw - 1)
+        bad = (present & (raw == 0)) | (present & (resolved < 0))
+        if keyword == "v":
+            bad |= ~present
+        if check_forward:
+            bad |= present & (resolved >= total)
+        if bad.any():
+            self._bad_index(tokens, element_lines, sizes, face_lines, what, keyword,
+                            check_forward)
+        resolved[~present] = -1
+        return resolved.astype(np.int32)
+
+    def _bad_index(self, tokens, element_lines, sizes, face_lines, what, keyword,
+                   check_forward):
+        """Walk the corners in file order and raise the first bad index."""
+        total = len(element_lines)
+        start = 0
+        for size, number in zip(sizes.tolist(), face_lines.tolist()):
+            for token in tokens[start : start + size]:
+                if token == "":
+                    if keyword == "v":
+                        self.fail(number, "face corner without a vertex index")
+                    continue
+                try:
+                    index = int(token)
+                except ValueError:
+                    self.fail(number, f"{what} index '{token}' is not an integer")
+                if index == 0:
+                    self.fail(number, f"{what} index 0 is invalid: OBJ indices start at 1 "
+                              f"(negative ones count back from the last {keyword})")
+                if index < 0:
+                    before = bisect.bisect_left(element_lines, number)
+                    if index + before < 0:
+                        self.fail(number, f"relative {what} index {index} out of range: "
+                                  f"only {before} {keyword} lines before this face")
+                elif check_forward and index > total:
+                    self.fail(number, f"{what} index {index} out of range: the file has "
+                              f"{total} {keyword} lines")
+            start += size
+        self.fail(face_lines[0] if len(face_lines) else None,
+                  f"cannot convert the {what} indices")
+
+    # -- assembly ------------------------------------------------------------------------
+
+    def _finish(self, points, uvs, normals, face_verts, face_uvs, face_normals) -> ObjData:
+        num_faces = len(self.face_sizes)
+        num_points = len(points)
+
+        crease_edges = (np.concatenate([p for _, p, _ in self.creases])
+                        if self.creases else np.zeros((0, 2), np.int64))
+        corner_verts = (np.concatenate([v for _, v, _ in self.corners])
+                        if self.corners else np.zeros(0, np.int64))
+        hole_faces = (np.concatenate([f for _, f in self.holes])
+                      if self.holes else np.zeros(0, np.int64))
+        # Tag indices are 0-based; they can only be checked once the whole file is read.
+        checks = ([(n, "crease", p.ravel(), "vertex", num_points) for n, p, _ in self.creases]
+                  + [(n, "corner", v, "vertex", num_points) for n, v, _ in self.corners]
+                  + [(n, "hole", f, "face", num_faces) for n, f in self.holes])
+        for number, name, indices, what, count in sorted(checks, key=lambda c: c[0]):
+            bad = indices[(indices < 0) | (indices >= count)]
+            if len(bad):
+                self.fail(number, f"tag '{name}': {what} index {bad[0]} out of range: the "
+                          f"file has {count} {what}s (tag indices are 0-based)")
+
+        # Materials: every MTL definition in order, then names used but never defined.
+        local_ids: dict = {}
+        face_material = _runs_to_array(self.material_runs, num_faces, local_ids)
+        diffuse = dict(self.mtl_diffuse)
+        for name, number in self.material_first_use.items():
+            if name not in diffuse:
+                diffuse[name] = DEFAULT_DIFFUSE
+                self.warn(number, f"material '{name}' is not defined in any material "
+                          f"library; using diffuse {DEFAULT_DIFFUSE}")
+        materials = tuple(Material(name, tuple(float(c) for c in rgb))
+                          for name, rgb in diffuse.items())
+        if local_ids:
+            material_ids = {name: k for k, name in enumerate(diffuse)}
+            remap = np.array([material_ids[name] for name in local_ids], dtype=np.int32)
+            face_material = np.where(face_material >= 0, remap[face_material], -1)
+
+        group_ids: dict = {}
+        face_group = _runs_to_array(self.group_runs, num_faces, group_ids)
+        object_ids: dict = {}
+        face_object = _runs_to_array(self.object_runs, num_faces, object_ids)
+
+        for keyword, (number, count) in self.unknown.items():
+            kind = ("free-form geometry statement" if keyword in _FREEFORM
+                    else "unsupported statement")
+            more = f" ({count} lines)" if count > 1 else ""
+            self.warn(number, f"{kind} '{keyword}' ignored{more}")
+        self.warnings.sort(key=lambda w: w[0])
+
+        def i32(a):
+            return np.ascontiguousarray(a, dtype=np.int32)
+
+        crease_sharpness = (np.concatenate([s for _, _, s in self.creases])
+                            if self.creases else np.zeros(0, np.float32))
+        corner_sharpness = (np.concatenate([s for _, _, s in self.corners])
+                            if self.corners else np.zeros(0, np.float32))
+        return ObjData(
+            path=self.path,
+            points=np.ascontiguousarray(points, dtype=np.float64),
+            face_sizes=i32(self.face_sizes),
+            face_verts=i32(face_verts),
+            uvs=np.ascontiguousarray(uvs, dtype=np.float64),
+            face_uvs=i32(face_uvs),
+            normals=np.ascontiguousarray(normals, dtype=np.float64),
+            face_normals=i32(face_normals),
+            face_material=i32(face_material),
+            materials=materials,
+            face_group=i32(face_group),
+            groups=tuple(group_ids),
+            face_object=i32(face_object),
+            objects=tuple(object_ids),
+            crease_edges=i32(crease_edges).reshape(-1, 2),
+            crease_sharpness=np.ascontiguousarray(crease_sharpness, dtype=np.float32),
+            corner_verts=i32(corner_verts),
+            corner_sharpness=np.ascontiguousarray(corner_sharpness, dtype=np.float32),
+            hole_faces=i32(hole_faces),
+            boundary=self.boundary,
+            crease_method=self.crease_method,
+            smooth_triangles=self.smooth_triangles,
+            warnings=tuple(message for _, message in self.warnings),
+        )

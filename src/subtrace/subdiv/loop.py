@@ -1,0 +1,59 @@
+"""Loop masks (OpenSubdiv Sdc::Scheme<LOOP>): weights only, no topology.
+
+Edge masks weight the two endpoints and the vertex opposite the edge in each incident
+triangle; vertex masks weight the vertex and the far ends of its incident edges. Catmull-
+Clark's module has the same names.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+REGULAR_VALENCE = 6
+
+
+@nb.njit(cache=True)
+def _beta(valence):
+    # OpenSubdiv evaluates this cosine in single precision (cosf)
+    inv = 1.0 / valence
+    c = math.cos(math.pi * 2.0 * inv)
+    return 0.25 * c + 0.375
+
+
+@nb.njit(cache=True)
+def smooth_edge_weights(n_faces, tri0, tri1, smooth_triangles):
+    """(endpoint weight, weight of each opposite vertex) of a smooth edge point."""
+    if n_faces == 2:
+        return 0.375, 0.125
+    return 0.375, 0.125 * 2.0 / n_faces
+
+
+@nb.njit(cache=True)
+def smooth_vertex_weights(valence):
+    """(vertex, each edge end, face point = 0) weights of the smooth vertex rule."""
+    if valence == 6:
+        return 0.625, 0.0625, 0.0
+    b = _beta(valence)
+    ew = (0.625 - b * b) / valence
+    return 1.0 - ew * valence, ew, 0.0
+
+
+@nb.njit(cache=True)
+def smooth_limit_weights(valence):
+    """(vertex, each edge end, 0) weights of the smooth limit position."""
+    if valence == 6:
+        return 0.5, 1.0 / 12.0, 0.0
+    b = _beta(valence)
+    b = (0.625 - b * b) / valence
+    ew = 1.0 / (valence + 3.0 / (8.0 * b))
+    return 1.0 - ew * valence, ew, 0.0
+
+
+def smooth_tangent_weights(valence: int):
+    """Weights of the first limit tangent over the ordered ring of edge ends: (edge (n,), None)."""
+    n = valence
+    i = np.arange(n)
+    return np.cos(2.0 * math.pi * i / n), None
