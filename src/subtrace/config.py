@@ -4,5 +4,9 @@
 SHARPNESS_INFINITE = 10.0
 
 # Exact evaluation: deepest local subdivision before a point is taken as the limit of its
-# extraordinary corner (2^-60 of a ptex face is far below double precision of any model).
-EVAL_MAX_DEPTH = 60
+# extraordinary corner: 2^-24 of a ptex face, whose squared size is below double precision.
+EVAL_MAX_DEPTH = 24
+
+# Step (in ptex units) of the finite differences that give derivatives where no exact
+# bicubic patch is reached (Loop, creases, boundaries).
+EVAL_FD_STEP = 2.0**-16

@@ -35,6 +35,8 @@ BOUNDARY_NONE = 0  # Sdc VTX_BOUNDARY_NONE
 BOUNDARY_EDGE_AND_CORNER = 1  # Sdc VTX_BOUNDARY_EDGE_AND_CORNER
 BOUNDARY_EDGE_ONLY = 2  # Sdc VTX_BOUNDARY_EDGE_ONLY (OpenSubdiv's default)
 
+_MAX_INDEX = 2**31 - 1  # indices are stored as int32
+
 _CREASE_METHODS = {"normal": "uniform", "chaikin": "chaikin"}
 _SMOOTH_TRIANGLES = ("catmark", "smooth")
 _TAGS = frozenset(
@@ -67,11 +69,11 @@ class ObjData:
     normals: np.ndarray  # (N,3) float64
     face_normals: np.ndarray  # (sum,) int32, -1 where absent
     face_material: np.ndarray  # (F,) int32 into materials, -1 where none
-    materials: tuple  # tuple[Material, ...]
+    materials: tuple[Material, ...]
     face_group: np.ndarray  # (F,) int32 into groups
-    groups: tuple  # tuple[str, ...]
+    groups: tuple[str, ...]
     face_object: np.ndarray  # (F,) int32 into objects
-    objects: tuple  # tuple[str, ...]
+    objects: tuple[str, ...]
     crease_edges: np.ndarray  # (k,2) int32 vertex pairs
     crease_sharpness: np.ndarray  # (k,) float32
     corner_verts: np.ndarray  # (c,) int32
@@ -80,7 +82,7 @@ class ObjData:
     boundary: int | None  # BOUNDARY_*; None without an interpolateboundary tag
     crease_method: str | None  # "uniform" | "chaikin"; None without a creasemethod tag
     smooth_triangles: str | None  # "catmark" | "smooth"; None without a smoothtriangles tag
-    warnings: tuple  # tuple[str, ...], each "path:line: message"
+    warnings: tuple[str, ...]  # each "path:line: message"
 
 
 def read_obj(path) -> ObjData:
@@ -205,8 +207,8 @@ class _Reader:
     def fail(self, line, problem):
         raise ObjError(self.path, line, problem)
 
-    def warn(self, line, message, where=None):
-        self.warnings.append((line, f"{where or self.path}:{line}: {message}"))
+    def warn(self, line, message):
+        self.warnings.append((line, f"{self.path}:{line}: {message}"))
 
     # -- the pass over statements --------------------------------------------------------
 
@@ -219,10 +221,11 @@ class _Reader:
             # report those first so the error is always the earliest line.
             self._convert(check_forward=False)
             raise
+        arrays = self._convert(check_forward=True)
         if not self.face_sizes:
             empty = not any(line.split() for line in lines)
             self.fail(None, "empty file: no faces" if empty else "no faces (no `f` statements)")
-        return self._finish(*self._convert(check_forward=True))
+        return self._finish(*arrays)
 
     def _scan(self, lines, numbers):
         point_tokens, point_lines = self.point_tokens, self.point_lines
@@ -335,6 +338,8 @@ class _Reader:
                 ints.append(int(token))
             except ValueError:
                 self.fail(number, f"tag '{name}': '{token}' is not an integer")
+            if abs(ints[-1]) > _MAX_INDEX:
+                self.fail(number, f"tag '{name}': index {token} out of range")
         floats = []
         for token in values[n_ints : n_ints + n_floats]:
             try:
@@ -348,8 +353,11 @@ class _Reader:
         counts = (n_ints, n_floats, n_strings)
 
         if name in ("crease", "corner"):
-            # OpenSubdiv reads crease ints pairwise, (v0 v1) (v2 v3) ..., and both tags take
-            # one sharpness for all or one per edge / vertex.
+            # far_utils.h reads crease ints pairwise, (v0 v1) (v2 v3) ..., not as a chain, and
+            # drops an odd last one; here an odd count is an error. Both tags take one
+            # sharpness for all or one per edge / vertex (OpenSubdiv indexes a crease's floats
+            # by int position, floatargs[2k] for edge k, which only works with one float).
+            # OpenSubdiv clamps negative sharpness to 0; here it is an error.
             items = n_ints // 2 if name == "crease" else n_ints
             if name == "crease" and (n_ints < 2 or n_ints % 2):
                 self.fail(
@@ -369,7 +377,9 @@ class _Reader:
             for value in floats:
                 if value < 0.0:
                     self.fail(number, f"tag '{name}': negative sharpness {value:g}")
-            sharpness = np.array(floats * items if n_floats == 1 else floats, dtype=np.float32)
+            with np.errstate(over="ignore"):  # beyond float32 is infinitely sharp anyway
+                sharpness = np.array(floats * items if n_floats == 1 else floats,
+                                     dtype=np.float32)
             if name == "crease":
                 pairs = np.array(ints, dtype=np.int64).reshape(-1, 2)
                 loops = pairs[pairs[:, 0] == pairs[:, 1]]
@@ -474,10 +484,9 @@ class _Reader:
                     except ValueError:
                         rgb = []
                     if len(rgb) not in (1, 3) or not all(math.isfinite(c) for c in rgb):
-                        raise ObjError(
-                            mtl_path, number,
-                            f"Kd needs 3 numbers r g b (or 1 for grey), got '{' '.join(parts[1:])}'",
-                        )
+                        got = " ".join(parts[1:])
+                        raise ObjError(mtl_path, number,
+                                       f"Kd needs 3 numbers r g b (or 1 for grey), got '{got}'")
                     self.mtl_diffuse[current] = tuple(rgb * 3 if len(rgb) == 1 else rgb)
 
     # -- bulk conversion -----------------------------------------------------------------
@@ -508,7 +517,7 @@ class _Reader:
             except ObjError as err:
                 errors.append(err)
         if errors:
-            raise min(errors, key=lambda err: err.line)
+            raise min(errors, key=lambda err: err.line or 0)
         return results
 
     def _floats(self, tokens, lines, width, keyword) -> np.ndarray:
@@ -582,7 +591,7 @@ class _Reader:
                     if index + before < 0:
                         self.fail(number, f"relative {what} index {index} out of range: "
                                   f"only {before} {keyword} lines before this face")
-                elif check_forward and index > total:
+                elif (check_forward and index > total) or index > _MAX_INDEX:
                     self.fail(number, f"{what} index {index} out of range: the file has "
                               f"{total} {keyword} lines")
             start += size

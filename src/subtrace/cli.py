@@ -1,0 +1,301 @@
+"""The ``subtrace`` command line: ``subtrace info [CAGE.obj] [--scheme S] [--level N]``.
+
+Owns argument parsing, the text report and the error policy (design invariant 7): every
+:class:`subtrace.errors.SubtraceError` becomes one line ``subtrace: error: <message>`` on
+stderr and exit code 2, with no traceback; argparse usage errors exit 2 as well.
+This module imports only argparse at the top; the cage, subdivision and limit code are
+imported by the subcommand that needs them. (``import subtrace`` itself loads numpy and
+Numba, about 0.3 s, which ``subtrace --help`` still pays.)
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+PROG = "subtrace"
+
+BOUNDARY_NAMES = {0: "none", 1: "edge-and-corner", 2: "edge-only"}
+
+
+def _level_arg(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid level {text!r}: expected an integer >= 0")
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"invalid level {value}: expected an integer >= 0")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog=PROG,
+        description="Exact Catmull-Clark and Loop subdivision surfaces (OpenSubdiv rules).",
+    )
+    from . import __version__
+
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    info = sub.add_parser(
+        "info",
+        help="summarise a control cage: topology, tags, bounds",
+        description=(
+            "Print the scheme, options, counts, tags, valences, Euler characteristic and "
+            "bounds of a control cage. Without CAGE the built-in sample cage (Spot, by "
+            "Keenan Crane, public domain) is used. The limit-surface bounds are the bounds "
+            "of the exact limit points of the level-1 vertices (an inner estimate of the "
+            "surface's bounds); the cage's bounds contain the whole limit surface."
+        ),
+    )
+    info.add_argument("cage", nargs="?", metavar="CAGE.obj", help="OBJ control cage")
+    info.add_argument(
+        "--scheme",
+        metavar="S",
+        help="catmark (Catmull-Clark) or loop; default: loop for all-triangle cages, "
+        "catmark otherwise",
+    )
+    info.add_argument(
+        "--level",
+        type=_level_arg,
+        metavar="N",
+        help="also print the counts after N uniform refinements",
+    )
+    info.set_defaults(func=_cmd_info)
+    return parser
+
+
+def main(argv=None) -> int:
+    """Run the command line; returns the exit code (0 ok, 2 bad input or usage)."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help / --version exit 0, usage errors exit 2
+        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+    from .errors import SubtraceError
+
+    try:
+        with _one_line_warnings():
+            return args.func(args)
+    except SubtraceError as exc:
+        print(f"{PROG}: error: {_one_line(str(exc))}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:  # `subtrace info | head`: stop quietly (Python docs' recipe)
+        try:
+            import os
+
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+        except (OSError, ValueError):
+            pass
+        return 1
+
+
+def _one_line(text: str) -> str:
+    return " ".join(part.strip() for part in text.splitlines() if part.strip())
+
+
+class _one_line_warnings:
+    """Show a SubtraceWarning as ``subtrace: warning: <message>`` (one line, no source)."""
+
+    def __enter__(self):
+        import warnings
+
+        self._saved = warnings.showwarning
+        saved = self._saved
+
+        def show(message, category, filename, lineno, file=None, line=None):
+            from .errors import SubtraceWarning
+
+            if issubclass(category, SubtraceWarning):
+                print(f"{PROG}: warning: {_one_line(str(message))}", file=file or sys.stderr)
+            else:
+                saved(message, category, filename, lineno, file, line)
+
+        warnings.showwarning = show
+        return self
+
+    def __exit__(self, *exc):
+        import warnings
+
+        warnings.showwarning = self._saved
+        return False
+
+
+# --------------------------------------------------------------------------------------
+# subtrace info
+# --------------------------------------------------------------------------------------
+
+
+def _cmd_info(args) -> int:
+    from . import load_cage
+
+    if args.cage is None:
+        from .data import sample_cage_path
+
+        path = sample_cage_path()
+        label = f"{path} (built-in sample: Spot by Keenan Crane, public domain)"
+    else:
+        path = args.cage
+        label = str(path)
+    cage = load_cage(path, scheme=args.scheme)
+    rows = [("file", label)] + cage_report(cage, args.level)
+    width = max(len(k) for k, _ in rows) + 1
+    for key, value in rows:
+        print(f"{key + ':':<{width}} {value}")
+    return 0
+
+
+def cage_report(cage, level: int | None = None) -> list[tuple[str, str]]:
+    """The rows ``subtrace info`` prints for ``cage`` (key, value), in order."""
+    import numpy as np
+
+    base = cage.base
+    opts = cage.options
+    rows: list[tuple[str, str]] = []
+    scheme_name = "Catmull-Clark" if cage.scheme == "catmark" else "Loop"
+    rows.append(("scheme", f"{cage.scheme} ({scheme_name})"))
+    if cage.scheme == "catmark":
+        tri_rule = "smooth" if opts.smooth_triangles else "catmark"
+    else:
+        tri_rule = "n/a (Loop)"
+    rows.append(
+        (
+            "options",
+            f"boundary {BOUNDARY_NAMES.get(opts.boundary, str(opts.boundary))}, "
+            f"crease method {'chaikin' if opts.chaikin else 'uniform'}, "
+            f"triangle rule {tri_rule}",
+        )
+    )
+
+    n_v, n_f, n_e = base.n_verts, base.n_faces, base.n_edges
+    rows.append(("vertices", str(n_v)))
+    rows.append(("faces", str(n_f)))
+    rows.append(("edges", str(n_e)))
+    sizes, counts = np.unique(cage.face_sizes, return_counts=True)
+    rows.append(
+        ("face sizes", ", ".join(f"{_size_name(int(s))} {int(c)}" for s, c in zip(sizes, counts)))
+    )
+
+    edge_uses = np.diff(base.edge_face_offsets)
+    has_faces = np.diff(base.vert_face_offsets) > 0
+    interior_manifold_edge = (edge_uses == 2) & ~base.edge_nonmanifold
+    # boundary: one incident face; degenerate edges (a face repeating a vertex) also have
+    # one, but OpenSubdiv treats them as non-manifold, and so are they counted here
+    boundary_edge = (edge_uses == 1) & ~base.edge_nonmanifold
+    rows.append(("boundary edges", str(int(np.count_nonzero(boundary_edge)))))
+    rows.append(
+        (
+            "non-manifold",
+            f"{int(np.count_nonzero(base.edge_nonmanifold))} edges, "
+            f"{int(np.count_nonzero(~base.vert_manifold & has_faces))} vertices",
+        )
+    )
+    rows.append(("isolated vertices", str(int(np.count_nonzero(~has_faces)))))
+
+    # creases: interior manifold edges with a tag (boundary / non-manifold edges are sharp
+    # anyway, so a tag on them changes nothing and is not counted)
+    s_e = base.edge_sharpness[interior_manifold_edge]
+    n_inf = int(np.count_nonzero(s_e >= _INF))
+    n_semi = int(np.count_nonzero((s_e > 0) & (s_e < _INF)))
+    rows.append(("crease edges", f"{n_inf + n_semi} ({n_semi} semi-sharp, {n_inf} infinitely sharp)"))
+    s_v = base.vert_sharpness
+    n_vinf = int(np.count_nonzero(s_v >= _INF))
+    n_vsemi = int(np.count_nonzero((s_v > 0) & (s_v < _INF)))
+    rows.append(
+        (
+            "sharp vertices",
+            f"{n_vinf + n_vsemi} ({n_vsemi} semi-sharp, {n_vinf} infinitely sharp; corner "
+            "tags plus automatic corners / non-manifold vertices)",
+        )
+    )
+    rows.append(("hole faces", str(int(np.count_nonzero(base.face_hole)))))
+
+    valence = np.diff(base.vert_edge_offsets)
+    used = valence[has_faces]
+    if len(used):
+        rows.append(("valence", f"{int(used.min())}..{int(used.max())}"))
+    else:
+        rows.append(("valence", "n/a"))
+    rows.append(("extraordinary vertices", str(extraordinary_count(cage))))
+    rows.append(("Euler characteristic", f"{n_v - n_e + n_f} (V - E + F)"))
+
+    lo, hi = cage.points.min(axis=0), cage.points.max(axis=0)
+    rows.append(("cage bounds", _bounds(lo, hi)))
+    rows.append(("limit bounds", _limit_bounds(cage)))
+
+    if level is not None:
+        lev = cage.level_topology(level)
+        rows.append(
+            (
+                f"level {level}",
+                f"{lev.n_verts} vertices, {lev.n_faces} faces, {lev.n_edges} edges, "
+                f"Euler characteristic {lev.n_verts - lev.n_edges + lev.n_faces}",
+            )
+        )
+    return rows
+
+
+_INF = 10.0  # sharpness at or above this is infinite (config.SHARPNESS_INFINITE)
+_SIZE_NAMES = {3: "triangles", 4: "quads", 5: "pentagons", 6: "hexagons"}
+
+
+def _size_name(size: int) -> str:
+    return _SIZE_NAMES.get(size, f"{size}-gons")
+
+
+def extraordinary_count(cage) -> int:
+    """Manifold vertices whose valence is not the regular one of the scheme.
+
+    Regular valence: 4 (Catmark) / 6 (Loop) for interior vertices, 3 / 4 on a boundary;
+    boundary vertices with a single face (corners) count as regular. Non-manifold and
+    isolated vertices are reported separately and not counted here.
+    """
+    import numpy as np
+
+    base = cage.base
+    reg = 4 if cage.scheme == "catmark" else 6
+    valence = np.diff(base.vert_edge_offsets)
+    n_faces = np.diff(base.vert_face_offsets)
+    boundary = valence == n_faces + 1
+    regular = np.where(boundary, (valence == reg // 2 + 1) | (n_faces == 1), valence == reg)
+    return int(np.count_nonzero(base.vert_manifold & (n_faces > 0) & ~regular))
+
+
+def _fmt(v) -> str:
+    return "(" + ", ".join(f"{x:.6g}" for x in v) + ")"
+
+
+def _bounds(lo, hi) -> str:
+    return f"min {_fmt(lo)} max {_fmt(hi)} size {_fmt(hi - lo)}"
+
+
+def _limit_bounds(cage) -> str:
+    try:
+        P, _, _ = cage.limit(1)
+    except ModuleNotFoundError as exc:  # limit evaluation not part of this build yet
+        if exc.name and exc.name.startswith("subtrace"):
+            return "n/a (limit evaluation is not available in this build)"
+        raise
+    # vertices on hole faces only, or on no face at all, are not on the surface
+    on_surface = _surface_vertices(cage.level_topology(1))
+    if not on_surface.any():
+        return "n/a (every face is a hole)"
+    P = P[on_surface]
+    return _bounds(P.min(axis=0), P.max(axis=0)) + " (limit points of the level-1 vertices)"
+
+
+def _surface_vertices(lev):
+    """(V,) bool: the vertex is a corner of a face that is not a hole."""
+    import numpy as np
+
+    sizes = np.diff(lev.face_offsets)
+    corner_in_hole = np.repeat(lev.face_hole, sizes)
+    keep = np.zeros(lev.n_verts, dtype=bool)
+    keep[lev.face_verts[~corner_in_hole]] = True
+    return keep
+
+
+if __name__ == "__main__":  # python -m subtrace.cli
+    raise SystemExit(main())

@@ -1,0 +1,18 @@
+"""Sample data shipped inside the package.
+
+``spot_control_mesh.obj``: the Catmull-Clark control cage of "Spot" by Keenan Crane
+(Keenan's 3D Model Repository, https://www.cs.cmu.edu/~kmcrane/Projects/ModelRepository/),
+released into the public domain; copied unchanged. 188 vertices, 180 faces (160 quads,
+16 pentagons, 4 triangles), closed, genus 0. ``subtrace info`` uses it when no cage is given.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+_HERE = Path(__file__).resolve().parent
+
+
+def sample_cage_path() -> Path:
+    """Path of the built-in sample cage (Spot, Catmull-Clark, public domain)."""
+    return _HERE / "spot_control_mesh.obj"
