@@ -69,7 +69,8 @@ def test_sample_cage_ships_with_the_package():
 def test_info_on_builtin_cage(capsys):
     code, rows, _, err = run_info(capsys)
     assert code == 0, err
-    n_verts = sum(1 for line in sample_cage_path().read_text().splitlines() if line.startswith("v "))
+    lines = sample_cage_path().read_text().splitlines()
+    n_verts = sum(1 for line in lines if line.startswith("v "))
     assert "spot_control_mesh.obj" in rows["file"]
     assert rows["scheme"].startswith("catmark")
     assert "boundary edge-only" in rows["options"]

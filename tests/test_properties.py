@@ -8,8 +8,10 @@ hole tags (sharpness in {0.5, 1, 2.5, inf}) and random options. Properties:
 * refinement keeps the Euler characteristic V - E + F;
 * refining the level-1 mesh again (with the level-1 tags carried over) is level 2;
 * a planar cage has a planar refinement and limit surface;
-* the limit surface lies in the convex hull of the control points (all masks are convex);
-* refinement and the limit are affine invariant.
+* the limit surface lies in the convex hull of the control points (with uniform creasing
+  every mask is convex; Chaikin creasing can extrapolate, see the hull test);
+* refinement, the limit and evaluation are affine invariant (and, expected but failing at
+  the time of writing, keep the orientation of the limit normals).
 
 Tests of ``cage.limit`` / ``cage.evaluate`` skip only while their modules do not exist yet;
 an import error inside an existing module fails the test.
@@ -20,6 +22,7 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import math
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,8 +33,10 @@ from hypothesis import strategies as st
 from subtrace import make_cage
 
 SHARPNESS = (0.5, 1.0, 2.5, math.inf)
+# 30 examples per property keeps the file under ~10 s; raise it for a soak run with
+# SUBTRACE_PROPERTY_EXAMPLES=1000 python -m pytest tests/test_properties.py
 PROPS = settings(
-    max_examples=30,
+    max_examples=int(os.environ.get("SUBTRACE_PROPERTY_EXAMPLES", "30")),
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
 )
@@ -128,8 +133,8 @@ def _grid_points(kind, vx, vy, planar, rng):
 
 
 @st.composite
-def cages(draw, planar=False, tags=True, remove_faces=True):
-    """A random valid cage (CageSpec)."""
+def cages(draw, planar=False, tags=True, remove_faces=True, chaikin=None):
+    """A random valid cage (CageSpec); ``chaikin`` None draws the crease method."""
     kind = "grid" if planar else draw(st.sampled_from(["grid", "grid", "cylinder", "torus"]))
     lo_x = 3 if kind in ("cylinder", "torus") else 1
     lo_y = 3 if kind == "torus" else 1
@@ -152,7 +157,7 @@ def cages(draw, planar=False, tags=True, remove_faces=True):
     kwargs = dict(
         scheme=scheme,
         boundary=draw(st.sampled_from([None, 0, 1, 2])),
-        chaikin=draw(st.booleans()),
+        chaikin=draw(st.booleans()) if chaikin is None else chaikin,
         smooth_triangles=scheme == "catmark" and draw(st.booleans()),
     )
     if tags and draw(st.booleans()):
@@ -310,8 +315,14 @@ def _outside_hull(points, queries):
     return float((queries @ eq[:, :3].T + eq[:, 3]).max())
 
 
+# Uniform creasing only: with Chaikin creasing OpenSubdiv's edge rule can extrapolate. An
+# edge of sharpness s in (1, 4/3) whose child sharpness decays to 0 at one end only gets a
+# "dart" child vertex, and Far then blends crease and smooth masks with weight s > 1
+# (Sdc::Scheme::ComputeEdgeVertexMask with the child rule given), so a face weight turns
+# negative and the refined point can leave the hull (found by this test; see the report of
+# issue 1). subtrace follows OpenSubdiv there.
 @PROPS
-@given(cages(), st.integers(0, 2**32 - 1))
+@given(cages(chaikin=False), st.integers(0, 2**32 - 1))
 def test_limit_surface_lies_in_convex_hull(spec, seed):
     cage = spec.build()
     lo, hi = cage.points.min(axis=0), cage.points.max(axis=0)
@@ -376,9 +387,14 @@ def test_affine_invariance(spec, seed):
     Pm, dPdum, dPdvm = moved.evaluate(faces, uv)
     a = P @ A.T + t
     assert np.abs(a - Pm).max() <= 1e-9 * _scale(a)
-    # derivatives are linear in the control points
+    # derivatives are linear in the control points; where they are finite differences of
+    # positions (step config.EVAL_FD_STEP) rounding in the positions is amplified by 1/step:
+    # up to ~10 eps |P| / step seen (Loop), so allow 100 of those
+    from subtrace import config
+
+    fd_tol = 100 * np.finfo(float).eps * _scale(a) / config.EVAL_FD_STEP
     for d, dm in ((dPdu, dPdum), (dPdv, dPdvm)):
-        assert np.abs(d @ A.T - dm).max() <= 1e-9 * max(1.0, np.abs(dm).max())
+        assert np.abs(d @ A.T - dm).max() <= max(1e-9 * np.abs(dm).max(), fd_tol)
 
 
 def _normal_cosines(A, du, dv, dum, dvm):
@@ -415,7 +431,7 @@ _FLIPPED = CageSpec(
 @pytest.mark.xfail(
     strict=False,
     reason="limit._eigen_limit orients du x dv by the sign of a dot product with a fan of "
-    "ring cross products, which an affine map with det > 0 can flip (reported in issue 1)",
+    "ring cross products, which an affine map with det > 0 can flip (open item on issue 2)",
 )
 @PROPS
 @given(cages(), st.integers(0, 2**32 - 1))

@@ -199,7 +199,9 @@ def cage_report(cage, level: int | None = None) -> list[tuple[str, str]]:
     s_e = base.edge_sharpness[interior_manifold_edge]
     n_inf = int(np.count_nonzero(s_e >= _INF))
     n_semi = int(np.count_nonzero((s_e > 0) & (s_e < _INF)))
-    rows.append(("crease edges", f"{n_inf + n_semi} ({n_semi} semi-sharp, {n_inf} infinitely sharp)"))
+    rows.append(
+        ("crease edges", f"{n_inf + n_semi} ({n_semi} semi-sharp, {n_inf} infinitely sharp)")
+    )
     s_v = base.vert_sharpness
     n_vinf = int(np.count_nonzero(s_v >= _INF))
     n_vsemi = int(np.count_nonzero((s_v > 0) & (s_v < _INF)))
