@@ -197,7 +197,7 @@ def build_level(
 
     if edge_nonmanifold is None:
         edge_nonmanifold = _detect_nonmanifold_edges(
-            edge_verts, edge_face_offsets, edge_faces, face_edge_forward, order_uses=None
+            edge_verts, edge_face_offsets
         )
         edge_nonmanifold |= _same_direction_uses(
             edge_face_offsets, edge_faces, edge_face_corner, face_offsets, face_edge_forward
@@ -244,7 +244,8 @@ def build_level(
     )
 
 
-def _detect_nonmanifold_edges(edge_verts, edge_face_offsets, edge_faces, forward, order_uses):
+def _detect_nonmanifold_edges(edge_verts, edge_face_offsets):
+    """Edges with more than two uses, none, or both ends at one vertex."""
     n_uses = np.diff(edge_face_offsets)
     nonman = (n_uses > 2) | (n_uses < 1) | (edge_verts[:, 0] == edge_verts[:, 1])
     return nonman

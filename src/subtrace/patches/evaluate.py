@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import config
-from ..subdiv.limit import _cut, classify, extract, limit_points, _SMOOTH
+from ..subdiv.limit import _SMOOTH, classify, extract, limit_points
 from ..subdiv.refine import refine_level, refine_points
 
 

@@ -163,6 +163,15 @@ def _far(edge_verts, e, v):
     return edge_verts[e, 1] if a == v else a
 
 
+@nb.njit(cache=True, inline="always")
+def _add3(P, du, dv, r, X, q, w, w1, w2):
+    """Add point q of X with weights w (position), w1 (du) and w2 (dv) to row r."""
+    for k in range(3):
+        P[r, k] += w * X[q, k]
+        du[r, k] += w1 * X[q, k]
+        dv[r, k] += w2 * X[q, k]
+
+
 @nb.njit(cache=True)
 def _closed_form_kernel(
     is_loop,
@@ -254,25 +263,14 @@ def _closed_form_kernel(
                 dv[r, k] = 0.0
             for i in range(n):
                 e = _far(edge_verts, vert_edges[ea + i], v)
-                i2 = (i + 1) % n  # the second tangent is the first rotated by one position
-                w1 = tw[n, i]
-                w2 = tw[n, (i - 1 + n) % n]
-                for k in range(3):
-                    P[r, k] += ew * X[e, k]
-                    du[r, k] += w1 * X[e, k]
-                    dv[r, k] += w2 * X[e, k]
+                # the second tangent mask is the first rotated by one ring position
+                _add3(P, du, dv, r, X, e, ew, tw[n, i], tw[n, (i - 1 + n) % n])
                 if not is_loop:
                     f = vert_faces[fa + i]
                     kk = vert_face_corner[fa + i]
                     off = face_offsets[f]
                     q = face_verts[off + (kk + 2) % 4]
-                    g1 = fw[n, i]
-                    g2 = fw[n, (i - 1 + n) % n]
-                    for k in range(3):
-                        P[r, k] += dw * X[q, k]
-                        du[r, k] += g1 * X[q, k]
-                        dv[r, k] += g2 * X[q, k]
-                _ = i2
+                    _add3(P, du, dv, r, X, q, dw, fw[n, i], fw[n, (i - 1 + n) % n])
 
 
 # --------------------------------------------------------------------------------------

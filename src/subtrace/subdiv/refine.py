@@ -25,12 +25,10 @@ from ..mesh.topology import Level, Options, build_level
 from . import catmark, loop
 from .creases import (
     F0,
-    RULE_CORNER,
     RULE_CREASE,
     RULE_DART,
     RULE_SMOOTH,
     child_edge_sharpness_at_vertex,
-    decrement,
     fractional_weight,
     rule_of,
 )
