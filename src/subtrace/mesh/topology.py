@@ -104,11 +104,25 @@ class Level:
 
 def _csr_from_keys(keys: np.ndarray, n: int):
     """Group positions 0..len(keys)-1 by key (stable). Returns (offsets (n+1,), order)."""
-    counts = np.bincount(keys, minlength=n)
     offsets = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(counts, out=offsets[1:])
-    order = np.argsort(keys, kind="stable").astype(np.int32)
+    order = np.empty(len(keys), dtype=np.int32)
+    _counting_sort(np.ascontiguousarray(keys), offsets, order)
     return offsets, order
+
+
+@nb.njit(cache=True)
+def _counting_sort(keys, offsets, order):
+    """Stable counting sort of small non-negative integer keys: offsets[k] is the start of
+    key k's run in ``order``, which lists the positions of the keys in increasing key order."""
+    for i in range(len(keys)):
+        offsets[keys[i] + 1] += 1
+    for k in range(1, len(offsets)):
+        offsets[k] += offsets[k - 1]
+    cursor = offsets[:-1].copy()
+    for i in range(len(keys)):
+        k = keys[i]
+        order[cursor[k]] = i
+        cursor[k] += 1
 
 
 def _corner_faces(face_offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -294,6 +308,16 @@ def _order_vertex_rings(
     their unordered lists and are flagged non-manifold.
     """
     n_verts = len(vert_face_offsets) - 1
+    # scratch buffers sized for the largest valence, allocated once
+    max_nf = 1
+    for v in range(n_verts):
+        max_nf = max(max_nf, vert_face_offsets[v + 1] - vert_face_offsets[v])
+    lead = np.empty(max_nf, np.int32)
+    trail = np.empty(max_nf, np.int32)
+    used = np.empty(max_nf, np.bool_)
+    order = np.empty(max_nf, np.int32)
+    tmp_f = np.empty(max_nf, np.int32)
+    tmp_c = np.empty(max_nf, np.int32)
     for v in range(n_verts):
         f0 = vert_face_offsets[v]
         nf = vert_face_offsets[v + 1] - f0
@@ -310,8 +334,6 @@ def _order_vertex_rings(
             vert_manifold[v] = False
             continue
         # leading edge (corner k -> k+1) and trailing edge (k-1 -> k) of each incident corner
-        lead = np.empty(nf, np.int32)
-        trail = np.empty(nf, np.int32)
         for j in range(nf):
             f = vert_faces[f0 + j]
             k = vert_face_corner[f0 + j]
@@ -332,8 +354,7 @@ def _order_vertex_rings(
             vert_manifold[v] = False
             continue
         # walk counter-clockwise: the next face leads with this face's trailing edge
-        used = np.zeros(nf, np.bool_)
-        order = np.empty(nf, np.int32)
+        used[:nf] = False
         order[0] = start
         used[start] = True
         for i in range(1, nf):
@@ -354,8 +375,6 @@ def _order_vertex_rings(
             vert_manifold[v] = False
             continue
         vert_manifold[v] = True
-        tmp_f = np.empty(nf, np.int32)
-        tmp_c = np.empty(nf, np.int32)
         for i in range(nf):
             tmp_f[i] = vert_faces[f0 + order[i]]
             tmp_c[i] = vert_face_corner[f0 + order[i]]
