@@ -34,7 +34,25 @@ class TopologyError(SubtraceError):
 
 
 class SceneError(SubtraceError):
-    """A bad scene file or command-line option."""
+    """A bad scene file or command-line option.
+
+    ``SceneError(message)`` alone is a plain error. A scene-file error also carries the
+    ``path`` and 1-based ``line`` (None where unknown) and the ``key`` it concerns: a TOML key
+    path such as ``camera.fov`` or ``object[0].mesh``, or a command-line option such as
+    ``--fov``. The message reads ``path:line: key: problem``, leaving out what is unknown;
+    ``problem`` holds the bare problem text.
+    """
+
+    def __init__(self, message: str, *, path=None, line: int | None = None, key=None):
+        self.path = None if path is None else str(path)
+        self.line = line
+        self.key = None if key is None else str(key)
+        self.problem = message
+        where = ""
+        if self.path is not None:
+            where = f"{self.path}:{line}: " if line is not None else f"{self.path}: "
+        what = f"{self.key}: " if self.key else ""
+        super().__init__(f"{where}{what}{message}")
 
 
 class SubtraceWarning(UserWarning):

@@ -1,0 +1,326 @@
+# subtrace.io.exr: the renderer's film on disk: multi-channel OpenEXR and an 8-bit PNG
+# preview, both through OpenImageIO.
+#
+# Channels are (H,W) arrays, row 0 at the top. Names and pixel types written:
+#   R, G, B, A                      half     colour (linear, already composited), coverage
+#   Z                               float32  ray distance t (+inf where no hit)
+#   N.X, N.Y, N.Z                   float32  shading normal (world space)
+#   level, patch_id, object_id      float32  integers stored exactly (|value| <= 2^24;
+#                                            -1 where no hit)
+# in that order in the written spec; any other channel name is written as float32 after them.
+# OpenEXR stores channels sorted by name, so the order a reader reports is its own;
+# read_exr returns the order above. Compression is ZIP. Header attributes are str, int
+# (32-bit; larger ones are stored as decimal strings), float (stored as 32-bit), 3 floats
+# (V3f), 16 floats (M44f) or bool (int 0/1); names starting with `oiio:` are OpenImageIO's
+# own hints and are not stored in the file.
+# Every file is written to a hidden temporary in the destination folder and moved into place
+# with os.replace, so a failure never leaves a partial file and never touches an existing
+# one; failures raise SubtraceError naming the path.
+
+from __future__ import annotations
+
+import os
+import secrets
+
+import numpy as np
+import OpenImageIO as oiio
+
+from subtrace.errors import SubtraceError
+
+CHANNEL_ORDER = ("R", "G", "B", "A", "Z", "N.X", "N.Y", "N.Z", "level", "patch_id", "object_id")
+HALF_CHANNELS = frozenset(("R", "G", "B", "A"))
+INTEGER_CHANNELS = frozenset(("level", "patch_id", "object_id"))
+MAX_EXACT_INTEGER = 2**24  # largest magnitude float32 holds for every integer below it
+COMPRESSION = "zip"
+ATTRIBUTE_PREFIX = "subtrace:"
+# Header attributes written under their own name (standard OpenEXR / OIIO names); any other
+# key without a ':' gets ATTRIBUTE_PREFIX.
+STANDARD_ATTRIBUTES = frozenset(
+    (
+        "worldToCamera",
+        "worldToNDC",
+        "Software",
+        "ImageDescription",
+        "Copyright",
+        "Artist",
+        "DateTime",
+        "owner",
+        "comments",
+        "capDate",
+        "utcOffset",
+    )
+)
+_INT32 = (-(2**31), 2**31 - 1)
+
+
+def write_exr(path, channels: dict, attributes: dict | None = None, png_path=None) -> None:
+    """Write a multi-channel EXR (and optionally an sRGB PNG preview of R, G, B).
+
+    path: destination (any extension; the format is always OpenEXR).
+    channels: name -> (H,W) array, all the same shape; see the module comment for the names,
+      the order and the pixel types. Values of the integer channels must be whole numbers of
+      magnitude <= 2^24.
+    attributes: header attributes, name -> str | int | float | bool | 3 or 16 floats. Names
+      without ':' (other than STANDARD_ATTRIBUTES) are stored as ``subtrace:<name>``.
+      ``subtrace:version`` and ``Software`` are always written.
+    png_path: also write an 8-bit sRGB preview of R, G, B (needs those channels).
+    Raises SubtraceError naming the file when it cannot be written (no partial file is left
+    behind and an existing file is left untouched); ValueError / TypeError for bad arrays or
+    attribute values (programming errors).
+    """
+    names, data = _pixel_block(channels)
+    height, width = data.shape[:2]
+    spec = oiio.ImageSpec(width, height, len(names), oiio.FLOAT)
+    spec.channelnames = tuple(names)
+    spec.channelformats = tuple(
+        oiio.TypeDesc("half") if n in HALF_CHANNELS else oiio.TypeDesc("float") for n in names
+    )
+    spec.alpha_channel = names.index("A") if "A" in names else -1
+    spec.z_channel = names.index("Z") if "Z" in names else -1
+    spec.attribute("compression", COMPRESSION)
+    for key, value in _header(attributes or {}).items():
+        _set_attribute(spec, key, value)
+    preview = None
+    if png_path is not None:
+        missing = [c for c in ("R", "G", "B") if c not in channels]
+        if missing:
+            raise ValueError(f"a PNG preview needs channels R, G, B; missing {missing}")
+        preview = srgb8(np.stack([np.asarray(channels[c]) for c in ("R", "G", "B")], axis=-1))
+    jobs = [(path, "openexr", spec, data)]
+    if preview is not None:
+        jobs.append((png_path, "png", _png_spec(preview), preview))
+    _write_all(jobs)
+
+
+def check_writable(path) -> None:
+    """Raise SubtraceError now if ``path`` cannot be written (missing folder, a directory,
+    no permission), so that a long render fails before it starts. Leaves nothing behind."""
+    path_str = _path_str(path)
+    os.unlink(_make_temp(path_str))
+
+
+def write_png(path, rgb_linear) -> None:
+    """Write (H,W,3) linear RGB as an 8-bit sRGB PNG (clipped to 0..1, NaN -> 0).
+
+    Same temporary-then-rename policy and errors as :func:`write_exr`.
+    """
+    pixels = srgb8(rgb_linear)
+    _write_all([(path, "png", _png_spec(pixels), pixels)])
+
+
+def srgb8(rgb_linear) -> np.ndarray:
+    """(H,W,3) linear RGB -> (H,W,3) uint8 with the sRGB transfer function (IEC 61966-2-1).
+
+    Values are clipped to [0, 1] first (NaN becomes 0) and rounded to the nearest code:
+    linear 0.5 -> 188.
+    """
+    rgb = np.asarray(rgb_linear, dtype=np.float64)
+    if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.shape[0] == 0 or rgb.shape[1] == 0:
+        raise ValueError(f"expected an (H,W,3) RGB array, got shape {rgb.shape}")
+    x = np.clip(np.nan_to_num(rgb, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
+    encoded = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+    return np.ascontiguousarray(np.rint(encoded * 255.0).astype(np.uint8))
+
+
+def read_exr(path) -> tuple[dict[str, np.ndarray], dict]:
+    """Read an image (EXR, or anything OpenImageIO reads): (channels, attributes).
+
+    channels: name -> (H,W) float32 C-contiguous array, in CHANNEL_ORDER first, then the
+    others in the reader's order. attributes: every header attribute, name -> value (str,
+    int, float, or a tuple for vectors / matrices), plus ``compression``.
+    Raises SubtraceError naming the file when it is missing or cannot be read.
+    """
+    path_str = _path_str(path)
+    if not os.path.exists(path_str):
+        raise SubtraceError(f"{path_str}: no such file")
+    if os.path.isdir(path_str):
+        raise SubtraceError(f"{path_str}: is a directory, expected an image file")
+    inp = oiio.ImageInput.open(path_str)
+    if inp is None:
+        raise SubtraceError(f"{path_str}: cannot read the image: {_oiio_error()}")
+    try:
+        spec = inp.spec()
+        pixels = inp.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
+        if pixels is None:
+            raise SubtraceError(f"{path_str}: cannot read the pixels: {_oiio_error(inp)}")
+        attributes = {}
+        for param in spec.extra_attribs:
+            value = param.value
+            attributes[param.name] = value
+    finally:
+        inp.close()
+    pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, -1)
+    names = list(spec.channelnames)
+    order = [n for n in CHANNEL_ORDER if n in names] + [n for n in names if n not in CHANNEL_ORDER]
+    channels = {n: np.ascontiguousarray(pixels[:, :, names.index(n)]) for n in order}
+    return channels, attributes
+
+
+# --------------------------------------------------------------------------------------
+# internals
+# --------------------------------------------------------------------------------------
+
+
+def _pixel_block(channels: dict) -> tuple[list[str], np.ndarray]:
+    """Channel names in write order and the (H,W,C) float32 block holding them."""
+    if not channels:
+        raise ValueError("write_exr needs at least one channel")
+    for name in channels:
+        if not isinstance(name, str) or not name:
+            raise ValueError(f"channel names must be non-empty strings, got {name!r}")
+    names = [n for n in CHANNEL_ORDER if n in channels]
+    names += [n for n in channels if n not in CHANNEL_ORDER]
+    shape = None
+    block = None
+    for k, name in enumerate(names):
+        array = np.asarray(channels[name])
+        if array.ndim != 2 or 0 in array.shape:
+            raise ValueError(f"channel {name}: expected a non-empty (H,W) array, got {array.shape}")
+        if shape is None:
+            shape = array.shape
+            block = np.empty(shape + (len(names),), dtype=np.float32)
+        elif array.shape != shape:
+            raise ValueError(f"channel {name}: shape {array.shape} differs from {shape}")
+        if name in INTEGER_CHANNELS:
+            _check_integers(name, array)
+        block[:, :, k] = array
+    return names, block
+
+
+def _check_integers(name: str, array: np.ndarray) -> None:
+    if np.issubdtype(array.dtype, np.integer):
+        if array.size and int(np.abs(array).max()) > MAX_EXACT_INTEGER:
+            raise ValueError(
+                f"channel {name}: values above 2^24 cannot be stored exactly in float32"
+            )
+        return
+    a = np.asarray(array, dtype=np.float64)
+    whole = np.all(np.isfinite(a)) and np.all(a == np.rint(a))
+    if not whole or np.any(np.abs(a) > MAX_EXACT_INTEGER):
+        raise ValueError(f"channel {name}: expected whole numbers of magnitude <= 2^24")
+
+
+def _header(attributes: dict) -> dict:
+    from subtrace import __version__
+
+    header = {"Software": f"subtrace {__version__}", "subtrace:version": __version__}
+    for key, value in attributes.items():
+        if not isinstance(key, str) or not key:
+            raise TypeError(f"attribute names must be non-empty strings, got {key!r}")
+        if ":" not in key and key not in STANDARD_ATTRIBUTES:
+            key = ATTRIBUTE_PREFIX + key
+        if key == "compression":
+            raise ValueError("the compression attribute is fixed (zip)")
+        header[key] = value
+    return header
+
+
+def _set_attribute(spec, key: str, value) -> None:
+    if isinstance(value, (bool, np.bool_)):
+        spec.attribute(key, int(value))
+    elif isinstance(value, (int, np.integer)):
+        value = int(value)
+        if _INT32[0] <= value <= _INT32[1]:
+            spec.attribute(key, value)
+        else:  # OpenEXR has no 64-bit integer attribute: keep it exact as text
+            spec.attribute(key, str(value))
+    elif isinstance(value, (float, np.floating)):
+        spec.attribute(key, float(value))
+    elif isinstance(value, str):
+        spec.attribute(key, value)
+    elif isinstance(value, (tuple, list, np.ndarray)) and len(value) in (3, 16):
+        floats = tuple(float(v) for v in np.asarray(value, dtype=np.float64).ravel())
+        kind = "vector" if len(floats) == 3 else "matrix"
+        spec.attribute(key, oiio.TypeDesc(kind), floats)
+    else:
+        raise TypeError(
+            f"attribute {key}: unsupported value {value!r} (use str, int, float, bool, "
+            "3 or 16 floats)"
+        )
+
+
+def _png_spec(pixels: np.ndarray):
+    spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], 3, oiio.UINT8)
+    spec.attribute("oiio:ColorSpace", "sRGB")
+    return spec
+
+
+def _write_all(jobs) -> None:
+    """Write each (path, format, spec, pixels) to a temporary, then move all into place."""
+    temps: list[str | None] = []
+    try:
+        for path, fmt, spec, pixels in jobs:
+            temps.append(_make_temp(_path_str(path)))
+            _write_image(_path_str(path), temps[-1], fmt, spec, pixels)
+        for k, (path, _, _, _) in enumerate(jobs):
+            try:
+                os.replace(temps[k], _path_str(path))
+            except OSError as err:
+                raise SubtraceError(
+                    f"{_path_str(path)}: cannot write the file: {_reason(err)}"
+                ) from None
+            temps[k] = None
+    finally:
+        for temp in temps:
+            if temp is not None:
+                try:
+                    os.unlink(temp)
+                except OSError:
+                    pass
+
+
+def _make_temp(path_str: str) -> str:
+    """Create an empty hidden temporary beside path_str (mode 0666 less the umask)."""
+    folder, name = os.path.split(os.path.abspath(path_str))
+    if os.path.isdir(path_str):
+        raise SubtraceError(f"{path_str}: is a directory, expected a file name")
+    if not os.path.isdir(folder):
+        what = "is not a directory" if os.path.exists(folder) else "does not exist"
+        raise SubtraceError(
+            f"{path_str}: cannot write the file: the folder {folder} {what}; create it first"
+        )
+    for _ in range(100):
+        temp = os.path.join(folder, f".{name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
+        try:
+            fd = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        except FileExistsError:
+            continue
+        except OSError as err:
+            raise SubtraceError(f"{path_str}: cannot write the file: {_reason(err)}") from None
+        os.close(fd)
+        return temp
+    raise SubtraceError(f"{path_str}: cannot create a temporary file in {folder}")
+
+
+def _write_image(path_str: str, temp: str, fmt: str, spec, pixels: np.ndarray) -> None:
+    out = oiio.ImageOutput.create(fmt)
+    if out is None:
+        raise SubtraceError(f"{path_str}: OpenImageIO has no {fmt} writer: {_oiio_error()}")
+    try:
+        if not out.open(temp, spec):
+            raise SubtraceError(f"{path_str}: cannot write the file: {_oiio_error(out)}")
+        if not out.write_image(pixels):
+            raise SubtraceError(f"{path_str}: cannot write the pixels: {_oiio_error(out)}")
+    finally:
+        closed = out.close()
+    if not closed:
+        raise SubtraceError(f"{path_str}: cannot finish the file: {_oiio_error(out)}")
+
+
+def _path_str(path) -> str:
+    path = os.fspath(path)
+    return os.fsdecode(path) if isinstance(path, bytes) else path
+
+
+def _reason(err: OSError) -> str:
+    if isinstance(err, PermissionError):
+        return "permission denied"
+    return err.strerror or str(err)
+
+
+def _oiio_error(obj=None) -> str:
+    message = (obj.geterror() if obj is not None else "") or oiio.geterror()
+    return " ".join(message.split()) or "unknown error"
+
+
+__all__ = ["write_exr", "write_png", "read_exr", "srgb8", "check_writable", "CHANNEL_ORDER"]

@@ -1,0 +1,849 @@
+"""subtrace.io.scene: TOML scene files -> :class:`Scene`, and command-line overrides.
+
+Owns the scene format and its validation; no geometry is loaded here (mesh files are only
+checked to exist). Every problem raises :class:`subtrace.errors.SceneError` naming the file,
+the line (TOML syntax errors: tomllib's line; other errors: the line of the offending key,
+found by scanning the text, else the line of its table, else none) and the key path
+(``camera.fov``, ``object[0].mesh``, 0-based array index), then the problem and the fix.
+Unknown keys are errors (they are usually typos); the message lists the allowed keys.
+
+Schema (every table and key optional unless marked *required*)::
+
+    output  = "renders/spot.exr"    # EXR to write; relative to this file's folder
+    preview = "renders/spot.png"    # 8-bit sRGB PNG preview; relative to this file's folder
+
+    [[object]]                      # *required*, one or more (a single [object] also works)
+    mesh     = "spot.obj"           # *required*: OBJ cage, relative to this file's folder
+    scheme   = "catmark"            # "catmark" | "catmull-clark" | "loop";
+                                    #   default: loop for all-triangle cages, else catmark
+    boundary = "edge-only"          # "none" | "edge-only" | "edge-and-corner";
+                                    #   default: the OBJ's interpolateboundary tag, else
+                                    #   edge-only (OpenSubdiv's loaders)
+    color    = [0.8, 0.6, 0.4]      # linear RGB in 0..1; overrides the OBJ's materials
+
+    [camera]                        # without eye and target: an automatic camera framing
+    eye    = [3.0, 2.0, 5.0]        #   all objects (subtrace.trace.camera.auto_camera);
+    target = [0.0, 0.5, 0.0]        #   give both eye and target, or neither
+    up     = [0.0, 1.0, 0.0]        # default [0, 1, 0]; must not be along target - eye
+                                    #   (the automatic camera uses it too)
+    fov    = 30.0                   # vertical field of view, degrees, in (0, 180); default 30
+    width  = 640                    # pixels, 1..32768; default 640
+    height = 480                    # pixels, 1..32768; default 480
+
+    [render]
+    tolerance = 1.0                 # angular tolerance in pixels (> 0); default 1 ...
+    # tolerance_deg = 0.05          # ... or in degrees (> 0); not both
+    background = [0.0, 0.0, 0.0]    # linear RGB in 0..1; default black
+    headlight = true                # a directional light from the eye; default true
+    headlight_intensity = 1.0       # >= 0; default 1
+
+    [[light]]                       # directional lights, any number
+    direction = [-1.0, -1.0, -0.5]  # *required*: the direction the light travels (from the
+                                    #   light into the scene), any non-zero length
+    color     = [1.0, 1.0, 1.0]     # linear RGB in 0..1; default white
+    intensity = 1.0                 # >= 0; default 1
+
+Paths in a :class:`Scene` are absolute (resolved against the scene file's folder, or
+``base_dir``); command-line overrides of paths are relative to the working directory.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import os
+import re
+import tomllib
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from subtrace.errors import SceneError
+from subtrace.io.obj import BOUNDARY_EDGE_AND_CORNER, BOUNDARY_EDGE_ONLY, BOUNDARY_NONE
+from subtrace.trace.camera import (
+    Camera,
+    auto_camera,
+    check_fov,
+    check_resolution,
+    check_vector,
+    check_view,
+)
+
+DEFAULT_WIDTH = 640
+DEFAULT_HEIGHT = 480
+DEFAULT_FOV_DEG = 30.0
+DEFAULT_UP = (0.0, 1.0, 0.0)
+DEFAULT_TOLERANCE_PX = 1.0
+DEFAULT_BACKGROUND = (0.0, 0.0, 0.0)
+DEFAULT_HEADLIGHT_INTENSITY = 1.0
+DEFAULT_LIGHT_COLOR = (1.0, 1.0, 1.0)
+
+SCHEMES = {"catmark": "catmark", "catmull-clark": "catmark", "loop": "loop"}
+BOUNDARIES = {
+    "none": BOUNDARY_NONE,
+    "edge-only": BOUNDARY_EDGE_ONLY,
+    "edge-and-corner": BOUNDARY_EDGE_AND_CORNER,
+}
+
+_TOP_KEYS = ("object", "camera", "render", "light", "output", "preview")
+_OBJECT_KEYS = ("mesh", "scheme", "boundary", "color")
+_CAMERA_KEYS = ("eye", "target", "up", "fov", "width", "height")
+_RENDER_KEYS = ("tolerance", "tolerance_deg", "background", "headlight", "headlight_intensity")
+_LIGHT_KEYS = ("direction", "color", "intensity")
+# Camera field -> scene key / command-line option
+_CAMERA_FIELD_KEY = {
+    "eye": "eye",
+    "target": "target",
+    "up": "up",
+    "fov_deg": "fov",
+    "width": "width",
+    "height": "height",
+}
+
+
+# --------------------------------------------------------------------------------------
+# the scene
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SceneObject:
+    """One cage to render: ``mesh`` absolute path; None fields fall back to the cage's own."""
+
+    mesh: str
+    scheme: str | None = None  # "catmark" | "loop"; None: by the cage's faces
+    boundary: str | None = None  # "none" | "edge-only" | "edge-and-corner"; None: OBJ tag
+    color: tuple[float, float, float] | None = None  # linear RGB 0..1; None: OBJ materials
+
+    @property
+    def boundary_code(self) -> int | None:
+        """The boundary mode as OpenSubdiv's Sdc code (subtrace.io.obj.BOUNDARY_*), or None."""
+        return None if self.boundary is None else BOUNDARIES[self.boundary]
+
+
+@dataclass(frozen=True)
+class Light:
+    """A directional light: unit ``direction`` the light travels, colour and intensity."""
+
+    direction: tuple[float, float, float]
+    color: tuple[float, float, float] = DEFAULT_LIGHT_COLOR
+    intensity: float = 1.0
+
+
+@dataclass(frozen=True)
+class CameraSettings:
+    """The [camera] table: eye and target both given (explicit) or both None (automatic)."""
+
+    eye: tuple[float, float, float] | None = None
+    target: tuple[float, float, float] | None = None
+    up: tuple[float, float, float] = DEFAULT_UP
+    fov_deg: float = DEFAULT_FOV_DEG
+    width: int = DEFAULT_WIDTH
+    height: int = DEFAULT_HEIGHT
+
+    @property
+    def is_auto(self) -> bool:
+        return self.eye is None
+
+    def make_camera(self, bounds_min=None, bounds_max=None) -> Camera:
+        """The Camera: explicit, or :func:`auto_camera` framing the bounds (then required)."""
+        if not self.is_auto:
+            return Camera(self.eye, self.target, self.up, self.fov_deg, self.width, self.height)
+        if bounds_min is None or bounds_max is None:
+            raise ValueError("an automatic camera needs the scene bounds")
+        return auto_camera(
+            bounds_min, bounds_max, self.width, self.height, self.fov_deg, self.up
+        )
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """The [render] table. Exactly one of tolerance_px / tolerance_deg is set."""
+
+    tolerance_px: float | None = DEFAULT_TOLERANCE_PX
+    tolerance_deg: float | None = None
+    background: tuple[float, float, float] = DEFAULT_BACKGROUND
+    headlight: bool = True
+    headlight_intensity: float = DEFAULT_HEADLIGHT_INTENSITY
+
+    def tolerance_rad(self, camera: Camera) -> float:
+        """The angular tolerance in radians (pixels times the camera's pixel angle)."""
+        if self.tolerance_deg is not None:
+            return math.radians(self.tolerance_deg)
+        return self.tolerance_px * camera.pixel_angle()
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene. ``path``: the scene file (None for a scene built in code)."""
+
+    objects: tuple[SceneObject, ...]
+    camera: CameraSettings = CameraSettings()
+    render: RenderSettings = RenderSettings()
+    lights: tuple[Light, ...] = ()
+    output: str | None = None
+    preview: str | None = None
+    path: str | None = None
+
+    def make_camera(self, bounds_min=None, bounds_max=None) -> Camera:
+        """See :meth:`CameraSettings.make_camera`."""
+        return self.camera.make_camera(bounds_min, bounds_max)
+
+
+# --------------------------------------------------------------------------------------
+# loading
+# --------------------------------------------------------------------------------------
+
+
+def load_scene(path) -> Scene:
+    """Read and validate a TOML scene file (UTF-8). Raises SceneError on any bad input."""
+    path = os.fspath(path)
+    if isinstance(path, bytes):
+        path = os.fsdecode(path)
+    text = _decode(path, _read_bytes(path))
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise _syntax_error(path, text, err) from None
+    return scene_from_dict(data, path=path, text=text)
+
+
+def scene_from_dict(d: dict, path=None, base_dir=None, *, text: str | None = None) -> Scene:
+    """Validate a parsed scene table (as tomllib gives it) into a :class:`Scene`.
+
+    path: the scene file, named in errors; base_dir: the folder relative paths are resolved
+    against (default: the folder of ``path``, else the working directory); text: the file's
+    text, used to find the line of an offending key (read from ``path`` when omitted).
+    """
+    if path is not None:
+        path = os.fsdecode(os.fspath(path))
+    if base_dir is None:
+        base_dir = os.path.dirname(os.path.abspath(path)) if path is not None else os.getcwd()
+    base_dir = os.path.abspath(os.fsdecode(os.fspath(base_dir)))
+    if text is None and path is not None:
+        try:
+            text = Path(path).read_text(encoding="utf-8-sig")
+        except (OSError, UnicodeDecodeError):
+            text = None
+    ctx = _Context(path, _KeyLines(text) if text is not None else None)
+    if not isinstance(d, dict):
+        raise ctx.error((), "a scene must be a TOML table of keys and tables")
+    ctx.check_keys((), d, _TOP_KEYS)
+
+    objects = _objects(ctx, d, base_dir)
+    camera = _camera(ctx, d.get("camera", {}))
+    render = _render(ctx, d.get("render", {}))
+    lights = _lights(ctx, d.get("light", []))
+    output = _out_path(ctx, d, "output", base_dir)
+    preview = _out_path(ctx, d, "preview", base_dir)
+    return Scene(
+        objects=objects,
+        camera=camera,
+        render=render,
+        lights=lights,
+        output=output,
+        preview=preview,
+        path=None if path is None else os.path.abspath(path),
+    )
+
+
+def scene_for_meshes(meshes, scheme: str | None = None) -> Scene:
+    """A default scene (automatic camera, headlight) for OBJ files named on the command line.
+
+    Relative paths are relative to the working directory.
+    """
+    objects = [{"mesh": os.fsdecode(os.fspath(m))} for m in meshes]
+    for obj in objects:
+        if os.path.isdir(obj["mesh"]):
+            raise SceneError("is a directory, expected an OBJ file", path=obj["mesh"])
+        if not os.path.isfile(obj["mesh"]):
+            raise SceneError("no such mesh file", path=obj["mesh"])
+    if scheme is not None:
+        for obj in objects:
+            obj["scheme"] = scheme
+    try:
+        return scene_from_dict({"object": objects})
+    except SceneError as err:
+        key = "--scheme" if err.key and err.key.endswith(".scheme") else None
+        raise SceneError(err.problem, key=key) from None
+
+
+def _read_bytes(path: str) -> bytes:
+    try:
+        return Path(path).read_bytes()
+    except IsADirectoryError:
+        raise SceneError("is a directory, expected a TOML scene file", path=path) from None
+    except FileNotFoundError:
+        raise SceneError("no such scene file", path=path) from None
+    except PermissionError:
+        raise SceneError("cannot read the file: permission denied", path=path) from None
+    except OSError as err:
+        raise SceneError(f"cannot read the file: {err.strerror or err}", path=path) from None
+
+
+def _decode(path: str, data: bytes) -> str:
+    """UTF-8 text (a byte-order mark is dropped); a bad byte is an error naming its line."""
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        line = data.count(b"\n", 0, err.start) + 1
+        column = err.start - (data.rfind(b"\n", 0, err.start) + 1) + 1
+        raise SceneError(
+            f"byte 0x{data[err.start]:02x} at column {column} is not valid UTF-8; "
+            "save the scene file as UTF-8",
+            path=path,
+            line=line,
+        ) from None
+
+
+_AT_LINE = re.compile(r"\s*\(at line (\d+), column (\d+)\)\s*$")
+_AT_END = re.compile(r"\s*\(at end of document\)\s*$")
+
+
+def _syntax_error(path: str, text: str, err: Exception) -> SceneError:
+    message = str(err)
+    line = None
+    m = _AT_LINE.search(message)
+    if m:
+        line = int(m.group(1))
+        message = f"{message[: m.start()]} (column {m.group(2)})"
+    elif _AT_END.search(message):
+        line = text.count("\n") + (0 if text.endswith("\n") else 1)
+        message = f"{message[: _AT_END.search(message).start()]} (at the end of the file)"
+    return SceneError(
+        f"TOML syntax error: {message}; see https://toml.io for the syntax", path=path, line=line
+    )
+
+
+# --------------------------------------------------------------------------------------
+# tables
+# --------------------------------------------------------------------------------------
+
+
+def _objects(ctx, d: dict, base_dir: str) -> tuple[SceneObject, ...]:
+    raw = d.get("object")
+    if raw is None:
+        raise ctx.error(
+            ("object",),
+            "the scene has no objects: add an [[object]] table with mesh = \"model.obj\"",
+        )
+    tables = ctx.table_list(("object",), raw, "[[object]]")
+    if not tables:
+        raise ctx.error(("object",), "the scene has no objects: add at least one [[object]]")
+    objects = []
+    for i, table in enumerate(tables):
+        where = ("object", i) if isinstance(raw, list) else ("object",)
+        ctx.check_keys(where, table, _OBJECT_KEYS)
+        if "mesh" not in table:
+            raise ctx.error(
+                where,
+                "missing key mesh: every [[object]] needs mesh = \"file.obj\" (a path "
+                "relative to the scene file's folder)",
+            )
+        mesh = _mesh_path(ctx, where + ("mesh",), table["mesh"], base_dir)
+        scheme = boundary = color = None
+        if "scheme" in table:
+            scheme = _choice(ctx, where + ("scheme",), table["scheme"], SCHEMES)
+        if "boundary" in table:
+            boundary = _choice(ctx, where + ("boundary",), table["boundary"], BOUNDARIES)
+        if "color" in table:
+            color = ctx.color(where + ("color",), table["color"])
+        objects.append(SceneObject(mesh=mesh, scheme=scheme, boundary=boundary, color=color))
+    return tuple(objects)
+
+
+def _camera(ctx, table) -> CameraSettings:
+    where = ("camera",)
+    table = ctx.table(where, table, "[camera]")
+    ctx.check_keys(where, table, _CAMERA_KEYS)
+    values = {}
+    for field, key in _CAMERA_FIELD_KEY.items():
+        if key in table:
+            values[field] = ctx.call(where + (key,), _CHECKERS[field], table[key], key)
+    has_eye, has_target = "eye" in values, "target" in values
+    if has_eye != has_target:
+        given, missing = ("eye", "target") if has_eye else ("target", "eye")
+        raise ctx.error(
+            where + (given,),
+            f"{given} is given but {missing} is not: give both eye and target, or neither "
+            "for an automatic camera that frames all objects",
+        )
+    settings = CameraSettings(**values)
+    if has_eye:
+        try:
+            check_view(settings.eye, settings.target, settings.up)
+        except SceneError as err:
+            key = err.key if err.key in table else "target"
+            raise ctx.error(where + (key,), err.problem) from None
+    return settings
+
+
+def _render(ctx, table) -> RenderSettings:
+    where = ("render",)
+    table = ctx.table(where, table, "[render]")
+    ctx.check_keys(where, table, _RENDER_KEYS)
+    if "tolerance" in table and "tolerance_deg" in table:
+        raise ctx.error(
+            where + ("tolerance_deg",),
+            "give either tolerance (pixels) or tolerance_deg (degrees), not both",
+        )
+    values = {}
+    if "tolerance_deg" in table:
+        values["tolerance_px"] = None
+        values["tolerance_deg"] = ctx.call(
+            where + ("tolerance_deg",), _positive, table["tolerance_deg"], "degrees"
+        )
+    if "tolerance" in table:
+        values["tolerance_px"] = ctx.call(
+            where + ("tolerance",), _positive, table["tolerance"], "pixels"
+        )
+    if "background" in table:
+        values["background"] = ctx.color(where + ("background",), table["background"])
+    if "headlight" in table:
+        value = table["headlight"]
+        if not isinstance(value, bool):
+            raise ctx.error(where + ("headlight",), f"expected true or false, got {_show(value)}")
+        values["headlight"] = value
+    if "headlight_intensity" in table:
+        values["headlight_intensity"] = ctx.call(
+            where + ("headlight_intensity",), _non_negative, table["headlight_intensity"]
+        )
+    return RenderSettings(**values)
+
+
+def _lights(ctx, raw) -> tuple[Light, ...]:
+    lights = []
+    for i, table in enumerate(ctx.table_list(("light",), raw, "[[light]]")):
+        where = ("light", i) if isinstance(raw, list) else ("light",)
+        ctx.check_keys(where, table, _LIGHT_KEYS)
+        if "direction" not in table:
+            raise ctx.error(
+                where,
+                "missing key direction: every [[light]] needs direction = [x, y, z] (the "
+                "direction the light travels)",
+            )
+        direction = ctx.call(where + ("direction",), check_vector, table["direction"], "")
+        norm = math.sqrt(sum(c * c for c in direction))
+        if norm == 0.0:
+            raise ctx.error(
+                where + ("direction",), "the direction is zero; give a non-zero vector"
+            )
+        direction = tuple(c / norm for c in direction)
+        values = {"direction": direction}
+        if "color" in table:
+            values["color"] = ctx.color(where + ("color",), table["color"])
+        if "intensity" in table:
+            values["intensity"] = ctx.call(
+                where + ("intensity",), _non_negative, table["intensity"]
+            )
+        lights.append(Light(**values))
+    return tuple(lights)
+
+
+def _mesh_path(ctx, keypath, value, base_dir: str) -> str:
+    if not isinstance(value, str) or not value.strip():
+        raise ctx.error(keypath, f"expected a file name in quotes, got {_show(value)}")
+    full = os.path.normpath(os.path.join(base_dir, os.path.expanduser(value)))
+    if os.path.isdir(full):
+        raise ctx.error(keypath, f"{full} is a directory, expected an OBJ file")
+    if not os.path.isfile(full):
+        raise ctx.error(
+            keypath,
+            f"mesh file {value!r} does not exist (looked for {full}; relative paths are "
+            "resolved against the scene file's folder)",
+        )
+    return full
+
+
+def _out_path(ctx, d: dict, key: str, base_dir: str) -> str | None:
+    if key not in d:
+        return None
+    value = d[key]
+    if not isinstance(value, str) or not value.strip():
+        raise ctx.error((key,), f"expected a file name in quotes, got {_show(value)}")
+    return os.path.normpath(os.path.join(base_dir, os.path.expanduser(value)))
+
+
+def _choice(ctx, keypath, value, choices: dict) -> str:
+    """The canonical name of a choice: SCHEMES' value, or BOUNDARIES' key."""
+    return ctx.call(keypath, _parse_choice, value, choices)
+
+
+# --------------------------------------------------------------------------------------
+# value checks (raise SceneError with the bare problem; _Context adds where)
+# --------------------------------------------------------------------------------------
+
+
+def _number(value, what: str = "") -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        unit = f" of {what}" if what else ""
+        raise SceneError(f"expected a number{unit}, got {_show(value)}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise SceneError(f"expected a finite number, got {value}")
+    return value
+
+
+def _positive(value, what: str = "") -> float:
+    value = _number(value, what)
+    if not value > 0.0:
+        unit = f" {what}" if what else ""
+        raise SceneError(f"must be greater than 0{unit}, got {value:g}")
+    return value
+
+
+def _non_negative(value, what: str = "") -> float:
+    value = _number(value, what)
+    if value < 0.0:
+        raise SceneError(f"must be 0 or more, got {value:g}")
+    return value
+
+
+def _color(value) -> tuple[float, float, float]:
+    rgb = check_vector(value, "color")
+    if not all(0.0 <= c <= 1.0 for c in rgb):
+        raise SceneError(
+            f"color components must be between 0 and 1 (linear RGB), got {_show(value)}"
+        )
+    return rgb
+
+
+_CHECKERS = {
+    "eye": check_vector,
+    "target": check_vector,
+    "up": check_vector,
+    "fov_deg": check_fov,
+    "width": check_resolution,
+    "height": check_resolution,
+}
+
+
+def _show(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return repr(value)
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, list):
+        return "[" + ", ".join(_show(v) for v in value) + "]"
+    return str(value)
+
+
+# --------------------------------------------------------------------------------------
+# error context: file, line of a key path
+# --------------------------------------------------------------------------------------
+
+
+def _format_key(keypath) -> str:
+    out = ""
+    for part in keypath:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += ("." if out else "") + part
+    return out
+
+
+class _Context:
+    def __init__(self, path, lines):
+        self.path = path
+        self.lines = lines
+
+    def error(self, keypath, problem: str) -> SceneError:
+        line = self.lines.find(tuple(keypath)) if self.lines is not None else None
+        return SceneError(problem, path=self.path, line=line, key=_format_key(keypath) or None)
+
+    def call(self, keypath, check, value, *args):
+        """check(value, ...) with its SceneError re-raised at keypath."""
+        try:
+            return check(value, *args)
+        except SceneError as err:
+            raise self.error(keypath, err.problem) from None
+
+    def color(self, keypath, value):
+        return self.call(keypath, _color, value)
+
+    def table(self, keypath, value, name: str) -> dict:
+        if not isinstance(value, dict):
+            raise self.error(keypath, f"expected a table {name}, got {_show(value)}")
+        return value
+
+    def table_list(self, keypath, value, name: str) -> list:
+        """An array of tables; a single table counts as a list of one."""
+        if isinstance(value, dict):
+            return [value]
+        if not isinstance(value, list) or not all(isinstance(t, dict) for t in value):
+            raise self.error(keypath, f"expected {name} tables, got {_show(value)}")
+        return value
+
+    def check_keys(self, keypath, table: dict, allowed) -> None:
+        for key in table:
+            if key not in allowed:
+                hint = difflib.get_close_matches(key, allowed, n=1)
+                did = f"did you mean {hint[0]!r}? " if hint else ""
+                where = f" in [{_format_key(keypath)}]" if keypath else ""
+                raise self.error(
+                    tuple(keypath) + (key,),
+                    f"unknown key {key!r}{where}; {did}allowed keys: {', '.join(allowed)}",
+                )
+
+
+_SEG = r"""(?:[A-Za-z0-9_-]+|"(?:[^"\\]|\\.)*"|'[^']*')"""
+_KEY = rf"{_SEG}(?:\s*\.\s*{_SEG})*"
+_ARRAY_HEADER = re.compile(rf"^\s*\[\[\s*({_KEY})\s*\]\]")
+_TABLE_HEADER = re.compile(rf"^\s*\[\s*({_KEY})\s*\]")
+_KEY_LINE = re.compile(rf"^\s*({_KEY})\s*=")
+_SEG_RE = re.compile(_SEG)
+
+
+class _KeyLines:
+    """Best-effort map from key paths to the 1-based line that defines them.
+
+    Scans table headers and ``key =`` lines, skipping the insides of multi-line arrays,
+    inline tables and multi-line strings. Array-of-tables entries get their 0-based index
+    in the path: ("object", 1, "mesh"). Keys inside inline tables are not recorded; find()
+    falls back to the nearest recorded parent.
+    """
+
+    def __init__(self, text: str):
+        self.lines: dict[tuple, int] = {}
+        counts: dict[tuple, int] = {}
+        current: tuple = ()
+        depth, quote = 0, None
+        for number, line in enumerate(text.splitlines(), 1):
+            if depth == 0 and quote is None:
+                m = _ARRAY_HEADER.match(line)
+                if m:
+                    raw = _segments(m.group(1))
+                    counts[raw] = counts.get(raw, -1) + 1
+                    current = _indexed(raw, counts)
+                    self.lines.setdefault(current, number)
+                    continue
+                m = _TABLE_HEADER.match(line)
+                if m:
+                    current = _indexed(_segments(m.group(1)), counts)
+                    self.lines.setdefault(current, number)
+                    continue
+                m = _KEY_LINE.match(line)
+                if not m:
+                    continue
+                self.lines.setdefault(current + _segments(m.group(1)), number)
+                line = line[m.end():]
+            depth, quote = _scan_value(line, depth, quote)
+
+    def find(self, keypath: tuple) -> int | None:
+        for k in range(len(keypath), 0, -1):
+            line = self.lines.get(keypath[:k])
+            if line is not None:
+                return line
+        return None
+
+
+def _segments(key: str) -> tuple:
+    out = []
+    for seg in _SEG_RE.findall(key):
+        if seg[:1] in "\"'":
+            seg = seg[1:-1]
+        out.append(seg)
+    return tuple(out)
+
+
+def _indexed(raw: tuple, counts: dict) -> tuple:
+    out: list = []
+    for k in range(1, len(raw) + 1):
+        out.append(raw[k - 1])
+        if raw[:k] in counts:
+            out.append(counts[raw[:k]])
+    return tuple(out)
+
+
+def _scan_value(text: str, depth: int, quote):
+    """Bracket depth and open string quote after scanning ``text`` (a value's characters)."""
+    i, n = 0, len(text)
+    while i < n:
+        if quote is not None:
+            if quote in ('"', '"""') and text[i] == "\\":
+                i += 2
+                continue
+            if text.startswith(quote, i):
+                i += len(quote)
+                quote = None
+                continue
+            i += 1
+            continue
+        c = text[i]
+        if c == "#":
+            break
+        if text.startswith('"""', i) or text.startswith("'''", i):
+            quote = text[i : i + 3]
+            i += 3
+            continue
+        if c in "\"'":
+            quote = c
+        elif c in "[{":
+            depth += 1
+        elif c in "]}":
+            depth = max(0, depth - 1)
+        i += 1
+    if quote in ('"', "'"):  # single-line strings cannot continue past the line
+        quote = None
+    return depth, quote
+
+
+# --------------------------------------------------------------------------------------
+# command-line overrides
+# --------------------------------------------------------------------------------------
+
+_OPTION = {
+    "width": "--width",
+    "height": "--height",
+    "fov": "--fov",
+    "eye": "--eye",
+    "target": "--target",
+    "up": "--up",
+    "tolerance": "--tolerance",
+    "tolerance_deg": "--tolerance-deg",
+    "scheme": "--scheme",
+    "output": "--output",
+    "preview": "--preview",
+}
+
+
+def apply_overrides(
+    scene: Scene,
+    *,
+    width=None,
+    height=None,
+    fov=None,
+    eye=None,
+    target=None,
+    up=None,
+    tolerance=None,
+    tolerance_deg=None,
+    scheme=None,
+    output=None,
+    preview=None,
+) -> Scene:
+    """A new Scene with command-line values replacing the file's; None means not given.
+
+    Values may be typed or the option's text ("1,2,3" or "1 2 3" for vectors). Errors are
+    SceneError whose key is the option (``--fov``). --tolerance and --tolerance-deg exclude
+    each other and each replaces either setting of the file. Relative paths are relative to
+    the working directory.
+    """
+    given = {"width": width, "height": height, "fov": fov, "eye": eye, "target": target}
+    given["up"] = up
+    cam = scene.camera
+    cam_values = {}
+    for name, field, parse, check in (
+        ("width", "width", _parse_int, check_resolution),
+        ("height", "height", _parse_int, check_resolution),
+        ("fov", "fov_deg", _parse_float, check_fov),
+        ("eye", "eye", _parse_vector, check_vector),
+        ("target", "target", _parse_vector, check_vector),
+        ("up", "up", _parse_vector, check_vector),
+    ):
+        if given[name] is not None:
+            cam_values[field] = _option(name, check, parse(given[name], name), _OPTION[name])
+    if cam_values:
+        cam = replace(cam, **cam_values)
+        if (cam.eye is None) != (cam.target is None):
+            given, missing = ("eye", "target") if cam.eye is not None else ("target", "eye")
+            raise SceneError(
+                f"the scene has no camera {missing}: give {_OPTION[missing]} as well (or "
+                "neither, for an automatic camera that frames all objects)",
+                key=_OPTION[given],
+            )
+        if not cam.is_auto and {"eye", "target", "up"} & cam_values.keys():
+            try:
+                check_view(cam.eye, cam.target, cam.up)
+            except SceneError as err:
+                given = [f for f in ("eye", "target", "up") if f in cam_values]
+                key = err.key if err.key in given else given[0]
+                raise SceneError(err.problem, key=_OPTION[key]) from None
+
+    render = scene.render
+    if tolerance is not None and tolerance_deg is not None:
+        raise SceneError(
+            "give either --tolerance (pixels) or --tolerance-deg (degrees), not both",
+            key="--tolerance-deg",
+        )
+    if tolerance is not None:
+        value = _option("tolerance", _positive, _parse_float(tolerance, "tolerance"), "pixels")
+        render = replace(render, tolerance_px=value, tolerance_deg=None)
+    if tolerance_deg is not None:
+        value = _parse_float(tolerance_deg, "tolerance_deg")
+        value = _option("tolerance_deg", _positive, value, "degrees")
+        render = replace(render, tolerance_px=None, tolerance_deg=value)
+
+    objects = scene.objects
+    if scheme is not None:
+        value = _option("scheme", _parse_choice, scheme, SCHEMES)
+        objects = tuple(replace(o, scheme=value) for o in objects)
+
+    paths = {}
+    for name, value in (("output", output), ("preview", preview)):
+        if value is not None:
+            paths[name] = _option(name, _parse_path, value)
+    return replace(scene, camera=cam, render=render, objects=objects, **paths)
+
+
+def _option(name: str, check, value, *args):
+    """check(value, *args) with its SceneError re-raised naming the option."""
+    try:
+        return check(value, *args)
+    except SceneError as err:
+        raise SceneError(err.problem, key=_OPTION[name]) from None
+
+
+def _parse_float(value, name: str):
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            raise SceneError(f"expected a number, got {value!r}", key=_OPTION[name]) from None
+    return value
+
+
+def _parse_int(value, name: str):
+    if isinstance(value, str):
+        try:
+            return int(value.strip())
+        except ValueError:
+            raise SceneError(
+                f"expected a whole number of pixels, got {value!r}", key=_OPTION[name]
+            ) from None
+    return value
+
+
+def _parse_vector(value, name: str):
+    if isinstance(value, str):
+        parts = [p for p in re.split(r"[,\s]+", value.strip().strip("[]()")) if p]
+        try:
+            return [float(p) for p in parts]
+        except ValueError:
+            raise SceneError(
+                f"expected 3 numbers like 1,2,3, got {value!r}", key=_OPTION[name]
+            ) from None
+    return value
+
+
+def _parse_choice(value, choices: dict) -> str:
+    """The canonical name: the mapping's value when it is a name, else the key."""
+    names = ", ".join(repr(c) for c in choices)
+    if not isinstance(value, str):
+        raise SceneError(f"expected one of {names}, got {_show(value)}")
+    key = value.strip().lower().replace("_", "-")
+    if key not in choices:
+        raise SceneError(f"unknown value {value!r}: use one of {names}")
+    canonical = choices[key]
+    return canonical if isinstance(canonical, str) else key
+
+
+def _parse_path(value) -> str:
+    value = os.fsdecode(os.fspath(value))
+    if not value.strip():
+        raise SceneError("expected a file name, got an empty string")
+    return os.path.abspath(os.path.expanduser(value))

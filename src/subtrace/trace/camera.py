@@ -1,0 +1,316 @@
+# subtrace.trace.camera: the pinhole camera and its primary rays.
+#
+# Owns the camera model only (no scene parsing, no tracing). Conventions:
+#   forward = normalize(target - eye); right = normalize(forward x up);
+#   true_up = right x forward. Camera space is right-handed with x = right, y = true_up and
+#   z = -forward (the OpenGL / OpenEXR `worldToCamera` convention: the camera looks down -z).
+#   Image +x (increasing column) is `right`, image row 0 is the top (towards `true_up`).
+#   The image plane lies at unit distance along `forward`; its height is 2 tan(fov/2) with
+#   `fov` the vertical field of view; pixels are square, of side s = 2 tan(fov/2) / height.
+#   The ray of pixel (row, col) goes from `eye` through the pixel centre:
+#     d(row, col) = p00 + col * dx + row * dy,  then normalised,
+#   with p00 the centre of pixel (0, 0), dx = s * right and dy = -s * true_up.
+# Kernels take the (4,3) float64 array of `camera_frame` ([eye, dx, dy, p00]) and call the
+# jitted `ray_direction(frame, row, col)`; row and col may be fractional (pixel corners are
+# at row +- 0.5, col +- 0.5). `Camera.ray_directions` is the same arithmetic in numpy, in the
+# same order, so both give the same bits.
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from subtrace.errors import SceneError
+
+MAX_RESOLUTION = 32768  # pixels per side, inclusive
+AUTO_VIEW_DIRECTION = (1.0, 0.6, 1.6)  # auto_camera: from the box centre towards the eye
+AUTO_MARGIN = 1.1  # auto_camera: bounding-sphere radius scale (10 % margin around it)
+# up within this angle (radians) of the view direction is "parallel": the frame is undefined
+_MIN_UP_ANGLE = 1e-6
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A pinhole camera: eye, target, up (world space), vertical field of view, resolution.
+
+    ``eye``, ``target``, ``up``: 3 finite numbers each (stored as float tuples); ``fov_deg``:
+    vertical field of view in degrees, in (0, 180); ``width``, ``height``: pixels, 1..32768.
+    Invalid values raise :class:`SceneError` whose ``key`` is the field name.
+    """
+
+    eye: tuple[float, float, float]
+    target: tuple[float, float, float]
+    up: tuple[float, float, float]
+    fov_deg: float
+    width: int
+    height: int
+
+    def __post_init__(self):
+        set_ = object.__setattr__
+        set_(self, "eye", check_vector(self.eye, "eye"))
+        set_(self, "target", check_vector(self.target, "target"))
+        set_(self, "up", check_vector(self.up, "up"))
+        set_(self, "fov_deg", check_fov(self.fov_deg, "fov_deg"))
+        set_(self, "width", check_resolution(self.width, "width"))
+        set_(self, "height", check_resolution(self.height, "height"))
+        check_view(self.eye, self.target, self.up)
+
+    def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(right, up, forward): orthonormal (3,) float64 world-space vectors.
+
+        ``up`` is the true up (the given up made orthogonal to the view direction);
+        right x up = -forward (camera space is right-handed, looking down -z).
+        """
+        return _basis(self.eye, self.target, self.up)
+
+    def pixel_size(self) -> float:
+        """Side of one pixel on the image plane at unit distance: 2 tan(fov/2) / height."""
+        return 2.0 * math.tan(math.radians(self.fov_deg) / 2.0) / self.height
+
+    def pixel_angle(self) -> float:
+        """Angle (radians) subtended by one pixel at the image centre: 2 atan(tan(fov/2)/H).
+
+        The unit of the angular tolerance: ``--tolerance 1`` means this angle.
+        """
+        return 2.0 * math.atan(math.tan(math.radians(self.fov_deg) / 2.0) / self.height)
+
+    def frame(self) -> np.ndarray:
+        """Same as :func:`camera_frame`."""
+        return camera_frame(self)
+
+    def ray_directions(self) -> np.ndarray:
+        """(height, width, 3) float64 unit directions through the pixel centres, row 0 at top."""
+        frame = camera_frame(self)
+        rows = np.arange(self.height, dtype=np.float64)[:, None]
+        cols = np.arange(self.width, dtype=np.float64)[None, :]
+        comps = []
+        for k in range(3):  # same operation order as ray_direction
+            comps.append(frame[3, k] + cols * frame[1, k] + rows * frame[2, k])
+        x, y, z = comps
+        n = np.sqrt(x * x + y * y + z * z)
+        return np.ascontiguousarray(np.stack((x / n, y / n, z / n), axis=-1))
+
+    def world_to_camera(self) -> np.ndarray:
+        """(4,4) float64 matrix, column-vector convention: p_cam = M @ [p_world, 1].
+
+        Camera space: x right, y up, z backwards (the camera looks down -z).
+        """
+        right, up, forward = self.basis()
+        m = np.eye(4)
+        m[0, :3], m[1, :3], m[2, :3] = right, up, -forward
+        m[:3, 3] = -(m[:3, :3] @ np.asarray(self.eye))
+        return m
+
+    def header_attributes(self) -> dict:
+        """EXR header attributes describing the camera (see :func:`subtrace.io.exr.write_exr`).
+
+        ``subtrace:camera`` is a readable summary; ``worldToCamera`` is OpenEXR's standard
+        attribute (Imath row-vector convention, the transpose of :meth:`world_to_camera`).
+        """
+        summary = (
+            f"eye {_fmt(self.eye)} target {_fmt(self.target)} up {_fmt(self.up)} "
+            f"fov {self.fov_deg:.9g} deg {self.width}x{self.height}"
+        )
+        matrix = tuple(float(v) for v in self.world_to_camera().T.ravel())
+        return {
+            "subtrace:camera": summary,
+            "subtrace:camera_fov_deg": float(self.fov_deg),
+            "worldToCamera": matrix,
+        }
+
+
+def camera_frame(camera: Camera) -> np.ndarray:
+    """(4,3) float64 C-contiguous [eye, dx, dy, p00] for kernels (see the module comment).
+
+    dx, dy: image-plane step (unit distance from the eye) per column / per row; p00: the
+    point through the centre of pixel (0, 0), relative to the eye.
+    """
+    right, up, forward = camera.basis()
+    s = camera.pixel_size()
+    frame = np.empty((4, 3), dtype=np.float64)
+    frame[0] = camera.eye
+    frame[1] = s * right
+    frame[2] = -s * up
+    frame[3] = (
+        forward + (0.5 - 0.5 * camera.width) * frame[1] + (0.5 - 0.5 * camera.height) * frame[2]
+    )
+    return frame
+
+
+@njit(cache=True, nogil=True)
+def ray_direction(frame, row, col):
+    """Unit direction (x, y, z) of the ray through image point (row, col) of `frame`.
+
+    frame: (4,3) float64 from :func:`camera_frame`; row, col: pixel coordinates (integers
+    for pixel centres; fractional values allowed). Returns a tuple of three floats.
+    """
+    # image-plane point at unit distance along forward, relative to the eye
+    x = frame[3, 0] + col * frame[1, 0] + row * frame[2, 0]
+    y = frame[3, 1] + col * frame[1, 1] + row * frame[2, 1]
+    z = frame[3, 2] + col * frame[1, 2] + row * frame[2, 2]
+    # normalise
+    n = math.sqrt(x * x + y * y + z * z)
+    return x / n, y / n, z / n
+
+
+def auto_camera(
+    bounds_min, bounds_max, width: int, height: int, fov_deg: float = 30.0, up=(0.0, 1.0, 0.0)
+) -> Camera:
+    """A camera that frames the axis-aligned box [bounds_min, bounds_max].
+
+    Looks at the box centre from the direction AUTO_VIEW_DIRECTION (normalised, given for
+    +Y up; for another ``up`` it is rotated by the smallest rotation taking +Y to ``up``), at
+    the distance where the box's bounding sphere, enlarged by AUTO_MARGIN, fits the smaller
+    of the vertical and horizontal fields of view. A box of zero size gets a unit sphere.
+    """
+    lo = np.asarray(bounds_min, dtype=np.float64).reshape(-1)
+    hi = np.asarray(bounds_max, dtype=np.float64).reshape(-1)
+    if lo.shape != (3,) or hi.shape != (3,):
+        raise SceneError("auto camera: bounds must be two 3-vectors")
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        raise SceneError("auto camera: the scene bounds are not finite")
+    if np.any(lo > hi):
+        raise SceneError("auto camera: empty scene bounds (min > max)")
+    fov_deg = check_fov(fov_deg, "fov_deg")
+    width = check_resolution(width, "width")
+    height = check_resolution(height, "height")
+    up = check_vector(up, "up")
+    centre = 0.5 * (lo + hi)
+    radius = 0.5 * float(np.linalg.norm(hi - lo))
+    if not radius > 1e-12 * max(1.0, float(np.abs(centre).max())):
+        radius = 1.0
+    half_v = math.radians(fov_deg) / 2.0
+    half_h = math.atan(math.tan(half_v) * width / height)
+    half = min(half_v, half_h)
+    distance = AUTO_MARGIN * radius / math.sin(half)
+    direction = _y_up_to(up) @ np.asarray(AUTO_VIEW_DIRECTION, dtype=np.float64)
+    direction /= np.linalg.norm(direction)
+    eye = centre + distance * direction
+    return Camera(
+        eye=tuple(eye.tolist()),
+        target=tuple(centre.tolist()),
+        up=up,
+        fov_deg=fov_deg,
+        width=width,
+        height=height,
+    )
+
+
+# --------------------------------------------------------------------------------------
+# validation (shared with subtrace.io.scene; `key` names the field in the error)
+# --------------------------------------------------------------------------------------
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(
+        value, (bool, np.bool_)
+    )
+
+
+def check_vector(value, key: str) -> tuple[float, float, float]:
+    """3 finite numbers as a float tuple, else SceneError(key=key)."""
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
+        raise SceneError(f"expected 3 numbers [x, y, z], got {value!r}", key=key)
+    items = list(value)
+    if len(items) != 3 or not all(_is_number(v) for v in items):
+        raise SceneError(f"expected 3 numbers [x, y, z], got {_show(value)}", key=key)
+    out = tuple(float(v) for v in items)
+    if not all(math.isfinite(v) for v in out):
+        raise SceneError(f"expected finite numbers, got {_show(value)}", key=key)
+    return out
+
+
+def check_fov(value, key: str) -> float:
+    """A vertical field of view in degrees, strictly between 0 and 180."""
+    if not _is_number(value):
+        raise SceneError(f"expected a number of degrees, got {_show(value)}", key=key)
+    value = float(value)
+    if not (0.0 < value < 180.0):
+        raise SceneError(
+            f"field of view must be between 0 and 180 degrees (exclusive), got {value:g}; "
+            "typical values are 20 to 60",
+            key=key,
+        )
+    return value
+
+
+def check_resolution(value, key: str) -> int:
+    """An image size in pixels, 1..MAX_RESOLUTION."""
+    if not _is_number(value) or isinstance(value, (float, np.floating)):
+        raise SceneError(f"expected a whole number of pixels, got {_show(value)}", key=key)
+    if not (1 <= value <= MAX_RESOLUTION):
+        raise SceneError(
+            f"must be between 1 and {MAX_RESOLUTION} pixels, got {_show(value)}", key=key
+        )
+    return int(value)
+
+
+def check_view(eye, target, up) -> None:
+    """eye != target and up not parallel to the view direction; SceneError otherwise.
+
+    The error's key is ``target`` for eye == target and ``up`` for a parallel up.
+    """
+    d = np.subtract(target, eye, dtype=np.float64)
+    dist = float(np.linalg.norm(d))
+    scale = max(float(np.linalg.norm(eye)), float(np.linalg.norm(target)))
+    if not dist > 4.0 * np.finfo(np.float64).eps * scale or dist == 0.0:
+        raise SceneError(
+            f"eye {_fmt(eye)} and target {_fmt(target)} coincide; the camera needs a view "
+            "direction: move the eye or the target",
+            key="target",
+        )
+    u = np.asarray(up, dtype=np.float64)
+    un = float(np.linalg.norm(u))
+    if un == 0.0:
+        raise SceneError("up vector is zero; use e.g. [0, 1, 0]", key="up")
+    sin_angle = float(np.linalg.norm(np.cross(d / dist, u / un)))
+    if not sin_angle > math.sin(_MIN_UP_ANGLE):
+        raise SceneError(
+            f"up {_fmt(up)} is parallel to the view direction {_fmt(tuple(d / dist))} "
+            "(target - eye); choose an up vector that is not along the view, e.g. [0, 1, 0] "
+            "or [0, 0, 1]",
+            key="up",
+        )
+
+
+def _y_up_to(up) -> np.ndarray:
+    """(3,3) rotation taking +Y to the unit vector along `up` (Rodrigues' formula)."""
+    norm = math.sqrt(sum(c * c for c in up))
+    if norm == 0.0:
+        raise SceneError("up vector is zero; use e.g. [0, 1, 0]", key="up")
+    b = np.asarray(up, dtype=np.float64) / norm
+    c = b[1]  # cos of the angle between +Y and b
+    if c < -1.0 + 1e-12:  # -Y: half a turn about X
+        return np.diag([1.0, -1.0, -1.0])
+    v = np.array([b[2], 0.0, -b[0]])  # +Y x b
+    vx = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    return np.eye(3) + vx + vx @ vx / (1.0 + c)
+
+
+def _basis(eye, target, up):
+    forward = np.subtract(target, eye, dtype=np.float64)
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, np.asarray(up, dtype=np.float64))
+    right /= np.linalg.norm(right)
+    true_up = np.cross(right, forward)
+    true_up /= np.linalg.norm(true_up)
+    return right, true_up, forward
+
+
+def _fmt(v) -> str:
+    return "[" + ", ".join(f"{float(x):.9g}" for x in v) + "]"
+
+
+def _show(value) -> str:
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_show(v) for v in value) + "]"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return repr(value)
+    if isinstance(value, dict):
+        return "a table"
+    return str(value)

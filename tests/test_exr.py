@@ -1,0 +1,328 @@
+"""Tests of subtrace.io.exr: channel round trips, formats, header, atomic writes, sRGB PNG."""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+import subtrace
+from subtrace.errors import SubtraceError
+from subtrace.io import exr
+from subtrace.io.exr import CHANNEL_ORDER, read_exr, srgb8, write_exr, write_png
+
+H, W = 7, 9
+is_root = hasattr(os, "geteuid") and os.geteuid() == 0
+
+
+def film(seed: int = 0) -> dict[str, np.ndarray]:
+    """Every channel the renderer writes, with awkward values."""
+    rng = np.random.default_rng(seed)
+    ch = {c: rng.uniform(-2.0, 2.0, (H, W)).astype(np.float32) for c in ("N.X", "N.Y", "N.Z")}
+    for c in "RGBA":
+        ch[c] = rng.uniform(0.0, 1.5, (H, W)).astype(np.float32)
+    ch["R"][0, :3] = [0.0, 65504.0, 1e-7]  # zero, largest half, a half subnormal
+    z = rng.uniform(0.0, 1e6, (H, W)).astype(np.float32)
+    z[0, 0], z[1, 1], z[2, 2] = np.inf, np.float32(1e-30), np.float32(3.4e38)
+    ch["Z"] = z
+    ch["level"] = rng.integers(0, 30, (H, W)).astype(np.int32)
+    ch["patch_id"] = rng.integers(-1, 2**24 + 1, (H, W)).astype(np.int64)
+    ch["patch_id"][0, :3] = [-1, 2**24, 2**24 - 1]
+    ch["object_id"] = rng.integers(-1, 5, (H, W)).astype(np.float32)
+    return ch
+
+
+def listing(folder) -> list[str]:
+    return sorted(os.listdir(folder))
+
+
+# --------------------------------------------------------------------------------------
+# round trip
+# --------------------------------------------------------------------------------------
+
+
+def test_round_trip_every_channel(tmp_path):
+    ch = film()
+    path = tmp_path / "film.exr"
+    write_exr(path, ch, {})
+    got, _ = read_exr(path)
+    assert list(got) == list(CHANNEL_ORDER)
+    for name in CHANNEL_ORDER:
+        assert got[name].shape == (H, W) and got[name].dtype == np.float32
+        if name in "RGBA":
+            # half: the value rounded to nearest-even half precision, exactly
+            expect = np.asarray(ch[name], np.float32).astype(np.float16).astype(np.float32)
+        else:
+            expect = np.asarray(ch[name]).astype(np.float32)  # exact, ids included
+        np.testing.assert_array_equal(got[name], expect, err_msg=name)
+    assert got["Z"][0, 0] == np.inf
+    assert got["patch_id"][0, 1] == 2**24 and got["patch_id"][0, 0] == -1
+    # half precision really is half: the rounding error is visible but within 2^-11
+    assert not np.array_equal(got["G"], ch["G"])
+    np.testing.assert_allclose(got["G"], ch["G"], rtol=2.0**-11)
+
+
+def test_channel_names_formats_and_compression(tmp_path):
+    path = tmp_path / "film.exr"
+    write_exr(path, film(), {})
+    inp = oiio.ImageInput.open(str(path))
+    try:
+        spec = inp.spec()
+        formats = dict(zip(spec.channelnames, (str(f) for f in spec.get_channelformats())))
+        assert sorted(spec.channelnames) == sorted(CHANNEL_ORDER)
+        assert formats == {c: ("half" if c in "RGBA" else "float") for c in CHANNEL_ORDER}
+        assert spec.get_string_attribute("compression") == "zip"
+        assert spec.channelnames[spec.alpha_channel] == "A"
+        assert spec.channelnames[spec.z_channel] == "Z"
+        assert (spec.width, spec.height) == (W, H)
+    finally:
+        inp.close()
+
+
+def test_subset_and_extra_channels(tmp_path):
+    path = tmp_path / "few.exr"
+    depth = np.arange(H * W, dtype=np.float32).reshape(H, W)
+    write_exr(path, {"extra": depth * 2, "Z": depth}, {})
+    got, _ = read_exr(path)
+    assert list(got) == ["Z", "extra"]  # known channels first, in CHANNEL_ORDER
+    np.testing.assert_array_equal(got["extra"], depth * 2)
+
+
+def test_header_attributes_round_trip(tmp_path):
+    path = tmp_path / "film.exr"
+    matrix = tuple(float(i) for i in range(16))
+    attrs = {
+        "scheme": "catmark",
+        "tolerance": 0.25,
+        "subtrace:time_load": 1.5,
+        "time_total": 3.125,
+        "rays": 123456,
+        "micro_triangles": 2**40,  # above int32: kept exact as text
+        "watertight": True,
+        "subtrace:eye": (1.0, 2.0, 3.0),
+        "worldToCamera": matrix,
+        "studio:note": "kept as given",
+        "camera": "eye [0, 0, 5] target [0, 0, 0]",
+    }
+    write_exr(path, film(), attrs)
+    _, got = read_exr(path)
+    assert got["subtrace:scheme"] == "catmark"
+    assert got["subtrace:tolerance"] == 0.25
+    assert got["subtrace:time_load"] == 1.5
+    assert got["subtrace:time_total"] == 3.125
+    assert got["subtrace:rays"] == 123456
+    assert got["subtrace:micro_triangles"] == str(2**40)
+    assert got["subtrace:watertight"] == 1
+    assert got["subtrace:eye"] == (1.0, 2.0, 3.0)
+    assert got["worldToCamera"] == matrix
+    assert got["studio:note"] == "kept as given"
+    assert got["subtrace:camera"] == "eye [0, 0, 5] target [0, 0, 0]"
+    assert got["subtrace:version"] == subtrace.__version__
+    assert got["Software"] == f"subtrace {subtrace.__version__}"
+    assert got["compression"] == "zip"
+    # floats are stored as 32-bit
+    write_exr(path, film(), {"tolerance": 0.1})
+    assert read_exr(path)[1]["subtrace:tolerance"] == pytest.approx(0.1, rel=1e-7)
+
+
+def test_camera_header_attributes(tmp_path):
+    from subtrace.trace.camera import Camera
+
+    cam = Camera((0, 0, 5), (0, 0, 0), (0, 1, 0), 40, W, H)
+    path = tmp_path / "film.exr"
+    write_exr(path, film(), cam.header_attributes())
+    _, got = read_exr(path)
+    assert got["subtrace:camera"] == cam.header_attributes()["subtrace:camera"]
+    np.testing.assert_allclose(np.reshape(got["worldToCamera"], (4, 4)).T, cam.world_to_camera())
+
+
+def test_bad_arrays_and_attributes(tmp_path):
+    path = tmp_path / "x.exr"
+    with pytest.raises(ValueError, match="at least one"):
+        write_exr(path, {}, {})
+    with pytest.raises(ValueError, match="shape"):
+        write_exr(path, {"R": np.zeros((2, 3)), "G": np.zeros((3, 2))}, {})
+    with pytest.raises(ValueError, match=r"\(H,W\)"):
+        write_exr(path, {"R": np.zeros((2, 3, 1))}, {})
+    with pytest.raises(ValueError, match="2\\^24"):
+        write_exr(path, {"patch_id": np.full((2, 2), 2**24 + 1)}, {})
+    with pytest.raises(ValueError, match="whole numbers"):
+        write_exr(path, {"level": np.full((2, 2), 0.5)}, {})
+    with pytest.raises(TypeError, match="unsupported"):
+        write_exr(path, {"R": np.zeros((2, 2))}, {"thing": {"a": 1}})
+    with pytest.raises(ValueError, match="preview needs"):
+        write_exr(path, {"Z": np.zeros((2, 2))}, {}, png_path=tmp_path / "x.png")
+    assert listing(tmp_path) == []
+
+
+# --------------------------------------------------------------------------------------
+# temporary file, then rename
+# --------------------------------------------------------------------------------------
+
+
+def test_check_writable(tmp_path):
+    exr.check_writable(tmp_path / "film.exr")
+    assert listing(tmp_path) == []
+    with pytest.raises(SubtraceError, match="does not exist"):
+        exr.check_writable(tmp_path / "no" / "film.exr")
+    with pytest.raises(SubtraceError, match="is a directory"):
+        exr.check_writable(tmp_path)
+
+
+def test_missing_folder(tmp_path):
+    path = tmp_path / "no" / "such" / "film.exr"
+    with pytest.raises(SubtraceError) as info:
+        write_exr(path, film(), {})
+    assert str(path) in str(info.value) and "does not exist" in str(info.value)
+    assert listing(tmp_path) == []
+
+
+@pytest.mark.skipif(is_root or sys.platform == "win32", reason="root ignores permissions")
+def test_read_only_folder(tmp_path):
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    folder.chmod(0o555)
+    try:
+        with pytest.raises(SubtraceError, match="permission denied") as info:
+            write_exr(folder / "film.exr", film(), {})
+        assert str(folder / "film.exr") in str(info.value)
+        assert listing(folder) == []
+    finally:
+        folder.chmod(0o755)
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs Linux /proc")
+def test_unwritable_folder_even_for_root():
+    with pytest.raises(SubtraceError, match="/proc/film.exr"):
+        write_exr("/proc/film.exr", film(), {})
+
+
+def test_target_is_a_directory(tmp_path):
+    (tmp_path / "film.exr").mkdir()
+    with pytest.raises(SubtraceError, match="is a directory"):
+        write_exr(tmp_path / "film.exr", film(), {})
+    assert listing(tmp_path) == ["film.exr"]
+
+
+def test_failure_while_writing_leaves_existing_file_intact(tmp_path, monkeypatch):
+    path = tmp_path / "film.exr"
+    path.write_bytes(b"previous render")
+    real = exr._write_image
+
+    def write_then_fail(path_str, temp, fmt, spec, pixels):
+        real(path_str, temp, fmt, spec, pixels)  # the temporary is complete...
+        assert os.path.getsize(temp) > 0
+        raise SubtraceError(f"{path_str}: disk full (simulated)")  # ...but then it fails
+
+    monkeypatch.setattr(exr, "_write_image", write_then_fail)
+    with pytest.raises(SubtraceError, match="simulated"):
+        write_exr(path, film(), {})
+    assert path.read_bytes() == b"previous render"
+    assert listing(tmp_path) == ["film.exr"]
+
+
+def test_failed_rename_leaves_existing_file_intact(tmp_path, monkeypatch):
+    path = tmp_path / "film.exr"
+    path.write_bytes(b"previous render")
+
+    def refuse(src, dst):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(exr.os, "replace", refuse)
+    with pytest.raises(SubtraceError, match="permission denied") as info:
+        write_exr(path, film(), {})
+    assert str(path) in str(info.value)
+    assert path.read_bytes() == b"previous render"
+    assert listing(tmp_path) == ["film.exr"]
+
+
+def test_exr_not_written_when_preview_folder_is_missing(tmp_path):
+    with pytest.raises(SubtraceError, match="does not exist"):
+        write_exr(tmp_path / "film.exr", film(), {}, png_path=tmp_path / "no" / "film.png")
+    assert listing(tmp_path) == []
+
+
+def test_overwrites_and_keeps_normal_permissions(tmp_path):
+    path = tmp_path / "film.exr"
+    path.write_bytes(b"old")
+    write_exr(path, film(), {})
+    assert read_exr(path)[0]["Z"][0, 0] == np.inf
+    assert listing(tmp_path) == ["film.exr"]
+    umask = os.umask(0)
+    os.umask(umask)
+    assert path.stat().st_mode & 0o777 == 0o666 & ~umask
+
+
+# --------------------------------------------------------------------------------------
+# PNG preview
+# --------------------------------------------------------------------------------------
+
+
+def read_png(path) -> np.ndarray:
+    inp = oiio.ImageInput.open(str(path))
+    try:
+        assert inp.format_name() == "png"
+        return inp.read_image(oiio.UINT8)
+    finally:
+        inp.close()
+
+
+# sRGB codes: 255 * (1.055 x^(1/2.4) - 0.055), or 255 * 12.92 x at or below 0.0031308,
+# rounded to nearest (0.5 -> 187.52, 0.18 -> 117.6, 0.001 -> 3.29, 0.0031308 -> 10.3, 0.9 -> 243.4)
+KNOWN = [(0.5, 188), (0.0, 0), (1.0, 255), (0.18, 118), (0.001, 3), (0.0031308, 10), (0.9, 243)]
+
+
+def test_png_srgb_curve(tmp_path):
+    values = [v for v, _ in KNOWN] + [2.0, -1.0, np.nan, np.inf]
+    codes = [c for _, c in KNOWN] + [255, 0, 0, 255]
+    rgb = np.zeros((2, len(values), 3), np.float32)
+    rgb[0, :, 0] = values  # red varies, green constant 0.5, blue 0
+    rgb[0, :, 1] = 0.5
+    rgb[1] = rgb[0, :, ::-1]
+    path = tmp_path / "p.png"
+    write_png(path, rgb)
+    png = read_png(path)
+    assert png.shape == (2, len(values), 3) and png.dtype == np.uint8
+    np.testing.assert_array_equal(png[0, :, 0], codes)
+    assert np.all(png[0, :, 1] == 188) and np.all(png[0, :, 2] == 0)
+    np.testing.assert_array_equal(png[1], png[0, :, ::-1])
+    np.testing.assert_array_equal(srgb8(rgb), png)
+    assert listing(tmp_path) == ["p.png"]
+
+
+def test_png_preview_beside_exr(tmp_path):
+    ch = film()
+    write_exr(tmp_path / "f.exr", ch, {}, png_path=tmp_path / "f.png")
+    assert listing(tmp_path) == ["f.exr", "f.png"]
+    png = read_png(tmp_path / "f.png")
+    # the preview encodes R, G, B as given (already composited), ignoring A
+    expect = srgb8(np.stack([ch["R"], ch["G"], ch["B"]], axis=-1))
+    np.testing.assert_array_equal(png, expect)
+
+
+def test_png_errors(tmp_path):
+    with pytest.raises(ValueError, match=r"\(H,W,3\)"):
+        write_png(tmp_path / "p.png", np.zeros((4, 4)))
+    with pytest.raises(SubtraceError, match="does not exist"):
+        write_png(tmp_path / "no" / "p.png", np.zeros((4, 4, 3)))
+    assert listing(tmp_path) == []
+
+
+# --------------------------------------------------------------------------------------
+# reading
+# --------------------------------------------------------------------------------------
+
+
+def test_read_errors(tmp_path):
+    with pytest.raises(SubtraceError, match="no such file") as info:
+        read_exr(tmp_path / "missing.exr")
+    assert str(tmp_path / "missing.exr") in str(info.value)
+    (tmp_path / "garbage.exr").write_bytes(b"this is not an image at all")
+    with pytest.raises(SubtraceError, match="cannot read") as info:
+        read_exr(tmp_path / "garbage.exr")
+    assert str(tmp_path / "garbage.exr") in str(info.value)
+    with pytest.raises(SubtraceError, match="is a directory"):
+        read_exr(tmp_path)
