@@ -236,8 +236,11 @@ def make_cage(
     )
 
 
-def load_cage(path, scheme: str | None = None) -> Cage:
-    """Read an OBJ control cage (with OpenSubdiv ``t`` tags) and prepare it for subdivision."""
+def load_cage(path, scheme: str | None = None, boundary: int | None = None) -> Cage:
+    """Read an OBJ control cage (with OpenSubdiv ``t`` tags) and prepare it for subdivision.
+
+    ``boundary`` (0 none, 1 edge-and-corner, 2 edge-only) overrides the file's
+    ``interpolateboundary`` tag."""
     from .io.obj import read_obj
 
     data = read_obj(path)
@@ -246,7 +249,7 @@ def load_cage(path, scheme: str | None = None) -> Cage:
         data.face_sizes,
         data.face_verts,
         scheme,
-        boundary=data.boundary,
+        boundary=data.boundary if boundary is None else boundary,
         chaikin=data.crease_method == "chaikin",
         smooth_triangles=data.smooth_triangles == "smooth",
         crease_edges=data.crease_edges,

@@ -16,3 +16,8 @@ _HERE = Path(__file__).resolve().parent
 def sample_cage_path() -> Path:
     """Path of the built-in sample cage (Spot, Catmull-Clark, public domain)."""
     return _HERE / "spot_control_mesh.obj"
+
+
+def default_scene_path() -> Path:
+    """Path of the built-in default scene of ``subtrace render`` (Spot, 1280x720, 1 px)."""
+    return _HERE / "default_scene.toml"

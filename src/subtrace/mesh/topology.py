@@ -125,6 +125,17 @@ def _counting_sort(keys, offsets, order):
         cursor[k] += 1
 
 
+def _compact(ids: np.ndarray, n: int):
+    """The distinct values of ``ids`` (all in 0..n-1) in increasing order, and the map from
+    each value to its rank (-1 for values absent); O(n), no sort."""
+    mask = np.zeros(n, dtype=bool)
+    mask[ids] = True
+    kept = np.nonzero(mask)[0]
+    rank = np.full(n, -1, dtype=np.int64)
+    rank[kept] = np.arange(len(kept))
+    return kept, rank
+
+
 def _corner_faces(face_offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For every corner c: its face and its index k within the face."""
     sizes = np.diff(face_offsets)

@@ -1,0 +1,221 @@
+"""The patch table: every face of the patch level L0 of every object, with its bounding shell.
+
+A patch is a face of level ``L0`` (Catmull-Clark: level 1, where all faces are quads; Loop:
+the cage). The renderer refines patches into grids of exact limit points
+(:mod:`subtrace.patches.grids`) on demand. Per patch, flat arrays (P = number of patches):
+
+* ``object_id``, ``face`` (face of the object's L0 level), ``ptex`` with ``ptex_uv0`` (P,2)
+  and ``ptex_scale``: patch parameter ``(s, t)`` is ptex ``uv0 + scale * (s, t)``;
+* ``shell_min``/``shell_max`` (P,3): the axis-aligned box of the control points of the faces
+  sharing a vertex with the patch. The limit surface over a face depends only on those
+  points, with non-negative weights, so it lies in their convex hull and in this box
+  (design invariant 2; Chaikin creases of sharpness in (1, 4/3) are the known exception and
+  get ``config.SHELL_CHAIKIN_MARGIN``);
+* ``edge_bound`` (P,): a bound on the length of the patch's iso-curves from its own and its
+  neighbours' control edges (see ``_shells``), and ``rate`` (P,): how much
+  control edges shrink per level near the patch's corners (1/2 for regular vertices, the
+  subdominant eigenvalue near extraordinary ones); together they bound the size of a grid
+  cell at depth n by ``edge_bound * rate^n`` (the refinement criterion);
+* ``edges`` (P,4) int64 (-1 pads triangles): global id of the L0 edge on each side (side k joins corners k, k+1),
+  used to give both patches of an edge the same sampling.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+from .. import config
+from ..patches.evaluate import ptex_layout
+
+# ptex offset of the child at corner j of a regular face (quads keep the parent's orientation)
+_QUAD_CHILD_UV0 = np.array([[0.0, 0.0], [0.5, 0.0], [0.5, 0.5], [0.0, 0.5]])
+
+
+@dataclass(frozen=True, eq=False)
+class ObjectPatches:
+    """An object's patch level: topology, points, options (what grids are built from)."""
+
+    cage: object
+    level0: int
+    level: object  # mesh.topology.Level of L0
+    points: np.ndarray  # (V,3) float64 L0 points
+    patch_faces: np.ndarray  # (p,) int64 faces of L0 that are patches (holes excluded)
+    first_patch: int  # global id of this object's first patch
+    first_edge: int  # global id of this object's first L0 edge
+
+
+@dataclass(frozen=True, eq=False)
+class PatchTable:
+    objects: tuple  # ObjectPatches per object
+    object_id: np.ndarray  # (P,) int32
+    face: np.ndarray  # (P,) int64 face in the object's L0
+    ptex: np.ndarray  # (P,) int32
+    ptex_uv0: np.ndarray  # (P,2) float64
+    ptex_scale: np.ndarray  # (P,) float64
+    shell_min: np.ndarray  # (P,3) float64
+    shell_max: np.ndarray  # (P,3) float64
+    edge_bound: np.ndarray  # (P,) float64
+    rate: np.ndarray  # (P,) float64
+    edges: np.ndarray  # (P,4) int64 global L0 edge ids (-1 pads a triangle's 4th side)
+    is_quad: np.ndarray  # (P,) bool: Catmull-Clark quad (else Loop triangle)
+    n_edges: int
+    level0: np.ndarray  # (P,) int8: L0 of the patch's object
+    material: np.ndarray  # (P,) int32 material of the base face (-1 none)
+
+    @property
+    def n_patches(self) -> int:
+        return len(self.face)
+
+
+def patch_level(cage) -> int:
+    """L0: the first level where every face has the scheme's regular size."""
+    return 1 if cage.scheme == "catmark" else 0
+
+
+def build_patch_table(cages) -> PatchTable:
+    """Patch table of several objects (Catmull-Clark and Loop cages may be mixed)."""
+    objs, parts = [], []
+    first_patch = first_edge = 0
+    for oid, cage in enumerate(cages):
+        L0 = patch_level(cage)
+        lev = cage.level_topology(L0)
+        pts = cage.refine(L0).points
+        faces = np.nonzero(~lev.face_hole)[0].astype(np.int64)
+        objs.append(ObjectPatches(cage, L0, lev, pts, faces, first_patch, first_edge))
+        quad = cage.scheme == "catmark"
+        parts.append(_object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad))
+        first_patch += len(faces)
+        first_edge += lev.n_edges
+    cat = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    return PatchTable(objects=tuple(objs), n_edges=first_edge, **cat)
+
+
+def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
+    k = 4 if quad else 3
+    n = len(faces)
+    # ptex mapping of each patch
+    base, sub, first = ptex_layout(cage)
+    if L0 == 1:
+        # level-1 face c is the child of base face F at corner j, numbered by base corner
+        fo = cage.base.face_offsets
+        sizes = np.diff(fo)
+        F = np.repeat(np.arange(len(sizes)), sizes)[faces]
+        j = faces - fo[F]
+        regular = sizes[F] == 4
+        ptex = np.where(regular, first[F], first[F] + j).astype(np.int32)
+        uv0 = np.where(regular[:, None], _QUAD_CHILD_UV0[j % 4], 0.0)
+        scale = np.where(regular, 0.5, 1.0)
+    else:
+        F = faces
+        ptex = first[faces].astype(np.int32)
+        uv0 = np.zeros((n, 2))
+        scale = np.ones(n)
+    material = (
+        np.full(n, -1, np.int32)
+        if cage.face_material is None
+        else np.asarray(cage.face_material, dtype=np.int32)[F]
+    )
+    smin = np.empty((n, 3))
+    smax = np.empty((n, 3))
+    ebound = np.empty(n)
+    valence = np.empty(n, dtype=np.int64)
+    _shells(
+        faces, lev.face_offsets, lev.face_verts, lev.vert_face_offsets, lev.vert_faces, pts,
+        smin, smax, ebound, valence,
+    )
+    if cage.options.chaikin and np.any(lev.edge_sharpness > 1.0):
+        margin = config.SHELL_CHAIKIN_MARGIN * (smax - smin).max(axis=1, keepdims=True)
+        smin -= margin
+        smax += margin
+    rate = _subdominant(valence, quad)
+    edges = np.full((n, 4), -1, dtype=np.int64)
+    edges[:, :k] = lev.face_edges[lev.face_offsets[faces][:, None] + np.arange(k)] + first_edge
+    return dict(
+        object_id=np.full(n, oid, np.int32),
+        face=faces,
+        ptex=ptex,
+        ptex_uv0=uv0,
+        ptex_scale=scale,
+        shell_min=smin,
+        shell_max=smax,
+        edge_bound=ebound,
+        rate=rate,
+        edges=edges,
+        is_quad=np.full(n, quad, dtype=bool),
+        level0=np.full(n, L0, np.int8),
+        material=material,
+    )
+
+
+@nb.njit(cache=True)
+def _shells(faces, face_offsets, face_verts, vert_face_offsets, vert_faces, pts, smin, smax,
+            ebound, valence):
+    """Box of the one-ring faces' points, longest edge among them, largest corner valence."""
+    for i in range(len(faces)):
+        f = faces[i]
+        lo0, lo1, lo2 = np.inf, np.inf, np.inf
+        hi0, hi1, hi2 = -np.inf, -np.inf, -np.inf
+        emax = 0.0
+        vmax = 0
+        # the patch's own edges
+        own = 0.0
+        n0 = face_offsets[f + 1] - face_offsets[f]
+        for b in range(n0):
+            p = face_verts[face_offsets[f] + b]
+            q = face_verts[face_offsets[f] + (b + 1) % n0]
+            dx, dy, dz = pts[q, 0] - pts[p, 0], pts[q, 1] - pts[p, 1], pts[q, 2] - pts[p, 2]
+            own = max(own, math.sqrt(dx * dx + dy * dy + dz * dz))
+        for c in range(face_offsets[f], face_offsets[f + 1]):
+            v = face_verts[c]
+            vmax = max(vmax, vert_face_offsets[v + 1] - vert_face_offsets[v])
+            for a in range(vert_face_offsets[v], vert_face_offsets[v + 1]):
+                g = vert_faces[a]
+                g0 = face_offsets[g]
+                ng = face_offsets[g + 1] - g0
+                for b in range(ng):
+                    p = face_verts[g0 + b]
+                    q = face_verts[g0 + (b + 1) % ng]
+                    x, y, z = pts[p, 0], pts[p, 1], pts[p, 2]
+                    lo0, lo1, lo2 = min(lo0, x), min(lo1, y), min(lo2, z)
+                    hi0, hi1, hi2 = max(hi0, x), max(hi1, y), max(hi2, z)
+                    dx, dy, dz = pts[q, 0] - x, pts[q, 1] - y, pts[q, 2] - z
+                    emax = max(emax, math.sqrt(dx * dx + dy * dy + dz * dz))
+        smin[i, 0], smin[i, 1], smin[i, 2] = lo0, lo1, lo2
+        smax[i, 0], smax[i, 1], smax[i, 2] = hi0, hi1, hi2
+        # an iso-curve over the patch is a cubic B-spline whose control polygon blends the
+        # patch's rows with weights >= 2/3 on its own two rows, and a B-spline span is no
+        # longer than e0/6 + 2 e1/3 + e2/6 of its control edges: hence this length bound
+        ebound[i] = (4.0 * own + 5.0 * emax) / 9.0
+        valence[i] = vmax
+
+
+def _subdominant(valence: np.ndarray, quad: bool) -> np.ndarray:
+    """Per-level contraction of control edges at a vertex of this valence (at least 1/2)."""
+    n = np.maximum(valence, 3).astype(np.float64)
+    c1, c2 = np.cos(2 * np.pi / n), np.cos(np.pi / n)
+    if quad:
+        lam = (5.0 + c1 + c2 * np.sqrt(2.0 * (9.0 + c1))) / 16.0
+    else:
+        lam = 3.0 / 8.0 + c1 / 4.0
+    return np.maximum(lam, 0.5)
+
+
+def choose_depths(table: PatchTable, eye: np.ndarray, tol_rad: float, max_depth: int):
+    """Grid depth of every patch: the smallest n with ``edge_bound * rate^n`` at most
+    ``tol_rad`` times the distance from the eye to the patch's shell (capped)."""
+    d = _box_distance(table.shell_min, table.shell_max, eye)
+    allowed = d * tol_rad
+    with np.errstate(divide="ignore", invalid="ignore"):
+        n = np.log(allowed / table.edge_bound) / np.log(table.rate)
+    n = np.where(allowed >= table.edge_bound, 0.0, np.ceil(n - 1e-9))
+    n = np.where(np.isfinite(n), n, max_depth)
+    return np.clip(n, 0, max_depth).astype(np.int32)
+
+
+def _box_distance(bmin, bmax, p):
+    q = np.maximum(np.maximum(bmin - p, 0.0), p - bmax)
+    return np.sqrt((q * q).sum(axis=1))

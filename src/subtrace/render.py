@@ -1,0 +1,358 @@
+"""Rendering: orchestration only (the maths lives in patches/, accel/, trace/, shade.py).
+
+``render_scene(scene)`` loads the cages, builds the patch table and the BVH of patch shells,
+chooses each patch's grid depth from the angular tolerance, then runs rounds of
+``trace.kernels.trace_round``: after each round the patches that rays asked for are refined
+(their grids of exact limit points built, T-junctions with coarser neighbours snapped, the
+quadtree of boxes built) and the rays that asked are traced again. Patches no ray reaches
+before a closer hit are never refined. Finally ``shade.py`` turns hits into image channels.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import config
+from .accel.bvh import build_bvh
+from .patches.grids import build_grids, grid_params, grid_size, leaf_corners
+from .patches.table import build_patch_table, choose_depths
+from .trace.kernels import HIT_FIELDS, H_T, trace_round
+
+
+@dataclass
+class RenderStats:
+    time_load: float = 0.0
+    time_preprocess: float = 0.0
+    time_refine: float = 0.0
+    time_trace: float = 0.0
+    time_shade: float = 0.0
+    time_total: float = 0.0
+    patches: int = 0
+    patches_refined: int = 0
+    micro_triangles: int = 0
+    grid_points: int = 0
+    rounds: int = 0
+    max_depth: int = 0
+    pixels_covered: int = 0
+    rays: int = 0
+
+    def as_attributes(self) -> dict:
+        return {f"subtrace:{k}": v for k, v in self.__dict__.items()}
+
+
+@dataclass
+class RenderResult:
+    channels: dict  # name -> (H,W) float32
+    stats: RenderStats
+    camera: object
+    tolerance_rad: float
+    schemes: tuple
+    refined_objects: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    # object id of every refined patch (what was built, for tests and reports)
+
+
+# --------------------------------------------------------------------------------------
+# static tables
+# --------------------------------------------------------------------------------------
+
+
+class _LeafTables:
+    """Leaf corners and grid parameters of every (depth, quad), concatenated for kernels."""
+
+    def __init__(self, max_depth: int):
+        D = max_depth + 1
+        self.lc_off = np.zeros((D, 2), dtype=np.int64)
+        self.uv_off = np.zeros((D, 2), dtype=np.int64)
+        lcs, uvs = [], []
+        n_lc = n_uv = 0
+        for d in range(D):
+            for q in (0, 1):
+                lc = leaf_corners(d, bool(q))
+                pad = np.full((len(lc), 4), -1, dtype=np.int32)
+                pad[:, : lc.shape[1]] = lc
+                self.lc_off[d, q] = n_lc
+                self.uv_off[d, q] = n_uv
+                lcs.append(pad)
+                uvs.append(grid_params(d, bool(q)))
+                n_lc += len(pad)
+                n_uv += len(uvs[-1])
+        self.lc_data = np.ascontiguousarray(np.concatenate(lcs))
+        self.uv_data = np.ascontiguousarray(np.concatenate(uvs))
+
+
+def _side_indices(depth: int, quad: bool) -> np.ndarray:
+    """(k, N+1) grid indices along each side, from corner k to corner k+1."""
+    N = 1 << depth
+    t = np.arange(N + 1)
+    if quad:
+        W = N + 1
+        return np.stack([t, N + t * W, (N - t) + N * W, (N - t) * W])
+    row = lambda j: j * (N + 1) - j * (j - 1) // 2  # noqa: E731
+    return np.stack([t, row(t) + (N - t), row(N - t)])
+
+
+class _Pools:
+    """Growable pools of grid points, normals and quadtree boxes of built patches."""
+
+    def __init__(self):
+        self.verts = np.zeros((0, 3))
+        self.normals = np.zeros((0, 3), dtype=np.float32)
+        self.node_lo = np.zeros((0, 3))
+        self.node_hi = np.zeros((0, 3))
+        self.slot_patch = np.zeros(0, np.int64)
+        self.slot_depth = np.zeros(0, np.int64)
+        self.slot_quad = np.zeros(0, np.bool_)
+        self.slot_vert_off = np.zeros(0, np.int64)
+        self.slot_node_off = np.zeros(0, np.int64)
+        self.slot_round = np.zeros(0, np.int64)
+
+    def append(self, patches, depth, quad, P, N, lo, hi, round_no):
+        m = len(patches)
+        G = P.shape[1]
+        K = lo.shape[1]
+        self.slot_vert_off = np.concatenate(
+            [self.slot_vert_off, len(self.verts) + G * np.arange(m, dtype=np.int64)]
+        )
+        self.slot_node_off = np.concatenate(
+            [self.slot_node_off, len(self.node_lo) + K * np.arange(m, dtype=np.int64)]
+        )
+        self.verts = np.concatenate([self.verts, P.reshape(-1, 3)])
+        self.normals = np.concatenate([self.normals, N.reshape(-1, 3).astype(np.float32)])
+        self.node_lo = np.concatenate([self.node_lo, lo.reshape(-1, 3)])
+        self.node_hi = np.concatenate([self.node_hi, hi.reshape(-1, 3)])
+        self.slot_patch = np.concatenate([self.slot_patch, patches])
+        self.slot_depth = np.concatenate([self.slot_depth, np.full(m, depth, np.int64)])
+        self.slot_quad = np.concatenate([self.slot_quad, np.full(m, quad, np.bool_)])
+        self.slot_round = np.concatenate([self.slot_round, np.full(m, round_no, np.int64)])
+
+
+# --------------------------------------------------------------------------------------
+# refinement of requested patches
+# --------------------------------------------------------------------------------------
+
+
+def _node_boxes(P: np.ndarray, depth: int, quad: bool):
+    """Quadtree boxes (m, K, 3) of grids P (m, G, 3): leaves from their corners, then up."""
+    lc = leaf_corners(depth, quad)
+    corners = P[:, lc]  # (m, 4^n, k, 3)
+    lo = [corners.min(axis=2)]
+    hi = [corners.max(axis=2)]
+    while lo[0].shape[1] > 1:
+        m, n = lo[0].shape[:2]
+        lo.insert(0, lo[0].reshape(m, n // 4, 4, 3).min(axis=2))
+        hi.insert(0, hi[0].reshape(m, n // 4, 4, 3).max(axis=2))
+    return np.concatenate(lo, axis=1), np.concatenate(hi, axis=1)
+
+
+def _snap_sides(P: np.ndarray, depth: int, quad: bool, side_depth: np.ndarray):
+    """Move boundary points of sides shared with a coarser patch onto the coarser
+    patch's polyline (linear interpolation of the points it shares), in place."""
+    sides = _side_indices(depth, quad)
+    N = 1 << depth
+    for k in range(sides.shape[0]):
+        for de in np.unique(side_depth[:, k]):
+            if de >= depth or de < 0:
+                continue
+            rows = np.nonzero(side_depth[:, k] == de)[0]
+            r = 1 << (depth - de)
+            t = np.arange(N + 1)
+            t0 = (t // r) * r
+            t1 = np.minimum(t0 + r, N)
+            w = ((t - t0) / r)[None, :, None]
+            idx = sides[k]
+            Q = P[rows][:, idx]
+            P[rows[:, None], idx[None, :]] = (1.0 - w) * Q[:, t0] + w * Q[:, t1]
+
+
+def _refine(table, requested, depths, edge_depth, pools, round_no, stats):
+    """Build the grids of the requested patches and append them to the pools."""
+    obj = table.object_id[requested]
+    dep = depths[requested]
+    order = np.lexsort((requested, dep, obj))
+    requested, obj, dep = requested[order], obj[order], dep[order]
+    keys = np.stack([obj, dep], axis=1)
+    starts = np.r_[0, np.nonzero(np.any(np.diff(keys, axis=0) != 0, axis=1))[0] + 1]
+    ends = np.r_[starts[1:], len(requested)]
+    for s, e in zip(starts, ends):
+        ids = requested[s:e]
+        o = table.objects[int(obj[s])]
+        d = int(dep[s])
+        quad = bool(table.is_quad[ids[0]])
+        P, N = build_grids(o.level, o.points, o.cage.options, table.face[ids], d)
+        k = 4 if quad else 3
+        side_depth = np.where(table.edges[ids, :k] >= 0, edge_depth[table.edges[ids, :k]], -1)
+        _snap_sides(P, d, quad, side_depth)
+        lo, hi = _node_boxes(P, d, quad)
+        pools.append(ids, d, quad, P, N, lo, hi, round_no)
+        stats.micro_triangles += len(ids) * (1 << (2 * d)) * (2 if quad else 1)
+        stats.grid_points += P.shape[0] * P.shape[1]
+    stats.patches_refined += len(requested)
+
+
+# --------------------------------------------------------------------------------------
+# the renderer
+# --------------------------------------------------------------------------------------
+
+
+def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
+    """Run the refinement rounds; returns (hits (H*W, 6), pools, depths)."""
+    from .trace.camera import camera_frame
+
+    max_depth = config.MAX_GRID_DEPTH if max_depth is None else max_depth
+    W, H = camera.width, camera.height
+    frame = camera_frame(camera)
+    eye = frame[0]
+    depths = choose_depths(table, eye, tol_rad, max_depth)
+    edge_depth = np.full(max(table.n_edges, 1), np.iinfo(np.int32).max, dtype=np.int64)
+    live = table.edges >= 0
+    np.minimum.at(edge_depth, table.edges[live], np.repeat(depths, 4).reshape(-1, 4)[live])
+    tables = _LeafTables(int(depths.max(initial=0)))
+    pools = _Pools()
+    patch_slot = np.full(table.n_patches, -1, dtype=np.int64)
+    hits = np.zeros((W * H, HIT_FIELDS))
+    hits[:, H_T] = np.inf
+    hits[:, 1] = -1
+    request = np.full(W * H, -1, dtype=np.int64)
+    rays = np.arange(W * H, dtype=np.int64)
+    round_no = 0
+    while len(rays):
+        t0 = time.perf_counter()
+        trace_round(
+            rays, frame, W, round_no,
+            bvh.node_min, bvh.node_max, bvh.node_first, bvh.node_count, bvh.node_axis,
+            bvh.prims, table.shell_min, table.shell_max, patch_slot,
+            pools.slot_depth, pools.slot_vert_off, pools.slot_node_off, pools.slot_quad,
+            pools.slot_round, pools.verts, pools.node_lo, pools.node_hi,
+            tables.lc_off, tables.lc_data, config.TRI_SLACK, hits, request,
+        )
+        stats.time_trace += time.perf_counter() - t0
+        req = request[rays]
+        asked = req >= 0
+        rays = rays[asked]
+        if not len(rays):
+            break
+        t0 = time.perf_counter()
+        new = np.unique(req[asked])
+        first_slot = len(pools.slot_patch)
+        _refine(table, new, depths, edge_depth, pools, round_no, stats)
+        patch_slot[pools.slot_patch[first_slot:]] = np.arange(first_slot, len(pools.slot_patch))
+        stats.time_refine += time.perf_counter() - t0
+        round_no += 1
+    stats.rounds = round_no + 1
+    stats.max_depth = int(pools.slot_depth.max(initial=0))
+    return hits, pools, depths, tables
+
+
+# --------------------------------------------------------------------------------------
+# scenes
+# --------------------------------------------------------------------------------------
+
+
+def load_objects(scene):
+    """Cages of the scene's objects (scheme / boundary overrides applied)."""
+    from .cage import load_cage
+
+    return [load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code) for o in scene.objects]
+
+
+def _patch_colors(table, scene):
+    from .io.obj import DEFAULT_DIFFUSE
+
+    colors = np.empty((table.n_patches, 3))
+    for oid, o in enumerate(table.objects):
+        sl = slice(o.first_patch, o.first_patch + len(o.patch_faces))
+        override = scene.objects[oid].color
+        if override is not None:
+            colors[sl] = override
+            continue
+        mats = o.cage.materials
+        table_rgb = np.array([m.diffuse for m in mats] + [DEFAULT_DIFFUSE], dtype=np.float64)
+        mat = table.material[sl]
+        colors[sl] = table_rgb[np.where(mat >= 0, mat, len(mats))]
+    return colors
+
+
+def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult:
+    """Render a :class:`subtrace.io.scene.Scene`; returns the channels and statistics."""
+    import numba
+
+    from .shade import shade_kernel
+    from .trace.camera import camera_frame
+
+    t_start = time.perf_counter()
+    if threads:
+        numba.set_num_threads(int(threads))
+    stats = RenderStats()
+    if cages is None:
+        cages = load_objects(scene)
+    stats.time_load = time.perf_counter() - t_start
+
+    t0 = time.perf_counter()
+    table = build_patch_table(cages)
+    bvh = build_bvh(table.shell_min, table.shell_max)
+    lo = table.shell_min.min(axis=0)
+    hi = table.shell_max.max(axis=0)
+    if scene.camera.is_auto:
+        # frame the limit surface: the bounds of the level-1 limit points of every object
+        bounds = [c.bounds() for c in cages]
+        lo = np.min([b[0] for b in bounds], axis=0)
+        hi = np.max([b[1] for b in bounds], axis=0)
+    camera = scene.make_camera(lo, hi)
+    tol_rad = scene.render.tolerance_rad(camera)
+    stats.patches = table.n_patches
+    stats.rays = camera.width * camera.height
+    stats.time_preprocess = time.perf_counter() - t0
+
+    hits, pools, depths, tables = trace_hits(table, bvh, camera, tol_rad, stats)
+
+    t0 = time.perf_counter()
+    W, H = camera.width, camera.height
+    n = W * H
+    rgba = np.empty((n, 4))
+    nrm = np.empty((n, 3))
+    level = np.empty(n)
+    patch = np.empty(n)
+    objid = np.empty(n)
+    uv = np.empty((n, 2))
+    lights = np.array(
+        [[*l.direction, *(np.asarray(l.color) * l.intensity)] for l in scene.lights],
+        dtype=np.float64,
+    ).reshape(-1, 6)
+    headlight = np.array([scene.render.headlight_intensity if scene.render.headlight else 0.0])
+    shade_kernel(
+        camera_frame(camera), W, hits, pools.slot_patch, pools.slot_depth, pools.slot_quad,
+        pools.slot_vert_off, pools.verts, pools.normals, tables.lc_off, tables.lc_data,
+        tables.uv_off, tables.uv_data, table.object_id, table.ptex, table.ptex_uv0,
+        table.ptex_scale, table.level0, _patch_colors(table, scene), lights, headlight,
+        np.asarray(scene.render.background, dtype=np.float64), rgba, nrm, level, patch,
+        objid, uv,
+    )
+    z = hits[:, H_T]
+    stats.pixels_covered = int(np.isfinite(z).sum())
+    channels = {
+        "R": rgba[:, 0], "G": rgba[:, 1], "B": rgba[:, 2], "A": rgba[:, 3], "Z": z,
+        "N.X": nrm[:, 0], "N.Y": nrm[:, 1], "N.Z": nrm[:, 2],
+        "level": level, "patch_id": patch, "object_id": objid,
+        "u": uv[:, 0], "v": uv[:, 1],
+    }
+    channels = {k: v.reshape(H, W).astype(np.float32) for k, v in channels.items()}
+    stats.time_shade = time.perf_counter() - t0
+    stats.time_total = time.perf_counter() - t_start
+    schemes = tuple(c.scheme for c in cages)
+    refined = table.object_id[pools.slot_patch]
+    return RenderResult(channels, stats, camera, tol_rad, schemes, refined)
+
+
+def result_attributes(result: RenderResult, scene) -> dict:
+    """EXR header attributes of a render: camera, tolerance, schemes, timings and counts."""
+    attrs = dict(result.camera.header_attributes())
+    attrs["subtrace:tolerance_rad"] = float(result.tolerance_rad)
+    attrs["subtrace:tolerance_px"] = float(result.tolerance_rad / result.camera.pixel_angle())
+    attrs["subtrace:scheme"] = ",".join(result.schemes)
+    attrs["subtrace:meshes"] = ";".join(o.mesh for o in scene.objects)
+    for k, v in result.stats.__dict__.items():
+        attrs[f"subtrace:{k}"] = float(v) if isinstance(v, float) else int(v)
+    return attrs

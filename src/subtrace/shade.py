@@ -1,0 +1,126 @@
+"""Shading: rebuild position, normal, ids and colour from the hits (pbrt habit: the
+intersection kernels return only t, the micro-face and its barycentrics).
+
+The normal at a hit interpolates the exact unit limit normals of the micro-face's corners
+(computed from the limit tangents of the subdivision core) with the hit's barycentrics, so
+it is within the tolerance's angle of the limit normal at that point; where the limit
+tangents leave a corner's normal undefined, the micro-triangle's own normal is used.
+Lighting is Lambertian, two-sided: a headlight at the eye plus directional lights.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from .trace.kernels import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI
+
+
+@nb.njit(cache=True, parallel=True)
+def shade_kernel(frame, width, hits, slot_patch, slot_depth, slot_quad, slot_vert_off,
+                 verts, normals, lc_off, lc_data, uv_off, uv_data, patch_object, patch_ptex,
+                 patch_uv0, patch_scale, patch_level0, patch_color, lights, headlight,
+                 background, out_rgba, out_n, out_level, out_patch, out_object, out_uv):
+    """Fill the per-pixel outputs (flat over pixels) from ``hits``.
+
+    ``lights`` (L,6): direction the light travels (unit) and its colour times intensity.
+    """
+    n_pix = hits.shape[0]
+    for r in nb.prange(n_pix):
+        t = hits[r, H_T]
+        if not (t < np.inf):
+            out_rgba[r, 0] = background[0]
+            out_rgba[r, 1] = background[1]
+            out_rgba[r, 2] = background[2]
+            out_rgba[r, 3] = 0.0
+            out_n[r, :] = 0.0
+            out_level[r] = -1.0
+            out_patch[r] = -1.0
+            out_object[r] = -1.0
+            out_uv[r, :] = 0.0
+            continue
+        row = r // width
+        col = r - row * width
+        dx = frame[3, 0] + col * frame[1, 0] + row * frame[2, 0]
+        dy = frame[3, 1] + col * frame[1, 1] + row * frame[2, 1]
+        dz = frame[3, 2] + col * frame[1, 2] + row * frame[2, 2]
+        inv = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
+        dx, dy, dz = dx * inv, dy * inv, dz * inv
+        s = np.int64(hits[r, H_SLOT])
+        leaf = np.int64(hits[r, H_LEAF])
+        b1 = hits[r, H_B1]
+        b2 = hits[r, H_B2]
+        b0 = 1.0 - b1 - b2
+        depth = slot_depth[s]
+        quad = slot_quad[s]
+        q = 1 if quad else 0
+        base = lc_off[depth, q] + leaf
+        ca = lc_data[base, 0]
+        if hits[r, H_TRI] == 0.0:
+            cb = lc_data[base, 1]
+            cc = lc_data[base, 2]
+        else:
+            cb = lc_data[base, 2]
+            cc = lc_data[base, 3]
+        vo = slot_vert_off[s]
+        # interpolated limit normal (fallback: the micro-triangle's normal)
+        nx = ny = nz = 0.0
+        ok = True
+        for a in range(3):
+            na = normals[vo + ca, a]
+            nb_ = normals[vo + cb, a]
+            nc = normals[vo + cc, a]
+            if not (np.isfinite(na) and np.isfinite(nb_) and np.isfinite(nc)):
+                ok = False
+        if ok:
+            nx = b0 * normals[vo + ca, 0] + b1 * normals[vo + cb, 0] + b2 * normals[vo + cc, 0]
+            ny = b0 * normals[vo + ca, 1] + b1 * normals[vo + cb, 1] + b2 * normals[vo + cc, 1]
+            nz = b0 * normals[vo + ca, 2] + b1 * normals[vo + cb, 2] + b2 * normals[vo + cc, 2]
+        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if not ok or ln == 0.0:
+            e1x = verts[vo + cb, 0] - verts[vo + ca, 0]
+            e1y = verts[vo + cb, 1] - verts[vo + ca, 1]
+            e1z = verts[vo + cb, 2] - verts[vo + ca, 2]
+            e2x = verts[vo + cc, 0] - verts[vo + ca, 0]
+            e2y = verts[vo + cc, 1] - verts[vo + ca, 1]
+            e2z = verts[vo + cc, 2] - verts[vo + ca, 2]
+            nx = e1y * e2z - e1z * e2y
+            ny = e1z * e2x - e1x * e2z
+            nz = e1x * e2y - e1y * e2x
+            ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if ln > 0.0:
+            nx, ny, nz = nx / ln, ny / ln, nz / ln
+        out_n[r, 0] = nx
+        out_n[r, 1] = ny
+        out_n[r, 2] = nz
+        # patch parameter of the hit, then ptex (u, v)
+        uo = uv_off[depth, q]
+        u = b0 * uv_data[uo + ca, 0] + b1 * uv_data[uo + cb, 0] + b2 * uv_data[uo + cc, 0]
+        v = b0 * uv_data[uo + ca, 1] + b1 * uv_data[uo + cb, 1] + b2 * uv_data[uo + cc, 1]
+        p = slot_patch[s]
+        out_uv[r, 0] = patch_uv0[p, 0] + patch_scale[p] * u
+        out_uv[r, 1] = patch_uv0[p, 1] + patch_scale[p] * v
+        out_level[r] = patch_level0[p] + depth
+        out_patch[r] = patch_ptex[p]
+        out_object[r] = patch_object[p]
+        # two-sided Lambert: headlight plus directional lights
+        sgn = -1.0 if nx * dx + ny * dy + nz * dz > 0.0 else 1.0
+        fx, fy, fz = sgn * nx, sgn * ny, sgn * nz
+        lr = lg = lb = 0.0
+        if headlight[0] > 0.0:
+            c = -(fx * dx + fy * dy + fz * dz) * headlight[0]
+            lr += c
+            lg += c
+            lb += c
+        for k in range(lights.shape[0]):
+            c = -(fx * lights[k, 0] + fy * lights[k, 1] + fz * lights[k, 2])
+            if c > 0.0:
+                lr += c * lights[k, 3]
+                lg += c * lights[k, 4]
+                lb += c * lights[k, 5]
+        out_rgba[r, 0] = patch_color[p, 0] * lr
+        out_rgba[r, 1] = patch_color[p, 1] * lg
+        out_rgba[r, 2] = patch_color[p, 2] * lb
+        out_rgba[r, 3] = 1.0
