@@ -1,0 +1,117 @@
+"""Benchmark: render scenes and report the time split, work done and peak memory.
+
+    python benchmarks/render.py [SCENE.toml ...] [--width 1280 --height 720] [--repeat 3]
+                                [--tolerance 1]
+
+Default scenes: ``scenes/spot.toml`` and ``scenes/sword.toml``. Each scene runs in a fresh
+subprocess: one *cold* run (first render in the process: Numba's cache is loaded, or kernels
+compile when it is stale) and ``repeat`` *warm* runs whose medians are reported. Times are
+the renderer's own (``subtrace:time_*``: load, preprocess, refine, trace, shade) plus the
+EXR write; ``cmd s`` is the wall time of a whole ``subtrace render`` command (interpreter
+start and imports included), measured separately. Peak memory is the subprocess's max RSS.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+DEFAULT_SCENES = [REPO / "scenes" / "spot.toml", REPO / "scenes" / "sword.toml"]
+
+
+def _import_subtrace():
+    try:
+        import subtrace
+    except ModuleNotFoundError as exc:
+        if exc.name != "subtrace":
+            raise
+        sys.path.insert(0, str(REPO / "src"))
+        import subtrace
+    return subtrace
+
+
+def worker(scene_path: str, width: int, height: int, tolerance: float, repeat: int) -> dict:
+    import resource
+
+    _import_subtrace()
+    from subtrace.io.exr import write_exr
+    from subtrace.io.scene import apply_overrides, load_scene
+    from subtrace.render import render_scene, result_attributes
+
+    scene = apply_overrides(load_scene(scene_path), width=width, height=height,
+                            tolerance=tolerance)
+    runs = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for _ in range(repeat + 1):
+            res = render_scene(scene)
+            t0 = time.perf_counter()
+            write_exr(os.path.join(tmp, "out.exr"), res.channels, result_attributes(res, scene))
+            st = dict(res.stats.__dict__)
+            st["time_write"] = time.perf_counter() - t0
+            runs.append(st)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    return {"cold": runs[0], "warm": runs[1:], "peak_mb": peak}
+
+
+def _command_time(scene_path, width, height, tolerance) -> float:
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [sys.executable, str(REPO / "cli.py"), "render", str(scene_path), "-o",
+               os.path.join(tmp, "o.exr"), "--width", str(width), "--height", str(height),
+               "--tolerance", str(tolerance), "--quiet"]
+        t0 = time.perf_counter()
+        subprocess.run(cmd, check=True)
+        return time.perf_counter() - t0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("scenes", nargs="*", default=[str(s) for s in DEFAULT_SCENES])
+    ap.add_argument("--width", type=int, default=1280)
+    ap.add_argument("--height", type=int, default=720)
+    ap.add_argument("--tolerance", type=float, default=1.0)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--worker", nargs=5, help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.worker:
+        s, w, h, t, r = args.worker
+        print(json.dumps(worker(s, int(w), int(h), float(t), int(r))))
+        return 0
+    print(f"{args.width}x{args.height}, tolerance {args.tolerance} px, {args.repeat} warm runs "
+          f"(medians), cpus {os.cpu_count()}")
+    cols = ("scene", "cold s", "load", "prep", "refine", "trace", "shade", "write", "total",
+            "cmd s", "Mrays/s", "refined", "patches", "micro-tris", "tris/px", "px", "peak MB")
+    print(" ".join(f"{c:>10}" for c in cols))
+    for scene in args.scenes:
+        out = subprocess.run(
+            [sys.executable, __file__, "--worker", scene, str(args.width), str(args.height),
+             str(args.tolerance), str(args.repeat)],
+            check=True, capture_output=True, text=True,
+        ).stdout
+        r = json.loads(out.strip().splitlines()[-1])
+        warm = r["warm"]
+        med = {k: statistics.median(run[k] for run in warm) for k in warm[0]}
+        cmd = _command_time(scene, args.width, args.height, args.tolerance)
+        cold = r["cold"]["time_total"] + r["cold"]["time_write"]
+        rays = med["rays"] / med["time_total"] / 1e6
+        row = (Path(scene).stem, f"{cold:.2f}", f"{med['time_load']:.3f}",
+               f"{med['time_preprocess']:.3f}", f"{med['time_refine']:.3f}",
+               f"{med['time_trace']:.3f}", f"{med['time_shade']:.3f}",
+               f"{med['time_write']:.3f}", f"{med['time_total']:.3f}", f"{cmd:.2f}",
+               f"{rays:.2f}", f"{int(med['patches_refined'])}", f"{int(med['patches'])}",
+               f"{int(med['micro_triangles'])}",
+               f"{med['micro_triangles'] / max(med['pixels_covered'], 1):.1f}",
+               f"{int(med['pixels_covered'])}", f"{r['peak_mb']:.0f}")
+        print(" ".join(f"{c:>10}" for c in row), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
