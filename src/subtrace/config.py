@@ -8,7 +8,7 @@ SHARPNESS_INFINITE = 10.0
 EVAL_MAX_DEPTH = 24
 
 # Step (in ptex units) of the finite differences that give derivatives where no exact
-# bicubic patch is reached (Loop, creases, boundaries).
+# bicubic (Catmark) or box-spline (Loop) patch is reached (creases, boundaries, extraordinary).
 EVAL_FD_STEP = 2.0**-16
 
 # Renderer: face rings cut out around the patches whose grids are refined together (the

@@ -5,13 +5,17 @@ faces within two rings of the faces holding the samples are cut out and refined 
 (``subdiv.limit.extract``), and each sample moves to the child face that contains it:
 
 * a Catmull-Clark quad whose four corners are smooth, valence-4 and crease-free is a
-  uniform bicubic B-spline patch: the sample is evaluated there exactly, with exact
-  derivatives (the common case, reached after a few levels except next to an
-  extraordinary vertex or a crease);
+  uniform bicubic B-spline patch of its 16 points, and a Loop triangle whose three corners
+  are smooth, valence-6 and crease-free a quartic box-spline patch of its 12 points: the
+  sample is evaluated there exactly, with exact derivatives (the common case, reached after
+  a few levels except next to an extraordinary vertex or a crease);
 * everything else keeps subdividing down to ``config.EVAL_MAX_DEPTH`` levels, where the face
   is 2^-depth of its ptex face: the position is interpolated from the exact limit points of
   its corners (error O(4^-depth), below double precision) and the derivatives are finite
-  differences of such exact positions (``config.EVAL_FD_STEP``).
+  differences of such exact positions (``config.EVAL_FD_STEP``);
+* at a ptex corner on a smooth extraordinary vertex, where the parametrization is singular,
+  the derivatives come from the vertex's limit tangents instead (:func:`_corner_derivatives`),
+  so that their cross product is the exact limit normal.
 
 Non-quad Catmull-Clark faces are split into their ptex sub-faces by the first level. Points
 on hole faces come back as NaN.
@@ -22,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import config
-from ..subdiv.limit import _SMOOTH, classify, extract, limit_points
+from ..subdiv.limit import _SMOOTH, classify, extract, limit_points, smooth_edge_tangents
 from ..subdiv.refine import refine_level, refine_points
 
 
@@ -70,11 +74,6 @@ def evaluate(cage, ptex_face, uv):
     idx = np.nonzero(live)[0]
     if len(idx) == 0:
         return P, dPdu, dPdv
-    if cage.scheme == "loop":
-        P[idx] = _positions(cage, faces[idx], subface[ptex_face[idx]], uv[idx])
-        du, dv = _fd_derivatives(cage, faces[idx], subface[ptex_face[idx]], uv[idx], P[idx])
-        dPdu[idx], dPdv[idx] = du, dv
-        return P, dPdu, dPdv
     p, du, dv, exact_d = _descend(cage, faces[idx], subface[ptex_face[idx]], uv[idx], True)
     P[idx] = p
     dPdu[idx] = du
@@ -83,7 +82,82 @@ def evaluate(cage, ptex_face, uv):
     if len(need):
         du, dv = _fd_derivatives(cage, faces[need], subface[ptex_face[need]], uv[need], P[need])
         dPdu[need], dPdv[need] = du, dv
+    _corner_derivatives(cage, faces[idx], subface[ptex_face[idx]], uv[idx], idx, dPdu, dPdv)
     return P, dPdu, dPdv
+
+
+# parameter-space directions of the leading edge (to the next corner) and the trailing
+# edge (to the previous corner) at each corner of a ptex quad / triangle
+_QUAD_UV = np.array([[0, 0], [1, 0], [1, 1], [0, 1]])
+_TRI_UV = np.array([[0, 0], [1, 0], [0, 1]])
+
+
+def _corner_derivatives(cage, faces, subface, uv, rows, dPdu, dPdv):
+    """Derivatives at ptex corners that are smooth extraordinary vertices, from the exact
+    limit tangents there (rows ``rows`` of dPdu, dPdv are replaced).
+
+    The parametrization is singular at such a corner: OpenSubdiv's derivatives there are
+    those of its end-cap patch and only their normal is meaningful (finite differences do
+    not even give that for Loop: at valence 3 the tangent and curvature terms decay alike).
+    Here the limit tangents along the face's two edges at the corner, T_lead and T_trail
+    (the smooth tangent mask turned to each edge, scaled as a regular vertex's would be),
+    are taken as the images of the two edge directions a, b in (u, v): the linear map
+    [T_lead T_trail] [a b]^-1 gives dP/du and dP/dv, whose cross product is the exact limit
+    normal, oriented like the faces. Corners where the vertex is regular, sharp, or still
+    semi-sharp keep what the descent gave them.
+
+    Work happens on level 1 (where every face has the scheme's regular size): corner j of a
+    regular face is corner j of its child j, with the same (u, v) directions over half the
+    length; a ptex sub-face of an n-gon is a level-1 face.
+    """
+    is_loop = cage.scheme == "loop"
+    table = _TRI_UV if is_loop else _QUAD_UV
+    pos = np.full(len(faces), -1)
+    for j, corner in enumerate(table):
+        pos[np.all(uv == corner, axis=1)] = j
+    sel = np.nonzero(pos >= 0)[0]
+    if len(sel) == 0:
+        return
+    base = cage.base
+    bfo = base.face_offsets
+    corners = [base.face_verts[bfo[f] : bfo[f + 1]] for f in np.unique(faces[sel])]
+    verts = np.unique(np.concatenate(corners))
+    sub, s2c, _, sub_faces = extract(base, verts, rings=2)
+    ref = refine_level(sub, cage.options)
+    child = ref.child
+    pts = refine_points(ref, cage.points[s2c])
+    cls = classify(child, cage.options)
+    face_map = np.full(base.n_faces, -1, dtype=np.int64)
+    face_map[sub_faces] = np.arange(len(sub_faces))
+    sf = face_map[faces[sel]]
+    regular = subface[sel] < 0
+    j = np.where(regular, pos[sel], subface[sel])  # which child of the face
+    c = 4 * sf + j if is_loop else sub.face_offsets[sf] + j  # the level-1 face
+    p = pos[sel]  # the sample's corner of it
+    w = child.face_verts[child.face_offsets[c] + p]
+    valence = np.diff(child.vert_edge_offsets)[w]
+    todo = (cls[w] == _SMOOTH) & (valence != (6 if is_loop else 4))
+    if not todo.any():
+        return
+    sel, c, p, w, regular = sel[todo], c[todo], p[todo], w[todo], regular[todo]
+    # the ring slot of face c at w: its leading edge, and the next (its trailing edge)
+    slot = np.empty(len(w), dtype=np.int64)
+    for t in range(len(w)):
+        a = child.vert_face_offsets[w[t]]
+        ring = child.vert_faces[a : child.vert_face_offsets[w[t] + 1]]
+        slot[t] = np.nonzero(ring == c[t])[0][0]
+    nxt = (slot + 1) % valence[todo]
+    scale = 1.0 / 3.0 if is_loop else 1.0 / 12.0
+    t_lead = scale * smooth_edge_tangents(child, pts, cage.options, w, slot)
+    t_trail = scale * smooth_edge_tangents(child, pts, cage.options, w, nxt)
+    n = len(table)
+    ab = np.stack([table[(p + 1) % n] - table[p], table[(p - 1) % n] - table[p]], axis=2)
+    ab = ab * np.where(regular, 0.5, 1.0)[:, None, None]  # (k, 2, 2): columns a, b
+    inv = np.linalg.inv(ab.astype(np.float64))
+    T = np.stack([t_lead, t_trail], axis=2)  # (k, 3, 2)
+    D = T @ inv  # (k, 3, 2): columns dP/du, dP/dv
+    dPdu[rows[sel]] = D[:, :, 0]
+    dPdv[rows[sel]] = D[:, :, 1]
 
 
 def _positions(cage, faces, subface, uv):
@@ -192,6 +266,70 @@ def _grid16(level, f):
     return G
 
 
+# A Loop triangle whose three corners are smooth, valence 6 and crease-free is a quartic box
+# spline of the 12 points around it. Lattice offsets of those points from corner 0, with
+# corner 1 at (1, 0) and corner 2 at (0, 1) (the triangle's own (u, v)):
+_BOX_POINTS = np.array(
+    [[-1, 0], [-1, 1], [-1, 2], [0, -1], [0, 0], [0, 1], [0, 2], [1, -1], [1, 0], [1, 1],
+     [2, -1], [2, 0]]
+)  # fmt: skip
+# the six lattice directions counter-clockwise, and where each corner's leading edge points
+_LATTICE_DIRS = np.array([[1, 0], [0, 1], [-1, 1], [-1, 0], [0, -1], [1, -1]])
+_TRI_CORNER = np.array([[0, 0], [1, 0], [0, 1]])
+_TRI_LEAD = np.array([0, 2, 4])
+# Basis: the weight of point k is sum over monomials u^a v^b (a + b <= 4, in this order) of
+# _BOX_COEF[monomial, k] / 24. It is the quartic that takes the exact limit values at the 15
+# vertices of the triangle's level-2 refinement (limit mask 1/2, 1/12 x 6 of a regular
+# vertex after two uniform steps); a quartic box-spline patch is fixed by them. The test
+# suite re-derives it that way (tests/test_limit_tangents.py).
+_BOX_MONO = np.array([(a, b) for a in range(5) for b in range(5 - a)])
+_BOX_COEF = np.array(
+    [
+        [2, 2, 0, 2, 12, 2, 0, 2, 2, 0, 0, 0],
+        [-4, 4, 0, -8, 0, 8, 0, -4, 4, 0, 0, 0],
+        [0, 0, 0, 12, -24, 12, 0, 0, 0, 0, 0, 0],
+        [4, -8, 4, -8, 16, -8, 0, 4, -8, 4, 0, 0],
+        [-2, 4, -2, 2, -2, -2, 2, -2, 4, -2, 0, 0],
+        [-8, -4, 0, -4, 0, 4, 0, 4, 8, 0, 0, 0],
+        [12, -12, 0, 12, -24, 12, 0, -12, 12, 0, 0, 0],
+        [0, 0, 0, -12, 24, -12, 0, 12, -24, 12, 0, 0],
+        [-4, 8, -4, 4, -4, -4, 4, -4, 8, -4, 0, 0],
+        [12, 0, 0, 0, -24, 0, 0, 0, 12, 0, 0, 0],
+        [-12, 12, 0, 0, 24, -24, 0, 0, -12, 12, 0, 0],
+        [0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
+        [-8, 4, 0, 4, 16, -8, 0, -8, -8, 4, 4, 0],
+        [4, -4, 0, -4, -4, 8, 0, 8, -4, -4, -4, 4],
+        [2, -2, 0, -2, -2, 4, 0, 4, -2, -2, -2, 2],
+    ],
+    dtype=np.float64,
+) / 24.0
+
+
+def _box_spline(u, v):
+    """Quartic box-spline basis and its u, v derivatives at (u, v): three (12,) arrays."""
+    a, b = _BOX_MONO[:, 0], _BOX_MONO[:, 1]
+    m = u**a * v**b
+    mu = np.where(a > 0, a * u ** np.maximum(a - 1, 0) * v**b, 0.0)
+    mv = np.where(b > 0, b * u**a * v ** np.maximum(b - 1, 0), 0.0)
+    return m @ _BOX_COEF, mu @ _BOX_COEF, mv @ _BOX_COEF
+
+
+def _grid12(level, f):
+    """The 12 control points (vertex ids, in _BOX_POINTS order) of a regular triangle ``f``."""
+    fo, fv = level.face_offsets, level.face_verts
+    at = {}
+    for k in range(3):
+        c = fv[fo[f] + k]
+        fa, ea = level.vert_face_offsets[c], level.vert_edge_offsets[c]
+        slot = int(np.nonzero(level.vert_faces[fa : fa + 6] == f)[0][0])
+        for t in range(6):
+            a, b = level.edge_verts[level.vert_edges[ea + (slot + t) % 6]]
+            far = b if a == c else a
+            at[tuple(_TRI_CORNER[k] + _LATTICE_DIRS[(_TRI_LEAD[k] + t) % 6])] = far
+        at[tuple(_TRI_CORNER[k])] = c
+    return np.array([at[tuple(q)] for q in _BOX_POINTS], dtype=np.int64)
+
+
 def _descend(cage, faces, subface, uv, want_derivs):
     """Walk every sample down the subdivision hierarchy; see the module comment."""
     opts = cage.options
@@ -219,32 +357,38 @@ def _descend(cage, faces, subface, uv, want_derivs):
         face_map[sub_faces] = np.arange(len(sub_faces))
         sub_pts = pts[s2c]
         sf = face_map[cur[ids]]
-        # regular bicubic patches: evaluate exactly and retire the sample
-        if not is_loop:
-            cls = classify(sub, opts)
-            val = np.diff(sub.vert_edge_offsets)
-            sfo = sub.face_offsets
-            for t, (i, f) in enumerate(zip(ids, sf)):
-                if sfo[f + 1] - sfo[f] != 4:
-                    continue
-                cv = sub.face_verts[sfo[f] : sfo[f] + 4]
-                if np.all(cls[cv] == _SMOOTH) and np.all(val[cv] == 4):
-                    G = _grid16(sub, f)
-                    X = sub_pts[G]  # (4,4,3)
-                    bu, du_ = _bspline(np.array([loc[i, 0]]))
-                    bv, dv_ = _bspline(np.array([loc[i, 1]]))
-                    P[i] = np.einsum("i,j,ijk->k", bu[0], bv[0], X)
-                    lu = np.einsum("i,j,ijk->k", du_[0], bv[0], X)
-                    lv = np.einsum("i,j,ijk->k", bu[0], dv_[0], X)
-                    # chain rule: d/dptex = J^T d/dlocal
-                    dU[i] = J[i, 0, 0] * lu + J[i, 1, 0] * lv
-                    dV[i] = J[i, 0, 1] * lu + J[i, 1, 1] * lv
-                    exact_d[i] = True
-                    active[i] = False
-            ids = np.nonzero(active)[0]
-            sf = face_map[cur[ids]]
-            if len(ids) == 0:
-                break
+        # regular patches (bicubic B-spline / quartic box spline): evaluate exactly, retire
+        cls = classify(sub, opts)
+        val = np.diff(sub.vert_edge_offsets)
+        sfo = sub.face_offsets
+        reg_valence = 6 if is_loop else 4
+        for i, f in zip(ids, sf):
+            if sfo[f + 1] - sfo[f] != (3 if is_loop else 4):
+                continue
+            cv = sub.face_verts[sfo[f] : sfo[f + 1]]
+            if not (np.all(cls[cv] == _SMOOTH) and np.all(val[cv] == reg_valence)):
+                continue
+            if is_loop:
+                X = sub_pts[_grid12(sub, f)]  # (12,3)
+                b, bu, bv = _box_spline(loc[i, 0], loc[i, 1])
+                P[i] = b @ X
+                lu, lv = bu @ X, bv @ X
+            else:
+                X = sub_pts[_grid16(sub, f)]  # (4,4,3)
+                bu, du_ = _bspline(np.array([loc[i, 0]]))
+                bv, dv_ = _bspline(np.array([loc[i, 1]]))
+                P[i] = np.einsum("i,j,ijk->k", bu[0], bv[0], X)
+                lu = np.einsum("i,j,ijk->k", du_[0], bv[0], X)
+                lv = np.einsum("i,j,ijk->k", bu[0], dv_[0], X)
+            # chain rule: d/dptex = J^T d/dlocal
+            dU[i] = J[i, 0, 0] * lu + J[i, 1, 0] * lv
+            dV[i] = J[i, 0, 1] * lu + J[i, 1, 1] * lv
+            exact_d[i] = True
+            active[i] = False
+        ids = np.nonzero(active)[0]
+        sf = face_map[cur[ids]]
+        if len(ids) == 0:
+            break
         if depth >= max_depth:
             _interpolate_corners(sub, sub_pts, opts, sf, loc[ids], ids, P, is_loop)
             break

@@ -13,8 +13,14 @@ OpenSubdiv's closed-form limit masks are exact only for "suitably isolated" vert
   one-ring subdivision matrix: eigenvalue 1 gives the limit point, the subdominant pair the
   tangent plane.
 
-Tangents use OpenSubdiv's masks where those apply; elsewhere their directions span the true
-tangent plane and ``du x dv`` points to the side the faces wind counter-clockwise around.
+Tangents are OpenSubdiv's masks where those apply: du x dv points to the side the faces
+wind counter-clockwise around. At a crease or boundary vertex du runs along the crease towards
+its first sharp edge and dv across the span of faces from there to the second one (Biermann
+et al.'s masks, as OpenSubdiv weights them). Those are the exact tangent plane only for the
+regular spans and smaller (Catmark 1-2 faces, Loop 1-3); for wider spans they are
+OpenSubdiv's approximation, a few degrees off on a coarse cage and converging with the level
+(``Limit()`` in OpenSubdiv gives the same values). Elsewhere (the eigen-analysis) du and dv
+span the true tangent plane, oriented from the topology alone (see :func:`_eigen_limit`).
 """
 
 from __future__ import annotations
@@ -24,7 +30,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ..mesh.topology import Level, Options, build_level
+from ..mesh.topology import Level, Options, _compact, build_level
 from . import catmark, loop
 from .creases import F0, F_INF, RULE_CORNER, RULE_CREASE, RULE_SMOOTH, rule_of
 
@@ -157,6 +163,34 @@ def _closed_form(level, points, options, cls, which, dest, P, du, dv):
     )
 
 
+def smooth_edge_tangents(level: Level, points: np.ndarray, options: Options, verts, slots):
+    """Limit tangents along ring edge ``slots[i]`` of the smooth vertices ``verts[i]``.
+
+    The smooth tangent mask turned to begin at that edge (slot 0 is ``limit_points``' du):
+    the derivative of the limit surface along the limit curve of the edge, up to a factor
+    that depends on the valence only (regular vertices: 12x the derivative per unit edge
+    of a bicubic B-spline patch for Catmark, 3x that of a quartic box-spline patch for Loop).
+    Every vertex must be of class ``_SMOOTH``. Returns (k,3) float64.
+    """
+    scheme = loop if options.scheme == "loop" else catmark
+    X = np.asarray(points, dtype=np.float64)
+    fo, fv = level.face_offsets, level.face_verts
+    out = np.zeros((len(verts), 3))
+    for t, (v, s) in enumerate(zip(verts, slots)):
+        ea, eb = level.vert_edge_offsets[v], level.vert_edge_offsets[v + 1]
+        fa = level.vert_face_offsets[v]
+        n = eb - ea
+        ew, fw = scheme.smooth_tangent_weights(n)
+        ew, fw = np.roll(ew, s), None if fw is None else np.roll(fw, s)
+        for i in range(n):
+            a, b = level.edge_verts[level.vert_edges[ea + i]]
+            out[t] += ew[i] * X[b if a == v else a]
+            if fw is not None:
+                f, k = level.vert_faces[fa + i], level.vert_face_corner[fa + i]
+                out[t] += fw[i] * X[fv[fo[f] + (k + 2) % (fo[f + 1] - fo[f])]]
+    return out
+
+
 @nb.njit(cache=True)
 def _far(edge_verts, e, v):
     a = edge_verts[e, 0]
@@ -210,47 +244,57 @@ def _closed_form_kernel(
             for k in range(3):
                 P[r, k] = X[v, k]
             if ne >= 2:
+                # along the first two edges (OpenSubdiv scales Loop's by 3)
+                s = 3.0 if is_loop else 1.0
                 a = _far(edge_verts, vert_edges[ea], v)
                 b = _far(edge_verts, vert_edges[ea + 1], v)
                 for k in range(3):
-                    du[r, k] = X[a, k] - X[v, k]
-                    dv[r, k] = X[b, k] - X[v, k]
+                    du[r, k] = s * (X[a, k] - X[v, k])
+                    dv[r, k] = s * (X[b, k] - X[v, k])
         elif c == _CREASE:
+            # the first two sharp edges in ring order lead and trail the span of faces
+            # i0 .. i1-1 that the tangents describe (OpenSubdiv's "crease ends")
             i0 = 0
             while edge_sharp[vert_edges[ea + i0]] <= F0:
                 i0 += 1
-            i1 = ne - 1
+            i1 = i0 + 1
             while edge_sharp[vert_edges[ea + i1]] <= F0:
-                i1 -= 1
+                i1 += 1
             a = _far(edge_verts, vert_edges[ea + i0], v)
             b = _far(edge_verts, vert_edges[ea + i1], v)
             for k in range(3):
                 P[r, k] = (4.0 * X[v, k] + X[a, k] + X[b, k]) / 6.0
-                du[r, k] = 0.5 * (X[a, k] - X[b, k])
+            # along the crease, towards the leading edge
+            s = 1.5 if is_loop else 0.5
+            for k in range(3):
+                du[r, k] = s * (X[a, k] - X[b, k])
                 dv[r, k] = 0.0
-            # cross tangent over the interior span between the crease edges (faces i0..i1-1)
+            # across the span, pointing into it (Biermann et al.'s masks as OpenSubdiv
+            # weights them); an unordered non-manifold ring may list fewer faces than the
+            # span claims: those faces are left out
             m = i1 - i0  # faces in the span
-            if m >= 1 and i1 - i0 <= fb - fa:
-                theta = math.pi / m
-                for i in range(1, m):
-                    w = math.sin(i * theta)
-                    e = _far(edge_verts, vert_edges[ea + i0 + i], v)
-                    for k in range(3):
-                        dv[r, k] += w * (X[e, k] - X[v, k])
+            if is_loop:
+                wv, wc, wi = _loop_cross_tangent(m)
+            else:
+                wv, wc, wi = _catmark_cross_tangent(m)
+            for k in range(3):
+                dv[r, k] = wv * X[v, k] + wc * (X[a, k] + X[b, k])
+            for i in range(1, m):
+                e = _far(edge_verts, vert_edges[ea + i0 + i], v)
+                w = wi * _cross_edge_weight(is_loop, m, i)
+                for k in range(3):
+                    dv[r, k] += w * X[e, k]
+            if not is_loop and m >= 2:
                 for i in range(m):
                     if fa + i0 + i >= fb:
                         break
                     f = vert_faces[fa + i0 + i]
                     kk = vert_face_corner[fa + i0 + i]
                     off = face_offsets[f]
-                    n = face_offsets[f + 1] - off
-                    w = 0.5 * (math.sin(i * theta) + math.sin((i + 1) * theta))
-                    if m == 1:
-                        w = 1.0
-                    for j in range(2, n - 1):
-                        q = face_verts[off + (kk + j) % n]
-                        for k in range(3):
-                            dv[r, k] += w * (X[q, k] - X[v, k])
+                    q = face_verts[off + (kk + 2) % (face_offsets[f + 1] - off)]
+                    w = wi * _catmark_cross_face_weight(m, i)
+                    for k in range(3):
+                        dv[r, k] += w * X[q, k]
         elif c == _SMOOTH:
             n = ne
             if is_loop:
@@ -271,6 +315,64 @@ def _closed_form_kernel(
                     off = face_offsets[f]
                     q = face_verts[off + (kk + 2) % 4]
                     _add3(P, du, dv, r, X, q, dw, fw[n, i], fw[n, (i - 1 + n) % n])
+
+
+# --------------------------------------------------------------------------------------
+# crease cross-tangent masks
+#
+# The tangent across a crease or boundary at a vertex whose span (the faces between its
+# two sharp edges, counter-clockwise from the leading one) has m faces: Biermann et al.'s
+# masks, as OpenSubdiv's Sdc::Scheme<...>::assignCreaseLimitTangentMasks weights them.
+# Each mask is (vertex weight, weight of both crease ends, scale of the interior weights);
+# interior edge i (1 <= i < m) of the span and, for Catmark, the diagonal vertex of span
+# face i (0 <= i < m) get that scale times _cross_edge_weight / _catmark_cross_face_weight.
+# They belong with the other masks in catmark.py / loop.py.
+# --------------------------------------------------------------------------------------
+
+
+@nb.njit(cache=True)
+def _catmark_cross_tangent(m):
+    if m == 1:  # a single face: from the vertex to the average of the crease ends
+        return -6.0, 3.0, 0.0
+    if m == 2:  # the regular boundary: the uniform B-spline cross derivative
+        return -4.0 / 6.0, -1.0 / 6.0, 1.0 / 6.0
+    theta = math.pi / m
+    c = math.cos(theta)
+    r = (c + 1.0) / math.sin(theta)
+    denom = 1.0 / (m * (3.0 + c))
+    return 4.0 * r * (c - 1.0) * denom, -r * (1.0 + 2.0 * c) * denom, denom
+
+
+@nb.njit(cache=True)
+def _loop_cross_tangent(m):
+    if m == 1:  # a single face
+        return -6.0, 3.0, 0.0
+    if m == 2:  # one interior edge
+        return -3.0, 0.0, 3.0
+    if m == 3:  # the regular boundary (OpenSubdiv's weights omit a factor sqrt(3)/2)
+        r3 = math.sqrt(3.0)
+        return -r3, -0.5 * r3, r3
+    theta = math.pi / m
+    return 0.0, -3.0 * math.sin(theta), 6.0 * (1.0 - math.cos(theta))
+
+
+@nb.njit(cache=True)
+def _cross_edge_weight(is_loop, m, i):
+    """Relative weight of interior edge i of an m-face span (see the masks above)."""
+    if is_loop:
+        return 1.0 if m <= 3 else math.sin(i * math.pi / m)
+    if m == 2:
+        return 4.0
+    return 4.0 * math.sin(i * math.pi / m)
+
+
+@nb.njit(cache=True)
+def _catmark_cross_face_weight(m, i):
+    """Relative weight of the diagonal vertex of face i of an m-face span (m >= 2)."""
+    if m == 2:
+        return 1.0
+    theta = math.pi / m
+    return math.sin(i * theta) + math.sin((i + 1) * theta)
 
 
 # --------------------------------------------------------------------------------------
@@ -304,12 +406,8 @@ def _cut(level: Level, faces: np.ndarray):
     fo, fv = level.face_offsets, level.face_verts
     corners = _gather_index(fo, faces)
     sizes = np.diff(fo)[faces]
-    old_v = np.unique(fv[corners])
-    vmap = np.full(level.n_verts, -1, dtype=np.int64)
-    vmap[old_v] = np.arange(len(old_v))
-    old_e = np.unique(level.face_edges[corners])
-    emap = np.full(level.n_edges, -1, dtype=np.int64)
-    emap[old_e] = np.arange(len(old_e))
+    old_v, vmap = _compact(fv[corners], level.n_verts)
+    old_e, emap = _compact(level.face_edges[corners], level.n_edges)
     offsets = np.zeros(len(faces) + 1, dtype=np.int64)
     np.cumsum(sizes, out=offsets[1:])
     sub = build_level(
@@ -369,15 +467,21 @@ def _hard_limits(level, points, options, hard, P, du, dv, rows):
     raise RuntimeError("limit: sharpness did not decay")  # pragma: no cover
 
 
-def ring_of(level: Level, v: int) -> np.ndarray:
+def ring_of(level: Level, v: int, start: int = 0) -> np.ndarray:
     """The one-ring of ``v`` in a fixed order: v, far ends of its edges, then the remaining
-    vertices of each incident face (from the corner after the leading edge's far end)."""
+    vertices of each incident face (from the corner after the leading edge's far end).
+
+    ``start`` rotates an interior ring to begin at its face (and leading edge) ``start``."""
+    ea, eb = level.vert_edge_offsets[v], level.vert_edge_offsets[v + 1]
+    fa, fb = level.vert_face_offsets[v], level.vert_face_offsets[v + 1]
+    edges = np.roll(level.vert_edges[ea:eb], -start)
+    slots = np.roll(np.arange(fa, fb), -start)
     out = [v]
-    for e in level.vert_edges[level.vert_edge_offsets[v] : level.vert_edge_offsets[v + 1]]:
+    for e in edges:
         a, b = level.edge_verts[e]
         out.append(int(b if a == v else a))
     fo, fv = level.face_offsets, level.face_verts
-    for j in range(level.vert_face_offsets[v], level.vert_face_offsets[v + 1]):
+    for j in slots:
         f = level.vert_faces[j]
         k = level.vert_face_corner[j]
         n = fo[f + 1] - fo[f]
@@ -393,60 +497,102 @@ def ring_of(level: Level, v: int) -> np.ndarray:
 
 
 def ring_matrix(level: Level, options: Options, v: int, depth: int = 1):
-    """Subdivision matrix of ``v``'s one-ring after ``depth`` levels: (A, ring, child level,
-    child ring) with child_ring_points = A @ ring_points."""
+    """Subdivision matrix of ``v``'s one-ring after ``depth`` levels: (A, ring, sub->level
+    vertex map, child level, child ring) with child_ring_points = A @ ring_points."""
+    sub, sub_to_cur, cur_to_sub, _ = extract(level, np.array([v]), rings=2)
+    A, ring, lev, cring = _sub_ring_matrix(sub, options, int(cur_to_sub[v]), depth)
+    return A, ring, sub_to_cur, lev, cring
+
+
+def _sub_ring_matrix(sub: Level, options: Options, sv: int, depth: int):
     from .refine import refine_level, refine_points
 
-    sub, sub_to_cur, cur_to_sub, _ = extract(level, np.array([v]), rings=2)
-    sv = int(cur_to_sub[v])
     ring = ring_of(sub, sv)
     W = np.eye(sub.n_verts)
     lev = sub
+    start = 0
     for _ in range(depth):
         ref = refine_level(lev, options)
         W = refine_points(ref, W)
-        lev = ref.child
-    cring = ring_of(lev, sv)
-    return W[np.ix_(cring, ring)], ring, sub_to_cur, lev, cring
+        # the child ring must list the children of the parent ring slot by slot: it begins
+        # at the child of the first face (child j of a face lies at its corner j, and the
+        # vertex keeps its index), wherever the child level's own ordering begins
+        j = lev.vert_face_offsets[sv] + start
+        f, k = lev.vert_faces[j], lev.vert_face_corner[j]
+        first = 4 * f + k if options.scheme == "loop" else lev.face_offsets[f] + k
+        child = ref.child
+        faces = child.vert_faces[child.vert_face_offsets[sv] : child.vert_face_offsets[sv + 1]]
+        hit = np.nonzero(faces == first)[0]
+        start = int(hit[0]) if len(hit) else 0
+        lev = child
+    cring = ring_of(lev, sv, start)
+    return W[np.ix_(cring, ring)], ring, lev, cring
 
 
-def _eigen_limit(level, points, options, v, row, P, du, dv):
-    """Exact limit of a vertex with a stationary neighbourhood from its ring eigenvectors."""
-    A, ring, sub_to_cur, _, cring = ring_matrix(level, options, v, depth=1)
-    if A.shape[0] != A.shape[1]:
-        # the ring changes shape once (n-gons at level 0): refine one level first
+def ring_polygon(level: Level, v: int, ring: np.ndarray) -> np.ndarray:
+    """Positions in ``ring`` (see :func:`ring_of`) of the closed polygon of ``v``'s one-ring
+    in counter-clockwise order: the far end of edge i, then the other corners of face i."""
+    pos = {int(x): i for i, x in enumerate(ring)}
+    fo, fv = level.face_offsets, level.face_verts
+    out = []
+    for j in range(level.vert_face_offsets[v], level.vert_face_offsets[v + 1]):
+        f = level.vert_faces[j]
+        k = level.vert_face_corner[j]
+        n = fo[f + 1] - fo[f]
+        for i in range(1, n - 1):
+            out.append(pos[int(fv[fo[f] + (k + i) % n])])
+    return np.array(out, dtype=np.int64)
+
+
+def _eigen_limit(level, points, options, v, row, P, du, dv, _refined=0):
+    """Exact limit of a vertex with a stationary neighbourhood from its ring eigenvectors.
+
+    The limit point is the dominant left eigenvector applied to the ring; the tangents are
+    the two subdominant ones. Their orientation comes from the topology alone: the ring
+    polygon, written in the coordinates of the matching right eigenvectors (the control net
+    of the characteristic map), must turn counter-clockwise, so du x dv points to the side
+    the faces wind counter-clockwise around whatever the geometry (and an affine map of the
+    cage moves the normal by its cofactor matrix, flipping it under a reflection).
+    """
+    sub, sub_to_cur, cur_to_sub, _ = extract(level, np.array([v]), rings=2)
+    sv = int(cur_to_sub[v])
+    A, ring, _, _ = _sub_ring_matrix(sub, options, sv, depth=1)
+    fs = sub.vert_faces[sub.vert_face_offsets[sv] : sub.vert_face_offsets[sv + 1]]
+    sizes = np.diff(sub.face_offsets)[fs]
+    n_edges = sub.vert_edge_offsets[sv + 1] - sub.vert_edge_offsets[sv]
+    changes = np.any(sizes != options.regular_face_size)
+    changes |= len(ring) != 1 + n_edges + np.sum(sizes - 3)
+    if changes and _refined < 8:
+        # the ring changes shape once (n-gons at level 0, or a ring that touches itself on
+        # a small cage and lists a vertex twice): refine first, until it is stationary
         from .refine import refine_level, refine_points
 
-        sub, s2c, c2s, _ = extract(level, np.array([v]), rings=2)
         ref = refine_level(sub, options)
-        pts = refine_points(ref, points[s2c])
-        _eigen_limit(ref.child, pts, options, int(c2s[v]), row, P, du, dv)
+        pts = refine_points(ref, points[sub_to_cur])
+        _eigen_limit(ref.child, pts, options, sv, row, P, du, dv, _refined + 1)
+        return
+    if A.shape[0] != A.shape[1]:  # pragma: no cover - a ring that never settles
         return
     X = points[sub_to_cur[ring]]
     w, vl = np.linalg.eig(A.T)
     order = np.argsort(-np.abs(w))
-    i1 = order[0]
-    l1 = np.real(vl[:, i1])
-    l1 = l1 / l1.sum()
-    P[row] = l1 @ X
-    # tangent plane: the subdominant left eigenvectors (real and imaginary parts if complex)
-    vecs = []
-    for i in order[1:]:
-        if abs(w[i]) < 1e-12:
-            break
-        vecs.append(np.real(vl[:, i]))
-        if np.iscomplexobj(vl) and np.abs(np.imag(vl[:, i])).max() > 1e-12:
-            vecs.append(np.imag(vl[:, i]))
-        if len(vecs) >= 2:
-            break
-    if len(vecs) >= 2:
-        t1, t2 = vecs[0] @ X, vecs[1] @ X
-        # orient du x dv like the faces around the vertex (a fan of cross products)
-        ref_n = np.zeros(3)
-        c = X[0]
-        for i in range(1, len(X) - 1):
-            ref_n += np.cross(X[i] - c, X[i + 1] - c)
-        if np.dot(np.cross(t1, t2), ref_n) < 0:
-            t2 = -t2
-        du[row] = t1
-        dv[row] = t2
+    l1 = np.real(vl[:, order[0]])
+    P[row] = (l1 / l1.sum()) @ X
+    if len(w) < 3 or abs(w[order[2]]) < 1e-12:
+        return
+    # the subdominant pair lam2, lam3 (complex conjugates, or two reals, possibly equal and
+    # then possibly defective): its left and right invariant subspaces are the left and right
+    # null spaces of the real matrix (A - lam2)(A - lam3), which handles all three cases alike
+    lam2, lam3 = w[order[1]], w[order[2]]
+    n = len(A)
+    M = A @ A - np.real(lam2 + lam3) * A + np.real(lam2 * lam3) * np.eye(n)
+    U, _, Vh = np.linalg.svd(M)
+    L = U[:, -2:].T  # (2, n): the tangent masks
+    R = Vh[-2:].T  # (n, 2)
+    # scaled so that L @ R is the identity, the rows of R are the ring points' coordinates
+    # in the basis the tangents L @ X are written in (the characteristic map's control net)
+    R = R @ np.linalg.inv(L @ R)
+    poly = R[ring_polygon(sub, sv, ring)]
+    area = np.sum(poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1) * poly[:, 1])
+    du[row] = L[0] @ X
+    dv[row] = (L[1] if area >= 0 else -L[1]) @ X
