@@ -117,19 +117,12 @@ def _read_bytes(path: str) -> bytes:
 
 def _decode(path: str, data: bytes) -> str:
     """UTF-8 text without a byte-order mark; a bad byte is an error naming its line."""
-    if data.startswith(b"\xef\xbb\xbf"):
-        data = data[3:]
+    from .text import BadByte, utf8_text
+
     try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as err:
-        line = data.count(b"\n", 0, err.start) + 1
-        column = err.start - (data.rfind(b"\n", 0, err.start) + 1) + 1
-        raise ObjError(
-            path,
-            line,
-            f"byte 0x{data[err.start]:02x} at column {column} is not valid UTF-8; "
-            "save the file as UTF-8",
-        ) from None
+        return utf8_text(data)
+    except BadByte as err:
+        raise ObjError(path, err.line, f"{err}; save the file as UTF-8") from None
 
 
 def _logical_lines(text: str):

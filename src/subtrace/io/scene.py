@@ -58,7 +58,9 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from subtrace.errors import SceneError
+from subtrace.io.text import BadByte, utf8_text
 from subtrace.io.obj import BOUNDARY_EDGE_AND_CORNER, BOUNDARY_EDGE_ONLY, BOUNDARY_NONE
+from subtrace.trace.camera import _show  # the same rendering of values in messages
 from subtrace.trace.camera import (
     Camera,
     auto_camera,
@@ -282,19 +284,11 @@ def _read_bytes(path: str) -> bytes:
 
 def _decode(path: str, data: bytes) -> str:
     """UTF-8 text (a byte-order mark is dropped); a bad byte is an error naming its line."""
-    if data.startswith(b"\xef\xbb\xbf"):
-        data = data[3:]
     try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as err:
-        line = data.count(b"\n", 0, err.start) + 1
-        column = err.start - (data.rfind(b"\n", 0, err.start) + 1) + 1
-        raise SceneError(
-            f"byte 0x{data[err.start]:02x} at column {column} is not valid UTF-8; "
-            "save the scene file as UTF-8",
-            path=path,
-            line=line,
-        ) from None
+        return utf8_text(data)
+    except BadByte as err:
+        raise SceneError(f"{err}; save the scene file as UTF-8", path=path,
+                         line=err.line) from None
 
 
 _AT_LINE = re.compile(r"\s*\(at line (\d+), column (\d+)\)\s*$")
@@ -517,18 +511,6 @@ _CHECKERS = {
     "width": check_resolution,
     "height": check_resolution,
 }
-
-
-def _show(value) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return repr(value)
-    if isinstance(value, dict):
-        return "a table"
-    if isinstance(value, list):
-        return "[" + ", ".join(_show(v) for v in value) + "]"
-    return str(value)
 
 
 # --------------------------------------------------------------------------------------
