@@ -312,3 +312,14 @@ def test_render_cli_bad_output_folder(tmp_path, capsys):
     assert rc == 2
     assert "Traceback" not in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_render_cli_default_scene_writes_to_working_directory(tmp_path, monkeypatch):
+    from subtrace.cli import main
+    from subtrace.io.exr import read_exr
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["render", "--width", "24", "--height", "16", "--quiet"]) == 0
+    ch, attrs = read_exr(tmp_path / "render.exr")
+    assert ch["A"].shape == (16, 24) and np.count_nonzero(ch["A"]) > 0
+    assert "spot_control_mesh.obj" in attrs["subtrace:meshes"]

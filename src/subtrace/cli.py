@@ -196,6 +196,9 @@ def _cmd_render(args) -> int:
         from .data import default_scene_path
 
         scene = load_scene(default_scene_path())
+        # the default scene lives in the package: write into the working directory
+        if args.output is None:
+            args.output = "render.exr"
     elif len(inputs) == 1 and inputs[0].lower().endswith(".toml"):
         scene = load_scene(inputs[0])
     elif all(not p.lower().endswith(".toml") for p in inputs):
