@@ -26,19 +26,8 @@ import sys
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+from _common import REPO, import_subtrace  # benchmarks/ is on sys.path when run as a script
 DEFAULT_MODEL = REPO.parent / "shared" / "models" / "sword_quad_dominant.obj"
-
-
-def _import_subtrace():
-    try:
-        import subtrace
-    except ModuleNotFoundError as exc:
-        if exc.name != "subtrace":
-            raise
-        sys.path.insert(0, str(REPO / "src"))
-        import subtrace
-    return subtrace
 
 
 def _max_rss_mb() -> float:
@@ -51,7 +40,7 @@ def _max_rss_mb() -> float:
 def worker(model: str, level: int, repeat: int, with_limit: bool) -> dict:
     """One level, in this process: cold run, then ``repeat`` warm runs."""
     t = time.perf_counter()
-    subtrace = _import_subtrace()
+    subtrace = import_subtrace()
     import numpy as np
 
     import_s = time.perf_counter() - t
@@ -107,7 +96,7 @@ def main(argv=None) -> int:
         print(f"refine.py: error: model not found: {args.model}", file=sys.stderr)
         return 2
     if with_limit:
-        subtrace = _import_subtrace()  # noqa: F841
+        subtrace = import_subtrace()  # noqa: F841
         import importlib.util
 
         if importlib.util.find_spec("subtrace.subdiv.limit") is None:

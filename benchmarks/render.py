@@ -23,25 +23,14 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+from _common import REPO, import_subtrace  # benchmarks/ is on sys.path when run as a script
 DEFAULT_SCENES = [REPO / "scenes" / "spot.toml", REPO / "scenes" / "sword.toml"]
-
-
-def _import_subtrace():
-    try:
-        import subtrace
-    except ModuleNotFoundError as exc:
-        if exc.name != "subtrace":
-            raise
-        sys.path.insert(0, str(REPO / "src"))
-        import subtrace
-    return subtrace
 
 
 def worker(scene_path: str, width: int, height: int, tolerance: float, repeat: int) -> dict:
     import resource
 
-    _import_subtrace()
+    import_subtrace()
     from subtrace.io.exr import write_exr
     from subtrace.io.scene import apply_overrides, load_scene
     from subtrace.render import render_scene, result_attributes

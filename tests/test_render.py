@@ -150,14 +150,12 @@ def _inside_point(cage):
     """Midpoint between where a ray from outside enters the limit surface and where it
     leaves it again (found by a second ray starting just past the entry)."""
     lo, hi = cage.bounds()
-    c = 0.5 * (lo + hi)
     size = float(np.linalg.norm(hi - lo))
     # aim at a point on the surface: the centre of the bounds may lie in a hole (torus)
     d = np.array([0.0, 0.0, -1.0])
     P, _, _ = cage.limit(1)
     start = P[np.argmax(P[:, 2])] + np.array([0.0, 0.0, 2.0 * size])
     start = start + 1e-3 * size * np.array([1.0, 1.0, 0.0])
-    del c
     p1 = _first_hit(cage, start, d)
     p2 = _first_hit(cage, p1 + 1e-6 * size * d, d)
     return tuple(0.5 * (p1 + p2))
@@ -222,7 +220,6 @@ def _closest_distance(cage, ptex, uv, X, iters=12):
         P, du, dv = cage.evaluate(ptex, uv)
         J = np.stack([du, dv], axis=2)  # (m,3,2)
         r = X - P
-        step = np.linalg.lstsq if False else None  # noqa: F841
         JtJ = np.einsum("mki,mkj->mij", J, J)
         Jtr = np.einsum("mki,mk->mi", J, r)
         delta = np.linalg.solve(JtJ + 1e-30 * np.eye(2), Jtr[..., None])[..., 0]
@@ -323,3 +320,15 @@ def test_render_cli_default_scene_writes_to_working_directory(tmp_path, monkeypa
     ch, attrs = read_exr(tmp_path / "render.exr")
     assert ch["A"].shape == (16, 24) and np.count_nonzero(ch["A"]) > 0
     assert "spot_control_mesh.obj" in attrs["subtrace:meshes"]
+
+
+@pytest.mark.parametrize("threads", ["0", "9999"])
+def test_render_cli_bad_thread_count(tmp_path, capsys, threads):
+    from subtrace.cli import main
+
+    out = tmp_path / "x.exr"
+    rc = main(["render", "-o", str(out), "--width", "8", "--height", "8", "--threads", threads])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert err.count("\n") == 1 and "--threads" in err and "Traceback" not in err
+    assert not out.exists() and list(tmp_path.iterdir()) == []

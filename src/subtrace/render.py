@@ -19,7 +19,7 @@ from . import config
 from .accel.bvh import build_bvh
 from .patches.grids import build_grids, grid_params, grid_size, leaf_corners
 from .patches.table import build_patch_table, choose_depths
-from .trace.kernels import HIT_FIELDS, H_T, trace_round
+from .trace.kernels import H_SLOT, H_T, HIT_FIELDS, trace_round
 
 
 @dataclass
@@ -95,38 +95,56 @@ def _side_indices(depth: int, quad: bool) -> np.ndarray:
 
 
 class _Pools:
-    """Growable pools of grid points, normals and quadtree boxes of built patches."""
+    """Growable pools of grid points, normals and quadtree boxes of built patches, and the
+    per-slot tables. Storage grows by doubling, so appending a round's grids copies each
+    element O(1) times; the attributes are views of the filled part."""
+
+    _ROWS = {"verts": ((3,), np.float64), "normals": ((3,), np.float32)}
+    _NODES = {"node_lo": ((3,), np.float64), "node_hi": ((3,), np.float64)}
+    _SLOTS = {"slot_patch": np.int64, "slot_depth": np.int64, "slot_quad": np.bool_,
+              "slot_vert_off": np.int64, "slot_node_off": np.int64, "slot_round": np.int64}
 
     def __init__(self):
-        self.verts = np.zeros((0, 3))
-        self.normals = np.zeros((0, 3), dtype=np.float32)
-        self.node_lo = np.zeros((0, 3))
-        self.node_hi = np.zeros((0, 3))
-        self.slot_patch = np.zeros(0, np.int64)
-        self.slot_depth = np.zeros(0, np.int64)
-        self.slot_quad = np.zeros(0, np.bool_)
-        self.slot_vert_off = np.zeros(0, np.int64)
-        self.slot_node_off = np.zeros(0, np.int64)
-        self.slot_round = np.zeros(0, np.int64)
+        self._store = {}
+        self._used = {"rows": 0, "nodes": 0, "slots": 0}
+        for name, (shape, dtype) in {**self._ROWS, **self._NODES}.items():
+            self._store[name] = np.zeros((0, *shape), dtype=dtype)
+        for name, dtype in self._SLOTS.items():
+            self._store[name] = np.zeros(0, dtype=dtype)
+        self._refresh()
+
+    def _refresh(self):
+        for group, names in (("rows", self._ROWS), ("nodes", self._NODES), ("slots", self._SLOTS)):
+            for name in names:
+                setattr(self, name, self._store[name][: self._used[group]])
+
+    def _put(self, group, names, values):
+        start = self._used[group]
+        end = start + len(values[0])
+        for name, value in zip(names, values):
+            buf = self._store[name]
+            if end > len(buf):
+                grown = np.empty((max(end, 2 * len(buf)), *buf.shape[1:]), dtype=buf.dtype)
+                grown[:start] = buf[:start]
+                self._store[name] = buf = grown
+            buf[start:end] = value
+        self._used[group] = end
+        return start
 
     def append(self, patches, depth, quad, P, N, lo, hi, round_no):
         m = len(patches)
         G = P.shape[1]
         K = lo.shape[1]
-        self.slot_vert_off = np.concatenate(
-            [self.slot_vert_off, len(self.verts) + G * np.arange(m, dtype=np.int64)]
+        v0 = self._put("rows", ("verts", "normals"), (P.reshape(-1, 3), N.reshape(-1, 3)))
+        n0 = self._put("nodes", ("node_lo", "node_hi"), (lo.reshape(-1, 3), hi.reshape(-1, 3)))
+        ar = np.arange(m, dtype=np.int64)
+        self._put(
+            "slots",
+            tuple(self._SLOTS),
+            (patches, np.full(m, depth), np.full(m, quad), v0 + G * ar, n0 + K * ar,
+             np.full(m, round_no)),
         )
-        self.slot_node_off = np.concatenate(
-            [self.slot_node_off, len(self.node_lo) + K * np.arange(m, dtype=np.int64)]
-        )
-        self.verts = np.concatenate([self.verts, P.reshape(-1, 3)])
-        self.normals = np.concatenate([self.normals, N.reshape(-1, 3).astype(np.float32)])
-        self.node_lo = np.concatenate([self.node_lo, lo.reshape(-1, 3)])
-        self.node_hi = np.concatenate([self.node_hi, hi.reshape(-1, 3)])
-        self.slot_patch = np.concatenate([self.slot_patch, patches])
-        self.slot_depth = np.concatenate([self.slot_depth, np.full(m, depth, np.int64)])
-        self.slot_quad = np.concatenate([self.slot_quad, np.full(m, quad, np.bool_)])
-        self.slot_round = np.concatenate([self.slot_round, np.full(m, round_no, np.int64)])
+        self._refresh()
 
 
 # --------------------------------------------------------------------------------------
@@ -214,7 +232,7 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
     patch_slot = np.full(table.n_patches, -1, dtype=np.int64)
     hits = np.zeros((W * H, HIT_FIELDS))
     hits[:, H_T] = np.inf
-    hits[:, 1] = -1
+    hits[:, H_SLOT] = -1
     request = np.full(W * H, -1, dtype=np.int64)
     rays = np.arange(W * H, dtype=np.int64)
     round_no = 0
@@ -222,7 +240,7 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
         t0 = time.perf_counter()
         trace_round(
             rays, frame, W, round_no,
-            bvh.node_min, bvh.node_max, bvh.node_first, bvh.node_count, bvh.node_axis,
+            bvh.node_min, bvh.node_max, bvh.node_first, bvh.node_count,
             bvh.prims, table.shell_min, table.shell_max, patch_slot,
             pools.slot_depth, pools.slot_vert_off, pools.slot_node_off, pools.slot_quad,
             pools.slot_round, pools.verts, pools.node_lo, pools.node_hi,
@@ -283,7 +301,13 @@ def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult
     from .trace.camera import camera_frame
 
     t_start = time.perf_counter()
-    if threads:
+    if threads is not None:
+        from .errors import SceneError
+
+        n_max = numba.config.NUMBA_NUM_THREADS
+        if not 1 <= int(threads) <= n_max:
+            raise SceneError(f"expected a thread count from 1 to {n_max}, got {threads}",
+                             key="--threads")
         numba.set_num_threads(int(threads))
     stats = RenderStats()
     if cages is None:

@@ -15,7 +15,7 @@ import math
 import numba as nb
 import numpy as np
 
-from .trace.kernels import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI
+from .trace.kernels import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, ray_setup
 
 
 @nb.njit(cache=True, parallel=True)
@@ -43,11 +43,7 @@ def shade_kernel(frame, width, hits, slot_patch, slot_depth, slot_quad, slot_ver
             continue
         row = r // width
         col = r - row * width
-        dx = frame[3, 0] + col * frame[1, 0] + row * frame[2, 0]
-        dy = frame[3, 1] + col * frame[1, 1] + row * frame[2, 1]
-        dz = frame[3, 2] + col * frame[1, 2] + row * frame[2, 2]
-        inv = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
-        dx, dy, dz = dx * inv, dy * inv, dz * inv
+        dx, dy, dz = ray_setup(frame, row, col)
         s = np.int64(hits[r, H_SLOT])
         leaf = np.int64(hits[r, H_LEAF])
         b1 = hits[r, H_B1]

@@ -3,10 +3,9 @@
 ``build_bvh(bmin, bmax)`` returns a :class:`BVH`:
 
 * ``node_min``/``node_max`` (K,3) float64 node boxes;
-* ``node_first`` (K,) int64: for an inner node the index of its second child (the first child
-  is the next node), for a leaf the first entry of ``prims``;
+* ``node_first`` (K,) int64: for an inner node the index of its first child (the second is
+  the next node), for a leaf the first entry of ``prims``;
 * ``node_count`` (K,) int64: 0 for inner nodes, the number of primitives for leaves;
-* ``node_axis`` (K,) int8: split axis of inner nodes (to visit the near child first);
 * ``prims`` (N,) int64: primitive ids in leaf order.
 
 Built top-down by binned surface-area heuristic over centroids (16 bins), leaves of at most
@@ -31,7 +30,6 @@ class BVH:
     node_max: np.ndarray
     node_first: np.ndarray
     node_count: np.ndarray
-    node_axis: np.ndarray
     prims: np.ndarray
 
     @property
@@ -49,11 +47,10 @@ def build_bvh(bmin: np.ndarray, bmax: np.ndarray, leaf_size: int | None = None) 
     node_max = np.empty((cap, 3))
     first = np.zeros(cap, np.int64)
     count = np.zeros(cap, np.int64)
-    axis = np.zeros(cap, np.int8)
     prims = np.arange(n, dtype=np.int64)
-    k = _build(bmin, bmax, prims, leaf, node_min, node_max, first, count, axis)
+    k = _build(bmin, bmax, prims, leaf, node_min, node_max, first, count)
     return BVH(node_min[:k].copy(), node_max[:k].copy(), first[:k].copy(), count[:k].copy(),
-               axis[:k].copy(), prims)
+               prims)
 
 
 @nb.njit(cache=True)
@@ -65,7 +62,7 @@ def _area(lo, hi):
 
 
 @nb.njit(cache=True)
-def _build(bmin, bmax, prims, leaf_size, node_min, node_max, first, count, axis):
+def _build(bmin, bmax, prims, leaf_size, node_min, node_max, first, count):
     n = len(prims)
     if n == 0:
         node_min[0, :] = np.inf
@@ -177,10 +174,8 @@ def _build(bmin, bmax, prims, leaf_size, node_min, node_max, first, count, axis)
         left = n_nodes
         right = n_nodes + 1
         n_nodes += 2
-        # layout: left child right after its parent is not required; store both explicitly
         first[node] = left
         count[node] = 0
-        axis[node] = ax
         st_node[sp], st_lo[sp], st_hi[sp] = right, mid, e
         sp += 1
         st_node[sp], st_lo[sp], st_hi[sp] = left, s, mid

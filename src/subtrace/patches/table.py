@@ -30,6 +30,7 @@ import numpy as np
 
 from .. import config
 from ..patches.evaluate import ptex_layout
+from ..subdiv import catmark, loop
 
 # ptex offset of the child at corner j of a regular face (quads keep the parent's orientation)
 _QUAD_CHILD_UV0 = np.array([[0.0, 0.0], [0.5, 0.0], [0.5, 0.5], [0.0, 0.5]])
@@ -195,13 +196,8 @@ def _shells(faces, face_offsets, face_verts, vert_face_offsets, vert_faces, pts,
 
 def _subdominant(valence: np.ndarray, quad: bool) -> np.ndarray:
     """Per-level contraction of control edges at a vertex of this valence (at least 1/2)."""
-    n = np.maximum(valence, 3).astype(np.float64)
-    c1, c2 = np.cos(2 * np.pi / n), np.cos(np.pi / n)
-    if quad:
-        lam = (5.0 + c1 + c2 * np.sqrt(2.0 * (9.0 + c1))) / 16.0
-    else:
-        lam = 3.0 / 8.0 + c1 / 4.0
-    return np.maximum(lam, 0.5)
+    scheme = catmark if quad else loop
+    return np.maximum(scheme.subdominant_eigenvalue(np.maximum(valence, 3)), 0.5)
 
 
 def choose_depths(table: PatchTable, eye: np.ndarray, tol_rad: float, max_depth: int):

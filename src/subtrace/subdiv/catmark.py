@@ -48,6 +48,14 @@ def smooth_limit_weights(valence):
     return 1.0 - n * (ew + fw), ew, fw
 
 
+def subdominant_eigenvalue(valence):
+    """Subdominant eigenvalue of the smooth Catmull-Clark rule at a vertex of this valence
+    (scalar or array; 1/2 for valence 4): how fast the one-ring shrinks per level."""
+    theta = 2.0 * np.pi / np.asarray(valence, dtype=np.float64)
+    c = np.cos(theta)
+    return 5.0 / 16.0 + (c + np.cos(theta / 2) * np.sqrt(2 * (9 + c))) / 16.0
+
+
 def smooth_tangent_weights(valence: int):
     """Weights of the first limit tangent over the ordered ring: (edge (n,), diagonal (n,)).
 
@@ -58,7 +66,7 @@ def smooth_tangent_weights(valence: int):
     if n == 4:
         return np.array([4.0, 0.0, -4.0, 0.0]), np.array([1.0, -1.0, -1.0, 1.0])
     theta = 2.0 * math.pi / n
-    lam = 5.0 / 16.0 + (math.cos(theta) + math.cos(theta / 2) * math.sqrt(2 * (9 + math.cos(theta)))) / 16.0
+    lam = float(subdominant_eigenvalue(n))
     fscale = 1.0 / (4.0 * lam - 1.0)
     i = np.arange(n)
     ew = 4.0 * np.cos(i * theta)

@@ -23,6 +23,12 @@ def _beta(valence):
     return 0.25 * c + 0.375
 
 
+def subdominant_eigenvalue(valence):
+    """Subdominant eigenvalue of the smooth Loop rule at a vertex of this valence (scalar
+    or array; 1/2 for valence 6): how fast the one-ring shrinks per level."""
+    return 3.0 / 8.0 + np.cos(2.0 * np.pi / np.asarray(valence, dtype=np.float64)) / 4.0
+
+
 @nb.njit(cache=True)
 def smooth_edge_weights(n_faces, tri0, tri1, smooth_triangles):
     """(endpoint weight, weight of each opposite vertex) of a smooth edge point."""

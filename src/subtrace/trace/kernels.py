@@ -91,7 +91,8 @@ def _tri(ox, oy, oz, kx, ky, kz, sx, sy, sz, a, b, c, verts, tmax, slack):
 
 
 @nb.njit(cache=True, inline="always")
-def _ray_setup(frame, row, col):
+def ray_setup(frame, row, col):
+    """Unit direction of the ray through the centre of pixel (row, col)."""
     dx = frame[3, 0] + col * frame[1, 0] + row * frame[2, 0]
     dy = frame[3, 1] + col * frame[1, 1] + row * frame[2, 1]
     dz = frame[3, 2] + col * frame[1, 2] + row * frame[2, 2]
@@ -120,8 +121,9 @@ def _shear(dx, dy, dz):
 @nb.njit(cache=True)
 def _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, slot_depth,
                     slot_vert_off, slot_node_off, slot_quad, verts, node_lo, node_hi, lc_off,
-                    lc_data, slack, hit, stack):
-    """Closest hit in the grid of slot ``s`` nearer than hit[H_T]; updates ``hit``."""
+                    lc_data, slack, hit, stack, ent_t, ent_i):
+    """Closest hit in the grid of slot ``s`` nearer than hit[H_T]; updates ``hit``.
+    ``stack``, ``ent_t`` (4,) and ``ent_i`` (4,) are the caller's scratch buffers."""
     depth = slot_depth[s]
     quad = slot_quad[s]
     lc0 = lc_off[depth, 1 if quad else 0]
@@ -135,38 +137,27 @@ def _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, slot_dept
     sp = 0
     stack[0] = 0
     sp = 1
-    ent_t = np.empty(4)
-    ent_i = np.empty(4, np.int64)
     while sp > 0:
         sp -= 1
         code = stack[sp]
         level = code >> 40
         idx = code & ((1 << 40) - 1)
         if level == depth:
+            # the micro-face: one triangle, or a quad's two triangles (a, b, c), (a, c, d)
             base = lc0 + idx
             a = vo + lc_data[base, 0]
-            b = vo + lc_data[base, 1]
-            c = vo + lc_data[base, 2]
-            t, ba, bb, bc = _tri(px, py, pz, kx, ky, kz, sx, sy, sz, a, b, c, verts,
-                                 hit[H_T], slack)
-            if t < hit[H_T]:
-                hit[H_T] = t
-                hit[H_SLOT] = s
-                hit[H_LEAF] = idx
-                hit[H_TRI] = 0
-                hit[H_B1] = bb
-                hit[H_B2] = bc
-            if quad:
-                d = vo + lc_data[base, 3]
-                t, ba, bc2, bd = _tri(px, py, pz, kx, ky, kz, sx, sy, sz, a, c, d, verts,
-                                      hit[H_T], slack)
+            for tri in range(2 if quad else 1):
+                b = vo + lc_data[base, 1 + tri]
+                c = vo + lc_data[base, 2 + tri]
+                t, ba, bb, bc = _tri(px, py, pz, kx, ky, kz, sx, sy, sz, a, b, c, verts,
+                                     hit[H_T], slack)
                 if t < hit[H_T]:
                     hit[H_T] = t
                     hit[H_SLOT] = s
                     hit[H_LEAF] = idx
-                    hit[H_TRI] = 1
-                    hit[H_B1] = bc2
-                    hit[H_B2] = bd
+                    hit[H_TRI] = tri
+                    hit[H_B1] = bb
+                    hit[H_B2] = bc
             continue
         # children: test boxes, push the hit ones far to near
         child_level = level + 1
@@ -191,8 +182,7 @@ def _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, slot_dept
 
 
 @nb.njit(cache=True, parallel=True)
-def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_count,
-                bvh_axis, prims, shell_min, shell_max, patch_slot, slot_depth, slot_vert_off,
+def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_count, prims, shell_min, shell_max, patch_slot, slot_depth, slot_vert_off,
                 slot_node_off, slot_quad, slot_round, verts, node_lo, node_hi, lc_off, lc_data,
                 slack, hits, request):
     """One round for the rays ``rays`` (pixel indices): update ``hits`` (n_pixels, 6) and
@@ -202,12 +192,14 @@ def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_c
         r = rays[q]
         row = r // width
         col = r - row * width
-        dx, dy, dz = _ray_setup(frame, row, col)
+        dx, dy, dz = ray_setup(frame, row, col)
         ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
         kx, ky, kz, sx, sy, sz = _shear(dx, dy, dz)
         hit = hits[r]
         stack = np.empty(128, np.int64)
         gstack = np.empty(64, np.int64)
+        ent_t = np.empty(4)
+        ent_i = np.empty(4, np.int64)
         req = -1
         req_t = np.inf
         sp = 0
@@ -234,7 +226,7 @@ def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_c
                         _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s,
                                         slot_depth, slot_vert_off, slot_node_off, slot_quad,
                                         verts, node_lo, node_hi, lc_off, lc_data, slack, hit,
-                                        gstack)
+                                        gstack, ent_t, ent_i)
                 continue
             left = bvh_first[node]
             right = left + 1
