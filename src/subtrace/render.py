@@ -17,6 +17,7 @@ import numpy as np
 
 from . import config
 from .accel.bvh import build_bvh
+from .patches.bspline import eval_grids
 from .patches.grids import build_grids, grid_params, grid_size, leaf_corners
 from .patches.table import build_patch_table, choose_depths
 from .trace.kernels import H_SLOT, H_T, HIT_FIELDS, trace_round
@@ -189,9 +190,10 @@ def _refine(table, requested, depths, edge_depth, pools, round_no, stats):
     """Build the grids of the requested patches and append them to the pools."""
     obj = table.object_id[requested]
     dep = depths[requested]
-    order = np.lexsort((requested, dep, obj))
+    order = np.lexsort((requested, table.regular[requested], dep, obj))
     requested, obj, dep = requested[order], obj[order], dep[order]
-    keys = np.stack([obj, dep], axis=1)
+    reg = table.regular[requested]
+    keys = np.stack([obj, dep, reg], axis=1)
     starts = np.r_[0, np.nonzero(np.any(np.diff(keys, axis=0) != 0, axis=1))[0] + 1]
     ends = np.r_[starts[1:], len(requested)]
     for s, e in zip(starts, ends):
@@ -199,7 +201,10 @@ def _refine(table, requested, depths, edge_depth, pools, round_no, stats):
         o = table.objects[int(obj[s])]
         d = int(dep[s])
         quad = bool(table.is_quad[ids[0]])
-        P, N = build_grids(o.level, o.points, o.cage.options, table.face[ids], d)
+        if reg[s]:
+            P, N = eval_grids(o.points[table.control[ids].reshape(-1, 4, 4)], d)
+        else:
+            P, N = build_grids(o.level, o.points, o.cage.options, table.face[ids], d)
         k = 4 if quad else 3
         side_depth = np.where(table.edges[ids, :k] >= 0, edge_depth[table.edges[ids, :k]], -1)
         _snap_sides(P, d, quad, side_depth)
@@ -215,6 +220,30 @@ def _refine(table, requested, depths, edge_depth, pools, round_no, stats):
 # --------------------------------------------------------------------------------------
 
 
+def _edge_sampling(table, depths):
+    """How patch sides sample their edges, made to agree on both sides of every edge.
+
+    Regular patches (intersected directly) sample a side shared with a finer regular
+    neighbour at the neighbour's depth (``reg_side``, (R,4)); an irregular patch is raised
+    to the depth of its regular neighbours, and irregular grids snap a side to the coarsest
+    depth on its edge (``edge_depth``, per L0 edge). Raises ``depths`` in place."""
+    live = table.edges >= 0
+    n_e = max(table.n_edges, 1)
+    rows = np.repeat(depths[:, None], 4, axis=1)
+    reg_max = np.full(n_e, -1, dtype=np.int64)
+    reg_live = live & table.regular[:, None]
+    np.maximum.at(reg_max, table.edges[reg_live], rows[reg_live])
+    nb_reg = np.where(live, reg_max[np.where(live, table.edges, 0)], -1)
+    irr = ~table.regular
+    depths[irr] = np.maximum(depths[irr], nb_reg[irr].max(axis=1))
+    edge_depth = np.full(n_e, np.iinfo(np.int32).max, dtype=np.int64)
+    rows = np.repeat(depths[:, None], 4, axis=1)
+    np.minimum.at(edge_depth, table.edges[live], rows[live])
+    reg = table.regular
+    reg_side = np.maximum(depths[reg][:, None], nb_reg[reg]).astype(np.int64)
+    return edge_depth, np.ascontiguousarray(reg_side)
+
+
 def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
     """Run the refinement rounds; returns (hits (H*W, 6), pools, depths)."""
     from .trace.camera import camera_frame
@@ -224,9 +253,10 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
     frame = camera_frame(camera)
     eye = frame[0]
     depths = choose_depths(table, eye, tol_rad, max_depth)
-    edge_depth = np.full(max(table.n_edges, 1), np.iinfo(np.int32).max, dtype=np.int64)
-    live = table.edges >= 0
-    np.minimum.at(edge_depth, table.edges[live], np.repeat(depths, 4).reshape(-1, 4)[live])
+    edge_depth, reg_side = _edge_sampling(table, depths)
+    reg_depth = np.ascontiguousarray(depths[table.regular], dtype=np.int64)
+    tested = np.zeros(W * H, dtype=np.int64)
+    touched = np.zeros(len(reg_depth), dtype=np.uint8)
     tables = _LeafTables(int(depths.max(initial=0)))
     pools = _Pools()
     patch_slot = np.full(table.n_patches, -1, dtype=np.int64)
@@ -244,7 +274,8 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
             bvh.prims, table.shell_min, table.shell_max, patch_slot,
             pools.slot_depth, pools.slot_vert_off, pools.slot_node_off, pools.slot_quad,
             pools.slot_round, pools.verts, pools.node_lo, pools.node_hi,
-            tables.lc_off, tables.lc_data, config.TRI_SLACK, hits, request,
+            tables.lc_off, tables.lc_data, table.reg_index, table.nets, reg_depth, reg_side,
+            config.TRI_SLACK, hits, request, tested, touched,
         )
         stats.time_trace += time.perf_counter() - t0
         req = request[rays]
@@ -260,8 +291,11 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
         stats.time_refine += time.perf_counter() - t0
         round_no += 1
     stats.rounds = round_no + 1
-    stats.max_depth = int(pools.slot_depth.max(initial=0))
-    return hits, pools, depths, tables
+    stats.micro_triangles += int(tested.sum())
+    direct = np.nonzero(table.regular)[0][touched.astype(bool)]
+    stats.patches_refined += len(direct)
+    stats.max_depth = int(max(pools.slot_depth.max(initial=0), reg_depth.max(initial=0)))
+    return hits, pools, depths, tables, direct
 
 
 # --------------------------------------------------------------------------------------
@@ -330,7 +364,7 @@ def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult
     stats.rays = camera.width * camera.height
     stats.time_preprocess = time.perf_counter() - t0
 
-    hits, pools, depths, tables = trace_hits(table, bvh, camera, tol_rad, stats)
+    hits, pools, depths, tables, direct = trace_hits(table, bvh, camera, tol_rad, stats)
 
     t0 = time.perf_counter()
     W, H = camera.width, camera.height
@@ -350,7 +384,8 @@ def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult
         camera_frame(camera), W, hits, pools.slot_patch, pools.slot_depth, pools.slot_quad,
         pools.slot_vert_off, pools.verts, pools.normals, tables.lc_off, tables.lc_data,
         tables.uv_off, tables.uv_data, table.object_id, table.ptex, table.ptex_uv0,
-        table.ptex_scale, table.level0, _patch_colors(table, scene), lights, headlight,
+        table.ptex_scale, table.level0, _patch_colors(table, scene), table.reg_index,
+        table.nets, lights, headlight,
         np.asarray(scene.render.background, dtype=np.float64), rgba, nrm, level, patch,
         objid, uv,
     )
@@ -366,7 +401,7 @@ def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult
     stats.time_shade = time.perf_counter() - t0
     stats.time_total = time.perf_counter() - t_start
     schemes = tuple(c.scheme for c in cages)
-    refined = table.object_id[pools.slot_patch]
+    refined = table.object_id[np.concatenate([pools.slot_patch, direct])]
     return RenderResult(channels, stats, camera, tol_rad, schemes, refined)
 
 

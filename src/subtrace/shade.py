@@ -15,14 +15,16 @@ import math
 import numba as nb
 import numpy as np
 
+from .trace.bezier import bez_derivatives
 from .trace.kernels import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, ray_setup
 
 
 @nb.njit(cache=True, parallel=True)
 def shade_kernel(frame, width, hits, slot_patch, slot_depth, slot_quad, slot_vert_off,
                  verts, normals, lc_off, lc_data, uv_off, uv_data, patch_object, patch_ptex,
-                 patch_uv0, patch_scale, patch_level0, patch_color, lights, headlight,
-                 background, out_rgba, out_n, out_level, out_patch, out_object, out_uv):
+                 patch_uv0, patch_scale, patch_level0, patch_color, reg_index, nets, lights,
+                 headlight, background, out_rgba, out_n, out_level, out_patch, out_object,
+                 out_uv):
     """Fill the per-pixel outputs (flat over pixels) from ``hits``.
 
     ``lights`` (L,6): direction the light travels (unit) and its colour times intensity.
@@ -45,57 +47,20 @@ def shade_kernel(frame, width, hits, slot_patch, slot_depth, slot_quad, slot_ver
         col = r - row * width
         dx, dy, dz = ray_setup(frame, row, col)
         s = np.int64(hits[r, H_SLOT])
-        leaf = np.int64(hits[r, H_LEAF])
-        b1 = hits[r, H_B1]
-        b2 = hits[r, H_B2]
-        b0 = 1.0 - b1 - b2
-        depth = slot_depth[s]
-        quad = slot_quad[s]
-        q = 1 if quad else 0
-        base = lc_off[depth, q] + leaf
-        ca = lc_data[base, 0]
-        if hits[r, H_TRI] == 0.0:
-            cb = lc_data[base, 1]
-            cc = lc_data[base, 2]
+        if s < 0:
+            # a regular patch hit directly: (B1, B2) is the patch parameter
+            p = -s - 2
+            u = hits[r, H_B1]
+            v = hits[r, H_B2]
+            nx, ny, nz = _bezier_normal(nets[reg_index[p]], u, v)
+            depth = np.int64(hits[r, H_LEAF])
         else:
-            cb = lc_data[base, 2]
-            cc = lc_data[base, 3]
-        vo = slot_vert_off[s]
-        # interpolated limit normal (fallback: the micro-triangle's normal)
-        nx = ny = nz = 0.0
-        ok = True
-        for a in range(3):
-            na = normals[vo + ca, a]
-            nb_ = normals[vo + cb, a]
-            nc = normals[vo + cc, a]
-            if not (np.isfinite(na) and np.isfinite(nb_) and np.isfinite(nc)):
-                ok = False
-        if ok:
-            nx = b0 * normals[vo + ca, 0] + b1 * normals[vo + cb, 0] + b2 * normals[vo + cc, 0]
-            ny = b0 * normals[vo + ca, 1] + b1 * normals[vo + cb, 1] + b2 * normals[vo + cc, 1]
-            nz = b0 * normals[vo + ca, 2] + b1 * normals[vo + cb, 2] + b2 * normals[vo + cc, 2]
-        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
-        if not ok or ln == 0.0:
-            e1x = verts[vo + cb, 0] - verts[vo + ca, 0]
-            e1y = verts[vo + cb, 1] - verts[vo + ca, 1]
-            e1z = verts[vo + cb, 2] - verts[vo + ca, 2]
-            e2x = verts[vo + cc, 0] - verts[vo + ca, 0]
-            e2y = verts[vo + cc, 1] - verts[vo + ca, 1]
-            e2z = verts[vo + cc, 2] - verts[vo + ca, 2]
-            nx = e1y * e2z - e1z * e2y
-            ny = e1z * e2x - e1x * e2z
-            nz = e1x * e2y - e1y * e2x
-            ln = math.sqrt(nx * nx + ny * ny + nz * nz)
-        if ln > 0.0:
-            nx, ny, nz = nx / ln, ny / ln, nz / ln
+            nx, ny, nz, u, v, depth, p = _grid_normal(
+                hits[r], s, slot_patch, slot_depth, slot_quad, slot_vert_off, verts, normals,
+                lc_off, lc_data, uv_off, uv_data)
         out_n[r, 0] = nx
         out_n[r, 1] = ny
         out_n[r, 2] = nz
-        # patch parameter of the hit, then ptex (u, v)
-        uo = uv_off[depth, q]
-        u = b0 * uv_data[uo + ca, 0] + b1 * uv_data[uo + cb, 0] + b2 * uv_data[uo + cc, 0]
-        v = b0 * uv_data[uo + ca, 1] + b1 * uv_data[uo + cb, 1] + b2 * uv_data[uo + cc, 1]
-        p = slot_patch[s]
         out_uv[r, 0] = patch_uv0[p, 0] + patch_scale[p] * u
         out_uv[r, 1] = patch_uv0[p, 1] + patch_scale[p] * v
         out_level[r] = patch_level0[p] + depth
@@ -120,3 +85,74 @@ def shade_kernel(frame, width, hits, slot_patch, slot_depth, slot_quad, slot_ver
         out_rgba[r, 1] = patch_color[p, 1] * lg
         out_rgba[r, 2] = patch_color[p, 2] * lb
         out_rgba[r, 3] = 1.0
+
+
+@nb.njit(cache=True)
+def _bezier_normal(net, u, v):
+    """Unit limit normal of a regular patch at (u, v); where the derivatives vanish (a
+    degenerate cage), the normal a little way towards the patch centre."""
+    for step in range(3):
+        pu, pv = bez_derivatives(net, u, v)
+        nx = pu[1] * pv[2] - pu[2] * pv[1]
+        ny = pu[2] * pv[0] - pu[0] * pv[2]
+        nz = pu[0] * pv[1] - pu[1] * pv[0]
+        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if ln > 0.0:
+            return nx / ln, ny / ln, nz / ln
+        u += (0.5 - u) * 1e-6
+        v += (0.5 - v) * 1e-6
+    return 0.0, 0.0, 0.0
+
+
+@nb.njit(cache=True)
+def _grid_normal(hit, s, slot_patch, slot_depth, slot_quad, slot_vert_off, verts, normals,
+                 lc_off, lc_data, uv_off, uv_data):
+    """Normal, patch parameter, depth and patch of a hit on a stored grid: the exact limit
+    normals of the micro-face's corners interpolated (the micro-triangle's own normal where
+    they are undefined)."""
+    leaf = np.int64(hit[H_LEAF])
+    b1 = hit[H_B1]
+    b2 = hit[H_B2]
+    b0 = 1.0 - b1 - b2
+    depth = slot_depth[s]
+    quad = slot_quad[s]
+    q = 1 if quad else 0
+    base = lc_off[depth, q] + leaf
+    ca = lc_data[base, 0]
+    if hit[H_TRI] == 0.0:
+        cb = lc_data[base, 1]
+        cc = lc_data[base, 2]
+    else:
+        cb = lc_data[base, 2]
+        cc = lc_data[base, 3]
+    vo = slot_vert_off[s]
+    nx = ny = nz = 0.0
+    ok = True
+    for a in range(3):
+        na = normals[vo + ca, a]
+        nb_ = normals[vo + cb, a]
+        nc = normals[vo + cc, a]
+        if not (np.isfinite(na) and np.isfinite(nb_) and np.isfinite(nc)):
+            ok = False
+    if ok:
+        nx = b0 * normals[vo + ca, 0] + b1 * normals[vo + cb, 0] + b2 * normals[vo + cc, 0]
+        ny = b0 * normals[vo + ca, 1] + b1 * normals[vo + cb, 1] + b2 * normals[vo + cc, 1]
+        nz = b0 * normals[vo + ca, 2] + b1 * normals[vo + cb, 2] + b2 * normals[vo + cc, 2]
+    ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if not ok or ln == 0.0:
+        e1x = verts[vo + cb, 0] - verts[vo + ca, 0]
+        e1y = verts[vo + cb, 1] - verts[vo + ca, 1]
+        e1z = verts[vo + cb, 2] - verts[vo + ca, 2]
+        e2x = verts[vo + cc, 0] - verts[vo + ca, 0]
+        e2y = verts[vo + cc, 1] - verts[vo + ca, 1]
+        e2z = verts[vo + cc, 2] - verts[vo + ca, 2]
+        nx = e1y * e2z - e1z * e2y
+        ny = e1z * e2x - e1x * e2z
+        nz = e1x * e2y - e1y * e2x
+        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if ln > 0.0:
+        nx, ny, nz = nx / ln, ny / ln, nz / ln
+    uo = uv_off[depth, q]
+    u = b0 * uv_data[uo + ca, 0] + b1 * uv_data[uo + cb, 0] + b2 * uv_data[uo + cc, 0]
+    v = b0 * uv_data[uo + ca, 1] + b1 * uv_data[uo + cb, 1] + b2 * uv_data[uo + cc, 1]
+    return nx, ny, nz, u, v, depth, slot_patch[s]

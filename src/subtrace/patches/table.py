@@ -31,6 +31,8 @@ import numpy as np
 from .. import config
 from ..patches.evaluate import ptex_layout
 from ..subdiv import catmark, loop
+from .bspline import bezier_nets, control_grids, derivative_bounds, hull_boxes, regular_mask
+from .isolate import box_distance, isolated_depths
 
 # ptex offset of the child at corner j of a regular face (quads keep the parent's orientation)
 _QUAD_CHILD_UV0 = np.array([[0.0, 0.0], [0.5, 0.0], [0.5, 0.5], [0.0, 0.5]])
@@ -61,6 +63,10 @@ class PatchTable:
     shell_max: np.ndarray  # (P,3) float64
     edge_bound: np.ndarray  # (P,) float64
     rate: np.ndarray  # (P,) float64
+    regular: np.ndarray  # (P,) bool: a regular bicubic patch
+    reg_index: np.ndarray  # (P,) int64 row of a regular patch in ``nets`` (-1: not regular)
+    nets: np.ndarray  # (R,4,4,3) float64 Bezier nets of the regular patches
+    control: np.ndarray  # (P,16) int64 its B-spline control points in L0 ([u][v]; -1: not regular)
     edges: np.ndarray  # (P,4) int64 global L0 edge ids (-1 pads a triangle's 4th side)
     is_quad: np.ndarray  # (P,) bool: Catmull-Clark quad (else Loop triangle)
     n_edges: int
@@ -92,7 +98,11 @@ def build_patch_table(cages) -> PatchTable:
         first_patch += len(faces)
         first_edge += lev.n_edges
     cat = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-    return PatchTable(objects=tuple(objs), n_edges=first_edge, **cat)
+    regular = cat["regular"]
+    reg_index = np.full(len(regular), -1, dtype=np.int64)
+    reg_index[regular] = np.arange(int(regular.sum()))
+    cat["nets"] = np.ascontiguousarray(cat["nets"])  # concatenated in patch order
+    return PatchTable(objects=tuple(objs), n_edges=first_edge, reg_index=reg_index, **cat)
 
 
 def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
@@ -133,6 +143,17 @@ def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
         smin -= margin
         smax += margin
     rate = _subdominant(valence, quad)
+    # regular quads: bicubic patches with a tight hull and an exact derivative bound
+    regular = regular_mask(lev, cage.options, faces)
+    control = np.full((n, 16), -1, dtype=np.int64)
+    nets = np.zeros((0, 4, 4, 3))
+    if regular.any():
+        cv = control_grids(lev, faces[regular])
+        control[regular] = cv.reshape(-1, 16)
+        nets = bez = bezier_nets(pts[cv])
+        smin[regular], smax[regular] = hull_boxes(bez)
+        ebound[regular] = derivative_bounds(bez)
+        rate[regular] = 0.5
     edges = np.full((n, 4), -1, dtype=np.int64)
     edges[:, :k] = lev.face_edges[lev.face_offsets[faces][:, None] + np.arange(k)] + first_edge
     return dict(
@@ -145,6 +166,9 @@ def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
         shell_max=smax,
         edge_bound=ebound,
         rate=rate,
+        regular=regular,
+        control=control,
+        nets=nets,
         edges=edges,
         is_quad=np.full(n, quad, dtype=bool),
         level0=np.full(n, L0, np.int8),
@@ -202,16 +226,19 @@ def _subdominant(valence: np.ndarray, quad: bool) -> np.ndarray:
 
 def choose_depths(table: PatchTable, eye: np.ndarray, tol_rad: float, max_depth: int):
     """Grid depth of every patch: the smallest n with ``edge_bound * rate^n`` at most
-    ``tol_rad`` times the distance from the eye to the patch's shell (capped)."""
-    d = _box_distance(table.shell_min, table.shell_max, eye)
+    ``tol_rad`` times the distance from the eye to the patch's shell (capped); irregular
+    quads needing more than depth 0 are then isolated (:mod:`subtrace.patches.isolate`)."""
+    d = box_distance(table.shell_min, table.shell_max, eye)
     allowed = d * tol_rad
     with np.errstate(divide="ignore", invalid="ignore"):
         n = np.log(allowed / table.edge_bound) / np.log(table.rate)
     n = np.where(allowed >= table.edge_bound, 0.0, np.ceil(n - 1e-9))
     n = np.where(np.isfinite(n), n, max_depth)
-    return np.clip(n, 0, max_depth).astype(np.int32)
-
-
-def _box_distance(bmin, bmax, p):
-    q = np.maximum(np.maximum(bmin - p, 0.0), p - bmax)
-    return np.sqrt((q * q).sum(axis=1))
+    depths = np.clip(n, 0, max_depth).astype(np.int32)
+    for oid, o in enumerate(table.objects):
+        if o.cage.scheme != "catmark":
+            continue
+        sel = np.nonzero((table.object_id == oid) & ~table.regular & (depths > 0))[0]
+        if len(sel):
+            depths[sel] = isolated_depths(o, table.face[sel], depths[sel], eye, tol_rad)
+    return depths

@@ -1,0 +1,143 @@
+"""Regular Catmull-Clark patches as bicubic B-splines: control grids, Bezier nets, exact grids.
+
+A quad of the patch level whose four corners are smooth, valence 4 and crease-free is a
+uniform bicubic B-spline patch of the 16 points around it (the same test and the same
+control grid as the exact evaluator, :mod:`subtrace.patches.evaluate`). For such a patch:
+
+* :func:`control_grids` gathers the 16 point ids, ``[u index][v index]``, with ``u`` running
+  from corner 0 to corner 1 and ``v`` from corner 0 to corner 3 (the grid layout of
+  :mod:`subtrace.patches.grids`);
+* :func:`bezier_nets` converts them to the patch's bicubic Bezier control net. The patch lies
+  in the net's convex hull, so the net's box is a containing shell much tighter than the box
+  of the 16 B-spline points (design invariant 2), and the partial derivatives are Bezier
+  patches with control points ``3 (b[i+1, j] - b[i, j])`` (resp. ``j``), so
+  :func:`derivative_bounds` bounds ``|dP/du|`` and ``|dP/dv|`` over the whole patch: a grid
+  cell at depth ``n`` has sides no longer than ``bound * 2^-n`` (the refinement criterion,
+  design invariant 3);
+* :func:`eval_grids` evaluates the exact limit points and normals on a depth-``n`` grid by
+  the tensor-product basis, instead of refining ``n`` levels.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numba as nb
+import numpy as np
+
+from ..subdiv.limit import _SMOOTH, classify
+
+# uniform cubic B-spline control points -> Bezier control points of the middle span
+_TO_BEZIER = np.array(
+    [[1.0, 4.0, 1.0, 0.0], [0.0, 4.0, 2.0, 0.0], [0.0, 2.0, 4.0, 0.0], [0.0, 1.0, 4.0, 1.0]]
+) / 6.0
+
+# grid position of face corner i, and the directions of its leading / trailing edges
+_B_CORNER = np.array([[1, 1], [2, 1], [2, 2], [1, 2]], dtype=np.int64)
+_LEAD = np.array([[1, 0], [0, 1], [-1, 0], [0, -1]], dtype=np.int64)
+_TRAIL = np.array([[0, 1], [-1, 0], [0, -1], [1, 0]], dtype=np.int64)
+
+
+def regular_mask(level, options, faces) -> np.ndarray:
+    """(len(faces),) bool: the faces of ``level`` that are regular bicubic patches."""
+    faces = np.asarray(faces, dtype=np.int64)
+    if options.scheme != "catmark" or len(faces) == 0:
+        return np.zeros(len(faces), dtype=bool)
+    cls = classify(level, options)
+    ok_vert = (cls == _SMOOTH) & (np.diff(level.vert_edge_offsets) == 4)
+    fo = level.face_offsets
+    quad = (fo[faces + 1] - fo[faces]) == 4
+    corners = level.face_verts[np.minimum(fo[faces][:, None] + np.arange(4), len(level.face_verts) - 1)]
+    return quad & ok_vert[corners].all(axis=1)
+
+
+def control_grids(level, faces) -> np.ndarray:
+    """(m, 4, 4) int64 point ids of the control grids of regular quads ``faces``."""
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    out = np.empty((len(faces), 4, 4), dtype=np.int64)
+    _control_grids(
+        level.face_offsets, level.face_verts, level.vert_face_offsets, level.vert_faces,
+        level.vert_face_corner, level.vert_edge_offsets, level.vert_edges, level.edge_verts,
+        faces, _B_CORNER, _LEAD, _TRAIL, out,
+    )
+    return out
+
+
+@nb.njit(cache=True)
+def _control_grids(fo, fv, vfo, vf, vfc, veo, ve, ev, faces, bc, lead, trail, out):
+    dirs = np.empty((4, 2), dtype=np.int64)
+    for m in range(len(faces)):
+        f = faces[m]
+        for i in range(4):
+            c = fv[fo[f] + i]
+            x0, y0 = bc[i, 0], bc[i, 1]
+            out[m, x0, y0] = c
+            a = vfo[c]
+            pos = 0
+            for j in range(4):
+                if vf[a + j] == f:
+                    pos = j
+            # the other three faces around the corner, counter-clockwise from f
+            for q in range(2):
+                dirs[0, q] = trail[i, q]
+                dirs[1, q] = -lead[i, q]
+                dirs[2, q] = -trail[i, q]
+                dirs[3, q] = lead[i, q]
+            for k in range(1, 4):
+                j = (pos + k) % 4
+                g = vf[a + j]
+                kk = vfc[a + j]
+                diag = fv[fo[g] + (kk + 2) % 4]
+                out[m, x0 + dirs[k - 1, 0] + dirs[k, 0], y0 + dirs[k - 1, 1] + dirs[k, 1]] = diag
+                if k >= 2:
+                    e = ve[veo[c] + j]
+                    other = ev[e, 1] if ev[e, 0] == c else ev[e, 0]
+                    out[m, x0 + dirs[k - 1, 0], y0 + dirs[k - 1, 1]] = other
+
+
+def bezier_nets(cv: np.ndarray) -> np.ndarray:
+    """(m,4,4,3) Bezier control nets of B-spline control grids ``cv`` (m,4,4,3)."""
+    return np.einsum("ai,bj,mijk->mabk", _TO_BEZIER, _TO_BEZIER, cv, optimize=True)
+
+
+def hull_boxes(bez: np.ndarray):
+    """Axis-aligned boxes (lo, hi), each (m,3), of Bezier nets: they contain the patches."""
+    flat = bez.reshape(len(bez), 16, 3)
+    return flat.min(axis=1), flat.max(axis=1)
+
+
+def derivative_bounds(bez: np.ndarray) -> np.ndarray:
+    """(m,) bound on |dP/du| and |dP/dv| over each patch (max of the derivative nets)."""
+    du = 3.0 * np.linalg.norm(np.diff(bez, axis=1), axis=-1).reshape(len(bez), -1).max(axis=1)
+    dv = 3.0 * np.linalg.norm(np.diff(bez, axis=2), axis=-1).reshape(len(bez), -1).max(axis=1)
+    return np.maximum(du, dv)
+
+
+@lru_cache(maxsize=None)
+def _basis(depth: int):
+    """B-spline basis (N+1,4) and its derivative at t = i/N, N = 2^depth."""
+    t = np.arange((1 << depth) + 1, dtype=np.float64) / (1 << depth)
+    s = 1.0 - t
+    b = np.stack([s**3, 3 * t**3 - 6 * t**2 + 4, -3 * t**3 + 3 * t**2 + 3 * t + 1, t**3], 1) / 6
+    d = np.stack([-(s**2), 3 * t**2 - 4 * t, -3 * t**2 + 2 * t + 1, t**2], 1) / 2
+    return b, d
+
+
+def eval_grids(cv: np.ndarray, depth: int):
+    """Exact limit points and unit normals (each (m, G, 3), G = (2^depth+1)^2) of regular
+    patches with control grids ``cv`` (m,4,4,3), point (i, j) at index ``i + j (N+1)``.
+    A normal the derivatives leave undefined (a degenerate patch) is NaN."""
+    b, d = _basis(depth)
+    m = len(cv)
+    n1 = len(b)
+    # contract v first (index j, major), then u (index i)
+    Bv = np.einsum("jb,mabk->mjak", b, cv, optimize=True)
+    Dv = np.einsum("jb,mabk->mjak", d, cv, optimize=True)
+    P = np.einsum("ia,mjak->mjik", b, Bv, optimize=True).reshape(m, n1 * n1, 3)
+    Pu = np.einsum("ia,mjak->mjik", d, Bv, optimize=True).reshape(m, n1 * n1, 3)
+    Pv = np.einsum("ia,mjak->mjik", b, Dv, optimize=True).reshape(m, n1 * n1, 3)
+    N = np.cross(Pu, Pv)
+    length = np.linalg.norm(N, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        N = np.where(length > 0, N / length, np.nan)
+    return P, N

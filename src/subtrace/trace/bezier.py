@@ -1,0 +1,264 @@
+"""Ray / regular-patch intersection by per-ray refinement of the Bezier net (nothing stored).
+
+A regular patch is one bicubic Bezier patch (``patches/bspline.py``), with a grid depth ``d``
+from the angular criterion. A ray that enters its shell descends the patch's quadtree: each
+node is the net of a dyadic sub-square (de Casteljau halving in u and v), tested by the box of
+its net, which contains the sub-patch (convex hull of the Bernstein basis); only the children
+whose boxes the ray enters are split further, nearest first, until depth ``d``. That is the
+refinement criterion per ray: a sub-patch is refined while its angular size is above the
+tolerance (its depth is below ``d``) and the ray hits its shell.
+
+A leaf is the grid cell ``(i, j)`` of the depth-``d`` grid. Its corners are limit points
+evaluated from the patch's net at the dyadic parameters ``(i/N, j/N)`` by one function
+(:func:`_bez_point`), so every cell of the patch computes a shared corner bit-identically.
+A cell on a side whose neighbour samples the shared edge more finely (``side_depth`` > d)
+also evaluates those samples and is cut into a fan around its centre, so both patches have
+the same points on the edge (no T-junction). The cell's points lie on the surface of the
+cell, inside its box; boxes are widened by a relative ``BOX_PAD`` for rounding.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from .kernels import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, _tri
+
+BOX_PAD = 1e-12
+MAX_SIDE_SAMPLES = 256  # samples per cell side at most (2^(side depth - depth))
+
+
+@nb.njit(cache=True)
+def _bez_point(net, u, v):
+    """Point of the Bezier patch ``net`` (4,4,3) at (u, v): one code path for every caller."""
+    su = 1.0 - u
+    sv = 1.0 - v
+    bu0, bu1, bu2, bu3 = su * su * su, 3.0 * u * su * su, 3.0 * u * u * su, u * u * u
+    bv0, bv1, bv2, bv3 = sv * sv * sv, 3.0 * v * sv * sv, 3.0 * v * v * sv, v * v * v
+    x = y = z = 0.0
+    for a in range(4):
+        ba = bu0 if a == 0 else (bu1 if a == 1 else (bu2 if a == 2 else bu3))
+        cx = bv0 * net[a, 0, 0] + bv1 * net[a, 1, 0] + bv2 * net[a, 2, 0] + bv3 * net[a, 3, 0]
+        cy = bv0 * net[a, 0, 1] + bv1 * net[a, 1, 1] + bv2 * net[a, 2, 1] + bv3 * net[a, 3, 1]
+        cz = bv0 * net[a, 0, 2] + bv1 * net[a, 1, 2] + bv2 * net[a, 2, 2] + bv3 * net[a, 3, 2]
+        x += ba * cx
+        y += ba * cy
+        z += ba * cz
+    return x, y, z
+
+
+@nb.njit(cache=True)
+def bez_derivatives(net, u, v):
+    """dP/du and dP/dv of the Bezier patch ``net`` at (u, v): two 3-tuples."""
+    su = 1.0 - u
+    sv = 1.0 - v
+    b = np.empty((2, 4))
+    db = np.empty((2, 4))
+    for k in range(2):
+        t = u if k == 0 else v
+        s = su if k == 0 else sv
+        b[k, 0], b[k, 1], b[k, 2], b[k, 3] = s * s * s, 3 * t * s * s, 3 * t * t * s, t * t * t
+        db[k, 0], db[k, 1], db[k, 2], db[k, 3] = -3 * s * s, 3 * s * (s - 2 * t), 3 * t * (2 * s - t), 3 * t * t
+    pu = np.zeros(3)
+    pv = np.zeros(3)
+    for a in range(4):
+        for c in range(4):
+            wu = db[0, a] * b[1, c]
+            wv = b[0, a] * db[1, c]
+            for k in range(3):
+                pu[k] += wu * net[a, c, k]
+                pv[k] += wv * net[a, c, k]
+    return (pu[0], pu[1], pu[2]), (pv[0], pv[1], pv[2])
+
+
+@nb.njit(cache=True, inline="always")
+def _split_row(a, b, c, d):
+    ab = 0.5 * (a + b)
+    bc = 0.5 * (b + c)
+    cd = 0.5 * (c + d)
+    abc = 0.5 * (ab + bc)
+    bcd = 0.5 * (bc + cd)
+    m = 0.5 * (abc + bcd)
+    return ab, abc, m, bcd, cd
+
+
+@nb.njit(cache=True)
+def _split(src, s, dst, d0):
+    """Write the four child nets of net ``src[s]`` into ``dst[d0 .. d0+3]`` (child
+    ``cu + 2 cv`` covers the half cu in u and cv in v)."""
+    half = np.empty((2, 4, 4, 3))
+    for c in range(4):  # halve along u (first index)
+        for k in range(3):
+            p0, p1, p2, p3 = src[s, 0, c, k], src[s, 1, c, k], src[s, 2, c, k], src[s, 3, c, k]
+            ab, abc, m, bcd, cd = _split_row(p0, p1, p2, p3)
+            half[0, 0, c, k], half[0, 1, c, k], half[0, 2, c, k], half[0, 3, c, k] = p0, ab, abc, m
+            half[1, 0, c, k], half[1, 1, c, k], half[1, 2, c, k], half[1, 3, c, k] = m, bcd, cd, p3
+    for h in range(2):  # then along v
+        for a in range(4):
+            for k in range(3):
+                p0, p1, p2, p3 = half[h, a, 0, k], half[h, a, 1, k], half[h, a, 2, k], half[h, a, 3, k]
+                ab, abc, m, bcd, cd = _split_row(p0, p1, p2, p3)
+                lo = d0 + h
+                hi = d0 + h + 2
+                dst[lo, a, 0, k], dst[lo, a, 1, k], dst[lo, a, 2, k], dst[lo, a, 3, k] = p0, ab, abc, m
+                dst[hi, a, 0, k], dst[hi, a, 1, k], dst[hi, a, 2, k], dst[hi, a, 3, k] = m, bcd, cd, p3
+
+
+@nb.njit(cache=True)
+def _net_entry(ox, oy, oz, ix, iy, iz, net, s, tmax):
+    """Entry distance of the ray into the (padded) box of net ``net[s]``; inf on a miss."""
+    lo0 = lo1 = lo2 = np.inf
+    hi0 = hi1 = hi2 = -np.inf
+    for a in range(4):
+        for c in range(4):
+            x, y, z = net[s, a, c, 0], net[s, a, c, 1], net[s, a, c, 2]
+            lo0, hi0 = min(lo0, x), max(hi0, x)
+            lo1, hi1 = min(lo1, y), max(hi1, y)
+            lo2, hi2 = min(lo2, z), max(hi2, z)
+    pad = BOX_PAD * max(max(abs(lo0), abs(hi0)), max(max(abs(lo1), abs(hi1)), max(abs(lo2), abs(hi2))))
+    lo0 -= pad
+    lo1 -= pad
+    lo2 -= pad
+    hi0 += pad
+    hi1 += pad
+    hi2 += pad
+    t0 = (lo0 - ox) * ix
+    t1 = (hi0 - ox) * ix
+    tn, tf = min(t0, t1), max(t0, t1)
+    t0 = (lo1 - oy) * iy
+    t1 = (hi1 - oy) * iy
+    tn, tf = max(tn, min(t0, t1)), min(tf, max(t0, t1))
+    t0 = (lo2 - oz) * iz
+    t1 = (hi2 - oz) * iz
+    tn, tf = max(tn, min(t0, t1)), min(tf, max(t0, t1))
+    tf *= 1.0 + 6.7e-16
+    tn = max(tn, 0.0)
+    if tn <= tf and tn < tmax:
+        return tn
+    return np.inf
+
+
+@nb.njit(cache=True)
+def _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, root, i, j, depth, side_depth, slack, hit,
+          code, lv, lp):
+    """Intersect grid cell (i, j) of the depth-``depth`` grid of Bezier net ``root``;
+    update ``hit`` (patch ``code`` into H_SLOT). ``lv`` (K,3) / ``lp`` (K,2): scratch for
+    the cell's points and parameters. Returns the number of triangles tested."""
+    N = 1 << depth
+    inv = 1.0 / N
+    n = 0
+    for corner in range(4):
+        ci = i + (1 if corner == 1 or corner == 2 else 0)
+        cj = j + (1 if corner >= 2 else 0)
+        u, v = ci * inv, cj * inv
+        x, y, z = _bez_point(root, u, v)
+        lv[n, 0], lv[n, 1], lv[n, 2] = x, y, z
+        lp[n, 0], lp[n, 1] = u, v
+        n += 1
+        # samples of the side that starts at this corner, when the neighbour is finer
+        side = corner
+        on_side = (j == 0) if side == 0 else ((i == N - 1) if side == 1 else ((j == N - 1) if side == 2 else (i == 0)))
+        if on_side and side_depth[side] > depth:
+            r = 1 << (side_depth[side] - depth)
+            for k in range(1, r):
+                f = k / r
+                if side == 0:
+                    uu, vv = (i + f) * inv, j * inv
+                elif side == 1:
+                    uu, vv = (i + 1) * inv, (j + f) * inv
+                elif side == 2:
+                    uu, vv = (i + 1 - f) * inv, (j + 1) * inv
+                else:
+                    uu, vv = i * inv, (j + 1 - f) * inv
+                x, y, z = _bez_point(root, uu, vv)
+                lv[n, 0], lv[n, 1], lv[n, 2] = x, y, z
+                lp[n, 0], lp[n, 1] = uu, vv
+                n += 1
+    o = (ox, oy, oz)
+    px, py, pz = o[kx], o[ky], o[kz]
+    tested = 0
+    if n == 4:
+        for tri in range(2):
+            b = 1 + tri
+            c = 2 + tri
+            t, ba, bb, bc = _tri(px, py, pz, kx, ky, kz, sx, sy, sz, 0, b, c, lv, hit[H_T], slack)
+            tested += 1
+            if t < hit[H_T]:
+                hit[H_T] = t
+                hit[H_SLOT] = code
+                hit[H_LEAF] = depth
+                hit[H_TRI] = 0.0
+                hit[H_B1] = ba * lp[0, 0] + bb * lp[b, 0] + bc * lp[c, 0]
+                hit[H_B2] = ba * lp[0, 1] + bb * lp[b, 1] + bc * lp[c, 1]
+        return tested
+    # a fan around the cell's centre
+    cu, cvv = (i + 0.5) * inv, (j + 0.5) * inv
+    x, y, z = _bez_point(root, cu, cvv)
+    lv[n, 0], lv[n, 1], lv[n, 2] = x, y, z
+    lp[n, 0], lp[n, 1] = cu, cvv
+    for k in range(n):
+        b = k
+        c = k + 1 if k + 1 < n else 0
+        t, ba, bb, bc = _tri(px, py, pz, kx, ky, kz, sx, sy, sz, n, b, c, lv, hit[H_T], slack)
+        tested += 1
+        if t < hit[H_T]:
+            hit[H_T] = t
+            hit[H_SLOT] = code
+            hit[H_LEAF] = depth
+            hit[H_TRI] = 0.0
+            hit[H_B1] = ba * lp[n, 0] + bb * lp[b, 0] + bc * lp[c, 0]
+            hit[H_B2] = ba * lp[n, 1] + bb * lp[b, 1] + bc * lp[c, 1]
+    return tested
+
+
+@nb.njit(cache=True)
+def intersect_bezier(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, nets, r, depth,
+                     side_depth, slack, hit, code, work, st_i, st_j, st_l, tmp_t, order, lv,
+                     lp):
+    """Closest hit on regular patch ``nets[r]`` (grid depth ``depth``) nearer than
+    hit[H_T]; updates ``hit``. ``work`` (>= 3*depth+6, 4,4,3) holds the stacked nets,
+    ``st_*`` their cell coordinates and levels. Returns the number of triangles tested."""
+    tested = 0
+    for a in range(4):
+        for c in range(4):
+            for k in range(3):
+                work[0, a, c, k] = nets[r, a, c, k]
+    st_i[0] = 0
+    st_j[0] = 0
+    st_l[0] = 0
+    sp = 1
+    base = work.shape[0] - 4  # the last four entries receive children before sorting
+    while sp > 0:
+        sp -= 1
+        lev = st_l[sp]
+        ci = st_i[sp]
+        cj = st_j[sp]
+        if lev == depth:
+            tested += _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets[r], ci, cj, depth,
+                            side_depth, slack, hit, code, lv, lp)
+            continue
+        _split(work, sp, work, base)
+        # the children the ray enters, pushed far to near
+        n = 0
+        for q in range(4):
+            te = _net_entry(ox, oy, oz, ix, iy, iz, work, base + q, hit[H_T])
+            if te < np.inf:
+                m = n
+                while m > 0 and tmp_t[m - 1] < te:
+                    tmp_t[m] = tmp_t[m - 1]
+                    order[m] = order[m - 1]
+                    m -= 1
+                tmp_t[m] = te
+                order[m] = q
+                n += 1
+        for e in range(n):
+            q = order[e]
+            for a in range(4):
+                for c in range(4):
+                    for k in range(3):
+                        work[sp, a, c, k] = work[base + q, a, c, k]
+            st_i[sp] = 2 * ci + (q & 1)
+            st_j[sp] = 2 * cj + (q >> 1)
+            st_l[sp] = lev + 1
+            sp += 1
+    return tested
