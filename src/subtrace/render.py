@@ -17,7 +17,8 @@ import numpy as np
 
 from . import config
 from .accel.bvh import build_bvh
-from .patches.bspline import eval_grids
+from .patches.bspline import hull_boxes
+from .patches.isolate import build_isolated
 from .patches.grids import build_grids, grid_params, grid_size, leaf_corners
 from .patches.table import build_patch_table, choose_depths
 from .trace.kernels import H_SLOT, H_T, HIT_FIELDS, trace_round
@@ -35,6 +36,7 @@ class RenderStats:
     patches_refined: int = 0
     micro_triangles: int = 0
     grid_points: int = 0
+    pieces: int = 0  # regular sub-patches and cells of the isolated irregular patches
     rounds: int = 0
     max_depth: int = 0
     pixels_covered: int = 0
@@ -186,31 +188,31 @@ def _snap_sides(P: np.ndarray, depth: int, quad: bool, side_depth: np.ndarray):
             P[rows[:, None], idx[None, :]] = (1.0 - w) * Q[:, t0] + w * Q[:, t1]
 
 
-def _refine(table, requested, depths, edge_depth, pools, round_no, stats):
-    """Build the grids of the requested patches and append them to the pools."""
+def _refine(table, requested, depths, edge_depth, pools, iso, round_no, stats):
+    """Build the requested patches: irregular Catmull-Clark patches into pieces (``iso``),
+    Loop patches into grids (``pools``)."""
     obj = table.object_id[requested]
     dep = depths[requested]
-    order = np.lexsort((requested, table.regular[requested], dep, obj))
+    order = np.lexsort((requested, dep, obj))
     requested, obj, dep = requested[order], obj[order], dep[order]
-    reg = table.regular[requested]
-    keys = np.stack([obj, dep, reg], axis=1)
+    keys = np.stack([obj, dep], axis=1)
     starts = np.r_[0, np.nonzero(np.any(np.diff(keys, axis=0) != 0, axis=1))[0] + 1]
     ends = np.r_[starts[1:], len(requested)]
     for s, e in zip(starts, ends):
         ids = requested[s:e]
         o = table.objects[int(obj[s])]
         d = int(dep[s])
-        quad = bool(table.is_quad[ids[0]])
-        if reg[s]:
-            P, N = eval_grids(o.points[table.control[ids].reshape(-1, 4, 4)], d)
-        else:
-            P, N = build_grids(o.level, o.points, o.cage.options, table.face[ids], d)
-        k = 4 if quad else 3
-        side_depth = np.where(table.edges[ids, :k] >= 0, edge_depth[table.edges[ids, :k]], -1)
-        _snap_sides(P, d, quad, side_depth)
-        lo, hi = _node_boxes(P, d, quad)
-        pools.append(ids, d, quad, P, N, lo, hi, round_no)
-        stats.micro_triangles += len(ids) * (1 << (2 * d)) * (2 if quad else 1)
+        if table.is_quad[ids[0]]:
+            subs, cells = build_isolated(o, table.face[ids], d)
+            n_sub, n_cell = iso.append(ids, d, subs, cells, round_no)
+            stats.pieces += n_sub + n_cell
+            continue
+        P, N = build_grids(o.level, o.points, o.cage.options, table.face[ids], d)
+        side_depth = np.where(table.edges[ids, :3] >= 0, edge_depth[table.edges[ids, :3]], -1)
+        _snap_sides(P, d, False, side_depth)
+        lo, hi = _node_boxes(P, d, False)
+        pools.append(ids, d, False, P, N, lo, hi, round_no)
+        stats.micro_triangles += len(ids) * (1 << (2 * d))
         stats.grid_points += P.shape[0] * P.shape[1]
     stats.patches_refined += len(requested)
 
@@ -221,31 +223,109 @@ def _refine(table, requested, depths, edge_depth, pools, round_no, stats):
 
 
 def _edge_sampling(table, depths):
-    """How patch sides sample their edges, made to agree on both sides of every edge.
+    """Make both sides of every edge sample it alike (design invariant 4); raises ``depths``
+    in place and returns ``(edge_depth, reg_side)``.
 
-    Regular patches (intersected directly) sample a side shared with a finer regular
-    neighbour at the neighbour's depth (``reg_side``, (R,4)); an irregular patch is raised
-    to the depth of its regular neighbours, and irregular grids snap a side to the coarsest
-    depth on its edge (``edge_depth``, per L0 edge). Raises ``depths`` in place."""
+    * An irregular Catmull-Clark patch (built into pieces, ``patches/isolate.py``) is raised
+      to the depth of every neighbour, repeatedly, so it is never coarser than a neighbour
+      and equal to its irregular neighbours: its sides need no extra samples.
+    * A regular patch (intersected directly) samples a side shared with a finer neighbour at
+      the neighbour's depth (``reg_side`` (R,4)), fanning its cells there.
+    * Loop grids snap a side to the coarsest depth on its edge (``edge_depth``, per edge).
+    """
     live = table.edges >= 0
     n_e = max(table.n_edges, 1)
-    rows = np.repeat(depths[:, None], 4, axis=1)
-    reg_max = np.full(n_e, -1, dtype=np.int64)
-    reg_live = live & table.regular[:, None]
-    np.maximum.at(reg_max, table.edges[reg_live], rows[reg_live])
-    nb_reg = np.where(live, reg_max[np.where(live, table.edges, 0)], -1)
-    irr = ~table.regular
-    depths[irr] = np.maximum(depths[irr], nb_reg[irr].max(axis=1))
+    safe = np.where(live, table.edges, 0)
+    iso = table.is_quad & ~table.regular
+
+    def neighbour_max():
+        best = np.full(n_e, -1, dtype=np.int64)
+        rows = np.repeat(depths[:, None], 4, axis=1)
+        np.maximum.at(best, table.edges[live], rows[live])
+        return np.where(live, best[safe], -1)
+
+    while iso.any():
+        raised = np.maximum(depths[iso], neighbour_max()[iso].max(axis=1))
+        if np.array_equal(raised, depths[iso]):
+            break
+        depths[iso] = raised
+    nb = neighbour_max()
+    reg = table.regular
+    reg_side = np.maximum(depths[reg][:, None], nb[reg]).astype(np.int64)
     edge_depth = np.full(n_e, np.iinfo(np.int32).max, dtype=np.int64)
     rows = np.repeat(depths[:, None], 4, axis=1)
     np.minimum.at(edge_depth, table.edges[live], rows[live])
-    reg = table.regular
-    reg_side = np.maximum(depths[reg][:, None], nb_reg[reg]).astype(np.int64)
     return edge_depth, np.ascontiguousarray(reg_side)
 
 
+class _Isolated:
+    """Pieces of the isolated patches built so far, in the layout of ``trace_round``'s
+    ``iso`` tuple (items of a patch contiguous)."""
+
+    def __init__(self, n_patches):
+        self.patch_iso = np.full(n_patches, -1, dtype=np.int64)
+        self.parts = {k: [] for k in ("first", "count", "round", "depth", "kind", "ref",
+                                      "level", "i0", "j0", "lo", "hi", "nets", "cells",
+                                      "normals", "patch")}
+        self.n_items = self.n_nets = self.n_cells = self.n_slots = 0
+        self._pack()
+
+    def append(self, patches, depth, subs, cells, round_no):
+        (sr, sl, si, sj, nets), (cr, ci, cj, cp, cn) = subs, cells
+        lo_s, hi_s = hull_boxes(nets) if len(nets) else (np.zeros((0, 3)), np.zeros((0, 3)))
+        root = np.concatenate([sr, cr])
+        order = np.argsort(root, kind="stable")
+        kind = np.r_[np.zeros(len(sr), np.int8), np.ones(len(cr), np.int8)][order]
+        ref = np.r_[self.n_nets + np.arange(len(sr)), self.n_cells + np.arange(len(cr))][order]
+        P = self.parts
+        P["kind"].append(kind)
+        P["ref"].append(ref.astype(np.int64))
+        P["level"].append(np.r_[sl, np.full(len(cr), depth)][order].astype(np.int64))
+        P["i0"].append(np.r_[si, ci][order].astype(np.int64))
+        P["j0"].append(np.r_[sj, cj][order].astype(np.int64))
+        P["lo"].append(np.concatenate([lo_s, cp.min(axis=1)])[order])
+        P["hi"].append(np.concatenate([hi_s, cp.max(axis=1)])[order])
+        P["nets"].append(nets)
+        P["cells"].append(cp)
+        P["normals"].append(cn)
+        count = np.bincount(root, minlength=len(patches))
+        first = self.n_items + np.r_[0, np.cumsum(count)[:-1]]
+        P["first"].append(first.astype(np.int64))
+        P["count"].append(count.astype(np.int64))
+        P["round"].append(np.full(len(patches), round_no, np.int64))
+        P["depth"].append(np.full(len(patches), depth, np.int64))
+        P["patch"].append(np.asarray(patches, dtype=np.int64))
+        self.patch_iso[patches] = self.n_slots + np.arange(len(patches))
+        self.n_slots += len(patches)
+        self.n_items += len(root)
+        self.n_nets += len(sr)
+        self.n_cells += len(cr)
+        self._pack()
+        return len(sr), len(cr)
+
+    def _pack(self):
+        shapes = {"lo": (0, 3), "hi": (0, 3), "nets": (0, 4, 4, 3), "cells": (0, 4, 3),
+                  "normals": (0, 4, 3)}
+        dtypes = {"kind": np.int8}
+        self.a = {}
+        for k, v in self.parts.items():
+            if v:
+                self.a[k] = np.ascontiguousarray(np.concatenate(v))
+            else:
+                self.a[k] = np.zeros(shapes.get(k, (0,)), dtype=dtypes.get(k, np.float64 if k in shapes else np.int64))
+        depth = self.a["depth"]
+        self.a["side"] = np.ascontiguousarray(np.repeat(depth[:, None], 4, axis=1))
+
+    def kernel_tuple(self):
+        a = self.a
+        return (self.patch_iso, a["first"], a["count"], a["round"], a["depth"], a["side"],
+                a["kind"], a["ref"], a["level"], a["i0"], a["j0"], a["lo"], a["hi"],
+                a["nets"], a["cells"])
+
+
 def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
-    """Run the refinement rounds; returns (hits (H*W, 6), pools, depths)."""
+    """Run the refinement rounds; returns (hits (H*W, 6), grid pools, isolated pieces, leaf
+    tables, every patch refined)."""
     from .trace.camera import camera_frame
 
     max_depth = config.MAX_GRID_DEPTH if max_depth is None else max_depth
@@ -259,6 +339,7 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
     touched = np.zeros(len(reg_depth), dtype=np.uint8)
     tables = _LeafTables(int(depths.max(initial=0)))
     pools = _Pools()
+    iso = _Isolated(table.n_patches)
     patch_slot = np.full(table.n_patches, -1, dtype=np.int64)
     hits = np.zeros((W * H, HIT_FIELDS))
     hits[:, H_T] = np.inf
@@ -275,7 +356,7 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
             pools.slot_depth, pools.slot_vert_off, pools.slot_node_off, pools.slot_quad,
             pools.slot_round, pools.verts, pools.node_lo, pools.node_hi,
             tables.lc_off, tables.lc_data, table.reg_index, table.nets, reg_depth, reg_side,
-            config.TRI_SLACK, hits, request, tested, touched,
+            iso.kernel_tuple(), config.TRI_SLACK, hits, request, tested, touched,
         )
         stats.time_trace += time.perf_counter() - t0
         req = request[rays]
@@ -286,7 +367,7 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
         t0 = time.perf_counter()
         new = np.unique(req[asked])
         first_slot = len(pools.slot_patch)
-        _refine(table, new, depths, edge_depth, pools, round_no, stats)
+        _refine(table, new, depths, edge_depth, pools, iso, round_no, stats)
         patch_slot[pools.slot_patch[first_slot:]] = np.arange(first_slot, len(pools.slot_patch))
         stats.time_refine += time.perf_counter() - t0
         round_no += 1
@@ -294,8 +375,10 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
     stats.micro_triangles += int(tested.sum())
     direct = np.nonzero(table.regular)[0][touched.astype(bool)]
     stats.patches_refined += len(direct)
-    stats.max_depth = int(max(pools.slot_depth.max(initial=0), reg_depth.max(initial=0)))
-    return hits, pools, depths, tables, direct
+    stats.max_depth = int(max(pools.slot_depth.max(initial=0), reg_depth.max(initial=0),
+                              iso.a["depth"].max(initial=0)))
+    built = np.concatenate([pools.slot_patch, iso.a["patch"], direct])
+    return hits, pools, iso, tables, built
 
 
 # --------------------------------------------------------------------------------------
@@ -364,7 +447,7 @@ def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult
     stats.rays = camera.width * camera.height
     stats.time_preprocess = time.perf_counter() - t0
 
-    hits, pools, depths, tables, direct = trace_hits(table, bvh, camera, tol_rad, stats)
+    hits, pools, iso, tables, built = trace_hits(table, bvh, camera, tol_rad, stats)
 
     t0 = time.perf_counter()
     W, H = camera.width, camera.height
@@ -385,7 +468,8 @@ def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult
         pools.slot_vert_off, pools.verts, pools.normals, tables.lc_off, tables.lc_data,
         tables.uv_off, tables.uv_data, table.object_id, table.ptex, table.ptex_uv0,
         table.ptex_scale, table.level0, _patch_colors(table, scene), table.reg_index,
-        table.nets, lights, headlight,
+        table.nets, iso.a["kind"], iso.a["ref"], iso.a["level"], iso.a["i0"], iso.a["j0"],
+        iso.a["nets"], iso.a["normals"], iso.a["cells"], lights, headlight,
         np.asarray(scene.render.background, dtype=np.float64), rgba, nrm, level, patch,
         objid, uv,
     )
@@ -401,7 +485,7 @@ def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult
     stats.time_shade = time.perf_counter() - t0
     stats.time_total = time.perf_counter() - t_start
     schemes = tuple(c.scheme for c in cages)
-    refined = table.object_id[np.concatenate([pools.slot_patch, direct])]
+    refined = table.object_id[built]
     return RenderResult(channels, stats, camera, tol_rad, schemes, refined)
 
 

@@ -22,7 +22,8 @@ from .trace.kernels import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, ray_setup
 @nb.njit(cache=True, parallel=True)
 def shade_kernel(frame, width, hits, slot_patch, slot_depth, slot_quad, slot_vert_off,
                  verts, normals, lc_off, lc_data, uv_off, uv_data, patch_object, patch_ptex,
-                 patch_uv0, patch_scale, patch_level0, patch_color, reg_index, nets, lights,
+                 patch_uv0, patch_scale, patch_level0, patch_color, reg_index, nets, item_kind,
+                 item_ref, item_level, item_i0, item_j0, item_nets, cell_normals, cells, lights,
                  headlight, background, out_rgba, out_n, out_level, out_patch, out_object,
                  out_uv):
     """Fill the per-pixel outputs (flat over pixels) from ``hits``.
@@ -52,8 +53,19 @@ def shade_kernel(frame, width, hits, slot_patch, slot_depth, slot_quad, slot_ver
             p = -s - 2
             u = hits[r, H_B1]
             v = hits[r, H_B2]
-            nx, ny, nz = _bezier_normal(nets[reg_index[p]], u, v)
             depth = np.int64(hits[r, H_LEAF])
+            it = np.int64(hits[r, H_TRI])
+            if it < 0:
+                nx, ny, nz = _bezier_normal(nets[reg_index[p]], u, v)
+            elif item_kind[it] == 0:
+                # a regular piece of an isolated patch, over a dyadic square
+                sc = 1 << item_level[it]
+                nx, ny, nz = _bezier_normal(item_nets[item_ref[it]], u * sc - item_i0[it],
+                                            v * sc - item_j0[it])
+            else:
+                nx, ny, nz = _cell_normal(cells[item_ref[it]], cell_normals[item_ref[it]],
+                                          u * (1 << depth) - item_i0[it],
+                                          v * (1 << depth) - item_j0[it])
         else:
             nx, ny, nz, u, v, depth, p = _grid_normal(
                 hits[r], s, slot_patch, slot_depth, slot_quad, slot_vert_off, verts, normals,
@@ -156,3 +168,23 @@ def _grid_normal(hit, s, slot_patch, slot_depth, slot_quad, slot_vert_off, verts
     u = b0 * uv_data[uo + ca, 0] + b1 * uv_data[uo + cb, 0] + b2 * uv_data[uo + cc, 0]
     v = b0 * uv_data[uo + ca, 1] + b1 * uv_data[uo + cb, 1] + b2 * uv_data[uo + cc, 1]
     return nx, ny, nz, u, v, depth, slot_patch[s]
+
+
+@nb.njit(cache=True)
+def _cell_normal(pts, nrm, a, b):
+    """Bilinear blend of a cell's exact corner normals at (a, b) in [0,1]^2 (corner order
+    (0,0), (1,0), (1,1), (0,1)); the cell's own normal where a corner's is undefined."""
+    w0, w1, w2, w3 = (1 - a) * (1 - b), a * (1 - b), a * b, (1 - a) * b
+    nx = w0 * nrm[0, 0] + w1 * nrm[1, 0] + w2 * nrm[2, 0] + w3 * nrm[3, 0]
+    ny = w0 * nrm[0, 1] + w1 * nrm[1, 1] + w2 * nrm[2, 1] + w3 * nrm[3, 1]
+    nz = w0 * nrm[0, 2] + w1 * nrm[1, 2] + w2 * nrm[2, 2] + w3 * nrm[3, 2]
+    ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if not (ln > 0.0):
+        # diagonals' cross product
+        ax, ay, az = pts[2, 0] - pts[0, 0], pts[2, 1] - pts[0, 1], pts[2, 2] - pts[0, 2]
+        bx, by, bz = pts[3, 0] - pts[1, 0], pts[3, 1] - pts[1, 1], pts[3, 2] - pts[1, 2]
+        nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if ln > 0.0:
+        return nx / ln, ny / ln, nz / ln
+    return 0.0, 0.0, 0.0

@@ -77,3 +77,69 @@ def isolated_depths(obj, faces, cap, eye, tol_rad):
         go = irr[~flat & (k < cap[kid_root[irr]])]
         root, start = kid_root[go], kids[go]
     return np.minimum(need, cap).astype(np.int32)
+
+
+def build_isolated(obj, faces, depth):
+    """Feature-adaptive pieces of the irregular quads ``faces`` of ``obj``'s patch level, all
+    refined to grid depth ``depth`` (a scalar): every grid cell of a patch is covered either
+    by a regular sub-patch (a bicubic Bezier net over a dyadic square) or, where no level
+    down to ``depth`` is regular, by a cell of exact limit points.
+
+    Returns ``(subs, cells)``:
+    ``subs`` = (root index (s,), level (s,), origin i0, j0 (s,) in units of 2^-level,
+    Bezier nets (s,4,4,3)); ``cells`` = (root index (c,), cell i, j (c,) in units of
+    2^-depth, corner points (c,4,3), corner unit normals (c,4,3), NaN where undefined).
+    """
+    from ..subdiv.limit import limit_points
+    from ..subdiv.refine import refine_level, refine_points
+    from .grids import _cut_around
+
+    options = obj.cage.options
+    faces = np.asarray(faces, dtype=np.int64)
+    subs = [[], [], [], [], []]
+    cells = [[], [], [], [], []]
+    root = np.arange(len(faces))
+    i0 = np.zeros(len(faces), dtype=np.int64)
+    j0 = np.zeros(len(faces), dtype=np.int64)
+    cur, cur_pts, start = obj.level, obj.points, faces
+    k = 0
+    if depth > 0:
+        while len(root):
+            cur, cur_pts, start = _cut_around(cur, cur_pts, start, 1)
+            ref = refine_level(cur, options)
+            cur_pts = refine_points(ref, cur_pts)
+            cur = ref.child
+            k += 1
+            q = np.arange(4)
+            kids = (4 * start[:, None] + q).ravel()
+            kid_root = np.repeat(root, 4)
+            ki = (2 * i0[:, None] + (q == 1) + (q == 2)).ravel()
+            kj = (2 * j0[:, None] + (q >= 2)).ravel()
+            reg = regular_mask(cur, options, kids)
+            if reg.any():
+                subs[0].append(kid_root[reg])
+                subs[1].append(np.full(int(reg.sum()), k))
+                subs[2].append(ki[reg])
+                subs[3].append(kj[reg])
+                subs[4].append(bezier_nets(cur_pts[control_grids(cur, kids[reg])]))
+            irr = ~reg
+            if k == depth:
+                root = kid_root[irr]
+                start, i0, j0 = kids[irr], ki[irr], kj[irr]
+                break
+            root, start, i0, j0 = kid_root[irr], kids[irr], ki[irr], kj[irr]
+    if len(root):
+        # the irregular cells left at the grid depth: exact limit points of their corners
+        fo = cur.face_offsets
+        corners = cur.face_verts[fo[start][:, None] + np.arange(4)]
+        P, du, dv = limit_points(cur, cur_pts, options, which=corners.ravel())
+        nrm = np.cross(du, dv)
+        length = np.linalg.norm(nrm, axis=1, keepdims=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            nrm = np.where(length > 0, nrm / length, np.nan)
+        cells = [[root], [i0], [j0], [P.reshape(-1, 4, 3)], [nrm.reshape(-1, 4, 3)]]
+    empty = (np.zeros(0, np.int64),) * 4
+    out_subs = tuple(np.concatenate(a) for a in subs) if subs[0] else (*empty, np.zeros((0, 4, 4, 3)))
+    out_cells = (tuple(np.concatenate(a) for a in cells) if cells[0]
+                 else (*empty[:3], np.zeros((0, 4, 3)), np.zeros((0, 4, 3))))
+    return out_subs, out_cells

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .kernels import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, _tri
+from .prims import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, _tri
 
 BOX_PAD = 1e-12
 MAX_SIDE_SAMPLES = 256  # samples per cell side at most (2^(side depth - depth))
@@ -139,90 +139,111 @@ def _net_entry(ox, oy, oz, ix, iy, iz, net, s, tmax):
 
 
 @nb.njit(cache=True)
-def _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, root, i, j, depth, side_depth, slack, hit,
-          code, lv, lp):
-    """Intersect grid cell (i, j) of the depth-``depth`` grid of Bezier net ``root``;
-    update ``hit`` (patch ``code`` into H_SLOT). ``lv`` (K,3) / ``lp`` (K,2): scratch for
-    the cell's points and parameters. Returns the number of triangles tested."""
-    N = 1 << depth
-    inv = 1.0 / N
+def _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, net, i, j, depth, oi, oj, root_depth,
+          side_depth, slack, hit, code, item, lv, lp):
+    """Intersect cell (i, j) of the depth-``depth`` grid of Bezier net ``net``, which covers
+    the cells from (oi, oj) of its root patch's depth-``root_depth`` grid; update ``hit``
+    (H_SLOT = ``code``, H_TRI = ``item``, (H_B1, H_B2) = root parameter). ``lv`` (K,3) /
+    ``lp`` (K,2): scratch for the cell's points and root parameters. Returns the number of
+    triangles tested."""
+    inv = 1.0 / (1 << depth)
+    NR = 1 << root_depth
+    rinv = 1.0 / NR
+    gi = oi + i
+    gj = oj + j
     n = 0
     for corner in range(4):
-        ci = i + (1 if corner == 1 or corner == 2 else 0)
-        cj = j + (1 if corner >= 2 else 0)
-        u, v = ci * inv, cj * inv
-        x, y, z = _bez_point(root, u, v)
+        di = 1 if corner == 1 or corner == 2 else 0
+        dj = 1 if corner >= 2 else 0
+        x, y, z = _bez_point(net, (i + di) * inv, (j + dj) * inv)
         lv[n, 0], lv[n, 1], lv[n, 2] = x, y, z
-        lp[n, 0], lp[n, 1] = u, v
+        lp[n, 0], lp[n, 1] = (gi + di) * rinv, (gj + dj) * rinv
         n += 1
         # samples of the side that starts at this corner, when the neighbour is finer
         side = corner
-        on_side = (j == 0) if side == 0 else ((i == N - 1) if side == 1 else ((j == N - 1) if side == 2 else (i == 0)))
-        if on_side and side_depth[side] > depth:
-            r = 1 << (side_depth[side] - depth)
+        if side == 0:
+            on_side = gj == 0
+        elif side == 1:
+            on_side = gi == NR - 1
+        elif side == 2:
+            on_side = gj == NR - 1
+        else:
+            on_side = gi == 0
+        if on_side and side_depth[side] > root_depth:
+            r = 1 << (side_depth[side] - root_depth)
             for k in range(1, r):
                 f = k / r
                 if side == 0:
-                    uu, vv = (i + f) * inv, j * inv
+                    a, b = i + f, j
+                    ga, gb = gi + f, gj
                 elif side == 1:
-                    uu, vv = (i + 1) * inv, (j + f) * inv
+                    a, b = i + 1, j + f
+                    ga, gb = gi + 1, gj + f
                 elif side == 2:
-                    uu, vv = (i + 1 - f) * inv, (j + 1) * inv
+                    a, b = i + 1 - f, j + 1
+                    ga, gb = gi + 1 - f, gj + 1
                 else:
-                    uu, vv = i * inv, (j + 1 - f) * inv
-                x, y, z = _bez_point(root, uu, vv)
+                    a, b = i, j + 1 - f
+                    ga, gb = gi, gj + 1 - f
+                x, y, z = _bez_point(net, a * inv, b * inv)
                 lv[n, 0], lv[n, 1], lv[n, 2] = x, y, z
-                lp[n, 0], lp[n, 1] = uu, vv
+                lp[n, 0], lp[n, 1] = ga * rinv, gb * rinv
                 n += 1
+    if n == 4:
+        return tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, lp, slack, hit, code, item,
+                        root_depth)
+    # a fan around the cell's centre
+    x, y, z = _bez_point(net, (i + 0.5) * inv, (j + 0.5) * inv)
+    lv[n, 0], lv[n, 1], lv[n, 2] = x, y, z
+    lp[n, 0], lp[n, 1] = (gi + 0.5) * rinv, (gj + 0.5) * rinv
     o = (ox, oy, oz)
     px, py, pz = o[kx], o[ky], o[kz]
-    tested = 0
-    if n == 4:
-        for tri in range(2):
-            b = 1 + tri
-            c = 2 + tri
-            t, ba, bb, bc = _tri(px, py, pz, kx, ky, kz, sx, sy, sz, 0, b, c, lv, hit[H_T], slack)
-            tested += 1
-            if t < hit[H_T]:
-                hit[H_T] = t
-                hit[H_SLOT] = code
-                hit[H_LEAF] = depth
-                hit[H_TRI] = 0.0
-                hit[H_B1] = ba * lp[0, 0] + bb * lp[b, 0] + bc * lp[c, 0]
-                hit[H_B2] = ba * lp[0, 1] + bb * lp[b, 1] + bc * lp[c, 1]
-        return tested
-    # a fan around the cell's centre
-    cu, cvv = (i + 0.5) * inv, (j + 0.5) * inv
-    x, y, z = _bez_point(root, cu, cvv)
-    lv[n, 0], lv[n, 1], lv[n, 2] = x, y, z
-    lp[n, 0], lp[n, 1] = cu, cvv
     for k in range(n):
         b = k
         c = k + 1 if k + 1 < n else 0
         t, ba, bb, bc = _tri(px, py, pz, kx, ky, kz, sx, sy, sz, n, b, c, lv, hit[H_T], slack)
-        tested += 1
         if t < hit[H_T]:
-            hit[H_T] = t
-            hit[H_SLOT] = code
-            hit[H_LEAF] = depth
-            hit[H_TRI] = 0.0
-            hit[H_B1] = ba * lp[n, 0] + bb * lp[b, 0] + bc * lp[c, 0]
-            hit[H_B2] = ba * lp[n, 1] + bb * lp[b, 1] + bc * lp[c, 1]
-    return tested
+            _record(hit, t, code, item, root_depth, lp, n, b, c, ba, bb, bc)
+    return n
+
+
+@nb.njit(cache=True, inline="always")
+def _record(hit, t, code, item, depth, lp, a, b, c, ba, bb, bc):
+    hit[H_T] = t
+    hit[H_SLOT] = code
+    hit[H_LEAF] = depth
+    hit[H_TRI] = item
+    hit[H_B1] = ba * lp[a, 0] + bb * lp[b, 0] + bc * lp[c, 0]
+    hit[H_B2] = ba * lp[a, 1] + bb * lp[b, 1] + bc * lp[c, 1]
 
 
 @nb.njit(cache=True)
-def intersect_bezier(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, nets, r, depth,
-                     side_depth, slack, hit, code, work, st_i, st_j, st_l, tmp_t, order, lv,
-                     lp):
-    """Closest hit on regular patch ``nets[r]`` (grid depth ``depth``) nearer than
-    hit[H_T]; updates ``hit``. ``work`` (>= 3*depth+6, 4,4,3) holds the stacked nets,
-    ``st_*`` their cell coordinates and levels. Returns the number of triangles tested."""
+def tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, lp, slack, hit, code, item, depth):
+    """The two triangles (0,1,2), (0,2,3) of the cell ``lv[:4]`` (parameters ``lp``)."""
+    o = (ox, oy, oz)
+    px, py, pz = o[kx], o[ky], o[kz]
+    for tri in range(2):
+        b = 1 + tri
+        c = 2 + tri
+        t, ba, bb, bc = _tri(px, py, pz, kx, ky, kz, sx, sy, sz, 0, b, c, lv, hit[H_T], slack)
+        if t < hit[H_T]:
+            _record(hit, t, code, item, depth, lp, 0, b, c, ba, bb, bc)
+    return 2
+
+
+@nb.njit(cache=True)
+def intersect_bezier(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, net, depth, oi, oj,
+                     root_depth, side_depth, slack, hit, code, item, work, st_i, st_j, st_l,
+                     tmp_t, order, lv, lp):
+    """Closest hit on the Bezier patch ``net`` refined to grid depth ``depth`` (covering the
+    root grid cells from (oi, oj), see :func:`_leaf`) nearer than hit[H_T]; updates ``hit``.
+    ``work`` (>= 3*depth+6, 4,4,3) holds the stacked nets, ``st_*`` their cell coordinates
+    and levels. Returns the number of micro-triangles built."""
     tested = 0
     for a in range(4):
         for c in range(4):
             for k in range(3):
-                work[0, a, c, k] = nets[r, a, c, k]
+                work[0, a, c, k] = net[a, c, k]
     st_i[0] = 0
     st_j[0] = 0
     st_l[0] = 0
@@ -234,8 +255,8 @@ def intersect_bezier(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, nets, r, de
         ci = st_i[sp]
         cj = st_j[sp]
         if lev == depth:
-            tested += _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets[r], ci, cj, depth,
-                            side_depth, slack, hit, code, lv, lp)
+            tested += _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, net, ci, cj, depth, oi, oj,
+                            root_depth, side_depth, slack, hit, code, item, lv, lp)
             continue
         _split(work, sp, work, base)
         # the children the ray enters, pushed far to near

@@ -25,97 +25,8 @@ import math
 import numba as nb
 import numpy as np
 
-# hit record layout (float64 per ray): t, slot, leaf, triangle, b1, b2
-H_T, H_SLOT, H_LEAF, H_TRI, H_B1, H_B2 = range(6)
-HIT_FIELDS = 6
-
-
-@nb.njit(cache=True, inline="always")
-def _slab(ox, oy, oz, ix, iy, iz, lo, hi, k, tmax):
-    """Entry distance of the ray into box ``k`` of (lo, hi), or inf if it misses before tmax.
-
-    Robust to direction components of zero (IEEE infinities in ``i*``); the far distance is
-    widened by 1 + 2 gamma(3) as pbrt does, so a ray grazing a box is not lost to rounding.
-    """
-    t0 = (lo[k, 0] - ox) * ix
-    t1 = (hi[k, 0] - ox) * ix
-    tn = min(t0, t1)
-    tf = max(t0, t1)
-    t0 = (lo[k, 1] - oy) * iy
-    t1 = (hi[k, 1] - oy) * iy
-    tn = max(tn, min(t0, t1))
-    tf = min(tf, max(t0, t1))
-    t0 = (lo[k, 2] - oz) * iz
-    t1 = (hi[k, 2] - oz) * iz
-    tn = max(tn, min(t0, t1))
-    tf = min(tf, max(t0, t1))
-    tf *= 1.0 + 6.7e-16
-    tn = max(tn, 0.0)
-    if tn <= tf and tn < tmax:
-        return tn
-    return np.inf
-
-
-@nb.njit(cache=True, inline="always")
-def _tri(ox, oy, oz, kx, ky, kz, sx, sy, sz, a, b, c, verts, tmax, slack):
-    """Watertight ray / triangle test (Woop, Benthin and Wald 2013) on vertices ``a, b, c``
-    of ``verts``; ``ox, oy, oz`` is the ray origin's (kx, ky, kz) components. Returns (t, b_a, b_b, b_c) with t = inf on a miss. Edge functions of a
-    shared edge are computed identically from both triangles, so no ray slips between them;
-    ``slack`` admits edge functions down to -slack times their sum (see config.TRI_SLACK)."""
-    ax = verts[a, kx] - ox
-    ay = verts[a, ky] - oy
-    az = verts[a, kz] - oz
-    bx = verts[b, kx] - ox
-    by = verts[b, ky] - oy
-    bz = verts[b, kz] - oz
-    cx = verts[c, kx] - ox
-    cy = verts[c, ky] - oy
-    cz = verts[c, kz] - oz
-    ax, ay = ax - sx * az, ay - sy * az
-    bx, by = bx - sx * bz, by - sy * bz
-    cx, cy = cx - sx * cz, cy - sy * cz
-    u = cx * by - cy * bx
-    v = ax * cy - ay * cx
-    w = bx * ay - by * ax
-    eps = slack * (abs(u) + abs(v) + abs(w))
-    if (u < -eps or v < -eps or w < -eps) and (u > eps or v > eps or w > eps):
-        return np.inf, 0.0, 0.0, 0.0
-    det = u + v + w
-    if det == 0.0:
-        return np.inf, 0.0, 0.0, 0.0
-    tt = (u * az + v * bz + w * cz) * sz
-    t = tt / det
-    if not (t > 0.0 and t < tmax):
-        return np.inf, 0.0, 0.0, 0.0
-    return t, u / det, v / det, w / det
-
-
-@nb.njit(cache=True, inline="always")
-def ray_setup(frame, row, col):
-    """Unit direction of the ray through the centre of pixel (row, col)."""
-    dx = frame[3, 0] + col * frame[1, 0] + row * frame[2, 0]
-    dy = frame[3, 1] + col * frame[1, 1] + row * frame[2, 1]
-    dz = frame[3, 2] + col * frame[1, 2] + row * frame[2, 2]
-    inv = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
-    return dx * inv, dy * inv, dz * inv
-
-
-@nb.njit(cache=True)
-def _shear(dx, dy, dz):
-    """Woop's permutation and shear constants of a ray direction."""
-    ax, ay, az = abs(dx), abs(dy), abs(dz)
-    kz = 0
-    if ay > ax and ay >= az:
-        kz = 1
-    elif az > ax and az > ay:
-        kz = 2
-    kx = (kz + 1) % 3
-    ky = (kx + 1) % 3
-    d = (dx, dy, dz)
-    dkz = d[kz]
-    if dkz < 0.0:
-        kx, ky = ky, kx
-    return kx, ky, kz, d[kx] / dkz, d[ky] / dkz, 1.0 / dkz
+from .bezier import intersect_bezier, tri_pair
+from .prims import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, _shear, _slab, _tri, ray_setup  # noqa: F401
 
 
 @nb.njit(cache=True)
@@ -181,6 +92,36 @@ def _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, slot_dept
             sp += 1
 
 
+@nb.njit(cache=True)
+def _intersect_isolated(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, p, s, iso, slack, hit,
+                        work, st_i, st_j, st_l, ent_t, ent_i, lv, lp):
+    """Closest hit on the pieces of isolated patch ``p`` (slot ``s`` of ``iso``)."""
+    first, count, depth, side = iso[1][s], iso[2][s], iso[4][s], iso[5][s]
+    kind, ref, level, i0, j0 = iso[6], iso[7], iso[8], iso[9], iso[10]
+    lo, hi, nets, cells = iso[11], iso[12], iso[13], iso[14]
+    tested = 0
+    inv = 1.0 / (1 << depth)
+    for it in range(first, first + count):
+        if _slab(ox, oy, oz, ix, iy, iz, lo, hi, it, hit[H_T]) == np.inf:
+            continue
+        if kind[it] == 0:
+            sh = depth - level[it]
+            tested += intersect_bezier(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz,
+                                       nets[ref[it]], sh, i0[it] << sh, j0[it] << sh, depth,
+                                       side, slack, hit, -2.0 - p, float(it), work, st_i,
+                                       st_j, st_l, ent_t, ent_i, lv, lp)
+        else:
+            c = ref[it]
+            for k in range(4):
+                for a in range(3):
+                    lv[k, a] = cells[c, k, a]
+                lp[k, 0] = (i0[it] + (1 if k == 1 or k == 2 else 0)) * inv
+                lp[k, 1] = (j0[it] + (1 if k >= 2 else 0)) * inv
+            tested += tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, lp, slack, hit,
+                               -2.0 - p, float(it), depth)
+    return tested
+
+
 RAYS_PER_TASK = 32  # rays per parallel task (scratch buffers are allocated once per task)
 
 
@@ -188,7 +129,7 @@ RAYS_PER_TASK = 32  # rays per parallel task (scratch buffers are allocated once
 def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_count, prims,
                 shell_min, shell_max, patch_slot, slot_depth, slot_vert_off, slot_node_off,
                 slot_quad, slot_round, verts, node_lo, node_hi, lc_off, lc_data, reg_index,
-                nets, reg_depth, reg_side, slack, hits, request, tested, touched):
+                nets, reg_depth, reg_side, iso, slack, hits, request, tested, touched):
     """One round for the rays ``rays`` (pixel indices): update ``hits`` (n_pixels, 6) and
     set ``request[r]`` to the nearest unbuilt patch the ray reaches first (or -1).
 
@@ -218,18 +159,17 @@ def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_c
             _trace_ray(r, ox, oy, oz, frame, width, round_no, bvh_min, bvh_max, bvh_first,
                        bvh_count, prims, shell_min, shell_max, patch_slot, slot_depth,
                        slot_vert_off, slot_node_off, slot_quad, slot_round, verts, node_lo,
-                       node_hi, lc_off, lc_data, reg_index, nets, reg_depth, reg_side, slack,
-                       hits, request, tested, touched, stack, gstack, ent_t, ent_i, work, st_i, st_j,
-                       st_l, lv, lp)
+                       node_hi, lc_off, lc_data, reg_index, nets, reg_depth, reg_side, iso,
+                       slack, hits, request, tested, touched, stack, gstack, ent_t, ent_i, work,
+                       st_i, st_j, st_l, lv, lp)
 
 
 @nb.njit(cache=True, error_model="numpy")  # 1/0 -> inf for axis-parallel rays
 def _trace_ray(r, ox, oy, oz, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_count,
                prims, shell_min, shell_max, patch_slot, slot_depth, slot_vert_off,
                slot_node_off, slot_quad, slot_round, verts, node_lo, node_hi, lc_off, lc_data,
-               reg_index, nets, reg_depth, reg_side, slack, hits, request, tested, touched,
-               stack,
-               gstack, ent_t, ent_i, work, st_i, st_j, st_l, lv, lp):
+               reg_index, nets, reg_depth, reg_side, iso, slack, hits, request, tested,
+               touched, stack, gstack, ent_t, ent_i, work, st_i, st_j, st_l, lv, lp):
     row = r // width
     col = r - row * width
     dx, dy, dz = ray_setup(frame, row, col)
@@ -257,10 +197,18 @@ def _trace_ray(r, ox, oy, oz, frame, width, round_no, bvh_min, bvh_max, bvh_firs
                 if ri >= 0:
                     if round_no == 0:
                         touched[ri] = 1
+                        d = reg_depth[ri]
                         tested[r] += intersect_bezier(
-                            ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, nets, ri,
-                            reg_depth[ri], reg_side[ri], slack, hit, -2.0 - p, work, st_i,
-                            st_j, st_l, ent_t, ent_i, lv, lp)
+                            ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, nets[ri], d, 0, 0,
+                            d, reg_side[ri], slack, hit, -2.0 - p, -1.0, work, st_i, st_j,
+                            st_l, ent_t, ent_i, lv, lp)
+                    continue
+                s = iso[0][p]
+                if s >= 0:
+                    if iso[3][s] == round_no - 1:
+                        tested[r] += _intersect_isolated(
+                            ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, p, s, iso, slack,
+                            hit, work, st_i, st_j, st_l, ent_t, ent_i, lv, lp)
                     continue
                 s = patch_slot[p]
                 if s < 0:
@@ -292,6 +240,3 @@ def _trace_ray(r, ox, oy, oz, frame, width, round_no, bvh_min, bvh_max, bvh_firs
             stack[sp] = right
             sp += 1
     request[r] = req if req_t < hit[H_T] else -1
-
-
-from .bezier import intersect_bezier  # noqa: E402  (bezier.py uses _tri from this module)

@@ -1,0 +1,101 @@
+"""Ray primitives shared by the kernels: hit record layout, slab test, watertight ray /
+triangle test, ray set-up for a pixel and Woop's shear constants."""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+# hit record layout (float64 per ray): t, slot, leaf, triangle, b1, b2
+H_T, H_SLOT, H_LEAF, H_TRI, H_B1, H_B2 = range(6)
+HIT_FIELDS = 6
+
+
+@nb.njit(cache=True, inline="always")
+def _slab(ox, oy, oz, ix, iy, iz, lo, hi, k, tmax):
+    """Entry distance of the ray into box ``k`` of (lo, hi), or inf if it misses before tmax.
+
+    Robust to direction components of zero (IEEE infinities in ``i*``); the far distance is
+    widened by 1 + 2 gamma(3) as pbrt does, so a ray grazing a box is not lost to rounding.
+    """
+    t0 = (lo[k, 0] - ox) * ix
+    t1 = (hi[k, 0] - ox) * ix
+    tn = min(t0, t1)
+    tf = max(t0, t1)
+    t0 = (lo[k, 1] - oy) * iy
+    t1 = (hi[k, 1] - oy) * iy
+    tn = max(tn, min(t0, t1))
+    tf = min(tf, max(t0, t1))
+    t0 = (lo[k, 2] - oz) * iz
+    t1 = (hi[k, 2] - oz) * iz
+    tn = max(tn, min(t0, t1))
+    tf = min(tf, max(t0, t1))
+    tf *= 1.0 + 6.7e-16
+    tn = max(tn, 0.0)
+    if tn <= tf and tn < tmax:
+        return tn
+    return np.inf
+
+
+@nb.njit(cache=True, inline="always")
+def _tri(ox, oy, oz, kx, ky, kz, sx, sy, sz, a, b, c, verts, tmax, slack):
+    """Watertight ray / triangle test (Woop, Benthin and Wald 2013) on vertices ``a, b, c``
+    of ``verts``; ``ox, oy, oz`` is the ray origin's (kx, ky, kz) components. Returns (t, b_a, b_b, b_c) with t = inf on a miss. Edge functions of a
+    shared edge are computed identically from both triangles, so no ray slips between them;
+    ``slack`` admits edge functions down to -slack times their sum (see config.TRI_SLACK)."""
+    ax = verts[a, kx] - ox
+    ay = verts[a, ky] - oy
+    az = verts[a, kz] - oz
+    bx = verts[b, kx] - ox
+    by = verts[b, ky] - oy
+    bz = verts[b, kz] - oz
+    cx = verts[c, kx] - ox
+    cy = verts[c, ky] - oy
+    cz = verts[c, kz] - oz
+    ax, ay = ax - sx * az, ay - sy * az
+    bx, by = bx - sx * bz, by - sy * bz
+    cx, cy = cx - sx * cz, cy - sy * cz
+    u = cx * by - cy * bx
+    v = ax * cy - ay * cx
+    w = bx * ay - by * ax
+    eps = slack * (abs(u) + abs(v) + abs(w))
+    if (u < -eps or v < -eps or w < -eps) and (u > eps or v > eps or w > eps):
+        return np.inf, 0.0, 0.0, 0.0
+    det = u + v + w
+    if det == 0.0:
+        return np.inf, 0.0, 0.0, 0.0
+    tt = (u * az + v * bz + w * cz) * sz
+    t = tt / det
+    if not (t > 0.0 and t < tmax):
+        return np.inf, 0.0, 0.0, 0.0
+    return t, u / det, v / det, w / det
+
+
+@nb.njit(cache=True, inline="always")
+def ray_setup(frame, row, col):
+    """Unit direction of the ray through the centre of pixel (row, col)."""
+    dx = frame[3, 0] + col * frame[1, 0] + row * frame[2, 0]
+    dy = frame[3, 1] + col * frame[1, 1] + row * frame[2, 1]
+    dz = frame[3, 2] + col * frame[1, 2] + row * frame[2, 2]
+    inv = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
+    return dx * inv, dy * inv, dz * inv
+
+
+@nb.njit(cache=True)
+def _shear(dx, dy, dz):
+    """Woop's permutation and shear constants of a ray direction."""
+    ax, ay, az = abs(dx), abs(dy), abs(dz)
+    kz = 0
+    if ay > ax and ay >= az:
+        kz = 1
+    elif az > ax and az > ay:
+        kz = 2
+    kx = (kz + 1) % 3
+    ky = (kx + 1) % 3
+    d = (dx, dy, dz)
+    dkz = d[kz]
+    if dkz < 0.0:
+        kx, ky = ky, kx
+    return kx, ky, kz, d[kx] / dkz, d[ky] / dkz, 1.0 / dkz
