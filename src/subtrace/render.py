@@ -20,7 +20,7 @@ from .accel.bvh import build_bvh
 from .patches.bspline import hull_boxes
 from .patches.isolate import build_isolated
 from .patches.grids import build_grids, grid_params, grid_size, leaf_corners
-from .patches.table import build_patch_table, choose_depths
+from .patches.table import build_patch_table, choose_depths, edge_sampling
 from .trace.kernels import H_SLOT, H_T, HIT_FIELDS, trace_round
 
 
@@ -222,42 +222,6 @@ def _refine(table, requested, depths, edge_depth, pools, iso, round_no, stats):
 # --------------------------------------------------------------------------------------
 
 
-def _edge_sampling(table, depths):
-    """Make both sides of every edge sample it alike (design invariant 4); raises ``depths``
-    in place and returns ``(edge_depth, reg_side)``.
-
-    * An irregular Catmull-Clark patch (built into pieces, ``patches/isolate.py``) is raised
-      to the depth of every neighbour, repeatedly, so it is never coarser than a neighbour
-      and equal to its irregular neighbours: its sides need no extra samples.
-    * A regular patch (intersected directly) samples a side shared with a finer neighbour at
-      the neighbour's depth (``reg_side`` (R,4)), fanning its cells there.
-    * Loop grids snap a side to the coarsest depth on its edge (``edge_depth``, per edge).
-    """
-    live = table.edges >= 0
-    n_e = max(table.n_edges, 1)
-    safe = np.where(live, table.edges, 0)
-    iso = table.is_quad & ~table.regular
-
-    def neighbour_max():
-        best = np.full(n_e, -1, dtype=np.int64)
-        rows = np.repeat(depths[:, None], 4, axis=1)
-        np.maximum.at(best, table.edges[live], rows[live])
-        return np.where(live, best[safe], -1)
-
-    while iso.any():
-        raised = np.maximum(depths[iso], neighbour_max()[iso].max(axis=1))
-        if np.array_equal(raised, depths[iso]):
-            break
-        depths[iso] = raised
-    nb = neighbour_max()
-    reg = table.regular
-    reg_side = np.maximum(depths[reg][:, None], nb[reg]).astype(np.int64)
-    edge_depth = np.full(n_e, np.iinfo(np.int32).max, dtype=np.int64)
-    rows = np.repeat(depths[:, None], 4, axis=1)
-    np.minimum.at(edge_depth, table.edges[live], rows[live])
-    return edge_depth, np.ascontiguousarray(reg_side)
-
-
 class _Isolated:
     """Pieces of the isolated patches built so far, in the layout of ``trace_round``'s
     ``iso`` tuple (items of a patch contiguous)."""
@@ -333,7 +297,7 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
     frame = camera_frame(camera)
     eye = frame[0]
     depths = choose_depths(table, eye, tol_rad, max_depth)
-    edge_depth, reg_side = _edge_sampling(table, depths)
+    edge_depth, reg_side = edge_sampling(table, depths)
     reg_depth = np.ascontiguousarray(depths[table.regular], dtype=np.int64)
     tested = np.zeros(W * H, dtype=np.int64)
     touched = np.zeros(len(reg_depth), dtype=np.uint8)

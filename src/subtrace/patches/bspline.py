@@ -20,6 +20,7 @@ control grid as the exact evaluator, :mod:`subtrace.patches.evaluate`). For such
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 
 import numba as nb
@@ -97,20 +98,70 @@ def _control_grids(fo, fv, vfo, vf, vfc, veo, ve, ev, faces, bc, lead, trail, ou
 
 def bezier_nets(cv: np.ndarray) -> np.ndarray:
     """(m,4,4,3) Bezier control nets of B-spline control grids ``cv`` (m,4,4,3)."""
-    return np.einsum("ai,bj,mijk->mabk", _TO_BEZIER, _TO_BEZIER, cv, optimize=True)
+    out = np.empty((len(cv), 4, 4, 3))
+    _to_bezier(np.ascontiguousarray(cv, dtype=np.float64), _TO_BEZIER, out)
+    return out
+
+
+@nb.njit(cache=True)
+def _to_bezier(cv, M, out):
+    tmp = np.empty((4, 4, 3))
+    for m in range(cv.shape[0]):
+        for a in range(4):
+            for j in range(4):
+                for k in range(3):
+                    tmp[a, j, k] = (M[a, 0] * cv[m, 0, j, k] + M[a, 1] * cv[m, 1, j, k]
+                                    + M[a, 2] * cv[m, 2, j, k] + M[a, 3] * cv[m, 3, j, k])
+        for a in range(4):
+            for b in range(4):
+                for k in range(3):
+                    out[m, a, b, k] = (M[b, 0] * tmp[a, 0, k] + M[b, 1] * tmp[a, 1, k]
+                                       + M[b, 2] * tmp[a, 2, k] + M[b, 3] * tmp[a, 3, k])
 
 
 def hull_boxes(bez: np.ndarray):
     """Axis-aligned boxes (lo, hi), each (m,3), of Bezier nets: they contain the patches."""
-    flat = bez.reshape(len(bez), 16, 3)
-    return flat.min(axis=1), flat.max(axis=1)
+    lo = np.empty((len(bez), 3))
+    hi = np.empty((len(bez), 3))
+    bound = np.empty(len(bez))
+    _net_summary(np.ascontiguousarray(bez), lo, hi, bound)
+    return lo, hi
 
 
 def derivative_bounds(bez: np.ndarray) -> np.ndarray:
     """(m,) bound on |dP/du| and |dP/dv| over each patch (max of the derivative nets)."""
-    du = 3.0 * np.linalg.norm(np.diff(bez, axis=1), axis=-1).reshape(len(bez), -1).max(axis=1)
-    dv = 3.0 * np.linalg.norm(np.diff(bez, axis=2), axis=-1).reshape(len(bez), -1).max(axis=1)
-    return np.maximum(du, dv)
+    lo = np.empty((len(bez), 3))
+    hi = np.empty((len(bez), 3))
+    bound = np.empty(len(bez))
+    _net_summary(np.ascontiguousarray(bez), lo, hi, bound)
+    return bound
+
+
+@nb.njit(cache=True)
+def _net_summary(bez, lo, hi, bound):
+    """Box of each net, and 3 max |b[i+1,j] - b[i,j]| over both directions."""
+    for m in range(bez.shape[0]):
+        for k in range(3):
+            lo[m, k] = np.inf
+            hi[m, k] = -np.inf
+        best = 0.0
+        for a in range(4):
+            for b in range(4):
+                for k in range(3):
+                    x = bez[m, a, b, k]
+                    lo[m, k] = min(lo[m, k], x)
+                    hi[m, k] = max(hi[m, k], x)
+                if a < 3:
+                    dx = bez[m, a + 1, b, 0] - bez[m, a, b, 0]
+                    dy = bez[m, a + 1, b, 1] - bez[m, a, b, 1]
+                    dz = bez[m, a + 1, b, 2] - bez[m, a, b, 2]
+                    best = max(best, math.sqrt(dx * dx + dy * dy + dz * dz))
+                if b < 3:
+                    dx = bez[m, a, b + 1, 0] - bez[m, a, b, 0]
+                    dy = bez[m, a, b + 1, 1] - bez[m, a, b, 1]
+                    dz = bez[m, a, b + 1, 2] - bez[m, a, b, 2]
+                    best = max(best, math.sqrt(dx * dx + dy * dy + dz * dz))
+        bound[m] = 3.0 * best
 
 
 @lru_cache(maxsize=None)

@@ -242,3 +242,60 @@ def choose_depths(table: PatchTable, eye: np.ndarray, tol_rad: float, max_depth:
         if len(sel):
             depths[sel] = isolated_depths(o, table.face[sel], depths[sel], eye, tol_rad)
     return depths
+
+
+def edge_sampling(table, depths):
+    """Make both sides of every edge sample it alike (design invariant 4); raises ``depths``
+    in place and returns ``(edge_depth, reg_side)``.
+
+    * An irregular Catmull-Clark patch (built into pieces, ``patches/isolate.py``) is raised
+      to the depth of every neighbour, repeatedly, so it is never coarser than a neighbour
+      and equal to its irregular neighbours: its sides need no extra samples.
+    * A regular patch (intersected directly) samples a side shared with a finer neighbour at
+      the neighbour's depth (``reg_side`` (R,4)), fanning its cells there.
+    * Loop grids snap a side to the coarsest depth on its edge (``edge_depth``, per edge).
+    """
+    n_e = max(table.n_edges, 1)
+    iso = table.is_quad & ~table.regular
+    nb_max = np.empty(table.edges.shape, dtype=np.int64)
+    edge_depth = np.empty(n_e, dtype=np.int64)
+    _sample_edges(table.edges, depths, iso, nb_max, edge_depth)
+    reg_side = np.maximum(depths[table.regular][:, None], nb_max[table.regular])
+    return edge_depth, np.ascontiguousarray(reg_side, dtype=np.int64)
+
+
+@nb.njit(cache=True)
+def _sample_edges(edges, depths, iso, nb_max, edge_depth):
+    """Raise the ``iso`` patches to their neighbours' depths until none changes (in place);
+    fill the deepest patch on each side's edge (``nb_max``) and the shallowest per edge."""
+    best = np.full(len(edge_depth), -1, np.int64)
+    for p in range(len(depths)):
+        for k in range(4):
+            e = edges[p, k]
+            if e >= 0:
+                best[e] = max(best[e], depths[p])
+    changed = True
+    while changed:
+        changed = False
+        for p in range(len(depths)):
+            if not iso[p]:
+                continue
+            m = depths[p]
+            for k in range(4):
+                e = edges[p, k]
+                if e >= 0:
+                    m = max(m, best[e])
+            if m > depths[p]:
+                depths[p] = m
+                changed = True
+                for k in range(4):
+                    e = edges[p, k]
+                    if e >= 0:
+                        best[e] = max(best[e], m)
+    edge_depth[:] = np.iinfo(np.int32).max
+    for p in range(len(depths)):
+        for k in range(4):
+            e = edges[p, k]
+            nb_max[p, k] = best[e] if e >= 0 else -1
+            if e >= 0:
+                edge_depth[e] = min(edge_depth[e], depths[p])

@@ -28,7 +28,7 @@ BOX_PAD = 1e-12
 MAX_SIDE_SAMPLES = 256  # samples per cell side at most (2^(side depth - depth))
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _bez_point(net, u, v):
     """Point of the Bezier patch ``net`` (4,4,3) at (u, v): one code path for every caller."""
     su = 1.0 - u
@@ -52,23 +52,22 @@ def bez_derivatives(net, u, v):
     """dP/du and dP/dv of the Bezier patch ``net`` at (u, v): two 3-tuples."""
     su = 1.0 - u
     sv = 1.0 - v
-    b = np.empty((2, 4))
-    db = np.empty((2, 4))
-    for k in range(2):
-        t = u if k == 0 else v
-        s = su if k == 0 else sv
-        b[k, 0], b[k, 1], b[k, 2], b[k, 3] = s * s * s, 3 * t * s * s, 3 * t * t * s, t * t * t
-        db[k, 0], db[k, 1], db[k, 2], db[k, 3] = -3 * s * s, 3 * s * (s - 2 * t), 3 * t * (2 * s - t), 3 * t * t
-    pu = np.zeros(3)
-    pv = np.zeros(3)
+    bu = (su * su * su, 3.0 * u * su * su, 3.0 * u * u * su, u * u * u)
+    bv = (sv * sv * sv, 3.0 * v * sv * sv, 3.0 * v * v * sv, v * v * v)
+    du = (-3.0 * su * su, 3.0 * su * (su - 2.0 * u), 3.0 * u * (2.0 * su - u), 3.0 * u * u)
+    dv = (-3.0 * sv * sv, 3.0 * sv * (sv - 2.0 * v), 3.0 * v * (2.0 * sv - v), 3.0 * v * v)
+    ux = uy = uz = vx = vy = vz = 0.0
     for a in range(4):
         for c in range(4):
-            wu = db[0, a] * b[1, c]
-            wv = b[0, a] * db[1, c]
-            for k in range(3):
-                pu[k] += wu * net[a, c, k]
-                pv[k] += wv * net[a, c, k]
-    return (pu[0], pu[1], pu[2]), (pv[0], pv[1], pv[2])
+            wu = du[a] * bv[c]
+            wv = bu[a] * dv[c]
+            ux += wu * net[a, c, 0]
+            uy += wu * net[a, c, 1]
+            uz += wu * net[a, c, 2]
+            vx += wv * net[a, c, 0]
+            vy += wv * net[a, c, 1]
+            vz += wv * net[a, c, 2]
+    return (ux, uy, uz), (vx, vy, vz)
 
 
 @nb.njit(cache=True, inline="always")
@@ -82,29 +81,30 @@ def _split_row(a, b, c, d):
     return ab, abc, m, bcd, cd
 
 
-@nb.njit(cache=True)
-def _split(src, s, dst, d0):
-    """Write the four child nets of net ``src[s]`` into ``dst[d0 .. d0+3]`` (child
-    ``cu + 2 cv`` covers the half cu in u and cv in v)."""
-    half = np.empty((2, 4, 4, 3))
+@nb.njit(cache=True, inline="always")
+def _split(w, s, d0):
+    """Write the four child nets of net ``w[s]`` into ``w[d0 .. d0+3]`` (child ``cu + 2 cv``
+    covers the half cu in u and cv in v), using ``w[d0-2]``, ``w[d0-1]`` as scratch."""
+    h0 = d0 - 2
     for c in range(4):  # halve along u (first index)
         for k in range(3):
-            p0, p1, p2, p3 = src[s, 0, c, k], src[s, 1, c, k], src[s, 2, c, k], src[s, 3, c, k]
+            p0, p1, p2, p3 = w[s, 0, c, k], w[s, 1, c, k], w[s, 2, c, k], w[s, 3, c, k]
             ab, abc, m, bcd, cd = _split_row(p0, p1, p2, p3)
-            half[0, 0, c, k], half[0, 1, c, k], half[0, 2, c, k], half[0, 3, c, k] = p0, ab, abc, m
-            half[1, 0, c, k], half[1, 1, c, k], half[1, 2, c, k], half[1, 3, c, k] = m, bcd, cd, p3
+            w[h0, 0, c, k], w[h0, 1, c, k], w[h0, 2, c, k], w[h0, 3, c, k] = p0, ab, abc, m
+            w[h0 + 1, 0, c, k], w[h0 + 1, 1, c, k], w[h0 + 1, 2, c, k], w[h0 + 1, 3, c, k] = m, bcd, cd, p3
     for h in range(2):  # then along v
+        src = h0 + h
+        lo = d0 + h
+        hi = d0 + h + 2
         for a in range(4):
             for k in range(3):
-                p0, p1, p2, p3 = half[h, a, 0, k], half[h, a, 1, k], half[h, a, 2, k], half[h, a, 3, k]
+                p0, p1, p2, p3 = w[src, a, 0, k], w[src, a, 1, k], w[src, a, 2, k], w[src, a, 3, k]
                 ab, abc, m, bcd, cd = _split_row(p0, p1, p2, p3)
-                lo = d0 + h
-                hi = d0 + h + 2
-                dst[lo, a, 0, k], dst[lo, a, 1, k], dst[lo, a, 2, k], dst[lo, a, 3, k] = p0, ab, abc, m
-                dst[hi, a, 0, k], dst[hi, a, 1, k], dst[hi, a, 2, k], dst[hi, a, 3, k] = m, bcd, cd, p3
+                w[lo, a, 0, k], w[lo, a, 1, k], w[lo, a, 2, k], w[lo, a, 3, k] = p0, ab, abc, m
+                w[hi, a, 0, k], w[hi, a, 1, k], w[hi, a, 2, k], w[hi, a, 3, k] = m, bcd, cd, p3
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _net_entry(ox, oy, oz, ix, iy, iz, net, s, tmax):
     """Entry distance of the ray into the (padded) box of net ``net[s]``; inf on a miss."""
     lo0 = lo1 = lo2 = np.inf
@@ -138,7 +138,7 @@ def _net_entry(ox, oy, oz, ix, iy, iz, net, s, tmax):
     return np.inf
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, net, i, j, depth, oi, oj, root_depth,
           side_depth, slack, hit, code, item, lv, lp):
     """Intersect cell (i, j) of the depth-``depth`` grid of Bezier net ``net``, which covers
@@ -217,7 +217,7 @@ def _record(hit, t, code, item, depth, lp, a, b, c, ba, bb, bc):
     hit[H_B2] = ba * lp[a, 1] + bb * lp[b, 1] + bc * lp[c, 1]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, lp, slack, hit, code, item, depth):
     """The two triangles (0,1,2), (0,2,3) of the cell ``lv[:4]`` (parameters ``lp``)."""
     o = (ox, oy, oz)
@@ -231,13 +231,13 @@ def tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, lp, slack, hit, code, item,
     return 2
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def intersect_bezier(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, net, depth, oi, oj,
                      root_depth, side_depth, slack, hit, code, item, work, st_i, st_j, st_l,
                      tmp_t, order, lv, lp):
     """Closest hit on the Bezier patch ``net`` refined to grid depth ``depth`` (covering the
     root grid cells from (oi, oj), see :func:`_leaf`) nearer than hit[H_T]; updates ``hit``.
-    ``work`` (>= 3*depth+6, 4,4,3) holds the stacked nets, ``st_*`` their cell coordinates
+    ``work`` (>= 3*depth+7, 4,4,3) holds the stacked nets (the last six are scratch), ``st_*`` their cell coordinates
     and levels. Returns the number of micro-triangles built."""
     tested = 0
     for a in range(4):
@@ -258,7 +258,7 @@ def intersect_bezier(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, net, depth,
             tested += _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, net, ci, cj, depth, oi, oj,
                             root_depth, side_depth, slack, hit, code, item, lv, lp)
             continue
-        _split(work, sp, work, base)
+        _split(work, sp, base)
         # the children the ray enters, pushed far to near
         n = 0
         for q in range(4):

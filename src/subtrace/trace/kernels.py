@@ -92,7 +92,7 @@ def _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, slot_dept
             sp += 1
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _intersect_isolated(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, p, s, iso, slack, hit,
                         work, st_i, st_j, st_l, ent_t, ent_i, lv, lp):
     """Closest hit on the pieces of isolated patch ``p`` (slot ``s`` of ``iso``)."""
@@ -122,7 +122,7 @@ def _intersect_isolated(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, p, s, is
     return tested
 
 
-RAYS_PER_TASK = 32  # rays per parallel task (scratch buffers are allocated once per task)
+RAYS_PER_TASK = 1024  # rays per parallel task (scratch buffers are allocated once per task)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -143,100 +143,104 @@ def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_c
     max_d = 0
     for k in range(len(reg_depth)):
         max_d = max(max_d, reg_depth[k])
+    for k in range(len(iso[4])):
+        max_d = max(max_d, iso[4][k])
     for task in nb.prange(n_tasks):
-        stack = np.empty(128, np.int64)
-        gstack = np.empty(64, np.int64)
-        ent_t = np.empty(4)
-        ent_i = np.empty(4, np.int64)
-        work = np.empty((3 * max_d + 8, 4, 4, 3))
-        st_i = np.empty(3 * max_d + 8, np.int64)
-        st_j = np.empty(3 * max_d + 8, np.int64)
-        st_l = np.empty(3 * max_d + 8, np.int64)
-        lv = np.empty((4 * 256 + 8, 3))
-        lp = np.empty((4 * 256 + 8, 2))
-        for q in range(task * RAYS_PER_TASK, min(n_rays, (task + 1) * RAYS_PER_TASK)):
-            r = rays[q]
-            _trace_ray(r, ox, oy, oz, frame, width, round_no, bvh_min, bvh_max, bvh_first,
-                       bvh_count, prims, shell_min, shell_max, patch_slot, slot_depth,
-                       slot_vert_off, slot_node_off, slot_quad, slot_round, verts, node_lo,
-                       node_hi, lc_off, lc_data, reg_index, nets, reg_depth, reg_side, iso,
-                       slack, hits, request, tested, touched, stack, gstack, ent_t, ent_i, work,
-                       st_i, st_j, st_l, lv, lp)
+        _trace_task(task * RAYS_PER_TASK, min(n_rays, (task + 1) * RAYS_PER_TASK), max_d,
+                    rays, ox, oy, oz, frame, width, round_no, bvh_min, bvh_max, bvh_first,
+                    bvh_count, prims, shell_min, shell_max, patch_slot, slot_depth,
+                    slot_vert_off, slot_node_off, slot_quad, slot_round, verts, node_lo,
+                    node_hi, lc_off, lc_data, reg_index, nets, reg_depth, reg_side, iso,
+                    slack, hits, request, tested, touched)
 
 
 @nb.njit(cache=True, error_model="numpy")  # 1/0 -> inf for axis-parallel rays
-def _trace_ray(r, ox, oy, oz, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_count,
-               prims, shell_min, shell_max, patch_slot, slot_depth, slot_vert_off,
-               slot_node_off, slot_quad, slot_round, verts, node_lo, node_hi, lc_off, lc_data,
-               reg_index, nets, reg_depth, reg_side, iso, slack, hits, request, tested,
-               touched, stack, gstack, ent_t, ent_i, work, st_i, st_j, st_l, lv, lp):
-    row = r // width
-    col = r - row * width
-    dx, dy, dz = ray_setup(frame, row, col)
-    ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
-    kx, ky, kz, sx, sy, sz = _shear(dx, dy, dz)
-    hit = hits[r]
-    req = -1
-    req_t = np.inf
-    sp = 0
-    if _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, 0, hit[H_T]) < np.inf:
-        stack[0] = 0
-        sp = 1
-    while sp > 0:
-        sp -= 1
-        node = stack[sp]
-        cnt = bvh_count[node]
-        if cnt > 0:
-            f = bvh_first[node]
-            for j in range(f, f + cnt):
-                p = prims[j]
-                te = _slab(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, hit[H_T])
-                if te == np.inf:
-                    continue
-                ri = reg_index[p]
-                if ri >= 0:
-                    if round_no == 0:
-                        touched[ri] = 1
-                        d = reg_depth[ri]
-                        tested[r] += intersect_bezier(
-                            ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, nets[ri], d, 0, 0,
-                            d, reg_side[ri], slack, hit, -2.0 - p, -1.0, work, st_i, st_j,
-                            st_l, ent_t, ent_i, lv, lp)
-                    continue
-                s = iso[0][p]
-                if s >= 0:
-                    if iso[3][s] == round_no - 1:
-                        tested[r] += _intersect_isolated(
-                            ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, p, s, iso, slack,
-                            hit, work, st_i, st_j, st_l, ent_t, ent_i, lv, lp)
-                    continue
-                s = patch_slot[p]
-                if s < 0:
-                    if te < req_t:
-                        req_t = te
-                        req = p
-                elif slot_round[s] == round_no - 1:
-                    _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s,
-                                    slot_depth, slot_vert_off, slot_node_off, slot_quad,
-                                    verts, node_lo, node_hi, lc_off, lc_data, slack, hit,
-                                    gstack, ent_t, ent_i)
-            continue
-        left = bvh_first[node]
-        right = left + 1
-        tl = _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, left, hit[H_T])
-        tr = _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, right, hit[H_T])
-        if tl < np.inf and tr < np.inf:
-            if tl <= tr:
-                stack[sp] = right
-                stack[sp + 1] = left
-            else:
+def _trace_task(q0, q1, max_d, rays, ox, oy, oz, frame, width, round_no, bvh_min, bvh_max,
+                bvh_first, bvh_count, prims, shell_min, shell_max, patch_slot, slot_depth,
+                slot_vert_off, slot_node_off, slot_quad, slot_round, verts, node_lo, node_hi,
+                lc_off, lc_data, reg_index, nets, reg_depth, reg_side, iso, slack, hits,
+                request, tested, touched):
+    """Rays ``rays[q0:q1]``, with scratch buffers shared by them (one call per task keeps
+    the per-ray cost free of call overhead)."""
+    stack = np.empty(128, np.int64)
+    gstack = np.empty(64, np.int64)
+    ent_t = np.empty(4)
+    ent_i = np.empty(4, np.int64)
+    work = np.empty((3 * max_d + 10, 4, 4, 3))
+    st_i = np.empty(3 * max_d + 8, np.int64)
+    st_j = np.empty(3 * max_d + 8, np.int64)
+    st_l = np.empty(3 * max_d + 8, np.int64)
+    lv = np.empty((4 * 256 + 8, 3))
+    lp = np.empty((4 * 256 + 8, 2))
+    for q in range(q0, q1):
+        r = rays[q]
+        row = r // width
+        col = r - row * width
+        dx, dy, dz = ray_setup(frame, row, col)
+        ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
+        kx, ky, kz, sx, sy, sz = _shear(dx, dy, dz)
+        hit = hits[r]
+        req = -1
+        req_t = np.inf
+        sp = 0
+        if _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, 0, hit[H_T]) < np.inf:
+            stack[0] = 0
+            sp = 1
+        while sp > 0:
+            sp -= 1
+            node = stack[sp]
+            cnt = bvh_count[node]
+            if cnt > 0:
+                f = bvh_first[node]
+                for j in range(f, f + cnt):
+                    p = prims[j]
+                    te = _slab(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, hit[H_T])
+                    if te == np.inf:
+                        continue
+                    ri = reg_index[p]
+                    if ri >= 0:
+                        if round_no == 0:
+                            touched[ri] = 1
+                            d = reg_depth[ri]
+                            tested[r] += intersect_bezier(
+                                ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, nets[ri], d, 0, 0,
+                                d, reg_side[ri], slack, hit, -2.0 - p, -1.0, work, st_i, st_j,
+                                st_l, ent_t, ent_i, lv, lp)
+                        continue
+                    s = iso[0][p]
+                    if s >= 0:
+                        if iso[3][s] == round_no - 1:
+                            tested[r] += _intersect_isolated(
+                                ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, p, s, iso, slack,
+                                hit, work, st_i, st_j, st_l, ent_t, ent_i, lv, lp)
+                        continue
+                    s = patch_slot[p]
+                    if s < 0:
+                        if te < req_t:
+                            req_t = te
+                            req = p
+                    elif slot_round[s] == round_no - 1:
+                        _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s,
+                                        slot_depth, slot_vert_off, slot_node_off, slot_quad,
+                                        verts, node_lo, node_hi, lc_off, lc_data, slack, hit,
+                                        gstack, ent_t, ent_i)
+                continue
+            left = bvh_first[node]
+            right = left + 1
+            tl = _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, left, hit[H_T])
+            tr = _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, right, hit[H_T])
+            if tl < np.inf and tr < np.inf:
+                if tl <= tr:
+                    stack[sp] = right
+                    stack[sp + 1] = left
+                else:
+                    stack[sp] = left
+                    stack[sp + 1] = right
+                sp += 2
+            elif tl < np.inf:
                 stack[sp] = left
-                stack[sp + 1] = right
-            sp += 2
-        elif tl < np.inf:
-            stack[sp] = left
-            sp += 1
-        elif tr < np.inf:
-            stack[sp] = right
-            sp += 1
-    request[r] = req if req_t < hit[H_T] else -1
+                sp += 1
+            elif tr < np.inf:
+                stack[sp] = right
+                sp += 1
+        request[r] = req if req_t < hit[H_T] else -1
