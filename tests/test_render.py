@@ -332,3 +332,97 @@ def test_render_cli_bad_thread_count(tmp_path, capsys, threads):
     assert rc == 2
     assert err.count("\n") == 1 and "--threads" in err and "Traceback" not in err
     assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+# --------------------------------------------------------------------------------------
+# regular patches as Bezier nets, irregular patches as feature-adaptive pieces
+# --------------------------------------------------------------------------------------
+
+PIECE_SHAPES = ["catmark_cube_creases1", "catmark_nonquads", "catmark_pole8",
+                "catmark_edgecorner", "catmark_chaikin1", "catmark_hole_test2"]
+
+
+@needs_shared
+@pytest.mark.parametrize("name", PIECE_SHAPES)
+def test_bicubic_grids_match_refinement(name):
+    """A regular patch evaluated as a bicubic B-spline gives the limit points that uniform
+    refinement gives (to rounding), and its Bezier hull box contains them."""
+    from subtrace.patches import bspline
+
+    cage = _load(name)
+    lev = cage.level_topology(1)
+    pts = cage.refine(1).points
+    faces = np.nonzero(~lev.face_hole)[0]
+    reg = faces[bspline.regular_mask(lev, cage.options, faces)]
+    if len(reg) == 0:
+        pytest.skip("no regular patch")
+    cv = pts[bspline.control_grids(lev, reg)]
+    lo, hi = bspline.hull_boxes(bspline.bezier_nets(cv))
+    scale = float(np.abs(pts).max())
+    for depth in (0, 3):
+        P, N = bspline.eval_grids(cv, depth)
+        ref, nref = build_grids(lev, pts, cage.options, reg, depth)
+        assert np.abs(P - ref).max() <= 1e-13 * scale
+        assert np.nanmax(np.abs(N - nref)) <= 1e-9
+        assert np.all(P >= lo[:, None] - 1e-12 * scale) and np.all(P <= hi[:, None] + 1e-12 * scale)
+
+
+@needs_shared
+@pytest.mark.parametrize("name", PIECE_SHAPES)
+def test_isolated_pieces_tile_the_grid(name):
+    """The pieces of an irregular patch cover every cell of its grid exactly once, and their
+    points are the grid's exact limit points (uniform refinement), to rounding."""
+    from subtrace.patches.isolate import build_isolated
+    from subtrace.trace.bezier import _bez_point
+
+    cage = _load(name)
+    table = build_patch_table([cage])
+    o = table.objects[0]
+    irr = np.nonzero(~table.regular)[0][:12]
+    scale = float(np.abs(o.points).max())
+    for depth in (0, 1, 3):
+        (sr, sl, si, sj, nets), (cr, ci, cj, cp, _) = build_isolated(o, table.face[irr], depth)
+        G = build_grids(o.level, o.points, cage.options, table.face[irr], depth)[0]
+        n = (1 << depth) + 1
+        G = G.reshape(len(irr), n, n, 3)
+        covered = np.zeros((len(irr), n - 1, n - 1), dtype=int)
+        for r, lev_, i, j, net in zip(sr, sl, si, sj, nets):
+            m = 1 << (depth - lev_)
+            for a in range(m + 1):
+                for b in range(m + 1):
+                    p = np.array(_bez_point(net, a / m, b / m))
+                    assert np.abs(p - G[r, j * m + b, i * m + a]).max() <= 1e-13 * scale
+            covered[r, j * m:(j + 1) * m, i * m:(i + 1) * m] += 1
+        for r, i, j, q in zip(cr, ci, cj, cp):
+            want = [G[r, j, i], G[r, j, i + 1], G[r, j + 1, i + 1], G[r, j + 1, i]]
+            assert np.abs(q - np.array(want)).max() <= 1e-13 * scale
+            covered[r, j, i] += 1
+        assert np.all(covered == 1)
+
+
+@needs_shared
+def test_cells_subtend_at_most_the_tolerance():
+    """Invariant 3 on real grids: with the chosen depths, every cell side of every patch of
+    Spot (regular and isolated) subtends at most the tolerance at the eye (the bound is
+    conservative) - and not far below it for most patches (the bound is tight)."""
+    from subtrace.patches.table import choose_depths
+
+    cage = subtrace.load_cage(MODELS / "spot_control_mesh.obj")
+    table = build_patch_table([cage])
+    o = table.objects[0]
+    eye = np.array([2.393, 1.306, -3.637])
+    tol = np.radians(0.05)
+    depths = choose_depths(table, eye, tol, 8)
+    worst = []
+    for d in np.unique(depths):
+        ids = np.nonzero(depths == d)[0]
+        P = build_grids(o.level, o.points, cage.options, table.face[ids], int(d))[0]
+        n = (1 << d) + 1
+        G = P.reshape(len(ids), n, n, 3)
+        dist = np.linalg.norm(G - eye, axis=-1)
+        su = np.linalg.norm(np.diff(G, axis=2), axis=-1) / np.minimum(dist[:, :, 1:], dist[:, :, :-1])
+        sv = np.linalg.norm(np.diff(G, axis=1), axis=-1) / np.minimum(dist[:, 1:], dist[:, :-1])
+        worst.append(np.maximum(su.reshape(len(ids), -1).max(1), sv.reshape(len(ids), -1).max(1)))
+    worst = np.concatenate(worst) / tol
+    assert worst.max() <= 1.0 + 1e-9
+    assert np.median(worst) > 0.4

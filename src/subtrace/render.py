@@ -204,7 +204,8 @@ def _refine(table, requested, depths, edge_depth, pools, iso, round_no, stats):
         d = int(dep[s])
         if table.is_quad[ids[0]]:
             subs, cells = build_isolated(o, table.face[ids], d)
-            n_sub, n_cell = iso.append(ids, d, subs, cells, round_no)
+            dd = np.full(len(ids), d)
+            n_sub, n_cell = iso.append(ids, dd, np.repeat(dd, 4), subs, cells, round_no)
             stats.pieces += n_sub + n_cell
             continue
         P, N = build_grids(o.level, o.points, o.cage.options, table.face[ids], d)
@@ -222,29 +223,34 @@ def _refine(table, requested, depths, edge_depth, pools, iso, round_no, stats):
 # --------------------------------------------------------------------------------------
 
 
-class _Isolated:
-    """Pieces of the isolated patches built so far, in the layout of ``trace_round``'s
-    ``iso`` tuple (items of a patch contiguous)."""
+class _Pieces:
+    """What the kernels intersect per ray, for every Catmull-Clark patch built so far, in the
+    layout of ``trace_round``'s ``iso`` tuple: a *slot* per patch (grid depth, how its four
+    sides are sampled, the round it was built in) and its *items* (contiguous): regular
+    Bezier pieces over dyadic squares of the patch, and cells of exact limit points.
+    A regular patch is one item, ready from the start (round -1); an irregular patch is built
+    on request into pieces (``patches/isolate.py``)."""
 
     def __init__(self, n_patches):
         self.patch_iso = np.full(n_patches, -1, dtype=np.int64)
-        self.parts = {k: [] for k in ("first", "count", "round", "depth", "kind", "ref",
+        self.parts = {k: [] for k in ("first", "count", "round", "depth", "side", "kind", "ref",
                                       "level", "i0", "j0", "lo", "hi", "nets", "cells",
                                       "normals", "patch")}
         self.n_items = self.n_nets = self.n_cells = self.n_slots = 0
         self._pack()
 
-    def append(self, patches, depth, subs, cells, round_no):
+    def append(self, patches, depth, side, subs, cells, round_no):
+        """Slots for ``patches`` (grid depths ``depth`` (m,), side depths ``side`` (m,4)) made
+        of ``subs`` and ``cells`` (see :func:`~subtrace.patches.isolate.build_isolated`)."""
         (sr, sl, si, sj, nets), (cr, ci, cj, cp, cn) = subs, cells
-        lo_s, hi_s = hull_boxes(nets) if len(nets) else (np.zeros((0, 3)), np.zeros((0, 3)))
+        lo_s, hi_s = hull_boxes(nets)
         root = np.concatenate([sr, cr])
         order = np.argsort(root, kind="stable")
-        kind = np.r_[np.zeros(len(sr), np.int8), np.ones(len(cr), np.int8)][order]
-        ref = np.r_[self.n_nets + np.arange(len(sr)), self.n_cells + np.arange(len(cr))][order]
         P = self.parts
-        P["kind"].append(kind)
-        P["ref"].append(ref.astype(np.int64))
-        P["level"].append(np.r_[sl, np.full(len(cr), depth)][order].astype(np.int64))
+        P["kind"].append(np.r_[np.zeros(len(sr), np.int8), np.ones(len(cr), np.int8)][order])
+        P["ref"].append(np.r_[self.n_nets + np.arange(len(sr)),
+                              self.n_cells + np.arange(len(cr))][order].astype(np.int64))
+        P["level"].append(np.r_[sl, depth[cr]][order].astype(np.int64))
         P["i0"].append(np.r_[si, ci][order].astype(np.int64))
         P["j0"].append(np.r_[sj, cj][order].astype(np.int64))
         P["lo"].append(np.concatenate([lo_s, cp.min(axis=1)])[order])
@@ -253,11 +259,11 @@ class _Isolated:
         P["cells"].append(cp)
         P["normals"].append(cn)
         count = np.bincount(root, minlength=len(patches))
-        first = self.n_items + np.r_[0, np.cumsum(count)[:-1]]
-        P["first"].append(first.astype(np.int64))
+        P["first"].append((self.n_items + np.cumsum(count) - count).astype(np.int64))
         P["count"].append(count.astype(np.int64))
         P["round"].append(np.full(len(patches), round_no, np.int64))
-        P["depth"].append(np.full(len(patches), depth, np.int64))
+        P["depth"].append(np.asarray(depth, dtype=np.int64))
+        P["side"].append(np.asarray(side, dtype=np.int64).reshape(-1, 4))
         P["patch"].append(np.asarray(patches, dtype=np.int64))
         self.patch_iso[patches] = self.n_slots + np.arange(len(patches))
         self.n_slots += len(patches)
@@ -269,22 +275,23 @@ class _Isolated:
 
     def _pack(self):
         shapes = {"lo": (0, 3), "hi": (0, 3), "nets": (0, 4, 4, 3), "cells": (0, 4, 3),
-                  "normals": (0, 4, 3)}
-        dtypes = {"kind": np.int8}
+                  "normals": (0, 4, 3), "side": (0, 4)}
         self.a = {}
         for k, v in self.parts.items():
             if v:
                 self.a[k] = np.ascontiguousarray(np.concatenate(v))
             else:
-                self.a[k] = np.zeros(shapes.get(k, (0,)), dtype=dtypes.get(k, np.float64 if k in shapes else np.int64))
-        depth = self.a["depth"]
-        self.a["side"] = np.ascontiguousarray(np.repeat(depth[:, None], 4, axis=1))
+                dtype = np.int8 if k == "kind" else (np.int64 if k in ("side",) or k not in shapes else np.float64)
+                self.a[k] = np.zeros(shapes.get(k, (0,)), dtype=dtype)
+        old = getattr(self, "touched", np.zeros(0, dtype=np.uint8))
+        self.touched = np.zeros(self.n_slots, dtype=np.uint8)  # set when a ray tests a slot
+        self.touched[: len(old)] = old
 
     def kernel_tuple(self):
         a = self.a
         return (self.patch_iso, a["first"], a["count"], a["round"], a["depth"], a["side"],
                 a["kind"], a["ref"], a["level"], a["i0"], a["j0"], a["lo"], a["hi"],
-                a["nets"], a["cells"])
+                a["nets"], a["cells"], self.touched)
 
 
 def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
@@ -298,12 +305,17 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
     eye = frame[0]
     depths = choose_depths(table, eye, tol_rad, max_depth)
     edge_depth, reg_side = edge_sampling(table, depths)
-    reg_depth = np.ascontiguousarray(depths[table.regular], dtype=np.int64)
     tested = np.zeros(W * H, dtype=np.int64)
-    touched = np.zeros(len(reg_depth), dtype=np.uint8)
     tables = _LeafTables(int(depths.max(initial=0)))
     pools = _Pools()
-    iso = _Isolated(table.n_patches)
+    iso = _Pieces(table.n_patches)
+    reg = np.nonzero(table.regular)[0]
+    none = np.zeros(0, np.int64)
+    one = np.arange(len(reg))
+    iso.append(reg, depths[reg], reg_side,
+               (one, np.zeros(len(reg), np.int64), np.zeros(len(reg), np.int64),
+                np.zeros(len(reg), np.int64), table.nets),
+               (none, none, none, np.zeros((0, 4, 3)), np.zeros((0, 4, 3))), -1)
     patch_slot = np.full(table.n_patches, -1, dtype=np.int64)
     hits = np.zeros((W * H, HIT_FIELDS))
     hits[:, H_T] = np.inf
@@ -319,8 +331,8 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
             bvh.prims, table.shell_min, table.shell_max, patch_slot,
             pools.slot_depth, pools.slot_vert_off, pools.slot_node_off, pools.slot_quad,
             pools.slot_round, pools.verts, pools.node_lo, pools.node_hi,
-            tables.lc_off, tables.lc_data, table.reg_index, table.nets, reg_depth, reg_side,
-            iso.kernel_tuple(), config.TRI_SLACK, hits, request, tested, touched,
+            tables.lc_off, tables.lc_data, iso.kernel_tuple(), config.TRI_SLACK, hits, request,
+            tested,
         )
         stats.time_trace += time.perf_counter() - t0
         req = request[rays]
@@ -337,11 +349,11 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
         round_no += 1
     stats.rounds = round_no + 1
     stats.micro_triangles += int(tested.sum())
-    direct = np.nonzero(table.regular)[0][touched.astype(bool)]
+    # regular patches count as refined once a ray has descended into them
+    direct = iso.a["patch"][(iso.a["round"] < 0) & (iso.touched > 0)]
     stats.patches_refined += len(direct)
-    stats.max_depth = int(max(pools.slot_depth.max(initial=0), reg_depth.max(initial=0),
-                              iso.a["depth"].max(initial=0)))
-    built = np.concatenate([pools.slot_patch, iso.a["patch"], direct])
+    stats.max_depth = int(max(pools.slot_depth.max(initial=0), iso.a["depth"].max(initial=0)))
+    built = np.concatenate([pools.slot_patch, iso.a["patch"][iso.a["round"] >= 0], direct])
     return hits, pools, iso, tables, built
 
 
@@ -431,8 +443,7 @@ def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult
         camera_frame(camera), W, hits, pools.slot_patch, pools.slot_depth, pools.slot_quad,
         pools.slot_vert_off, pools.verts, pools.normals, tables.lc_off, tables.lc_data,
         tables.uv_off, tables.uv_data, table.object_id, table.ptex, table.ptex_uv0,
-        table.ptex_scale, table.level0, _patch_colors(table, scene), table.reg_index,
-        table.nets, iso.a["kind"], iso.a["ref"], iso.a["level"], iso.a["i0"], iso.a["j0"],
+        table.ptex_scale, table.level0, _patch_colors(table, scene), iso.a["kind"], iso.a["ref"], iso.a["level"], iso.a["i0"], iso.a["j0"],
         iso.a["nets"], iso.a["normals"], iso.a["cells"], lights, headlight,
         np.asarray(scene.render.background, dtype=np.float64), rgba, nrm, level, patch,
         objid, uv,

@@ -22,7 +22,7 @@ from .trace.kernels import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, ray_setup
 @nb.njit(cache=True, parallel=True)
 def shade_kernel(frame, width, hits, slot_patch, slot_depth, slot_quad, slot_vert_off,
                  verts, normals, lc_off, lc_data, uv_off, uv_data, patch_object, patch_ptex,
-                 patch_uv0, patch_scale, patch_level0, patch_color, reg_index, nets, item_kind,
+                 patch_uv0, patch_scale, patch_level0, patch_color, item_kind,
                  item_ref, item_level, item_i0, item_j0, item_nets, cell_normals, cells, lights,
                  headlight, background, out_rgba, out_n, out_level, out_patch, out_object,
                  out_uv):
@@ -49,16 +49,14 @@ def shade_kernel(frame, width, hits, slot_patch, slot_depth, slot_quad, slot_ver
         dx, dy, dz = ray_setup(frame, row, col)
         s = np.int64(hits[r, H_SLOT])
         if s < 0:
-            # a regular patch hit directly: (B1, B2) is the patch parameter
+            # a Catmull-Clark patch: H_TRI is the piece hit, (B1, B2) the patch parameter
             p = -s - 2
             u = hits[r, H_B1]
             v = hits[r, H_B2]
             depth = np.int64(hits[r, H_LEAF])
             it = np.int64(hits[r, H_TRI])
-            if it < 0:
-                nx, ny, nz = _bezier_normal(nets[reg_index[p]], u, v)
-            elif item_kind[it] == 0:
-                # a regular piece of an isolated patch, over a dyadic square
+            if item_kind[it] == 0:
+                # a Bezier piece over a dyadic square of the patch (the whole of a regular one)
                 sc = 1 << item_level[it]
                 nx, ny, nz = _bezier_normal(item_nets[item_ref[it]], u * sc - item_i0[it],
                                             v * sc - item_j0[it])

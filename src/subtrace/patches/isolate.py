@@ -21,6 +21,10 @@ import numpy as np
 
 from .bspline import bezier_nets, control_grids, derivative_bounds, hull_boxes, regular_mask
 
+# The control-edge bound of a cell at an extraordinary vertex is not a proven bound (measured
+# up to 0.8 % short on Spot); irregular cells stop refining only with this much to spare.
+IRREGULAR_MARGIN = 1.25
+
 
 def _levels_needed(bound, dist, tol_rad):
     """Smallest n >= 0 with ``bound * 2^-n <= tol_rad * dist`` (elementwise)."""
@@ -72,7 +76,7 @@ def isolated_depths(obj, faces, cap, eye, tol_rad):
         valence = np.empty(len(irr), dtype=np.int64)
         _shells(kids[irr], cur.face_offsets, cur.face_verts, cur.vert_face_offsets,
                 cur.vert_faces, cur_pts, smin, smax, ebound, valence)
-        flat = ebound <= tol_rad * box_distance(smin, smax, eye)
+        flat = IRREGULAR_MARGIN * ebound <= tol_rad * box_distance(smin, smax, eye)
         np.maximum.at(need, kid_root[irr], k)
         go = irr[~flat & (k < cap[kid_root[irr]])]
         root, start = kid_root[go], kids[go]

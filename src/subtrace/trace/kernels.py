@@ -122,46 +122,48 @@ def _intersect_isolated(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, p, s, is
     return tested
 
 
-RAYS_PER_TASK = 1024  # rays per parallel task (scratch buffers are allocated once per task)
+RAYS_PER_BLOCK = 64  # consecutive rays traced together
+N_TASKS = 64  # parallel tasks; task t takes blocks t, t + N_TASKS, ... (balanced over the image)
 
 
 @nb.njit(cache=True, parallel=True)
 def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_count, prims,
                 shell_min, shell_max, patch_slot, slot_depth, slot_vert_off, slot_node_off,
-                slot_quad, slot_round, verts, node_lo, node_hi, lc_off, lc_data, reg_index,
-                nets, reg_depth, reg_side, iso, slack, hits, request, tested, touched):
+                slot_quad, slot_round, verts, node_lo, node_hi, lc_off, lc_data, iso, slack,
+                hits, request, tested):
     """One round for the rays ``rays`` (pixel indices): update ``hits`` (n_pixels, 6) and
     set ``request[r]`` to the nearest unbuilt patch the ray reaches first (or -1).
 
-    Regular patches (``reg_index[p] >= 0``: Bezier net ``nets[reg_index[p]]``, grid depth
-    ``reg_depth``, side sampling depths ``reg_side``) are intersected directly, in round 0
-    (see ``trace/bezier.py``); ``tested[r]`` counts the micro-triangles they built for ray r.
+    Catmull-Clark patches are intersected per ray through their pieces (``render._Pieces``),
+    held in the tuple ``iso`` = (slot of each patch (P,) or -1 while unbuilt, and per slot:
+    first item, item count, round built (-1: from the start), grid depth, side sampling
+    depths (S,4); per item: kind (0: Bezier piece, 1: cell), row in the nets / cells, level,
+    origin i0, j0 in units of 2^-level, box lo, hi (I,3); the Bezier nets (.,4,4,3), the
+    cells' corners (.,4,3); and a per-slot flag set when a ray tests it). Loop patches are
+    grids in the pools. ``tested[r]`` counts the micro-triangles built for ray r.
     """
     ox, oy, oz = frame[0, 0], frame[0, 1], frame[0, 2]
     n_rays = len(rays)
-    n_tasks = (n_rays + RAYS_PER_TASK - 1) // RAYS_PER_TASK
+    n_blocks = (n_rays + RAYS_PER_BLOCK - 1) // RAYS_PER_BLOCK
+    n_tasks = min(N_TASKS, n_blocks)
     max_d = 0
-    for k in range(len(reg_depth)):
-        max_d = max(max_d, reg_depth[k])
     for k in range(len(iso[4])):
         max_d = max(max_d, iso[4][k])
     for task in nb.prange(n_tasks):
-        _trace_task(task * RAYS_PER_TASK, min(n_rays, (task + 1) * RAYS_PER_TASK), max_d,
+        _trace_task(task, n_tasks, max_d,
                     rays, ox, oy, oz, frame, width, round_no, bvh_min, bvh_max, bvh_first,
                     bvh_count, prims, shell_min, shell_max, patch_slot, slot_depth,
                     slot_vert_off, slot_node_off, slot_quad, slot_round, verts, node_lo,
-                    node_hi, lc_off, lc_data, reg_index, nets, reg_depth, reg_side, iso,
-                    slack, hits, request, tested, touched)
+                    node_hi, lc_off, lc_data, iso, slack, hits, request, tested)
 
 
 @nb.njit(cache=True, error_model="numpy")  # 1/0 -> inf for axis-parallel rays
-def _trace_task(q0, q1, max_d, rays, ox, oy, oz, frame, width, round_no, bvh_min, bvh_max,
+def _trace_task(task, n_tasks, max_d, rays, ox, oy, oz, frame, width, round_no, bvh_min, bvh_max,
                 bvh_first, bvh_count, prims, shell_min, shell_max, patch_slot, slot_depth,
                 slot_vert_off, slot_node_off, slot_quad, slot_round, verts, node_lo, node_hi,
-                lc_off, lc_data, reg_index, nets, reg_depth, reg_side, iso, slack, hits,
-                request, tested, touched):
-    """Rays ``rays[q0:q1]``, with scratch buffers shared by them (one call per task keeps
-    the per-ray cost free of call overhead)."""
+                lc_off, lc_data, iso, slack, hits, request, tested):
+    """The blocks of rays of one task, with scratch buffers shared by them (one call per
+    task keeps the per-ray cost free of call overhead)."""
     stack = np.empty(128, np.int64)
     gstack = np.empty(64, np.int64)
     ent_t = np.empty(4)
@@ -172,75 +174,69 @@ def _trace_task(q0, q1, max_d, rays, ox, oy, oz, frame, width, round_no, bvh_min
     st_l = np.empty(3 * max_d + 8, np.int64)
     lv = np.empty((4 * 256 + 8, 3))
     lp = np.empty((4 * 256 + 8, 2))
-    for q in range(q0, q1):
-        r = rays[q]
-        row = r // width
-        col = r - row * width
-        dx, dy, dz = ray_setup(frame, row, col)
-        ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
-        kx, ky, kz, sx, sy, sz = _shear(dx, dy, dz)
-        hit = hits[r]
-        req = -1
-        req_t = np.inf
-        sp = 0
-        if _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, 0, hit[H_T]) < np.inf:
-            stack[0] = 0
-            sp = 1
-        while sp > 0:
-            sp -= 1
-            node = stack[sp]
-            cnt = bvh_count[node]
-            if cnt > 0:
-                f = bvh_first[node]
-                for j in range(f, f + cnt):
-                    p = prims[j]
-                    te = _slab(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, hit[H_T])
-                    if te == np.inf:
-                        continue
-                    ri = reg_index[p]
-                    if ri >= 0:
-                        if round_no == 0:
-                            touched[ri] = 1
-                            d = reg_depth[ri]
-                            tested[r] += intersect_bezier(
-                                ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, nets[ri], d, 0, 0,
-                                d, reg_side[ri], slack, hit, -2.0 - p, -1.0, work, st_i, st_j,
-                                st_l, ent_t, ent_i, lv, lp)
-                        continue
-                    s = iso[0][p]
-                    if s >= 0:
-                        if iso[3][s] == round_no - 1:
-                            tested[r] += _intersect_isolated(
-                                ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, p, s, iso, slack,
-                                hit, work, st_i, st_j, st_l, ent_t, ent_i, lv, lp)
-                        continue
-                    s = patch_slot[p]
-                    if s < 0:
-                        if te < req_t:
-                            req_t = te
-                            req = p
-                    elif slot_round[s] == round_no - 1:
-                        _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s,
-                                        slot_depth, slot_vert_off, slot_node_off, slot_quad,
-                                        verts, node_lo, node_hi, lc_off, lc_data, slack, hit,
-                                        gstack, ent_t, ent_i)
-                continue
-            left = bvh_first[node]
-            right = left + 1
-            tl = _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, left, hit[H_T])
-            tr = _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, right, hit[H_T])
-            if tl < np.inf and tr < np.inf:
-                if tl <= tr:
-                    stack[sp] = right
-                    stack[sp + 1] = left
-                else:
+    n_rays = len(rays)
+    n_blocks = (n_rays + RAYS_PER_BLOCK - 1) // RAYS_PER_BLOCK
+    for blk in range(task, n_blocks, n_tasks):
+        for q in range(blk * RAYS_PER_BLOCK, min(n_rays, (blk + 1) * RAYS_PER_BLOCK)):
+            r = rays[q]
+            row = r // width
+            col = r - row * width
+            dx, dy, dz = ray_setup(frame, row, col)
+            ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
+            kx, ky, kz, sx, sy, sz = _shear(dx, dy, dz)
+            hit = hits[r]
+            req = -1
+            req_t = np.inf
+            sp = 0
+            if _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, 0, hit[H_T]) < np.inf:
+                stack[0] = 0
+                sp = 1
+            while sp > 0:
+                sp -= 1
+                node = stack[sp]
+                cnt = bvh_count[node]
+                if cnt > 0:
+                    f = bvh_first[node]
+                    for j in range(f, f + cnt):
+                        p = prims[j]
+                        te = _slab(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, hit[H_T])
+                        if te == np.inf:
+                            continue
+                        s = iso[0][p]
+                        if s >= 0:
+                            if iso[3][s] == round_no - 1:
+                                iso[15][s] = 1
+                                tested[r] += _intersect_isolated(
+                                    ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, p, s, iso, slack,
+                                    hit, work, st_i, st_j, st_l, ent_t, ent_i, lv, lp)
+                            continue
+                        s = patch_slot[p]
+                        if s < 0:
+                            if te < req_t:
+                                req_t = te
+                                req = p
+                        elif slot_round[s] == round_no - 1:
+                            _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s,
+                                            slot_depth, slot_vert_off, slot_node_off, slot_quad,
+                                            verts, node_lo, node_hi, lc_off, lc_data, slack, hit,
+                                            gstack, ent_t, ent_i)
+                    continue
+                left = bvh_first[node]
+                right = left + 1
+                tl = _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, left, hit[H_T])
+                tr = _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, right, hit[H_T])
+                if tl < np.inf and tr < np.inf:
+                    if tl <= tr:
+                        stack[sp] = right
+                        stack[sp + 1] = left
+                    else:
+                        stack[sp] = left
+                        stack[sp + 1] = right
+                    sp += 2
+                elif tl < np.inf:
                     stack[sp] = left
-                    stack[sp + 1] = right
-                sp += 2
-            elif tl < np.inf:
-                stack[sp] = left
-                sp += 1
-            elif tr < np.inf:
-                stack[sp] = right
-                sp += 1
-        request[r] = req if req_t < hit[H_T] else -1
+                    sp += 1
+                elif tr < np.inf:
+                    stack[sp] = right
+                    sp += 1
+            request[r] = req if req_t < hit[H_T] else -1
