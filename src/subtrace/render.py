@@ -19,7 +19,7 @@ from . import config
 from .accel.bvh import build_bvh
 from .patches.bspline import hull_boxes
 from .patches.isolate import build_isolated
-from .patches.grids import build_grids, grid_params, grid_size, leaf_corners
+from .patches.grids import build_grids, grid_params, leaf_corners
 from .patches.table import build_patch_table, choose_depths, edge_sampling
 from .trace.kernels import H_SLOT, H_T, HIT_FIELDS, trace_round
 

@@ -35,6 +35,20 @@ def _levels_needed(bound, dist, tol_rad):
     return np.where(np.isfinite(n), n, 1e9)
 
 
+def _children(level, points, faces, options):
+    """Cut the neighbourhood of quads ``faces`` out of ``level``, refine it once; return the
+    refined cut, its points, the faces' four children each (in the cut) and which of those
+    are regular."""
+    from ..subdiv.refine import refine_level, refine_points
+    from .grids import _cut_around
+
+    cur, cur_pts, start = _cut_around(level, points, faces, 1)
+    ref = refine_level(cur, options)
+    cur_pts = refine_points(ref, cur_pts)
+    kids = (4 * start[:, None] + np.arange(4)).ravel()
+    return ref.child, cur_pts, kids, regular_mask(ref.child, options, kids)
+
+
 def box_distance(bmin, bmax, p):
     q = np.maximum(np.maximum(bmin - p, 0.0), p - bmax)
     return np.sqrt((q * q).sum(axis=1))
@@ -43,8 +57,6 @@ def box_distance(bmin, bmax, p):
 def isolated_depths(obj, faces, cap, eye, tol_rad):
     """Depths (len(faces),) int32 of the irregular quads ``faces`` of ``obj``'s patch level,
     none above ``cap`` (their conservative depths, (len(faces),) int)."""
-    from .grids import _cut_around
-    from ..subdiv.refine import refine_level, refine_points
     from .table import _shells
 
     faces = np.asarray(faces, dtype=np.int64)
@@ -56,14 +68,9 @@ def isolated_depths(obj, faces, cap, eye, tol_rad):
     cur, cur_pts, start = obj.level, obj.points, faces[root]
     k = 0
     while len(root):
-        cur, cur_pts, start = _cut_around(cur, cur_pts, start, 1)
-        ref = refine_level(cur, options)
-        cur_pts = refine_points(ref, cur_pts)
-        cur = ref.child
+        cur, cur_pts, kids, reg = _children(cur, cur_pts, start, options)
         k += 1
-        kids = (4 * start[:, None] + np.arange(4)).ravel()
         kid_root = np.repeat(root, 4)
-        reg = regular_mask(cur, options, kids)
         if reg.any():
             bez = bezier_nets(cur_pts[control_grids(cur, kids[reg])])
             lo, hi = hull_boxes(bez)
@@ -95,8 +102,6 @@ def build_isolated(obj, faces, depth):
     2^-depth, corner points (c,4,3), corner unit normals (c,4,3), NaN where undefined).
     """
     from ..subdiv.limit import limit_points
-    from ..subdiv.refine import refine_level, refine_points
-    from .grids import _cut_around
 
     options = obj.cage.options
     faces = np.asarray(faces, dtype=np.int64)
@@ -109,17 +114,12 @@ def build_isolated(obj, faces, depth):
     k = 0
     if depth > 0:
         while len(root):
-            cur, cur_pts, start = _cut_around(cur, cur_pts, start, 1)
-            ref = refine_level(cur, options)
-            cur_pts = refine_points(ref, cur_pts)
-            cur = ref.child
+            cur, cur_pts, kids, reg = _children(cur, cur_pts, start, options)
             k += 1
             q = np.arange(4)
-            kids = (4 * start[:, None] + q).ravel()
             kid_root = np.repeat(root, 4)
             ki = (2 * i0[:, None] + (q == 1) + (q == 2)).ravel()
             kj = (2 * j0[:, None] + (q >= 2)).ravel()
-            reg = regular_mask(cur, options, kids)
             if reg.any():
                 subs[0].append(kid_root[reg])
                 subs[1].append(np.full(int(reg.sum()), k))

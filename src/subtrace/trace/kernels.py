@@ -20,7 +20,6 @@ is refined only when a ray reaches its shell before any closer hit.
 
 from __future__ import annotations
 
-import math
 
 import numba as nb
 import numpy as np
