@@ -345,9 +345,11 @@ PIECE_SHAPES = ["catmark_cube_creases1", "catmark_nonquads", "catmark_pole8",
 @needs_shared
 @pytest.mark.parametrize("name", PIECE_SHAPES)
 def test_bicubic_grids_match_refinement(name):
-    """A regular patch evaluated as a bicubic B-spline gives the limit points that uniform
-    refinement gives (to rounding), and its Bezier hull box contains them."""
+    """A regular patch evaluated the way the renderer does (its Bezier net: points and
+    derivatives) gives the limit points and normals of uniform refinement (to rounding),
+    and the net's box contains them."""
     from subtrace.patches import bspline
+    from subtrace.trace.bezier import _bez_point, bez_derivatives
 
     cage = _load(name)
     lev = cage.level_topology(1)
@@ -356,15 +358,22 @@ def test_bicubic_grids_match_refinement(name):
     reg = faces[bspline.regular_mask(lev, cage.options, faces)]
     if len(reg) == 0:
         pytest.skip("no regular patch")
-    cv = pts[bspline.control_grids(lev, reg)]
-    lo, hi = bspline.hull_boxes(bspline.bezier_nets(cv))
+    nets = bspline.bezier_nets(pts[bspline.control_grids(lev, reg)])
+    lo, hi, _ = bspline.net_bounds(nets)
     scale = float(np.abs(pts).max())
     for depth in (0, 3):
-        P, N = bspline.eval_grids(cv, depth)
+        n = (1 << depth) + 1
         ref, nref = build_grids(lev, pts, cage.options, reg, depth)
-        assert np.abs(P - ref).max() <= 1e-13 * scale
-        assert np.nanmax(np.abs(N - nref)) <= 1e-9
-        assert np.all(P >= lo[:, None] - 1e-12 * scale) and np.all(P <= hi[:, None] + 1e-12 * scale)
+        for m, net in enumerate(nets):
+            for g in range(n * n):
+                j, i = divmod(g, n)
+                u, v = i / (n - 1), j / (n - 1)
+                p = np.array(_bez_point(net, u, v))
+                assert np.abs(p - ref[m, g]).max() <= 1e-13 * scale
+                assert np.all(p >= lo[m] - 1e-12 * scale) and np.all(p <= hi[m] + 1e-12 * scale)
+                du, dv = bez_derivatives(net, u, v)
+                nrm = np.cross(du, dv)
+                assert np.abs(nrm / np.linalg.norm(nrm) - nref[m, g]).max() <= 1e-9
 
 
 @needs_shared

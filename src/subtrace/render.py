@@ -17,7 +17,7 @@ import numpy as np
 
 from . import config
 from .accel.bvh import build_bvh
-from .patches.bspline import hull_boxes
+from .patches.bspline import net_bounds
 from .patches.isolate import build_isolated
 from .patches.grids import build_grids, grid_params, leaf_corners
 from .patches.table import build_patch_table, choose_depths, edge_sampling
@@ -243,7 +243,7 @@ class _Pieces:
         """Slots for ``patches`` (grid depths ``depth`` (m,), side depths ``side`` (m,4)) made
         of ``subs`` and ``cells`` (see :func:`~subtrace.patches.isolate.build_isolated`)."""
         (sr, sl, si, sj, nets), (cr, ci, cj, cp, cn) = subs, cells
-        lo_s, hi_s = hull_boxes(nets)
+        lo_s, hi_s, _ = net_bounds(nets)
         root = np.concatenate([sr, cr])
         order = np.argsort(root, kind="stable")
         P = self.parts

@@ -1,4 +1,4 @@
-"""Regular Catmull-Clark patches as bicubic B-splines: control grids, Bezier nets, exact grids.
+"""Regular Catmull-Clark patches as bicubic B-splines: control grids, Bezier nets, bounds.
 
 A quad of the patch level whose four corners are smooth, valence 4 and crease-free is a
 uniform bicubic B-spline patch of the 16 points around it (the same test and the same
@@ -11,17 +11,16 @@ control grid as the exact evaluator, :mod:`subtrace.patches.evaluate`). For such
   in the net's convex hull, so the net's box is a containing shell much tighter than the box
   of the 16 B-spline points (design invariant 2), and the partial derivatives are Bezier
   patches with control points ``3 (b[i+1, j] - b[i, j])`` (resp. ``j``), so
-  :func:`derivative_bounds` bounds ``|dP/du|`` and ``|dP/dv|`` over the whole patch: a grid
-  cell at depth ``n`` has sides no longer than ``bound * 2^-n`` (the refinement criterion,
-  design invariant 3);
-* :func:`eval_grids` evaluates the exact limit points and normals on a depth-``n`` grid by
-  the tensor-product basis, instead of refining ``n`` levels.
+  :func:`net_bounds` gives the box and a bound on ``|dP/du|`` and ``|dP/dv|`` over the whole
+  patch: a grid cell at depth ``n`` has sides no longer than ``bound * 2^-n`` (the refinement
+  criterion, design invariant 3).
+
+The renderer evaluates the nets themselves (``trace/bezier.py``).
 """
 
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 
 import numba as nb
 import numpy as np
@@ -119,22 +118,15 @@ def _to_bezier(cv, M, out):
                                        + M[b, 2] * tmp[a, 2, k] + M[b, 3] * tmp[a, 3, k])
 
 
-def hull_boxes(bez: np.ndarray):
-    """Axis-aligned boxes (lo, hi), each (m,3), of Bezier nets: they contain the patches."""
+def net_bounds(bez: np.ndarray):
+    """``(lo, hi, bound)`` of Bezier nets (m,4,4,3): their boxes (each (m,3)), which contain
+    the patches, and (m,) a bound on |dP/du| and |dP/dv| over each patch (the largest
+    control point of the derivative nets)."""
     lo = np.empty((len(bez), 3))
     hi = np.empty((len(bez), 3))
     bound = np.empty(len(bez))
     _net_summary(np.ascontiguousarray(bez), lo, hi, bound)
-    return lo, hi
-
-
-def derivative_bounds(bez: np.ndarray) -> np.ndarray:
-    """(m,) bound on |dP/du| and |dP/dv| over each patch (max of the derivative nets)."""
-    lo = np.empty((len(bez), 3))
-    hi = np.empty((len(bez), 3))
-    bound = np.empty(len(bez))
-    _net_summary(np.ascontiguousarray(bez), lo, hi, bound)
-    return bound
+    return lo, hi, bound
 
 
 @nb.njit(cache=True)
@@ -162,33 +154,3 @@ def _net_summary(bez, lo, hi, bound):
                     dz = bez[m, a, b + 1, 2] - bez[m, a, b, 2]
                     best = max(best, math.sqrt(dx * dx + dy * dy + dz * dz))
         bound[m] = 3.0 * best
-
-
-@lru_cache(maxsize=None)
-def _basis(depth: int):
-    """B-spline basis (N+1,4) and its derivative at t = i/N, N = 2^depth."""
-    t = np.arange((1 << depth) + 1, dtype=np.float64) / (1 << depth)
-    s = 1.0 - t
-    b = np.stack([s**3, 3 * t**3 - 6 * t**2 + 4, -3 * t**3 + 3 * t**2 + 3 * t + 1, t**3], 1) / 6
-    d = np.stack([-(s**2), 3 * t**2 - 4 * t, -3 * t**2 + 2 * t + 1, t**2], 1) / 2
-    return b, d
-
-
-def eval_grids(cv: np.ndarray, depth: int):
-    """Exact limit points and unit normals (each (m, G, 3), G = (2^depth+1)^2) of regular
-    patches with control grids ``cv`` (m,4,4,3), point (i, j) at index ``i + j (N+1)``.
-    A normal the derivatives leave undefined (a degenerate patch) is NaN."""
-    b, d = _basis(depth)
-    m = len(cv)
-    n1 = len(b)
-    # contract v first (index j, major), then u (index i)
-    Bv = np.einsum("jb,mabk->mjak", b, cv, optimize=True)
-    Dv = np.einsum("jb,mabk->mjak", d, cv, optimize=True)
-    P = np.einsum("ia,mjak->mjik", b, Bv, optimize=True).reshape(m, n1 * n1, 3)
-    Pu = np.einsum("ia,mjak->mjik", d, Bv, optimize=True).reshape(m, n1 * n1, 3)
-    Pv = np.einsum("ia,mjak->mjik", b, Dv, optimize=True).reshape(m, n1 * n1, 3)
-    N = np.cross(Pu, Pv)
-    length = np.linalg.norm(N, axis=-1, keepdims=True)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        N = np.where(length > 0, N / length, np.nan)
-    return P, N

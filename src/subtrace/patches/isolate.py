@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .bspline import bezier_nets, control_grids, derivative_bounds, hull_boxes, regular_mask
+from .bspline import bezier_nets, control_grids, net_bounds, regular_mask
 
 # The control-edge bound of a cell at an extraordinary vertex is not a proven bound (measured
 # up to 0.8 % short on Spot); irregular cells stop refining only with this much to spare.
@@ -73,8 +73,8 @@ def isolated_depths(obj, faces, cap, eye, tol_rad):
         kid_root = np.repeat(root, 4)
         if reg.any():
             bez = bezier_nets(cur_pts[control_grids(cur, kids[reg])])
-            lo, hi = hull_boxes(bez)
-            n = _levels_needed(derivative_bounds(bez), box_distance(lo, hi, eye), tol_rad)
+            lo, hi, bound = net_bounds(bez)
+            n = _levels_needed(bound, box_distance(lo, hi, eye), tol_rad)
             np.maximum.at(need, kid_root[reg], k + n.astype(np.int64))
         irr = np.nonzero(~reg)[0]
         smin = np.empty((len(irr), 3))

@@ -1,8 +1,9 @@
 """The patch table: every face of the patch level L0 of every object, with its bounding shell.
 
 A patch is a face of level ``L0`` (Catmull-Clark: level 1, where all faces are quads; Loop:
-the cage). The renderer refines patches into grids of exact limit points
-(:mod:`subtrace.patches.grids`) on demand. Per patch, flat arrays (P = number of patches):
+the cage). The renderer intersects regular patches through their Bezier nets, splits
+irregular Catmull-Clark patches into pieces (:mod:`subtrace.patches.isolate`) and refines
+Loop patches into grids of exact limit points (:mod:`subtrace.patches.grids`), on demand. Per patch, flat arrays (P = number of patches):
 
 * ``object_id``, ``face`` (face of the object's L0 level), ``ptex`` with ``ptex_uv0`` (P,2)
   and ``ptex_scale``: patch parameter ``(s, t)`` is ptex ``uv0 + scale * (s, t)``;
@@ -16,6 +17,9 @@ the cage). The renderer refines patches into grids of exact limit points
   control edges shrink per level near the patch's corners (1/2 for regular vertices, the
   subdominant eigenvalue near extraordinary ones); together they bound the size of a grid
   cell at depth n by ``edge_bound * rate^n`` (the refinement criterion);
+* ``regular`` (P,) bool and ``nets`` (R,4,4,3): the Bezier nets of the regular bicubic
+  patches (:mod:`subtrace.patches.bspline`), in patch order. For those, the shell is the
+  net's box, ``edge_bound`` the exact bound on the derivatives and ``rate`` 1/2;
 * ``edges`` (P,4) int64 (-1 pads triangles): global id of the L0 edge on each side (side k joins corners k, k+1),
   used to give both patches of an edge the same sampling.
 """
@@ -31,7 +35,7 @@ import numpy as np
 from .. import config
 from ..patches.evaluate import ptex_layout
 from ..subdiv import catmark, loop
-from .bspline import bezier_nets, control_grids, derivative_bounds, hull_boxes, regular_mask
+from .bspline import bezier_nets, control_grids, net_bounds, regular_mask
 from .isolate import box_distance, isolated_depths
 
 # ptex offset of the child at corner j of a regular face (quads keep the parent's orientation)
@@ -64,9 +68,7 @@ class PatchTable:
     edge_bound: np.ndarray  # (P,) float64
     rate: np.ndarray  # (P,) float64
     regular: np.ndarray  # (P,) bool: a regular bicubic patch
-    reg_index: np.ndarray  # (P,) int64 row of a regular patch in ``nets`` (-1: not regular)
-    nets: np.ndarray  # (R,4,4,3) float64 Bezier nets of the regular patches
-    control: np.ndarray  # (P,16) int64 its B-spline control points in L0 ([u][v]; -1: not regular)
+    nets: np.ndarray  # (R,4,4,3) float64 Bezier nets of the regular patches, in patch order
     edges: np.ndarray  # (P,4) int64 global L0 edge ids (-1 pads a triangle's 4th side)
     is_quad: np.ndarray  # (P,) bool: Catmull-Clark quad (else Loop triangle)
     n_edges: int
@@ -97,12 +99,8 @@ def build_patch_table(cages) -> PatchTable:
         parts.append(_object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad))
         first_patch += len(faces)
         first_edge += lev.n_edges
-    cat = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-    regular = cat["regular"]
-    reg_index = np.full(len(regular), -1, dtype=np.int64)
-    reg_index[regular] = np.arange(int(regular.sum()))
-    cat["nets"] = np.ascontiguousarray(cat["nets"])  # concatenated in patch order
-    return PatchTable(objects=tuple(objs), n_edges=first_edge, reg_index=reg_index, **cat)
+    cat = {k: np.ascontiguousarray(np.concatenate([p[k] for p in parts])) for k in parts[0]}
+    return PatchTable(objects=tuple(objs), n_edges=first_edge, **cat)
 
 
 def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
@@ -145,15 +143,9 @@ def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
     rate = _subdominant(valence, quad)
     # regular quads: bicubic patches with a tight hull and an exact derivative bound
     regular = regular_mask(lev, cage.options, faces)
-    control = np.full((n, 16), -1, dtype=np.int64)
-    nets = np.zeros((0, 4, 4, 3))
-    if regular.any():
-        cv = control_grids(lev, faces[regular])
-        control[regular] = cv.reshape(-1, 16)
-        nets = bez = bezier_nets(pts[cv])
-        smin[regular], smax[regular] = hull_boxes(bez)
-        ebound[regular] = derivative_bounds(bez)
-        rate[regular] = 0.5
+    nets = bezier_nets(pts[control_grids(lev, faces[regular])])
+    smin[regular], smax[regular], ebound[regular] = net_bounds(nets)
+    rate[regular] = 0.5
     edges = np.full((n, 4), -1, dtype=np.int64)
     edges[:, :k] = lev.face_edges[lev.face_offsets[faces][:, None] + np.arange(k)] + first_edge
     return dict(
@@ -167,7 +159,6 @@ def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
         edge_bound=ebound,
         rate=rate,
         regular=regular,
-        control=control,
         nets=nets,
         edges=edges,
         is_quad=np.full(n, quad, dtype=bool),
