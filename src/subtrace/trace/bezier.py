@@ -22,7 +22,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .prims import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, _tri
+from .prims import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, _tri, push_sorted, slab_bounds
 
 BOX_PAD = 1e-12
 MAX_SIDE_SAMPLES = 256  # samples per cell side at most (2^(side depth - depth))
@@ -116,26 +116,8 @@ def _net_entry(ox, oy, oz, ix, iy, iz, net, s, tmax):
             lo1, hi1 = min(lo1, y), max(hi1, y)
             lo2, hi2 = min(lo2, z), max(hi2, z)
     pad = BOX_PAD * max(max(abs(lo0), abs(hi0)), max(max(abs(lo1), abs(hi1)), max(abs(lo2), abs(hi2))))
-    lo0 -= pad
-    lo1 -= pad
-    lo2 -= pad
-    hi0 += pad
-    hi1 += pad
-    hi2 += pad
-    t0 = (lo0 - ox) * ix
-    t1 = (hi0 - ox) * ix
-    tn, tf = min(t0, t1), max(t0, t1)
-    t0 = (lo1 - oy) * iy
-    t1 = (hi1 - oy) * iy
-    tn, tf = max(tn, min(t0, t1)), min(tf, max(t0, t1))
-    t0 = (lo2 - oz) * iz
-    t1 = (hi2 - oz) * iz
-    tn, tf = max(tn, min(t0, t1)), min(tf, max(t0, t1))
-    tf *= 1.0 + 6.7e-16
-    tn = max(tn, 0.0)
-    if tn <= tf and tn < tmax:
-        return tn
-    return np.inf
+    return slab_bounds(ox, oy, oz, ix, iy, iz, lo0 - pad, lo1 - pad, lo2 - pad, hi0 + pad,
+                       hi1 + pad, hi2 + pad, tmax)
 
 
 @nb.njit(cache=True, inline="always")
@@ -264,14 +246,7 @@ def intersect_bezier(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, net, depth,
         for q in range(4):
             te = _net_entry(ox, oy, oz, ix, iy, iz, work, base + q, hit[H_T])
             if te < np.inf:
-                m = n
-                while m > 0 and tmp_t[m - 1] < te:
-                    tmp_t[m] = tmp_t[m - 1]
-                    order[m] = order[m - 1]
-                    m -= 1
-                tmp_t[m] = te
-                order[m] = q
-                n += 1
+                n = push_sorted(tmp_t, order, n, te, q)
         for e in range(n):
             q = order[e]
             for a in range(4):

@@ -25,7 +25,10 @@ import numba as nb
 import numpy as np
 
 from .bezier import intersect_bezier, tri_pair
-from .prims import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, _shear, _slab, _tri, ray_setup  # noqa: F401
+from .prims import (  # noqa: F401  (HIT_FIELDS and H_* are re-exported for the driver)
+    H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, _shear, _slab, _tri, push_sorted,
+    ray_setup,
+)
 
 
 @nb.njit(cache=True)
@@ -77,15 +80,7 @@ def _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, slot_dept
             ci = 4 * idx + j
             te = _slab(ox, oy, oz, ix, iy, iz, node_lo, node_hi, lvl_off + ci, hit[H_T])
             if te < np.inf:
-                # insertion sort, descending entry distance
-                m = n
-                while m > 0 and ent_t[m - 1] < te:
-                    ent_t[m] = ent_t[m - 1]
-                    ent_i[m] = ent_i[m - 1]
-                    m -= 1
-                ent_t[m] = te
-                ent_i[m] = ci
-                n += 1
+                n = push_sorted(ent_t, ent_i, n, te, ci)
         for j in range(n):
             stack[sp] = (child_level << 40) | ent_i[j]
             sp += 1

@@ -14,22 +14,22 @@ HIT_FIELDS = 6
 
 
 @nb.njit(cache=True, inline="always")
-def _slab(ox, oy, oz, ix, iy, iz, lo, hi, k, tmax):
-    """Entry distance of the ray into box ``k`` of (lo, hi), or inf if it misses before tmax.
+def slab_bounds(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tmax):
+    """Entry distance of the ray into the box [lo, hi], or inf if it misses before tmax.
 
     Robust to direction components of zero (IEEE infinities in ``i*``); the far distance is
     widened by 1 + 2 gamma(3) as pbrt does, so a ray grazing a box is not lost to rounding.
     """
-    t0 = (lo[k, 0] - ox) * ix
-    t1 = (hi[k, 0] - ox) * ix
+    t0 = (lo0 - ox) * ix
+    t1 = (hi0 - ox) * ix
     tn = min(t0, t1)
     tf = max(t0, t1)
-    t0 = (lo[k, 1] - oy) * iy
-    t1 = (hi[k, 1] - oy) * iy
+    t0 = (lo1 - oy) * iy
+    t1 = (hi1 - oy) * iy
     tn = max(tn, min(t0, t1))
     tf = min(tf, max(t0, t1))
-    t0 = (lo[k, 2] - oz) * iz
-    t1 = (hi[k, 2] - oz) * iz
+    t0 = (lo2 - oz) * iz
+    t1 = (hi2 - oz) * iz
     tn = max(tn, min(t0, t1))
     tf = min(tf, max(t0, t1))
     tf *= 1.0 + 6.7e-16
@@ -37,6 +37,28 @@ def _slab(ox, oy, oz, ix, iy, iz, lo, hi, k, tmax):
     if tn <= tf and tn < tmax:
         return tn
     return np.inf
+
+
+@nb.njit(cache=True, inline="always")
+def _slab(ox, oy, oz, ix, iy, iz, lo, hi, k, tmax):
+    """Entry distance of the ray into box ``k`` of (lo, hi) (see :func:`slab_bounds`)."""
+    return slab_bounds(ox, oy, oz, ix, iy, iz, lo[k, 0], lo[k, 1], lo[k, 2], hi[k, 0],
+                       hi[k, 1], hi[k, 2], tmax)
+
+
+@nb.njit(cache=True, inline="always")
+def push_sorted(ent_t, ent_i, n, te, item):
+    """Insert ``item`` with entry distance ``te`` into the first ``n`` entries of
+    (ent_t, ent_i), kept in descending distance (so pushing them in order puts the nearest
+    on top of a stack); returns the new count."""
+    m = n
+    while m > 0 and ent_t[m - 1] < te:
+        ent_t[m] = ent_t[m - 1]
+        ent_i[m] = ent_i[m - 1]
+        m -= 1
+    ent_t[m] = te
+    ent_i[m] = item
+    return n + 1
 
 
 @nb.njit(cache=True, inline="always")
