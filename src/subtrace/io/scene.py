@@ -322,19 +322,13 @@ def _objects(ctx, d: dict, base_dir: str) -> tuple[SceneObject, ...]:
             ("object",),
             "the scene has no objects: add an [[object]] table with mesh = \"model.obj\"",
         )
-    tables = ctx.table_list(("object",), raw, "[[object]]")
+    tables = ctx.array_tables(
+        "object", raw, _OBJECT_KEYS, "mesh",
+        "mesh = \"file.obj\" (a path relative to the scene file's folder)")
     if not tables:
         raise ctx.error(("object",), "the scene has no objects: add at least one [[object]]")
     objects = []
-    for i, table in enumerate(tables):
-        where = ("object", i) if isinstance(raw, list) else ("object",)
-        ctx.check_keys(where, table, _OBJECT_KEYS)
-        if "mesh" not in table:
-            raise ctx.error(
-                where,
-                "missing key mesh: every [[object]] needs mesh = \"file.obj\" (a path "
-                "relative to the scene file's folder)",
-            )
+    for where, table in tables:
         mesh = _mesh_path(ctx, where + ("mesh",), table["mesh"], base_dir)
         scheme = boundary = color = None
         if "scheme" in table:
@@ -408,15 +402,10 @@ def _render(ctx, table) -> RenderSettings:
 
 def _lights(ctx, raw) -> tuple[Light, ...]:
     lights = []
-    for i, table in enumerate(ctx.table_list(("light",), raw, "[[light]]")):
-        where = ("light", i) if isinstance(raw, list) else ("light",)
-        ctx.check_keys(where, table, _LIGHT_KEYS)
-        if "direction" not in table:
-            raise ctx.error(
-                where,
-                "missing key direction: every [[light]] needs direction = [x, y, z] (the "
-                "direction the light travels)",
-            )
+    for where, table in ctx.array_tables(
+        "light", raw, _LIGHT_KEYS, "direction",
+        "direction = [x, y, z] (the direction the light travels)",
+    ):
         direction = ctx.call(where + ("direction",), check_vector, table["direction"], "")
         norm = math.sqrt(sum(c * c for c in direction))
         if norm == 0.0:
@@ -559,6 +548,19 @@ class _Context:
         if not isinstance(value, list) or not all(isinstance(t, dict) for t in value):
             raise self.error(keypath, f"expected {name} tables, got {_show(value)}")
         return value
+
+    def array_tables(self, name: str, value, allowed, required: str, hint: str) -> list:
+        """``(keypath, table)`` for each table of the array ``[[name]]``: unknown keys are
+        refused and each must have ``required`` (``hint`` says what it holds)."""
+        out = []
+        for i, table in enumerate(self.table_list((name,), value, f"[[{name}]]")):
+            where = (name, i) if isinstance(value, list) else (name,)
+            self.check_keys(where, table, allowed)
+            if required not in table:
+                raise self.error(
+                    where, f"missing key {required}: every [[{name}]] needs {hint}")
+            out.append((where, table))
+        return out
 
     def check_keys(self, keypath, table: dict, allowed) -> None:
         for key in table:
