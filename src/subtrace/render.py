@@ -97,57 +97,69 @@ def _side_indices(depth: int, quad: bool) -> np.ndarray:
     return np.stack([t, row(t) + (N - t), row(N - t)])
 
 
-class _Pools:
-    """Growable pools of grid points, normals and quadtree boxes of built patches, and the
-    per-slot tables. Storage grows by doubling, so appending a round's grids copies each
-    element O(1) times; the attributes are views of the filled part."""
+class _Growable:
+    """Named arrays in groups that grow together (a group's arrays have one length). Storage
+    grows by doubling, so appending round after round copies each element O(1) times;
+    ``self.a[name]`` is a view of the filled part (a kernel's writes into it persist)."""
 
-    _ROWS = {"verts": ((3,), np.float64), "normals": ((3,), np.float32)}
-    _NODES = {"node_lo": ((3,), np.float64), "node_hi": ((3,), np.float64)}
-    _SLOTS = {"slot_patch": np.int64, "slot_depth": np.int64, "slot_quad": np.bool_,
-              "slot_vert_off": np.int64, "slot_node_off": np.int64, "slot_round": np.int64}
+    GROUPS: dict = {}  # group -> {name: (trailing shape, dtype)}
 
     def __init__(self):
         self._store = {}
-        self._used = {"rows": 0, "nodes": 0, "slots": 0}
-        for name, (shape, dtype) in {**self._ROWS, **self._NODES}.items():
-            self._store[name] = np.zeros((0, *shape), dtype=dtype)
-        for name, dtype in self._SLOTS.items():
-            self._store[name] = np.zeros(0, dtype=dtype)
+        self._used = {}
+        for group, names in self.GROUPS.items():
+            self._used[group] = 0
+            for name, (shape, dtype) in names.items():
+                self._store[name] = np.zeros((0, *shape), dtype=dtype)
         self._refresh()
 
     def _refresh(self):
-        for group, names in (("rows", self._ROWS), ("nodes", self._NODES), ("slots", self._SLOTS)):
-            for name in names:
-                setattr(self, name, self._store[name][: self._used[group]])
+        self.a = {name: self._store[name][: self._used[group]]
+                  for group, names in self.GROUPS.items() for name in names}
 
-    def _put(self, group, names, values):
+    def _put(self, group, **values):
+        """Append rows to every array of ``group``; returns the first new row."""
         start = self._used[group]
-        end = start + len(values[0])
-        for name, value in zip(names, values):
+        end = start + len(next(iter(values.values())))
+        for name in self.GROUPS[group]:
             buf = self._store[name]
             if end > len(buf):
-                grown = np.empty((max(end, 2 * len(buf)), *buf.shape[1:]), dtype=buf.dtype)
+                grown = np.zeros((max(end, 2 * len(buf)), *buf.shape[1:]), dtype=buf.dtype)
                 grown[:start] = buf[:start]
                 self._store[name] = buf = grown
-            buf[start:end] = value
+            if name in values:
+                buf[start:end] = values[name]
         self._used[group] = end
+        self._refresh()
         return start
+
+
+class _Pools(_Growable):
+    """Grid points, normals and quadtree boxes of built Loop patches, and their slots."""
+
+    GROUPS = {
+        "rows": {"verts": ((3,), np.float64), "normals": ((3,), np.float32)},
+        "nodes": {"node_lo": ((3,), np.float64), "node_hi": ((3,), np.float64)},
+        "slots": {"slot_patch": ((), np.int64), "slot_depth": ((), np.int64),
+                  "slot_quad": ((), np.bool_), "slot_vert_off": ((), np.int64),
+                  "slot_node_off": ((), np.int64), "slot_round": ((), np.int64)},
+    }
+
+    def __init__(self, n_patches):
+        super().__init__()
+        self.patch_slot = np.full(n_patches, -1, dtype=np.int64)
 
     def append(self, patches, depth, quad, P, N, lo, hi, round_no):
         m = len(patches)
         G = P.shape[1]
         K = lo.shape[1]
-        v0 = self._put("rows", ("verts", "normals"), (P.reshape(-1, 3), N.reshape(-1, 3)))
-        n0 = self._put("nodes", ("node_lo", "node_hi"), (lo.reshape(-1, 3), hi.reshape(-1, 3)))
+        v0 = self._put("rows", verts=P.reshape(-1, 3), normals=N.reshape(-1, 3))
+        n0 = self._put("nodes", node_lo=lo.reshape(-1, 3), node_hi=hi.reshape(-1, 3))
         ar = np.arange(m, dtype=np.int64)
-        self._put(
-            "slots",
-            tuple(self._SLOTS),
-            (patches, np.full(m, depth), np.full(m, quad), v0 + G * ar, n0 + K * ar,
-             np.full(m, round_no)),
-        )
-        self._refresh()
+        s0 = self._put("slots", slot_patch=patches, slot_depth=np.full(m, depth),
+                       slot_quad=np.full(m, quad), slot_vert_off=v0 + G * ar,
+                       slot_node_off=n0 + K * ar, slot_round=np.full(m, round_no))
+        self.patch_slot[patches] = s0 + ar
 
 
 # --------------------------------------------------------------------------------------
@@ -223,21 +235,28 @@ def _refine(table, requested, depths, edge_depth, pools, iso, round_no, stats):
 # --------------------------------------------------------------------------------------
 
 
-class _Pieces:
+class _Pieces(_Growable):
     """What the kernels intersect per ray, for every Catmull-Clark patch built so far, in the
     layout of ``trace_round``'s ``iso`` tuple: a *slot* per patch (grid depth, how its four
-    sides are sampled, the round it was built in) and its *items* (contiguous): regular
-    Bezier pieces over dyadic squares of the patch, and cells of exact limit points.
-    A regular patch is one item, ready from the start (round -1); an irregular patch is built
-    on request into pieces (``patches/isolate.py``)."""
+    sides are sampled, the round it was built in, whether a ray has tested it) and its
+    *items* (contiguous): regular Bezier pieces over dyadic squares of the patch, and cells
+    of exact limit points. A regular patch is one item, ready from the start (round -1); an
+    irregular patch is built on request into pieces (``patches/isolate.py``)."""
+
+    GROUPS = {
+        "slots": {"patch": ((), np.int64), "first": ((), np.int64), "count": ((), np.int64),
+                  "round": ((), np.int64), "depth": ((), np.int64), "side": ((4,), np.int64),
+                  "touched": ((), np.uint8)},
+        "items": {"kind": ((), np.int8), "ref": ((), np.int64), "level": ((), np.int64),
+                  "i0": ((), np.int64), "j0": ((), np.int64), "lo": ((3,), np.float64),
+                  "hi": ((3,), np.float64)},
+        "nets": {"nets": ((4, 4, 3), np.float64)},
+        "cells": {"cells": ((4, 3), np.float64), "normals": ((4, 3), np.float64)},
+    }
 
     def __init__(self, n_patches):
+        super().__init__()
         self.patch_iso = np.full(n_patches, -1, dtype=np.int64)
-        self.parts = {k: [] for k in ("first", "count", "round", "depth", "side", "kind", "ref",
-                                      "level", "i0", "j0", "lo", "hi", "nets", "cells",
-                                      "normals", "patch")}
-        self.n_items = self.n_nets = self.n_cells = self.n_slots = 0
-        self._pack()
 
     def append(self, patches, depth, side, subs, cells, round_no):
         """Slots for ``patches`` (grid depths ``depth`` (m,), side depths ``side`` (m,4)) made
@@ -246,52 +265,28 @@ class _Pieces:
         lo_s, hi_s, _ = net_bounds(nets)
         root = np.concatenate([sr, cr])
         order = np.argsort(root, kind="stable")
-        P = self.parts
-        P["kind"].append(np.r_[np.zeros(len(sr), np.int8), np.ones(len(cr), np.int8)][order])
-        P["ref"].append(np.r_[self.n_nets + np.arange(len(sr)),
-                              self.n_cells + np.arange(len(cr))][order].astype(np.int64))
-        P["level"].append(np.r_[sl, depth[cr]][order].astype(np.int64))
-        P["i0"].append(np.r_[si, ci][order].astype(np.int64))
-        P["j0"].append(np.r_[sj, cj][order].astype(np.int64))
-        P["lo"].append(np.concatenate([lo_s, cp.min(axis=1)])[order])
-        P["hi"].append(np.concatenate([hi_s, cp.max(axis=1)])[order])
-        P["nets"].append(nets)
-        P["cells"].append(cp)
-        P["normals"].append(cn)
+        n0 = self._put("nets", nets=nets)
+        c0 = self._put("cells", cells=cp, normals=cn)
+        i_start = self._put(
+            "items",
+            kind=np.r_[np.zeros(len(sr), np.int8), np.ones(len(cr), np.int8)][order],
+            ref=np.r_[n0 + np.arange(len(sr)), c0 + np.arange(len(cr))][order],
+            level=np.r_[sl, depth[cr]][order], i0=np.r_[si, ci][order],
+            j0=np.r_[sj, cj][order], lo=np.concatenate([lo_s, cp.min(axis=1)])[order],
+            hi=np.concatenate([hi_s, cp.max(axis=1)])[order],
+        )
         count = np.bincount(root, minlength=len(patches))
-        P["first"].append((self.n_items + np.cumsum(count) - count).astype(np.int64))
-        P["count"].append(count.astype(np.int64))
-        P["round"].append(np.full(len(patches), round_no, np.int64))
-        P["depth"].append(np.asarray(depth, dtype=np.int64))
-        P["side"].append(np.asarray(side, dtype=np.int64).reshape(-1, 4))
-        P["patch"].append(np.asarray(patches, dtype=np.int64))
-        self.patch_iso[patches] = self.n_slots + np.arange(len(patches))
-        self.n_slots += len(patches)
-        self.n_items += len(root)
-        self.n_nets += len(sr)
-        self.n_cells += len(cr)
-        self._pack()
+        s0 = self._put("slots", patch=patches, first=i_start + np.cumsum(count) - count,
+                       count=count, round=np.full(len(patches), round_no), depth=depth,
+                       side=np.asarray(side).reshape(-1, 4))
+        self.patch_iso[patches] = s0 + np.arange(len(patches))
         return len(sr), len(cr)
-
-    def _pack(self):
-        shapes = {"lo": (0, 3), "hi": (0, 3), "nets": (0, 4, 4, 3), "cells": (0, 4, 3),
-                  "normals": (0, 4, 3), "side": (0, 4)}
-        self.a = {}
-        for k, v in self.parts.items():
-            if v:
-                self.a[k] = np.ascontiguousarray(np.concatenate(v))
-            else:
-                dtype = np.int8 if k == "kind" else (np.int64 if k in ("side",) or k not in shapes else np.float64)
-                self.a[k] = np.zeros(shapes.get(k, (0,)), dtype=dtype)
-        old = getattr(self, "touched", np.zeros(0, dtype=np.uint8))
-        self.touched = np.zeros(self.n_slots, dtype=np.uint8)  # set when a ray tests a slot
-        self.touched[: len(old)] = old
 
     def kernel_tuple(self):
         a = self.a
         return (self.patch_iso, a["first"], a["count"], a["round"], a["depth"], a["side"],
                 a["kind"], a["ref"], a["level"], a["i0"], a["j0"], a["lo"], a["hi"],
-                a["nets"], a["cells"], self.touched)
+                a["nets"], a["cells"], a["touched"])
 
 
 def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
@@ -307,7 +302,7 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
     edge_depth, reg_side = edge_sampling(table, depths)
     tested = np.zeros(W * H, dtype=np.int64)
     tables = _LeafTables(int(depths.max(initial=0)))
-    pools = _Pools()
+    pools = _Pools(table.n_patches)
     iso = _Pieces(table.n_patches)
     reg = np.nonzero(table.regular)[0]
     none = np.zeros(0, np.int64)
@@ -316,7 +311,6 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
                (one, np.zeros(len(reg), np.int64), np.zeros(len(reg), np.int64),
                 np.zeros(len(reg), np.int64), table.nets),
                (none, none, none, np.zeros((0, 4, 3)), np.zeros((0, 4, 3))), -1)
-    patch_slot = np.full(table.n_patches, -1, dtype=np.int64)
     hits = np.zeros((W * H, HIT_FIELDS))
     hits[:, H_T] = np.inf
     hits[:, H_SLOT] = -1
@@ -325,12 +319,13 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
     round_no = 0
     while len(rays):
         t0 = time.perf_counter()
+        g = pools.a
         trace_round(
             rays, frame, W, round_no,
             bvh.node_min, bvh.node_max, bvh.node_first, bvh.node_count,
-            bvh.prims, table.shell_min, table.shell_max, patch_slot,
-            pools.slot_depth, pools.slot_vert_off, pools.slot_node_off, pools.slot_quad,
-            pools.slot_round, pools.verts, pools.node_lo, pools.node_hi,
+            bvh.prims, table.shell_min, table.shell_max, pools.patch_slot,
+            g["slot_depth"], g["slot_vert_off"], g["slot_node_off"], g["slot_quad"],
+            g["slot_round"], g["verts"], g["node_lo"], g["node_hi"],
             tables.lc_off, tables.lc_data, iso.kernel_tuple(), config.TRI_SLACK, hits, request,
             tested,
         )
@@ -342,18 +337,16 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
             break
         t0 = time.perf_counter()
         new = np.unique(req[asked])
-        first_slot = len(pools.slot_patch)
         _refine(table, new, depths, edge_depth, pools, iso, round_no, stats)
-        patch_slot[pools.slot_patch[first_slot:]] = np.arange(first_slot, len(pools.slot_patch))
         stats.time_refine += time.perf_counter() - t0
         round_no += 1
     stats.rounds = round_no + 1
     stats.micro_triangles += int(tested.sum())
     # regular patches count as refined once a ray has descended into them
-    direct = iso.a["patch"][(iso.a["round"] < 0) & (iso.touched > 0)]
+    direct = iso.a["patch"][(iso.a["round"] < 0) & (iso.a["touched"] > 0)]
     stats.patches_refined += len(direct)
-    stats.max_depth = int(max(pools.slot_depth.max(initial=0), iso.a["depth"].max(initial=0)))
-    built = np.concatenate([pools.slot_patch, iso.a["patch"][iso.a["round"] >= 0], direct])
+    stats.max_depth = int(max(pools.a["slot_depth"].max(initial=0), iso.a["depth"].max(initial=0)))
+    built = np.concatenate([pools.a["slot_patch"], iso.a["patch"][iso.a["round"] >= 0], direct])
     return hits, pools, iso, tables, built
 
 
@@ -439,12 +432,13 @@ def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult
         dtype=np.float64,
     ).reshape(-1, 6)
     headlight = np.array([scene.render.headlight_intensity if scene.render.headlight else 0.0])
+    g, q = pools.a, iso.a
     shade_kernel(
-        camera_frame(camera), W, hits, pools.slot_patch, pools.slot_depth, pools.slot_quad,
-        pools.slot_vert_off, pools.verts, pools.normals, tables.lc_off, tables.lc_data,
+        camera_frame(camera), W, hits, g["slot_patch"], g["slot_depth"], g["slot_quad"],
+        g["slot_vert_off"], g["verts"], g["normals"], tables.lc_off, tables.lc_data,
         tables.uv_off, tables.uv_data, table.object_id, table.ptex, table.ptex_uv0,
-        table.ptex_scale, table.level0, _patch_colors(table, scene), iso.a["kind"], iso.a["ref"], iso.a["level"], iso.a["i0"], iso.a["j0"],
-        iso.a["nets"], iso.a["normals"], iso.a["cells"], lights, headlight,
+        table.ptex_scale, table.level0, _patch_colors(table, scene), q["kind"], q["ref"],
+        q["level"], q["i0"], q["j0"], q["nets"], q["normals"], q["cells"], lights, headlight,
         np.asarray(scene.render.background, dtype=np.float64), rgba, nrm, level, patch,
         objid, uv,
     )
