@@ -1,11 +1,13 @@
 """Rendering: orchestration only (the maths lives in patches/, accel/, trace/, shade.py).
 
 ``render_scene(scene)`` loads the cages, builds the patch table and the BVH of patch shells,
-chooses each patch's grid depth from the angular tolerance, then runs rounds of
-``trace.kernels.trace_round``: after each round the patches that rays asked for are refined
-(their grids of exact limit points built, T-junctions with coarser neighbours snapped, the
-quadtree of boxes built) and the rays that asked are traced again. Patches no ray reaches
-before a closer hit are never refined. Finally ``shade.py`` turns hits into image channels.
+chooses each patch's grid depth from the angular tolerance and makes neighbours sample their
+shared edges alike, then runs rounds of ``trace.kernels.trace_round``. Regular Catmull-Clark
+patches are refined per ray inside the kernel (nothing stored). After each round the
+patches that rays asked for are built: irregular Catmull-Clark patches into Bezier pieces
+and cells (``_Pieces``), Loop patches into grids with snapped sides and quadtree boxes
+(``_Pools``). The rays that asked are then traced again. Patches no ray reaches before a
+closer hit are never refined. Finally ``shade.py`` turns hits into image channels.
 """
 
 from __future__ import annotations
