@@ -383,8 +383,7 @@ def _patch_colors(table, scene):
 
 def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult:
     """Render a :class:`subtrace.io.scene.Scene`; returns the channels and statistics."""
-    import numba
-
+    from . import tasks
     from .shade import shade_kernel
     from .trace.camera import camera_frame
 
@@ -392,11 +391,11 @@ def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult
     if threads is not None:
         from .errors import SceneError
 
-        n_max = numba.config.NUMBA_NUM_THREADS
+        n_max = tasks.max_threads()
         if not 1 <= int(threads) <= n_max:
             raise SceneError(f"expected a thread count from 1 to {n_max}, got {threads}",
                              key="--threads")
-        numba.set_num_threads(int(threads))
+    tasks.set_threads(threads)
     stats = RenderStats()
     if cages is None:
         cages = load_objects(scene)

@@ -19,82 +19,95 @@ from .trace.bezier import bez_derivatives
 from .trace.kernels import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, ray_setup
 
 
-@nb.njit(cache=True, parallel=True)
-def shade_kernel(frame, width, hits, slot_patch, slot_depth, slot_quad, slot_vert_off,
-                 verts, normals, lc_off, lc_data, uv_off, uv_data, patch_object, patch_ptex,
-                 patch_uv0, patch_scale, patch_level0, patch_color, item_kind,
-                 item_ref, item_level, item_i0, item_j0, item_nets, cell_normals, cells, lights,
-                 headlight, background, out_rgba, out_n, out_level, out_patch, out_object,
-                 out_uv):
-    """Fill the per-pixel outputs (flat over pixels) from ``hits``.
+def shade_kernel(*args):
+    """Fill the per-pixel outputs (flat over pixels) from ``hits``; the arguments are
+    :func:`_shade_task`'s after its first two (the pixels are shared among threads)."""
+    from .tasks import run_tasks
+
+    run_tasks(_shade_task, *args)
+
+
+SHADE_BLOCK = 1024  # consecutive pixels shaded together
+
+
+@nb.njit(cache=True, nogil=True)
+def _shade_task(task, n_tasks, frame, width, hits, slot_patch, slot_depth, slot_quad,
+                slot_vert_off, verts, normals, lc_off, lc_data, uv_off, uv_data, patch_object,
+                patch_ptex, patch_uv0, patch_scale, patch_level0, patch_color, item_kind,
+                item_ref, item_level, item_i0, item_j0, item_nets, cell_normals, cells, lights,
+                headlight, background, out_rgba, out_n, out_level, out_patch, out_object,
+                out_uv):
+    """Shade the blocks of pixels ``task, task + n_tasks, ...``.
 
     ``lights`` (L,6): direction the light travels (unit) and its colour times intensity.
     """
     n_pix = hits.shape[0]
-    for r in nb.prange(n_pix):
-        t = hits[r, H_T]
-        if not (t < np.inf):
-            out_rgba[r, 0] = background[0]
-            out_rgba[r, 1] = background[1]
-            out_rgba[r, 2] = background[2]
-            out_rgba[r, 3] = 0.0
-            out_n[r, :] = 0.0
-            out_level[r] = -1.0
-            out_patch[r] = -1.0
-            out_object[r] = -1.0
-            out_uv[r, :] = 0.0
-            continue
-        row = r // width
-        col = r - row * width
-        dx, dy, dz = ray_setup(frame, row, col)
-        s = np.int64(hits[r, H_SLOT])
-        if s < 0:
-            # a Catmull-Clark patch: H_TRI is the piece hit, (B1, B2) the patch parameter
-            p = -s - 2
-            u = hits[r, H_B1]
-            v = hits[r, H_B2]
-            depth = np.int64(hits[r, H_LEAF])
-            it = np.int64(hits[r, H_TRI])
-            if item_kind[it] == 0:
-                # a Bezier piece over a dyadic square of the patch (the whole of a regular one)
-                sc = 1 << item_level[it]
-                nx, ny, nz = _bezier_normal(item_nets[item_ref[it]], u * sc - item_i0[it],
-                                            v * sc - item_j0[it])
+    n_blocks = (n_pix + SHADE_BLOCK - 1) // SHADE_BLOCK
+    for blk in range(task, n_blocks, n_tasks):
+        for r in range(blk * SHADE_BLOCK, min(n_pix, (blk + 1) * SHADE_BLOCK)):
+            t = hits[r, H_T]
+            if not (t < np.inf):
+                out_rgba[r, 0] = background[0]
+                out_rgba[r, 1] = background[1]
+                out_rgba[r, 2] = background[2]
+                out_rgba[r, 3] = 0.0
+                out_n[r, :] = 0.0
+                out_level[r] = -1.0
+                out_patch[r] = -1.0
+                out_object[r] = -1.0
+                out_uv[r, :] = 0.0
+                continue
+            row = r // width
+            col = r - row * width
+            dx, dy, dz = ray_setup(frame, row, col)
+            s = np.int64(hits[r, H_SLOT])
+            if s < 0:
+                # a Catmull-Clark patch: H_TRI is the piece hit, (B1, B2) the patch parameter
+                p = -s - 2
+                u = hits[r, H_B1]
+                v = hits[r, H_B2]
+                depth = np.int64(hits[r, H_LEAF])
+                it = np.int64(hits[r, H_TRI])
+                if item_kind[it] == 0:
+                    # a Bezier piece over a dyadic square of the patch (the whole of a regular one)
+                    sc = 1 << item_level[it]
+                    nx, ny, nz = _bezier_normal(item_nets[item_ref[it]], u * sc - item_i0[it],
+                                                v * sc - item_j0[it])
+                else:
+                    nx, ny, nz = _cell_normal(cells[item_ref[it]], cell_normals[item_ref[it]],
+                                              u * (1 << depth) - item_i0[it],
+                                              v * (1 << depth) - item_j0[it])
             else:
-                nx, ny, nz = _cell_normal(cells[item_ref[it]], cell_normals[item_ref[it]],
-                                          u * (1 << depth) - item_i0[it],
-                                          v * (1 << depth) - item_j0[it])
-        else:
-            nx, ny, nz, u, v, depth, p = _grid_normal(
-                hits[r], s, slot_patch, slot_depth, slot_quad, slot_vert_off, verts, normals,
-                lc_off, lc_data, uv_off, uv_data)
-        out_n[r, 0] = nx
-        out_n[r, 1] = ny
-        out_n[r, 2] = nz
-        out_uv[r, 0] = patch_uv0[p, 0] + patch_scale[p] * u
-        out_uv[r, 1] = patch_uv0[p, 1] + patch_scale[p] * v
-        out_level[r] = patch_level0[p] + depth
-        out_patch[r] = patch_ptex[p]
-        out_object[r] = patch_object[p]
-        # two-sided Lambert: headlight plus directional lights
-        sgn = -1.0 if nx * dx + ny * dy + nz * dz > 0.0 else 1.0
-        fx, fy, fz = sgn * nx, sgn * ny, sgn * nz
-        lr = lg = lb = 0.0
-        if headlight[0] > 0.0:
-            c = -(fx * dx + fy * dy + fz * dz) * headlight[0]
-            lr += c
-            lg += c
-            lb += c
-        for k in range(lights.shape[0]):
-            c = -(fx * lights[k, 0] + fy * lights[k, 1] + fz * lights[k, 2])
-            if c > 0.0:
-                lr += c * lights[k, 3]
-                lg += c * lights[k, 4]
-                lb += c * lights[k, 5]
-        out_rgba[r, 0] = patch_color[p, 0] * lr
-        out_rgba[r, 1] = patch_color[p, 1] * lg
-        out_rgba[r, 2] = patch_color[p, 2] * lb
-        out_rgba[r, 3] = 1.0
+                nx, ny, nz, u, v, depth, p = _grid_normal(
+                    hits[r], s, slot_patch, slot_depth, slot_quad, slot_vert_off, verts, normals,
+                    lc_off, lc_data, uv_off, uv_data)
+            out_n[r, 0] = nx
+            out_n[r, 1] = ny
+            out_n[r, 2] = nz
+            out_uv[r, 0] = patch_uv0[p, 0] + patch_scale[p] * u
+            out_uv[r, 1] = patch_uv0[p, 1] + patch_scale[p] * v
+            out_level[r] = patch_level0[p] + depth
+            out_patch[r] = patch_ptex[p]
+            out_object[r] = patch_object[p]
+            # two-sided Lambert: headlight plus directional lights
+            sgn = -1.0 if nx * dx + ny * dy + nz * dz > 0.0 else 1.0
+            fx, fy, fz = sgn * nx, sgn * ny, sgn * nz
+            lr = lg = lb = 0.0
+            if headlight[0] > 0.0:
+                c = -(fx * dx + fy * dy + fz * dz) * headlight[0]
+                lr += c
+                lg += c
+                lb += c
+            for k in range(lights.shape[0]):
+                c = -(fx * lights[k, 0] + fy * lights[k, 1] + fz * lights[k, 2])
+                if c > 0.0:
+                    lr += c * lights[k, 3]
+                    lg += c * lights[k, 4]
+                    lb += c * lights[k, 5]
+            out_rgba[r, 0] = patch_color[p, 0] * lr
+            out_rgba[r, 1] = patch_color[p, 1] * lg
+            out_rgba[r, 2] = patch_color[p, 2] * lb
+            out_rgba[r, 3] = 1.0
 
 
 @nb.njit(cache=True)

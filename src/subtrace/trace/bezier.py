@@ -28,7 +28,7 @@ BOX_PAD = 1e-12
 MAX_SIDE_SAMPLES = 256  # samples per cell side at most (2^(side depth - depth))
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _bez_point(net, u, v):
     """Point of the Bezier patch ``net`` (4,4,3) at (u, v): one code path for every caller."""
     su = 1.0 - u
@@ -70,7 +70,7 @@ def bez_derivatives(net, u, v):
     return (ux, uy, uz), (vx, vy, vz)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _split_row(a, b, c, d):
     ab = 0.5 * (a + b)
     bc = 0.5 * (b + c)
@@ -81,7 +81,7 @@ def _split_row(a, b, c, d):
     return ab, abc, m, bcd, cd
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _split(w, s, d0):
     """Write the four child nets of net ``w[s]`` into ``w[d0 .. d0+3]`` (child ``cu + 2 cv``
     covers the half cu in u and cv in v), using ``w[d0-2]``, ``w[d0-1]`` as scratch."""
@@ -104,7 +104,7 @@ def _split(w, s, d0):
                 w[hi, a, 0, k], w[hi, a, 1, k], w[hi, a, 2, k], w[hi, a, 3, k] = m, bcd, cd, p3
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _net_entry(ox, oy, oz, ix, iy, iz, net, s, tmax):
     """Entry distance of the ray into the (padded) box of net ``net[s]``; inf on a miss."""
     lo0 = lo1 = lo2 = np.inf
@@ -120,7 +120,7 @@ def _net_entry(ox, oy, oz, ix, iy, iz, net, s, tmax):
                        hi1 + pad, hi2 + pad, tmax)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, net, i, j, depth, oi, oj, root_depth,
           side_depth, slack, hit, code, item, lv, lp):
     """Intersect cell (i, j) of the depth-``depth`` grid of Bezier net ``net``, which covers
@@ -189,7 +189,7 @@ def _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, net, i, j, depth, oi, oj, root_dep
     return n
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _record(hit, t, code, item, depth, lp, a, b, c, ba, bb, bc):
     hit[H_T] = t
     hit[H_SLOT] = code
@@ -199,7 +199,7 @@ def _record(hit, t, code, item, depth, lp, a, b, c, ba, bb, bc):
     hit[H_B2] = ba * lp[a, 1] + bb * lp[b, 1] + bc * lp[c, 1]
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, lp, slack, hit, code, item, depth):
     """The two triangles (0,1,2), (0,2,3) of the cell ``lv[:4]`` (parameters ``lp``)."""
     o = (ox, oy, oz)

@@ -117,10 +117,8 @@ def _intersect_isolated(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, p, s, is
 
 
 RAYS_PER_BLOCK = 64  # consecutive rays traced together
-N_TASKS = 64  # parallel tasks; task t takes blocks t, t + N_TASKS, ... (balanced over the image)
 
 
-@nb.njit(cache=True, parallel=True)
 def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_count, prims,
                 shell_min, shell_max, patch_slot, slot_depth, slot_vert_off, slot_node_off,
                 slot_quad, slot_round, verts, node_lo, node_hi, lc_off, lc_data, iso, slack,
@@ -134,24 +132,20 @@ def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_c
     depths (S,4); per item: kind (0: Bezier piece, 1: cell), row in the nets / cells, level,
     origin i0, j0 in units of 2^-level, box lo, hi (I,3); the Bezier nets (.,4,4,3), the
     cells' corners (.,4,3); and a per-slot flag set when a ray tests it). Loop patches are
-    grids in the pools. ``tested[r]`` counts the micro-triangles built for ray r.
+    grids in the pools. ``tested[r]`` counts the micro-triangles built for ray r. The rays
+    are shared among threads in interleaved blocks (``tasks.run_tasks``).
     """
-    ox, oy, oz = frame[0, 0], frame[0, 1], frame[0, 2]
-    n_rays = len(rays)
-    n_blocks = (n_rays + RAYS_PER_BLOCK - 1) // RAYS_PER_BLOCK
-    n_tasks = min(N_TASKS, n_blocks)
-    max_d = 0
-    for k in range(len(iso[4])):
-        max_d = max(max_d, iso[4][k])
-    for task in nb.prange(n_tasks):
-        _trace_task(task, n_tasks, max_d,
-                    rays, ox, oy, oz, frame, width, round_no, bvh_min, bvh_max, bvh_first,
-                    bvh_count, prims, shell_min, shell_max, patch_slot, slot_depth,
-                    slot_vert_off, slot_node_off, slot_quad, slot_round, verts, node_lo,
-                    node_hi, lc_off, lc_data, iso, slack, hits, request, tested)
+    from ..tasks import run_tasks
+
+    max_d = int(iso[4].max(initial=0))
+    run_tasks(_trace_task, max_d, rays, float(frame[0, 0]), float(frame[0, 1]),
+              float(frame[0, 2]), frame, int(width), int(round_no), bvh_min, bvh_max,
+              bvh_first, bvh_count, prims, shell_min, shell_max, patch_slot, slot_depth,
+              slot_vert_off, slot_node_off, slot_quad, slot_round, verts, node_lo, node_hi,
+              lc_off, lc_data, iso, float(slack), hits, request, tested)
 
 
-@nb.njit(cache=True, error_model="numpy")  # 1/0 -> inf for axis-parallel rays
+@nb.njit(cache=True, nogil=True, error_model="numpy")  # 1/0 -> inf for axis-parallel rays
 def _trace_task(task, n_tasks, max_d, rays, ox, oy, oz, frame, width, round_no, bvh_min, bvh_max,
                 bvh_first, bvh_count, prims, shell_min, shell_max, patch_slot, slot_depth,
                 slot_vert_off, slot_node_off, slot_quad, slot_round, verts, node_lo, node_hi,

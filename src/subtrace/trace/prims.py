@@ -13,7 +13,7 @@ H_T, H_SLOT, H_LEAF, H_TRI, H_B1, H_B2 = range(6)
 HIT_FIELDS = 6
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def slab_bounds(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tmax):
     """Entry distance of the ray into the box [lo, hi], or inf if it misses before tmax.
 
@@ -39,14 +39,14 @@ def slab_bounds(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tmax):
     return np.inf
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _slab(ox, oy, oz, ix, iy, iz, lo, hi, k, tmax):
     """Entry distance of the ray into box ``k`` of (lo, hi) (see :func:`slab_bounds`)."""
     return slab_bounds(ox, oy, oz, ix, iy, iz, lo[k, 0], lo[k, 1], lo[k, 2], hi[k, 0],
                        hi[k, 1], hi[k, 2], tmax)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def push_sorted(ent_t, ent_i, n, te, item):
     """Insert ``item`` with entry distance ``te`` into the first ``n`` entries of
     (ent_t, ent_i), kept in descending distance (so pushing them in order puts the nearest
@@ -61,7 +61,7 @@ def push_sorted(ent_t, ent_i, n, te, item):
     return n + 1
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _tri(ox, oy, oz, kx, ky, kz, sx, sy, sz, a, b, c, verts, tmax, slack):
     """Watertight ray / triangle test (Woop, Benthin and Wald 2013) on vertices ``a, b, c``
     of ``verts``; ``ox, oy, oz`` is the ray origin's (kx, ky, kz) components. Returns (t, b_a, b_b, b_c) with t = inf on a miss. Edge functions of a
@@ -95,7 +95,7 @@ def _tri(ox, oy, oz, kx, ky, kz, sx, sy, sz, a, b, c, verts, tmax, slack):
     return t, u / det, v / det, w / det
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def ray_setup(frame, row, col):
     """Unit direction of the ray through the centre of pixel (row, col)."""
     dx = frame[3, 0] + col * frame[1, 0] + row * frame[2, 0]
