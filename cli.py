@@ -13,6 +13,6 @@ except ModuleNotFoundError as exc:
         raise
     sys.path.insert(0, str(Path(__file__).resolve().parent / "src"))
 
-from subtrace.cli import main
+from subtrace.cli import run
 
-raise SystemExit(main())
+run()

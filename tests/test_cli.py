@@ -292,3 +292,17 @@ def test_launcher_subprocess_info():
     assert proc.returncode == 0, proc.stderr
     assert re.search(r"^faces:\s+180$", proc.stdout, re.M), proc.stdout
     assert "Traceback" not in proc.stderr
+
+
+def test_launcher_subprocess_render(tmp_path):
+    # the launcher ends the process itself (cli.run): the EXR must be complete, the exit
+    # code and the report on stdout (a pipe, so block-buffered) must arrive
+    out = tmp_path / "tiny.exr"
+    proc = _launcher("render", sample_cage_path(), "-o", out,
+                     "--width", "16", "--height", "8")
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith(f"{out}: 16x8"), proc.stdout
+    from subtrace.io.exr import read_exr
+
+    channels, _ = read_exr(out)
+    assert channels["R"].shape == (8, 16)

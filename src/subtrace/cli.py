@@ -6,11 +6,16 @@ stderr and exit code 2, with no traceback; argparse usage errors exit 2 as well.
 This module imports only argparse at the top; the cage, subdivision and limit code are
 imported by the subcommand that needs them. (``import subtrace`` itself loads numpy and
 Numba, about 0.3 s, which ``subtrace --help`` still pays.)
+
+:func:`run` is the process entry point (``cli.py``, ``python -m subtrace.cli``, the
+``subtrace`` script); it trims two fixed costs of a short process that :func:`main`, which
+tests call in-process, leaves alone: see :func:`_start_numba` and :func:`_exit_now`.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 PROG = "subtrace"
@@ -99,13 +104,23 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv=None) -> int:
-    """Run the command line; returns the exit code (0 ok, 2 bad input or usage)."""
+def run(argv=None):
+    """Run the command line as the whole process: :func:`main`, then exit with its code."""
+    _exit_now(main(argv, own_process=True))
+
+
+def main(argv=None, own_process: bool = False) -> int:
+    """Run the command line; returns the exit code (0 ok, 2 bad input or usage).
+
+    own_process: this process exists only to run this command (:func:`run`), so the
+    process-wide shortcut of :func:`_start_numba` is allowed.
+    """
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help / --version exit 0, usage errors exit 2
         return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+    args.own_process = own_process
     from .errors import SubtraceError
 
     try:
@@ -116,13 +131,49 @@ def main(argv=None) -> int:
         return 2
     except BrokenPipeError:  # `subtrace info | head`: stop quietly (Python docs' recipe)
         try:
-            import os
-
             devnull = os.open(os.devnull, os.O_WRONLY)
             os.dup2(devnull, sys.stdout.fileno())
         except (OSError, ValueError):
             pass
         return 1
+
+
+def _start_numba(args) -> None:
+    """Set up Numba's CPU target (its first use, before any kernel is loaded) without
+    scipy.linalg.
+
+    That set-up imports scipy.linalg only to ask whether np.dot may call BLAS (which decides
+    just how np.convolve / np.correlate are compiled), and the import costs about 0.2 s, more
+    than the rest of the set-up. Outside a process of its own (:func:`run`), or when
+    scipy.linalg is already imported, nothing is done. The import is refused only during
+    the set-up: a kernel that needs BLAS still imports scipy.linalg when it is compiled.
+    """
+    if not getattr(args, "own_process", False) or "scipy.linalg" in sys.modules:
+        return
+    try:
+        from numba.core.registry import cpu_target
+    except ImportError:  # pragma: no cover - a Numba without this internal module
+        return
+    sys.modules["scipy.linalg"] = None  # `import scipy.linalg...` raises ImportError
+    try:
+        cpu_target.target_context.refresh()
+    finally:
+        del sys.modules["scipy.linalg"]
+
+
+def _exit_now(code: int):
+    """End the process with ``code`` once output is flushed and the exit handlers have run,
+    skipping the interpreter's teardown of every module (Numba's typing registries alone
+    take about 0.2 s to free). Everything written was closed before this point."""
+    import atexit
+
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # closed or broken pipe: nothing more can be said
+            pass
+    atexit._run_exitfuncs()
+    os._exit(code)
 
 
 def _one_line(text: str) -> str:
@@ -164,6 +215,7 @@ class _one_line_warnings:
 def _cmd_info(args) -> int:
     from . import load_cage
 
+    _start_numba(args)
     if args.cage is None:
         from .data import sample_cage_path
 
@@ -186,8 +238,6 @@ def _cmd_info(args) -> int:
 
 
 def _cmd_render(args) -> int:
-    import os
-
     from .errors import SceneError
     from .io.scene import apply_overrides, load_scene, scene_for_meshes
 
@@ -220,6 +270,7 @@ def _cmd_render(args) -> int:
         check_writable(png)
     from .render import render_scene, result_attributes
 
+    _start_numba(args)
     result = render_scene(scene, threads=args.threads)
     import time
 
@@ -394,4 +445,4 @@ def _surface_vertices(lev):
 
 
 if __name__ == "__main__":  # python -m subtrace.cli
-    raise SystemExit(main())
+    run()
