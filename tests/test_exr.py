@@ -194,6 +194,21 @@ def test_read_only_folder(tmp_path):
         folder.chmod(0o755)
 
 
+def test_round_trip_in_several_row_pieces(tmp_path):
+    # taller than exr.ROWS_PER_WRITE and not a multiple of it: pieces and a short last one
+    rows = 2 * exr.ROWS_PER_WRITE + 5
+    rng = np.random.default_rng(1)
+    ch = {c: rng.uniform(-1e3, 1e3, (rows, 3)).astype(np.float32) for c in ("Z", "N.X", "u")}
+    ch["R"] = rng.uniform(0.0, 1.0, (rows, 3)).astype(np.float32)
+    ch["patch_id"] = np.arange(rows * 3).reshape(rows, 3)
+    path = tmp_path / "tall.exr"
+    write_exr(path, ch, {})
+    got, _ = read_exr(path)
+    np.testing.assert_array_equal(got["R"], ch["R"].astype(np.float16).astype(np.float32))
+    for name in ("Z", "N.X", "u", "patch_id"):
+        np.testing.assert_array_equal(got[name], ch[name].astype(np.float32), err_msg=name)
+
+
 @pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs Linux /proc")
 def test_unwritable_folder_even_for_root():
     with pytest.raises(SubtraceError, match="/proc/film.exr"):
@@ -220,6 +235,25 @@ def test_failure_while_writing_leaves_existing_file_intact(tmp_path, monkeypatch
     monkeypatch.setattr(exr, "_write_image", write_then_fail)
     with pytest.raises(SubtraceError, match="simulated"):
         write_exr(path, film(), {})
+    assert path.read_bytes() == b"previous render"
+    assert listing(tmp_path) == ["film.exr"]
+
+
+def test_failed_preview_leaves_no_file(tmp_path, monkeypatch):
+    # the preview is written on a thread of its own beside the EXR: its failure still
+    # leaves neither file nor temporary, and the existing EXR untouched
+    path = tmp_path / "film.exr"
+    path.write_bytes(b"previous render")
+    real = exr._write_image
+
+    def fail_png(path_str, temp, fmt, spec, pixels):
+        if fmt == "png":
+            raise SubtraceError(f"{path_str}: disk full (simulated)")
+        real(path_str, temp, fmt, spec, pixels)
+
+    monkeypatch.setattr(exr, "_write_image", fail_png)
+    with pytest.raises(SubtraceError, match="film.png: disk full"):
+        write_exr(path, film(), {}, png_path=tmp_path / "film.png")
     assert path.read_bytes() == b"previous render"
     assert listing(tmp_path) == ["film.exr"]
 
