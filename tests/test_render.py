@@ -368,7 +368,7 @@ def test_bicubic_grids_match_refinement(name):
             for g in range(n * n):
                 j, i = divmod(g, n)
                 u, v = i / (n - 1), j / (n - 1)
-                p = np.array(_bez_point(net, u, v))
+                p = np.array(_bez_point(nets, m, u, v))
                 assert np.abs(p - ref[m, g]).max() <= 1e-13 * scale
                 assert np.all(p >= lo[m] - 1e-12 * scale) and np.all(p <= hi[m] + 1e-12 * scale)
                 du, dv = bez_derivatives(net, u, v)
@@ -395,11 +395,11 @@ def test_isolated_pieces_tile_the_grid(name):
         n = (1 << depth) + 1
         G = G.reshape(len(irr), n, n, 3)
         covered = np.zeros((len(irr), n - 1, n - 1), dtype=int)
-        for r, lev_, i, j, net in zip(sr, sl, si, sj, nets):
+        for k, (r, lev_, i, j) in enumerate(zip(sr, sl, si, sj)):
             m = 1 << (depth - lev_)
             for a in range(m + 1):
                 for b in range(m + 1):
-                    p = np.array(_bez_point(net, a / m, b / m))
+                    p = np.array(_bez_point(nets, k, a / m, b / m))
                     assert np.abs(p - G[r, j * m + b, i * m + a]).max() <= 1e-13 * scale
             covered[r, j * m:(j + 1) * m, i * m:(i + 1) * m] += 1
         for r, i, j, q in zip(cr, ci, cj, cp):
@@ -435,3 +435,25 @@ def test_cells_subtend_at_most_the_tolerance():
     worst = np.concatenate(worst) / tol
     assert worst.max() <= 1.0 + 1e-9
     assert np.median(worst) > 0.4
+
+
+@needs_shared
+def test_memo_and_threads_do_not_change_the_image(monkeypatch):
+    """Rays share their Bezier splits through a per-thread memo; a memo that runs out makes
+    the rays split on the spot instead. Neither the memo's size nor the thread count may
+    change a single bit of the image (the same cells, boxes and order either way)."""
+    from subtrace import render, tasks
+
+    mesh = MODELS / "spot_control_mesh.obj"
+    scene = _scene([mesh], (1.2, 0.6, 2.2), (0.0, 0.3, 0.0), width=96, height=72,
+                   tolerance=0.5)
+    cage = subtrace.load_cage(mesh)
+    base = render_scene(scene, cages=[cage], threads=1)
+    assert base.stats.pixels_covered > 1000
+    two = render_scene(scene, cages=[cage], threads=min(2, tasks.max_threads()))
+    monkeypatch.setattr(render._Memos, "START", {"child": 64, "nets": 8, "cells": 16})
+    small = render_scene(scene, cages=[cage], threads=1)
+    assert small.stats.rounds > base.stats.rounds or small.stats.memo_full > 0
+    for name, ch in base.channels.items():
+        assert np.array_equal(ch, two.channels[name], equal_nan=True), name
+        assert np.array_equal(ch, small.channels[name], equal_nan=True), name

@@ -39,6 +39,8 @@ class RenderStats:
     micro_triangles: int = 0
     grid_points: int = 0
     pieces: int = 0  # regular sub-patches and cells of the isolated irregular patches
+    memo_nodes: int = 0  # quadtree nodes of Bezier pieces split and kept by the threads
+    memo_full: int = 0  # times a thread's memo ran out during a round (rays split on the spot)
     rounds: int = 0
     max_depth: int = 0
     pixels_covered: int = 0
@@ -288,12 +290,71 @@ class _Pieces(_Growable):
         a = self.a
         return (self.patch_iso, a["first"], a["count"], a["round"], a["depth"], a["side"],
                 a["kind"], a["ref"], a["level"], a["i0"], a["j0"], a["lo"], a["hi"],
-                a["nets"], a["cells"], a["touched"])
+                a["nets"], a["cells"].reshape(-1, 3), a["touched"])
+
+
+class _Memos:
+    """Each thread's memo of the Bezier nets its rays split (``trace.bezier``: item roots,
+    node children, boxes and rows, the net store, the cell-corner store, counts). The stores
+    are allocated lazily by the OS (``np.empty``); one that ran out during a round (its rays
+    went on without storing) is doubled before the next."""
+
+    START = {"child": 1 << 20, "nets": 1 << 18, "cells": 1 << 18}
+
+    def __init__(self, n_threads):
+        self.m = [self._grow(None, 0, "child", "nets", "cells") for _ in range(n_threads)]
+        self.full = 0
+
+    def _grow(self, old, n_items, *which):
+        """A memo with room for ``n_items`` items, the stores named in ``which`` doubled."""
+        from .trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
+
+        if old is None:
+            root = np.full(0, -1, np.int64)
+            child, box, data = np.empty(0, np.int64), np.empty((0, 6)), np.empty(0, np.int64)
+            nets, cells, cnt = np.empty((0, 4, 4, 3)), np.empty((0, 3)), np.zeros(4, np.int64)
+        else:
+            root, child, box, data, nets, cells, cnt = old
+        if len(root) < n_items:
+            root = np.concatenate([root, np.full(max(n_items, 2 * len(root)) - len(root), -1)])
+
+        def grown(a, n_used, size):
+            b = np.empty((size, *a.shape[1:]), a.dtype)
+            b[:n_used] = a[:n_used]
+            return b
+
+        if "child" in which:
+            n = max(2 * len(child), self.START["child"])
+            used = cnt[M_NODES]
+            child, box, data = grown(child, used, n), grown(box, used, n), grown(data, used, n)
+        if "nets" in which:
+            nets = grown(nets, cnt[M_NETS], max(2 * len(nets), self.START["nets"]))
+        if "cells" in which:
+            cells = grown(cells, 4 * cnt[M_CELLS], max(2 * len(cells), 4 * self.START["cells"]))
+        cnt[M_FULL] = 0
+        return root, child, box, data, nets, cells, cnt
+
+    def kernel_tuple(self, n_items):
+        from .trace.bezier import M_FULL
+
+        for k, m in enumerate(self.m):
+            self.full += int(m[-1][M_FULL])
+            if m[-1][M_FULL] or len(m[0]) < n_items:
+                self.m[k] = self._grow(m, n_items, *(("child", "nets", "cells") if m[-1][M_FULL]
+                                                     else ()))
+        return tuple(self.m)
+
+    def finish(self, stats):
+        from .trace.bezier import M_FULL, M_NODES
+
+        stats.memo_nodes = int(sum(m[-1][M_NODES] for m in self.m))
+        stats.memo_full = self.full + int(sum(m[-1][M_FULL] for m in self.m))
 
 
 def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
     """Run the refinement rounds; returns (hits (H*W, 6), grid pools, isolated pieces, leaf
     tables, every patch refined)."""
+    from . import tasks
     from .trace.camera import camera_frame
 
     max_depth = config.MAX_GRID_DEPTH if max_depth is None else max_depth
@@ -306,6 +367,7 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
     tables = _LeafTables(int(depths.max(initial=0)))
     pools = _Pools(table.n_patches)
     iso = _Pieces(table.n_patches)
+    memos = _Memos(tasks.thread_count())
     reg = np.nonzero(table.regular)[0]
     none = np.zeros(0, np.int64)
     one = np.arange(len(reg))
@@ -328,8 +390,8 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
             bvh.prims, table.shell_min, table.shell_max, pools.patch_slot,
             g["slot_depth"], g["slot_vert_off"], g["slot_node_off"], g["slot_quad"],
             g["slot_round"], g["verts"], g["node_lo"], g["node_hi"],
-            tables.lc_off, tables.lc_data, iso.kernel_tuple(), config.TRI_SLACK, hits, request,
-            tested,
+            tables.lc_off, tables.lc_data, iso.kernel_tuple(),
+            memos.kernel_tuple(len(iso.a["kind"])), config.TRI_SLACK, hits, request, tested,
         )
         stats.time_trace += time.perf_counter() - t0
         req = request[rays]
@@ -343,6 +405,7 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
         stats.time_refine += time.perf_counter() - t0
         round_no += 1
     stats.rounds = round_no + 1
+    memos.finish(stats)
     stats.micro_triangles += int(tested.sum())
     # regular patches count as refined once a ray has descended into them
     direct = iso.a["patch"][(iso.a["round"] < 0) & (iso.a["touched"] > 0)]

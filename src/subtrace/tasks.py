@@ -32,10 +32,10 @@ def thread_count() -> int:
     return _state["threads"] or max_threads()
 
 
-def run_tasks(kernel, *args) -> None:
-    """``kernel(task, n, *args)`` for task = 0 .. n-1 on n threads; re-raises the first
-    error."""
-    n = thread_count()
+def run_tasks(kernel, *args, n: int | None = None) -> None:
+    """``kernel(task, n, *args)`` for task = 0 .. n-1 on n threads (default
+    :func:`thread_count`); re-raises the first error."""
+    n = thread_count() if n is None else n
     if n == 1:
         kernel(0, 1, *args)
         return

@@ -22,15 +22,19 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .prims import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, _tri, push_sorted, slab_bounds
+from .prims import (
+    H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, _slab, _tri, inline_njit, leaf_njit, push_sorted,
+    slab_bounds,
+)
 
 BOX_PAD = 1e-12
 MAX_SIDE_SAMPLES = 256  # samples per cell side at most (2^(side depth - depth))
 
 
-@nb.njit(cache=True)
-def _bez_point(net, u, v):
-    """Point of the Bezier patch ``net`` (4,4,3) at (u, v): one code path for every caller."""
+@leaf_njit
+def _bez_point(nets, k, u, v):
+    """Point of the Bezier patch ``nets[k]`` (4,4,3) at (u, v): one code path for every
+    caller, so a point shared by cells is computed bit-identically by each."""
     su = 1.0 - u
     sv = 1.0 - v
     bu0, bu1, bu2, bu3 = su * su * su, 3.0 * u * su * su, 3.0 * u * u * su, u * u * u
@@ -38,16 +42,19 @@ def _bez_point(net, u, v):
     x = y = z = 0.0
     for a in range(4):
         ba = bu0 if a == 0 else (bu1 if a == 1 else (bu2 if a == 2 else bu3))
-        cx = bv0 * net[a, 0, 0] + bv1 * net[a, 1, 0] + bv2 * net[a, 2, 0] + bv3 * net[a, 3, 0]
-        cy = bv0 * net[a, 0, 1] + bv1 * net[a, 1, 1] + bv2 * net[a, 2, 1] + bv3 * net[a, 3, 1]
-        cz = bv0 * net[a, 0, 2] + bv1 * net[a, 1, 2] + bv2 * net[a, 2, 2] + bv3 * net[a, 3, 2]
+        cx = (bv0 * nets[k, a, 0, 0] + bv1 * nets[k, a, 1, 0] + bv2 * nets[k, a, 2, 0]
+              + bv3 * nets[k, a, 3, 0])
+        cy = (bv0 * nets[k, a, 0, 1] + bv1 * nets[k, a, 1, 1] + bv2 * nets[k, a, 2, 1]
+              + bv3 * nets[k, a, 3, 1])
+        cz = (bv0 * nets[k, a, 0, 2] + bv1 * nets[k, a, 1, 2] + bv2 * nets[k, a, 2, 2]
+              + bv3 * nets[k, a, 3, 2])
         x += ba * cx
         y += ba * cy
         z += ba * cz
     return x, y, z
 
 
-@nb.njit(cache=True)
+@leaf_njit
 def bez_derivatives(net, u, v):
     """dP/du and dP/dv of the Bezier patch ``net`` at (u, v): two 3-tuples."""
     su = 1.0 - u
@@ -70,7 +77,7 @@ def bez_derivatives(net, u, v):
     return (ux, uy, uz), (vx, vy, vz)
 
 
-@nb.njit(cache=True)
+@leaf_njit
 def _split_row(a, b, c, d):
     ab = 0.5 * (a + b)
     bc = 0.5 * (b + c)
@@ -81,32 +88,42 @@ def _split_row(a, b, c, d):
     return ab, abc, m, bcd, cd
 
 
-@nb.njit(cache=True)
-def _split(w, s, d0):
-    """Write the four child nets of net ``w[s]`` into ``w[d0 .. d0+3]`` (child ``cu + 2 cv``
+@leaf_njit
+def _split(src, s, w, d0):
+    """Write the four child nets of net ``src[s]`` into ``w[d0 .. d0+3]`` (child ``cu + 2 cv``
     covers the half cu in u and cv in v), using ``w[d0-2]``, ``w[d0-1]`` as scratch."""
     h0 = d0 - 2
     for c in range(4):  # halve along u (first index)
         for k in range(3):
-            p0, p1, p2, p3 = w[s, 0, c, k], w[s, 1, c, k], w[s, 2, c, k], w[s, 3, c, k]
+            p0, p1, p2, p3 = src[s, 0, c, k], src[s, 1, c, k], src[s, 2, c, k], src[s, 3, c, k]
             ab, abc, m, bcd, cd = _split_row(p0, p1, p2, p3)
             w[h0, 0, c, k], w[h0, 1, c, k], w[h0, 2, c, k], w[h0, 3, c, k] = p0, ab, abc, m
-            w[h0 + 1, 0, c, k], w[h0 + 1, 1, c, k], w[h0 + 1, 2, c, k], w[h0 + 1, 3, c, k] = m, bcd, cd, p3
+            w[h0 + 1, 0, c, k], w[h0 + 1, 1, c, k] = m, bcd
+            w[h0 + 1, 2, c, k], w[h0 + 1, 3, c, k] = cd, p3
     for h in range(2):  # then along v
-        src = h0 + h
+        src_h = h0 + h
         lo = d0 + h
         hi = d0 + h + 2
         for a in range(4):
             for k in range(3):
-                p0, p1, p2, p3 = w[src, a, 0, k], w[src, a, 1, k], w[src, a, 2, k], w[src, a, 3, k]
+                p0, p1 = w[src_h, a, 0, k], w[src_h, a, 1, k]
+                p2, p3 = w[src_h, a, 2, k], w[src_h, a, 3, k]
                 ab, abc, m, bcd, cd = _split_row(p0, p1, p2, p3)
                 w[lo, a, 0, k], w[lo, a, 1, k], w[lo, a, 2, k], w[lo, a, 3, k] = p0, ab, abc, m
                 w[hi, a, 0, k], w[hi, a, 1, k], w[hi, a, 2, k], w[hi, a, 3, k] = m, bcd, cd, p3
 
 
-@nb.njit(cache=True)
-def _net_entry(ox, oy, oz, ix, iy, iz, net, s, tmax):
-    """Entry distance of the ray into the (padded) box of net ``net[s]``; inf on a miss."""
+@leaf_njit
+def _pad(lo0, lo1, lo2, hi0, hi1, hi2):
+    """A box widened by ``BOX_PAD`` of its largest coordinate (for rounding)."""
+    pad = BOX_PAD * max(max(abs(lo0), abs(hi0)), max(max(abs(lo1), abs(hi1)),
+                                                     max(abs(lo2), abs(hi2))))
+    return lo0 - pad, lo1 - pad, lo2 - pad, hi0 + pad, hi1 + pad, hi2 + pad
+
+
+@leaf_njit
+def _net_box(net, s):
+    """Padded box of the control points of ``net[s]`` (it contains the patch)."""
     lo0 = lo1 = lo2 = np.inf
     hi0 = hi1 = hi2 = -np.inf
     for a in range(4):
@@ -115,19 +132,36 @@ def _net_entry(ox, oy, oz, ix, iy, iz, net, s, tmax):
             lo0, hi0 = min(lo0, x), max(hi0, x)
             lo1, hi1 = min(lo1, y), max(hi1, y)
             lo2, hi2 = min(lo2, z), max(hi2, z)
-    pad = BOX_PAD * max(max(abs(lo0), abs(hi0)), max(max(abs(lo1), abs(hi1)), max(abs(lo2), abs(hi2))))
-    return slab_bounds(ox, oy, oz, ix, iy, iz, lo0 - pad, lo1 - pad, lo2 - pad, hi0 + pad,
-                       hi1 + pad, hi2 + pad, tmax)
+    return _pad(lo0, lo1, lo2, hi0, hi1, hi2)
 
 
-@nb.njit(cache=True)
-def _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, net, i, j, depth, oi, oj, root_depth,
-          side_depth, slack, hit, code, item, lv, lp):
-    """Intersect cell (i, j) of the depth-``depth`` grid of Bezier net ``net``, which covers
-    the cells from (oi, oj) of its root patch's depth-``root_depth`` grid; update ``hit``
-    (H_SLOT = ``code``, H_TRI = ``item``, (H_B1, H_B2) = root parameter). ``lv`` (K,3) /
-    ``lp`` (K,2): scratch for the cell's points and root parameters. Returns the number of
-    triangles tested."""
+@leaf_njit
+def _net_entry(ox, oy, oz, ix, iy, iz, net, s, tmax):
+    """Entry distance of the ray into the (padded) box of net ``net[s]``; inf on a miss."""
+    lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(net, s)
+    return slab_bounds(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tmax)
+
+
+@leaf_njit
+def _fan_samples(gi, gj, root_depth, sides, srow):
+    """Whether the root-grid cell (gi, gj) has a side sampled more finely than the grid (a
+    side on the patch boundary whose neighbour is finer, ``sides[srow]``): then it is cut
+    into a fan."""
+    NR = 1 << root_depth
+    return ((gj == 0 and sides[srow, 0] > root_depth)
+            or (gi == NR - 1 and sides[srow, 1] > root_depth)
+            or (gj == NR - 1 and sides[srow, 2] > root_depth)
+            or (gi == 0 and sides[srow, 3] > root_depth))
+
+
+@leaf_njit
+def _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, i, j, depth, oi, oj, root_depth,
+          sides, srow, slack, hit, code, item, lv, lp):
+    """Intersect cell (i, j) of the depth-``depth`` grid of Bezier net ``nets[nk]``, which
+    covers the cells from (oi, oj) of its root patch's depth-``root_depth`` grid; update
+    ``hit`` (H_SLOT = ``code``, H_TRI = ``item``, (H_B1, H_B2) = root parameter). ``lv``
+    (K,3) / ``lp`` (K,2): scratch for the cell's points and root parameters. Returns the
+    number of triangles tested."""
     inv = 1.0 / (1 << depth)
     NR = 1 << root_depth
     rinv = 1.0 / NR
@@ -137,7 +171,7 @@ def _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, net, i, j, depth, oi, oj, root_dep
     for corner in range(4):
         di = 1 if corner == 1 or corner == 2 else 0
         dj = 1 if corner >= 2 else 0
-        x, y, z = _bez_point(net, (i + di) * inv, (j + dj) * inv)
+        x, y, z = _bez_point(nets, nk, (i + di) * inv, (j + dj) * inv)
         lv[n, 0], lv[n, 1], lv[n, 2] = x, y, z
         lp[n, 0], lp[n, 1] = (gi + di) * rinv, (gj + dj) * rinv
         n += 1
@@ -151,8 +185,8 @@ def _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, net, i, j, depth, oi, oj, root_dep
             on_side = gj == NR - 1
         else:
             on_side = gi == 0
-        if on_side and side_depth[side] > root_depth:
-            r = 1 << (side_depth[side] - root_depth)
+        if on_side and sides[srow, side] > root_depth:
+            r = 1 << (sides[srow, side] - root_depth)
             for k in range(1, r):
                 f = k / r
                 if side == 0:
@@ -167,15 +201,15 @@ def _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, net, i, j, depth, oi, oj, root_dep
                 else:
                     a, b = i, j + 1 - f
                     ga, gb = gi, gj + 1 - f
-                x, y, z = _bez_point(net, a * inv, b * inv)
+                x, y, z = _bez_point(nets, nk, a * inv, b * inv)
                 lv[n, 0], lv[n, 1], lv[n, 2] = x, y, z
                 lp[n, 0], lp[n, 1] = ga * rinv, gb * rinv
                 n += 1
     if n == 4:
-        return tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, lp, slack, hit, code, item,
+        return tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, 0, lp, slack, hit, code, item,
                         root_depth)
     # a fan around the cell's centre
-    x, y, z = _bez_point(net, (i + 0.5) * inv, (j + 0.5) * inv)
+    x, y, z = _bez_point(nets, nk, (i + 0.5) * inv, (j + 0.5) * inv)
     lv[n, 0], lv[n, 1], lv[n, 2] = x, y, z
     lp[n, 0], lp[n, 1] = (gi + 0.5) * rinv, (gj + 0.5) * rinv
     o = (ox, oy, oz)
@@ -189,7 +223,7 @@ def _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, net, i, j, depth, oi, oj, root_dep
     return n
 
 
-@nb.njit(cache=True)
+@leaf_njit
 def _record(hit, t, code, item, depth, lp, a, b, c, ba, bb, bc):
     hit[H_T] = t
     hit[H_SLOT] = code
@@ -199,48 +233,52 @@ def _record(hit, t, code, item, depth, lp, a, b, c, ba, bb, bc):
     hit[H_B2] = ba * lp[a, 1] + bb * lp[b, 1] + bc * lp[c, 1]
 
 
-@nb.njit(cache=True)
-def tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, lp, slack, hit, code, item, depth):
-    """The two triangles (0,1,2), (0,2,3) of the cell ``lv[:4]`` (parameters ``lp``)."""
+@leaf_njit
+def tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, v0, lp, slack, hit, code, item, depth):
+    """The two triangles (0,1,2), (0,2,3) of the cell ``lv[v0 : v0+4]`` (root parameters
+    ``lp[:4]``)."""
     o = (ox, oy, oz)
     px, py, pz = o[kx], o[ky], o[kz]
     for tri in range(2):
         b = 1 + tri
         c = 2 + tri
-        t, ba, bb, bc = _tri(px, py, pz, kx, ky, kz, sx, sy, sz, 0, b, c, lv, hit[H_T], slack)
+        t, ba, bb, bc = _tri(px, py, pz, kx, ky, kz, sx, sy, sz, v0, v0 + b, v0 + c, lv,
+                             hit[H_T], slack)
         if t < hit[H_T]:
             _record(hit, t, code, item, depth, lp, 0, b, c, ba, bb, bc)
     return 2
 
 
-@nb.njit(cache=True, inline="always")
-def intersect_bezier(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, net, depth, oi, oj,
-                     root_depth, side_depth, slack, hit, code, item, work, st_i, st_j, st_l,
-                     tmp_t, order, lv, lp):
-    """Closest hit on the Bezier patch ``net`` refined to grid depth ``depth`` (covering the
-    root grid cells from (oi, oj), see :func:`_leaf`) nearer than hit[H_T]; updates ``hit``.
-    ``work`` (>= 3*depth+7, 4,4,3) holds the stacked nets (the last six are scratch), ``st_*`` their cell coordinates
-    and levels. Returns the number of micro-triangles built."""
+@leaf_njit
+def _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, src, s, lev0, ci0, cj0, nets, nk,
+             depth, oi, oj, root_depth, sides, srow, slack, hit, code, item, work, st, st_t,
+             st0, tmp_t, order, lv, lp):
+    """Closest hit on the sub-patch ``src[s]`` (cell (ci0, cj0) of level ``lev0`` of the
+    Bezier patch ``nets[nk]``) refined down to level ``depth``, splitting per ray and storing
+    nothing. ``work`` (>= 3*depth+7, 4,4,3) holds the stacked nets (the last six are
+    scratch), rows ``st0 ..`` of ``st`` their cell coordinates and levels (columns 2, 3, 4)
+    and of ``st_t`` their entry distances. Returns the number of triangles tested."""
     tested = 0
     for a in range(4):
         for c in range(4):
             for k in range(3):
-                work[0, a, c, k] = net[a, c, k]
-    st_i[0] = 0
-    st_j[0] = 0
-    st_l[0] = 0
+                work[0, a, c, k] = src[s, a, c, k]
+    st[st0, 2] = ci0
+    st[st0, 3] = cj0
+    st[st0, 4] = lev0
+    st_t[st0] = 0.0
     sp = 1
     base = work.shape[0] - 4  # the last four entries receive children before sorting
     while sp > 0:
         sp -= 1
-        lev = st_l[sp]
-        ci = st_i[sp]
-        cj = st_j[sp]
-        if lev == depth:
-            tested += _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, net, ci, cj, depth, oi, oj,
-                            root_depth, side_depth, slack, hit, code, item, lv, lp)
+        if st_t[st0 + sp] >= hit[H_T]:  # a nearer hit was found since it was pushed
             continue
-        _split(work, sp, base)
+        ci, cj, lev = st[st0 + sp, 2], st[st0 + sp, 3], st[st0 + sp, 4]
+        if lev == depth:
+            tested += _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, ci, cj, depth, oi, oj,
+                            root_depth, sides, srow, slack, hit, code, item, lv, lp)
+            continue
+        _split(work, sp, work, base)
         # the children the ray enters, pushed far to near
         n = 0
         for q in range(4):
@@ -253,8 +291,231 @@ def intersect_bezier(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, net, depth,
                 for c in range(4):
                     for k in range(3):
                         work[sp, a, c, k] = work[base + q, a, c, k]
-            st_i[sp] = 2 * ci + (q & 1)
-            st_j[sp] = 2 * cj + (q >> 1)
-            st_l[sp] = lev + 1
+            st[st0 + sp, 2] = 2 * ci + (q & 1)
+            st[st0 + sp, 3] = 2 * cj + (q >> 1)
+            st[st0 + sp, 4] = lev + 1
+            st_t[st0 + sp] = tmp_t[e]
             sp += 1
     return tested
+
+
+# --------------------------------------------------------------------------------------
+# the per-thread memo of split nets
+# --------------------------------------------------------------------------------------
+#
+# Rays of neighbouring pixels descend the same nodes of a patch's quadtree. A thread keeps
+# what its rays split: ``mem`` = (root node of each item (I,) or -1, first of the four
+# children of each node (N,) or -1, each node's padded box (N,6), each node's row (N,) in
+# the net store (an inner node that was split) or the corner store (a cell that was
+# intersected), or -1 (not yet) or -2 (a fan cell: evaluated per ray), the net store
+# (.,4,4,3), the corner store (4 rows per cell, (.,3)), counts (4,): nodes, nets and cells
+# used, and a flag set when a store ran out (the descent then goes on without storing; the
+# driver grows the stores for the next round)). Everything is made lazily: a node's box when
+# its parent is split, its net when it is split itself, a cell's corners when a ray first
+# reaches it; so what is stored is what the thread's rays needed.
+
+M_NODES, M_NETS, M_CELLS, M_FULL = range(4)
+NOT_YET, FAN = -1, -2
+
+
+@leaf_njit
+def _new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, row):
+    m = cnt[M_NODES]
+    cnt[M_NODES] = m + 1
+    child[m] = -1
+    box[m, 0], box[m, 1], box[m, 2] = lo0, lo1, lo2
+    box[m, 3], box[m, 4], box[m, 5] = hi0, hi1, hi2
+    data[m] = row
+    return m
+
+
+@leaf_njit
+def _store_net(m_nets, cnt, src, s):
+    r = cnt[M_NETS]
+    cnt[M_NETS] = r + 1
+    for a in range(4):
+        for c in range(4):
+            for k in range(3):
+                m_nets[r, a, c, k] = src[s, a, c, k]
+    return r
+
+
+@leaf_njit
+def _store_cell(m_cells, cnt, nets, nk, ci, cj, depth):
+    """Store the four corners of cell (ci, cj) of the depth-``depth`` grid of ``nets[nk]``
+    (evaluated from the patch's own net, as :func:`_leaf` does); returns its row."""
+    r = cnt[M_CELLS]
+    cnt[M_CELLS] = r + 1
+    inv = 1.0 / (1 << depth)
+    for corner in range(4):
+        di = 1 if corner == 1 or corner == 2 else 0
+        dj = 1 if corner >= 2 else 0
+        x, y, z = _bez_point(nets, nk, (ci + di) * inv, (cj + dj) * inv)
+        m_cells[4 * r + corner, 0] = x
+        m_cells[4 * r + corner, 1] = y
+        m_cells[4 * r + corner, 2] = z
+    return r
+
+
+@leaf_njit
+def _expand(node, parent, ci, cj, lev, pd, mem, work):
+    """Split ``node`` (cell (ci, cj) of level ``lev`` of a piece of depth ``pd``): get its
+    net (stored, or the quadrant of its parent's) and create its four children with their
+    boxes; its net is kept if its children will be split in turn. Returns the first child,
+    or -1 when a store is full."""
+    root_m, child, box, data, m_nets, m_cells, cnt = mem
+    if cnt[M_NODES] + 4 > len(child) or cnt[M_NETS] + 1 > len(m_nets):
+        cnt[M_FULL] = 1
+        return -1
+    base = work.shape[0] - 4
+    src, s = m_nets, data[node]
+    if s < 0:
+        _split(m_nets, data[parent], work, base)
+        q = base + (ci & 1) + 2 * (cj & 1)
+        if lev + 1 < pd:
+            data[node] = s = _store_net(m_nets, cnt, work, q)
+        else:  # its children are cells: their corners come from the piece's own net
+            for a in range(4):
+                for c in range(4):
+                    for k in range(3):
+                        work[0, a, c, k] = work[q, a, c, k]
+            src, s = work, 0
+    _split(src, s, work, base)
+    first = cnt[M_NODES]
+    for q in range(4):
+        lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(work, base + q)
+        _new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, NOT_YET)
+    child[node] = first
+    return first
+
+
+@inline_njit
+def intersect_patch(ray, p, s, slot_first, slot_count, slot_depth, slot_side, kind, ref, level,
+                    i0, j0, lo, hi, nets, cells, mem, slack, hit, scratch):
+    """Closest hit on the pieces of Catmull-Clark patch ``p`` (slot ``s``; the arrays of
+    ``kernels.trace_round``'s ``iso``) nearer than hit[H_T]; updates ``hit``. Returns the
+    number of micro-triangles built: the cells this ray stored in the memo ``mem``, the
+    cells it evaluated on the spot and the irregular cells it tested. ``ray`` = (ox, oy, oz,
+    ix, iy, iz, kx, ky, kz, sx, sy, sz): origin, inverse direction and shear constants.
+
+    A Bezier piece (item ``it``; a regular patch is one) is refined to the patch's grid
+    depth: the ray descends its quadtree, nearest child first, into the nodes whose boxes it
+    enters before its best hit; a node is split (its children's boxes stored) once per
+    thread, a cell's corners are evaluated once (see the memo above). ``work`` (>=
+    3*depth+10, 4,4,3), the stack ``st`` (>= 6*depth+8, 5) with entry distances ``st_t``,
+    ``tmp_t`` / ``order`` (4,) and ``lv`` (K,3) / ``lp`` (K,2) (a cell's points and
+    parameters) are the thread's ``scratch``. (Calls with more than 30 arguments are
+    compiled by Python as calls with ``*args``, which Numba cannot inline: hence the tuples.)
+    """
+    ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz = ray
+    work, st, st_t, tmp_t, order, lv, lp = scratch
+    root_m, child, box, data, m_nets, m_cells, cnt = mem
+    first, count, depth = slot_first[s], slot_count[s], slot_depth[s]
+    code = -2.0 - p
+    tested = 0
+    inv = 1.0 / (1 << depth)
+    for it in range(first, first + count):
+        if _slab(ox, oy, oz, ix, iy, iz, lo, hi, it, hit[H_T]) == np.inf:
+            continue
+        if kind[it] == 1:  # an irregular cell: its exact corners
+            c = ref[it]
+            for k in range(4):
+                lp[k, 0] = (i0[it] + (1 if k == 1 or k == 2 else 0)) * inv
+                lp[k, 1] = (j0[it] + (1 if k >= 2 else 0)) * inv
+            tested += tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, cells, 4 * c, lp, slack, hit,
+                               code, it, depth)
+            continue
+        nk = ref[it]
+        pd = depth - level[it]  # the piece's own grid depth
+        oi = i0[it] << pd
+        oj = j0[it] << pd
+        node = root_m[it]
+        if node < 0:
+            if cnt[M_NODES] + 1 > len(child) or cnt[M_NETS] + 1 > len(m_nets) or pd == 0:
+                if pd > 0:
+                    cnt[M_FULL] = 1
+                tested += _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, nets, nk, 0,
+                                   0, 0, nets, nk, pd, oi, oj, depth, slot_side, s, slack, hit,
+                                   code, it, work, st, st_t, 0, tmp_t, order, lv, lp)
+                continue
+            lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(nets, nk)
+            node = _new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2,
+                             _store_net(m_nets, cnt, nets, nk))
+            root_m[it] = node
+        # stack rows: node, parent, i, j, level; st_t: entry distance when pushed
+        st[0, 0], st[0, 1], st[0, 2], st[0, 3], st[0, 4] = node, -1, 0, 0, 0
+        st_t[0] = 0.0
+        sp = 1
+        while sp > 0:
+            sp -= 1
+            if st_t[sp] >= hit[H_T]:  # a nearer hit was found since it was pushed
+                continue
+            node, parent, ci, cj, lev = st[sp, 0], st[sp, 1], st[sp, 2], st[sp, 3], st[sp, 4]
+            if lev == pd:
+                r = data[node]
+                if r == NOT_YET:
+                    if _fan_samples(oi + ci, oj + cj, depth, slot_side, s):
+                        r = data[node] = FAN
+                    elif cnt[M_CELLS] < len(m_cells) // 4:
+                        r = data[node] = _store_cell(m_cells, cnt, nets, nk, ci, cj, pd)
+                        tested += 2
+                    else:
+                        cnt[M_FULL] = 1
+                        r = FAN
+                if r < 0:  # evaluated on the spot
+                    tested += _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, ci, cj, pd,
+                                    oi, oj, depth, slot_side, s, slack, hit, code, it, lv, lp)
+                else:
+                    for k in range(4):
+                        lp[k, 0] = (oi + ci + (1 if k == 1 or k == 2 else 0)) * inv
+                        lp[k, 1] = (oj + cj + (1 if k >= 2 else 0)) * inv
+                    tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, m_cells, 4 * r, lp, slack, hit,
+                             code, it, depth)
+                continue
+            c = child[node]
+            if c < 0:
+                c = _expand(node, parent, ci, cj, lev, pd, mem, work)
+                if c < 0:  # a store is full: split per ray below this node
+                    tested += _descend_node(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, node,
+                                            parent, lev, ci, cj, nets, nk, pd, oi, oj, depth,
+                                            slot_side, s, slack, hit, code, it, mem, work, st,
+                                            st_t, sp + 1, tmp_t, order, lv, lp)
+                    continue
+            # the children the ray enters, pushed far to near
+            n = 0
+            for q in range(4):
+                te = slab_bounds(ox, oy, oz, ix, iy, iz, box[c + q, 0], box[c + q, 1],
+                                 box[c + q, 2], box[c + q, 3], box[c + q, 4], box[c + q, 5],
+                                 hit[H_T])
+                if te < np.inf:
+                    n = push_sorted(tmp_t, order, n, te, q)
+            for e in range(n):
+                q = order[e]
+                st[sp, 0], st[sp, 1], st[sp, 4] = c + q, node, lev + 1
+                st[sp, 2], st[sp, 3] = 2 * ci + (q & 1), 2 * cj + (q >> 1)
+                st_t[sp] = tmp_t[e]
+                sp += 1
+    return tested
+
+
+@leaf_njit
+def _descend_node(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, node, parent, lev, ci, cj,
+                  nets, nk, pd, oi, oj, depth, sides, srow, slack, hit, code, it, mem, work, st,
+                  st_t, st0, tmp_t, order, lv, lp):
+    """:func:`_descend` below memo node ``node`` (whose net may not be stored: then the
+    quadrant of its parent's)."""
+    root_m, child, box, data, m_nets, m_cells, cnt = mem
+    if data[node] >= 0:
+        return _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, m_nets, data[node], lev,
+                        ci, cj, nets, nk, pd, oi, oj, depth, sides, srow, slack, hit, code, it,
+                        work, st, st_t, st0, tmp_t, order, lv, lp)
+    base = work.shape[0] - 4
+    _split(m_nets, data[parent], work, base)
+    q = base + (ci & 1) + 2 * (cj & 1)
+    for a in range(4):  # _descend starts from work[0]
+        for c in range(4):
+            for k in range(3):
+                work[1, a, c, k] = work[q, a, c, k]
+    return _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, work, 1, lev, ci, cj, nets,
+                    nk, pd, oi, oj, depth, sides, srow, slack, hit, code, it, work, st, st_t,
+                    st0, tmp_t, order, lv, lp)

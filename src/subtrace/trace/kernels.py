@@ -24,14 +24,14 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .bezier import intersect_bezier, tri_pair
-from .prims import (  # noqa: F401  (HIT_FIELDS and H_* are re-exported for the driver)
-    H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, _shear, _slab, _tri, push_sorted,
-    ray_setup,
+from .bezier import MAX_SIDE_SAMPLES, intersect_patch
+from .prims import (  # noqa: F401  (H_* are re-exported for the driver)
+    H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, _shear, _slab, _tri, inline_njit, leaf_njit,
+    push_sorted, ray_setup,
 )
 
 
-@nb.njit(cache=True)
+@leaf_njit
 def _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, slot_depth,
                     slot_vert_off, slot_node_off, slot_quad, verts, node_lo, node_hi, lc_off,
                     lc_data, slack, hit, stack, ent_t, ent_i):
@@ -86,93 +86,77 @@ def _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, slot_dept
             sp += 1
 
 
-@nb.njit(cache=True, inline="always")
-def _intersect_isolated(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, p, s, iso, slack, hit,
-                        work, st_i, st_j, st_l, ent_t, ent_i, lv, lp):
-    """Closest hit on the pieces of isolated patch ``p`` (slot ``s`` of ``iso``)."""
-    first, count, depth, side = iso[1][s], iso[2][s], iso[4][s], iso[5][s]
-    kind, ref, level, i0, j0 = iso[6], iso[7], iso[8], iso[9], iso[10]
-    lo, hi, nets, cells = iso[11], iso[12], iso[13], iso[14]
-    tested = 0
-    inv = 1.0 / (1 << depth)
-    for it in range(first, first + count):
-        if _slab(ox, oy, oz, ix, iy, iz, lo, hi, it, hit[H_T]) == np.inf:
-            continue
-        if kind[it] == 0:
-            sh = depth - level[it]
-            tested += intersect_bezier(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz,
-                                       nets[ref[it]], sh, i0[it] << sh, j0[it] << sh, depth,
-                                       side, slack, hit, -2.0 - p, float(it), work, st_i,
-                                       st_j, st_l, ent_t, ent_i, lv, lp)
-        else:
-            c = ref[it]
-            for k in range(4):
-                for a in range(3):
-                    lv[k, a] = cells[c, k, a]
-                lp[k, 0] = (i0[it] + (1 if k == 1 or k == 2 else 0)) * inv
-                lp[k, 1] = (j0[it] + (1 if k >= 2 else 0)) * inv
-            tested += tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, lp, slack, hit,
-                               -2.0 - p, float(it), depth)
-    return tested
-
-
-RAYS_PER_BLOCK = 64  # consecutive rays traced together
+BAND_ROWS = 8  # image rows per band of rays; threads take interleaved bands
 
 
 def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_count, prims,
                 shell_min, shell_max, patch_slot, slot_depth, slot_vert_off, slot_node_off,
-                slot_quad, slot_round, verts, node_lo, node_hi, lc_off, lc_data, iso, slack,
-                hits, request, tested):
-    """One round for the rays ``rays`` (pixel indices): update ``hits`` (n_pixels, 6) and
-    set ``request[r]`` to the nearest unbuilt patch the ray reaches first (or -1).
+                slot_quad, slot_round, verts, node_lo, node_hi, lc_off, lc_data, iso, mems,
+                slack, hits, request, tested):
+    """One round for the rays ``rays`` (sorted pixel indices): update ``hits`` (n_pixels, 6)
+    and set ``request[r]`` to the nearest unbuilt patch the ray reaches first (or -1).
 
     Catmull-Clark patches are intersected per ray through their pieces (``render._Pieces``),
     held in the tuple ``iso`` = (slot of each patch (P,) or -1 while unbuilt, and per slot:
     first item, item count, round built (-1: from the start), grid depth, side sampling
     depths (S,4); per item: kind (0: Bezier piece, 1: cell), row in the nets / cells, level,
     origin i0, j0 in units of 2^-level, box lo, hi (I,3); the Bezier nets (.,4,4,3), the
-    cells' corners (.,4,3); and a per-slot flag set when a ray tests it). Loop patches are
-    grids in the pools. ``tested[r]`` counts the micro-triangles built for ray r. The rays
-    are shared among threads in interleaved blocks (``tasks.run_tasks``).
+    cells' corners (4 rows per cell, (.,3)); and a per-slot flag set when a ray tests it).
+    Loop patches are grids in the pools. ``tested[r]`` counts the micro-triangles built for
+    ray r. The rays are cut into bands of ``BAND_ROWS`` image rows, and thread ``t`` of
+    ``n`` (``tasks.run_tasks``, n = len(mems)) takes bands t, t + n, ... with its own memo
+    of split Bezier nets ``mems[t]`` (see ``bezier.intersect_piece``): neighbouring rays of
+    a band share their splits, and the bands' interleaving balances the threads.
     """
     from ..tasks import run_tasks
 
     max_d = int(iso[4].max(initial=0))
-    run_tasks(_trace_task, max_d, rays, float(frame[0, 0]), float(frame[0, 1]),
+    band_rows = BAND_ROWS * int(width)
+    n_bands = -(-(int(rays[-1]) + 1) // band_rows) if len(rays) else 0
+    bands = np.searchsorted(rays, np.arange(n_bands + 1) * band_rows).astype(np.int64)
+    scratch = tuple(_scratch(max_d) for _ in mems)
+    run_tasks(_trace_task, rays, bands, float(frame[0, 0]), float(frame[0, 1]),
               float(frame[0, 2]), frame, int(width), int(round_no), bvh_min, bvh_max,
               bvh_first, bvh_count, prims, shell_min, shell_max, patch_slot, slot_depth,
               slot_vert_off, slot_node_off, slot_quad, slot_round, verts, node_lo, node_hi,
-              lc_off, lc_data, iso, float(slack), hits, request, tested)
+              lc_off, lc_data, iso, mems, scratch, float(slack), hits, request, tested,
+              n=len(mems))
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")  # 1/0 -> inf for axis-parallel rays
-def _trace_task(task, n_tasks, max_d, rays, ox, oy, oz, frame, width, round_no, bvh_min, bvh_max,
-                bvh_first, bvh_count, prims, shell_min, shell_max, patch_slot, slot_depth,
-                slot_vert_off, slot_node_off, slot_quad, slot_round, verts, node_lo, node_hi,
-                lc_off, lc_data, iso, slack, hits, request, tested):
-    """The blocks of rays of one task, with scratch buffers shared by them (one call per
-    task keeps the per-ray cost free of call overhead)."""
-    stack = np.empty(128, np.int64)
-    gstack = np.empty(64, np.int64)
-    ent_t = np.empty(4)
-    ent_i = np.empty(4, np.int64)
-    work = np.empty((3 * max_d + 10, 4, 4, 3))
-    st_i = np.empty(3 * max_d + 8, np.int64)
-    st_j = np.empty(3 * max_d + 8, np.int64)
-    st_l = np.empty(3 * max_d + 8, np.int64)
-    lv = np.empty((4 * 256 + 8, 3))
-    lp = np.empty((4 * 256 + 8, 2))
-    n_rays = len(rays)
-    n_blocks = (n_rays + RAYS_PER_BLOCK - 1) // RAYS_PER_BLOCK
-    for blk in range(task, n_blocks, n_tasks):
-        for q in range(blk * RAYS_PER_BLOCK, min(n_rays, (blk + 1) * RAYS_PER_BLOCK)):
+def _scratch(max_d):
+    """A thread's scratch buffers for grids up to depth ``max_d``: BVH and grid stacks,
+    Bezier nets being split, the quadtree stack and its entry distances, child order,
+    a cell's points and parameters (fans included), the ray's hit record."""
+    n = 6 * max_d + 8
+    return (np.empty(128, np.int64), np.empty(64, np.int64), np.empty((3 * max_d + 10, 4, 4, 3)),
+            np.empty((n, 5), np.int64), np.empty(n), np.empty(4), np.empty(4, np.int64),
+            np.empty((4 * MAX_SIDE_SAMPLES + 8, 3)), np.empty((4 * MAX_SIDE_SAMPLES + 8, 2)),
+            np.empty(HIT_FIELDS))
+
+
+@nb.njit(cache=True, nogil=True, _nrt=False, error_model="numpy")  # see prims.leaf_njit
+def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, bvh_min,
+                bvh_max, bvh_first, bvh_count, prims, shell_min, shell_max, patch_slot,
+                slot_depth, slot_vert_off, slot_node_off, slot_quad, slot_round, verts,
+                node_lo, node_hi, lc_off, lc_data, iso, mems, scratches, slack, hits, request,
+                tested):
+    """The bands of rays of one task, with its memo and scratch buffers (one call per task
+    keeps the per-ray cost free of call overhead)."""
+    mem = mems[task]
+    stack, gstack, work, st, st_t, ent_t, ent_i, lv, lp, hit = scratches[task]
+    scratch = (work, st, st_t, ent_t, ent_i, lv, lp)
+    patch_iso, slot_first, slot_count, iso_round, slot_d, slot_side = iso[:6]
+    kind, ref, level, i0, j0, it_lo, it_hi, nets, cells, iso_touched = iso[6:]
+    for band in range(task, len(bands) - 1, n_tasks):
+        for q in range(bands[band], bands[band + 1]):
             r = rays[q]
             row = r // width
             col = r - row * width
             dx, dy, dz = ray_setup(frame, row, col)
             ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
             kx, ky, kz, sx, sy, sz = _shear(dx, dy, dz)
-            hit = hits[r]
+            for k in range(HIT_FIELDS):
+                hit[k] = hits[r, k]
             req = -1
             req_t = np.inf
             sp = 0
@@ -190,13 +174,14 @@ def _trace_task(task, n_tasks, max_d, rays, ox, oy, oz, frame, width, round_no, 
                         te = _slab(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, hit[H_T])
                         if te == np.inf:
                             continue
-                        s = iso[0][p]
+                        s = patch_iso[p]
                         if s >= 0:
-                            if iso[3][s] == round_no - 1:
-                                iso[15][s] = 1
-                                tested[r] += _intersect_isolated(
-                                    ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, p, s, iso, slack,
-                                    hit, work, st_i, st_j, st_l, ent_t, ent_i, lv, lp)
+                            if iso_round[s] == round_no - 1:
+                                iso_touched[s] = 1
+                                tested[r] += intersect_patch(
+                                    (ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz), p, s,
+                                    slot_first, slot_count, slot_d, slot_side, kind, ref, level,
+                                    i0, j0, it_lo, it_hi, nets, cells, mem, slack, hit, scratch)
                             continue
                         s = patch_slot[p]
                         if s < 0:
@@ -228,3 +213,5 @@ def _trace_task(task, n_tasks, max_d, rays, ox, oy, oz, frame, width, round_no, 
                     stack[sp] = right
                     sp += 1
             request[r] = req if req_t < hit[H_T] else -1
+            for k in range(HIT_FIELDS):
+                hits[r, k] = hit[k]
