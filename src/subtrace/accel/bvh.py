@@ -63,19 +63,25 @@ def _area(lo, hi):
 
 @nb.njit(cache=True)
 def _build(bmin, bmax, prims, leaf_size, node_min, node_max, first, count):
+    # Written with scalar loops only: whole-array expressions, np.full and array-to-slice
+    # assignment each pull a generic Numba implementation into the first compile (the slice
+    # assignment alone, through its error message, about 1.5 s).
     n = len(prims)
     if n == 0:
-        node_min[0, :] = np.inf
-        node_max[0, :] = -np.inf
+        for a in range(3):
+            node_min[0, a] = np.inf
+            node_max[0, a] = -np.inf
         first[0] = 0
         count[0] = 0
         return 1
-    cent = 0.5 * (bmin + bmax)
+    cent = np.empty((n, 3))
+    for p in range(n):
+        for a in range(3):
+            cent[p, a] = 0.5 * (bmin[p, a] + bmax[p, a])
     # explicit stack of (node index, start, end); children are written depth-first
     st_node = np.empty(128, np.int64)
     st_lo = np.empty(128, np.int64)
     st_hi = np.empty(128, np.int64)
-    sp = 0
     st_node[0], st_lo[0], st_hi[0] = 0, 0, n
     sp = 1
     n_nodes = 1
@@ -86,23 +92,25 @@ def _build(bmin, bmax, prims, leaf_size, node_min, node_max, first, count):
     right_n = np.empty(_BINS, np.int64)
     lo = np.empty(3)
     hi = np.empty(3)
+    clo = np.empty(3)
+    chi = np.empty(3)
+    tmp = np.empty(n, np.int64)
     while sp > 0:
         sp -= 1
         node, s, e = st_node[sp], st_lo[sp], st_hi[sp]
-        # node box and centroid bounds
-        nlo = np.full(3, np.inf)
-        nhi = np.full(3, -np.inf)
-        clo = np.full(3, np.inf)
-        chi = np.full(3, -np.inf)
+        # node box (straight into the node arrays) and centroid bounds
+        for a in range(3):
+            node_min[node, a] = np.inf
+            node_max[node, a] = -np.inf
+            clo[a] = np.inf
+            chi[a] = -np.inf
         for i in range(s, e):
             p = prims[i]
             for a in range(3):
-                nlo[a] = min(nlo[a], bmin[p, a])
-                nhi[a] = max(nhi[a], bmax[p, a])
+                node_min[node, a] = min(node_min[node, a], bmin[p, a])
+                node_max[node, a] = max(node_max[node, a], bmax[p, a])
                 clo[a] = min(clo[a], cent[p, a])
                 chi[a] = max(chi[a], cent[p, a])
-        node_min[node] = nlo
-        node_max[node] = nhi
         cnt = e - s
         ax = 0
         ext = chi[0] - clo[0]
@@ -115,9 +123,11 @@ def _build(bmin, bmax, prims, leaf_size, node_min, node_max, first, count):
             count[node] = cnt
             continue
         # binned SAH along the widest centroid axis
-        bin_n[:] = 0
-        bin_lo[:] = np.inf
-        bin_hi[:] = -np.inf
+        for b in range(_BINS):
+            bin_n[b] = 0
+            for a in range(3):
+                bin_lo[b, a] = np.inf
+                bin_hi[b, a] = -np.inf
         scale = _BINS / ext
         for i in range(s, e):
             p = prims[i]
@@ -126,8 +136,9 @@ def _build(bmin, bmax, prims, leaf_size, node_min, node_max, first, count):
             for a in range(3):
                 bin_lo[b, a] = min(bin_lo[b, a], bmin[p, a])
                 bin_hi[b, a] = max(bin_hi[b, a], bmax[p, a])
-        lo[:] = np.inf
-        hi[:] = -np.inf
+        for a in range(3):
+            lo[a] = np.inf
+            hi[a] = -np.inf
         acc = 0
         for b in range(_BINS - 1, 0, -1):
             for a in range(3):
@@ -136,8 +147,9 @@ def _build(bmin, bmax, prims, leaf_size, node_min, node_max, first, count):
             acc += bin_n[b]
             right_area[b] = _area(lo, hi)
             right_n[b] = acc
-        lo[:] = np.inf
-        hi[:] = -np.inf
+        for a in range(3):
+            lo[a] = np.inf
+            hi[a] = -np.inf
         acc = 0
         best = np.inf
         split = -1
@@ -155,7 +167,6 @@ def _build(bmin, bmax, prims, leaf_size, node_min, node_max, first, count):
         # partition (stable within each side keeps the build deterministic)
         mid = s
         if split >= 0:
-            tmp = np.empty(cnt, np.int64)
             k = 0
             for i in range(s, e):
                 p = prims[i]
@@ -168,7 +179,8 @@ def _build(bmin, bmax, prims, leaf_size, node_min, node_max, first, count):
                 if min(_BINS - 1, int((cent[p, ax] - clo[ax]) * scale)) > split:
                     tmp[k] = p
                     k += 1
-            prims[s:e] = tmp
+            for i in range(cnt):
+                prims[s + i] = tmp[i]
         if mid == s or mid == e:
             mid = s + cnt // 2  # degenerate binning: split the range in two
         left = n_nodes
