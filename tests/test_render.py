@@ -390,7 +390,7 @@ def test_isolated_pieces_tile_the_grid(name):
     irr = np.nonzero(~table.regular)[0][:12]
     scale = float(np.abs(o.points).max())
     for depth in (0, 1, 3):
-        (sr, sl, si, sj, nets), (cr, ci, cj, cp, _) = build_isolated(o, table.face[irr], depth)
+        (sr, sl, si, sj, nets, _), (cr, ci, cj, cp, _) = build_isolated(o, table.face[irr], depth)
         G = build_grids(o.level, o.points, cage.options, table.face[irr], depth)[0]
         n = (1 << depth) + 1
         G = G.reshape(len(irr), n, n, 3)
@@ -412,8 +412,9 @@ def test_isolated_pieces_tile_the_grid(name):
 @needs_shared
 def test_cells_subtend_at_most_the_tolerance():
     """Invariant 3 on real grids: with the chosen depths, every cell side of every patch of
-    Spot (regular and isolated) subtends at most the tolerance at the eye (the bound is
-    conservative) - and not far below it for most patches (the bound is tight)."""
+    Spot (regular and isolated, and each piece of an isolated patch at its own depth)
+    subtends at most the tolerance at the eye (the bound is conservative) - and not far
+    below it for most patches (the bound is tight)."""
     from subtrace.patches.table import choose_depths
 
     cage = subtrace.load_cage(MODELS / "spot_control_mesh.obj")
@@ -432,6 +433,26 @@ def test_cells_subtend_at_most_the_tolerance():
         su = np.linalg.norm(np.diff(G, axis=2), axis=-1) / np.minimum(dist[:, :, 1:], dist[:, :, :-1])
         sv = np.linalg.norm(np.diff(G, axis=1), axis=-1) / np.minimum(dist[:, 1:], dist[:, :-1])
         worst.append(np.maximum(su.reshape(len(ids), -1).max(1), sv.reshape(len(ids), -1).max(1)))
+    # the pieces of isolated patches, each refined to its own depth
+    from subtrace.patches.isolate import build_isolated
+
+    irr = np.nonzero(~table.regular & (depths > 0))[0]
+    for d in np.unique(depths[irr]):
+        ids = irr[depths[irr] == d]
+        (_, lev, _, _, nets, own), _ = build_isolated(o, table.face[ids], int(d), eye, tol)
+        assert np.all((own >= lev) & (own <= d))
+        for pd in np.unique(own - lev):
+            sel = own - lev == pd
+            t = np.linspace(0.0, 1.0, (1 << pd) + 1)
+            B = np.stack([(1 - t) ** 3, 3 * t * (1 - t) ** 2, 3 * t * t * (1 - t), t ** 3], 1)
+            G = np.einsum("ia,jb,nabk->njik", B, B, nets[sel])  # (n, v, u, 3)
+            dist = np.linalg.norm(G - eye, axis=-1)
+            su = (np.linalg.norm(np.diff(G, axis=2), axis=-1)
+                  / np.minimum(dist[:, :, 1:], dist[:, :, :-1]))
+            sv = (np.linalg.norm(np.diff(G, axis=1), axis=-1)
+                  / np.minimum(dist[:, 1:], dist[:, :-1]))
+            worst.append(np.maximum(su.reshape(sel.sum(), -1).max(1),
+                                    sv.reshape(sel.sum(), -1).max(1)))
     worst = np.concatenate(worst) / tol
     assert worst.max() <= 1.0 + 1e-9
     assert np.median(worst) > 0.4

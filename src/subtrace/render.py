@@ -204,7 +204,7 @@ def _snap_sides(P: np.ndarray, depth: int, quad: bool, side_depth: np.ndarray):
             P[rows[:, None], idx[None, :]] = (1.0 - w) * Q[:, t0] + w * Q[:, t1]
 
 
-def _refine(table, requested, depths, edge_depth, pools, iso, round_no, stats):
+def _refine(table, requested, depths, edge_depth, pools, iso, round_no, stats, eye, tol_rad):
     """Build the requested patches: irregular Catmull-Clark patches into pieces (``iso``),
     Loop patches into grids (``pools``)."""
     obj = table.object_id[requested]
@@ -219,7 +219,7 @@ def _refine(table, requested, depths, edge_depth, pools, iso, round_no, stats):
         o = table.objects[int(obj[s])]
         d = int(dep[s])
         if table.is_quad[ids[0]]:
-            subs, cells = build_isolated(o, table.face[ids], d)
+            subs, cells = build_isolated(o, table.face[ids], d, eye, tol_rad)
             dd = np.full(len(ids), d)
             n_sub, n_cell = iso.append(ids, dd, np.repeat(dd, 4), subs, cells, round_no)
             stats.pieces += n_sub + n_cell
@@ -249,10 +249,10 @@ class _Pieces(_Growable):
 
     GROUPS = {
         "slots": {"patch": ((), np.int64), "first": ((), np.int64), "count": ((), np.int64),
-                  "round": ((), np.int64), "depth": ((), np.int64), "side": ((4,), np.int64),
-                  "touched": ((), np.uint8)},
+                  "round": ((), np.int64), "depth": ((), np.int64), "touched": ((), np.uint8)},
         "items": {"kind": ((), np.int8), "ref": ((), np.int64), "level": ((), np.int64),
-                  "i0": ((), np.int64), "j0": ((), np.int64), "lo": ((3,), np.float64),
+                  "i0": ((), np.int64), "j0": ((), np.int64), "depth_i": ((), np.int64),
+                  "side": ((4,), np.int64), "lo": ((3,), np.float64),
                   "hi": ((3,), np.float64)},
         "nets": {"nets": ((4, 4, 3), np.float64)},
         "cells": {"cells": ((4, 3), np.float64), "normals": ((4, 3), np.float64)},
@@ -263,32 +263,43 @@ class _Pieces(_Growable):
         self.patch_iso = np.full(n_patches, -1, dtype=np.int64)
 
     def append(self, patches, depth, side, subs, cells, round_no):
-        """Slots for ``patches`` (grid depths ``depth`` (m,), side depths ``side`` (m,4)) made
-        of ``subs`` and ``cells`` (see :func:`~subtrace.patches.isolate.build_isolated`)."""
-        (sr, sl, si, sj, nets), (cr, ci, cj, cp, cn) = subs, cells
+        """Slots for ``patches`` (grid depths ``depth`` (m,), how their sides are sampled
+        ``side`` (m,4)) made of ``subs`` and ``cells`` (see
+        :func:`~subtrace.patches.isolate.build_isolated`); each piece samples its sides as
+        finely as the pieces beside it (:func:`~subtrace.patches.isolate.item_sides`)."""
+        from .patches.isolate import item_sides
+
+        (sr, sl, si, sj, nets, sd), (cr, ci, cj, cp, cn) = subs, cells
         lo_s, hi_s, _ = net_bounds(nets)
         root = np.concatenate([sr, cr])
         order = np.argsort(root, kind="stable")
+        level = np.r_[sl, depth[cr]][order]
+        i0, j0 = np.r_[si, ci][order], np.r_[sj, cj][order]
+        depth_i = np.r_[sd, depth[cr]][order].astype(np.int64)
+        count = np.bincount(root, minlength=len(patches))
+        first = np.cumsum(count) - count
+        item_side = np.empty((len(root), 4), np.int64)
+        item_sides(first, count, level, i0, j0, depth_i,
+                   np.ascontiguousarray(np.asarray(side).reshape(-1, 4), dtype=np.int64),
+                   item_side)
         n0 = self._put("nets", nets=nets)
         c0 = self._put("cells", cells=cp, normals=cn)
         i_start = self._put(
             "items",
             kind=np.r_[np.zeros(len(sr), np.int8), np.ones(len(cr), np.int8)][order],
             ref=np.r_[n0 + np.arange(len(sr)), c0 + np.arange(len(cr))][order],
-            level=np.r_[sl, depth[cr]][order], i0=np.r_[si, ci][order],
-            j0=np.r_[sj, cj][order], lo=np.concatenate([lo_s, cp.min(axis=1)])[order],
+            level=level, i0=i0, j0=j0, depth_i=depth_i, side=item_side,
+            lo=np.concatenate([lo_s, cp.min(axis=1)])[order],
             hi=np.concatenate([hi_s, cp.max(axis=1)])[order],
         )
-        count = np.bincount(root, minlength=len(patches))
-        s0 = self._put("slots", patch=patches, first=i_start + np.cumsum(count) - count,
-                       count=count, round=np.full(len(patches), round_no), depth=depth,
-                       side=np.asarray(side).reshape(-1, 4))
+        s0 = self._put("slots", patch=patches, first=i_start + first, count=count,
+                       round=np.full(len(patches), round_no), depth=depth)
         self.patch_iso[patches] = s0 + np.arange(len(patches))
         return len(sr), len(cr)
 
     def kernel_tuple(self):
         a = self.a
-        return (self.patch_iso, a["first"], a["count"], a["round"], a["depth"], a["side"],
+        return (self.patch_iso, a["first"], a["count"], a["round"], a["depth_i"], a["side"],
                 a["kind"], a["ref"], a["level"], a["i0"], a["j0"], a["lo"], a["hi"],
                 a["nets"], a["cells"].reshape(-1, 3), a["touched"])
 
@@ -373,7 +384,7 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
     one = np.arange(len(reg))
     iso.append(reg, depths[reg], reg_side,
                (one, np.zeros(len(reg), np.int64), np.zeros(len(reg), np.int64),
-                np.zeros(len(reg), np.int64), table.nets),
+                np.zeros(len(reg), np.int64), table.nets, depths[reg]),
                (none, none, none, np.zeros((0, 4, 3)), np.zeros((0, 4, 3))), -1)
     hits = np.zeros((W * H, HIT_FIELDS))
     hits[:, H_T] = np.inf
@@ -401,7 +412,7 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
             break
         t0 = time.perf_counter()
         new = np.unique(req[asked])
-        _refine(table, new, depths, edge_depth, pools, iso, round_no, stats)
+        _refine(table, new, depths, edge_depth, pools, iso, round_no, stats, eye, tol_rad)
         stats.time_refine += time.perf_counter() - t0
         round_no += 1
     stats.rounds = round_no + 1
@@ -410,7 +421,7 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
     # regular patches count as refined once a ray has descended into them
     direct = iso.a["patch"][(iso.a["round"] < 0) & (iso.a["touched"] > 0)]
     stats.patches_refined += len(direct)
-    stats.max_depth = int(max(pools.a["slot_depth"].max(initial=0), iso.a["depth"].max(initial=0)))
+    stats.max_depth = int(max(pools.a["slot_depth"].max(initial=0), iso.a["depth_i"].max(initial=0)))
     built = np.concatenate([pools.a["slot_patch"], iso.a["patch"][iso.a["round"] >= 0], direct])
     return hits, pools, iso, tables, built
 

@@ -17,6 +17,7 @@ conservative depth. Its grid is still uniform, so every cell satisfies the crite
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
 from .bspline import bezier_nets, control_grids, net_bounds, regular_mask
@@ -90,22 +91,25 @@ def isolated_depths(obj, faces, cap, eye, tol_rad):
     return np.minimum(need, cap).astype(np.int32)
 
 
-def build_isolated(obj, faces, depth):
-    """Feature-adaptive pieces of the irregular quads ``faces`` of ``obj``'s patch level, all
-    refined to grid depth ``depth`` (a scalar): every grid cell of a patch is covered either
-    by a regular sub-patch (a bicubic Bezier net over a dyadic square) or, where no level
-    down to ``depth`` is regular, by a cell of exact limit points.
+def build_isolated(obj, faces, depth, eye=None, tol_rad=None):
+    """Feature-adaptive pieces of the irregular quads ``faces`` of ``obj``'s patch level,
+    refined down to grid depth ``depth`` (a scalar): every grid cell of a patch is covered
+    either by a regular sub-patch (a bicubic Bezier net over a dyadic square) or, where no
+    level down to ``depth`` is regular, by a cell of exact limit points.
 
     Returns ``(subs, cells)``:
     ``subs`` = (root index (s,), level (s,), origin i0, j0 (s,) in units of 2^-level,
-    Bezier nets (s,4,4,3)); ``cells`` = (root index (c,), cell i, j (c,) in units of
-    2^-depth, corner points (c,4,3), corner unit normals (c,4,3), NaN where undefined).
+    Bezier nets (s,4,4,3), grid depth (s,) in the patch's units: the piece's own need from
+    its Bezier bound as seen from ``eye`` at ``tol_rad`` (as :func:`isolated_depths`), at
+    least its level and at most ``depth``; ``depth`` for all without an eye);
+    ``cells`` = (root index (c,), cell i, j (c,) in units of 2^-depth, corner points (c,4,3),
+    corner unit normals (c,4,3), NaN where undefined).
     """
     from ..subdiv.limit import limit_points
 
     options = obj.cage.options
     faces = np.asarray(faces, dtype=np.int64)
-    subs = [[], [], [], [], []]
+    subs = [[], [], [], [], [], []]
     cells = [[], [], [], [], []]
     root = np.arange(len(faces))
     i0 = np.zeros(len(faces), dtype=np.int64)
@@ -125,7 +129,14 @@ def build_isolated(obj, faces, depth):
                 subs[1].append(np.full(int(reg.sum()), k))
                 subs[2].append(ki[reg])
                 subs[3].append(kj[reg])
-                subs[4].append(bezier_nets(cur_pts[control_grids(cur, kids[reg])]))
+                bez = bezier_nets(cur_pts[control_grids(cur, kids[reg])])
+                subs[4].append(bez)
+                own = np.full(len(bez), depth)
+                if eye is not None:
+                    lo, hi, bound = net_bounds(bez)
+                    n = _levels_needed(bound, box_distance(lo, hi, eye), tol_rad)
+                    own = np.clip(k + n, k, depth).astype(np.int64)
+                subs[5].append(own)
             irr = ~reg
             if k == depth:
                 root = kid_root[irr]
@@ -143,7 +154,59 @@ def build_isolated(obj, faces, depth):
             nrm = np.where(length > 0, nrm / length, np.nan)
         cells = [[root], [i0], [j0], [P.reshape(-1, 4, 3)], [nrm.reshape(-1, 4, 3)]]
     empty = (np.zeros(0, np.int64),) * 4
-    out_subs = tuple(np.concatenate(a) for a in subs) if subs[0] else (*empty, np.zeros((0, 4, 4, 3)))
+    out_subs = (tuple(np.concatenate(a) for a in subs) if subs[0]
+                else (*empty, np.zeros((0, 4, 4, 3)), empty[0]))
     out_cells = (tuple(np.concatenate(a) for a in cells) if cells[0]
                  else (*empty[:3], np.zeros((0, 4, 3)), np.zeros((0, 4, 3))))
     return out_subs, out_cells
+
+
+@nb.njit(cache=True)
+def item_sides(first, count, level, i0, j0, depth, patch_side, out):
+    """How finely each side of each piece is sampled, for watertight pieces of different
+    depths: patch ``p``'s pieces are ``first[p] .. first[p] + count[p] - 1`` (dyadic squares
+    at ``level``, origin ``i0, j0``, grid ``depth``, all in the patch's units); ``out`` (n,4)
+    receives, per side (0: v = v0, 1: u = u1, 2: v = v1, 3: u = u0), the deepest grid among
+    the pieces that share a stretch of it (itself included), and at least ``patch_side[p, k]``
+    on the patch's side k. Repeated until nothing changes: a large piece's side spans several
+    small pieces, which must then all sample their stretches as the large one does."""
+    for p in range(len(first)):
+        f, c = first[p], count[p]
+        top = 0
+        for a in range(f, f + c):
+            top = max(top, level[a])
+        full = 1 << top
+        for a in range(f, f + c):
+            sc = 1 << (top - level[a])
+            u0, v0 = i0[a] * sc, j0[a] * sc
+            u1, v1 = u0 + sc, v0 + sc
+            for k in range(4):
+                out[a, k] = depth[a]
+            if v0 == 0:
+                out[a, 0] = max(out[a, 0], patch_side[p, 0])
+            if u1 == full:
+                out[a, 1] = max(out[a, 1], patch_side[p, 1])
+            if v1 == full:
+                out[a, 2] = max(out[a, 2], patch_side[p, 2])
+            if u0 == 0:
+                out[a, 3] = max(out[a, 3], patch_side[p, 3])
+        changed = True
+        while changed:
+            changed = False
+            for a in range(f, f + c):
+                sa = 1 << (top - level[a])
+                au0, av0 = i0[a] * sa, j0[a] * sa
+                for b in range(f, f + c):
+                    sb = 1 << (top - level[b])
+                    bu0, bv0 = i0[b] * sb, j0[b] * sb
+                    # a's top side on b's bottom side, a's right side on b's left side
+                    if av0 + sa == bv0 and max(au0, bu0) < min(au0 + sa, bu0 + sb):
+                        m = max(out[a, 2], out[b, 0])
+                        if out[a, 2] != m or out[b, 0] != m:
+                            out[a, 2] = out[b, 0] = m
+                            changed = True
+                    if au0 + sa == bu0 and max(av0, bv0) < min(av0 + sa, bv0 + sb):
+                        m = max(out[a, 1], out[b, 3])
+                        if out[a, 1] != m or out[b, 3] != m:
+                            out[a, 1] = out[b, 3] = m
+                            changed = True

@@ -143,15 +143,15 @@ def _net_entry(ox, oy, oz, ix, iy, iz, net, s, tmax):
 
 
 @leaf_njit
-def _fan_samples(gi, gj, root_depth, sides, srow):
-    """Whether the root-grid cell (gi, gj) has a side sampled more finely than the grid (a
-    side on the patch boundary whose neighbour is finer, ``sides[srow]``): then it is cut
-    into a fan."""
-    NR = 1 << root_depth
-    return ((gj == 0 and sides[srow, 0] > root_depth)
-            or (gi == NR - 1 and sides[srow, 1] > root_depth)
-            or (gj == NR - 1 and sides[srow, 2] > root_depth)
-            or (gi == 0 and sides[srow, 3] > root_depth))
+def _fan_samples(i, j, depth, root_depth, sides, srow):
+    """Whether cell (i, j) of a piece's depth-``depth`` grid (``root_depth`` in the patch's
+    units) lies on a side of the piece sampled more finely than its grid (``sides[srow]``,
+    where the piece beside it is finer): then it is cut into a fan."""
+    N = 1 << depth
+    return ((j == 0 and sides[srow, 0] > root_depth)
+            or (i == N - 1 and sides[srow, 1] > root_depth)
+            or (j == N - 1 and sides[srow, 2] > root_depth)
+            or (i == 0 and sides[srow, 3] > root_depth))
 
 
 @leaf_njit
@@ -162,9 +162,9 @@ def _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, i, j, depth, oi, oj, roo
     ``hit`` (H_SLOT = ``code``, H_TRI = ``item``, (H_B1, H_B2) = root parameter). ``lv``
     (K,3) / ``lp`` (K,2): scratch for the cell's points and root parameters. Returns the
     number of triangles tested."""
-    inv = 1.0 / (1 << depth)
-    NR = 1 << root_depth
-    rinv = 1.0 / NR
+    N = 1 << depth
+    inv = 1.0 / N
+    rinv = 1.0 / (1 << root_depth)
     gi = oi + i
     gj = oj + j
     n = 0
@@ -175,16 +175,16 @@ def _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, i, j, depth, oi, oj, roo
         lv[n, 0], lv[n, 1], lv[n, 2] = x, y, z
         lp[n, 0], lp[n, 1] = (gi + di) * rinv, (gj + dj) * rinv
         n += 1
-        # samples of the side that starts at this corner, when the neighbour is finer
+        # samples of the side that starts at this corner, when the piece beside is finer
         side = corner
         if side == 0:
-            on_side = gj == 0
+            on_side = j == 0
         elif side == 1:
-            on_side = gi == NR - 1
+            on_side = i == N - 1
         elif side == 2:
-            on_side = gj == NR - 1
+            on_side = j == N - 1
         else:
-            on_side = gi == 0
+            on_side = i == 0
         if on_side and sides[srow, side] > root_depth:
             r = 1 << (sides[srow, side] - root_depth)
             for k in range(1, r):
@@ -390,7 +390,7 @@ def _expand(node, parent, ci, cj, lev, pd, mem, work):
 
 
 @inline_njit
-def intersect_patch(ray, p, s, slot_first, slot_count, slot_depth, slot_side, kind, ref, level,
+def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, kind, ref, level,
                     i0, j0, lo, hi, nets, cells, mem, slack, hit, scratch):
     """Closest hit on the pieces of Catmull-Clark patch ``p`` (slot ``s``; the arrays of
     ``kernels.trace_round``'s ``iso``) nearer than hit[H_T]; updates ``hit``. Returns the
@@ -410,13 +410,14 @@ def intersect_patch(ray, p, s, slot_first, slot_count, slot_depth, slot_side, ki
     ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz = ray
     work, st, st_t, tmp_t, order, lv, lp = scratch
     root_m, child, box, data, m_nets, m_cells, cnt = mem
-    first, count, depth = slot_first[s], slot_count[s], slot_depth[s]
+    first, count = slot_first[s], slot_count[s]
     code = -2.0 - p
     tested = 0
-    inv = 1.0 / (1 << depth)
     for it in range(first, first + count):
         if _slab(ox, oy, oz, ix, iy, iz, lo, hi, it, hit[H_T]) == np.inf:
             continue
+        depth = item_depth[it]  # its grid, in the patch's units
+        inv = 1.0 / (1 << depth)
         if kind[it] == 1:  # an irregular cell: its exact corners
             c = ref[it]
             for k in range(4):
@@ -435,7 +436,7 @@ def intersect_patch(ray, p, s, slot_first, slot_count, slot_depth, slot_side, ki
                 if pd > 0:
                     cnt[M_FULL] = 1
                 tested += _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, nets, nk, 0,
-                                   0, 0, nets, nk, pd, oi, oj, depth, slot_side, s, slack, hit,
+                                   0, 0, nets, nk, pd, oi, oj, depth, item_side, it, slack, hit,
                                    code, it, work, st, st_t, 0, tmp_t, order, lv, lp)
                 continue
             lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(nets, nk)
@@ -454,7 +455,7 @@ def intersect_patch(ray, p, s, slot_first, slot_count, slot_depth, slot_side, ki
             if lev == pd:
                 r = data[node]
                 if r == NOT_YET:
-                    if _fan_samples(oi + ci, oj + cj, depth, slot_side, s):
+                    if _fan_samples(ci, cj, pd, depth, item_side, it):
                         r = data[node] = FAN
                     elif cnt[M_CELLS] < len(m_cells) // 4:
                         r = data[node] = _store_cell(m_cells, cnt, nets, nk, ci, cj, pd)
@@ -464,7 +465,7 @@ def intersect_patch(ray, p, s, slot_first, slot_count, slot_depth, slot_side, ki
                         r = FAN
                 if r < 0:  # evaluated on the spot
                     tested += _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, ci, cj, pd,
-                                    oi, oj, depth, slot_side, s, slack, hit, code, it, lv, lp)
+                                    oi, oj, depth, item_side, it, slack, hit, code, it, lv, lp)
                 else:
                     for k in range(4):
                         lp[k, 0] = (oi + ci + (1 if k == 1 or k == 2 else 0)) * inv
@@ -478,7 +479,7 @@ def intersect_patch(ray, p, s, slot_first, slot_count, slot_depth, slot_side, ki
                 if c < 0:  # a store is full: split per ray below this node
                     tested += _descend_node(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, node,
                                             parent, lev, ci, cj, nets, nk, pd, oi, oj, depth,
-                                            slot_side, s, slack, hit, code, it, mem, work, st,
+                                            item_side, it, slack, hit, code, it, mem, work, st,
                                             st_t, sp + 1, tmp_t, order, lv, lp)
                     continue
             # the children the ray enters, pushed far to near

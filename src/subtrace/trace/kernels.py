@@ -145,7 +145,7 @@ def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, 
     mem = mems[task]
     stack, gstack, work, st, st_t, ent_t, ent_i, lv, lp, hit = scratches[task]
     scratch = (work, st, st_t, ent_t, ent_i, lv, lp)
-    patch_iso, slot_first, slot_count, iso_round, slot_d, slot_side = iso[:6]
+    patch_iso, slot_first, slot_count, iso_round, item_depth, item_side = iso[:6]
     kind, ref, level, i0, j0, it_lo, it_hi, nets, cells, iso_touched = iso[6:]
     for band in range(task, len(bands) - 1, n_tasks):
         for q in range(bands[band], bands[band + 1]):
@@ -180,7 +180,7 @@ def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, 
                                 iso_touched[s] = 1
                                 tested[r] += intersect_patch(
                                     (ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz), p, s,
-                                    slot_first, slot_count, slot_d, slot_side, kind, ref, level,
+                                    slot_first, slot_count, item_depth, item_side, kind, ref, level,
                                     i0, j0, it_lo, it_hi, nets, cells, mem, slack, hit, scratch)
                             continue
                         s = patch_slot[p]
