@@ -205,25 +205,26 @@ def _snap_sides(P: np.ndarray, depth: int, quad: bool, side_depth: np.ndarray):
 
 
 def _refine(table, requested, depths, edge_depth, pools, iso, round_no, stats, eye, tol_rad):
-    """Build the requested patches: irregular Catmull-Clark patches into pieces (``iso``),
-    Loop patches into grids (``pools``)."""
+    """Build the requested patches: irregular Catmull-Clark patches into pieces (``iso``,
+    all of an object's in one isolation), Loop patches into grids (``pools``)."""
     obj = table.object_id[requested]
     dep = depths[requested]
-    order = np.lexsort((requested, dep, obj))
-    requested, obj, dep = requested[order], obj[order], dep[order]
-    keys = np.stack([obj, dep], axis=1)
+    quad = table.is_quad[requested]
+    order = np.lexsort((requested, np.where(quad, 0, dep), obj))
+    requested, obj, dep, quad = requested[order], obj[order], dep[order], quad[order]
+    keys = np.stack([obj, np.where(quad, -1, dep)], axis=1)
     starts = np.r_[0, np.nonzero(np.any(np.diff(keys, axis=0) != 0, axis=1))[0] + 1]
     ends = np.r_[starts[1:], len(requested)]
     for s, e in zip(starts, ends):
         ids = requested[s:e]
         o = table.objects[int(obj[s])]
-        d = int(dep[s])
-        if table.is_quad[ids[0]]:
-            subs, cells = build_isolated(o, table.face[ids], d, eye, tol_rad)
-            dd = np.full(len(ids), d)
-            n_sub, n_cell = iso.append(ids, dd, np.repeat(dd, 4), subs, cells, round_no)
+        if quad[s]:
+            subs, cells = build_isolated(o, table.face[ids], dep[s:e], eye, tol_rad)
+            n_sub, n_cell = iso.append(ids, dep[s:e], np.repeat(dep[s:e], 4), subs, cells,
+                                       round_no)
             stats.pieces += n_sub + n_cell
             continue
+        d = int(dep[s])
         P, N = build_grids(o.level, o.points, o.cage.options, table.face[ids], d)
         side_depth = np.where(table.edges[ids, :3] >= 0, edge_depth[table.edges[ids, :3]], -1)
         _snap_sides(P, d, False, side_depth)
@@ -496,12 +497,12 @@ def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult
     t0 = time.perf_counter()
     W, H = camera.width, camera.height
     n = W * H
-    rgba = np.empty((n, 4))
-    nrm = np.empty((n, 3))
-    level = np.empty(n)
-    patch = np.empty(n)
-    objid = np.empty(n)
-    uv = np.empty((n, 2))
+    # the channels as float32 planes, written in place by the kernel (no conversion pass)
+    names = ("R", "G", "B", "A", "N.X", "N.Y", "N.Z", "level", "patch_id", "object_id", "u",
+             "v")
+    planes = np.empty((len(names), n), dtype=np.float32)
+    rgba, nrm, level, patch, objid, uv = (planes[0:4].T, planes[4:7].T, planes[7],
+                                          planes[8], planes[9], planes[10:12].T)
     lights = np.array(
         [[*l.direction, *(np.asarray(l.color) * l.intensity)] for l in scene.lights],
         dtype=np.float64,
@@ -519,13 +520,9 @@ def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult
     )
     z = hits[:, H_T]
     stats.pixels_covered = int(np.isfinite(z).sum())
-    channels = {
-        "R": rgba[:, 0], "G": rgba[:, 1], "B": rgba[:, 2], "A": rgba[:, 3], "Z": z,
-        "N.X": nrm[:, 0], "N.Y": nrm[:, 1], "N.Z": nrm[:, 2],
-        "level": level, "patch_id": patch, "object_id": objid,
-        "u": uv[:, 0], "v": uv[:, 1],
-    }
-    channels = {k: v.reshape(H, W).astype(np.float32) for k, v in channels.items()}
+    channels = {name: planes[k].reshape(H, W) for k, name in enumerate(names)}
+    channels = {**{c: channels[c] for c in "RGBA"}, "Z": z.astype(np.float32).reshape(H, W),
+                **{c: channels[c] for c in names[4:]}}
     stats.time_shade = time.perf_counter() - t0
     stats.time_total = time.perf_counter() - t_start
     schemes = tuple(c.scheme for c in cages)

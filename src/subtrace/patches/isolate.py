@@ -93,22 +93,21 @@ def isolated_depths(obj, faces, cap, eye, tol_rad):
 
 def build_isolated(obj, faces, depth, eye=None, tol_rad=None):
     """Feature-adaptive pieces of the irregular quads ``faces`` of ``obj``'s patch level,
-    refined down to grid depth ``depth`` (a scalar): every grid cell of a patch is covered
-    either by a regular sub-patch (a bicubic Bezier net over a dyadic square) or, where no
-    level down to ``depth`` is regular, by a cell of exact limit points.
+    refined down to grid depth ``depth`` (a scalar, or one per face): every grid cell of a
+    patch is covered either by a regular sub-patch (a bicubic Bezier net over a dyadic
+    square) or, where no level down to the depth is regular, by a cell of exact limit points.
 
     Returns ``(subs, cells)``:
     ``subs`` = (root index (s,), level (s,), origin i0, j0 (s,) in units of 2^-level,
     Bezier nets (s,4,4,3), grid depth (s,) in the patch's units: the piece's own need from
     its Bezier bound as seen from ``eye`` at ``tol_rad`` (as :func:`isolated_depths`), at
-    least its level and at most ``depth``; ``depth`` for all without an eye);
+    least its level and at most its patch's depth; the patch's depth without an eye);
     ``cells`` = (root index (c,), cell i, j (c,) in units of 2^-depth, corner points (c,4,3),
     corner unit normals (c,4,3), NaN where undefined).
     """
-    from ..subdiv.limit import limit_points
-
     options = obj.cage.options
     faces = np.asarray(faces, dtype=np.int64)
+    depth = np.broadcast_to(np.asarray(depth, dtype=np.int64), faces.shape)
     subs = [[], [], [], [], [], []]
     cells = [[], [], [], [], []]
     root = np.arange(len(faces))
@@ -116,49 +115,59 @@ def build_isolated(obj, faces, depth, eye=None, tol_rad=None):
     j0 = np.zeros(len(faces), dtype=np.int64)
     cur, cur_pts, start = obj.level, obj.points, faces
     k = 0
-    if depth > 0:
-        while len(root):
-            cur, cur_pts, kids, reg = _children(cur, cur_pts, start, options)
-            k += 1
-            q = np.arange(4)
-            kid_root = np.repeat(root, 4)
-            ki = (2 * i0[:, None] + (q == 1) + (q == 2)).ravel()
-            kj = (2 * j0[:, None] + (q >= 2)).ravel()
-            if reg.any():
-                subs[0].append(kid_root[reg])
-                subs[1].append(np.full(int(reg.sum()), k))
-                subs[2].append(ki[reg])
-                subs[3].append(kj[reg])
-                bez = bezier_nets(cur_pts[control_grids(cur, kids[reg])])
-                subs[4].append(bez)
-                own = np.full(len(bez), depth)
-                if eye is not None:
-                    lo, hi, bound = net_bounds(bez)
-                    n = _levels_needed(bound, box_distance(lo, hi, eye), tol_rad)
-                    own = np.clip(k + n, k, depth).astype(np.int64)
-                subs[5].append(own)
-            irr = ~reg
-            if k == depth:
-                root = kid_root[irr]
-                start, i0, j0 = kids[irr], ki[irr], kj[irr]
+    while len(root):
+        done = depth[root] == k
+        if done.any():
+            # the irregular cells left at their patch's depth: exact limit points
+            _add_cells(cells, cur, cur_pts, options, start[done], root[done], i0[done],
+                       j0[done])
+            keep = ~done
+            root, start, i0, j0 = root[keep], start[keep], i0[keep], j0[keep]
+            if not len(root):
                 break
-            root, start, i0, j0 = kid_root[irr], kids[irr], ki[irr], kj[irr]
-    if len(root):
-        # the irregular cells left at the grid depth: exact limit points of their corners
-        fo = cur.face_offsets
-        corners = cur.face_verts[fo[start][:, None] + np.arange(4)]
-        P, du, dv = limit_points(cur, cur_pts, options, which=corners.ravel())
-        nrm = np.cross(du, dv)
-        length = np.linalg.norm(nrm, axis=1, keepdims=True)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            nrm = np.where(length > 0, nrm / length, np.nan)
-        cells = [[root], [i0], [j0], [P.reshape(-1, 4, 3)], [nrm.reshape(-1, 4, 3)]]
+        cur, cur_pts, kids, reg = _children(cur, cur_pts, start, options)
+        k += 1
+        q = np.arange(4)
+        kid_root = np.repeat(root, 4)
+        ki = (2 * i0[:, None] + (q == 1) + (q == 2)).ravel()
+        kj = (2 * j0[:, None] + (q >= 2)).ravel()
+        if reg.any():
+            subs[0].append(kid_root[reg])
+            subs[1].append(np.full(int(reg.sum()), k))
+            subs[2].append(ki[reg])
+            subs[3].append(kj[reg])
+            bez = bezier_nets(cur_pts[control_grids(cur, kids[reg])])
+            subs[4].append(bez)
+            own = depth[kid_root[reg]]
+            if eye is not None:
+                lo, hi, bound = net_bounds(bez)
+                n = _levels_needed(bound, box_distance(lo, hi, eye), tol_rad)
+                own = np.clip(k + n, k, own).astype(np.int64)
+            subs[5].append(own)
+        irr = ~reg
+        root, start, i0, j0 = kid_root[irr], kids[irr], ki[irr], kj[irr]
     empty = (np.zeros(0, np.int64),) * 4
     out_subs = (tuple(np.concatenate(a) for a in subs) if subs[0]
                 else (*empty, np.zeros((0, 4, 4, 3)), empty[0]))
     out_cells = (tuple(np.concatenate(a) for a in cells) if cells[0]
                  else (*empty[:3], np.zeros((0, 4, 3)), np.zeros((0, 4, 3))))
     return out_subs, out_cells
+
+
+def _add_cells(cells, level, points, options, faces, root, i0, j0):
+    """Append the cells ``faces`` of ``level`` (exact limit points and unit normals of their
+    corners, NaN normals where undefined) to the lists ``cells``."""
+    from ..subdiv.limit import limit_points
+
+    fo = level.face_offsets
+    corners = level.face_verts[fo[faces][:, None] + np.arange(4)]
+    P, du, dv = limit_points(level, points, options, which=corners.ravel())
+    nrm = np.cross(du, dv)
+    length = np.linalg.norm(nrm, axis=1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        nrm = np.where(length > 0, nrm / length, np.nan)
+    for lst, a in zip(cells, (root, i0, j0, P.reshape(-1, 4, 3), nrm.reshape(-1, 4, 3))):
+        lst.append(a)
 
 
 @nb.njit(cache=True)
