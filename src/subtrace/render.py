@@ -121,18 +121,27 @@ class _Growable:
         self.a = {name: self._store[name][: self._used[group]]
                   for group, names in self.GROUPS.items() for name in names}
 
-    def _put(self, group, **values):
-        """Append rows to every array of ``group``; returns the first new row."""
+    def reserve(self, group, n):
+        """Make room for ``n`` rows of ``group`` in all (no copy later until they are used)."""
+        self._grow(group, n)
+
+    def _grow(self, group, end):
         start = self._used[group]
-        end = start + len(next(iter(values.values())))
         for name in self.GROUPS[group]:
             buf = self._store[name]
             if end > len(buf):
-                grown = np.zeros((max(end, 2 * len(buf)), *buf.shape[1:]), dtype=buf.dtype)
+                grown = np.empty((max(end, 2 * len(buf)), *buf.shape[1:]), dtype=buf.dtype)
                 grown[:start] = buf[:start]
-                self._store[name] = buf = grown
-            if name in values:
-                buf[start:end] = values[name]
+                self._store[name] = grown
+
+    def _put(self, group, **values):
+        """Append rows to every array of ``group`` (zeros where no value is given); returns
+        the first new row."""
+        start = self._used[group]
+        end = start + len(next(iter(values.values())))
+        self._grow(group, end)
+        for name in self.GROUPS[group]:
+            self._store[name][start:end] = values.get(name, 0)
         self._used[group] = end
         self._refresh()
         return start
@@ -381,6 +390,9 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
     iso = _Pieces(table.n_patches)
     memos = _Memos(tasks.thread_count())
     reg = np.nonzero(table.regular)[0]
+    n_irr = int(np.count_nonzero(table.is_quad & ~table.regular))
+    iso.reserve("items", len(reg) + 16 * n_irr)
+    iso.reserve("nets", len(reg) + 16 * n_irr)
     none = np.zeros(0, np.int64)
     one = np.arange(len(reg))
     iso.append(reg, depths[reg], reg_side,
