@@ -3,10 +3,10 @@
 ``render_scene(scene)`` loads the cages, builds the patch table and the BVH of patch shells,
 chooses each patch's grid depth from the angular tolerance and makes neighbours sample their
 shared edges alike, then runs rounds of ``trace.kernels.trace_round``. Regular Catmull-Clark
-patches are refined per ray inside the kernel (nothing stored). After each round the
-patches that rays asked for are built: irregular Catmull-Clark patches into Bezier pieces
-and cells (``_Pieces``), Loop patches into grids with snapped sides and quadtree boxes
-(``_Pools``). The rays that asked are then traced again. Patches no ray reaches before a
+patches are refined per ray inside the kernel, each thread keeping what its rays split
+(``_Memos``). After each round the patches that rays asked for are built: irregular
+Catmull-Clark patches into Bezier pieces (each with its own depth) and cells (``_Pieces``),
+Loop patches into grids with snapped sides and quadtree boxes (``_Pools``). The rays that asked are then traced again. Patches no ray reaches before a
 closer hit are never refined. Finally ``shade.py`` turns hits into image channels.
 """
 
@@ -36,7 +36,7 @@ class RenderStats:
     time_total: float = 0.0
     patches: int = 0
     patches_refined: int = 0
-    micro_triangles: int = 0
+    micro_triangles: int = 0  # built: cells kept by a thread x2, fan and irregular cells per ray
     grid_points: int = 0
     pieces: int = 0  # regular sub-patches and cells of the isolated irregular patches
     memo_nodes: int = 0  # quadtree nodes of Bezier pieces split and kept by the threads

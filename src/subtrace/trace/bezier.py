@@ -435,9 +435,11 @@ def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, ki
             if cnt[M_NODES] + 1 > len(child) or cnt[M_NETS] + 1 > len(m_nets) or pd == 0:
                 if pd > 0:
                     cnt[M_FULL] = 1
-                tested += _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, nets, nk, 0,
-                                   0, 0, nets, nk, pd, oi, oj, depth, item_side, it, slack, hit,
-                                   code, it, work, st, st_t, 0, tmp_t, order, lv, lp)
+                zero = np.int64(0)  # (literal arguments would compile another _descend)
+                tested += _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, nets, nk,
+                                   zero, zero, zero, nets, nk, pd, oi, oj, depth, item_side, it,
+                                   slack, hit, code, it, work, st, st_t, zero, tmp_t, order, lv,
+                                   lp)
                 continue
             lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(nets, nk)
             node = _new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2,
@@ -517,6 +519,6 @@ def _descend_node(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, node, parent, 
         for c in range(4):
             for k in range(3):
                 work[1, a, c, k] = work[q, a, c, k]
-    return _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, work, 1, lev, ci, cj, nets,
+    return _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, work, np.int64(1), lev, ci, cj, nets,
                     nk, pd, oi, oj, depth, sides, srow, slack, hit, code, it, work, st, st_t,
                     st0, tmp_t, order, lv, lp)
