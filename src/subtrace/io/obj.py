@@ -11,9 +11,12 @@
 #   corner_sharpness (c,) f4, hole_faces (h,) i4, all 0-based; sharpness >= 10 is infinite.
 # Tags follow OpenSubdiv's regression reader (regression/common/shape_utils.cpp parses
 # `t name nI/nF/nS ints floats strings`, far_utils.h interprets it); see _Reader._tag.
-# Speed: one Python pass splits statements and keeps number tokens as strings; numpy
-# converts each block in bulk, and only a failed conversion walks the rows again to name
-# the first bad line.
+# Speed: a jitted byte scanner (_scan_bytes) reads the v / vt / vn / f lines and lists the
+# other statements for Python; anything it cannot read exactly as the statement reader does
+# (continuation lines, malformed or out-of-range values) sends the file to the statement
+# reader (_Reader.read), which is also the tests' oracle. That reader splits statements in
+# one Python pass keeping number tokens as strings; numpy converts each block in bulk, and
+# only a failed conversion walks the rows again to name the first bad line.
 
 from __future__ import annotations
 
@@ -24,6 +27,7 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
+import numba as nb
 import numpy as np
 
 from subtrace.errors import ObjError, SubtraceWarning
@@ -95,8 +99,9 @@ def read_obj(path) -> ObjData:
     path = os.fspath(path)
     if isinstance(path, bytes):
         path = os.fsdecode(path)
-    text = _decode(path, _read_bytes(path))
-    data = _Reader(path).read(text)
+    raw = _read_bytes(path)
+    text = _decode(path, raw)
+    data = _Reader(path).read_fast(raw) or _Reader(path).read(text)
     for message in data.warnings:
         warnings.warn(message, SubtraceWarning, stacklevel=2)
     return data
@@ -205,6 +210,55 @@ class _Reader:
 
     # -- the pass over statements --------------------------------------------------------
 
+    def read_fast(self, data: bytes) -> ObjData | None:
+        """What `read` returns, from the byte scanner; None where only `read` can tell.
+
+        The scanner (_scan_bytes) reads v / vt / vn / f lines and lists the other statements
+        for _statement. Continuation lines, anything malformed or out of range, and errors of
+        other statements go to `read` (on a fresh _Reader), which reports them.
+        """
+        if b"\\" in data:
+            return None
+        start = 3 if data.startswith(b"\xef\xbb\xbf") else 0
+        max_lines = data.count(b"\n") + data.count(b"\r") + 1
+        points = np.empty(3 * max_lines)
+        uvs = np.empty(2 * max_lines)
+        normals = np.empty(3 * max_lines)
+        face_sizes = np.empty(max_lines, dtype=np.int32)
+        corners = np.empty((3, len(data) // 2 + 1), dtype=np.int32)
+        other = np.empty((max_lines, 4), dtype=np.int64)
+        slow = np.empty((3 * max_lines, 4), dtype=np.int64)
+        counts = np.zeros(7, dtype=np.int64)
+        buffer = np.frombuffer(data, dtype=np.uint8)
+        if not _scan_bytes(buffer, start, points, uvs, normals, face_sizes, corners, other,
+                           slow, counts):
+            return None
+        nv, nt, nn, nf, nc, no, ns = counts.tolist()
+        if nf == 0:
+            return None
+        # numbers the scanner cannot convert exactly: float() rounds them correctly
+        blocks = (points, uvs, normals)
+        for a, b, block, index in slow[:ns].tolist():
+            value = float(data[a:b])
+            if not math.isfinite(value):
+                return None
+            blocks[block][index] = value
+        try:
+            for a, b, number, num_faces in other[:no].tolist():
+                line = data[a:b].decode("utf-8")
+                parts = line.split()
+                if not parts:
+                    continue
+                if parts[0] in ("v", "vt", "vn", "f"):
+                    return None  # split at a non-ASCII space the scanner does not know
+                self._statement(number, line, parts, num_faces)
+            return self._finish(
+                points[: 3 * nv].reshape(-1, 3).copy(), uvs[: 2 * nt].reshape(-1, 2).copy(),
+                normals[: 3 * nn].reshape(-1, 3).copy(), face_sizes[:nf].copy(),
+                corners[0, :nc].copy(), corners[1, :nc].copy(), corners[2, :nc].copy())
+        except ObjError:
+            return None
+
     def read(self, text: str) -> ObjData:
         lines, numbers = _logical_lines(text)
         try:
@@ -214,11 +268,13 @@ class _Reader:
             # report those first so the error is always the earliest line.
             self._convert(check_forward=False)
             raise
-        arrays = self._convert(check_forward=True)
+        points, uvs, normals, face_verts, face_uvs, face_normals = self._convert(
+            check_forward=True)
         if not self.face_sizes:
             empty = not any(line.split() for line in lines)
             self.fail(None, "empty file: no faces" if empty else "no faces (no `f` statements)")
-        return self._finish(*arrays)
+        return self._finish(points, uvs, normals, self.face_sizes, face_verts, face_uvs,
+                            face_normals)
 
     def _scan(self, lines, numbers):
         point_tokens, point_lines = self.point_tokens, self.point_lines
@@ -272,25 +328,31 @@ class _Reader:
                     self.fail(number, f"vn needs 3 coordinates x y z, got {len(parts) - 1}")
                 self.normal_tokens += parts[1:4]
                 self.normal_lines.append(number)
-            elif keyword == "t":
-                self._tag(number, parts)
-            elif keyword == "g":
-                self.group_runs.append((len(face_sizes), " ".join(parts[1:]) or DEFAULT_NAME))
-            elif keyword == "o":
-                self.object_runs.append((len(face_sizes), " ".join(parts[1:]) or DEFAULT_NAME))
-            elif keyword == "usemtl":
-                # `usemtl` without a name ends the active material.
-                name = " ".join(parts[1:]) or None
-                if name is not None:
-                    self.material_first_use.setdefault(name, number)
-                self.material_runs.append((len(face_sizes), name))
-            elif keyword == "mtllib":
-                self._mtllib(number, line.split(None, 1)[1].strip() if len(parts) > 1 else "")
-            elif keyword == "s":
-                pass  # smoothing groups do not affect subdivision surfaces
             else:
-                seen = self.unknown.setdefault(keyword, [number, 0])
-                seen[1] += 1
+                self._statement(number, line, parts, len(face_sizes))
+
+    def _statement(self, number, line, parts, num_faces):
+        """A statement other than v / vt / vn / f, after `num_faces` faces."""
+        keyword = parts[0]
+        if keyword == "t":
+            self._tag(number, parts)
+        elif keyword == "g":
+            self.group_runs.append((num_faces, " ".join(parts[1:]) or DEFAULT_NAME))
+        elif keyword == "o":
+            self.object_runs.append((num_faces, " ".join(parts[1:]) or DEFAULT_NAME))
+        elif keyword == "usemtl":
+            # `usemtl` without a name ends the active material.
+            name = " ".join(parts[1:]) or None
+            if name is not None:
+                self.material_first_use.setdefault(name, number)
+            self.material_runs.append((num_faces, name))
+        elif keyword == "mtllib":
+            self._mtllib(number, line.split(None, 1)[1].strip() if len(parts) > 1 else "")
+        elif keyword == "s":
+            pass  # smoothing groups do not affect subdivision surfaces
+        else:
+            seen = self.unknown.setdefault(keyword, [number, 0])
+            seen[1] += 1
 
     # -- OpenSubdiv tags -----------------------------------------------------------------
 
@@ -593,8 +655,9 @@ class _Reader:
 
     # -- assembly ------------------------------------------------------------------------
 
-    def _finish(self, points, uvs, normals, face_verts, face_uvs, face_normals) -> ObjData:
-        num_faces = len(self.face_sizes)
+    def _finish(self, points, uvs, normals, face_sizes, face_verts, face_uvs,
+                face_normals) -> ObjData:
+        num_faces = len(face_sizes)
         num_points = len(points)
 
         crease_edges = (np.concatenate([p for _, p, _ in self.creases])
@@ -651,7 +714,7 @@ class _Reader:
         return ObjData(
             path=self.path,
             points=np.ascontiguousarray(points, dtype=np.float64),
-            face_sizes=i32(self.face_sizes),
+            face_sizes=i32(face_sizes),
             face_verts=i32(face_verts),
             uvs=np.ascontiguousarray(uvs, dtype=np.float64),
             face_uvs=i32(face_uvs),
@@ -673,3 +736,272 @@ class _Reader:
             smooth_triangles=self.smooth_triangles,
             warnings=tuple(message for _, message in self.warnings),
         )
+
+
+# -- byte scanner (the fast path) --------------------------------------------------------------
+# Reads v / vt / vn / f lines straight from the file's bytes and lists every other statement
+# for _Reader._statement. It accepts only what it can read exactly as the statement reader
+# does and answers False for anything else (a malformed or out-of-range value, a byte it
+# cannot classify), after which the statement reader reads the file again and reports it.
+
+_FAST_MAX_DIGITS = 18  # significant digits kept in an int64 mantissa (< 10^18)
+_FAST_MAX_POW10 = 22  # 10^22 is the largest power of ten a double holds exactly
+
+
+@nb.njit(cache=True)
+def _is_space(b):
+    """Bytes that str.split() takes as whitespace inside a line (\\t \\v \\f \\x1c-\\x1f, space)."""
+    return b == 32 or (9 <= b <= 13) or (28 <= b <= 31)
+
+
+@nb.njit(cache=True)
+def _parse_float(data, a, b):
+    """(code, value) of the token data[a:b]: code 0 for a value equal to float()'s, 1 for a
+    decimal number float() must convert (too many digits or a large exponent), 2 for
+    anything else.
+
+    Clinger's fast path: a mantissa m <= 2^53 and a power 10^k with |k| <= 22 are exact
+    doubles, so the single rounding of m * 10^k or m / 10^-k is the correctly rounded value.
+    """
+    i = a
+    neg = False
+    if data[i] == 43 or data[i] == 45:  # + or -
+        neg = data[i] == 45
+        i += 1
+    mantissa = 0
+    digits = 0  # significant digits in the mantissa
+    point = 0  # digits of the mantissa after the decimal point
+    seen = False
+    exact = True
+    after = False
+    while i < b:
+        c = data[i]
+        if 48 <= c <= 57:
+            seen = True
+            if digits < _FAST_MAX_DIGITS:
+                mantissa = mantissa * 10 + (c - 48)
+                if mantissa > 0:
+                    digits += 1
+                if after:
+                    point += 1
+            else:
+                exact = False  # a digit the mantissa cannot hold: float() converts this one
+        elif c == 46 and not after:  # .
+            after = True
+        else:
+            break
+        i += 1
+    if not seen:
+        return 2, 0.0
+    exponent = 0
+    if i < b and (data[i] == 101 or data[i] == 69):  # e or E
+        i += 1
+        eneg = False
+        if i < b and (data[i] == 43 or data[i] == 45):
+            eneg = data[i] == 45
+            i += 1
+        if i == b:
+            return 2, 0.0
+        while i < b and 48 <= data[i] <= 57:
+            if exponent < 100000:
+                exponent = exponent * 10 + (data[i] - 48)
+            i += 1
+        if eneg:
+            exponent = -exponent
+    if i != b:
+        return 2, 0.0
+    if not exact:
+        return 1, 0.0
+    if mantissa == 0:
+        return 0, -0.0 if neg else 0.0
+    power = exponent - point
+    if mantissa > 2**53 or power > _FAST_MAX_POW10 or power < -_FAST_MAX_POW10:
+        return 1, 0.0
+    scale = 1.0
+    for _ in range(abs(power)):
+        scale *= 10.0
+    value = mantissa * scale if power >= 0 else mantissa / scale
+    return 0, -value if neg else value
+
+
+@nb.njit(cache=True)
+def _parse_index(data, a, b):
+    """The OBJ index data[a:b] as written (1-based, or negative to count back); 0 for
+    anything the statement reader would reject or convert differently."""
+    i = a
+    neg = False
+    if i < b and (data[i] == 43 or data[i] == 45):
+        neg = data[i] == 45
+        i += 1
+    if i == b or b - i > 10:
+        return 0
+    value = 0
+    while i < b:
+        c = data[i]
+        if not 48 <= c <= 57:
+            return 0
+        value = value * 10 + (c - 48)
+        i += 1
+    if value > _MAX_INDEX:
+        return 0
+    return -value if neg else value
+
+
+@nb.njit(cache=True)
+def _scan_bytes(data, start, points, uvs, normals, face_sizes, corners, other, slow, counts):
+    """Read the statements of `data` (uint8) from byte `start`; True when it read them all.
+
+    Fills points / uvs / normals (flat float64), face_sizes and corners (3, C) int32 rows of
+    v / vt / vn indices (-1 where absent); other (n,4) gets (start, end, line, faces so far)
+    of every other statement, comment removed; slow (n,4) gets (start, end, block, index) of
+    numbers for float() (block 0 points, 1 uvs, 2 normals). counts gets the numbers of
+    points, uvs, normals, faces, corners, other statements and slow numbers.
+    """
+    n = len(data)
+    nv = nt = nn = nf = nc = no = ns = 0
+    number = 0
+    i = start
+    while i < n:
+        number += 1
+        # the line: ended by \n, \r or \r\n; its comment starts at the first #
+        s = i
+        e = s
+        end = -1
+        while e < n and data[e] != 10 and data[e] != 13:
+            if data[e] == 35 and end < 0:
+                end = e
+            e += 1
+        if end < 0:
+            end = e
+        i = e + 2 if e + 1 < n and data[e] == 13 and data[e + 1] == 10 else e + 1
+        # the keyword
+        j = s
+        while j < end and _is_space(data[j]):
+            j += 1
+        if j == end:
+            continue
+        k = j
+        while k < end and not _is_space(data[k]) and data[k] < 128:
+            k += 1
+        kind = 0  # 0 other, 1 v, 2 vt, 3 vn, 4 f
+        if k == end or _is_space(data[k]):
+            if k - j == 1 and data[j] == 118:
+                kind = 1
+            elif k - j == 1 and data[j] == 102:
+                kind = 4
+            elif k - j == 2 and data[j] == 118 and data[j + 1] == 116:
+                kind = 2
+            elif k - j == 2 and data[j] == 118 and data[j + 1] == 110:
+                kind = 3
+        if kind == 0:
+            other[no, 0] = s
+            other[no, 1] = end
+            other[no, 2] = number
+            other[no, 3] = nf
+            no += 1
+            continue
+        # the tokens after the keyword
+        size = 0
+        p = k
+        while True:
+            while p < end and _is_space(data[p]):
+                p += 1
+            if p == end:
+                break
+            q = p
+            while q < end and not _is_space(data[q]):
+                q += 1
+            if kind == 4:
+                # a corner v, v/vt, v//vn or v/vt/vn
+                a = p
+                b = p
+                while b < q and data[b] != 47:
+                    b += 1
+                # 0-based; negative indices count back from the elements read so far, positive
+                # ones are checked against the totals at the end
+                v = _parse_index(data, a, b)
+                v = v - 1 if v > 0 else (v + nv if v < 0 else -1)
+                if v < 0:
+                    return False
+                t = -1
+                m = -1
+                if b < q:
+                    a = b + 1
+                    b = a
+                    while b < q and data[b] != 47:
+                        b += 1
+                    if b > a:
+                        t = _parse_index(data, a, b)
+                        t = t - 1 if t > 0 else (t + nt if t < 0 else -1)
+                        if t < 0:
+                            return False
+                    if b < q:
+                        a = b + 1
+                        b = a
+                        while b < q and data[b] != 47:
+                            b += 1
+                        if b < q:
+                            return False  # too many '/'
+                        if b > a:
+                            m = _parse_index(data, a, b)
+                            m = m - 1 if m > 0 else (m + nn if m < 0 else -1)
+                            if m < 0:
+                                return False
+                corners[0, nc + size] = v
+                corners[1, nc + size] = t
+                corners[2, nc + size] = m
+            elif size < (2 if kind == 2 else 3):
+                code, value = _parse_float(data, p, q)
+                if code == 2:
+                    return False
+                if kind == 1:
+                    index = 3 * nv + size
+                    points[index] = value
+                elif kind == 2:
+                    index = 2 * nt + size
+                    uvs[index] = value
+                else:
+                    index = 3 * nn + size
+                    normals[index] = value
+                if code == 1:
+                    slow[ns, 0] = p
+                    slow[ns, 1] = q
+                    slow[ns, 2] = kind - 1
+                    slow[ns, 3] = index
+                    ns += 1
+            else:
+                break  # v / vn: w or colours, vt: w, all ignored
+            size += 1
+            p = q
+        if kind == 1:
+            if size < 3:
+                return False
+            nv += 1
+        elif kind == 2:
+            if size < 1:
+                return False
+            if size == 1:
+                uvs[2 * nt + 1] = 0.0
+            nt += 1
+        elif kind == 3:
+            if size < 3:
+                return False
+            nn += 1
+        else:
+            if size < 3:
+                return False
+            face_sizes[nf] = size
+            nf += 1
+            nc += size
+    # positive indices may name elements defined later: check them against the totals
+    for c in range(nc):
+        if corners[0, c] >= nv or corners[1, c] >= nt or corners[2, c] >= nn:
+            return False
+    counts[0] = nv
+    counts[1] = nt
+    counts[2] = nn
+    counts[3] = nf
+    counts[4] = nc
+    counts[5] = no
+    counts[6] = ns
+    return True
