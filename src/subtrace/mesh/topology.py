@@ -102,29 +102,6 @@ class Level:
 # --------------------------------------------------------------------------------------
 
 
-def _csr_from_keys(keys: np.ndarray, n: int):
-    """Group positions 0..len(keys)-1 by key (stable). Returns (offsets (n+1,), order)."""
-    offsets = np.zeros(n + 1, dtype=np.int64)
-    order = np.empty(len(keys), dtype=np.int32)
-    _counting_sort(np.ascontiguousarray(keys), offsets, order)
-    return offsets, order
-
-
-@nb.njit(cache=True)
-def _counting_sort(keys, offsets, order):
-    """Stable counting sort of small non-negative integer keys: offsets[k] is the start of
-    key k's run in ``order``, which lists the positions of the keys in increasing key order."""
-    for i in range(len(keys)):
-        offsets[keys[i] + 1] += 1
-    for k in range(1, len(offsets)):
-        offsets[k] += offsets[k - 1]
-    cursor = offsets[:-1].copy()
-    for i in range(len(keys)):
-        k = keys[i]
-        order[cursor[k]] = i
-        cursor[k] += 1
-
-
 def _compact(ids: np.ndarray, n: int):
     """The distinct values of ``ids`` (all in 0..n-1) in increasing order, and the map from
     each value to its rank (-1 for values absent); O(n), no sort."""
@@ -136,49 +113,79 @@ def _compact(ids: np.ndarray, n: int):
     return kept, rank
 
 
-def _corner_faces(face_offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For every corner c: its face and its index k within the face."""
-    sizes = np.diff(face_offsets)
-    face_of = np.repeat(np.arange(len(sizes), dtype=np.int32), sizes)
-    k = (np.arange(face_offsets[-1], dtype=np.int64) - face_offsets[face_of]).astype(np.int32)
-    return face_of, k
-
-
-def _next_corner(face_offsets: np.ndarray, face_of: np.ndarray, k: np.ndarray) -> np.ndarray:
-    sizes = np.diff(face_offsets)
-    s = sizes[face_of]
-    return (face_offsets[face_of] + (k + 1) % s).astype(np.int64)
-
-
 def base_edges(face_offsets: np.ndarray, face_verts: np.ndarray, n_verts: int):
     """Edges of a base mesh, numbered by first appearance when walking faces in order.
 
     Returns (edge_verts (E,2), face_edges (C,), face_edge_forward (C,)).
     """
-    face_of, k = _corner_faces(face_offsets)
-    a = face_verts.astype(np.int64)
-    b = face_verts[_next_corner(face_offsets, face_of, k)].astype(np.int64)
-    lo = np.minimum(a, b)
-    hi = np.maximum(a, b)
-    keys = lo * np.int64(n_verts) + hi
-    # as in OpenSubdiv, a degenerate edge (a face repeating a vertex) is never shared, and a
-    # face that uses an edge a second time gets a new edge for that use
-    unique_use = a == b
-    order = np.lexsort((np.arange(len(keys)), face_of, keys))
-    same = (keys[order][1:] == keys[order][:-1]) & (face_of[order][1:] == face_of[order][:-1])
-    unique_use[order[1:][same]] = True
-    if unique_use.any():
-        keys[unique_use] = np.int64(n_verts) * n_verts + np.nonzero(unique_use)[0]
-    uniq, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
-    # renumber the unique edges by first appearance
-    order = np.argsort(first, kind="stable")
-    rank = np.empty_like(order)
-    rank[order] = np.arange(len(order))
-    face_edges = rank[inverse].astype(np.int32)
-    first_sorted = first[order]
-    edge_verts = np.stack([a[first_sorted], b[first_sorted]], axis=1).astype(np.int32)
-    forward = (edge_verts[face_edges, 0] == a) & (edge_verts[face_edges, 1] == b)
-    return edge_verts, face_edges, forward
+    face_offsets = np.ascontiguousarray(face_offsets, dtype=np.int64)
+    face_verts = np.ascontiguousarray(face_verts, dtype=np.int32)
+    n_corners = len(face_verts)
+    edge_verts = np.empty((n_corners, 2), dtype=np.int32)
+    face_edges = np.empty(n_corners, dtype=np.int32)
+    forward = np.empty(n_corners, dtype=np.bool_)
+    n_edges = _base_edges(face_offsets, face_verts, n_verts, edge_verts, face_edges, forward)
+    return edge_verts[:n_edges].copy(), face_edges, forward
+
+
+@nb.njit(cache=True)
+def _base_edges(face_offsets, face_verts, n_verts, edge_verts, face_edges, forward):
+    """Number the edges of the faces' corners (corner k -> k+1) in order of first use; each
+    distinct vertex pair is one edge, except that, as in OpenSubdiv, a degenerate edge (a
+    face repeating a vertex) is never shared and a face using a pair again gets a new edge
+    for that use. Fills edge_verts (orientation of first use, at least E rows), face_edges
+    and forward; returns E.
+    """
+    n_faces = len(face_offsets) - 1
+    # the edges seen so far from each lower vertex: a bucket per vertex, at most its uses
+    start = np.zeros(n_verts + 1, dtype=np.int64)
+    for f in range(n_faces):
+        f0 = face_offsets[f]
+        n = face_offsets[f + 1] - f0
+        for k in range(n):
+            a = face_verts[f0 + k]
+            b = face_verts[f0 + k + 1 if k + 1 < n else f0]
+            start[min(a, b) + 1] += 1
+    for v in range(n_verts):
+        start[v + 1] += start[v]
+    filled = np.zeros(n_verts, dtype=np.int64)
+    bucket_hi = np.empty(start[n_verts], dtype=np.int32)
+    bucket_edge = np.empty(start[n_verts], dtype=np.int32)
+    last_face = np.empty(start[n_verts], dtype=np.int64)  # of each bucket entry's edge
+    n_edges = 0
+    for f in range(n_faces):
+        f0 = face_offsets[f]
+        n = face_offsets[f + 1] - f0
+        for k in range(n):
+            c = f0 + k
+            a = face_verts[c]
+            b = face_verts[f0 + k + 1 if k + 1 < n else f0]
+            lo, hi = min(a, b), max(a, b)
+            # an edge already used by an earlier face
+            e = -1
+            seen = False
+            if a != b:
+                for j in range(start[lo], start[lo] + filled[lo]):
+                    if bucket_hi[j] == hi:
+                        seen = True
+                        if last_face[j] != f:
+                            e = bucket_edge[j]
+                            last_face[j] = f
+                        break
+            if e < 0:
+                e = n_edges
+                n_edges += 1
+                edge_verts[e, 0] = a
+                edge_verts[e, 1] = b
+                if a != b and not seen:
+                    j = start[lo] + filled[lo]
+                    bucket_hi[j] = hi
+                    bucket_edge[j] = e
+                    last_face[j] = f
+                    filled[lo] += 1
+            face_edges[c] = e
+            forward[c] = edge_verts[e, 0] == a and edge_verts[e, 1] == b
+    return n_edges
 
 
 def build_level(
@@ -204,45 +211,27 @@ def build_level(
     face_verts = np.ascontiguousarray(face_verts, dtype=np.int32)
     face_edges = np.ascontiguousarray(face_edges, dtype=np.int32)
     edge_verts = np.ascontiguousarray(edge_verts, dtype=np.int32).reshape(-1, 2)
+    face_edge_forward = np.ascontiguousarray(face_edge_forward, dtype=np.bool_)
     n_edges = len(edge_verts)
-    face_of, k = _corner_faces(face_offsets)
+    n_corners = len(face_verts)
 
-    # edge -> face uses, in face order
-    edge_face_offsets, order = _csr_from_keys(face_edges, n_edges)
-    edge_faces = face_of[order]
-    edge_face_corner = k[order]
-
-    # vertex -> face corners, and vertex -> edges
-    vert_face_offsets, order = _csr_from_keys(face_verts, n_verts)
-    vert_faces = face_of[order]
-    vert_face_corner = k[order]
-    ev = edge_verts.ravel()
-    vert_edge_offsets, order = _csr_from_keys(ev, n_verts)
-    vert_edges = (order // 2).astype(np.int32)
-
-    if edge_nonmanifold is None:
-        edge_nonmanifold = _detect_nonmanifold_edges(
-            edge_verts, edge_face_offsets
-        )
-        edge_nonmanifold |= _same_direction_uses(
-            edge_face_offsets, edge_faces, edge_face_corner, face_offsets, face_edge_forward
-        )
+    # edge -> face uses in face order, vertex -> face corners, vertex -> edges
+    edge_face_offsets = np.zeros(n_edges + 1, dtype=np.int64)
+    edge_faces = np.empty(n_corners, dtype=np.int32)
+    edge_face_corner = np.empty(n_corners, dtype=np.int32)
+    vert_face_offsets = np.zeros(n_verts + 1, dtype=np.int64)
+    vert_faces = np.empty(n_corners, dtype=np.int32)
+    vert_face_corner = np.empty(n_corners, dtype=np.int32)
+    vert_edge_offsets = np.zeros(n_verts + 1, dtype=np.int64)
+    vert_edges = np.empty(2 * n_edges, dtype=np.int32)
+    detect = edge_nonmanifold is None
+    edge_nonmanifold = (np.empty(n_edges, dtype=np.bool_) if detect
+                        else np.ascontiguousarray(edge_nonmanifold, dtype=np.bool_))
     vert_manifold = np.empty(n_verts, dtype=np.bool_)
-    _order_vertex_rings(
-        face_offsets,
-        face_verts,
-        face_edges,
-        edge_verts,
-        edge_face_offsets,
-        edge_faces,
-        edge_nonmanifold,
-        vert_face_offsets,
-        vert_faces,
-        vert_face_corner,
-        vert_edge_offsets,
-        vert_edges,
-        vert_manifold,
-    )
+    _relations(face_offsets, face_verts, face_edges, edge_verts, face_edge_forward,
+               edge_face_offsets, edge_faces, edge_face_corner, vert_face_offsets, vert_faces,
+               vert_face_corner, vert_edge_offsets, vert_edges, detect, edge_nonmanifold,
+               vert_manifold)
     if vert_nonmanifold is not None:
         vert_manifold &= ~vert_nonmanifold
 
@@ -262,71 +251,100 @@ def build_level(
         vert_edge_offsets=vert_edge_offsets,
         vert_edges=vert_edges,
         vert_manifold=vert_manifold,
-        edge_nonmanifold=np.ascontiguousarray(edge_nonmanifold, dtype=np.bool_),
+        edge_nonmanifold=edge_nonmanifold,
         edge_sharpness=np.ascontiguousarray(edge_sharpness, dtype=np.float32),
         vert_sharpness=np.ascontiguousarray(vert_sharpness, dtype=np.float32),
         face_hole=np.ascontiguousarray(face_hole, dtype=np.bool_),
     )
 
 
-def _detect_nonmanifold_edges(edge_verts, edge_face_offsets):
-    """Edges with more than two uses, none, or both ends at one vertex."""
-    n_uses = np.diff(edge_face_offsets)
-    nonman = (n_uses > 2) | (n_uses < 1) | (edge_verts[:, 0] == edge_verts[:, 1])
-    return nonman
-
-
-def _same_direction_uses(edge_face_offsets, edge_faces, edge_face_corner, face_offsets, forward):
-    """Edges used twice in the same direction (faces of opposite orientation), or twice by
-    one face: OpenSubdiv cannot orient these and treats them as non-manifold."""
-    n_uses = np.diff(edge_face_offsets)
-    two = np.nonzero(n_uses == 2)[0]
-    if len(two) == 0:
-        return np.zeros(len(n_uses), dtype=bool)
-    u0 = edge_face_offsets[two]
-    f0, f1 = edge_faces[u0], edge_faces[u0 + 1]
-    c0 = face_offsets[f0] + edge_face_corner[u0]
-    c1 = face_offsets[f1] + edge_face_corner[u0 + 1]
-    bad = (forward[c0] == forward[c1]) | (f0 == f1)
-    out = np.zeros(len(n_uses), dtype=bool)
-    out[two[bad]] = True
-    return out
-
-
 @nb.njit(cache=True)
-def _order_vertex_rings(
-    face_offsets,
-    face_verts,
-    face_edges,
-    edge_verts,
-    edge_face_offsets,
-    edge_faces,
-    edge_nonmanifold,
-    vert_face_offsets,
-    vert_faces,
-    vert_face_corner,
-    vert_edge_offsets,
-    vert_edges,
-    vert_manifold,
-):
-    """Order each manifold vertex's faces counter-clockwise and its edges to match.
+def _relations(face_offsets, face_verts, face_edges, edge_verts, face_edge_forward,
+               edge_face_offsets, edge_faces, edge_face_corner, vert_face_offsets, vert_faces,
+               vert_face_corner, vert_edge_offsets, vert_edges, detect, edge_nonmanifold,
+               vert_manifold):
+    """The CSR relations of a level from its faces and edges (offset arrays zeroed on
+    entry), each list in face / edge order (stable counting sorts), then the vertex rings
+    ordered (see below) and ``vert_manifold`` set.
 
-    As in OpenSubdiv: edge i of the ring is the *leading* edge of face i at the vertex (the
-    edge leaving it, corner k -> k+1), and the next face counter-clockwise is the one whose
-    leading edge is this face's trailing edge (corner k-1 -> k). A boundary vertex starts at
-    the face whose leading edge is a boundary, and has one more edge than faces: the last is
-    the trailing edge of the last face. Vertices whose faces do not form a single fan keep
-    their unordered lists and are flagged non-manifold.
+    With ``detect``, also flags the non-manifold edges: used by more than two faces or
+    none, joining a vertex to itself, or used twice in the same direction or by one face
+    (OpenSubdiv cannot orient those).
+
+    Rings, as in OpenSubdiv: edge i of the ring is the *leading* edge of face i at the
+    vertex (the edge leaving it, corner k -> k+1), and the next face counter-clockwise is
+    the one whose leading edge is this face's trailing edge (corner k-1 -> k). A boundary
+    vertex starts at the face whose leading edge is a boundary, and has one more edge than
+    faces: the last is the trailing edge of the last face. Vertices whose faces do not form
+    a single fan keep their unordered lists and are flagged non-manifold.
     """
+    n_faces = len(face_offsets) - 1
+    n_edges = len(edge_verts)
     n_verts = len(vert_face_offsets) - 1
-    # scratch buffers sized for the largest valence, allocated once
+    # sizes of the lists, then their offsets
+    for c in range(len(face_verts)):
+        edge_face_offsets[face_edges[c] + 1] += 1
+        vert_face_offsets[face_verts[c] + 1] += 1
+    for e in range(n_edges):
+        vert_edge_offsets[edge_verts[e, 0] + 1] += 1
+        vert_edge_offsets[edge_verts[e, 1] + 1] += 1
+    for e in range(n_edges):
+        edge_face_offsets[e + 1] += edge_face_offsets[e]
+    for v in range(n_verts):
+        vert_face_offsets[v + 1] += vert_face_offsets[v]
+        vert_edge_offsets[v + 1] += vert_edge_offsets[v]
+    # the entries, in corner order (edge order for vertex -> edges); each vertex corner also
+    # gets its leading and trailing edges, for the ring walk
+    lead = np.empty(len(face_verts), dtype=np.int32)
+    trail = np.empty(len(face_verts), dtype=np.int32)
+    edge_fill = np.empty(n_edges, dtype=np.int64)
+    for e in range(n_edges):
+        edge_fill[e] = edge_face_offsets[e]
+    vert_fill = np.empty(n_verts, dtype=np.int64)
+    for v in range(n_verts):
+        vert_fill[v] = vert_face_offsets[v]
+    for f in range(n_faces):
+        c0 = face_offsets[f]
+        c1 = face_offsets[f + 1]
+        for c in range(c0, c1):
+            e = face_edges[c]
+            j = edge_fill[e]
+            edge_faces[j] = f
+            edge_face_corner[j] = c - c0
+            edge_fill[e] = j + 1
+            v = face_verts[c]
+            j = vert_fill[v]
+            vert_faces[j] = f
+            vert_face_corner[j] = c - c0
+            lead[j] = e
+            trail[j] = face_edges[c - 1 if c > c0 else c1 - 1]
+            vert_fill[v] = j + 1
+    for v in range(n_verts):
+        vert_fill[v] = vert_edge_offsets[v]
+    for e in range(n_edges):
+        for i in range(2):
+            v = edge_verts[e, i]
+            vert_edges[vert_fill[v]] = e
+            vert_fill[v] += 1
+    if detect:
+        for e in range(n_edges):
+            u0 = edge_face_offsets[e]
+            uses = edge_face_offsets[e + 1] - u0
+            bad = uses > 2 or uses < 1 or edge_verts[e, 0] == edge_verts[e, 1]
+            if uses == 2:
+                f0 = edge_faces[u0]
+                f1 = edge_faces[u0 + 1]
+                c0 = face_offsets[f0] + edge_face_corner[u0]
+                c1 = face_offsets[f1] + edge_face_corner[u0 + 1]
+                bad = bad or face_edge_forward[c0] == face_edge_forward[c1] or f0 == f1
+            edge_nonmanifold[e] = bad
+
+    # the rings; scratch buffers sized for the largest valence
     max_nf = 1
     for v in range(n_verts):
         max_nf = max(max_nf, vert_face_offsets[v + 1] - vert_face_offsets[v])
-    lead = np.empty(max_nf, np.int32)
-    trail = np.empty(max_nf, np.int32)
     used = np.empty(max_nf, np.bool_)
-    order = np.empty(max_nf, np.int32)
+    order = np.empty(max_nf, np.int64)
     tmp_f = np.empty(max_nf, np.int32)
     tmp_c = np.empty(max_nf, np.int32)
     for v in range(n_verts):
@@ -344,19 +362,11 @@ def _order_vertex_rings(
         if not ok or (ne != nf and ne != nf + 1):
             vert_manifold[v] = False
             continue
-        # leading edge (corner k -> k+1) and trailing edge (k-1 -> k) of each incident corner
-        for j in range(nf):
-            f = vert_faces[f0 + j]
-            k = vert_face_corner[f0 + j]
-            off = face_offsets[f]
-            n = face_offsets[f + 1] - off
-            lead[j] = face_edges[off + k]
-            trail[j] = face_edges[off + (k - 1 + n) % n]
         # a boundary ring starts at the face whose leading edge is used only once
         start = 0
         n_start = 0
         for j in range(nf):
-            e = lead[j]
+            e = lead[f0 + j]
             if edge_face_offsets[e + 1] - edge_face_offsets[e] == 1:
                 start = j
                 n_start += 1
@@ -365,14 +375,15 @@ def _order_vertex_rings(
             vert_manifold[v] = False
             continue
         # walk counter-clockwise: the next face leads with this face's trailing edge
-        used[:nf] = False
+        for j in range(nf):
+            used[j] = False
         order[0] = start
         used[start] = True
         for i in range(1, nf):
-            e = trail[order[i - 1]]
+            e = trail[f0 + order[i - 1]]
             nxt = -1
             for j in range(nf):
-                if (not used[j]) and lead[j] == e:
+                if (not used[j]) and lead[f0 + j] == e:
                     nxt = j
                     break
             if nxt < 0:
@@ -381,7 +392,7 @@ def _order_vertex_rings(
             order[i] = nxt
             used[nxt] = True
         if ok and not is_boundary:
-            ok = trail[order[nf - 1]] == lead[order[0]]
+            ok = trail[f0 + order[nf - 1]] == lead[f0 + order[0]]
         if not ok:
             vert_manifold[v] = False
             continue
@@ -389,12 +400,12 @@ def _order_vertex_rings(
         for i in range(nf):
             tmp_f[i] = vert_faces[f0 + order[i]]
             tmp_c[i] = vert_face_corner[f0 + order[i]]
+            vert_edges[e0 + i] = lead[f0 + order[i]]
+        if is_boundary:
+            vert_edges[e0 + nf] = trail[f0 + order[nf - 1]]
         for i in range(nf):
             vert_faces[f0 + i] = tmp_f[i]
             vert_face_corner[f0 + i] = tmp_c[i]
-            vert_edges[e0 + i] = lead[order[i]]
-        if is_boundary:
-            vert_edges[e0 + nf] = trail[order[nf - 1]]
 
 
 def tag_base_level(
