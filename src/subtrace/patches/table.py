@@ -35,7 +35,7 @@ import numpy as np
 from .. import config
 from ..patches.evaluate import ptex_layout
 from ..subdiv import catmark, loop
-from .bspline import bezier_nets, control_grids, net_bounds, regular_mask
+from .bspline import _TO_BEZIER, _net_summary, _to_bezier, control_grids, regular_mask
 from .isolate import box_distance, isolated_depths
 
 # ptex offset of the child at corner j of a regular face (quads keep the parent's orientation)
@@ -99,8 +99,16 @@ def build_patch_table(cages) -> PatchTable:
         parts.append(_object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad))
         first_patch += len(faces)
         first_edge += lev.n_edges
-    cat = {k: np.ascontiguousarray(np.concatenate([p[k] for p in parts])) for k in parts[0]}
+    if len(parts) == 1:
+        cat = parts[0]  # already contiguous: no copy of the nets
+    else:
+        cat = {k: np.ascontiguousarray(np.concatenate([p[k] for p in parts])) for k in parts[0]}
     return PatchTable(objects=tuple(objs), n_edges=first_edge, **cat)
+
+
+# regular patches converted to Bezier nets per call of _regular_shells' inner kernels: their
+# B-spline points stay in cache
+_NET_CHUNK = 64
 
 
 def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
@@ -131,21 +139,28 @@ def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
     smin = np.empty((n, 3))
     smax = np.empty((n, 3))
     ebound = np.empty(n)
-    valence = np.empty(n, dtype=np.int64)
-    _shells(
-        faces, lev.face_offsets, lev.face_verts, lev.vert_face_offsets, lev.vert_faces, pts,
-        smin, smax, ebound, valence,
-    )
-    if cage.options.chaikin and np.any(lev.edge_sharpness > 1.0):
-        margin = config.SHELL_CHAIKIN_MARGIN * (smax - smin).max(axis=1, keepdims=True)
-        smin -= margin
-        smax += margin
-    rate = _subdominant(valence, quad)
+    rate = np.empty(n)
     # regular quads: bicubic patches with a tight hull and an exact derivative bound
     regular = regular_mask(lev, cage.options, faces)
-    nets = bezier_nets(pts[control_grids(lev, faces[regular])])
-    smin[regular], smax[regular], ebound[regular] = net_bounds(nets)
-    rate[regular] = 0.5
+    rows = np.nonzero(regular)[0]
+    nets = np.empty((len(rows), 4, 4, 3))
+    _regular_shells(control_grids(lev, faces[rows]), pts, _TO_BEZIER, rows, _NET_CHUNK, nets,
+                    smin, smax, ebound)
+    rate[rows] = 0.5
+    # the others: boxes of their one-ring control points
+    rows = np.nonzero(~regular)[0]
+    lo = np.empty((len(rows), 3))
+    hi = np.empty((len(rows), 3))
+    bound = np.empty(len(rows))
+    valence = np.empty(len(rows), dtype=np.int64)
+    _shells(faces[rows], lev.face_offsets, lev.face_verts, lev.vert_face_offsets,
+            lev.vert_faces, pts, lo, hi, bound, valence)
+    if cage.options.chaikin and np.any(lev.edge_sharpness > 1.0):
+        margin = config.SHELL_CHAIKIN_MARGIN * (hi - lo).max(axis=1, keepdims=True)
+        lo -= margin
+        hi += margin
+    smin[rows], smax[rows], ebound[rows] = lo, hi, bound
+    rate[rows] = _subdominant(valence, quad)
     edges = np.full((n, 4), -1, dtype=np.int64)
     edges[:, :k] = lev.face_edges[lev.face_offsets[faces][:, None] + np.arange(k)] + first_edge
     return dict(
@@ -165,6 +180,38 @@ def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
         level0=np.full(n, L0, np.int8),
         material=material,
     )
+
+
+@nb.njit(cache=True)
+def _regular_shells(grids, pts, to_bezier, rows, chunk, nets, smin, smax, ebound):
+    """Bezier nets (R,4,4,3) of the regular patches from their control grids (R,4,4) of
+    point ids, and each net's box and derivative bound written to patch rows ``rows``.
+
+    The conversion and the bounds are bspline's own kernels, called on ``chunk`` patches at
+    a time so that neither the B-spline points nor the nets make a pass through memory.
+    """
+    cv = np.empty((chunk, 4, 4, 3))
+    lo = np.empty((chunk, 3))
+    hi = np.empty((chunk, 3))
+    bound = np.empty(chunk)
+    for a in range(0, len(grids), chunk):
+        m = min(chunk, len(grids) - a)
+        # the chunk's B-spline control points
+        for i in range(m):
+            for u in range(4):
+                for v in range(4):
+                    p = grids[a + i, u, v]
+                    cv[i, u, v, 0] = pts[p, 0]
+                    cv[i, u, v, 1] = pts[p, 1]
+                    cv[i, u, v, 2] = pts[p, 2]
+        _to_bezier(cv[:m], to_bezier, nets[a : a + m])
+        _net_summary(nets[a : a + m], lo[:m], hi[:m], bound[:m])
+        # scattered to the patches' rows
+        for i in range(m):
+            r = rows[a + i]
+            smin[r, 0], smin[r, 1], smin[r, 2] = lo[i, 0], lo[i, 1], lo[i, 2]
+            smax[r, 0], smax[r, 1], smax[r, 2] = hi[i, 0], hi[i, 1], hi[i, 2]
+            ebound[r] = bound[i]
 
 
 @nb.njit(cache=True)
