@@ -478,3 +478,22 @@ def test_memo_and_threads_do_not_change_the_image(monkeypatch):
     for name, ch in base.channels.items():
         assert np.array_equal(ch, two.channels[name], equal_nan=True), name
         assert np.array_equal(ch, small.channels[name], equal_nan=True), name
+
+
+@needs_shared
+def test_warmup_compiles_the_kernels_a_render_uses():
+    """On a cold cache a second process compiles the trace and shade kernels from empty
+    inputs (``subtrace.warmup``); that only helps if their types are exactly those of a
+    render: a render after the warm-up adds no compiled specialisation."""
+    from subtrace import shade, tasks, warmup
+    from subtrace.trace import kernels
+
+    n = tasks.max_threads()
+    warmup.compile_kernels(n)
+    before = (set(kernels._trace_task.signatures), set(shade._shade_task.signatures))
+    mesh = MODELS / "spot_control_mesh.obj"
+    res = render_scene(_scene([mesh], (1.2, 0.6, 2.2), (0.0, 0.3, 0.0)), threads=n)
+    assert res.stats.pixels_covered > 100
+    after = (set(kernels._trace_task.signatures), set(shade._shade_task.signatures))
+    assert after == before
+    assert warmup.start(n) is None  # cached now: no second process

@@ -470,7 +470,7 @@ def _patch_colors(table, scene):
 
 def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult:
     """Render a :class:`subtrace.io.scene.Scene`; returns the channels and statistics."""
-    from . import tasks
+    from . import tasks, warmup
     from .shade import shade_kernel
     from .trace.camera import camera_frame
 
@@ -484,26 +484,31 @@ def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult
                              key="--threads")
     tasks.set_threads(threads)
     stats = RenderStats()
-    if cages is None:
-        cages = load_objects(scene)
-    stats.time_load = time.perf_counter() - t_start
+    compiling = warmup.start(tasks.thread_count())  # on a cold cache only
+    try:
+        if cages is None:
+            cages = load_objects(scene)
+        stats.time_load = time.perf_counter() - t_start
 
-    t0 = time.perf_counter()
-    table = build_patch_table(cages)
-    bvh = build_bvh(table.shell_min, table.shell_max)
-    lo = table.shell_min.min(axis=0)
-    hi = table.shell_max.max(axis=0)
-    if scene.camera.is_auto:
-        # frame the limit surface: the bounds of the level-1 limit points of every object
-        bounds = [c.bounds() for c in cages]
-        lo = np.min([b[0] for b in bounds], axis=0)
-        hi = np.max([b[1] for b in bounds], axis=0)
-    camera = scene.make_camera(lo, hi)
-    tol_rad = scene.render.tolerance_rad(camera)
-    stats.patches = table.n_patches
-    stats.rays = camera.width * camera.height
-    stats.time_preprocess = time.perf_counter() - t0
-
+        t0 = time.perf_counter()
+        table = build_patch_table(cages)
+        bvh = build_bvh(table.shell_min, table.shell_max)
+        lo = table.shell_min.min(axis=0)
+        hi = table.shell_max.max(axis=0)
+        if scene.camera.is_auto:
+            # frame the limit surface: the bounds of the level-1 limit points of every object
+            bounds = [c.bounds() for c in cages]
+            lo = np.min([b[0] for b in bounds], axis=0)
+            hi = np.max([b[1] for b in bounds], axis=0)
+        camera = scene.make_camera(lo, hi)
+        tol_rad = scene.render.tolerance_rad(camera)
+        stats.patches = table.n_patches
+        stats.rays = camera.width * camera.height
+        stats.time_preprocess = time.perf_counter() - t0
+    except BaseException:
+        warmup.stop(compiling)
+        raise
+    warmup.wait(compiling)
     hits, pools, iso, tables, built = trace_hits(table, bvh, camera, tol_rad, stats)
 
     t0 = time.perf_counter()

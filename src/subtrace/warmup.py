@@ -1,0 +1,94 @@
+"""Compile the trace and shade kernels in a second process on a cold Numba cache.
+
+The first render with an empty cache spends most of its time compiling: the kernels of
+loading and preprocessing, then the trace and shade kernels. The two groups do not depend
+on each other, so while the first process compiles (and runs) the loading and
+preprocessing, a second process compiles the trace and shade kernels on the other core, by
+calling them on empty inputs of exactly the types a render passes, and stores them in the
+shared cache; the first process waits for it before tracing and then loads them from the
+cache. On a warm cache nothing is started.
+
+    python -m subtrace.warmup THREADS      # what the second process runs
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+
+def _cached(name: str) -> bool:
+    """Whether Numba's cache (this package version's folder) holds the kernel ``name``."""
+    root = os.environ.get("NUMBA_CACHE_DIR")
+    return bool(root) and any(Path(root).rglob(f"*{name}-*.nbi"))
+
+
+def start(threads: int):
+    """Start compiling the trace and shade kernels for ``threads`` threads in a second
+    process if the cache lacks them; returns the process (or None)."""
+    if _cached("_trace_task") and _cached("_shade_task"):
+        return None
+    try:
+        return subprocess.Popen([sys.executable, "-m", "subtrace.warmup", str(int(threads))],
+                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
+    except OSError:  # no second process: the kernels compile when first called
+        return None
+
+
+def wait(proc) -> None:
+    """Wait for a process from :func:`start` (whatever its outcome: a kernel it did not
+    store is compiled by the caller when first called)."""
+    if proc is not None:
+        proc.wait()
+
+
+def stop(proc) -> None:
+    """End a process from :func:`start` (the render it served failed)."""
+    if proc is not None:
+        proc.kill()
+        proc.wait()
+
+
+def compile_kernels(threads: int) -> None:
+    """Compile ``trace.kernels._trace_task`` and ``shade._shade_task`` with the argument
+    types of a render on ``threads`` threads (empty inputs: nothing is traced)."""
+    import numpy as np
+
+    from . import config, tasks
+    from .render import _LeafTables, _Memos, _Pieces, _Pools
+    from .shade import shade_kernel
+    from .trace.kernels import HIT_FIELDS, trace_round
+
+    i64, f64 = np.zeros(0, np.int64), np.zeros((0, 3))
+    frame = np.zeros((4, 3))
+    hits = np.zeros((0, HIT_FIELDS))
+    misses = np.full((2, HIT_FIELDS), np.inf)  # two pixels: the output planes' layout
+    pools, iso, tables = _Pools(0), _Pieces(0), _LeafTables(0)
+    memos = _Memos(threads)
+    g, q = pools.a, iso.a
+    tasks.set_threads(threads)
+    try:
+        trace_round(i64, frame, 1, 0, f64, f64, i64, i64, i64, f64, f64, pools.patch_slot,
+                    g["slot_depth"], g["slot_vert_off"], g["slot_node_off"], g["slot_quad"],
+                    g["slot_round"], g["verts"], g["node_lo"], g["node_hi"], tables.lc_off,
+                    tables.lc_data, iso.kernel_tuple(), memos.kernel_tuple(0),
+                    config.TRI_SLACK, hits, i64, i64)
+        i32 = np.zeros(0, np.int32)
+        planes = np.zeros((12, 2), np.float32)
+        shade_kernel(frame, 1, misses, g["slot_patch"], g["slot_depth"], g["slot_quad"],
+                     g["slot_vert_off"], g["verts"], g["normals"], tables.lc_off,
+                     tables.lc_data, tables.uv_off, tables.uv_data, i32, i32,
+                     np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int8), np.zeros((0, 3)),
+                     q["kind"], q["ref"], q["level"], q["i0"], q["j0"], q["nets"],
+                     q["normals"], q["cells"], np.zeros((0, 6)), np.zeros(1), np.zeros(3),
+                     planes[0:4].T, planes[4:7].T, planes[7], planes[8], planes[9],
+                     planes[10:12].T)
+    finally:
+        tasks.set_threads(None)
+
+
+if __name__ == "__main__":
+    compile_kernels(int(sys.argv[1]))
