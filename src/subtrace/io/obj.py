@@ -100,8 +100,10 @@ def read_obj(path) -> ObjData:
     if isinstance(path, bytes):
         path = os.fsdecode(path)
     raw = _read_bytes(path)
-    text = _decode(path, raw)
-    data = _Reader(path).read_fast(raw) or _Reader(path).read(text)
+    # ASCII is valid UTF-8 without a byte-order mark: only other files need checking first
+    text = None if raw.isascii() else _decode(path, raw)
+    data = _Reader(path).read_fast(raw) or _Reader(path).read(
+        _decode(path, raw) if text is None else text)
     for message in data.warnings:
         warnings.warn(message, SubtraceWarning, stacklevel=2)
     return data
@@ -220,7 +222,7 @@ class _Reader:
         if b"\\" in data:
             return None
         start = 3 if data.startswith(b"\xef\xbb\xbf") else 0
-        max_lines = data.count(b"\n") + data.count(b"\r") + 1
+        max_lines = data.count(b"\n") + (data.count(b"\r") if b"\r" in data else 0) + 1
         points = np.empty(3 * max_lines)
         uvs = np.empty(2 * max_lines)
         normals = np.empty(3 * max_lines)
@@ -858,7 +860,8 @@ def _scan_bytes(data, start, points, uvs, normals, face_sizes, corners, other, s
     points, uvs, normals, faces, corners, other statements and slow numbers.
     """
     n = len(data)
-    nv = nt = nn = nf = nc = no = ns = 0
+    elements = np.zeros(3, dtype=np.int64)  # v, vt, vn statements read so far
+    nf = nc = no = ns = 0
     number = 0
     i = start
     while i < n:
@@ -874,7 +877,7 @@ def _scan_bytes(data, start, points, uvs, normals, face_sizes, corners, other, s
         if end < 0:
             end = e
         i = e + 2 if e + 1 < n and data[e] == 13 and data[e + 1] == 10 else e + 1
-        # the keyword
+        # the keyword: 0 v, 1 vt, 2 vn, 3 f, -1 any other statement
         j = s
         while j < end and _is_space(data[j]):
             j += 1
@@ -883,24 +886,21 @@ def _scan_bytes(data, start, points, uvs, normals, face_sizes, corners, other, s
         k = j
         while k < end and not _is_space(data[k]) and data[k] < 128:
             k += 1
-        kind = 0  # 0 other, 1 v, 2 vt, 3 vn, 4 f
+        kind = -1
         if k == end or _is_space(data[k]):
-            if k - j == 1 and data[j] == 118:
-                kind = 1
-            elif k - j == 1 and data[j] == 102:
-                kind = 4
-            elif k - j == 2 and data[j] == 118 and data[j + 1] == 116:
-                kind = 2
-            elif k - j == 2 and data[j] == 118 and data[j + 1] == 110:
-                kind = 3
-        if kind == 0:
+            if k - j == 1:
+                kind = 0 if data[j] == 118 else (3 if data[j] == 102 else -1)
+            elif k - j == 2 and data[j] == 118:
+                kind = 1 if data[j + 1] == 116 else (2 if data[j + 1] == 110 else -1)
+        if kind < 0:
             other[no, 0] = s
             other[no, 1] = end
             other[no, 2] = number
             other[no, 3] = nf
             no += 1
             continue
-        # the tokens after the keyword
+        # the tokens after the keyword; v / vn keep 3 numbers, vt 2 (w, colours ignored)
+        width = 2 if kind == 1 else 3
         size = 0
         p = k
         while True:
@@ -911,95 +911,71 @@ def _scan_bytes(data, start, points, uvs, normals, face_sizes, corners, other, s
             q = p
             while q < end and not _is_space(data[q]):
                 q += 1
-            if kind == 4:
-                # a corner v, v/vt, v//vn or v/vt/vn
+            if kind == 3:
+                # a corner v, v/vt, v//vn or v/vt/vn, 0-based: negative indices count back
+                # from the elements read so far, positive ones are checked at the end
                 a = p
                 b = p
-                while b < q and data[b] != 47:
-                    b += 1
-                # 0-based; negative indices count back from the elements read so far, positive
-                # ones are checked against the totals at the end
-                v = _parse_index(data, a, b)
-                v = v - 1 if v > 0 else (v + nv if v < 0 else -1)
-                if v < 0:
-                    return False
-                t = -1
-                m = -1
-                if b < q:
-                    a = b + 1
+                for field in range(3):
                     b = a
-                    while b < q and data[b] != 47:
+                    while b < q and data[b] != 47:  # /
                         b += 1
-                    if b > a:
-                        t = _parse_index(data, a, b)
-                        t = t - 1 if t > 0 else (t + nt if t < 0 else -1)
-                        if t < 0:
+                    index = -1
+                    if b > a or field == 0:
+                        index = _parse_index(data, a, b)
+                        if index > 0:
+                            index -= 1
+                        elif index < 0:
+                            index += elements[field]
+                        else:
                             return False
-                    if b < q:
-                        a = b + 1
-                        b = a
-                        while b < q and data[b] != 47:
-                            b += 1
-                        if b < q:
-                            return False  # too many '/'
-                        if b > a:
-                            m = _parse_index(data, a, b)
-                            m = m - 1 if m > 0 else (m + nn if m < 0 else -1)
-                            if m < 0:
-                                return False
-                corners[0, nc + size] = v
-                corners[1, nc + size] = t
-                corners[2, nc + size] = m
-            elif size < (2 if kind == 2 else 3):
+                        if index < 0:
+                            return False
+                    corners[field, nc + size] = index
+                    a = b + 1
+                if b < q:
+                    return False  # a fourth field
+            elif size < width:
                 code, value = _parse_float(data, p, q)
                 if code == 2:
                     return False
-                if kind == 1:
-                    index = 3 * nv + size
+                index = width * elements[kind] + size
+                if kind == 0:
                     points[index] = value
-                elif kind == 2:
-                    index = 2 * nt + size
+                elif kind == 1:
                     uvs[index] = value
                 else:
-                    index = 3 * nn + size
                     normals[index] = value
                 if code == 1:
                     slow[ns, 0] = p
                     slow[ns, 1] = q
-                    slow[ns, 2] = kind - 1
+                    slow[ns, 2] = kind
                     slow[ns, 3] = index
                     ns += 1
             else:
-                break  # v / vn: w or colours, vt: w, all ignored
+                break
             size += 1
             p = q
-        if kind == 1:
-            if size < 3:
-                return False
-            nv += 1
-        elif kind == 2:
-            if size < 1:
-                return False
-            if size == 1:
-                uvs[2 * nt + 1] = 0.0
-            nt += 1
-        elif kind == 3:
-            if size < 3:
-                return False
-            nn += 1
-        else:
+        if kind == 3:
             if size < 3:
                 return False
             face_sizes[nf] = size
             nf += 1
             nc += size
+        else:
+            if size < (1 if kind == 1 else 3):
+                return False
+            if size == 1:
+                uvs[2 * elements[1] + 1] = 0.0  # vt u: v defaults to 0
+            elements[kind] += 1
     # positive indices may name elements defined later: check them against the totals
     for c in range(nc):
-        if corners[0, c] >= nv or corners[1, c] >= nt or corners[2, c] >= nn:
-            return False
-    counts[0] = nv
-    counts[1] = nt
-    counts[2] = nn
+        for field in range(3):
+            if corners[field, c] >= elements[field]:
+                return False
+    counts[0] = elements[0]
+    counts[1] = elements[1]
+    counts[2] = elements[2]
     counts[3] = nf
     counts[4] = nc
     counts[5] = no
