@@ -33,6 +33,7 @@ import numba as nb
 import numpy as np
 
 from .. import config
+from ..tasks import run_tasks
 from ..patches.evaluate import ptex_layout
 from ..subdiv import catmark, loop
 from .bspline import _TO_BEZIER, _net_summary, _to_bezier, control_grids, regular_mask
@@ -124,7 +125,8 @@ def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
         j = faces - fo[F]
         regular = sizes[F] == 4
         ptex = np.where(regular, first[F], first[F] + j).astype(np.int32)
-        uv0 = np.where(regular[:, None], _QUAD_CHILD_UV0[j % 4], 0.0)
+        uv0 = _QUAD_CHILD_UV0.take(j % 4, axis=0)
+        uv0[~regular] = 0.0
         scale = np.where(regular, 0.5, 1.0)
     else:
         F = faces
@@ -144,8 +146,8 @@ def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
     regular = regular_mask(lev, cage.options, faces)
     rows = np.nonzero(regular)[0]
     nets = np.empty((len(rows), 4, 4, 3))
-    _regular_shells(control_grids(lev, faces[rows]), pts, _TO_BEZIER, rows, _NET_CHUNK, nets,
-                    smin, smax, ebound)
+    run_tasks(_regular_shells, control_grids(lev, faces[rows]), pts, _TO_BEZIER, rows,
+              _NET_CHUNK, nets, smin, smax, ebound)
     rate[rows] = 0.5
     # the others: boxes of their one-ring control points
     rows = np.nonzero(~regular)[0]
@@ -161,8 +163,14 @@ def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
         hi += margin
     smin[rows], smax[rows], ebound[rows] = lo, hi, bound
     rate[rows] = _subdominant(valence, quad)
-    edges = np.full((n, 4), -1, dtype=np.int64)
-    edges[:, :k] = lev.face_edges[lev.face_offsets[faces][:, None] + np.arange(k)] + first_edge
+    # global ids of the sides' edges, a column at a time (-1 pads a triangle's 4th side)
+    edges = np.empty((n, 4), dtype=np.int64)
+    starts = lev.face_offsets[faces]
+    for side in range(4):
+        if side < k:
+            np.add(lev.face_edges.take(starts + side), first_edge, out=edges[:, side])
+        else:
+            edges[:, side] = -1
     return dict(
         object_id=np.full(n, oid, np.int32),
         face=faces,
@@ -182,19 +190,21 @@ def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
     )
 
 
-@nb.njit(cache=True)
-def _regular_shells(grids, pts, to_bezier, rows, chunk, nets, smin, smax, ebound):
+@nb.njit(cache=True, nogil=True)
+def _regular_shells(task, n_tasks, grids, pts, to_bezier, rows, chunk, nets, smin, smax,
+                    ebound):
     """Bezier nets (R,4,4,3) of the regular patches from their control grids (R,4,4) of
     point ids, and each net's box and derivative bound written to patch rows ``rows``.
 
     The conversion and the bounds are bspline's own kernels, called on ``chunk`` patches at
-    a time so that neither the B-spline points nor the nets make a pass through memory.
+    a time so that neither the B-spline points nor the nets make a pass through memory;
+    task ``task`` of ``n_tasks`` (tasks.run_tasks) takes chunks task, task + n_tasks, ...
     """
     cv = np.empty((chunk, 4, 4, 3))
     lo = np.empty((chunk, 3))
     hi = np.empty((chunk, 3))
     bound = np.empty(chunk)
-    for a in range(0, len(grids), chunk):
+    for a in range(task * chunk, len(grids), n_tasks * chunk):
         m = min(chunk, len(grids) - a)
         # the chunk's B-spline control points
         for i in range(m):
