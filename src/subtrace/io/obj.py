@@ -748,12 +748,24 @@ class _Reader:
 
 _FAST_MAX_DIGITS = 18  # significant digits kept in an int64 mantissa (< 10^18)
 _FAST_MAX_POW10 = 22  # 10^22 is the largest power of ten a double holds exactly
+_POW10 = np.array([10.0**k for k in range(_FAST_MAX_POW10 + 1)])  # each exact
+
+
+# byte classes: 1 whitespace inside a line for str.split() (\\t \\v \\f \\x1c-\\x1f, space),
+# 2 no more tokens after it on the line (\\n, \\r, the # of a comment)
+_BYTE_CLASS = np.zeros(256, dtype=np.uint8)
+_BYTE_CLASS[[9, 11, 12, 28, 29, 30, 31, 32]] = 1
+_BYTE_CLASS[[10, 13, 35]] = 2
 
 
 @nb.njit(cache=True)
 def _is_space(b):
-    """Bytes that str.split() takes as whitespace inside a line (\\t \\v \\f \\x1c-\\x1f, space)."""
-    return b == 32 or (9 <= b <= 13) or (28 <= b <= 31)
+    return _BYTE_CLASS[b] == 1
+
+
+@nb.njit(cache=True)
+def _ends_tokens(b):
+    return _BYTE_CLASS[b] == 2
 
 
 @nb.njit(cache=True)
@@ -819,9 +831,7 @@ def _parse_float(data, a, b):
     power = exponent - point
     if mantissa > 2**53 or power > _FAST_MAX_POW10 or power < -_FAST_MAX_POW10:
         return 1, 0.0
-    scale = 1.0
-    for _ in range(abs(power)):
-        scale *= 10.0
+    scale = _POW10[abs(power)]
     value = mantissa * scale if power >= 0 else mantissa / scale
     return 0, -value if neg else value
 
@@ -866,50 +876,32 @@ def _scan_bytes(data, start, points, uvs, normals, face_sizes, corners, other, s
     i = start
     while i < n:
         number += 1
-        # the line: ended by \n, \r or \r\n; its comment starts at the first #
+        # the keyword: 0 v, 1 vt, 2 vn, 3 f, -1 any other statement, and -2 none (a blank
+        # or comment line)
         s = i
-        e = s
-        end = -1
-        while e < n and data[e] != 10 and data[e] != 13:
-            if data[e] == 35 and end < 0:
-                end = e
-            e += 1
-        if end < 0:
-            end = e
-        i = e + 2 if e + 1 < n and data[e] == 13 and data[e + 1] == 10 else e + 1
-        # the keyword: 0 v, 1 vt, 2 vn, 3 f, -1 any other statement
         j = s
-        while j < end and _is_space(data[j]):
+        while j < n and _is_space(data[j]):
             j += 1
-        if j == end:
-            continue
         k = j
-        while k < end and not _is_space(data[k]) and data[k] < 128:
+        while k < n and _BYTE_CLASS[data[k]] == 0 and data[k] < 128:
             k += 1
-        kind = -1
-        if k == end or _is_space(data[k]):
+        kind = -2 if k == j and (j == n or _ends_tokens(data[j])) else -1
+        if k == n or _BYTE_CLASS[data[k]] != 0:
             if k - j == 1:
                 kind = 0 if data[j] == 118 else (3 if data[j] == 102 else -1)
             elif k - j == 2 and data[j] == 118:
                 kind = 1 if data[j + 1] == 116 else (2 if data[j + 1] == 110 else -1)
-        if kind < 0:
-            other[no, 0] = s
-            other[no, 1] = end
-            other[no, 2] = number
-            other[no, 3] = nf
-            no += 1
-            continue
         # the tokens after the keyword; v / vn keep 3 numbers, vt 2 (w, colours ignored)
         width = 2 if kind == 1 else 3
         size = 0
         p = k
-        while True:
-            while p < end and _is_space(data[p]):
+        while kind >= 0:
+            while p < n and _is_space(data[p]):
                 p += 1
-            if p == end:
+            if p == n or _ends_tokens(data[p]):
                 break
             q = p
-            while q < end and not _is_space(data[q]):
+            while q < n and _BYTE_CLASS[data[q]] == 0:
                 q += 1
             if kind == 3:
                 # a corner v, v/vt, v//vn or v/vt/vn, 0-based: negative indices count back
@@ -956,7 +948,24 @@ def _scan_bytes(data, start, points, uvs, normals, face_sizes, corners, other, s
                 break
             size += 1
             p = q
-        if kind == 3:
+        # the rest of the line (ignored tokens, a comment) and its end: \n, \r or \r\n
+        e = p
+        end = -1
+        while e < n and data[e] != 10 and data[e] != 13:
+            if data[e] == 35 and end < 0:
+                end = e
+            e += 1
+        i = e + 2 if e + 1 < n and data[e] == 13 and data[e + 1] == 10 else e + 1
+        if kind == -2:
+            continue
+        if kind == -1:
+            # any other statement, its comment removed, for the statement reader
+            other[no, 0] = s
+            other[no, 1] = e if end < 0 else end
+            other[no, 2] = number
+            other[no, 3] = nf
+            no += 1
+        elif kind == 3:
             if size < 3:
                 return False
             face_sizes[nf] = size
