@@ -751,8 +751,8 @@ _FAST_MAX_POW10 = 22  # 10^22 is the largest power of ten a double holds exactly
 _POW10 = np.array([10.0**k for k in range(_FAST_MAX_POW10 + 1)])  # each exact
 
 
-# byte classes: 1 whitespace inside a line for str.split() (\\t \\v \\f \\x1c-\\x1f, space),
-# 2 no more tokens after it on the line (\\n, \\r, the # of a comment)
+# byte classes: 1 whitespace inside a line for str.split() (\t \v \f \x1c-\x1f, space),
+# 2 no more tokens after it on the line (\n, \r, the # of a comment)
 _BYTE_CLASS = np.zeros(256, dtype=np.uint8)
 _BYTE_CLASS[[9, 11, 12, 28, 29, 30, 31, 32]] = 1
 _BYTE_CLASS[[10, 13, 35]] = 2
