@@ -293,10 +293,10 @@ def _relations(face_offsets, face_verts, face_edges, edge_verts, face_edge_forwa
     for v in range(n_verts):
         vert_face_offsets[v + 1] += vert_face_offsets[v]
         vert_edge_offsets[v + 1] += vert_edge_offsets[v]
-    # the entries, in corner order (edge order for vertex -> edges); each vertex corner also
-    # gets its leading and trailing edges, for the ring walk
-    lead = np.empty(len(face_verts), dtype=np.int32)
-    trail = np.empty(len(face_verts), dtype=np.int32)
+    # the entries, in corner order (edge order for vertex -> edges); a vertex's corners go to
+    # `slot` first, with their leading and trailing edges for the ring walk, and reach
+    # vert_faces / vert_face_corner in ring order (one row per corner: one cache line)
+    slot = np.empty((len(face_verts), 4), dtype=np.int32)  # face, corner, lead, trail
     edge_fill = np.empty(n_edges, dtype=np.int64)
     for e in range(n_edges):
         edge_fill[e] = edge_face_offsets[e]
@@ -314,10 +314,10 @@ def _relations(face_offsets, face_verts, face_edges, edge_verts, face_edge_forwa
             edge_fill[e] = j + 1
             v = face_verts[c]
             j = vert_fill[v]
-            vert_faces[j] = f
-            vert_face_corner[j] = c - c0
-            lead[j] = e
-            trail[j] = face_edges[c - 1 if c > c0 else c1 - 1]
+            slot[j, 0] = f
+            slot[j, 1] = c - c0
+            slot[j, 2] = e
+            slot[j, 3] = face_edges[c - 1 if c > c0 else c1 - 1]
             vert_fill[v] = j + 1
     for v in range(n_verts):
         vert_fill[v] = vert_edge_offsets[v]
@@ -345,67 +345,60 @@ def _relations(face_offsets, face_verts, face_edges, edge_verts, face_edge_forwa
         max_nf = max(max_nf, vert_face_offsets[v + 1] - vert_face_offsets[v])
     used = np.empty(max_nf, np.bool_)
     order = np.empty(max_nf, np.int64)
-    tmp_f = np.empty(max_nf, np.int32)
-    tmp_c = np.empty(max_nf, np.int32)
     for v in range(n_verts):
         f0 = vert_face_offsets[v]
         nf = vert_face_offsets[v + 1] - f0
         e0 = vert_edge_offsets[v]
         ne = vert_edge_offsets[v + 1] - e0
-        if nf == 0:
-            vert_manifold[v] = False
-            continue
-        ok = True
+        ok = nf > 0 and (ne == nf or ne == nf + 1)
         for j in range(ne):
             if edge_nonmanifold[vert_edges[e0 + j]]:
                 ok = False
-        if not ok or (ne != nf and ne != nf + 1):
-            vert_manifold[v] = False
-            continue
         # a boundary ring starts at the face whose leading edge is used only once
-        start = 0
-        n_start = 0
-        for j in range(nf):
-            e = lead[f0 + j]
-            if edge_face_offsets[e + 1] - edge_face_offsets[e] == 1:
-                start = j
-                n_start += 1
         is_boundary = ne == nf + 1
-        if (is_boundary and n_start != 1) or ((not is_boundary) and n_start != 0):
-            vert_manifold[v] = False
-            continue
-        # walk counter-clockwise: the next face leads with this face's trailing edge
-        for j in range(nf):
-            used[j] = False
-        order[0] = start
-        used[start] = True
-        for i in range(1, nf):
-            e = trail[f0 + order[i - 1]]
-            nxt = -1
+        start = 0
+        if ok:
+            n_start = 0
             for j in range(nf):
-                if (not used[j]) and lead[f0 + j] == e:
-                    nxt = j
+                e = slot[f0 + j, 2]
+                if edge_face_offsets[e + 1] - edge_face_offsets[e] == 1:
+                    start = j
+                    n_start += 1
+            ok = n_start == (1 if is_boundary else 0)
+        # walk counter-clockwise: the next face leads with this face's trailing edge
+        if ok:
+            for j in range(nf):
+                used[j] = False
+            order[0] = start
+            used[start] = True
+            for i in range(1, nf):
+                e = slot[f0 + order[i - 1], 3]
+                nxt = -1
+                for j in range(nf):
+                    if (not used[j]) and slot[f0 + j, 2] == e:
+                        nxt = j
+                        break
+                if nxt < 0:
+                    ok = False
                     break
-            if nxt < 0:
-                ok = False
-                break
-            order[i] = nxt
-            used[nxt] = True
-        if ok and not is_boundary:
-            ok = trail[f0 + order[nf - 1]] == lead[f0 + order[0]]
+                order[i] = nxt
+                used[nxt] = True
+            if ok and not is_boundary:
+                ok = slot[f0 + order[nf - 1], 3] == slot[f0 + order[0], 2]
+        vert_manifold[v] = ok
         if not ok:
-            vert_manifold[v] = False
+            # not a single fan: the corners stay in face order
+            for j in range(nf):
+                vert_faces[f0 + j] = slot[f0 + j, 0]
+                vert_face_corner[f0 + j] = slot[f0 + j, 1]
             continue
-        vert_manifold[v] = True
         for i in range(nf):
-            tmp_f[i] = vert_faces[f0 + order[i]]
-            tmp_c[i] = vert_face_corner[f0 + order[i]]
-            vert_edges[e0 + i] = lead[f0 + order[i]]
+            r = f0 + order[i]
+            vert_faces[f0 + i] = slot[r, 0]
+            vert_face_corner[f0 + i] = slot[r, 1]
+            vert_edges[e0 + i] = slot[r, 2]
         if is_boundary:
-            vert_edges[e0 + nf] = trail[f0 + order[nf - 1]]
-        for i in range(nf):
-            vert_faces[f0 + i] = tmp_f[i]
-            vert_face_corner[f0 + i] = tmp_c[i]
+            vert_edges[e0 + nf] = slot[f0 + order[nf - 1], 3]
 
 
 def tag_base_level(
