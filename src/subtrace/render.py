@@ -23,7 +23,7 @@ from .patches.bspline import net_bounds
 from .patches.isolate import build_isolated
 from .patches.grids import build_grids, grid_params, leaf_corners
 from .patches.table import build_patch_table, choose_depths, edge_sampling
-from .trace.kernels import H_SLOT, H_T, HIT_FIELDS, trace_round
+from .trace.kernels import H_SLOT, H_T, HIT_FIELDS, candidate_lists, trace_round
 
 
 @dataclass
@@ -403,6 +403,7 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
     hits[:, H_T] = np.inf
     hits[:, H_SLOT] = -1
     request = np.full(W * H, -1, dtype=np.int64)
+    cands = candidate_lists(W * H)
     rays = np.arange(W * H, dtype=np.int64)
     round_no = 0
     while len(rays):
@@ -415,7 +416,8 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
             g["slot_depth"], g["slot_vert_off"], g["slot_node_off"], g["slot_quad"],
             g["slot_round"], g["verts"], g["node_lo"], g["node_hi"],
             tables.lc_off, tables.lc_data, iso.kernel_tuple(),
-            memos.kernel_tuple(len(iso.a["kind"])), config.TRI_SLACK, hits, request, tested,
+            memos.kernel_tuple(len(iso.a["kind"])), cands, config.TRI_SLACK, hits, request,
+            tested,
         )
         stats.time_trace += time.perf_counter() - t0
         req = request[rays]

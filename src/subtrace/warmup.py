@@ -60,7 +60,7 @@ def compile_kernels(threads: int) -> None:
     from . import config, tasks
     from .render import _LeafTables, _Memos, _Pieces, _Pools
     from .shade import shade_kernel
-    from .trace.kernels import HIT_FIELDS, trace_round
+    from .trace.kernels import HIT_FIELDS, candidate_lists, trace_round
 
     i64, f64 = np.zeros(0, np.int64), np.zeros((0, 3))
     frame = np.zeros((4, 3))
@@ -75,7 +75,7 @@ def compile_kernels(threads: int) -> None:
                     g["slot_depth"], g["slot_vert_off"], g["slot_node_off"], g["slot_quad"],
                     g["slot_round"], g["verts"], g["node_lo"], g["node_hi"], tables.lc_off,
                     tables.lc_data, iso.kernel_tuple(), memos.kernel_tuple(0),
-                    config.TRI_SLACK, hits, i64, i64)
+                    candidate_lists(0), config.TRI_SLACK, hits, i64, i64)
         i32 = np.zeros(0, np.int32)
         planes = np.zeros((12, 2), np.float32)
         shade_kernel(frame, 1, misses, g["slot_patch"], g["slot_depth"], g["slot_quad"],

@@ -87,12 +87,13 @@ def _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, slot_dept
 
 
 BAND_ROWS = 8  # image rows per band of rays; threads take interleaved bands
+CANDIDATES = 8  # unbuilt shells a ray remembers between rounds (more: it traverses again)
 
 
 def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_count, prims,
                 shell_min, shell_max, patch_slot, slot_depth, slot_vert_off, slot_node_off,
                 slot_quad, slot_round, verts, node_lo, node_hi, lc_off, lc_data, iso, mems,
-                slack, hits, request, tested):
+                cands, slack, hits, request, tested):
     """One round for the rays ``rays`` (sorted pixel indices): update ``hits`` (n_pixels, 6)
     and set ``request[r]`` to the nearest unbuilt patch the ray reaches first (or -1).
 
@@ -107,6 +108,7 @@ def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_c
     ``n`` (``tasks.run_tasks``, n = len(mems)) takes bands t, t + n, ... with its own memo
     of split Bezier nets ``mems[t]`` (see ``bezier.intersect_piece``): neighbouring rays of
     a band share their splits, and the bands' interleaving balances the threads.
+    ``cands`` (:func:`candidate_lists`) carries each ray's unbuilt shells to the next round.
     """
     from ..tasks import run_tasks
 
@@ -119,8 +121,16 @@ def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_c
               float(frame[0, 2]), frame, int(width), int(round_no), bvh_min, bvh_max,
               bvh_first, bvh_count, prims, shell_min, shell_max, patch_slot, slot_depth,
               slot_vert_off, slot_node_off, slot_quad, slot_round, verts, node_lo, node_hi,
-              lc_off, lc_data, iso, mems, scratch, float(slack), hits, request, tested,
+              lc_off, lc_data, iso, mems, scratch, cands, float(slack), hits, request, tested,
               n=len(mems))
+
+
+def candidate_lists(n_rays):
+    """Per ray, the unbuilt shells it entered before its best hit (patch ids, entry
+    distances, count or -1 when there were more than ``CANDIDATES``): a ray traced again
+    after they are built tests just those instead of traversing the BVH again."""
+    return (np.empty((n_rays, CANDIDATES), np.int32), np.empty((n_rays, CANDIDATES)),
+            np.zeros(n_rays, np.int8))
 
 
 def _scratch(max_d):
@@ -138,8 +148,8 @@ def _scratch(max_d):
 def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, bvh_min,
                 bvh_max, bvh_first, bvh_count, prims, shell_min, shell_max, patch_slot,
                 slot_depth, slot_vert_off, slot_node_off, slot_quad, slot_round, verts,
-                node_lo, node_hi, lc_off, lc_data, iso, mems, scratches, slack, hits, request,
-                tested):
+                node_lo, node_hi, lc_off, lc_data, iso, mems, scratches, cands, slack, hits,
+                request, tested):
     """The bands of rays of one task, with its memo and scratch buffers (one call per task
     keeps the per-ray cost free of call overhead)."""
     mem = mems[task]
@@ -147,6 +157,28 @@ def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, 
     scratch = (work, st, st_t, ent_t, ent_i, lv, lp)
     patch_iso, slot_first, slot_count, iso_round, item_depth, item_side = iso[:6]
     kind, ref, level, i0, j0, it_lo, it_hi, nets, cells, iso_touched = iso[6:]
+    cand_p, cand_t, cand_n = cands
+
+    def visit(p, r, ray):
+        """Intersect patch ``p`` if it was built in the previous round; False if unbuilt."""
+        s = patch_iso[p]
+        if s >= 0:
+            if iso_round[s] == round_no - 1:
+                iso_touched[s] = 1
+                tested[r] += intersect_patch(ray, p, s, slot_first, slot_count, item_depth,
+                                             item_side, kind, ref, level, i0, j0, it_lo, it_hi,
+                                             nets, cells, mem, slack, hit, scratch)
+            return True
+        s = patch_slot[p]
+        if s < 0:
+            return False
+        if slot_round[s] == round_no - 1:
+            ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz = ray
+            _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, slot_depth,
+                            slot_vert_off, slot_node_off, slot_quad, verts, node_lo, node_hi,
+                            lc_off, lc_data, slack, hit, gstack, ent_t, ent_i)
+        return True
+
     for band in range(task, len(bands) - 1, n_tasks):
         for q in range(bands[band], bands[band + 1]):
             r = rays[q]
@@ -157,8 +189,40 @@ def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, 
             kx, ky, kz, sx, sy, sz = _shear(dx, dy, dz)
             for k in range(HIT_FIELDS):
                 hit[k] = hits[r, k]
+            ray = (ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz)
+            n_c = cand_n[r]
+            if round_no > 0 and n_c >= 0:
+                # the unbuilt shells this ray entered last round, nearest first: test those
+                # built since, keep the others (no traversal)
+                for k in range(n_c):
+                    m = k
+                    while m > 0 and cand_t[r, m - 1] > cand_t[r, m]:
+                        cand_t[r, m - 1], cand_t[r, m] = cand_t[r, m], cand_t[r, m - 1]
+                        cand_p[r, m - 1], cand_p[r, m] = cand_p[r, m], cand_p[r, m - 1]
+                        m -= 1
+                kept = 0
+                for k in range(n_c):
+                    te = cand_t[r, k]
+                    if te >= hit[H_T]:
+                        continue
+                    p = cand_p[r, k]
+                    if not visit(p, r, ray):
+                        cand_p[r, kept] = p
+                        cand_t[r, kept] = te
+                        kept += 1
+                n_c = 0
+                for k in range(kept):  # those still before the hit
+                    if cand_t[r, k] < hit[H_T]:
+                        n_c += 1
+                cand_n[r] = n_c
+                req = cand_p[r, 0] if n_c > 0 else -1
+                request[r] = req
+                for k in range(HIT_FIELDS):
+                    hits[r, k] = hit[k]
+                continue
             req = -1
             req_t = np.inf
+            n_c = 0
             sp = 0
             if _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, 0, hit[H_T]) < np.inf:
                 stack[0] = 0
@@ -174,25 +238,16 @@ def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, 
                         te = _slab(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, hit[H_T])
                         if te == np.inf:
                             continue
-                        s = patch_iso[p]
-                        if s >= 0:
-                            if iso_round[s] == round_no - 1:
-                                iso_touched[s] = 1
-                                tested[r] += intersect_patch(
-                                    (ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz), p, s,
-                                    slot_first, slot_count, item_depth, item_side, kind, ref, level,
-                                    i0, j0, it_lo, it_hi, nets, cells, mem, slack, hit, scratch)
-                            continue
-                        s = patch_slot[p]
-                        if s < 0:
+                        if not visit(p, r, ray):  # unbuilt: a candidate, the nearest a request
+                            if n_c < CANDIDATES:
+                                cand_p[r, n_c] = p
+                                cand_t[r, n_c] = te
+                                n_c += 1
+                            else:
+                                n_c = CANDIDATES + 1
                             if te < req_t:
                                 req_t = te
                                 req = p
-                        elif slot_round[s] == round_no - 1:
-                            _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s,
-                                            slot_depth, slot_vert_off, slot_node_off, slot_quad,
-                                            verts, node_lo, node_hi, lc_off, lc_data, slack, hit,
-                                            gstack, ent_t, ent_i)
                     continue
                 left = bvh_first[node]
                 right = left + 1
@@ -213,5 +268,6 @@ def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, 
                     stack[sp] = right
                     sp += 1
             request[r] = req if req_t < hit[H_T] else -1
+            cand_n[r] = n_c if n_c <= CANDIDATES else -1
             for k in range(HIT_FIELDS):
                 hits[r, k] = hit[k]
