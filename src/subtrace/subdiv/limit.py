@@ -91,23 +91,26 @@ def _classify_kernel(
     vert_sharp,
     out,
 ):
+    n_max = 0
+    for v in range(len(vert_edge_offsets) - 1):
+        n_max = max(n_max, vert_edge_offsets[v + 1] - vert_edge_offsets[v])
+    buf = np.empty(n_max, np.float32)  # one buffer for every vertex's edge sharpnesses
     for v in range(len(vert_face_offsets) - 1):
         fa, fb = vert_face_offsets[v], vert_face_offsets[v + 1]
         ea, eb = vert_edge_offsets[v], vert_edge_offsets[v + 1]
         if fa == fb:
             out[v] = _ISOLATED
             continue
-        es = np.empty(eb - ea, np.float32)
         semi = vert_sharp[v] > F0 and vert_sharp[v] < F_INF
         for i in range(eb - ea):
             s = edge_sharp[vert_edges[ea + i]]
-            es[i] = s
+            buf[i] = s
             if s > F0 and s < F_INF:
                 semi = True
         if semi:
             out[v] = _HARD_SHARP
             continue
-        rule = rule_of(vert_sharp[v], es)
+        rule = rule_of(vert_sharp[v], buf[: eb - ea])
         if rule == RULE_CORNER:
             out[v] = _CORNER
         elif rule == RULE_CREASE:
