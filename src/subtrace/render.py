@@ -320,7 +320,7 @@ class _Memos:
     are allocated lazily by the OS (``np.empty``); one that ran out during a round (its rays
     went on without storing) is doubled before the next."""
 
-    START = {"child": 1 << 20, "nets": 1 << 18, "cells": 1 << 18}
+    START = {"child": 1 << 22, "nets": 1 << 19, "cells": 1 << 20}  # virtual: touched as used
 
     def __init__(self, n_threads):
         self.m = [self._grow(None, 0, "child", "nets", "cells") for _ in range(n_threads)]
