@@ -7,8 +7,8 @@ Default scenes: ``scenes/spot.toml`` and ``scenes/sword.toml``. Each scene runs 
 subprocess: one *cold* run (first render in the process: Numba's cache is loaded, or kernels
 compile when it is stale) and ``repeat`` *warm* runs whose medians are reported. Times are
 the renderer's own (``subtrace:time_*``: load, preprocess, refine, trace, shade) plus the
-EXR write; ``cmd s`` is the wall time of a whole ``subtrace render`` command (interpreter
-start and imports included), measured separately. Peak memory is the subprocess's max RSS.
+EXR write; ``cmd s`` is the median wall time of ``repeat`` whole ``subtrace render``
+commands (interpreter start and imports included), measured separately. Peak memory is the subprocess's max RSS.
 """
 
 from __future__ import annotations
@@ -87,7 +87,8 @@ def main(argv=None) -> int:
         r = json.loads(out.strip().splitlines()[-1])
         warm = r["warm"]
         med = {k: statistics.median(run[k] for run in warm) for k in warm[0]}
-        cmd = _command_time(scene, args.width, args.height, args.tolerance)
+        cmd = statistics.median(_command_time(scene, args.width, args.height, args.tolerance)
+                                for _ in range(args.repeat))
         cold = r["cold"]["time_total"] + r["cold"]["time_write"]
         rays = med["rays"] / med["time_total"] / 1e6
         row = (Path(scene).stem, f"{cold:.2f}", f"{med['time_load']:.3f}",

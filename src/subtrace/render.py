@@ -36,7 +36,7 @@ class RenderStats:
     time_total: float = 0.0
     patches: int = 0
     patches_refined: int = 0
-    micro_triangles: int = 0  # built: cells kept by a thread x2, fan and irregular cells per ray
+    micro_triangles: int = 0  # built: 2 per cell kept by a thread or isolated, fans per ray
     grid_points: int = 0
     pieces: int = 0  # regular sub-patches and cells of the isolated irregular patches
     memo_nodes: int = 0  # quadtree nodes of Bezier pieces split and kept by the threads
@@ -232,6 +232,7 @@ def _refine(table, requested, depths, edge_depth, pools, iso, round_no, stats, e
             n_sub, n_cell = iso.append(ids, dep[s:e], np.repeat(dep[s:e], 4), subs, cells,
                                        round_no)
             stats.pieces += n_sub + n_cell
+            stats.micro_triangles += 2 * n_cell
             continue
         d = int(dep[s])
         P, N = build_grids(o.level, o.points, o.cage.options, table.face[ids], d)

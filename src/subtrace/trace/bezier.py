@@ -394,8 +394,8 @@ def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, ki
                     i0, j0, lo, hi, nets, cells, mem, slack, hit, scratch):
     """Closest hit on the pieces of Catmull-Clark patch ``p`` (slot ``s``; the arrays of
     ``kernels.trace_round``'s ``iso``) nearer than hit[H_T]; updates ``hit``. Returns the
-    number of micro-triangles built: the cells this ray stored in the memo ``mem``, the
-    cells it evaluated on the spot and the irregular cells it tested. ``ray`` = (ox, oy, oz,
+    number of micro-triangles built: the cells this ray stored in the memo ``mem`` and the
+    cells it evaluated on the spot (fans). ``ray`` = (ox, oy, oz,
     ix, iy, iz, kx, ky, kz, sx, sy, sz): origin, inverse direction and shear constants.
 
     A Bezier piece (item ``it``; a regular patch is one) is refined to the patch's grid
@@ -423,8 +423,8 @@ def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, ki
             for k in range(4):
                 lp[k, 0] = (i0[it] + (1 if k == 1 or k == 2 else 0)) * inv
                 lp[k, 1] = (j0[it] + (1 if k >= 2 else 0)) * inv
-            tested += tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, cells, 4 * c, lp, slack, hit,
-                               code, it, depth)
+            tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, cells, 4 * c, lp, slack, hit, code, it,
+                     depth)  # (counted once, when the patch was built)
             continue
         nk = ref[it]
         pd = depth - level[it]  # the piece's own grid depth
