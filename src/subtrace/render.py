@@ -373,10 +373,11 @@ class _Memos:
         stats.memo_full = self.full + int(sum(m[-1][M_FULL] for m in self.m))
 
 
-def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
+def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None, compiling=None):
     """Run the refinement rounds; returns (hits (H*W, 6), grid pools, isolated pieces, leaf
-    tables, every patch refined)."""
-    from . import tasks
+    tables, every patch refined). ``compiling``: the process compiling the trace kernels
+    (``warmup.start``), waited for before the first round."""
+    from . import tasks, warmup
     from .trace.camera import camera_frame
 
     max_depth = config.MAX_GRID_DEPTH if max_depth is None else max_depth
@@ -407,6 +408,7 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None):
     cands = candidate_lists(W * H)
     rays = np.arange(W * H, dtype=np.int64)
     round_no = 0
+    warmup.wait(compiling)
     while len(rays):
         t0 = time.perf_counter()
         g = pools.a
@@ -508,11 +510,11 @@ def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult
         stats.patches = table.n_patches
         stats.rays = camera.width * camera.height
         stats.time_preprocess = time.perf_counter() - t0
+        hits, pools, iso, tables, built = trace_hits(table, bvh, camera, tol_rad, stats,
+                                                     compiling=compiling)
     except BaseException:
         warmup.stop(compiling)
         raise
-    warmup.wait(compiling)
-    hits, pools, iso, tables, built = trace_hits(table, bvh, camera, tol_rad, stats)
 
     t0 = time.perf_counter()
     W, H = camera.width, camera.height
