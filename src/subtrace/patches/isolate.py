@@ -58,7 +58,7 @@ def box_distance(bmin, bmax, p):
 def isolated_depths(obj, faces, cap, eye, tol_rad):
     """Depths (len(faces),) int32 of the irregular quads ``faces`` of ``obj``'s patch level,
     none above ``cap`` (their conservative depths, (len(faces),) int)."""
-    from .table import _shells
+    from .table import one_ring_shells
 
     faces = np.asarray(faces, dtype=np.int64)
     cap = np.asarray(cap, dtype=np.int64)
@@ -78,12 +78,7 @@ def isolated_depths(obj, faces, cap, eye, tol_rad):
             n = _levels_needed(bound, box_distance(lo, hi, eye), tol_rad)
             np.maximum.at(need, kid_root[reg], k + n.astype(np.int64))
         irr = np.nonzero(~reg)[0]
-        smin = np.empty((len(irr), 3))
-        smax = np.empty((len(irr), 3))
-        ebound = np.empty(len(irr))
-        valence = np.empty(len(irr), dtype=np.int64)
-        _shells(kids[irr], cur.face_offsets, cur.face_verts, cur.vert_face_offsets,
-                cur.vert_faces, cur_pts, smin, smax, ebound, valence)
+        smin, smax, ebound, _ = one_ring_shells(cur, kids[irr], cur_pts)
         flat = IRREGULAR_MARGIN * ebound <= tol_rad * box_distance(smin, smax, eye)
         np.maximum.at(need, kid_root[irr], k)
         go = irr[~flat & (k < cap[kid_root[irr]])]

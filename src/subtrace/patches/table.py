@@ -151,12 +151,7 @@ def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
     rate[rows] = 0.5
     # the others: boxes of their one-ring control points
     rows = np.nonzero(~regular)[0]
-    lo = np.empty((len(rows), 3))
-    hi = np.empty((len(rows), 3))
-    bound = np.empty(len(rows))
-    valence = np.empty(len(rows), dtype=np.int64)
-    _shells(faces[rows], lev.face_offsets, lev.face_verts, lev.vert_face_offsets,
-            lev.vert_faces, pts, lo, hi, bound, valence)
+    lo, hi, bound, valence = one_ring_shells(lev, faces[rows], pts)
     if cage.options.chaikin and np.any(lev.edge_sharpness > 1.0):
         margin = config.SHELL_CHAIKIN_MARGIN * (hi - lo).max(axis=1, keepdims=True)
         lo -= margin
@@ -222,6 +217,18 @@ def _regular_shells(task, n_tasks, grids, pts, to_bezier, rows, chunk, nets, smi
             smin[r, 0], smin[r, 1], smin[r, 2] = lo[i, 0], lo[i, 1], lo[i, 2]
             smax[r, 0], smax[r, 1], smax[r, 2] = hi[i, 0], hi[i, 1], hi[i, 2]
             ebound[r] = bound[i]
+
+
+def one_ring_shells(level, faces, pts):
+    """(box min (n,3), box max (n,3), length bound (n,), largest corner valence (n,)) of the
+    one-ring control points of ``faces`` of ``level`` at ``pts`` (see :func:`_shells`)."""
+    lo = np.empty((len(faces), 3))
+    hi = np.empty((len(faces), 3))
+    bound = np.empty(len(faces))
+    valence = np.empty(len(faces), dtype=np.int64)
+    _shells(faces, level.face_offsets, level.face_verts, level.vert_face_offsets,
+            level.vert_faces, pts, lo, hi, bound, valence)
+    return lo, hi, bound, valence
 
 
 @nb.njit(cache=True)
