@@ -24,8 +24,27 @@ def _numba_cache_dir() -> None:
     for p in sorted(root.rglob("*.py")):
         st = p.stat()
         h.update(f"{p.relative_to(root)}:{st.st_size}:{st.st_mtime_ns}".encode())
-    base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
-    os.environ["NUMBA_CACHE_DIR"] = str(base / "subtrace" / f"numba-{h.hexdigest()[:16]}")
+    base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "subtrace"
+    folder = base / f"numba-{h.hexdigest()[:16]}"
+    if not folder.exists():
+        _prune(base)
+    os.environ["NUMBA_CACHE_DIR"] = str(folder)
+
+
+CACHES_KEPT = 8  # cache folders of other source versions kept (other checkouts, branches)
+
+
+def _prune(base: Path) -> None:
+    """Remove all but the ``CACHES_KEPT`` most recently used cache folders (each edit of the
+    sources starts a new one)."""
+    try:
+        old = sorted(base.glob("numba-*"), key=lambda p: p.stat().st_mtime, reverse=True)
+    except OSError:
+        return
+    import shutil
+
+    for p in old[CACHES_KEPT:]:
+        shutil.rmtree(p, ignore_errors=True)
 
 
 _numba_cache_dir()
