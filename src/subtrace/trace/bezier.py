@@ -143,14 +143,25 @@ def _net_entry(ox, oy, oz, ix, iy, iz, net, s, tmax):
 
 
 @leaf_njit
-def _cell_samples(nets, nk, i, j, depth, oi, oj, root_depth, sides, srow, lv, v0, lp, points):
-    """The points of cell (i, j) of the depth-``depth`` grid of Bezier net ``nets[nk]``, which
-    covers the cells from (oi, oj) of its root patch's depth-``root_depth`` grid: its corners
-    and, on a side of the piece sampled more finely (``sides[srow]``, where the piece beside
-    is finer), that side's samples, counter-clockwise, then (when there are such samples)
-    the cell's centre, around which it is cut into a fan. Writes their root parameters to
-    ``lp`` and, if ``points``, the points to ``lv[v0 ..]`` (each evaluated by one code path,
-    so shared points are bit-identical); returns their number without the centre."""
+def _fan_samples(i, j, depth, root_depth, sides, srow):
+    """Whether cell (i, j) of a piece's depth-``depth`` grid (``root_depth`` in the patch's
+    units) lies on a side of the piece sampled more finely than its grid (``sides[srow]``,
+    where the piece beside it is finer): then it is cut into a fan."""
+    N = 1 << depth
+    return ((j == 0 and sides[srow, 0] > root_depth)
+            or (i == N - 1 and sides[srow, 1] > root_depth)
+            or (j == N - 1 and sides[srow, 2] > root_depth)
+            or (i == 0 and sides[srow, 3] > root_depth))
+
+
+@leaf_njit
+def _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, i, j, depth, oi, oj, root_depth,
+          sides, srow, slack, hit, code, item, lv, lp):
+    """Intersect cell (i, j) of the depth-``depth`` grid of Bezier net ``nets[nk]``, which
+    covers the cells from (oi, oj) of its root patch's depth-``root_depth`` grid; update
+    ``hit`` (H_SLOT = ``code``, H_TRI = ``item``, (H_B1, H_B2) = root parameter). ``lv``
+    (K,3) / ``lp`` (K,2): scratch for the cell's points and root parameters. Returns the
+    number of triangles tested."""
     N = 1 << depth
     inv = 1.0 / N
     rinv = 1.0 / (1 << root_depth)
@@ -160,9 +171,8 @@ def _cell_samples(nets, nk, i, j, depth, oi, oj, root_depth, sides, srow, lv, v0
     for corner in range(4):
         di = 1 if corner == 1 or corner == 2 else 0
         dj = 1 if corner >= 2 else 0
-        if points:
-            x, y, z = _bez_point(nets, nk, (i + di) * inv, (j + dj) * inv)
-            lv[v0 + n, 0], lv[v0 + n, 1], lv[v0 + n, 2] = x, y, z
+        x, y, z = _bez_point(nets, nk, (i + di) * inv, (j + dj) * inv)
+        lv[n, 0], lv[n, 1], lv[n, 2] = x, y, z
         lp[n, 0], lp[n, 1] = (gi + di) * rinv, (gj + dj) * rinv
         n += 1
         # samples of the side that starts at this corner, when the piece beside is finer
@@ -191,48 +201,26 @@ def _cell_samples(nets, nk, i, j, depth, oi, oj, root_depth, sides, srow, lv, v0
                 else:
                     a, b = i, j + 1 - f
                     ga, gb = gi, gj + 1 - f
-                if points:
-                    x, y, z = _bez_point(nets, nk, a * inv, b * inv)
-                    lv[v0 + n, 0], lv[v0 + n, 1], lv[v0 + n, 2] = x, y, z
+                x, y, z = _bez_point(nets, nk, a * inv, b * inv)
+                lv[n, 0], lv[n, 1], lv[n, 2] = x, y, z
                 lp[n, 0], lp[n, 1] = ga * rinv, gb * rinv
                 n += 1
-    if n > 4:
-        if points:
-            x, y, z = _bez_point(nets, nk, (i + 0.5) * inv, (j + 0.5) * inv)
-            lv[v0 + n, 0], lv[v0 + n, 1], lv[v0 + n, 2] = x, y, z
-        lp[n, 0], lp[n, 1] = (gi + 0.5) * rinv, (gj + 0.5) * rinv
-    return n
-
-
-@leaf_njit
-def _cell_test(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, v0, lp, n, slack, hit, code, item,
-               depth):
-    """The triangles of a cell whose ``n`` points (and centre, if n > 4) are ``lv[v0 ..]``
-    with root parameters ``lp``: two triangles, or a fan around the centre."""
     if n == 4:
-        return tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, v0, lp, slack, hit, code, item,
-                        depth)
+        return tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, 0, lp, slack, hit, code, item,
+                        root_depth)
+    # a fan around the cell's centre
+    x, y, z = _bez_point(nets, nk, (i + 0.5) * inv, (j + 0.5) * inv)
+    lv[n, 0], lv[n, 1], lv[n, 2] = x, y, z
+    lp[n, 0], lp[n, 1] = (gi + 0.5) * rinv, (gj + 0.5) * rinv
     o = (ox, oy, oz)
     px, py, pz = o[kx], o[ky], o[kz]
     for k in range(n):
+        b = k
         c = k + 1 if k + 1 < n else 0
-        t, ba, bb, bc = _tri(px, py, pz, kx, ky, kz, sx, sy, sz, v0 + n, v0 + k, v0 + c, lv,
-                             hit[H_T], slack)
+        t, ba, bb, bc = _tri(px, py, pz, kx, ky, kz, sx, sy, sz, n, b, c, lv, hit[H_T], slack)
         if t < hit[H_T]:
-            _record(hit, t, code, item, depth, lp, n, k, c, ba, bb, bc)
+            _record(hit, t, code, item, root_depth, lp, n, b, c, ba, bb, bc)
     return n
-
-
-@leaf_njit
-def _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, i, j, depth, oi, oj, root_depth,
-          sides, srow, slack, hit, code, item, lv, lp):
-    """Intersect cell (i, j) (see :func:`_cell_samples`), evaluated on the spot; update
-    ``hit`` (H_SLOT = ``code``, H_TRI = ``item``, (H_B1, H_B2) = root parameter). ``lv``
-    (K,3) / ``lp`` (K,2): scratch for the cell's points and root parameters. Returns the
-    number of triangles tested."""
-    n = _cell_samples(nets, nk, i, j, depth, oi, oj, root_depth, sides, srow, lv, 0, lp, True)
-    return _cell_test(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, 0, lp, n, slack, hit, code, item,
-                      root_depth)
 
 
 @leaf_njit
@@ -318,16 +306,16 @@ def _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, src, s, lev0, ci0, 
 # Rays of neighbouring pixels descend the same nodes of a patch's quadtree. A thread keeps
 # what its rays split: ``mem`` = (root node of each item (I,) or -1, first of the four
 # children of each node (N,) or -1, each node's padded box (N,6), each node's row (N,) in
-# the net store (an inner node that was split) or its first slot in the point store (a cell
-# that was intersected: its points, 4 rows a slot, a fan's over several slots), or -1 (not
-# yet), the net store (.,4,4,3), the point store (.,3), counts (4,): nodes, nets and point
-# slots used, and a flag set when a store ran out (the descent then goes on without storing; the
+# the net store (an inner node that was split) or the corner store (a cell that was
+# intersected), or -1 (not yet) or -2 (a fan cell: evaluated per ray), the net store
+# (.,4,4,3), the corner store (4 rows per cell, (.,3)), counts (4,): nodes, nets and cells
+# used, and a flag set when a store ran out (the descent then goes on without storing; the
 # driver grows the stores for the next round)). Everything is made lazily: a node's box when
 # its parent is split, its net when it is split itself, a cell's corners when a ray first
 # reaches it; so what is stored is what the thread's rays needed.
 
 M_NODES, M_NETS, M_CELLS, M_FULL = range(4)
-NOT_YET = -1
+NOT_YET, FAN = -1, -2
 
 
 @leaf_njit
@@ -349,6 +337,23 @@ def _store_net(m_nets, cnt, src, s):
         for c in range(4):
             for k in range(3):
                 m_nets[r, a, c, k] = src[s, a, c, k]
+    return r
+
+
+@leaf_njit
+def _store_cell(m_cells, cnt, nets, nk, ci, cj, depth):
+    """Store the four corners of cell (ci, cj) of the depth-``depth`` grid of ``nets[nk]``
+    (evaluated from the patch's own net, as :func:`_leaf` does); returns its row."""
+    r = cnt[M_CELLS]
+    cnt[M_CELLS] = r + 1
+    inv = 1.0 / (1 << depth)
+    for corner in range(4):
+        di = 1 if corner == 1 or corner == 2 else 0
+        dj = 1 if corner >= 2 else 0
+        x, y, z = _bez_point(nets, nk, (ci + di) * inv, (cj + dj) * inv)
+        m_cells[4 * r + corner, 0] = x
+        m_cells[4 * r + corner, 1] = y
+        m_cells[4 * r + corner, 2] = z
     return r
 
 
@@ -451,26 +456,24 @@ def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, ki
             node, parent, ci, cj, lev = st[sp, 0], st[sp, 1], st[sp, 2], st[sp, 3], st[sp, 4]
             if lev == pd:
                 r = data[node]
-                if r == NOT_YET:  # first visit: store its points (a fan's too)
-                    n = _cell_samples(nets, nk, ci, cj, pd, oi, oj, depth, item_side, it, lv,
-                                      0, lp, False)
-                    slots = (n + (1 if n > 4 else 0) + 3) // 4
-                    if cnt[M_CELLS] + slots <= len(m_cells) // 4:
-                        r = data[node] = cnt[M_CELLS]
-                        cnt[M_CELLS] += slots
-                        _cell_samples(nets, nk, ci, cj, pd, oi, oj, depth, item_side, it,
-                                      m_cells, 4 * r, lp, True)
-                        tested += 2 if n == 4 else n
+                if r == NOT_YET:
+                    if _fan_samples(ci, cj, pd, depth, item_side, it):
+                        r = data[node] = FAN
+                    elif cnt[M_CELLS] < len(m_cells) // 4:
+                        r = data[node] = _store_cell(m_cells, cnt, nets, nk, ci, cj, pd)
+                        tested += 2
                     else:
                         cnt[M_FULL] = 1
-                if r < 0:  # no room: evaluated on the spot
+                        r = FAN
+                if r < 0:  # evaluated on the spot
                     tested += _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, ci, cj, pd,
                                     oi, oj, depth, item_side, it, slack, hit, code, it, lv, lp)
                 else:
-                    n = _cell_samples(nets, nk, ci, cj, pd, oi, oj, depth, item_side, it, lv,
-                                      0, lp, False)
-                    _cell_test(ox, oy, oz, kx, ky, kz, sx, sy, sz, m_cells, 4 * r, lp, n,
-                               slack, hit, code, it, depth)
+                    for k in range(4):
+                        lp[k, 0] = (oi + ci + (1 if k == 1 or k == 2 else 0)) * inv
+                        lp[k, 1] = (oj + cj + (1 if k >= 2 else 0)) * inv
+                    tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, m_cells, 4 * r, lp, slack, hit,
+                             code, it, depth)
                 continue
             c = child[node]
             if c < 0:
