@@ -101,6 +101,14 @@ def _side_indices(depth: int, quad: bool) -> np.ndarray:
     return np.stack([t, row(t) + (N - t), row(N - t)])
 
 
+def _grown(a, n_used, size):
+    """``a`` with room for ``size`` rows (``np.empty``: pages are touched as used), its
+    first ``n_used`` rows copied."""
+    b = np.empty((size, *a.shape[1:]), a.dtype)
+    b[:n_used] = a[:n_used]
+    return b
+
+
 class _Growable:
     """Named arrays in groups that grow together (a group's arrays have one length). Storage
     grows by doubling, so appending round after round copies each element O(1) times;
@@ -130,9 +138,7 @@ class _Growable:
         for name in self.GROUPS[group]:
             buf = self._store[name]
             if end > len(buf):
-                grown = np.empty((max(end, 2 * len(buf)), *buf.shape[1:]), dtype=buf.dtype)
-                grown[:start] = buf[:start]
-                self._store[name] = grown
+                self._store[name] = _grown(buf, start, max(end, 2 * len(buf)))
 
     def _put(self, group, **values):
         """Append rows to every array of ``group`` (zeros where no value is given); returns
@@ -252,15 +258,15 @@ def _refine(table, requested, depths, edge_depth, pools, iso, round_no, stats, e
 
 class _Pieces(_Growable):
     """What the kernels intersect per ray, for every Catmull-Clark patch built so far, in the
-    layout of ``trace_round``'s ``iso`` tuple: a *slot* per patch (grid depth, how its four
-    sides are sampled, the round it was built in, whether a ray has tested it) and its
-    *items* (contiguous): regular Bezier pieces over dyadic squares of the patch, and cells
-    of exact limit points. A regular patch is one item, ready from the start (round -1); an
+    layout of ``trace_round``'s ``iso`` tuple: a *slot* per patch (the round it was built
+    in, whether a ray has tested it) and its *items* (contiguous): regular Bezier pieces over
+    dyadic squares of the patch, and cells of exact limit points, each with its grid depth
+    and how its four sides are sampled. A regular patch is one item, ready from the start (round -1); an
     irregular patch is built on request into pieces (``patches/isolate.py``)."""
 
     GROUPS = {
         "slots": {"patch": ((), np.int64), "first": ((), np.int64), "count": ((), np.int64),
-                  "round": ((), np.int64), "depth": ((), np.int64), "touched": ((), np.uint8)},
+                  "round": ((), np.int64), "touched": ((), np.uint8)},
         "items": {"kind": ((), np.int8), "ref": ((), np.int64), "level": ((), np.int64),
                   "i0": ((), np.int64), "j0": ((), np.int64), "depth_i": ((), np.int64),
                   "side": ((4,), np.int64), "lo": ((3,), np.float64),
@@ -304,7 +310,7 @@ class _Pieces(_Growable):
             hi=np.concatenate([hi_s, cp.max(axis=1)])[order],
         )
         s0 = self._put("slots", patch=patches, first=i_start + first, count=count,
-                       round=np.full(len(patches), round_no), depth=depth)
+                       round=np.full(len(patches), round_no))
         self.patch_iso[patches] = s0 + np.arange(len(patches))
         return len(sr), len(cr)
 
@@ -339,20 +345,16 @@ class _Memos:
             root, child, box, data, nets, cells, cnt = old
         if len(root) < n_items:
             root = np.concatenate([root, np.full(max(n_items, 2 * len(root)) - len(root), -1)])
-
-        def grown(a, n_used, size):
-            b = np.empty((size, *a.shape[1:]), a.dtype)
-            b[:n_used] = a[:n_used]
-            return b
-
         if "child" in which:
             n = max(2 * len(child), self.START["child"])
             used = cnt[M_NODES]
-            child, box, data = grown(child, used, n), grown(box, used, n), grown(data, used, n)
+            child, box, data = (_grown(child, used, n), _grown(box, used, n),
+                                _grown(data, used, n))
         if "nets" in which:
-            nets = grown(nets, cnt[M_NETS], max(2 * len(nets), self.START["nets"]))
+            nets = _grown(nets, cnt[M_NETS], max(2 * len(nets), self.START["nets"]))
         if "cells" in which:
-            cells = grown(cells, 4 * cnt[M_CELLS], max(2 * len(cells), 4 * self.START["cells"]))
+            cells = _grown(cells, 4 * cnt[M_CELLS],
+                           max(2 * len(cells), 4 * self.START["cells"]))
         cnt[M_FULL] = 0
         return root, child, box, data, nets, cells, cnt
 

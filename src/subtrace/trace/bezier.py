@@ -89,6 +89,24 @@ def _split_row(a, b, c, d):
 
 
 @leaf_njit
+def _copy_net(dst, d, src, s):
+    """``dst[d] = src[s]`` for Bezier nets (4,4,3), element by element (no array views)."""
+    for a in range(4):
+        for c in range(4):
+            for k in range(3):
+                dst[d, a, c, k] = src[s, a, c, k]
+
+
+@leaf_njit
+def _corner_params(lp, gi, gj, inv):
+    """Root parameters of the four corners of grid cell (gi, gj) of spacing ``inv`` into
+    ``lp[:4]`` (corner order (0,0), (1,0), (1,1), (0,1))."""
+    for k in range(4):
+        lp[k, 0] = (gi + (1 if k == 1 or k == 2 else 0)) * inv
+        lp[k, 1] = (gj + (1 if k >= 2 else 0)) * inv
+
+
+@leaf_njit
 def _split(src, s, w, d0):
     """Write the four child nets of net ``src[s]`` into ``w[d0 .. d0+3]`` (child ``cu + 2 cv``
     covers the half cu in u and cv in v), using ``w[d0-2]``, ``w[d0-1]`` as scratch."""
@@ -259,10 +277,7 @@ def _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, src, s, lev0, ci0, 
     scratch), rows ``st0 ..`` of ``st`` their cell coordinates and levels (columns 2, 3, 4)
     and of ``st_t`` their entry distances. Returns the number of triangles tested."""
     tested = 0
-    for a in range(4):
-        for c in range(4):
-            for k in range(3):
-                work[0, a, c, k] = src[s, a, c, k]
+    _copy_net(work, 0, src, s)
     st[st0, 2] = ci0
     st[st0, 3] = cj0
     st[st0, 4] = lev0
@@ -287,10 +302,7 @@ def _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, src, s, lev0, ci0, 
                 n = push_sorted(tmp_t, order, n, te, q)
         for e in range(n):
             q = order[e]
-            for a in range(4):
-                for c in range(4):
-                    for k in range(3):
-                        work[sp, a, c, k] = work[base + q, a, c, k]
+            _copy_net(work, sp, work, base + q)
             st[st0 + sp, 2] = 2 * ci + (q & 1)
             st[st0 + sp, 3] = 2 * cj + (q >> 1)
             st[st0 + sp, 4] = lev + 1
@@ -333,10 +345,7 @@ def _new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, row):
 def _store_net(m_nets, cnt, src, s):
     r = cnt[M_NETS]
     cnt[M_NETS] = r + 1
-    for a in range(4):
-        for c in range(4):
-            for k in range(3):
-                m_nets[r, a, c, k] = src[s, a, c, k]
+    _copy_net(m_nets, r, src, s)
     return r
 
 
@@ -375,10 +384,7 @@ def _expand(node, parent, ci, cj, lev, pd, mem, work):
         if lev + 1 < pd:
             data[node] = s = _store_net(m_nets, cnt, work, q)
         else:  # its children are cells: their corners come from the piece's own net
-            for a in range(4):
-                for c in range(4):
-                    for k in range(3):
-                        work[0, a, c, k] = work[q, a, c, k]
+            _copy_net(work, 0, work, q)
             src, s = work, 0
     _split(src, s, work, base)
     first = cnt[M_NODES]
@@ -395,11 +401,11 @@ def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, ki
     """Closest hit on the pieces of Catmull-Clark patch ``p`` (slot ``s``; the arrays of
     ``kernels.trace_round``'s ``iso``) nearer than hit[H_T]; updates ``hit``. Returns the
     number of micro-triangles built: the cells this ray stored in the memo ``mem`` and the
-    cells it evaluated on the spot (fans). ``ray`` = (ox, oy, oz,
-    ix, iy, iz, kx, ky, kz, sx, sy, sz): origin, inverse direction and shear constants.
+    cells it evaluated on the spot (fans). ``ray`` = (ox, oy, oz, ix, iy, iz, kx, ky, kz,
+    sx, sy, sz): origin, inverse direction and shear constants.
 
-    A Bezier piece (item ``it``; a regular patch is one) is refined to the patch's grid
-    depth: the ray descends its quadtree, nearest child first, into the nodes whose boxes it
+    A Bezier piece (item ``it``; a regular patch is one) is refined to its own grid depth
+    (``item_depth``, in the patch's units): the ray descends its quadtree, nearest child first, into the nodes whose boxes it
     enters before its best hit; a node is split (its children's boxes stored) once per
     thread, a cell's corners are evaluated once (see the memo above). ``work`` (>=
     3*depth+10, 4,4,3), the stack ``st`` (>= 6*depth+8, 5) with entry distances ``st_t``,
@@ -420,9 +426,7 @@ def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, ki
         inv = 1.0 / (1 << depth)
         if kind[it] == 1:  # an irregular cell: its exact corners
             c = ref[it]
-            for k in range(4):
-                lp[k, 0] = (i0[it] + (1 if k == 1 or k == 2 else 0)) * inv
-                lp[k, 1] = (j0[it] + (1 if k >= 2 else 0)) * inv
+            _corner_params(lp, i0[it], j0[it], inv)
             tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, cells, 4 * c, lp, slack, hit, code, it,
                      depth)  # (counted once, when the patch was built)
             continue
@@ -469,9 +473,7 @@ def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, ki
                     tested += _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, ci, cj, pd,
                                     oi, oj, depth, item_side, it, slack, hit, code, it, lv, lp)
                 else:
-                    for k in range(4):
-                        lp[k, 0] = (oi + ci + (1 if k == 1 or k == 2 else 0)) * inv
-                        lp[k, 1] = (oj + cj + (1 if k >= 2 else 0)) * inv
+                    _corner_params(lp, oi + ci, oj + cj, inv)
                     tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, m_cells, 4 * r, lp, slack, hit,
                              code, it, depth)
                 continue
@@ -514,11 +516,8 @@ def _descend_node(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, node, parent, 
                         work, st, st_t, st0, tmp_t, order, lv, lp)
     base = work.shape[0] - 4
     _split(m_nets, data[parent], work, base)
-    q = base + (ci & 1) + 2 * (cj & 1)
-    for a in range(4):  # _descend starts from work[0]
-        for c in range(4):
-            for k in range(3):
-                work[1, a, c, k] = work[q, a, c, k]
-    return _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, work, np.int64(1), lev, ci, cj, nets,
-                    nk, pd, oi, oj, depth, sides, srow, slack, hit, code, it, work, st, st_t,
-                    st0, tmp_t, order, lv, lp)
+    # out of the scratch rows that _descend overwrites
+    _copy_net(work, 1, work, base + (ci & 1) + 2 * (cj & 1))
+    return _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, work, np.int64(1), lev, ci,
+                    cj, nets, nk, pd, oi, oj, depth, sides, srow, slack, hit, code, it, work, st,
+                    st_t, st0, tmp_t, order, lv, lp)

@@ -98,15 +98,16 @@ def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_c
     and set ``request[r]`` to the nearest unbuilt patch the ray reaches first (or -1).
 
     Catmull-Clark patches are intersected per ray through their pieces (``render._Pieces``),
-    held in the tuple ``iso`` = (slot of each patch (P,) or -1 while unbuilt, and per slot:
-    first item, item count, round built (-1: from the start), grid depth, side sampling
-    depths (S,4); per item: kind (0: Bezier piece, 1: cell), row in the nets / cells, level,
-    origin i0, j0 in units of 2^-level, box lo, hi (I,3); the Bezier nets (.,4,4,3), the
-    cells' corners (4 rows per cell, (.,3)); and a per-slot flag set when a ray tests it).
+    held in the tuple ``iso`` = (slot of each patch (P,) or -1 while unbuilt; per slot:
+    first item, item count, round built (-1: from the start); per item: grid depth and side
+    sampling depths (I,4) in the patch's units, kind (0: Bezier piece, 1: cell), row in the
+    nets / cells, level, origin i0, j0 in units of 2^-level, box lo, hi (I,3); the Bezier
+    nets (.,4,4,3), the cells' corners (4 rows per cell, (.,3)); and a per-slot flag set
+    when a ray tests it).
     Loop patches are grids in the pools. ``tested[r]`` counts the micro-triangles built for
     ray r. The rays are cut into bands of ``BAND_ROWS`` image rows, and thread ``t`` of
     ``n`` (``tasks.run_tasks``, n = len(mems)) takes bands t, t + n, ... with its own memo
-    of split Bezier nets ``mems[t]`` (see ``bezier.intersect_piece``): neighbouring rays of
+    of split Bezier nets ``mems[t]`` (see ``bezier.intersect_patch``): neighbouring rays of
     a band share their splits, and the bands' interleaving balances the threads.
     ``cands`` (:func:`candidate_lists`) carries each ray's unbuilt shells to the next round.
     """
