@@ -497,3 +497,37 @@ def test_warmup_compiles_the_kernels_a_render_uses():
     after = (set(kernels._trace_task.signatures), set(shade._shade_task.signatures))
     assert after == before
     assert warmup.start(n) is None  # cached now: no second process
+
+
+@needs_shared
+def test_patches_are_built_only_for_rays_that_reach_them_first():
+    """'Only what is needed', checked from the outside: every patch built on request (an
+    irregular one) has its shell entered by some ray before that ray's final hit. A ray asks
+    for the nearest unbuilt shell it enters; asking for a farther one (a wrong order of the
+    shells a ray remembers between rounds) builds patches that a nearer surface hides."""
+    from subtrace.accel.bvh import build_bvh
+    from subtrace.render import RenderStats, trace_hits
+    from subtrace.trace.camera import camera_frame
+
+    mesh = MODELS / "spot_control_mesh.obj"
+    scene = _scene([mesh], (1.2, 0.6, 2.2), (0.0, 0.3, 0.0), width=96, height=72)
+    table = build_patch_table([subtrace.load_cage(mesh)])
+    bvh = build_bvh(table.shell_min, table.shell_max)
+    camera = scene.make_camera(table.shell_min.min(0), table.shell_max.max(0))
+    hits, _, iso, _, _ = trace_hits(table, bvh, camera, scene.render.tolerance_rad(camera),
+                                    RenderStats())
+    asked = iso.a["patch"][iso.a["round"] >= 0]
+    assert len(asked) > 20
+    frame = camera_frame(camera)
+    rows, cols = np.divmod(np.arange(camera.width * camera.height), camera.width)
+    d = frame[3] + cols[:, None] * frame[1] + rows[:, None] * frame[2]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / d
+        t0 = (table.shell_min[asked][:, None, :] - frame[0]) * inv
+        t1 = (table.shell_max[asked][:, None, :] - frame[0]) * inv
+    near = np.maximum(np.nanmax(np.minimum(t0, t1), axis=2), 0.0)
+    far = np.nanmin(np.maximum(t0, t1), axis=2)
+    t_hit = hits[:, 0]
+    reached_first = (near <= far * (1 + 1e-9)) & (near < t_hit * (1 + 1e-9))
+    assert np.all(reached_first.any(axis=1))

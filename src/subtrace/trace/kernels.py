@@ -212,11 +212,16 @@ def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, 
                         cand_t[r, kept] = te
                         kept += 1
                 n_c = 0
-                for k in range(kept):  # those still before the hit
-                    if cand_t[r, k] < hit[H_T]:
+                req = -1
+                req_t = np.inf
+                for k in range(kept):  # those still before the hit; the nearest is asked for
+                    p, te = cand_p[r, k], cand_t[r, k]
+                    if te < hit[H_T]:
+                        cand_p[r, n_c], cand_t[r, n_c] = p, te
                         n_c += 1
+                        if te < req_t:
+                            req_t, req = te, p
                 cand_n[r] = n_c
-                req = cand_p[r, 0] if n_c > 0 else -1
                 request[r] = req
                 for k in range(HIT_FIELDS):
                     hits[r, k] = hit[k]
