@@ -410,6 +410,30 @@ def test_isolated_pieces_tile_the_grid(name):
 
 
 @needs_shared
+def test_rest_boxes_contain_the_later_items():
+    """The box a ray tests before a level's pieces contains every later piece of the patch
+    (a miss skips them all) and is no larger than their union."""
+    from subtrace.patches.isolate import build_isolated
+    from subtrace.render import _Pieces
+
+    cage = subtrace.load_cage(MODELS / "spot_control_mesh.obj")
+    table = build_patch_table([cage])
+    irr = np.nonzero(~table.regular)[0][:40]
+    depth = np.full(len(irr), 4)
+    subs, cells = build_isolated(table.objects[0], table.face[irr], depth)
+    iso = _Pieces(table.n_patches)
+    iso.append(irr, depth, np.repeat(depth, 4), subs, cells, 0)
+    a = iso.a
+    assert np.all(a["count"] > 1)
+    for f, c in zip(a["first"], a["count"]):
+        for it in range(f, f + c):
+            lo = a["lo"][it:f + c].min(axis=0)
+            hi = a["hi"][it:f + c].max(axis=0)
+            assert np.array_equal(a["rest_lo"][it], lo)
+            assert np.array_equal(a["rest_hi"][it], hi)
+
+
+@needs_shared
 def test_cells_subtend_at_most_the_tolerance():
     """Invariant 3 on real grids: with the chosen depths, every cell side of every patch of
     Spot (regular and isolated, and each piece of an isolated patch at its own depth)

@@ -270,7 +270,8 @@ class _Pieces(_Growable):
         "items": {"kind": ((), np.int8), "ref": ((), np.int64), "level": ((), np.int64),
                   "i0": ((), np.int64), "j0": ((), np.int64), "depth_i": ((), np.int64),
                   "side": ((4,), np.int64), "lo": ((3,), np.float64),
-                  "hi": ((3,), np.float64)},
+                  "hi": ((3,), np.float64), "rest_lo": ((3,), np.float64),
+                  "rest_hi": ((3,), np.float64)},
         "nets": {"nets": ((4, 4, 3), np.float64)},
         "cells": {"cells": ((4, 3), np.float64), "normals": ((4, 3), np.float64)},
     }
@@ -284,7 +285,7 @@ class _Pieces(_Growable):
         ``side`` (m,4)) made of ``subs`` and ``cells`` (see
         :func:`~subtrace.patches.isolate.build_isolated`); each piece samples its sides as
         finely as the pieces beside it (:func:`~subtrace.patches.isolate.item_sides`)."""
-        from .patches.isolate import item_sides
+        from .patches.isolate import item_sides, rest_boxes
 
         (sr, sl, si, sj, nets, sd), (cr, ci, cj, cp, cn) = subs, cells
         lo_s, hi_s, _ = net_bounds(nets)
@@ -301,13 +302,16 @@ class _Pieces(_Growable):
                    item_side)
         n0 = self._put("nets", nets=nets)
         c0 = self._put("cells", cells=cp, normals=cn)
+        lo = np.concatenate([lo_s, cp.min(axis=1)])[order]
+        hi = np.concatenate([hi_s, cp.max(axis=1)])[order]
+        rest_lo, rest_hi = np.empty_like(lo), np.empty_like(hi)
+        rest_boxes(first, count, lo, hi, rest_lo, rest_hi)
         i_start = self._put(
             "items",
             kind=np.r_[np.zeros(len(sr), np.int8), np.ones(len(cr), np.int8)][order],
             ref=np.r_[n0 + np.arange(len(sr)), c0 + np.arange(len(cr))][order],
-            level=level, i0=i0, j0=j0, depth_i=depth_i, side=item_side,
-            lo=np.concatenate([lo_s, cp.min(axis=1)])[order],
-            hi=np.concatenate([hi_s, cp.max(axis=1)])[order],
+            level=level, i0=i0, j0=j0, depth_i=depth_i, side=item_side, lo=lo, hi=hi,
+            rest_lo=rest_lo, rest_hi=rest_hi,
         )
         s0 = self._put("slots", patch=patches, first=i_start + first, count=count,
                        round=np.full(len(patches), round_no))
@@ -318,6 +322,7 @@ class _Pieces(_Growable):
         a = self.a
         return (self.patch_iso, a["first"], a["count"], a["round"], a["depth_i"], a["side"],
                 a["kind"], a["ref"], a["level"], a["i0"], a["j0"], a["lo"], a["hi"],
+                a["rest_lo"], a["rest_hi"],
                 a["nets"], a["cells"].reshape(-1, 3), a["touched"])
 
 

@@ -214,3 +214,19 @@ def item_sides(first, count, level, i0, j0, depth, patch_side, out):
                         if out[a, 1] != m or out[b, 3] != m:
                             out[a, 1] = out[b, 3] = m
                             changed = True
+
+
+@nb.njit(cache=True)
+def rest_boxes(first, count, lo, hi, rest_lo, rest_hi):
+    """Per item, the box of it and the items after it in its patch (patch ``p``'s items are
+    ``first[p] .. first[p] + count[p] - 1``, coarse levels first): a ray that misses the box
+    of the rest skips them all."""
+    for p in range(len(first)):
+        f, c = first[p], count[p]
+        for a in range(f + c - 1, f - 1, -1):
+            for k in range(3):
+                rest_lo[a, k] = lo[a, k]
+                rest_hi[a, k] = hi[a, k]
+                if a + 1 < f + c:
+                    rest_lo[a, k] = min(rest_lo[a, k], rest_lo[a + 1, k])
+                    rest_hi[a, k] = max(rest_hi[a, k], rest_hi[a + 1, k])

@@ -397,7 +397,7 @@ def _expand(node, parent, ci, cj, lev, pd, mem, work):
 
 @inline_njit
 def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, kind, ref, level,
-                    i0, j0, lo, hi, nets, cells, mem, slack, hit, scratch):
+                    i0, j0, lo, hi, rest_lo, rest_hi, nets, cells, mem, slack, hit, scratch):
     """Closest hit on the pieces of Catmull-Clark patch ``p`` (slot ``s``; the arrays of
     ``kernels.trace_round``'s ``iso``) nearer than hit[H_T]; updates ``hit``. Returns the
     number of micro-triangles built: the cells this ray stored in the memo ``mem`` and the
@@ -420,6 +420,10 @@ def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, ki
     code = -2.0 - p
     tested = 0
     for it in range(first, first + count):
+        if count > 1 and (it == first or level[it] != level[it - 1]):
+            # the pieces of a level and all finer ones: skipped together on a miss
+            if _slab(ox, oy, oz, ix, iy, iz, rest_lo, rest_hi, it, hit[H_T]) == np.inf:
+                break
         if _slab(ox, oy, oz, ix, iy, iz, lo, hi, it, hit[H_T]) == np.inf:
             continue
         depth = item_depth[it]  # its grid, in the patch's units

@@ -101,7 +101,8 @@ def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_c
     held in the tuple ``iso`` = (slot of each patch (P,) or -1 while unbuilt; per slot:
     first item, item count, round built (-1: from the start); per item: grid depth and side
     sampling depths (I,4) in the patch's units, kind (0: Bezier piece, 1: cell), row in the
-    nets / cells, level, origin i0, j0 in units of 2^-level, box lo, hi (I,3); the Bezier
+    nets / cells, level, origin i0, j0 in units of 2^-level, box lo, hi (I,3), the box of the
+    item and the patch's items after it, rest_lo, rest_hi (I,3); the Bezier
     nets (.,4,4,3), the cells' corners (4 rows per cell, (.,3)); and a per-slot flag set
     when a ray tests it).
     Loop patches are grids in the pools. ``tested[r]`` counts the micro-triangles built for
@@ -157,7 +158,7 @@ def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, 
     stack, gstack, work, st, st_t, ent_t, ent_i, lv, lp, hit = scratches[task]
     scratch = (work, st, st_t, ent_t, ent_i, lv, lp)
     patch_iso, slot_first, slot_count, iso_round, item_depth, item_side = iso[:6]
-    kind, ref, level, i0, j0, it_lo, it_hi, nets, cells, iso_touched = iso[6:]
+    kind, ref, level, i0, j0, it_lo, it_hi, rest_lo, rest_hi, nets, cells, iso_touched = iso[6:]
     cand_p, cand_t, cand_n = cands
 
     def visit(p, r, ray):
@@ -168,7 +169,8 @@ def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, 
                 iso_touched[s] = 1
                 tested[r] += intersect_patch(ray, p, s, slot_first, slot_count, item_depth,
                                              item_side, kind, ref, level, i0, j0, it_lo, it_hi,
-                                             nets, cells, mem, slack, hit, scratch)
+                                             rest_lo, rest_hi, nets, cells, mem, slack, hit,
+                                             scratch)
             return True
         s = patch_slot[p]
         if s < 0:
