@@ -345,23 +345,24 @@ class _Memos:
         if old is None:
             root = np.full(0, -1, np.int64)
             child, box, data = np.empty(0, np.int64), np.empty((0, 6)), np.empty(0, np.int64)
+            slab = np.empty((0, 5))
             nets, cells, cnt = np.empty((0, 4, 4, 3)), np.empty((0, 3)), np.zeros(4, np.int64)
         else:
-            root, child, box, data, nets, cells, cnt = old
+            root, child, box, slab, data, nets, cells, cnt = old
         if len(root) < n_items:
             root = np.concatenate([root, np.full(max(n_items, 2 * len(root)) - len(root), -1)])
         if "child" in which:
             n = max(2 * len(child), self.START["child"])
             used = cnt[M_NODES]
-            child, box, data = (_grown(child, used, n), _grown(box, used, n),
-                                _grown(data, used, n))
+            child, box, slab, data = (_grown(child, used, n), _grown(box, used, n),
+                                      _grown(slab, used, n), _grown(data, used, n))
         if "nets" in which:
             nets = _grown(nets, cnt[M_NETS], max(2 * len(nets), self.START["nets"]))
         if "cells" in which:
             cells = _grown(cells, 4 * cnt[M_CELLS],
                            max(2 * len(cells), 4 * self.START["cells"]))
         cnt[M_FULL] = 0
-        return root, child, box, data, nets, cells, cnt
+        return root, child, box, slab, data, nets, cells, cnt
 
     def kernel_tuple(self, n_items):
         from .trace.bezier import M_FULL

@@ -24,7 +24,7 @@ import numpy as np
 
 from .prims import (
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, _slab, _tri, inline_njit, leaf_njit, push_sorted,
-    slab_bounds,
+    slab_bounds, slab_range,
 )
 
 BOX_PAD = 1e-12
@@ -158,6 +158,63 @@ def _net_entry(ox, oy, oz, ix, iy, iz, net, s, tmax):
     """Entry distance of the ray into the (padded) box of net ``net[s]``; inf on a miss."""
     lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(net, s)
     return slab_bounds(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tmax)
+
+
+SLAB_PAD = 1e-11  # a cell's slab is widened by this much of its net's largest coordinate
+
+
+@leaf_njit
+def _cell_slab(net, s, slab, m):
+    """The slab of a cell's Bezier net ``net[s]`` into ``slab[m]``: the normal ``n`` of its
+    corners' diagonals and the range of ``n . P`` over its 16 points, widened for rounding.
+    The cell's surface, its corners and fan samples (evaluated from its patch's net: equal to
+    the net's points to rounding) lie in the convex hull of the net, so between the planes."""
+    ax = net[s, 3, 3, 0] - net[s, 0, 0, 0]
+    ay = net[s, 3, 3, 1] - net[s, 0, 0, 1]
+    az = net[s, 3, 3, 2] - net[s, 0, 0, 2]
+    bx = net[s, 0, 3, 0] - net[s, 3, 0, 0]
+    by = net[s, 0, 3, 1] - net[s, 3, 0, 1]
+    bz = net[s, 0, 3, 2] - net[s, 3, 0, 2]
+    nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+    lo = np.inf
+    hi = -np.inf
+    big = 0.0
+    for a in range(4):
+        for c in range(4):
+            x, y, z = net[s, a, c, 0], net[s, a, c, 1], net[s, a, c, 2]
+            d = nx * x + ny * y + nz * z
+            lo = min(lo, d)
+            hi = max(hi, d)
+            big = max(big, max(abs(x), max(abs(y), abs(z))))
+    pad = SLAB_PAD * (abs(nx) + abs(ny) + abs(nz)) * big
+    slab[m, 0], slab[m, 1], slab[m, 2] = nx, ny, nz
+    slab[m, 3], slab[m, 4] = lo - pad, hi + pad
+
+
+@leaf_njit
+def _cell_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, box, slab, c, tmax):
+    """Entry distance of the ray into the box of cell node ``c`` cut by its slab; inf when
+    the ray misses either before ``tmax``. (The ray's stretch between the planes is widened
+    by a relative 1e-9 for rounding.)"""
+    tn, tf = slab_range(ox, oy, oz, ix, iy, iz, box[c, 0], box[c, 1], box[c, 2], box[c, 3],
+                        box[c, 4], box[c, 5], tmax)
+    if tn == np.inf:
+        return np.inf
+    nx, ny, nz = slab[c, 0], slab[c, 1], slab[c, 2]
+    dn = nx * dx + ny * dy + nz * dz
+    no = nx * ox + ny * oy + nz * oz
+    if dn == 0.0:
+        return tn if slab[c, 3] <= no <= slab[c, 4] else np.inf
+    ta = (slab[c, 3] - no) / dn
+    tb = (slab[c, 4] - no) / dn
+    if ta > tb:
+        ta, tb = tb, ta
+    ta -= 1e-9 * abs(ta)
+    tb += 1e-9 * abs(tb)
+    tn = max(tn, ta)
+    if tn <= min(tf, tb):
+        return tn
+    return np.inf
 
 
 @leaf_njit
@@ -317,7 +374,8 @@ def _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, src, s, lev0, ci0, 
 #
 # Rays of neighbouring pixels descend the same nodes of a patch's quadtree. A thread keeps
 # what its rays split: ``mem`` = (root node of each item (I,) or -1, first of the four
-# children of each node (N,) or -1, each node's padded box (N,6), each node's row (N,) in
+# children of each node (N,) or -1, each node's padded box (N,6), a cell's slab (N,5): a
+# normal and the range of the normal coordinate of its net (see :func:`_cell_slab`), each node's row (N,) in
 # the net store (an inner node that was split) or the corner store (a cell that was
 # intersected), or -1 (not yet) or -2 (a fan cell: evaluated per ray), the net store
 # (.,4,4,3), the corner store (4 rows per cell, (.,3)), counts (4,): nodes, nets and cells
@@ -372,7 +430,7 @@ def _expand(node, parent, ci, cj, lev, pd, mem, work):
     net (stored, or the quadrant of its parent's) and create its four children with their
     boxes; its net is kept if its children will be split in turn. Returns the first child,
     or -1 when a store is full."""
-    root_m, child, box, data, m_nets, m_cells, cnt = mem
+    root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
     if cnt[M_NODES] + 4 > len(child) or cnt[M_NETS] + 1 > len(m_nets):
         cnt[M_FULL] = 1
         return -1
@@ -390,7 +448,9 @@ def _expand(node, parent, ci, cj, lev, pd, mem, work):
     first = cnt[M_NODES]
     for q in range(4):
         lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(work, base + q)
-        _new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, NOT_YET)
+        m = _new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, NOT_YET)
+        if lev + 1 == pd:  # a cell: its slab too
+            _cell_slab(work, base + q, slab, m)
     child[node] = first
     return first
 
@@ -402,7 +462,7 @@ def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, ki
     ``kernels.trace_round``'s ``iso``) nearer than hit[H_T]; updates ``hit``. Returns the
     number of micro-triangles built: the cells this ray stored in the memo ``mem`` and the
     cells it evaluated on the spot (fans). ``ray`` = (ox, oy, oz, ix, iy, iz, kx, ky, kz,
-    sx, sy, sz): origin, inverse direction and shear constants.
+    sx, sy, sz, dx, dy, dz): origin, inverse direction, shear constants and direction.
 
     A Bezier piece (item ``it``; a regular patch is one) is refined to its own grid depth
     (``item_depth``, in the patch's units): the ray descends its quadtree, nearest child first, into the nodes whose boxes it
@@ -413,9 +473,9 @@ def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, ki
     parameters) are the thread's ``scratch``. (Calls with more than 30 arguments are
     compiled by Python as calls with ``*args``, which Numba cannot inline: hence the tuples.)
     """
-    ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz = ray
+    ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz = ray
     work, st, st_t, tmp_t, order, lv, lp = scratch
-    root_m, child, box, data, m_nets, m_cells, cnt = mem
+    root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
     first, count = slot_first[s], slot_count[s]
     code = -2.0 - p
     tested = 0
@@ -490,12 +550,16 @@ def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, ki
                                             item_side, it, slack, hit, code, it, mem, work, st,
                                             st_t, sp + 1, tmp_t, order, lv, lp)
                     continue
-            # the children the ray enters, pushed far to near
+            # the children the ray enters, pushed far to near (cells: box and slab)
             n = 0
             for q in range(4):
-                te = slab_bounds(ox, oy, oz, ix, iy, iz, box[c + q, 0], box[c + q, 1],
-                                 box[c + q, 2], box[c + q, 3], box[c + q, 4], box[c + q, 5],
-                                 hit[H_T])
+                if lev + 1 == pd:
+                    te = _cell_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, box, slab, c + q,
+                                     hit[H_T])
+                else:
+                    te = slab_bounds(ox, oy, oz, ix, iy, iz, box[c + q, 0], box[c + q, 1],
+                                     box[c + q, 2], box[c + q, 3], box[c + q, 4], box[c + q, 5],
+                                     hit[H_T])
                 if te < np.inf:
                     n = push_sorted(tmp_t, order, n, te, q)
             for e in range(n):
@@ -513,7 +577,7 @@ def _descend_node(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, node, parent, 
                   st_t, st0, tmp_t, order, lv, lp):
     """:func:`_descend` below memo node ``node`` (whose net may not be stored: then the
     quadrant of its parent's)."""
-    root_m, child, box, data, m_nets, m_cells, cnt = mem
+    root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
     if data[node] >= 0:
         return _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, m_nets, data[node], lev,
                         ci, cj, nets, nk, pd, oi, oj, depth, sides, srow, slack, hit, code, it,

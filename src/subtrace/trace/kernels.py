@@ -176,7 +176,7 @@ def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, 
         if s < 0:
             return False
         if slot_round[s] == round_no - 1:
-            ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz = ray
+            ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz = ray
             _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, slot_depth,
                             slot_vert_off, slot_node_off, slot_quad, verts, node_lo, node_hi,
                             lc_off, lc_data, slack, hit, gstack, ent_t, ent_i)
@@ -192,7 +192,7 @@ def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, 
             kx, ky, kz, sx, sy, sz = _shear(dx, dy, dz)
             for k in range(HIT_FIELDS):
                 hit[k] = hits[r, k]
-            ray = (ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz)
+            ray = (ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz)
             n_c = cand_n[r]
             if round_no > 0 and n_c >= 0:
                 # the unbuilt shells this ray entered last round, nearest first: test those

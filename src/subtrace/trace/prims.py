@@ -39,6 +39,13 @@ def slab_bounds(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tmax):
     Robust to direction components of zero (IEEE infinities in ``i*``); the far distance is
     widened by 1 + 2 gamma(3) as pbrt does, so a ray grazing a box is not lost to rounding.
     """
+    return slab_range(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tmax)[0]
+
+
+@leaf_njit
+def slab_range(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tmax):
+    """Entry and exit distances of the ray in the box [lo, hi] (as :func:`slab_bounds`);
+    (inf, inf) if it misses before tmax."""
     t0 = (lo0 - ox) * ix
     t1 = (hi0 - ox) * ix
     tn = min(t0, t1)
@@ -54,8 +61,8 @@ def slab_bounds(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tmax):
     tf *= 1.0 + 6.7e-16
     tn = max(tn, 0.0)
     if tn <= tf and tn < tmax:
-        return tn
-    return np.inf
+        return tn, tf
+    return np.inf, np.inf
 
 
 @leaf_njit
