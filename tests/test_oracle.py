@@ -236,3 +236,16 @@ def test_samples(shapes, name):
     base, sub, _ = subtrace.patches.evaluate.ptex_layout(cage)
     np.testing.assert_array_equal(base, ptex)
     np.testing.assert_array_equal(sub, z["ptex_subface"])
+
+
+@pytest.mark.parametrize("name", SHAPES)
+def test_classifying_some_vertices_matches_classifying_all(name, shapes):
+    """``classify(level, options, which)`` gives the whole level's classes at ``which``."""
+    from subtrace.subdiv.limit import classify
+
+    _, _, cage = shapes(name)
+    lev = cage.level_topology(1)
+    full = classify(lev, cage.options)
+    rng = np.random.default_rng(7)
+    which = rng.integers(0, lev.n_verts, max(1, lev.n_verts // 3))
+    assert np.array_equal(classify(lev, cage.options, which)[which], full[which])

@@ -555,3 +555,39 @@ def test_patches_are_built_only_for_rays_that_reach_them_first():
     t_hit = hits[:, 0]
     reached_first = (near <= far * (1 + 1e-9)) & (near < t_hit * (1 + 1e-9))
     assert np.all(reached_first.any(axis=1))
+
+
+@needs_shared
+def test_isolation_taken_from_the_depth_choice_equals_a_fresh_one():
+    """``build_isolated`` with the record of ``isolated_depths`` gives the same pieces and
+    cells as refining the requested patches afresh, also where a patch's depth was raised
+    beyond what the record reaches (it then refines further itself)."""
+    from subtrace.patches.isolate import build_isolated, isolated_depths
+
+    cage = subtrace.load_cage(MODELS / "spot_control_mesh.obj")
+    table = build_patch_table([cage])
+    o = table.objects[0]
+    irr = np.nonzero(~table.regular)[0]
+    eye = np.array([0.3, 0.6, 2.2])
+    tol = 2e-3
+    record = {}
+    depths = isolated_depths(o, table.face[irr], np.full(len(irr), 6), eye, tol, record)
+    assert len(record["levels"]) >= 2
+    pick = np.arange(0, len(irr), 3)
+    dep = np.minimum(depths[pick] + (pick % 2), 6)  # some raised, as neighbours raise them
+    a = build_isolated(o, table.face[irr[pick]], dep, eye, tol, record)
+    b = build_isolated(o, table.face[irr[pick]], dep, eye, tol)
+    scale = float(np.abs(o.points).max())
+
+    def by_piece(arrays, n_keys):
+        order = np.lexsort(arrays[:n_keys][::-1])
+        return [x[order] for x in arrays]
+
+    (ar, al, ai, aj, an, ad), (br, bl, bi, bj, bn, bd) = by_piece(a[0], 4), by_piece(b[0], 4)
+    for x, y in ((ar, br), (al, bl), (ai, bi), (aj, bj), (ad, bd)):
+        assert np.array_equal(x, y)
+    assert np.abs(an - bn).max() <= 1e-13 * scale
+    (cr, ci, cj, cp, _), (dr, di, dj, dp, _) = by_piece(a[1], 3), by_piece(b[1], 3)
+    for x, y in ((cr, dr), (ci, di), (cj, dj)):
+        assert np.array_equal(x, y)
+    assert np.abs(cp - dp).max() <= 1e-13 * scale

@@ -219,9 +219,11 @@ def _snap_sides(P: np.ndarray, depth: int, quad: bool, side_depth: np.ndarray):
             P[rows[:, None], idx[None, :]] = (1.0 - w) * Q[:, t0] + w * Q[:, t1]
 
 
-def _refine(table, requested, depths, edge_depth, pools, iso, round_no, stats, eye, tol_rad):
+def _refine(table, requested, depths, edge_depth, pools, iso, round_no, stats, eye, tol_rad,
+            record):
     """Build the requested patches: irregular Catmull-Clark patches into pieces (``iso``,
-    all of an object's in one isolation), Loop patches into grids (``pools``)."""
+    all of an object's in one isolation, taking what ``record[object id]`` kept of the
+    depth choice's isolation), Loop patches into grids (``pools``)."""
     obj = table.object_id[requested]
     dep = depths[requested]
     quad = table.is_quad[requested]
@@ -234,7 +236,8 @@ def _refine(table, requested, depths, edge_depth, pools, iso, round_no, stats, e
         ids = requested[s:e]
         o = table.objects[int(obj[s])]
         if quad[s]:
-            subs, cells = build_isolated(o, table.face[ids], dep[s:e], eye, tol_rad)
+            subs, cells = build_isolated(o, table.face[ids], dep[s:e], eye, tol_rad,
+                                         record.get(int(obj[s])))
             n_sub, n_cell = iso.append(ids, dep[s:e], np.repeat(dep[s:e], 4), subs, cells,
                                        round_no)
             stats.pieces += n_sub + n_cell
@@ -392,7 +395,8 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None, compiling=Non
     W, H = camera.width, camera.height
     frame = camera_frame(camera)
     eye = frame[0]
-    depths = choose_depths(table, eye, tol_rad, max_depth)
+    record = {}
+    depths = choose_depths(table, eye, tol_rad, max_depth, record)
     edge_depth, reg_side = edge_sampling(table, depths)
     tested = np.zeros(W * H, dtype=np.int64)
     tables = _LeafTables(int(depths.max(initial=0)))
@@ -438,7 +442,8 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None, compiling=Non
             break
         t0 = time.perf_counter()
         new = np.unique(req[asked])
-        _refine(table, new, depths, edge_depth, pools, iso, round_no, stats, eye, tol_rad)
+        _refine(table, new, depths, edge_depth, pools, iso, round_no, stats, eye, tol_rad,
+                record)
         stats.time_refine += time.perf_counter() - t0
         round_no += 1
     stats.rounds = round_no + 1

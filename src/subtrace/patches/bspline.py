@@ -43,12 +43,12 @@ def regular_mask(level, options, faces) -> np.ndarray:
     faces = np.asarray(faces, dtype=np.int64)
     if options.scheme != "catmark" or len(faces) == 0:
         return np.zeros(len(faces), dtype=bool)
-    cls = classify(level, options)
-    ok_vert = (cls == _SMOOTH) & (np.diff(level.vert_edge_offsets) == 4)
     fo = level.face_offsets
     quad = (fo[faces + 1] - fo[faces]) == 4
     corners = level.face_verts[np.minimum(fo[faces][:, None] + np.arange(4), len(level.face_verts) - 1)]
-    return quad & ok_vert[corners].all(axis=1)
+    cls = classify(level, options, corners)
+    ok = (cls[corners] == _SMOOTH) & (np.diff(level.vert_edge_offsets)[corners] == 4)
+    return quad & ok.all(axis=1)
 
 
 def control_grids(level, faces) -> np.ndarray:

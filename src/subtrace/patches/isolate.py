@@ -55,28 +55,37 @@ def box_distance(bmin, bmax, p):
     return np.sqrt((q * q).sum(axis=1))
 
 
-def isolated_depths(obj, faces, cap, eye, tol_rad):
+def isolated_depths(obj, faces, cap, eye, tol_rad, record=None):
     """Depths (len(faces),) int32 of the irregular quads ``faces`` of ``obj``'s patch level,
-    none above ``cap`` (their conservative depths, (len(faces),) int)."""
+    none above ``cap`` (their conservative depths, (len(faces),) int). With a dict
+    ``record``, what each level's refinement made is kept in it (see :class:`_Level`), for
+    :func:`build_isolated` to take instead of refining the same faces again."""
     from .table import one_ring_shells
 
     faces = np.asarray(faces, dtype=np.int64)
     cap = np.asarray(cap, dtype=np.int64)
     need = np.zeros(len(faces), dtype=np.int64)
     options = obj.cage.options
+    levels = []
+    if record is not None:
+        record.update(faces=faces, levels=levels)
     # frontier: (root index, face in the current level)
     root = np.nonzero(cap > 0)[0]
     cur, cur_pts, start = obj.level, obj.points, faces[root]
     k = 0
     while len(root):
+        parent_start = start
         cur, cur_pts, kids, reg = _children(cur, cur_pts, start, options)
         k += 1
         kid_root = np.repeat(root, 4)
+        bez, n = np.zeros((0, 4, 4, 3)), np.zeros(0)
         if reg.any():
             bez = bezier_nets(cur_pts[control_grids(cur, kids[reg])])
             lo, hi, bound = net_bounds(bez)
             n = _levels_needed(bound, box_distance(lo, hi, eye), tol_rad)
             np.maximum.at(need, kid_root[reg], k + n.astype(np.int64))
+        if record is not None:
+            levels.append(_Level(parent_start, cur, cur_pts, kids, reg, bez, n))
         irr = np.nonzero(~reg)[0]
         smin, smax, ebound, _ = one_ring_shells(cur, kids[irr], cur_pts)
         flat = IRREGULAR_MARGIN * ebound <= tol_rad * box_distance(smin, smax, eye)
@@ -86,11 +95,34 @@ def isolated_depths(obj, faces, cap, eye, tol_rad):
     return np.minimum(need, cap).astype(np.int32)
 
 
-def build_isolated(obj, faces, depth, eye=None, tol_rad=None):
+class _Level:
+    """One level of :func:`isolated_depths`' refinement: the faces it refined (``start``,
+    in the previous level), the refined cut ``cur`` with its points, their four children
+    each (``kids``, in ``cur``), which are regular, and those's Bezier nets and levels
+    needed beyond this one (``bez``, ``n``)."""
+
+    def __init__(self, start, cur, pts, kids, reg, bez, n):
+        self.start, self.cur, self.pts, self.kids, self.reg = start, cur, pts, kids, reg
+        self.bez, self.n = bez, n
+        self.reg_rank = np.cumsum(reg) - 1
+        self.lut = np.full(int(start.max(initial=-1)) + 1, -1, np.int64)
+        self.lut[start] = np.arange(len(start))
+
+    def find(self, faces):
+        """Row of each of ``faces`` (in the previous level) in ``start``, or -1."""
+        out = np.full(len(faces), -1, np.int64)
+        ok = faces < len(self.lut)
+        out[ok] = self.lut[faces[ok]]
+        return out
+
+
+def build_isolated(obj, faces, depth, eye=None, tol_rad=None, record=None):
     """Feature-adaptive pieces of the irregular quads ``faces`` of ``obj``'s patch level,
     refined down to grid depth ``depth`` (a scalar, or one per face): every grid cell of a
     patch is covered either by a regular sub-patch (a bicubic Bezier net over a dyadic
     square) or, where no level down to the depth is regular, by a cell of exact limit points.
+    ``record``: what :func:`isolated_depths` made for the same eye and tolerance (its levels
+    are taken where they reach, and refined further where they do not).
 
     Returns ``(subs, cells)``:
     ``subs`` = (root index (s,), level (s,), origin i0, j0 (s,) in units of 2^-level,
@@ -105,48 +137,75 @@ def build_isolated(obj, faces, depth, eye=None, tol_rad=None):
     depth = np.broadcast_to(np.asarray(depth, dtype=np.int64), faces.shape)
     subs = [[], [], [], [], [], []]
     cells = [[], [], [], [], []]
-    root = np.arange(len(faces))
-    i0 = np.zeros(len(faces), dtype=np.int64)
-    j0 = np.zeros(len(faces), dtype=np.int64)
-    cur, cur_pts, start = obj.level, obj.points, faces
+    zero = np.zeros(len(faces), dtype=np.int64)
+    levels = record["levels"] if record is not None and eye is not None else []
+    # groups of the frontier: (level, points, root index, face in the level, i0, j0, whether
+    # the level is the record's)
+    groups = [(obj.level, obj.points, np.arange(len(faces)), faces, zero, zero, bool(levels))]
     k = 0
-    while len(root):
-        done = depth[root] == k
-        if done.any():
-            # the irregular cells left at their patch's depth: exact limit points
-            _add_cells(cells, cur, cur_pts, options, start[done], root[done], i0[done],
-                       j0[done])
-            keep = ~done
-            root, start, i0, j0 = root[keep], start[keep], i0[keep], j0[keep]
-            if not len(root):
-                break
-        cur, cur_pts, kids, reg = _children(cur, cur_pts, start, options)
+    while groups:
+        nxt = []
+        for cur, cur_pts, root, start, i0, j0, recorded in groups:
+            done = depth[root] == k
+            if done.any():
+                # the irregular cells left at their patch's depth: exact limit points
+                _add_cells(cells, cur, cur_pts, options, start[done], root[done], i0[done],
+                           j0[done])
+                keep = ~done
+                root, start, i0, j0 = root[keep], start[keep], i0[keep], j0[keep]
+                if not len(root):
+                    continue
+            rows = levels[k].find(start) if recorded and k < len(levels) else np.full(len(start), -1)
+            have = rows >= 0
+            if have.any():
+                lv = levels[k]
+                kid_rows = (4 * rows[have, None] + np.arange(4)).ravel()
+                nxt.append(_next_level(subs, k + 1, lv.cur, lv.pts, lv.kids[kid_rows],
+                                       lv.reg[kid_rows], root[have], i0[have], j0[have], depth,
+                                       eye, tol_rad, True,
+                                       lv.bez[lv.reg_rank[kid_rows[lv.reg[kid_rows]]]],
+                                       lv.n[lv.reg_rank[kid_rows[lv.reg[kid_rows]]]]))
+            if not have.all():
+                fresh = ~have
+                ref, ref_pts, kids, reg = _children(cur, cur_pts, start[fresh], options)
+                nxt.append(_next_level(subs, k + 1, ref, ref_pts, kids, reg, root[fresh],
+                                       i0[fresh], j0[fresh], depth, eye, tol_rad, False))
+        groups = [g for g in nxt if len(g[2])]
         k += 1
-        q = np.arange(4)
-        kid_root = np.repeat(root, 4)
-        ki = (2 * i0[:, None] + (q == 1) + (q == 2)).ravel()
-        kj = (2 * j0[:, None] + (q >= 2)).ravel()
-        if reg.any():
-            subs[0].append(kid_root[reg])
-            subs[1].append(np.full(int(reg.sum()), k))
-            subs[2].append(ki[reg])
-            subs[3].append(kj[reg])
-            bez = bezier_nets(cur_pts[control_grids(cur, kids[reg])])
-            subs[4].append(bez)
-            own = depth[kid_root[reg]]
-            if eye is not None:
-                lo, hi, bound = net_bounds(bez)
-                n = _levels_needed(bound, box_distance(lo, hi, eye), tol_rad)
-                own = np.clip(k + n, k, own).astype(np.int64)
-            subs[5].append(own)
-        irr = ~reg
-        root, start, i0, j0 = kid_root[irr], kids[irr], ki[irr], kj[irr]
     empty = (np.zeros(0, np.int64),) * 4
     out_subs = (tuple(np.concatenate(a) for a in subs) if subs[0]
                 else (*empty, np.zeros((0, 4, 4, 3)), empty[0]))
     out_cells = (tuple(np.concatenate(a) for a in cells) if cells[0]
                  else (*empty[:3], np.zeros((0, 4, 3)), np.zeros((0, 4, 3))))
     return out_subs, out_cells
+
+
+def _next_level(subs, k, cur, cur_pts, kids, reg, root, i0, j0, depth, eye, tol_rad, recorded,
+                bez=None, n=None):
+    """Append the regular children ``kids[reg]`` (level ``k`` of ``cur``; four per frontier
+    face of roots ``root`` at origins ``i0, j0``) to ``subs`` as pieces; return the group of
+    the irregular ones. ``bez``, ``n``: the regular ones' nets and needs, when known."""
+    q = np.arange(4)
+    kid_root = np.repeat(root, 4)
+    ki = (2 * i0[:, None] + (q == 1) + (q == 2)).ravel()
+    kj = (2 * j0[:, None] + (q >= 2)).ravel()
+    if reg.any():
+        subs[0].append(kid_root[reg])
+        subs[1].append(np.full(int(reg.sum()), k))
+        subs[2].append(ki[reg])
+        subs[3].append(kj[reg])
+        if bez is None:
+            bez = bezier_nets(cur_pts[control_grids(cur, kids[reg])])
+        subs[4].append(bez)
+        own = depth[kid_root[reg]]
+        if eye is not None:
+            if n is None:
+                lo, hi, bound = net_bounds(bez)
+                n = _levels_needed(bound, box_distance(lo, hi, eye), tol_rad)
+            own = np.clip(k + n, k, own).astype(np.int64)
+        subs[5].append(own)
+    irr = ~reg
+    return cur, cur_pts, kid_root[irr], kids[irr], ki[irr], kj[irr], recorded
 
 
 def _add_cells(cells, level, points, options, faces, root, i0, j0):

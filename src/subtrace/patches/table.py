@@ -279,10 +279,13 @@ def _subdominant(valence: np.ndarray, quad: bool) -> np.ndarray:
     return np.maximum(scheme.subdominant_eigenvalue(np.maximum(valence, 3)), 0.5)
 
 
-def choose_depths(table: PatchTable, eye: np.ndarray, tol_rad: float, max_depth: int):
+def choose_depths(table: PatchTable, eye: np.ndarray, tol_rad: float, max_depth: int,
+                  record=None):
     """Grid depth of every patch: the smallest n with ``edge_bound * rate^n`` at most
     ``tol_rad`` times the distance from the eye to the patch's shell (capped); irregular
-    quads needing more than depth 0 are then isolated (:mod:`subtrace.patches.isolate`)."""
+    quads needing more than depth 0 are then isolated (:mod:`subtrace.patches.isolate`).
+    With a dict ``record``, ``record[object id]`` keeps what the isolation made (see
+    :func:`~subtrace.patches.isolate.isolated_depths`)."""
     d = box_distance(table.shell_min, table.shell_max, eye)
     allowed = d * tol_rad
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -295,7 +298,8 @@ def choose_depths(table: PatchTable, eye: np.ndarray, tol_rad: float, max_depth:
             continue
         sel = np.nonzero((table.object_id == oid) & ~table.regular & (depths > 0))[0]
         if len(sel):
-            depths[sel] = isolated_depths(o, table.face[sel], depths[sel], eye, tol_rad)
+            rec = record.setdefault(oid, {}) if record is not None else None
+            depths[sel] = isolated_depths(o, table.face[sel], depths[sel], eye, tol_rad, rec)
     return depths
 
 

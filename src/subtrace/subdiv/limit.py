@@ -52,7 +52,7 @@ def limit_points(level: Level, points: np.ndarray, options: Options, which=None)
     P = np.zeros((n, 3))
     du = np.zeros((n, 3))
     dv = np.zeros((n, 3))
-    cls = classify(level, options)
+    cls = classify(level, options, which)
     _closed_form(level, points, options, cls, which, np.arange(n), P, du, dv)
     hard = np.nonzero(cls[which] < 0)[0]
     if len(hard):
@@ -60,9 +60,14 @@ def limit_points(level: Level, points: np.ndarray, options: Options, which=None)
     return P, du, dv
 
 
-def classify(level: Level, options: Options) -> np.ndarray:
-    """(V,) int8 vertex classes (see the constants above)."""
+def classify(level: Level, options: Options, which=None) -> np.ndarray:
+    """(V,) int8 vertex classes (see the constants above); with ``which``, only those
+    vertices are classified (the others' entries are undefined)."""
     out = np.empty(level.n_verts, dtype=np.int8)
+    if which is None or np.size(which) >= level.n_verts:  # (repeats: all at once is cheaper)
+        verts = np.arange(level.n_verts)
+    else:
+        verts = np.ascontiguousarray(which, dtype=np.int64).ravel()
     _classify_kernel(
         options.regular_face_size,
         level.face_offsets,
@@ -73,6 +78,7 @@ def classify(level: Level, options: Options) -> np.ndarray:
         level.vert_manifold,
         level.edge_sharpness,
         level.vert_sharpness,
+        verts,
         out,
     )
     return out
@@ -89,13 +95,14 @@ def _classify_kernel(
     vert_manifold,
     edge_sharp,
     vert_sharp,
+    verts,
     out,
 ):
     n_max = 0
-    for v in range(len(vert_edge_offsets) - 1):
+    for v in verts:
         n_max = max(n_max, vert_edge_offsets[v + 1] - vert_edge_offsets[v])
     buf = np.empty(n_max, np.float32)  # one buffer for every vertex's edge sharpnesses
-    for v in range(len(vert_face_offsets) - 1):
+    for v in verts:
         fa, fb = vert_face_offsets[v], vert_face_offsets[v + 1]
         ea, eb = vert_edge_offsets[v], vert_edge_offsets[v + 1]
         if fa == fb:
