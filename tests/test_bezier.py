@@ -79,3 +79,18 @@ def test_cell_slab_culls_rays_that_pass_beside_a_flat_cell():
 
     assert slab_bounds(*args, *box[0], np.inf) < np.inf
     assert _cell_entry(*args, d[0], d[1], d[2], box, slab, 0, np.inf) == np.inf
+
+
+def test_quadrant_is_the_split_child():
+    """``_quadrant`` makes exactly the child that ``_split`` makes (the descent mixes both)."""
+    from subtrace.trace.bezier import _quadrant
+
+    rng = np.random.default_rng(3)
+    nets = rng.normal(size=(1, 4, 4, 3))
+    work = np.empty((8, 4, 4, 3))
+    _split(nets, 0, work, 4)
+    for cu in (0, 1):
+        for cv in (0, 1):
+            out = np.empty((2, 4, 4, 3))
+            _quadrant(nets, 0, cu, cv, out, 0)
+            assert np.array_equal(out[0], work[4 + cu + 2 * cv])

@@ -132,6 +132,31 @@ def _split(src, s, w, d0):
 
 
 @leaf_njit
+def _quadrant(src, s, cu, cv, w, d):
+    """Write child ``cu + 2 cv`` of net ``src[s]`` (as :func:`_split` makes it) into
+    ``w[d]``, using ``w[d + 1]`` as scratch."""
+    for c in range(4):  # halve along u, keep half cu
+        for k in range(3):
+            p0, p1, p2, p3 = src[s, 0, c, k], src[s, 1, c, k], src[s, 2, c, k], src[s, 3, c, k]
+            ab, abc, m, bcd, cd = _split_row(p0, p1, p2, p3)
+            if cu == 0:
+                w[d + 1, 0, c, k], w[d + 1, 1, c, k], w[d + 1, 2, c, k], w[d + 1, 3, c, k] = (
+                    p0, ab, abc, m)
+            else:
+                w[d + 1, 0, c, k], w[d + 1, 1, c, k], w[d + 1, 2, c, k], w[d + 1, 3, c, k] = (
+                    m, bcd, cd, p3)
+    for a in range(4):  # then along v, keep half cv
+        for k in range(3):
+            p0, p1 = w[d + 1, a, 0, k], w[d + 1, a, 1, k]
+            p2, p3 = w[d + 1, a, 2, k], w[d + 1, a, 3, k]
+            ab, abc, m, bcd, cd = _split_row(p0, p1, p2, p3)
+            if cv == 0:
+                w[d, a, 0, k], w[d, a, 1, k], w[d, a, 2, k], w[d, a, 3, k] = p0, ab, abc, m
+            else:
+                w[d, a, 0, k], w[d, a, 1, k], w[d, a, 2, k], w[d, a, 3, k] = m, bcd, cd, p3
+
+
+@leaf_njit
 def _pad(lo0, lo1, lo2, hi0, hi1, hi2):
     """A box widened by ``BOX_PAD`` of its largest coordinate (for rounding)."""
     pad = BOX_PAD * max(max(abs(lo0), abs(hi0)), max(max(abs(lo1), abs(hi1)),
@@ -437,12 +462,10 @@ def _expand(node, parent, ci, cj, lev, pd, mem, work):
     base = work.shape[0] - 4
     src, s = m_nets, data[node]
     if s < 0:
-        _split(m_nets, data[parent], work, base)
-        q = base + (ci & 1) + 2 * (cj & 1)
+        _quadrant(m_nets, data[parent], ci & 1, cj & 1, work, 0)
         if lev + 1 < pd:
-            data[node] = s = _store_net(m_nets, cnt, work, q)
+            data[node] = s = _store_net(m_nets, cnt, work, 0)
         else:  # its children are cells: their corners come from the piece's own net
-            _copy_net(work, 0, work, q)
             src, s = work, 0
     _split(src, s, work, base)
     first = cnt[M_NODES]
@@ -582,10 +605,7 @@ def _descend_node(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, node, parent, 
         return _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, m_nets, data[node], lev,
                         ci, cj, nets, nk, pd, oi, oj, depth, sides, srow, slack, hit, code, it,
                         work, st, st_t, st0, tmp_t, order, lv, lp)
-    base = work.shape[0] - 4
-    _split(m_nets, data[parent], work, base)
-    # out of the scratch rows that _descend overwrites
-    _copy_net(work, 1, work, base + (ci & 1) + 2 * (cj & 1))
+    _quadrant(m_nets, data[parent], ci & 1, cj & 1, work, 1)  # (row 0 is _descend's)
     return _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, work, np.int64(1), lev, ci,
                     cj, nets, nk, pd, oi, oj, depth, sides, srow, slack, hit, code, it, work, st,
                     st_t, st0, tmp_t, order, lv, lp)
