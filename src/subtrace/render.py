@@ -23,7 +23,7 @@ from .patches.bspline import net_bounds
 from .patches.isolate import build_isolated
 from .patches.grids import build_grids, grid_params, leaf_corners
 from .patches.table import build_patch_table, choose_depths, edge_sampling
-from .trace.kernels import H_SLOT, H_T, HIT_FIELDS, candidate_lists, trace_round
+from .trace.kernels import H_T, HIT_FIELDS, candidate_lists, trace_round
 
 
 @dataclass
@@ -395,10 +395,12 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None, compiling=Non
     W, H = camera.width, camera.height
     frame = camera_frame(camera)
     eye = frame[0]
+    t0 = time.perf_counter()
     record = {}
-    depths = choose_depths(table, eye, tol_rad, max_depth, record)
+    depths = choose_depths(table, eye, tol_rad, max_depth, record)  # (isolates: refinement)
     edge_depth, reg_side = edge_sampling(table, depths)
-    tested = np.zeros(W * H, dtype=np.int64)
+    stats.time_refine += time.perf_counter() - t0
+    tested = np.empty(W * H, dtype=np.int64)  # (round 0 writes every ray's entries)
     tables = _LeafTables(int(depths.max(initial=0)))
     pools = _Pools(table.n_patches)
     iso = _Pieces(table.n_patches)
@@ -413,10 +415,8 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None, compiling=Non
                (one, np.zeros(len(reg), np.int64), np.zeros(len(reg), np.int64),
                 np.zeros(len(reg), np.int64), table.nets, depths[reg]),
                (none, none, none, np.zeros((0, 4, 3)), np.zeros((0, 4, 3))), -1)
-    hits = np.zeros((W * H, HIT_FIELDS))
-    hits[:, H_T] = np.inf
-    hits[:, H_SLOT] = -1
-    request = np.full(W * H, -1, dtype=np.int64)
+    hits = np.empty((W * H, HIT_FIELDS))
+    request = np.empty(W * H, dtype=np.int64)
     cands = candidate_lists(W * H)
     rays = np.arange(W * H, dtype=np.int64)
     round_no = 0

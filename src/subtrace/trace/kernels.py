@@ -96,6 +96,8 @@ def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_c
                 cands, slack, hits, request, tested):
     """One round for the rays ``rays`` (sorted pixel indices): update ``hits`` (n_pixels, 6)
     and set ``request[r]`` to the nearest unbuilt patch the ray reaches first (or -1).
+    Round 0 starts every ray afresh: it writes ``hits``, ``tested``, ``request`` and the
+    candidate counts of each ray without reading them (they need no initial values).
 
     Catmull-Clark patches are intersected per ray through their pieces (``render._Pieces``),
     held in the tuple ``iso`` = (slot of each patch (P,) or -1 while unbuilt; per slot:
@@ -132,7 +134,7 @@ def candidate_lists(n_rays):
     distances, count or -1 when there were more than ``CANDIDATES``): a ray traced again
     after they are built tests just those instead of traversing the BVH again."""
     return (np.empty((n_rays, CANDIDATES), np.int32), np.empty((n_rays, CANDIDATES)),
-            np.zeros(n_rays, np.int8))
+            np.empty(n_rays, np.int8))  # (set by round 0 for every ray)
 
 
 def _scratch(max_d):
@@ -190,8 +192,15 @@ def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, 
             dx, dy, dz = ray_setup(frame, row, col)
             ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
             kx, ky, kz, sx, sy, sz = _shear(dx, dy, dz)
-            for k in range(HIT_FIELDS):
-                hit[k] = hits[r, k]
+            if round_no == 0:  # a fresh ray: ``hits`` and ``tested`` are not initialised
+                for k in range(HIT_FIELDS):
+                    hit[k] = 0.0
+                hit[H_T] = np.inf
+                hit[H_SLOT] = -1.0
+                tested[r] = 0
+            else:
+                for k in range(HIT_FIELDS):
+                    hit[k] = hits[r, k]
             ray = (ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz)
             n_c = cand_n[r]
             if round_no > 0 and n_c >= 0:
