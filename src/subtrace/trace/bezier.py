@@ -19,7 +19,6 @@ cell, inside its box; boxes are widened by a relative ``BOX_PAD`` for rounding.
 
 from __future__ import annotations
 
-import numba as nb
 import numpy as np
 
 from .prims import (

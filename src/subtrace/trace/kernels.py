@@ -26,7 +26,7 @@ import numpy as np
 
 from .bezier import MAX_SIDE_SAMPLES, intersect_patch
 from .prims import (  # noqa: F401  (H_* are re-exported for the driver)
-    H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, _shear, _slab, _tri, inline_njit, leaf_njit,
+    H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, _shear, _slab, _tri, leaf_njit,
     push_sorted, ray_setup,
 )
 
