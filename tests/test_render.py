@@ -524,22 +524,21 @@ def test_warmup_compiles_the_kernels_a_render_uses():
 
 
 @needs_shared
-def test_patches_are_built_only_for_rays_that_reach_them_first():
+@pytest.mark.parametrize("accel", ["projection", "bvh"])
+def test_patches_are_built_only_for_rays_that_reach_them_first(accel):
     """'Only what is needed', checked from the outside: every patch built on request (an
     irregular one) has its shell entered by some ray before that ray's final hit. A ray asks
     for the nearest unbuilt shell it enters; asking for a farther one (a wrong order of the
     shells a ray remembers between rounds) builds patches that a nearer surface hides."""
-    from subtrace.accel.bvh import build_bvh
     from subtrace.render import RenderStats, trace_hits
     from subtrace.trace.camera import camera_frame
 
     mesh = MODELS / "spot_control_mesh.obj"
     scene = _scene([mesh], (1.2, 0.6, 2.2), (0.0, 0.3, 0.0), width=96, height=72)
     table = build_patch_table([subtrace.load_cage(mesh)])
-    bvh = build_bvh(table.shell_min, table.shell_max)
     camera = scene.make_camera(table.shell_min.min(0), table.shell_max.max(0))
-    hits, _, iso, _, _ = trace_hits(table, bvh, camera, scene.render.tolerance_rad(camera),
-                                    RenderStats())
+    hits, _, iso, _, _ = trace_hits(table, camera, scene.render.tolerance_rad(camera),
+                                    RenderStats(), accel=accel)
     asked = iso.a["patch"][iso.a["round"] >= 0]
     assert len(asked) > 20
     frame = camera_frame(camera)

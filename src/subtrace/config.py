@@ -24,6 +24,10 @@ SHELL_CHAIKIN_MARGIN = 0.25
 # Deepest grid of one patch (2^n x 2^n cells): bounds memory when the eye is inside a shell.
 MAX_GRID_DEPTH = 8
 
+# How primary rays find the patch shells they enter: "projection" (shells binned into image
+# tiles, accel/projection.py; measured faster on Spot and the sword, BENCHMARKS.md) or "bvh".
+PRIMARY_ACCEL = "projection"
+
 # Patches per BVH leaf, and the traversal stack size (enough for any tree this builds).
 BVH_LEAF_SIZE = 2
 STACK_SIZE = 128

@@ -1,7 +1,7 @@
 """Rendering: orchestration only (the maths lives in patches/, accel/, trace/, shade.py).
 
-``render_scene(scene)`` loads the cages, builds the patch table and the BVH of patch shells,
-chooses each patch's grid depth from the angular tolerance and makes neighbours sample their
+``render_scene(scene)`` loads the cages, builds the patch table, bins the patch shells into
+image tiles (or builds their BVH), chooses each patch's grid depth from the angular tolerance and makes neighbours sample their
 shared edges alike, then runs rounds of ``trace.kernels.trace_round``. Regular Catmull-Clark
 patches are refined per ray inside the kernel, each thread keeping what its rays split
 (``_Memos``). After each round the patches that rays asked for are built: irregular
@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import config
-from .accel.bvh import build_bvh
+from .accel.bvh import build_bvh, no_bvh
 from .patches.bspline import net_bounds
 from .patches.isolate import build_isolated
 from .patches.grids import build_grids, grid_params, leaf_corners
@@ -384,17 +384,32 @@ class _Memos:
         stats.memo_full = self.full + int(sum(m[-1][M_FULL] for m in self.m))
 
 
-def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None, compiling=None):
+def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, accel=None):
     """Run the refinement rounds; returns (hits (H*W, 6), grid pools, isolated pieces, leaf
     tables, every patch refined). ``compiling``: the process compiling the trace kernels
-    (``warmup.start``), waited for before the first round."""
+    (``warmup.start``), waited for before the first round. ``accel``: how a ray finds the
+    shells it enters, ``"projection"`` (the shells binned into image tiles,
+    ``accel/projection.py``) or ``"bvh"`` (``accel/bvh.py``); default
+    ``config.PRIMARY_ACCEL``. Either structure is built here (preprocess time)."""
     from . import tasks, warmup
+    from .accel.projection import no_tiles, project_shells
     from .trace.camera import camera_frame
 
     max_depth = config.MAX_GRID_DEPTH if max_depth is None else max_depth
     W, H = camera.width, camera.height
     frame = camera_frame(camera)
     eye = frame[0]
+    t0 = time.perf_counter()
+    accel = config.PRIMARY_ACCEL if accel is None else accel
+    if accel == "projection":
+        tiles = project_shells(table.shell_min, table.shell_max, frame, W, H).kernel_tuple()
+        bvh = no_bvh()
+    elif accel == "bvh":
+        tiles = no_tiles()
+        bvh = build_bvh(table.shell_min, table.shell_max)
+    else:
+        raise ValueError(f"unknown acceleration {accel!r}")
+    stats.time_preprocess += time.perf_counter() - t0
     t0 = time.perf_counter()
     record = {}
     depths = choose_depths(table, eye, tol_rad, max_depth, record)  # (isolates: refinement)
@@ -427,7 +442,7 @@ def trace_hits(table, bvh, camera, tol_rad, stats, max_depth=None, compiling=Non
         trace_round(
             rays, frame, W, round_no,
             bvh.node_min, bvh.node_max, bvh.node_first, bvh.node_count,
-            bvh.prims, table.shell_min, table.shell_max, pools.patch_slot,
+            bvh.prims, tiles, table.shell_min, table.shell_max, pools.patch_slot,
             g["slot_depth"], g["slot_vert_off"], g["slot_node_off"], g["slot_quad"],
             g["slot_round"], g["verts"], g["node_lo"], g["node_hi"],
             tables.lc_off, tables.lc_data, iso.kernel_tuple(),
@@ -486,8 +501,9 @@ def _patch_colors(table, scene):
     return colors
 
 
-def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult:
-    """Render a :class:`subtrace.io.scene.Scene`; returns the channels and statistics."""
+def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> RenderResult:
+    """Render a :class:`subtrace.io.scene.Scene`; returns the channels and statistics.
+    ``accel``: how rays find the shells they enter (see :func:`trace_hits`)."""
     from . import tasks, warmup
     from .shade import shade_kernel
     from .trace.camera import camera_frame
@@ -510,7 +526,6 @@ def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult
 
         t0 = time.perf_counter()
         table = build_patch_table(cages)
-        bvh = build_bvh(table.shell_min, table.shell_max)
         lo = table.shell_min.min(axis=0)
         hi = table.shell_max.max(axis=0)
         if scene.camera.is_auto:
@@ -523,8 +538,8 @@ def render_scene(scene, cages=None, threads=None, progress=None) -> RenderResult
         stats.patches = table.n_patches
         stats.rays = camera.width * camera.height
         stats.time_preprocess = time.perf_counter() - t0
-        hits, pools, iso, tables, built = trace_hits(table, bvh, camera, tol_rad, stats,
-                                                     compiling=compiling)
+        hits, pools, iso, tables, built = trace_hits(table, camera, tol_rad, stats,
+                                                     compiling=compiling, accel=accel)
     except BaseException:
         warmup.stop(compiling)
         raise

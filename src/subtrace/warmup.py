@@ -60,6 +60,7 @@ def compile_kernels(threads: int) -> None:
     from . import config, tasks
     from .render import _LeafTables, _Memos, _Pieces, _Pools
     from .shade import shade_kernel
+    from .accel.projection import no_tiles
     from .trace.kernels import HIT_FIELDS, candidate_lists, trace_round
 
     i64, f64 = np.zeros(0, np.int64), np.zeros((0, 3))
@@ -71,7 +72,8 @@ def compile_kernels(threads: int) -> None:
     g, q = pools.a, iso.a
     tasks.set_threads(threads)
     try:
-        trace_round(i64, frame, 1, 0, f64, f64, i64, i64, i64, f64, f64, pools.patch_slot,
+        trace_round(i64, frame, 1, 0, f64, f64, i64, i64, i64, no_tiles(), f64, f64,
+                    pools.patch_slot,
                     g["slot_depth"], g["slot_vert_off"], g["slot_node_off"], g["slot_quad"],
                     g["slot_round"], g["verts"], g["node_lo"], g["node_hi"], tables.lc_off,
                     tables.lc_data, iso.kernel_tuple(), memos.kernel_tuple(0),

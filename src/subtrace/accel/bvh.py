@@ -37,6 +37,12 @@ class BVH:
         return len(self.node_first)
 
 
+def no_bvh() -> BVH:
+    """An empty BVH (the kernels' arguments when rays use the projection instead)."""
+    z = np.zeros(0, np.int64)
+    return BVH(np.zeros((0, 3)), np.zeros((0, 3)), z, z, z)
+
+
 def build_bvh(bmin: np.ndarray, bmax: np.ndarray, leaf_size: int | None = None) -> BVH:
     bmin = np.ascontiguousarray(bmin, dtype=np.float64).reshape(-1, 3)
     bmax = np.ascontiguousarray(bmax, dtype=np.float64).reshape(-1, 3)

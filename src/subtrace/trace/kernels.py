@@ -24,6 +24,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from ..accel.projection import TILE
 from .bezier import MAX_SIDE_SAMPLES, intersect_patch
 from .prims import (  # noqa: F401  (H_* are re-exported for the driver)
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, _shear, _slab, _tri, leaf_njit,
@@ -91,7 +92,7 @@ CANDIDATES = 8  # unbuilt shells a ray remembers between rounds (more: it traver
 
 
 def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_count, prims,
-                shell_min, shell_max, patch_slot, slot_depth, slot_vert_off, slot_node_off,
+                tiles, shell_min, shell_max, patch_slot, slot_depth, slot_vert_off, slot_node_off,
                 slot_quad, slot_round, verts, node_lo, node_hi, lc_off, lc_data, iso, mems,
                 cands, slack, hits, request, tested):
     """One round for the rays ``rays`` (sorted pixel indices): update ``hits`` (n_pixels, 6)
@@ -123,7 +124,7 @@ def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_c
     scratch = tuple(_scratch(max_d) for _ in mems)
     run_tasks(_trace_task, rays, bands, float(frame[0, 0]), float(frame[0, 1]),
               float(frame[0, 2]), frame, int(width), int(round_no), bvh_min, bvh_max,
-              bvh_first, bvh_count, prims, shell_min, shell_max, patch_slot, slot_depth,
+              bvh_first, bvh_count, prims, tiles, shell_min, shell_max, patch_slot, slot_depth,
               slot_vert_off, slot_node_off, slot_quad, slot_round, verts, node_lo, node_hi,
               lc_off, lc_data, iso, mems, scratch, cands, float(slack), hits, request, tested,
               n=len(mems))
@@ -150,7 +151,7 @@ def _scratch(max_d):
 
 @nb.njit(cache=True, nogil=True, _nrt=False, error_model="numpy")  # see prims.leaf_njit
 def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, bvh_min,
-                bvh_max, bvh_first, bvh_count, prims, shell_min, shell_max, patch_slot,
+                bvh_max, bvh_first, bvh_count, prims, tiles, shell_min, shell_max, patch_slot,
                 slot_depth, slot_vert_off, slot_node_off, slot_quad, slot_round, verts,
                 node_lo, node_hi, lc_off, lc_data, iso, mems, scratches, cands, slack, hits,
                 request, tested):
@@ -162,6 +163,8 @@ def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, 
     patch_iso, slot_first, slot_count, iso_round, item_depth, item_side = iso[:6]
     kind, ref, level, i0, j0, it_lo, it_hi, rest_lo, rest_hi, nets, cells, iso_touched = iso[6:]
     cand_p, cand_t, cand_n = cands
+    tile_off, tile_items, tile_key, tiles_per_row = tiles
+    projected = len(tile_off) > 1
 
     def visit(p, r, ray):
         """Intersect patch ``p`` if it was built in the previous round; False if unbuilt."""
@@ -183,6 +186,24 @@ def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, 
                             slot_vert_off, slot_node_off, slot_quad, verts, node_lo, node_hi,
                             lc_off, lc_data, slack, hit, gstack, ent_t, ent_i)
         return True
+
+    def enter(p, r, ray, n_c, req, req_t):
+        """Shell ``p`` met in a traversal: intersect its patch if the ray enters the shell
+        before its hit; if unbuilt, the patch is a candidate (n_c of them so far, one past
+        ``CANDIDATES`` on overflow), the nearest (req at req_t) the request."""
+        ox, oy, oz, ix, iy, iz = ray[:6]
+        te = _slab(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, hit[H_T])
+        if te < np.inf and not visit(p, r, ray):
+            if n_c < CANDIDATES:
+                cand_p[r, n_c] = p
+                cand_t[r, n_c] = te
+                n_c += 1
+            else:
+                n_c = CANDIDATES + 1
+            if te < req_t:
+                req_t = te
+                req = p
+        return n_c, req, req_t
 
     for band in range(task, len(bands) - 1, n_tasks):
         for q in range(bands[band], bands[band + 1]):
@@ -241,7 +262,15 @@ def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, 
             req_t = np.inf
             n_c = 0
             sp = 0
-            if _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, 0, hit[H_T]) < np.inf:
+            if projected:
+                # the shells projected onto this ray's tile, nearest box first
+                tile = (row // TILE) * tiles_per_row + col // TILE
+                for j in range(tile_off[tile], tile_off[tile + 1]):
+                    p = tile_items[j]
+                    if tile_key[p] >= hit[H_T]:  # it and every later one lie beyond the hit
+                        break
+                    n_c, req, req_t = enter(p, r, ray, n_c, req, req_t)
+            elif _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, 0, hit[H_T]) < np.inf:
                 stack[0] = 0
                 sp = 1
             while sp > 0:
@@ -251,20 +280,7 @@ def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, 
                 if cnt > 0:
                     f = bvh_first[node]
                     for j in range(f, f + cnt):
-                        p = prims[j]
-                        te = _slab(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, hit[H_T])
-                        if te == np.inf:
-                            continue
-                        if not visit(p, r, ray):  # unbuilt: a candidate, the nearest a request
-                            if n_c < CANDIDATES:
-                                cand_p[r, n_c] = p
-                                cand_t[r, n_c] = te
-                                n_c += 1
-                            else:
-                                n_c = CANDIDATES + 1
-                            if te < req_t:
-                                req_t = te
-                                req = p
+                        n_c, req, req_t = enter(prims[j], r, ray, n_c, req, req_t)
                     continue
                 left = bvh_first[node]
                 right = left + 1

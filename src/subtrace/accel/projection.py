@@ -1,0 +1,123 @@
+"""Primary-ray acceleration: the shells projected onto the image, binned into pixel tiles.
+
+Every primary ray leaves the eye through a pixel centre. A shell's box seen from the eye
+covers the convex hull of its eight corners' projections (a perspective map keeps convex
+sets convex while the box stays in front of the eye plane), so its bounding rectangle,
+widened by a pixel for rounding, holds every pixel whose ray can enter the box. Each
+``TILE`` x ``TILE`` tile of the image lists the shells whose rectangles reach it, nearest
+box first (``key``: the distance from the eye to the box, a lower bound on every ray's
+entry distance). A ray walks its tile's list and stops at the first shell whose key is not
+below its best hit: no later shell can hold a nearer one. A box that reaches the eye plane
+(or the eye) is listed in every tile; one wholly behind it in none.
+
+``project_shells(bmin, bmax, frame, width, height)`` returns :class:`Tiles`:
+
+* ``off`` (T+1,) int64 and ``items`` (E,) int32: tile ``t``'s shells are
+  ``items[off[t]:off[t+1]]``, tiles row by row (``per_row`` of them per row);
+* ``key`` (N,) float64: the distance from the eye to each shell's box.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+TILE = 2  # pixels per tile side
+
+
+@dataclass(frozen=True, eq=False)
+class Tiles:
+    off: np.ndarray
+    items: np.ndarray
+    key: np.ndarray
+    per_row: int
+
+    def kernel_tuple(self):
+        return self.off, self.items, self.key, np.int64(self.per_row)
+
+
+def no_tiles():
+    """The kernels' tile arguments when rays traverse the BVH instead."""
+    return np.zeros(1, np.int64), np.zeros(0, np.int32), np.zeros(0), np.int64(0)
+
+
+def project_shells(bmin, bmax, frame, width: int, height: int) -> Tiles:
+    """Bin the boxes ``[bmin, bmax]`` (N,3) into the tiles of a ``width`` x ``height`` image
+    seen through ``frame`` (``trace.camera.camera_frame``)."""
+    bmin = np.ascontiguousarray(bmin, dtype=np.float64)
+    bmax = np.ascontiguousarray(bmax, dtype=np.float64)
+    eye = frame[0]
+    # pixel coordinates of a point X: (X - eye) = a0 * p00 + a1 * dx + a2 * dy, col = a1 / a0
+    basis = np.stack([frame[3], frame[1], frame[2]], axis=1)
+    inv = np.ascontiguousarray(np.linalg.inv(basis))
+    q = np.maximum(np.maximum(bmin - eye, 0.0), eye - bmax)
+    key = np.sqrt((q * q).sum(axis=1))
+    tx = -(-int(width) // TILE)
+    ty = -(-int(height) // TILE)
+    rect = np.empty((len(bmin), 4), np.int64)
+    count = np.zeros(tx * ty + 1, np.int64)
+    _rectangles(bmin, bmax, np.ascontiguousarray(eye), inv, int(width), int(height), tx, ty,
+                rect, count)
+    off = np.zeros(tx * ty + 1, np.int64)
+    np.cumsum(count[:-1], out=off[1:])
+    items = np.empty(int(off[-1]), np.int32)
+    _fill(np.argsort(key, kind="stable"), rect, tx, off.copy(), items)
+    return Tiles(off, items, key, tx)
+
+
+@nb.njit(cache=True)
+def _rectangles(bmin, bmax, eye, inv, width, height, tx, ty, rect, count):
+    """Each box's tile rectangle ``rect[i]`` = (x0, y0, x1, y1), inclusive, empty (x0 > x1)
+    when it lies behind the eye plane; counts per tile into ``count``."""
+    for i in range(len(bmin)):
+        c0 = r0 = np.inf
+        c1 = r1 = -np.inf
+        front = 0
+        behind = 0
+        for k in range(8):
+            x = (bmax[i, 0] if k & 1 else bmin[i, 0]) - eye[0]
+            y = (bmax[i, 1] if k & 2 else bmin[i, 1]) - eye[1]
+            z = (bmax[i, 2] if k & 4 else bmin[i, 2]) - eye[2]
+            a0 = inv[0, 0] * x + inv[0, 1] * y + inv[0, 2] * z
+            a1 = inv[1, 0] * x + inv[1, 1] * y + inv[1, 2] * z
+            a2 = inv[2, 0] * x + inv[2, 1] * y + inv[2, 2] * z
+            scale = abs(x) + abs(y) + abs(z)
+            if a0 > 1e-9 * scale:
+                front += 1
+                c0 = min(c0, a1 / a0)
+                c1 = max(c1, a1 / a0)
+                r0 = min(r0, a2 / a0)
+                r1 = max(r1, a2 / a0)
+            elif a0 <= 0.0:
+                behind += 1
+        if behind == 8:
+            rect[i, 0], rect[i, 1], rect[i, 2], rect[i, 3] = 0, 0, -1, -1
+            continue
+        if front < 8:  # reaches the eye plane: every pixel
+            c0, r0, c1, r1 = 0.0, 0.0, width - 1.0, height - 1.0
+        # pixel centres are at integer (col, row); one pixel more on each side for rounding
+        x0 = max(int(np.floor(max(c0, -2.0))) - 1, 0)
+        y0 = max(int(np.floor(max(r0, -2.0))) - 1, 0)
+        x1 = min(int(np.ceil(min(c1, width + 1.0))) + 1, width - 1)
+        y1 = min(int(np.ceil(min(r1, height + 1.0))) + 1, height - 1)
+        if x0 > x1 or y0 > y1:
+            rect[i, 0], rect[i, 1], rect[i, 2], rect[i, 3] = 0, 0, -1, -1
+            continue
+        rect[i, 0], rect[i, 1] = x0 // TILE, y0 // TILE
+        rect[i, 2], rect[i, 3] = x1 // TILE, y1 // TILE
+        for b in range(rect[i, 1], rect[i, 3] + 1):
+            for a in range(rect[i, 0], rect[i, 2] + 1):
+                count[b * tx + a] += 1
+
+
+@nb.njit(cache=True)
+def _fill(order, rect, tx, cursor, items):
+    """Append the boxes to their tiles' lists in the order ``order`` (nearest first)."""
+    for i in order:
+        for b in range(rect[i, 1], rect[i, 3] + 1):
+            for a in range(rect[i, 0], rect[i, 2] + 1):
+                t = b * tx + a
+                items[cursor[t]] = i
+                cursor[t] += 1
