@@ -435,6 +435,13 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     cands = candidate_lists(W * H)
     rays = np.arange(W * H, dtype=np.int64)
     round_no = 0
+    if compiling is not None:
+        # a cold cache: while the trace kernels compile elsewhere, compile what the rounds
+        # need here (exact limit points of isolated cells), on inputs of the same types
+        from .subdiv.limit import limit_points
+
+        for o in table.objects[:1]:
+            limit_points(o.level, o.points, o.cage.options, which=np.zeros(0, np.int64))
     warmup.wait(compiling)
     while len(rays):
         t0 = time.perf_counter()

@@ -187,24 +187,6 @@ def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, 
                             lc_off, lc_data, slack, hit, gstack, ent_t, ent_i)
         return True
 
-    def enter(p, r, ray, n_c, req, req_t):
-        """Shell ``p`` met in a traversal: intersect its patch if the ray enters the shell
-        before its hit; if unbuilt, the patch is a candidate (n_c of them so far, one past
-        ``CANDIDATES`` on overflow), the nearest (req at req_t) the request."""
-        ox, oy, oz, ix, iy, iz = ray[:6]
-        te = _slab(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, hit[H_T])
-        if te < np.inf and not visit(p, r, ray):
-            if n_c < CANDIDATES:
-                cand_p[r, n_c] = p
-                cand_t[r, n_c] = te
-                n_c += 1
-            else:
-                n_c = CANDIDATES + 1
-            if te < req_t:
-                req_t = te
-                req = p
-        return n_c, req, req_t
-
     for band in range(task, len(bands) - 1, n_tasks):
         for q in range(bands[band], bands[band + 1]):
             r = rays[q]
@@ -223,83 +205,88 @@ def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, 
                 for k in range(HIT_FIELDS):
                     hit[k] = hits[r, k]
             ray = (ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz)
-            n_c = cand_n[r]
-            if round_no > 0 and n_c >= 0:
-                # the unbuilt shells this ray entered last round, nearest first: test those
-                # built since, keep the others (no traversal)
-                for k in range(n_c):
+            # the shells the ray may enter, one at a time, from one of three sources: the
+            # unbuilt shells it remembers from its last round (nearest first: no traversal),
+            # its tile's list (the projection, nearest box first), or the BVH's leaves
+            # (nearest child first); one place below handles a shell, so the patch
+            # intersection is inlined once
+            src = 2
+            sp = 0
+            j = j_end = np.int64(0)
+            if round_no > 0 and cand_n[r] >= 0:
+                src = 0
+                j_end = np.int64(cand_n[r])
+                for k in range(j_end):  # nearest first
                     m = k
                     while m > 0 and cand_t[r, m - 1] > cand_t[r, m]:
                         cand_t[r, m - 1], cand_t[r, m] = cand_t[r, m], cand_t[r, m - 1]
                         cand_p[r, m - 1], cand_p[r, m] = cand_p[r, m], cand_p[r, m - 1]
                         m -= 1
-                kept = 0
-                for k in range(n_c):
-                    te = cand_t[r, k]
-                    if te >= hit[H_T]:
-                        continue
-                    p = cand_p[r, k]
-                    if not visit(p, r, ray):
-                        cand_p[r, kept] = p
-                        cand_t[r, kept] = te
-                        kept += 1
-                n_c = 0
-                req = -1
-                req_t = np.inf
-                for k in range(kept):  # those still before the hit; the nearest is asked for
-                    p, te = cand_p[r, k], cand_t[r, k]
-                    if te < hit[H_T]:
-                        cand_p[r, n_c], cand_t[r, n_c] = p, te
-                        n_c += 1
-                        if te < req_t:
-                            req_t, req = te, p
-                cand_n[r] = n_c
-                request[r] = req
-                for k in range(HIT_FIELDS):
-                    hits[r, k] = hit[k]
-                continue
-            req = -1
-            req_t = np.inf
-            n_c = 0
-            sp = 0
-            if projected:
-                # the shells projected onto this ray's tile, nearest box first
+            elif projected:
+                src = 1
                 tile = (row // TILE) * tiles_per_row + col // TILE
-                for j in range(tile_off[tile], tile_off[tile + 1]):
-                    p = tile_items[j]
-                    if tile_key[p] >= hit[H_T]:  # it and every later one lie beyond the hit
-                        break
-                    n_c, req, req_t = enter(p, r, ray, n_c, req, req_t)
+                j, j_end = tile_off[tile], tile_off[tile + 1]
             elif _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, 0, hit[H_T]) < np.inf:
                 stack[0] = 0
                 sp = 1
-            while sp > 0:
-                sp -= 1
-                node = stack[sp]
-                cnt = bvh_count[node]
-                if cnt > 0:
-                    f = bvh_first[node]
-                    for j in range(f, f + cnt):
-                        n_c, req, req_t = enter(prims[j], r, ray, n_c, req, req_t)
-                    continue
-                left = bvh_first[node]
-                right = left + 1
-                tl = _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, left, hit[H_T])
-                tr = _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, right, hit[H_T])
-                if tl < np.inf and tr < np.inf:
-                    if tl <= tr:
-                        stack[sp] = right
-                        stack[sp + 1] = left
+            req = -1
+            req_t = np.inf
+            n_c = 0
+            while True:
+                if j == j_end:  # the next BVH leaf
+                    while sp > 0 and j == j_end:
+                        sp -= 1
+                        node = stack[sp]
+                        cnt = bvh_count[node]
+                        if cnt > 0:
+                            j, j_end = bvh_first[node], bvh_first[node] + cnt
+                            continue
+                        left = bvh_first[node]
+                        right = left + 1
+                        tl = _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, left, hit[H_T])
+                        tr = _slab(ox, oy, oz, ix, iy, iz, bvh_min, bvh_max, right, hit[H_T])
+                        if tl < np.inf and tr < np.inf:
+                            if tl <= tr:
+                                stack[sp] = right
+                                stack[sp + 1] = left
+                            else:
+                                stack[sp] = left
+                                stack[sp + 1] = right
+                            sp += 2
+                        elif tl < np.inf:
+                            stack[sp] = left
+                            sp += 1
+                        elif tr < np.inf:
+                            stack[sp] = right
+                            sp += 1
+                    if j == j_end:
+                        break
+                if src == 0:
+                    p = np.int64(cand_p[r, j])
+                    te = cand_t[r, j]
+                    if te >= hit[H_T]:  # it and every later one lie beyond the hit
+                        break
+                else:
+                    if src == 1:
+                        p = np.int64(tile_items[j])
+                        if tile_key[p] >= hit[H_T]:  # it and every later one: beyond the hit
+                            break
                     else:
-                        stack[sp] = left
-                        stack[sp + 1] = right
-                    sp += 2
-                elif tl < np.inf:
-                    stack[sp] = left
-                    sp += 1
-                elif tr < np.inf:
-                    stack[sp] = right
-                    sp += 1
+                        p = prims[j]
+                    te = _slab(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, hit[H_T])
+                j += 1
+                if te < np.inf and not visit(p, r, ray):
+                    # unbuilt: a candidate (rewritten in place when remembered: n_c < j), the
+                    # nearest one the request
+                    if n_c < CANDIDATES:
+                        cand_p[r, n_c] = p
+                        cand_t[r, n_c] = te
+                        n_c += 1
+                    else:
+                        n_c = CANDIDATES + 1
+                    if te < req_t:
+                        req_t = te
+                        req = p
             request[r] = req if req_t < hit[H_T] else -1
             cand_n[r] = n_c if n_c <= CANDIDATES else -1
             for k in range(HIT_FIELDS):
