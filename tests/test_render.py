@@ -557,10 +557,12 @@ def test_patches_are_built_only_for_rays_that_reach_them_first(accel):
 
 
 @needs_shared
-def test_isolation_taken_from_the_depth_choice_equals_a_fresh_one():
+@pytest.mark.parametrize("record_depth", [0, 6])
+def test_isolation_taken_from_the_depth_choice_equals_a_fresh_one(record_depth):
     """``build_isolated`` with the record of ``isolated_depths`` gives the same pieces and
     cells as refining the requested patches afresh, also where a patch's depth was raised
-    beyond what the record reaches (it then refines further itself)."""
+    beyond what the record reaches (it then refines further itself); recording deeper
+    (``record_depth``) does not change the depths chosen."""
     from subtrace.patches.isolate import build_isolated, isolated_depths
 
     cage = subtrace.load_cage(MODELS / "spot_control_mesh.obj")
@@ -570,8 +572,11 @@ def test_isolation_taken_from_the_depth_choice_equals_a_fresh_one():
     eye = np.array([0.3, 0.6, 2.2])
     tol = 2e-3
     record = {}
-    depths = isolated_depths(o, table.face[irr], np.full(len(irr), 6), eye, tol, record)
-    assert len(record["levels"]) >= 2
+    depths = isolated_depths(o, table.face[irr], np.full(len(irr), 6), eye, tol, record,
+                             record_depth)
+    assert np.array_equal(depths, isolated_depths(o, table.face[irr], np.full(len(irr), 6),
+                                                  eye, tol))
+    assert len(record["levels"]) >= (2 if record_depth == 0 else record_depth)
     pick = np.arange(0, len(irr), 3)
     dep = np.minimum(depths[pick] + (pick % 2), 6)  # some raised, as neighbours raise them
     a = build_isolated(o, table.face[irr[pick]], dep, eye, tol, record)

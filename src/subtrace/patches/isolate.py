@@ -55,11 +55,13 @@ def box_distance(bmin, bmax, p):
     return np.sqrt((q * q).sum(axis=1))
 
 
-def isolated_depths(obj, faces, cap, eye, tol_rad, record=None):
+def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0):
     """Depths (len(faces),) int32 of the irregular quads ``faces`` of ``obj``'s patch level,
     none above ``cap`` (their conservative depths, (len(faces),) int). With a dict
     ``record``, what each level's refinement made is kept in it (see :class:`_Level`), for
-    :func:`build_isolated` to take instead of refining the same faces again."""
+    :func:`build_isolated` to take instead of refining the same faces again; the irregular
+    corners are then refined down to ``record_depth`` at least (a patch's depth may be
+    raised later, to its neighbours', and its pieces are built down to it)."""
     from .table import one_ring_shells
 
     faces = np.asarray(faces, dtype=np.int64)
@@ -69,8 +71,9 @@ def isolated_depths(obj, faces, cap, eye, tol_rad, record=None):
     levels = []
     if record is not None:
         record.update(faces=faces, levels=levels)
-    # frontier: (root index, face in the current level)
+    # frontier: (root index, face in the current level, whether it still sets the need)
     root = np.nonzero(cap > 0)[0]
+    active = np.ones(len(root), bool)
     cur, cur_pts, start = obj.level, obj.points, faces[root]
     k = 0
     while len(root):
@@ -78,20 +81,23 @@ def isolated_depths(obj, faces, cap, eye, tol_rad, record=None):
         cur, cur_pts, kids, reg = _children(cur, cur_pts, start, options)
         k += 1
         kid_root = np.repeat(root, 4)
+        kid_active = np.repeat(active, 4)
         bez, n = np.zeros((0, 4, 4, 3)), np.zeros(0)
         if reg.any():
             bez = bezier_nets(cur_pts[control_grids(cur, kids[reg])])
             lo, hi, bound = net_bounds(bez)
             n = _levels_needed(bound, box_distance(lo, hi, eye), tol_rad)
-            np.maximum.at(need, kid_root[reg], k + n.astype(np.int64))
+            sets = kid_active[reg]
+            np.maximum.at(need, kid_root[reg][sets], k + n[sets].astype(np.int64))
         if record is not None:
             levels.append(_Level(parent_start, cur, cur_pts, kids, reg, bez, n))
         irr = np.nonzero(~reg)[0]
         smin, smax, ebound, _ = one_ring_shells(cur, kids[irr], cur_pts)
         flat = IRREGULAR_MARGIN * ebound <= tol_rad * box_distance(smin, smax, eye)
-        np.maximum.at(need, kid_root[irr], k)
-        go = irr[~flat & (k < cap[kid_root[irr]])]
-        root, start = kid_root[go], kids[go]
+        np.maximum.at(need, kid_root[irr][kid_active[irr]], k)
+        more = kid_active[irr] & ~flat & (k < cap[kid_root[irr]])
+        keep = more | (k < record_depth if record is not None else False)
+        root, start, active = kid_root[irr[keep]], kids[irr[keep]], more[keep]
     return np.minimum(need, cap).astype(np.int32)
 
 

@@ -299,7 +299,8 @@ def choose_depths(table: PatchTable, eye: np.ndarray, tol_rad: float, max_depth:
         sel = np.nonzero((table.object_id == oid) & ~table.regular & (depths > 0))[0]
         if len(sel):
             rec = record.setdefault(oid, {}) if record is not None else None
-            depths[sel] = isolated_depths(o, table.face[sel], depths[sel], eye, tol_rad, rec)
+            depths[sel] = isolated_depths(o, table.face[sel], depths[sel], eye, tol_rad, rec,
+                                          int(depths[sel].max()))
     return depths
 
 
