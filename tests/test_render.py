@@ -595,3 +595,25 @@ def test_isolation_taken_from_the_depth_choice_equals_a_fresh_one(record_depth):
     for x, y in ((cr, dr), (ci, di), (cj, dj)):
         assert np.array_equal(x, y)
     assert np.abs(cp - dp).max() <= 1e-13 * scale
+
+
+@needs_shared
+def test_regular_patches_appended_directly_equal_the_general_append():
+    """``_Pieces.append_regular`` lays out regular patches as ``append`` does (one piece
+    each, sides as given, the net's box for both boxes)."""
+    from subtrace.render import _Pieces
+
+    table = build_patch_table([subtrace.load_cage(MODELS / "spot_control_mesh.obj")])
+    reg = np.nonzero(table.regular)[0]
+    rng = np.random.default_rng(1)
+    depth = rng.integers(0, 6, len(reg))
+    side = depth[:, None] + rng.integers(0, 2, (len(reg), 4))
+    z = np.zeros(len(reg), np.int64)
+    none = np.zeros(0, np.int64)
+    a, b = _Pieces(table.n_patches), _Pieces(table.n_patches)
+    a.append(reg, depth, side, (np.arange(len(reg)), z, z, z, table.nets, depth),
+             (none, none, none, np.zeros((0, 4, 3)), np.zeros((0, 4, 3))), -1)
+    b.append_regular(reg, depth, side, table.nets, table.shell_min[reg], table.shell_max[reg])
+    assert np.array_equal(a.patch_iso, b.patch_iso)
+    for name in a.a:
+        assert np.array_equal(a.a[name], b.a[name]), name

@@ -321,6 +321,21 @@ class _Pieces(_Growable):
         self.patch_iso[patches] = s0 + np.arange(len(patches))
         return len(sr), len(cr)
 
+    def append_regular(self, patches, depth, side, nets, lo, hi):
+        """Slots for regular patches, one Bezier piece each (the whole patch): what
+        :meth:`append` makes of them, without its general work. ``lo``, ``hi``: their nets'
+        boxes (the patch table's shells)."""
+        m = len(patches)
+        z = np.zeros(m, np.int64)
+        ar = np.arange(m, dtype=np.int64)
+        n0 = self._put("nets", nets=nets)
+        i_start = self._put("items", kind=np.zeros(m, np.int8), ref=n0 + ar, level=z, i0=z,
+                            j0=z, depth_i=depth, side=side, lo=lo, hi=hi, rest_lo=lo,
+                            rest_hi=hi)
+        s0 = self._put("slots", patch=patches, first=i_start + ar, count=np.ones(m, np.int64),
+                       round=np.full(m, -1))
+        self.patch_iso[patches] = s0 + ar
+
     def kernel_tuple(self):
         a = self.a
         return (self.patch_iso, a["first"], a["count"], a["round"], a["depth_i"], a["side"],
@@ -424,12 +439,8 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     n_irr = int(np.count_nonzero(table.is_quad & ~table.regular))
     iso.reserve("items", len(reg) + 16 * n_irr)
     iso.reserve("nets", len(reg) + 16 * n_irr)
-    none = np.zeros(0, np.int64)
-    one = np.arange(len(reg))
-    iso.append(reg, depths[reg], reg_side,
-               (one, np.zeros(len(reg), np.int64), np.zeros(len(reg), np.int64),
-                np.zeros(len(reg), np.int64), table.nets, depths[reg]),
-               (none, none, none, np.zeros((0, 4, 3)), np.zeros((0, 4, 3))), -1)
+    iso.append_regular(reg, depths[reg], reg_side, table.nets, table.shell_min[reg],
+                       table.shell_max[reg])
     hits = np.empty((W * H, HIT_FIELDS))
     request = np.empty(W * H, dtype=np.int64)
     cands = candidate_lists(W * H)
