@@ -71,9 +71,10 @@ def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0):
     levels = []
     if record is not None:
         record.update(faces=faces, levels=levels)
-    # frontier: (root index, face in the current level, whether it still sets the need)
-    root = np.nonzero(cap > 0)[0]
-    active = np.ones(len(root), bool)
+    # frontier: (root index, face in the current level, whether it still sets the need);
+    # patches of depth 0 are only recorded (a neighbour may raise them)
+    root = np.nonzero((cap > 0) | (record is not None and record_depth > 0))[0]
+    active = cap[root] > 0
     cur, cur_pts, start = obj.level, obj.points, faces[root]
     k = 0
     while len(root):

@@ -296,8 +296,10 @@ def choose_depths(table: PatchTable, eye: np.ndarray, tol_rad: float, max_depth:
     for oid, o in enumerate(table.objects):
         if o.cage.scheme != "catmark":
             continue
-        sel = np.nonzero((table.object_id == oid) & ~table.regular & (depths > 0))[0]
-        if len(sel):
+        sel = np.nonzero((table.object_id == oid) & ~table.regular)[0]
+        if record is None:
+            sel = sel[depths[sel] > 0]
+        if len(sel) and depths[sel].max() > 0:
             rec = record.setdefault(oid, {}) if record is not None else None
             depths[sel] = isolated_depths(o, table.face[sel], depths[sel], eye, tol_rad, rec,
                                           int(depths[sel].max()))
