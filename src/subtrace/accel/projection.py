@@ -52,26 +52,31 @@ def project_shells(bmin, bmax, frame, width: int, height: int) -> Tiles:
     # pixel coordinates of a point X: (X - eye) = a0 * p00 + a1 * dx + a2 * dy, col = a1 / a0
     basis = np.stack([frame[3], frame[1], frame[2]], axis=1)
     inv = np.ascontiguousarray(np.linalg.inv(basis))
-    q = np.maximum(np.maximum(bmin - eye, 0.0), eye - bmax)
-    key = np.sqrt((q * q).sum(axis=1))
+    key = np.empty(len(bmin))
     tx = -(-int(width) // TILE)
     ty = -(-int(height) // TILE)
     rect = np.empty((len(bmin), 4), np.int64)
     count = np.zeros(tx * ty + 1, np.int64)
     _rectangles(bmin, bmax, np.ascontiguousarray(eye), inv, int(width), int(height), tx, ty,
-                rect, count)
+                rect, count, key)
     off = np.zeros(tx * ty + 1, np.int64)
     np.cumsum(count[:-1], out=off[1:])
     items = np.empty(int(off[-1]), np.int32)
-    _fill(np.argsort(key, kind="stable"), rect, tx, off.copy(), items)
+    _fill(np.argsort(key), rect, tx, off.copy(), items)  # (ties: any fixed order will do)
     return Tiles(off, items, key, tx)
 
 
 @nb.njit(cache=True)
-def _rectangles(bmin, bmax, eye, inv, width, height, tx, ty, rect, count):
+def _rectangles(bmin, bmax, eye, inv, width, height, tx, ty, rect, count, key):
     """Each box's tile rectangle ``rect[i]`` = (x0, y0, x1, y1), inclusive, empty (x0 > x1)
-    when it lies behind the eye plane; counts per tile into ``count``."""
+    when it lies behind the eye plane; counts per tile into ``count``; the distance from
+    the eye to each box into ``key``."""
     for i in range(len(bmin)):
+        d2 = 0.0
+        for k in range(3):
+            g = max(max(bmin[i, k] - eye[k], 0.0), eye[k] - bmax[i, k])
+            d2 += g * g
+        key[i] = np.sqrt(d2)
         c0 = r0 = np.inf
         c1 = r1 = -np.inf
         front = 0
