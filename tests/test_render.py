@@ -301,6 +301,24 @@ def test_render_cli_writes_exr(tmp_path):
     assert attrs["subtrace:scheme"] == "catmark"
 
 
+def test_render_cli_accel_chooses_the_traversal(tmp_path, capsys):
+    """``--accel bvh`` renders the same image as the default projection and says so in the
+    header; an unknown method is a usage error (exit 2, nothing written)."""
+    from subtrace.cli import main
+    from subtrace.io.exr import read_exr
+
+    args = ["render", str(MODELS / "spot_control_mesh.obj"), "--width", "40", "--height", "30",
+            "--quiet"]
+    assert main(args + ["-o", str(tmp_path / "p.exr")]) == 0
+    assert main(args + ["-o", str(tmp_path / "b.exr"), "--accel", "bvh"]) == 0
+    (p, pa), (b, ba) = read_exr(tmp_path / "p.exr"), read_exr(tmp_path / "b.exr")
+    assert (pa["subtrace:accel"], ba["subtrace:accel"]) == ("projection", "bvh")
+    assert all(np.array_equal(p[k], b[k], equal_nan=True) for k in p)
+    assert main(args + ["-o", str(tmp_path / "x.exr"), "--accel", "kd"]) == 2
+    assert "invalid choice" in capsys.readouterr().err
+    assert not (tmp_path / "x.exr").exists()
+
+
 def test_render_cli_bad_output_folder(tmp_path, capsys):
     from subtrace.cli import main
 

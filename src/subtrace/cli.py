@@ -97,6 +97,9 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--scheme", metavar="S", help="catmark or loop, for every object")
     render.add_argument("--threads", type=_level_arg, metavar="N",
                         help="worker threads (default: all cores)")
+    render.add_argument("--accel", choices=("projection", "bvh"), default=None,
+                        help="how rays find the patch shells they enter: shells projected "
+                             "onto image tiles (default) or a BVH")
     render.add_argument("--png", action="store_true",
                         help="also write an sRGB PNG preview next to the EXR")
     render.add_argument("--quiet", action="store_true", help="print nothing on success")
@@ -271,7 +274,7 @@ def _cmd_render(args) -> int:
     from .render import render_scene, result_attributes
 
     _start_numba(args)
-    result = render_scene(scene, threads=args.threads)
+    result = render_scene(scene, threads=args.threads, accel=args.accel)
     import time
 
     t0 = time.perf_counter()

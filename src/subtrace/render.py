@@ -58,6 +58,7 @@ class RenderResult:
     tolerance_rad: float
     schemes: tuple
     refined_objects: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    accel: str = "projection"  # how rays found the shells they enter
     # object id of every refined patch (what was built, for tests and reports)
 
 
@@ -534,6 +535,11 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
         if not 1 <= int(threads) <= n_max:
             raise SceneError(f"expected a thread count from 1 to {n_max}, got {threads}",
                              key="--threads")
+    accel = config.PRIMARY_ACCEL if accel is None else accel
+    if accel not in ("projection", "bvh"):
+        from .errors import SceneError
+
+        raise SceneError(f"expected projection or bvh, got {accel!r}", key="--accel")
     tasks.set_threads(threads)
     stats = RenderStats()
     compiling = warmup.start(tasks.thread_count())  # on a cold cache only
@@ -595,7 +601,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     stats.time_total = time.perf_counter() - t_start
     schemes = tuple(c.scheme for c in cages)
     refined = table.object_id[built]
-    return RenderResult(channels, stats, camera, tol_rad, schemes, refined)
+    return RenderResult(channels, stats, camera, tol_rad, schemes, refined, accel)
 
 
 def result_attributes(result: RenderResult, scene) -> dict:
@@ -605,6 +611,7 @@ def result_attributes(result: RenderResult, scene) -> dict:
     attrs["subtrace:tolerance_px"] = float(result.tolerance_rad / result.camera.pixel_angle())
     attrs["subtrace:scheme"] = ",".join(result.schemes)
     attrs["subtrace:meshes"] = ";".join(o.mesh for o in scene.objects)
+    attrs["subtrace:accel"] = result.accel
     for k, v in result.stats.__dict__.items():
         attrs[f"subtrace:{k}"] = float(v) if isinstance(v, float) else int(v)
     return attrs
