@@ -10,6 +10,7 @@ compile of the trace kernel, and gain nothing here over one call per thread.
 from __future__ import annotations
 
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 _state = {"threads": None, "pool": None}
@@ -39,10 +40,39 @@ def run_tasks(kernel, *args, n: int | None = None) -> None:
     if n == 1:
         kernel(0, 1, *args)
         return
+    _on_threads(n, lambda t: kernel(t, n, *args))
+
+
+def run_chunks(work, n_items: int, chunk: int, n: int | None = None) -> None:
+    """``work(t, a, b)`` for the chunks [a, b) of ``range(n_items)``, ``chunk`` items each,
+    on n threads (default :func:`thread_count`) that take the next chunk as they finish one
+    (so a thread with cheaper chunks takes more of them); ``t`` is the thread's index, for
+    buffers of its own. Re-raises the first error."""
+    n = thread_count() if n is None else n
+    lock = threading.Lock()
+    start = [0]
+
+    def worker(t):
+        while True:
+            with lock:
+                a = start[0]
+                start[0] = a + chunk
+            if a >= n_items:
+                return
+            work(t, a, min(a + chunk, n_items))
+
+    if n == 1:
+        worker(0)
+    else:
+        _on_threads(n, worker)
+
+
+def _on_threads(n, fn) -> None:
+    """``fn(t)`` for t = 0 .. n-1, ``fn(0)`` on the calling thread."""
     pool = _state["pool"]
     if pool is None or pool._max_workers < n:
         pool = _state["pool"] = ThreadPoolExecutor(max_workers=n, thread_name_prefix="subtrace")
-    futures = [pool.submit(kernel, t, n, *args) for t in range(1, n)]
-    kernel(0, n, *args)  # the calling thread takes the first share
+    futures = [pool.submit(fn, t) for t in range(1, n)]
+    fn(0)  # the calling thread takes the first share
     for f in futures:
         f.result()

@@ -87,7 +87,8 @@ def _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, slot_dept
             sp += 1
 
 
-BAND_ROWS = 8  # image rows per band of rays; threads take interleaved bands
+BAND_ROWS = 8  # image rows per band of rays
+BAND_CHUNK = 2  # bands a thread takes at a time (the next free ones, as it finishes)
 CANDIDATES = 8  # unbuilt shells a ray remembers between rounds (more: it traverses again)
 
 
@@ -109,25 +110,30 @@ def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_c
     nets (.,4,4,3), the cells' corners (4 rows per cell, (.,3)); and a per-slot flag set
     when a ray tests it).
     Loop patches are grids in the pools. ``tested[r]`` counts the micro-triangles built for
-    ray r. The rays are cut into bands of ``BAND_ROWS`` image rows, and thread ``t`` of
-    ``n`` (``tasks.run_tasks``, n = len(mems)) takes bands t, t + n, ... with its own memo
-    of split Bezier nets ``mems[t]`` (see ``bezier.intersect_patch``): neighbouring rays of
-    a band share their splits, and the bands' interleaving balances the threads.
+    ray r. The rays are cut into bands of ``BAND_ROWS`` image rows; each of n threads
+    (n = len(mems)) takes the next ``BAND_CHUNK`` bands whenever it is free
+    (``tasks.run_chunks``), with its own memo of split Bezier nets ``mems[t]`` (see
+    ``bezier.intersect_patch``): neighbouring rays of a band share their splits. What a
+    memo holds changes the work, never a hit, so the image does not depend on the threads.
     ``cands`` (:func:`candidate_lists`) carries each ray's unbuilt shells to the next round.
     """
-    from ..tasks import run_tasks
+    from ..tasks import run_chunks
 
     max_d = int(iso[4].max(initial=0))
     band_rows = BAND_ROWS * int(width)
     n_bands = -(-(int(rays[-1]) + 1) // band_rows) if len(rays) else 0
     bands = np.searchsorted(rays, np.arange(n_bands + 1) * band_rows).astype(np.int64)
     scratch = tuple(_scratch(max_d) for _ in mems)
-    run_tasks(_trace_task, rays, bands, float(frame[0, 0]), float(frame[0, 1]),
-              float(frame[0, 2]), frame, int(width), int(round_no), bvh_min, bvh_max,
-              bvh_first, bvh_count, prims, tiles, shell_min, shell_max, patch_slot, slot_depth,
-              slot_vert_off, slot_node_off, slot_quad, slot_round, verts, node_lo, node_hi,
-              lc_off, lc_data, iso, mems, scratch, cands, float(slack), hits, request, tested,
-              n=len(mems))
+    args = (float(frame[0, 0]), float(frame[0, 1]), float(frame[0, 2]), frame, int(width),
+            int(round_no), bvh_min, bvh_max, bvh_first, bvh_count, prims, tiles, shell_min,
+            shell_max, patch_slot, slot_depth, slot_vert_off, slot_node_off, slot_quad,
+            slot_round, verts, node_lo, node_hi, lc_off, lc_data, iso, mems, scratch, cands,
+            float(slack), hits, request, tested)
+
+    def work(t, a, b):
+        _trace_task(t, rays, bands[a:b + 1], *args)
+
+    run_chunks(work, n_bands, BAND_CHUNK, n=len(mems))
 
 
 def candidate_lists(n_rays):
@@ -150,13 +156,13 @@ def _scratch(max_d):
 
 
 @nb.njit(cache=True, nogil=True, _nrt=False, error_model="numpy")  # see prims.leaf_njit
-def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, bvh_min,
+def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_min,
                 bvh_max, bvh_first, bvh_count, prims, tiles, shell_min, shell_max, patch_slot,
                 slot_depth, slot_vert_off, slot_node_off, slot_quad, slot_round, verts,
                 node_lo, node_hi, lc_off, lc_data, iso, mems, scratches, cands, slack, hits,
                 request, tested):
-    """The bands of rays of one task, with its memo and scratch buffers (one call per task
-    keeps the per-ray cost free of call overhead)."""
+    """The bands of rays ``bands`` (band k: rays[bands[k]:bands[k+1]]) on thread ``task``,
+    with its memo and scratch buffers."""
     mem = mems[task]
     stack, gstack, work, st, st_t, ent_t, ent_i, lv, lp, hit = scratches[task]
     scratch = (work, st, st_t, ent_t, ent_i, lv, lp)
@@ -187,7 +193,7 @@ def _trace_task(task, n_tasks, rays, bands, ox, oy, oz, frame, width, round_no, 
                             lc_off, lc_data, slack, hit, gstack, ent_t, ent_i)
         return True
 
-    for band in range(task, len(bands) - 1, n_tasks):
+    for band in range(len(bands) - 1):
         for q in range(bands[band], bands[band + 1]):
             r = rays[q]
             row = r // width
