@@ -12,6 +12,7 @@ closer hit are never refined. Finally ``shade.py`` turns hits into image channel
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass, field
 
@@ -91,6 +92,12 @@ class _LeafTables:
                 n_uv += len(uvs[-1])
         self.lc_data = np.ascontiguousarray(np.concatenate(lcs))
         self.uv_data = np.ascontiguousarray(np.concatenate(uvs))
+
+
+@functools.lru_cache(maxsize=4)
+def _leaf_tables(max_depth: int) -> _LeafTables:
+    """The (read-only) tables up to ``max_depth``, made once per process."""
+    return _LeafTables(max_depth)
 
 
 def _side_indices(depth: int, quad: bool) -> np.ndarray:
@@ -434,7 +441,7 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     edge_depth, reg_side = edge_sampling(table, depths)
     stats.time_refine += time.perf_counter() - t0
     tested = np.empty(W * H, dtype=np.int64)  # (round 0 writes every ray's entries)
-    tables = _LeafTables(int(depths.max(initial=0)))
+    tables = _leaf_tables(int(depths[~table.is_quad].max(initial=0)))  # (Loop grids only)
     pools = _Pools(table.n_patches)
     iso = _Pieces(table.n_patches)
     memos = _Memos(tasks.thread_count())
