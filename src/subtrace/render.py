@@ -484,7 +484,9 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
         if not len(rays):
             break
         t0 = time.perf_counter()
-        new = np.unique(req[asked])
+        flag = np.zeros(table.n_patches, bool)
+        flag[req[asked]] = True
+        new = np.nonzero(flag)[0]  # (np.unique, sorted: it hashes every request)
         _refine(table, new, depths, edge_depth, pools, iso, round_no, stats, eye, tol_rad,
                 record)
         stats.time_refine += time.perf_counter() - t0
