@@ -51,11 +51,11 @@ def _shade_task(task, n_tasks, frame, width, hits, slot_patch, slot_depth, slot_
                 out_rgba[r, 1] = background[1]
                 out_rgba[r, 2] = background[2]
                 out_rgba[r, 3] = 0.0
-                out_n[r, :] = 0.0
+                out_n[r, 0] = out_n[r, 1] = out_n[r, 2] = 0.0  # (no slices: no views)
                 out_level[r] = -1.0
                 out_patch[r] = -1.0
                 out_object[r] = -1.0
-                out_uv[r, :] = 0.0
+                out_uv[r, 0] = out_uv[r, 1] = 0.0
                 continue
             row = r // width
             col = r - row * width
