@@ -1,0 +1,406 @@
+# subtrace.compare: compare two renders channel group by channel group, with thresholds in
+# the style of OpenImageIO's `idiff`, and draw their differences.
+#
+# Groups, their channels and the per-pixel error each is judged by:
+#   colour    R,G,B                     max over R,G,B of |a - b| (linear values); reported:
+#                                       RMSE, PSNR (peak 1), max abs, mean FLIP (LDR FLIP of
+#                                       OpenImageIO on RGB clipped to [0,1]; None without it)
+#   coverage  A                         1 where exactly one image has the surface (A > 0)
+#   depth     Z                         |Za - Zb| / min(Za, Zb), where both have the surface
+#   normals   N.X,N.Y,N.Z               angle between the normals in degrees, where both have
+#                                       the surface
+#   ids       level,patch_id,object_id  1 where any id differs, where both have the surface
+# Colour and coverage are judged over all pixels, the others over the pixels covered in both
+# (coverage differences are counted once, by coverage). A group is compared when both images
+# have all of its channels; one image having a group that the other lacks is a mismatch.
+#
+# Verdict of a group (idiff's rule, per group): n_fail pixels have error > fail, n_warn have
+# error > warn; FAIL when n_fail > failpercent % of the group's pixels or the largest error
+# > hardfail; else WARN when n_warn > warnpercent % of them; else PASS. The image's verdict
+# is the worst group's. Exit codes (idiff's): 0 pass, 1 warn, 2 fail, 3 size or channel
+# mismatch, 4 a file that cannot be read.
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .errors import SubtraceError
+
+PASS, WARN, FAIL = "pass", "warn", "fail"
+EXIT_CODES = {PASS: 0, WARN: 1, FAIL: 2}
+EXIT_MISMATCH = 3
+EXIT_UNREADABLE = 4
+
+GROUPS = {
+    "colour": ("R", "G", "B"),
+    "coverage": ("A",),
+    "depth": ("Z",),
+    "normals": ("N.X", "N.Y", "N.Z"),
+    "ids": ("level", "patch_id", "object_id"),
+}
+
+
+class ImageMismatchError(SubtraceError):
+    """The two images differ in size or in the channel groups they hold (exit code 3)."""
+
+
+class UnreadableImageError(SubtraceError):
+    """An image file is missing or cannot be read (exit code 4)."""
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """idiff-style thresholds of one group (errors in the group's unit; percents of its
+    pixels). ``hardfail``: any single pixel above it fails (inf: never)."""
+
+    warn: float
+    fail: float
+    warnpercent: float = 0.0
+    failpercent: float = 0.0
+    hardfail: float = math.inf
+
+
+# Defaults, for renders of the same scene by the same (deterministic) renderer, so that
+# float noise from harmless code changes passes and real changes do not:
+# colour: 0.02 (5 sRGB codes in the mid-tones), up to 1 % of the pixels may exceed it (the
+#   silhouette pixels that flip between surface and background);
+# coverage: any flip counts; 0.5 % of the pixels may flip (a silhouette shifted by a fraction
+#   of a pixel) before a failure, any flip is a warning;
+# depth: 1e-3 relative, beyond what a one-pixel tolerance moves a surface at normal incidence
+#   (about 2e-5 relative) but below a change of the shape; 1 % may exceed (grazing pixels);
+# normals: 2 degrees, 1 % may exceed (pixels beside creases and occlusion edges);
+# ids: any difference counts; 1 % may differ (patch borders that a tiny shift crosses). A
+#   change of refinement level changes `level` over whole patches and fails.
+DEFAULT_THRESHOLDS = {
+    "colour": Thresholds(warn=0.005, fail=0.02, warnpercent=0.1, failpercent=1.0),
+    "coverage": Thresholds(warn=0.5, fail=0.5, warnpercent=0.0, failpercent=0.5),
+    "depth": Thresholds(warn=1e-4, fail=1e-3, warnpercent=0.1, failpercent=1.0),
+    "normals": Thresholds(warn=0.5, fail=2.0, warnpercent=0.1, failpercent=1.0),
+    "ids": Thresholds(warn=0.5, fail=0.5, warnpercent=0.0, failpercent=1.0),
+}
+THRESHOLD_FIELDS = ("warn", "fail", "warnpercent", "failpercent", "hardfail")
+
+
+@dataclass
+class GroupResult:
+    """One group's comparison: ``metrics`` (name -> number or None), pixel counts, verdict."""
+
+    name: str
+    pixels: int  # pixels judged (see the module comment)
+    n_warn: int
+    n_fail: int
+    max_error: float
+    thresholds: Thresholds
+    verdict: str
+    metrics: dict = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        return {
+            "verdict": self.verdict,
+            "pixels": self.pixels,
+            "n_warn": self.n_warn,
+            "n_fail": self.n_fail,
+            "max_error": _json_number(self.max_error),
+            "thresholds": {k: _json_number(getattr(self.thresholds, k)) for k in THRESHOLD_FIELDS},
+            **{k: _json_number(v) for k, v in self.metrics.items()},
+        }
+
+
+@dataclass
+class Comparison:
+    """The result of :func:`compare_images`: per-group results, the overall verdict and
+    exit code, and the per-pixel error maps (group -> (H,W) float32, 0 where not judged)."""
+
+    width: int
+    height: int
+    groups: dict
+    errors: dict
+    verdict: str
+
+    @property
+    def exit_code(self) -> int:
+        return EXIT_CODES[self.verdict]
+
+    def as_dict(self) -> dict:
+        return {
+            "verdict": self.verdict,
+            "exit_code": self.exit_code,
+            "width": self.width,
+            "height": self.height,
+            "groups": {name: g.as_dict() for name, g in self.groups.items()},
+        }
+
+    def table(self) -> str:
+        """A readable report: one row per group, then the verdict."""
+        rows = [("group", "verdict", "pixels", "> warn", "> fail", "max", "metrics")]
+        for g in self.groups.values():
+            metrics = ", ".join(f"{k} {_fmt(v)}" for k, v in g.metrics.items())
+            rows.append((g.name, g.verdict.upper(), str(g.pixels), str(g.n_warn), str(g.n_fail),
+                         _fmt(g.max_error), metrics))
+        widths = [max(len(r[k]) for r in rows) for k in range(len(rows[0]) - 1)]
+        lines = ["  ".join(c.ljust(w) for c, w in zip(r[:-1], widths)) + "  " + r[-1]
+                 for r in rows]
+        lines.append(f"{self.width}x{self.height}: {self.verdict.upper()}")
+        return "\n".join(lines)
+
+    def diff_channels(self) -> dict:
+        """Difference image channels: |dR|,|dG|,|dB| as R,G,B, then each group's per-pixel
+        error (``coverage``, ``depth_rel``, ``normal_deg``, ``ids``) and ``heat``: the largest
+        error divided by its group's fail threshold (>= 1 fails)."""
+        out = {c: self.errors[c] for c in ("R", "G", "B") if c in self.errors}
+        names = {"coverage": "coverage", "depth": "depth_rel", "normals": "normal_deg",
+                 "ids": "ids"}
+        for group, name in names.items():
+            if group in self.groups:
+                out[name] = self.errors[group]
+        out["heat"] = self.heat()
+        return out
+
+    def heat(self) -> np.ndarray:
+        """(H,W) float32: max over groups of error / fail threshold (0 where nothing differs)."""
+        heat = np.zeros((self.height, self.width), dtype=np.float32)
+        for name, g in self.groups.items():
+            scale = g.thresholds.fail if g.thresholds.fail > 0 else 1.0
+            np.maximum(heat, self.errors[name] / np.float32(scale), out=heat)
+        return heat
+
+    def write_diff(self, path, png_path=None) -> None:
+        """Write :meth:`diff_channels` as an EXR (verdict in the header) and optionally a PNG
+        heat map of :meth:`heat` (black: equal, red: half the fail threshold, yellow:
+        at the threshold, white: twice it or more)."""
+        from .io.exr import write_exr, write_png
+
+        attrs = {"compare_verdict": self.verdict}
+        write_exr(path, self.diff_channels(), attrs)
+        if png_path is not None:
+            write_png(png_path, heat_map(self.heat()))
+
+
+def heat_map(heat: np.ndarray) -> np.ndarray:
+    """(H,W) -> (H,W,3) float64 linear RGB ramp: 0 black, 0.5 red, 1 yellow, >= 2 white."""
+    stops = np.array([0.0, 0.5, 1.0, 2.0])
+    colours = np.array([[0, 0, 0], [0.8, 0, 0], [1, 0.85, 0], [1, 1, 1]], dtype=np.float64)
+    h = np.nan_to_num(np.asarray(heat, dtype=np.float64), nan=2.0, posinf=2.0)
+    return np.stack([np.interp(h, stops, colours[:, k]) for k in range(3)], axis=-1)
+
+
+def compare_images(a, b, thresholds: dict | None = None, flip: bool = True) -> Comparison:
+    """Compare two images group by group (see the module comment).
+
+    a, b: EXR paths (str or PathLike) or channel dicts (name -> (H,W) array, as
+      ``read_exr`` or ``RenderResult.channels`` give). The comparison is symmetric except
+      for FLIP, which takes ``b`` as the reference.
+    thresholds: group -> Thresholds, or group -> dict of some of THRESHOLD_FIELDS replacing
+      the defaults (DEFAULT_THRESHOLDS).
+    flip: compute the mean FLIP of the colour group (needs OpenImageIO >= 3.2; None else).
+    Raises UnreadableImageError for a file that cannot be read, ImageMismatchError for
+    different sizes or channel groups, SubtraceError for an unknown group or field.
+    """
+    limits = resolve_thresholds(thresholds)
+    ca, name_a = _channels(a, "A")
+    cb, name_b = _channels(b, "B")
+    shape_a, shape_b = _shape(ca), _shape(cb)
+    if shape_a != shape_b:
+        raise ImageMismatchError(
+            f"{name_a} is {shape_a[1]}x{shape_a[0]} but {name_b} is {shape_b[1]}x{shape_b[0]}"
+        )
+    present = []
+    for group, names in GROUPS.items():
+        has_a, has_b = _has_group(ca, names), _has_group(cb, names)
+        if has_a != has_b:
+            with_it, without = (name_a, name_b) if has_a else (name_b, name_a)
+            raise ImageMismatchError(
+                f"{with_it} has the {group} channels {','.join(names)} but {without} has not"
+            )
+        if has_a:
+            present.append(group)
+    if not present:
+        raise ImageMismatchError(
+            f"{name_a} and {name_b} have no channel group in common (expected some of "
+            f"{', '.join(','.join(n) for n in GROUPS.values())})"
+        )
+
+    height, width = shape_a
+    f = lambda c, n: np.asarray(c[n], dtype=np.float64)  # noqa: E731
+    # pixels with the surface: A > 0 where there is coverage, else a finite depth
+    if "coverage" in present:
+        cov_a, cov_b = f(ca, "A") > 0, f(cb, "A") > 0
+    elif "depth" in present:
+        cov_a, cov_b = np.isfinite(f(ca, "Z")), np.isfinite(f(cb, "Z"))
+    else:
+        cov_a = cov_b = np.ones((height, width), dtype=bool)
+    both = cov_a & cov_b
+    all_px = np.ones((height, width), dtype=bool)
+
+    groups, errors = {}, {}
+    for group in present:
+        metrics = {}
+        if group == "colour":
+            d = [np.abs(f(ca, c) - f(cb, c)) for c in GROUPS["colour"]]
+            for c, dc in zip(GROUPS["colour"], d):
+                errors[c] = _finite_or_inf(dc).astype(np.float32)
+            err, mask = _finite_or_inf(np.maximum.reduce(d)), all_px
+            mse = float(np.mean(np.square(np.nan_to_num(np.stack(d), nan=np.inf))))
+            metrics["rmse"] = math.sqrt(mse)
+            metrics["psnr"] = math.inf if mse == 0 else 10.0 * math.log10(1.0 / mse)
+            metrics["max_abs"] = float(err.max())
+            metrics["mean_flip"] = _mean_flip(ca, cb) if flip else None
+        elif group == "coverage":
+            err, mask = (cov_a != cov_b).astype(np.float64), all_px
+            metrics["count"] = int(err.sum())
+        elif group == "depth":
+            za, zb = f(ca, "Z"), f(cb, "Z")
+            with np.errstate(invalid="ignore", divide="ignore"):
+                rel = np.abs(za - zb) / np.minimum(np.abs(za), np.abs(zb))
+            rel = np.where(za == zb, 0.0, rel)  # equal depths (0 and 0, inf and inf) agree
+            err, mask = np.where(both, _finite_or_inf(rel), 0.0), both
+            metrics["max_rel"] = float(err.max(initial=0.0))
+            metrics["mean_rel"] = float(err[both].mean()) if both.any() else 0.0
+        elif group == "normals":
+            na = np.stack([f(ca, c) for c in GROUPS["normals"]], axis=-1)
+            nb = np.stack([f(cb, c) for c in GROUPS["normals"]], axis=-1)
+            err, mask = np.where(both, normal_angle_deg(na, nb), 0.0), both
+            metrics["max_deg"] = float(err.max(initial=0.0))
+            metrics["mean_deg"] = float(err[both].mean()) if both.any() else 0.0
+        else:  # ids
+            differ = np.zeros((height, width), dtype=bool)
+            for c in GROUPS["ids"]:
+                differ |= f(ca, c) != f(cb, c)
+            err, mask = (differ & both).astype(np.float64), both
+            metrics["count"] = int(err.sum())
+        errors[group] = err.astype(np.float32)
+        groups[group] = _judge(group, err[mask], limits[group], metrics)
+    worst = max((g.verdict for g in groups.values()), key=lambda v: EXIT_CODES[v])
+    return Comparison(width, height, groups, errors, worst)
+
+
+def normal_angle_deg(na: np.ndarray, nb: np.ndarray) -> np.ndarray:
+    """Angle in degrees between (..., 3) vectors (atan2 of |a x b| and a.b: accurate for
+    small angles); 180 where a vector is zero or not finite."""
+    cross = np.linalg.norm(np.cross(na, nb), axis=-1)
+    dot = np.sum(na * nb, axis=-1)
+    with np.errstate(invalid="ignore"):
+        angle = np.degrees(np.arctan2(cross, dot))
+    bad = ~np.isfinite(angle) | ~(np.linalg.norm(na, axis=-1) > 0) | ~(
+        np.linalg.norm(nb, axis=-1) > 0
+    )
+    return np.where(bad, 180.0, angle)
+
+
+def resolve_thresholds(thresholds: dict | None) -> dict:
+    """DEFAULT_THRESHOLDS with ``thresholds`` (group -> Thresholds or dict of fields) applied."""
+    limits = dict(DEFAULT_THRESHOLDS)
+    for group, value in (thresholds or {}).items():
+        if group not in GROUPS:
+            raise SubtraceError(
+                f"unknown channel group {group!r}: use one of {', '.join(GROUPS)}"
+            )
+        if isinstance(value, Thresholds):
+            limits[group] = value
+            continue
+        unknown = set(value) - set(THRESHOLD_FIELDS)
+        if unknown:
+            raise SubtraceError(
+                f"unknown threshold {sorted(unknown)[0]!r}: use {', '.join(THRESHOLD_FIELDS)}"
+            )
+        for key, number in value.items():
+            if not (isinstance(number, (int, float)) and number >= 0 and not math.isnan(number)):
+                raise SubtraceError(f"{group} {key}: expected a number >= 0, got {number!r}")
+        limits[group] = replace(limits[group], **{k: float(v) for k, v in value.items()})
+    return limits
+
+
+def _judge(group: str, err: np.ndarray, limits: Thresholds, metrics: dict) -> GroupResult:
+    n = int(err.size)
+    n_warn = int(np.count_nonzero(err > limits.warn))
+    n_fail = int(np.count_nonzero(err > limits.fail))
+    max_error = float(err.max(initial=0.0))
+    if n_fail > limits.failpercent / 100.0 * n or max_error > limits.hardfail:
+        verdict = FAIL
+    elif n_warn > limits.warnpercent / 100.0 * n:
+        verdict = WARN
+    else:
+        verdict = PASS
+    return GroupResult(group, n, n_warn, n_fail, max_error, limits, verdict, metrics)
+
+
+def _channels(image, label: str) -> tuple[dict, str]:
+    """(channels, name for messages) of a path or a channel dict."""
+    if isinstance(image, dict):
+        return image, f"image {label}"
+    from .io.exr import read_exr
+
+    path = os.fsdecode(os.fspath(image))
+    try:
+        channels, _ = read_exr(path)
+    except SubtraceError as err:
+        raise UnreadableImageError(str(err)) from None
+    return channels, path
+
+
+def _shape(channels: dict) -> tuple[int, int]:
+    return np.shape(next(iter(channels.values()))) if channels else (0, 0)
+
+
+def _has_group(channels: dict, names) -> bool:
+    return all(n in channels for n in names)
+
+
+def _finite_or_inf(x: np.ndarray) -> np.ndarray:
+    """NaN errors (a NaN in one image) become +inf, so that they count as failures."""
+    return np.where(np.isnan(x), np.inf, x)
+
+
+def _mean_flip(ca: dict, cb: dict) -> float | None:
+    """Mean LDR FLIP error of R,G,B clipped to [0,1], ``cb`` as the reference; None when
+    OpenImageIO has no FLIP_diff."""
+    import OpenImageIO as oiio
+
+    flip_diff = getattr(oiio.ImageBufAlgo, "FLIP_diff", None)
+    if flip_diff is None:
+        return None
+
+    def buf(channels):
+        rgb = np.stack([np.asarray(channels[c], dtype=np.float32) for c in "RGB"], axis=-1)
+        rgb = np.clip(np.nan_to_num(rgb, nan=0.0), 0.0, 1.0)
+        image = oiio.ImageBuf(oiio.ImageSpec(rgb.shape[1], rgb.shape[0], 3, oiio.FLOAT))
+        image.set_pixels(oiio.ROI(), np.ascontiguousarray(rgb))
+        return image
+
+    result = flip_diff(buf(cb), buf(ca), hdr=0)
+    if result.has_error:
+        return None
+    return float(result.spec().getattribute("FLIP:meanerror"))
+
+
+def _json_number(v):
+    """JSON has no infinities or NaN: those become strings."""
+    if isinstance(v, float) and not math.isfinite(v):
+        return str(v)
+    return v
+
+
+def _fmt(v) -> str:
+    if v is None:
+        return "n/a"
+    if isinstance(v, int):
+        return str(v)
+    return f"{v:.4g}"
+
+
+__all__ = [
+    "compare_images",
+    "Comparison",
+    "GroupResult",
+    "Thresholds",
+    "DEFAULT_THRESHOLDS",
+    "GROUPS",
+    "ImageMismatchError",
+    "UnreadableImageError",
+    "heat_map",
+    "normal_angle_deg",
+]

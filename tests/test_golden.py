@@ -1,0 +1,433 @@
+"""Golden images: every scene of ``scenes/`` rendered small and compared with
+``golden_images/<scene>.exr``; the goldens themselves checked against an independent reference
+(a fine uniform refinement pushed to the limit, ray cast in plain numpy); and proof that the
+thresholds catch a one-level refinement change and a crease change.
+
+Regenerate the goldens (after a change that is meant to alter the images) with::
+
+    python -m pytest tests/test_golden.py --update-golden
+
+A failing comparison writes the render, the reference and their difference (EXR and PNG) to
+``test_output/golden/<scene>/`` (git-ignored) and prints the paths.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import subtrace
+from subtrace.compare import DEFAULT_THRESHOLDS, FAIL, GROUPS, compare_images
+from subtrace.io.exr import read_exr, write_exr, write_png
+from subtrace.io.scene import apply_overrides, load_scene
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENES_DIR = ROOT / "scenes"
+GOLDEN_DIR = ROOT / "golden_images"
+FAILURE_DIR = ROOT / "test_output" / "golden"
+SHARED = ROOT.parent / "shared"
+SCENES = sorted(p.stem for p in SCENES_DIR.glob("*.toml"))
+
+needs_shared = pytest.mark.skipif(
+    not (SHARED / "models").is_dir(), reason="../shared/models not present"
+)
+
+# Small renders: each golden stays well under 100 KB and all eight render in about a second
+# once the kernels are compiled. The scenes' own tolerance (1 px) is kept, so the goldens
+# exercise the adaptive depth choice at this resolution.
+GOLDEN_WIDTH, GOLDEN_HEIGHT = 160, 120
+# Only the channels that `subtrace compare` judges are stored (u, v would double the size).
+GOLDEN_CHANNELS = tuple(c for names in GROUPS.values() for c in names)
+# The comparison uses subtrace compare's defaults: the renderer is deterministic, so an
+# unchanged renderer gives 0 everywhere; the percents absorb silhouette, crease and patch
+# border pixels that harmless arithmetic changes flip, while a one-level refinement change
+# (the `level` id over whole patches) and a crease sharpness change (depth, normals) fail
+# (test_thresholds_catch_*).
+GOLDEN_THRESHOLDS = DEFAULT_THRESHOLDS
+UPDATE_ALL = "python -m pytest tests/test_golden.py --update-golden"
+
+
+def update_command(scene: str) -> str:
+    """The exact command that (re)writes one scene's golden image."""
+    return f'python -m pytest "tests/test_golden.py::test_golden[{scene}]" --update-golden'
+
+
+def golden_path(scene: str) -> Path:
+    return GOLDEN_DIR / f"{scene}.exr"
+
+
+def _rel(path: Path) -> str:
+    """``path`` relative to the repository root where it lies inside it."""
+    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
+
+
+def golden_scene(scene: str, **overrides):
+    """The scene file at the golden resolution (plus any other apply_overrides values)."""
+    loaded = load_scene(SCENES_DIR / f"{scene}.toml")
+    return apply_overrides(loaded, width=GOLDEN_WIDTH, height=GOLDEN_HEIGHT, **overrides)
+
+
+def render_channels(scene) -> tuple[dict, object]:
+    """Render ``scene``: (the GOLDEN_CHANNELS, the RenderResult)."""
+    from subtrace.render import render_scene
+
+    result = render_scene(scene)
+    return {c: result.channels[c] for c in GOLDEN_CHANNELS}, result
+
+
+def golden_attributes(result, scene, name: str) -> dict:
+    """Header of a golden image: camera, scheme, tolerance (subtrace:version is added by
+    write_exr), the scene, the command that regenerates it and the thresholds it is held to.
+    Timings and counts are left out so that regenerating an unchanged golden gives the same
+    file."""
+    from subtrace.render import result_attributes
+
+    keep = ("subtrace:camera", "subtrace:camera_fov_deg", "worldToCamera",
+            "subtrace:tolerance_rad", "subtrace:tolerance_px", "subtrace:scheme",
+            "subtrace:accel")
+    attrs = {k: v for k, v in result_attributes(result, scene).items() if k in keep}
+    attrs["subtrace:scene"] = f"scenes/{name}.toml"
+    attrs["subtrace:meshes"] = ";".join(Path(o.mesh).name for o in scene.objects)
+    attrs["subtrace:golden_command"] = update_command(name)
+    attrs["subtrace:golden_thresholds"] = json.dumps(
+        {g: dataclasses.asdict(t) for g, t in GOLDEN_THRESHOLDS.items()}
+    )
+    return attrs
+
+
+def write_failure(name: str, rendered: dict, comparison) -> list[Path]:
+    """Write the render, the golden and their difference (EXR + PNG) for a failed scene."""
+    folder = FAILURE_DIR / name
+    folder.mkdir(parents=True, exist_ok=True)
+    rgb = lambda ch: np.stack([ch[c] for c in "RGB"], axis=-1)  # noqa: E731
+    paths = [folder / f for f in ("rendered.exr", "rendered.png", "reference.exr",
+                                  "reference.png", "diff.exr", "diff.png")]
+    write_exr(paths[0], rendered, {"scene": f"scenes/{name}.toml"})
+    write_png(paths[1], rgb(rendered))
+    shutil.copyfile(golden_path(name), paths[2])
+    write_png(paths[3], rgb(read_exr(golden_path(name))[0]))
+    comparison.write_diff(paths[4], png_path=paths[5])
+    return paths
+
+
+@needs_shared
+@pytest.mark.parametrize("name", SCENES)
+def test_golden(name, update_golden):
+    """Each scene renders to its golden image within GOLDEN_THRESHOLDS."""
+    scene = golden_scene(name)
+    path = golden_path(name)
+    if update_golden:
+        channels, result = render_channels(scene)
+        path.parent.mkdir(exist_ok=True)
+        write_exr(path, channels, golden_attributes(result, scene, name))
+        print(f"wrote {_rel(path)}")
+        return
+    if not path.exists():
+        pytest.fail(f"golden image {_rel(path)} is missing; create it with: "
+                    f"{update_command(name)}", pytrace=False)
+    rendered, _ = render_channels(scene)
+    comparison = compare_images(rendered, path, GOLDEN_THRESHOLDS)
+    if comparison.verdict == FAIL:
+        paths = write_failure(name, rendered, comparison)
+        pytest.fail(
+            f"{name} differs from {_rel(path)}:\n{comparison.table()}\n"
+            "written: " + ", ".join(str(p) for p in paths) + "\nif the change is intended, "
+            f"regenerate with: {update_command(name)}",
+            pytrace=False,
+        )
+
+
+def test_every_scene_has_a_golden():
+    """Every scene of scenes/ has its golden image, and every golden image its scene."""
+    goldens = sorted(p.stem for p in GOLDEN_DIR.glob("*.exr"))
+    missing = [update_command(s) for s in SCENES if s not in goldens]
+    assert not missing, "missing golden images; create them with: " + "; ".join(missing)
+    assert goldens == SCENES, f"golden images without a scene: {set(goldens) - set(SCENES)}"
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_golden_header_and_size(name):
+    """Goldens record scheme, tolerance, version and the regenerating command, hold exactly
+    the compared channels at the golden resolution, and stay small for the repository."""
+    path = golden_path(name)
+    if not path.exists():
+        pytest.skip(f"{path} missing (see test_every_scene_has_a_golden)")
+    assert path.stat().st_size < 150_000
+    channels, attrs = read_exr(path)
+    assert tuple(channels) == GOLDEN_CHANNELS
+    assert channels["R"].shape == (GOLDEN_HEIGHT, GOLDEN_WIDTH)
+    assert attrs["subtrace:version"] == subtrace.__version__
+    assert attrs["subtrace:scheme"] in ("catmark", "loop")
+    assert attrs["subtrace:tolerance_px"] == pytest.approx(1.0, rel=1e-6)
+    assert attrs["subtrace:golden_command"] == update_command(name)
+    assert attrs["subtrace:scene"] == f"scenes/{name}.toml"
+
+
+def test_missing_golden_names_the_command(tmp_path, monkeypatch):
+    """A missing golden fails with the exact command that creates it."""
+    if not (SHARED / "models").is_dir():
+        pytest.skip("../shared/models not present")
+    monkeypatch.setattr(f"{__name__}.GOLDEN_DIR", tmp_path)
+    with pytest.raises(pytest.fail.Exception) as info:
+        test_golden("creases", update_golden=False)
+    message = str(info.value)
+    assert update_command("creases") in message
+    assert "missing" in message
+
+
+# --------------------------------------------------------------------------------------
+# the goldens against an independent reference
+# --------------------------------------------------------------------------------------
+
+REF_EDGE_PX = 2.0  # reference triangles: every edge projects to at most this many pixels
+REF_MAX_LEVEL = 7
+DEPTH_JUMP = 0.05  # relative depth step between neighbour pixels that marks an occlusion edge
+NORMAL_SLACK_DEG = 0.5  # the renderer's own normal error beyond the reference's (see below)
+
+
+def reference_mesh(cage, camera) -> tuple[np.ndarray, np.ndarray]:
+    """(points (n,3) float64, triangles (T,3) int64): the exact limit points of a uniform
+    refinement of ``cage`` at the first level where every edge projects to at most
+    REF_EDGE_PX pixels, Catmark quads split along one diagonal, hole faces left out."""
+    eye = np.asarray(camera.eye)
+    first = 1 if cage.scheme == "catmark" else 0  # Catmark level 0 may have n-gons
+    for level in range(first, REF_MAX_LEVEL + 1):
+        mesh = cage.refine(level)
+        k = int(mesh.face_sizes.max())
+        faces = mesh.face_verts.reshape(-1, k)[~mesh.face_hole].astype(np.int64)
+        P, _, _ = cage.limit(level)
+        corners = P[faces]
+        edges = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=-1).max(axis=1)
+        dist = np.linalg.norm(corners - eye, axis=-1).min(axis=1)
+        if (edges / dist).max() <= REF_EDGE_PX * camera.pixel_angle():
+            break
+    if k == 4:
+        faces = np.concatenate([faces[:, [0, 1, 2]], faces[:, [0, 2, 3]]])
+    return P, faces
+
+
+def ray_cast(triangles: np.ndarray, camera) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest hit of every pixel's ray with ``triangles``: (t (H,W), triangle (H,W)), t the
+    distance from the eye (inf, -1 on a miss). Plain numpy: each triangle is tested against
+    the pixels of its projected bounding box (one pixel wider on each side), Moller-Trumbore
+    in float64 with barycentrics allowed 1e-9 outside (a pixel centre on a shared edge hits
+    both triangles rather than neither). Triangles reaching behind the eye are skipped (the
+    scenes' cameras are outside their objects)."""
+    W, H = camera.width, camera.height
+    eye = np.asarray(camera.eye, dtype=np.float64)
+    right, up, forward = camera.basis()
+    s = camera.pixel_size()
+    dirs = camera.ray_directions().reshape(-1, 3)
+    rel = triangles - eye
+    z = rel @ forward
+    keep = (z > 1e-9).all(axis=1)
+    tri_index = np.nonzero(keep)[0]
+    rel, z = rel[keep], z[keep]
+    col = (rel @ right) / (z * s) - 0.5 + 0.5 * W
+    row = -(rel @ up) / (z * s) - 0.5 + 0.5 * H
+    c0 = np.clip(np.floor(col.min(axis=1)) - 1, 0, W - 1).astype(np.int64)
+    c1 = np.clip(np.ceil(col.max(axis=1)) + 1, 0, W - 1).astype(np.int64)
+    r0 = np.clip(np.floor(row.min(axis=1)) - 1, 0, H - 1).astype(np.int64)
+    r1 = np.clip(np.ceil(row.max(axis=1)) + 1, 0, H - 1).astype(np.int64)
+    inside = (col.max(axis=1) >= -1) & (col.min(axis=1) <= W) & (row.max(axis=1) >= -1) & (
+        row.min(axis=1) <= H)
+    nc, nr = np.where(inside, c1 - c0 + 1, 0), np.where(inside, r1 - r0 + 1, 0)
+    best_t = np.full(W * H, np.inf)
+    best_tri = np.full(W * H, -1, dtype=np.int64)
+    chunk = 200_000
+    for a in range(0, len(rel), chunk):
+        sl = slice(a, a + chunk)
+        counts = nc[sl] * nr[sl]
+        tri = np.repeat(np.arange(a, min(a + chunk, len(rel))), counts)
+        k = np.arange(len(tri)) - np.repeat(np.cumsum(counts) - counts, counts)
+        pix = (r0[tri] + k // nc[tri]) * W + c0[tri] + k % nc[tri]
+        v0, e1, e2 = rel[tri, 0], rel[tri, 1] - rel[tri, 0], rel[tri, 2] - rel[tri, 0]
+        d = dirs[pix]
+        p = np.cross(d, e2)
+        det = np.einsum("ij,ij->i", e1, p)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / det
+            u = -np.einsum("ij,ij->i", v0, p) * inv
+            q = np.cross(-v0, e1)
+            v = np.einsum("ij,ij->i", d, q) * inv
+            t = np.einsum("ij,ij->i", e2, q) * inv
+        eps = 1e-9
+        hit = (det != 0) & (u >= -eps) & (v >= -eps) & (u + v <= 1 + eps) & (t > 0)
+        pix, t, tri = pix[hit], t[hit], tri[hit]
+        order = np.lexsort((t, pix))
+        pix, t, tri = pix[order], t[order], tri[order]
+        first = np.r_[True, pix[1:] != pix[:-1]]
+        pix, t, tri = pix[first], t[first], tri[first]
+        better = t < best_t[pix]
+        best_t[pix[better]] = t[better]
+        best_tri[pix[better]] = tri_index[tri[better]]
+    return best_t.reshape(H, W), best_tri.reshape(H, W)
+
+
+def normal_spread_deg(points: np.ndarray, faces: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """(T,) degrees: how far the surface normal may turn within reach of each triangle.
+
+    Each vertex gets the cone (around the mean) of the normals of its triangles; a
+    triangle's spread is twice the widest cone of its corners, which bounds the angle between
+    its normal and that of any triangle sharing a corner. Beside a crease it is the crease's
+    dihedral angle, elsewhere about the turn of the normal over one triangle."""
+    from subtrace.compare import normal_angle_deg
+
+    mean = np.zeros_like(points)
+    for k in range(3):
+        np.add.at(mean, faces[:, k], normals)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean /= np.linalg.norm(mean, axis=1)[:, None]
+    cone = np.zeros(len(points))
+    for k in range(3):
+        np.maximum.at(cone, faces[:, k], normal_angle_deg(normals, mean[faces[:, k]]))
+    return 2.0 * cone[faces].max(axis=1)
+
+
+def reference_check(channels: dict, scene, tol_rad: float) -> dict:
+    """Check rendered ``channels`` against the independent reference of ``scene``.
+
+    The reference: for every object, the triangles of :func:`reference_mesh` (exact limit
+    points of a fine uniform refinement, each edge at most REF_EDGE_PX pixels), ray cast in
+    numpy (:func:`ray_cast`) through the same pixel centres. Edge pixels are those within
+    one pixel of a reference silhouette or of an occlusion step (neighbour depths differing by
+    more than DEPTH_JUMP); elsewhere both images see the same smooth piece of surface.
+    Returns lists of offending pixels (row, col) per check, empty when the render is right:
+
+    * coverage: a pixel covered in one and not the other that is not an edge pixel (a
+      tolerance of one pixel moves a silhouette by less than a pixel);
+    * depth: |Z - Z_ref| cos(theta) > tol_rad * Z_ref off the edges (theta: between the ray
+      and the reference normal): the two surfaces further apart, along the normal, than the
+      tolerance angle at that distance. Both lie much closer to the limit surface than that
+      (cells and reference triangles subtend at most a pixel or two, and a flat piece of
+      that size deviates from the surface by a fraction of its size proportional to its
+      normal's turn), so this is what the tolerance allows, with room;
+    * normals: the rendered normal (an exact limit normal, or a blend of exact ones across
+      a cell) further than the triangle's normal_spread_deg + NORMAL_SLACK_DEG from the
+      hit triangle's normal, off the edges. The limit normal anywhere on the triangle lies
+      within its spread of its normal; the slack covers the renderer's blend across a cell
+      of at most a pixel.
+    """
+    camera = scene.make_camera()
+    points, faces = [], []
+    for o in scene.objects:
+        cage = subtrace.load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code)
+        P, F = reference_mesh(cage, camera)
+        faces.append(F + sum(len(p) for p in points))
+        points.append(P)
+    points, faces = np.concatenate(points), np.concatenate(faces)
+    tris = points[faces]
+    normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    area = np.linalg.norm(normals, axis=1)
+    normals /= np.where(area > 0, area, 1.0)[:, None]
+    t_ref, tri = ray_cast(np.where((area > 0)[:, None, None], tris, np.nan), camera)
+    spread = normal_spread_deg(points, faces, normals)
+
+    H, W = t_ref.shape
+    covered_ref = np.isfinite(t_ref)
+    covered = channels["A"] > 0
+    padded = np.pad(t_ref, 1, constant_values=np.inf)
+    edge = np.zeros((H, W), dtype=bool)
+    with np.errstate(invalid="ignore"):
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                q = padded[1 + dy:1 + dy + H, 1 + dx:1 + dx + W]
+                edge |= np.isfinite(q) != covered_ref
+                edge |= np.abs(q - t_ref) > DEPTH_JUMP * np.minimum(q, t_ref)
+    inner = covered & covered_ref & ~edge
+    n_ref = normals[tri[inner]]
+    cos = np.abs(np.einsum("ij,ij->i", camera.ray_directions()[inner], n_ref))
+    z, z_ref = channels["Z"][inner].astype(np.float64), t_ref[inner]
+    n = np.stack([channels[c][inner] for c in ("N.X", "N.Y", "N.Z")], axis=-1)
+    from subtrace.compare import normal_angle_deg
+
+    angle = normal_angle_deg(n.astype(np.float64), n_ref)
+    rows, cols = np.nonzero(inner)
+    pixels = lambda bad: list(zip(rows[bad].tolist(), cols[bad].tolist()))  # noqa: E731
+    return {
+        "coverage": list(zip(*[a.tolist() for a in np.nonzero((covered != covered_ref) & ~edge)])),
+        "depth": pixels(np.abs(z - z_ref) * cos > tol_rad * z_ref),
+        "normals": pixels(angle > spread[tri[inner]] + NORMAL_SLACK_DEG),
+        "inner_pixels": int(inner.sum()),
+        "covered_pixels": int(covered.sum()),
+    }
+
+
+@needs_shared
+@pytest.mark.parametrize("name", SCENES)
+def test_golden_matches_independent_reference(name):
+    """Each golden image is right, not only what the code produced: coverage, depth and
+    normals agree with a fine uniform refinement ray cast in numpy (see reference_check)."""
+    path = golden_path(name)
+    if not path.exists():
+        pytest.skip(f"{path} missing (see test_every_scene_has_a_golden)")
+    channels, attrs = read_exr(path)
+    scene = golden_scene(name)
+    assert attrs["subtrace:camera"] == scene.make_camera().header_attributes()["subtrace:camera"]
+    bad = reference_check(channels, scene, attrs["subtrace:tolerance_rad"])
+    # most covered pixels are judged: the edge band is a small part of each image
+    assert bad["inner_pixels"] > 0.5 * bad["covered_pixels"]
+    for check in ("coverage", "depth", "normals"):
+        assert not bad[check], f"{name}: {check} differs from the reference at {bad[check][:10]}"
+
+
+# --------------------------------------------------------------------------------------
+# the thresholds catch real changes
+# --------------------------------------------------------------------------------------
+
+CREASES_OBJ = SHARED / "oracle" / "shapes" / "catmark_cubes_semisharp.obj"
+CREASE_LINE = "t crease 2/1/0  8  9  2.0"  # one semi-sharp crease of the creases scene
+
+
+def perturbed_creases_scene(tmp_path, sharpness: float):
+    """The creases scene with one crease's sharpness changed from 2.0 to ``sharpness``."""
+    text = CREASES_OBJ.read_text()
+    assert text.count(CREASE_LINE) == 1
+    obj = tmp_path / "perturbed.obj"
+    obj.write_text(text.replace(CREASE_LINE, f"t crease 2/1/0  8  9  {sharpness}"))
+    scene = golden_scene("creases")
+    return dataclasses.replace(
+        scene, objects=(dataclasses.replace(scene.objects[0], mesh=str(obj)),)
+    )
+
+
+@needs_shared
+@pytest.mark.parametrize("sharpness", [1.0, 2.5])
+def test_thresholds_catch_crease_change(tmp_path, sharpness):
+    """Changing one crease's sharpness (2 -> 1 or 2.5) fails the golden comparison through
+    the geometry (depth and normals), not only through the ids."""
+    if not golden_path("creases").exists():
+        pytest.skip("golden image creases.exr missing")
+    rendered, _ = render_channels(perturbed_creases_scene(tmp_path, sharpness))
+    comparison = compare_images(rendered, golden_path("creases"), GOLDEN_THRESHOLDS)
+    assert comparison.verdict == FAIL
+    assert comparison.groups["depth"].verdict == FAIL
+    assert comparison.groups["normals"].verdict == FAIL
+
+
+@needs_shared
+def test_reference_check_rejects_a_wrong_crease(tmp_path):
+    """The reference check has teeth: a render whose crease is wrong (sharpness 1 instead of
+    2) departs from the reference of the unchanged scene. (Sharpness 2.5 moves the surface
+    less than the tolerance-sized bounds of the check; the golden comparison catches it.)"""
+    rendered, result = render_channels(perturbed_creases_scene(tmp_path, 1.0))
+    bad = reference_check(rendered, golden_scene("creases"), result.tolerance_rad)
+    assert len(bad["depth"]) + len(bad["normals"]) > 10
+
+
+@needs_shared
+@pytest.mark.parametrize("tolerance", [0.5, 2.0])
+def test_thresholds_catch_one_level_change(tolerance):
+    """Halving or doubling the tolerance refines (nearly) every patch one level deeper or
+    shallower: the comparison fails on the ids group (level)."""
+    if not golden_path("spot").exists():
+        pytest.skip("golden image spot.exr missing")
+    rendered, _ = render_channels(golden_scene("spot", tolerance=tolerance))
+    comparison = compare_images(rendered, golden_path("spot"), GOLDEN_THRESHOLDS)
+    assert comparison.verdict == FAIL
+    assert comparison.groups["ids"].verdict == FAIL
