@@ -1,7 +1,8 @@
 """subtrace: ray tracing of exact Catmull-Clark and Loop subdivision surfaces.
 
-Public API: :func:`load_cage`, :func:`make_cage`, :class:`Cage`, :class:`Mesh` and the
-error types in :mod:`subtrace.errors`.
+Public API: :func:`load_cage`, :func:`make_cage`, :class:`Cage`, :class:`Mesh`,
+:func:`compare_images` (from :mod:`subtrace.compare`, imported on first use: it loads
+OpenImageIO) and the error types in :mod:`subtrace.errors`.
 """
 
 from __future__ import annotations
@@ -52,11 +53,22 @@ _numba_cache_dir()
 from .cage import Cage, Mesh, load_cage, make_cage  # noqa: E402
 from .errors import ObjError, SceneError, SubtraceError, TopologyError  # noqa: E402
 
+
+def __getattr__(name):
+    # compare_images is imported on first use, so `import subtrace` does not load OpenImageIO
+    if name == "compare_images":
+        from .compare import compare_images
+
+        return compare_images
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 __all__ = [
     "Cage",
     "Mesh",
     "load_cage",
     "make_cage",
+    "compare_images",
     "SubtraceError",
     "ObjError",
     "TopologyError",

@@ -1,8 +1,11 @@
-"""The ``subtrace`` command line: ``subtrace info [CAGE.obj] [--scheme S] [--level N]``.
+"""The ``subtrace`` command line: ``subtrace info [CAGE.obj] [--scheme S] [--level N]``,
+``subtrace render ...`` and ``subtrace compare A.exr B.exr ...``.
 
 Owns argument parsing, the text report and the error policy (design invariant 7): every
 :class:`subtrace.errors.SubtraceError` becomes one line ``subtrace: error: <message>`` on
 stderr and exit code 2, with no traceback; argparse usage errors exit 2 as well.
+``compare`` follows idiff's exit codes instead: 3 for a size or channel mismatch, 4 for an
+image that cannot be read (and 0 / 1 / 2 for pass / warning / failure).
 This module imports only argparse at the top; the cage, subdivision and limit code are
 imported by the subcommand that needs them. (``import subtrace`` itself loads numpy and
 Numba, about 0.3 s, which ``subtrace --help`` still pays.)
@@ -104,6 +107,36 @@ def build_parser() -> argparse.ArgumentParser:
                         help="also write an sRGB PNG preview next to the EXR")
     render.add_argument("--quiet", action="store_true", help="print nothing on success")
     render.set_defaults(func=_cmd_render)
+
+    compare = sub.add_parser(
+        "compare",
+        help="compare two EXR renders channel group by channel group (idiff-style verdict)",
+        description=(
+            "Compare two EXR images by channel group: colour (R,G,B: RMSE, PSNR, max abs, "
+            "mean FLIP), coverage (A: pixels with the surface in one image only), depth (Z: "
+            "relative error), normals (N.X,N.Y,N.Z: angle in degrees) and ids (level, "
+            "patch_id, object_id: pixels that differ). A group fails when more than "
+            "FAILPERCENT %% of its pixels have an error above FAIL, or one above HARDFAIL; it "
+            "warns likewise with WARN and WARNPERCENT. Threshold options take GROUP=VALUE "
+            "(repeatable) or a bare VALUE for the colour group. Exit codes as idiff's: 0 pass, "
+            "1 warning, 2 failure (or bad options), 3 size or channel mismatch, 4 a file that "
+            "cannot be read."
+        ),
+    )
+    compare.add_argument("image_a", metavar="A.exr", help="first image (the test image)")
+    compare.add_argument("image_b", metavar="B.exr", help="second image (the reference)")
+    for name in ("fail", "failpercent", "warn", "warnpercent", "hardfail"):
+        compare.add_argument(f"--{name}", action="append", default=[],
+                             metavar="[GROUP=]VALUE",
+                             help=f"{name} threshold of a group (default: see the README)")
+    compare.add_argument("--diff", metavar="OUT.exr",
+                         help="write the per-pixel differences and a normalised 'heat' channel")
+    compare.add_argument("--png", action="store_true",
+                         help="with --diff: also write a heat-map PNG next to it")
+    compare.add_argument("--json", action="store_true", help="print the metrics as JSON")
+    compare.add_argument("--no-flip", action="store_true",
+                         help="skip the FLIP metric (the slowest one on large images)")
+    compare.set_defaults(func=_cmd_compare)
     return parser
 
 
@@ -293,6 +326,77 @@ def _cmd_render(args) -> int:
             + (f"; preview {png}" if png else "")
         )
     return 0
+
+
+# --------------------------------------------------------------------------------------
+# subtrace compare
+# --------------------------------------------------------------------------------------
+
+
+def _cmd_compare(args) -> int:
+    """Compare two images; exit code by idiff's convention (see the subparser)."""
+    import json
+
+    from .compare import (EXIT_MISMATCH, EXIT_UNREADABLE, ImageMismatchError,
+                          UnreadableImageError, compare_images)
+    from .errors import SubtraceError
+
+    thresholds = _compare_thresholds(args)
+    png = None
+    if args.png:
+        if not args.diff:
+            raise SubtraceError("--png writes the heat map of --diff: give --diff OUT.exr too")
+        png = os.path.splitext(args.diff)[0] + ".png"
+    if args.diff:
+        from .io.exr import check_writable
+
+        check_writable(args.diff)
+        if png:
+            check_writable(png)
+    try:
+        result = compare_images(args.image_a, args.image_b, thresholds, flip=not args.no_flip)
+    except (UnreadableImageError, ImageMismatchError) as exc:
+        print(f"{PROG}: error: {_one_line(str(exc))}", file=sys.stderr)
+        return EXIT_UNREADABLE if isinstance(exc, UnreadableImageError) else EXIT_MISMATCH
+    if args.diff:
+        result.write_diff(args.diff, png_path=png)
+    if args.json:
+        report = {"a": args.image_a, "b": args.image_b, **result.as_dict()}
+        if args.diff:
+            report["diff"] = args.diff
+        print(json.dumps(report, indent=2))
+    else:
+        print(f"A: {args.image_a}\nB: {args.image_b}")
+        print(result.table())
+        if args.diff:
+            print(f"difference: {args.diff}" + (f", heat map: {png}" if png else ""))
+    return result.exit_code
+
+
+def _compare_thresholds(args) -> dict:
+    """--fail/--warn/... values as {group: {field: value}}; a bare value is the colour
+    group's. Raises SubtraceError naming the option for a bad group or number."""
+    from .compare import GROUPS
+    from .errors import SubtraceError
+
+    thresholds: dict = {}
+    for name in ("fail", "failpercent", "warn", "warnpercent", "hardfail"):
+        for text in getattr(args, name):
+            group, _, value = text.rpartition("=")
+            group = group.strip() or "colour"
+            if group not in GROUPS:
+                raise SubtraceError(
+                    f"--{name} {text}: unknown channel group {group!r}: use one of "
+                    f"{', '.join(GROUPS)}"
+                )
+            try:
+                number = float(value)
+            except ValueError:
+                number = float("nan")
+            if not number >= 0:  # also NaN
+                raise SubtraceError(f"--{name} {text}: expected a number >= 0, got {value!r}")
+            thresholds.setdefault(group, {})[name] = number
+    return thresholds
 
 
 def cage_report(cage, level: int | None = None) -> list[tuple[str, str]]:

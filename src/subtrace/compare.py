@@ -246,7 +246,8 @@ def compare_images(a, b, thresholds: dict | None = None, flip: bool = True) -> C
             err, mask = _finite_or_inf(np.maximum.reduce(d)), all_px
             mse = float(np.mean(np.square(np.nan_to_num(np.stack(d), nan=np.inf))))
             metrics["rmse"] = math.sqrt(mse)
-            metrics["psnr"] = math.inf if mse == 0 else 10.0 * math.log10(1.0 / mse)
+            metrics["psnr"] = (10.0 * math.log10(1.0 / mse) if 0 < mse < math.inf
+                               else math.inf if mse == 0 else -math.inf)
             metrics["max_abs"] = float(err.max())
             metrics["mean_flip"] = _mean_flip(ca, cb) if flip else None
         elif group == "coverage":
