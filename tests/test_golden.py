@@ -180,6 +180,32 @@ def test_missing_golden_names_the_command(tmp_path, monkeypatch):
     assert "missing" in message
 
 
+@needs_shared
+def test_failure_writes_render_reference_and_difference(tmp_path, monkeypatch):
+    """A golden that no longer matches (depth 1 % off) fails, naming the images it wrote."""
+    if not golden_path("creases").exists():
+        pytest.skip("golden image creases.exr missing")
+    channels, attrs = read_exr(golden_path("creases"))
+    channels["Z"] = channels["Z"] * np.float32(1.01)
+    monkeypatch.setattr(f"{__name__}.GOLDEN_DIR", tmp_path / "golden")
+    monkeypatch.setattr(f"{__name__}.FAILURE_DIR", tmp_path / "out")
+    (tmp_path / "golden").mkdir()
+    header = {k: v for k, v in attrs.items() if k.startswith("subtrace:")}
+    write_exr(tmp_path / "golden" / "creases.exr", channels, header)
+    with pytest.raises(pytest.fail.Exception) as info:
+        test_golden("creases", update_golden=False)
+    message = str(info.value)
+    assert "depth" in message and update_command("creases") in message
+    names = ("rendered.exr", "rendered.png", "reference.exr", "reference.png", "diff.exr",
+             "diff.png")
+    for name in names:
+        path = tmp_path / "out" / "creases" / name
+        assert path.stat().st_size > 0 and str(path) in message
+    diff, _ = read_exr(tmp_path / "out" / "creases" / "diff.exr")
+    covered = channels["A"] > 0
+    np.testing.assert_allclose(diff["depth_rel"][covered], 0.01, rtol=1e-3)
+
+
 # --------------------------------------------------------------------------------------
 # the goldens against an independent reference
 # --------------------------------------------------------------------------------------
