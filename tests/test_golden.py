@@ -23,7 +23,7 @@ import pytest
 
 import subtrace
 from subtrace.compare import DEFAULT_THRESHOLDS, FAIL, GROUPS, compare_images
-from subtrace.io.exr import read_exr, write_exr, write_png
+from subtrace.io.exr import HALF_CHANNELS, read_exr, write_exr, write_png
 from subtrace.io.scene import apply_overrides, load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -100,6 +100,21 @@ def golden_attributes(result, scene, name: str) -> dict:
     return attrs
 
 
+def same_golden(path: Path, channels: dict, attrs: dict) -> bool:
+    """True when the golden at ``path`` has exactly these pixels and subtrace header values
+    (then it is not rewritten: OpenImageIO would stamp a new DateTime into the file)."""
+    old_channels, old_attrs = read_exr(path)
+    if list(old_channels) != list(channels):
+        return False
+    for c, new in channels.items():  # as stored: half or float32
+        stored = np.asarray(new, np.float16 if c in HALF_CHANNELS else np.float32)
+        if not np.array_equal(old_channels[c], stored.astype(np.float32), equal_nan=True):
+            return False
+    ours = {k: v for k, v in attrs.items() if k.startswith("subtrace:")}
+    return all(old_attrs.get(k) == pytest.approx(v) if isinstance(v, float)
+               else old_attrs.get(k) == v for k, v in ours.items())
+
+
 def write_failure(name: str, rendered: dict, comparison) -> list[Path]:
     """Write the render, the golden and their difference (EXR + PNG) for a failed scene."""
     folder = FAILURE_DIR / name
@@ -123,8 +138,12 @@ def test_golden(name, update_golden):
     path = golden_path(name)
     if update_golden:
         channels, result = render_channels(scene)
+        attrs = golden_attributes(result, scene, name)
+        if path.exists() and same_golden(path, channels, attrs):
+            print(f"{_rel(path)} unchanged")
+            return
         path.parent.mkdir(exist_ok=True)
-        write_exr(path, channels, golden_attributes(result, scene, name))
+        write_exr(path, channels, attrs)
         print(f"wrote {_rel(path)}")
         return
     if not path.exists():
@@ -178,6 +197,24 @@ def test_missing_golden_names_the_command(tmp_path, monkeypatch):
     message = str(info.value)
     assert update_command("creases") in message
     assert "missing" in message
+
+
+@needs_shared
+def test_update_golden_writes_and_keeps_unchanged_files(tmp_path, monkeypatch):
+    """--update-golden creates a missing golden that then passes, leaves an equal one
+    untouched (same bytes: no new DateTime) and rewrites one whose pixels differ."""
+    monkeypatch.setattr(f"{__name__}.GOLDEN_DIR", tmp_path)
+    path = tmp_path / "creases.exr"
+    test_golden("creases", update_golden=True)
+    first = path.read_bytes()
+    test_golden("creases", update_golden=False)
+    test_golden("creases", update_golden=True)
+    assert path.read_bytes() == first
+    channels, attrs = read_exr(path)
+    changed = dict(channels, Z=channels["Z"] * np.float32(2))
+    write_exr(path, changed, {k: v for k, v in attrs.items() if k.startswith("subtrace:")})
+    test_golden("creases", update_golden=True)
+    np.testing.assert_array_equal(read_exr(path)[0]["Z"], channels["Z"])
 
 
 @needs_shared
