@@ -1,24 +1,25 @@
-# subtrace.compare: compare two renders channel group by channel group, with thresholds in
-# the style of OpenImageIO's `idiff`, and draw their differences.
-#
-# Groups, their channels and the per-pixel error each is judged by:
-#   colour    R,G,B                     max over R,G,B of |a - b| (linear values); reported:
-#                                       RMSE, PSNR (peak 1), max abs, mean FLIP (LDR FLIP of
-#                                       OpenImageIO on RGB clipped to [0,1]; None without it)
-#   coverage  A                         1 where exactly one image has the surface (A > 0)
-#   depth     Z                         |Za - Zb| / min(Za, Zb), where both have the surface
-#   normals   N.X,N.Y,N.Z               angle between the normals in degrees, where both have
-#                                       the surface
-#   ids       level,patch_id,object_id  1 where any id differs, where both have the surface
-# Colour and coverage are judged over all pixels, the others over the pixels covered in both
-# (coverage differences are counted once, by coverage). A group is compared when both images
-# have all of its channels; one image having a group that the other lacks is a mismatch.
-#
-# Verdict of a group (idiff's rule, per group): n_fail pixels have error > fail, n_warn have
-# error > warn; FAIL when n_fail > failpercent % of the group's pixels or the largest error
-# > hardfail; else WARN when n_warn > warnpercent % of them; else PASS. The image's verdict
-# is the worst group's. Exit codes (idiff's): 0 pass, 1 warn, 2 fail, 3 size or channel
-# mismatch, 4 a file that cannot be read.
+"""Compare two renders channel group by channel group, with thresholds in
+the style of OpenImageIO's `idiff`, and draw their differences.
+
+Groups, their channels and the per-pixel error each is judged by:
+  colour    R,G,B                     max over R,G,B of |a - b| (linear values); reported:
+                                      RMSE, PSNR (peak 1), max abs, mean FLIP (LDR FLIP of
+                                      OpenImageIO on RGB clipped to [0,1]; None without it)
+  coverage  A                         1 where exactly one image has the surface (A > 0)
+  depth     Z                         |Za - Zb| / min(Za, Zb), where both have the surface
+  normals   N.X,N.Y,N.Z               angle between the normals in degrees, where both have
+                                      the surface
+  ids       level,patch_id,object_id  1 where any id differs, where both have the surface
+Colour and coverage are judged over all pixels, the others over the pixels covered in both
+(coverage differences are counted once, by coverage). A group is compared when both images
+have all of its channels; one image having a group that the other lacks is a mismatch.
+
+Verdict of a group (idiff's rule, per group): n_fail pixels have error > fail, n_warn have
+error > warn; FAIL when n_fail > failpercent % of the group's pixels or the largest error
+> hardfail; else WARN when n_warn > warnpercent % of them; else PASS. The image's verdict
+is the worst group's. Exit codes (idiff's): 0 pass, 1 warn, 2 fail, 3 size or channel
+mismatch, 4 a file that cannot be read.
+"""
 
 from __future__ import annotations
 
