@@ -1,4 +1,4 @@
-"""Ray kernels: slab test, watertight ray / triangle test, BVH and patch-grid traversal.
+"""Ray kernels: the rounds of primary rays through the patch shells, and patch-grid traversal.
 
 One ray per pixel from a pinhole camera ``frame`` = [eye, dx, dy, p00] (see
 ``trace.camera.camera_frame``); ``t`` is the distance from the eye along the unit direction.
@@ -10,12 +10,14 @@ at ``(4^l - 1) / 3``, node ``i``'s children are ``4i .. 4i+3`` of level ``l+1`` 
 1-to-4 segmentation of the patch grid), the leaves at level ``depth`` are the micro-faces
 whose grid corners are ``lc_data[lc_off[depth, quad] + i]`` (a triangle's 4th is -1).
 
-A round (:func:`trace_round`) traverses the BVH of patch shells for each active ray:
-built patches are intersected (only those built since the ray's previous round: older ones
-were tested then), and the nearest *unbuilt* patch whose shell the ray enters before its
-best hit so far is recorded as the ray's request; the driver builds the requested patches
-and runs another round for the rays that asked. This is the refinement criterion: a patch
-is refined only when a ray reaches its shell before any closer hit.
+A round (:func:`trace_round`) takes each active ray through the patch shells it enters,
+from its image tile's list (``accel/projection.py``, nearest box first) or the BVH of the
+shells: built patches are intersected (only those built since the ray's previous round:
+older ones were tested then), and the nearest *unbuilt* patch whose shell the ray enters
+before its best hit so far is recorded as the ray's request; the driver builds the requested
+patches and runs another round for the rays that asked, each going through just the unbuilt
+shells it remembers. This is the refinement criterion: a patch is refined only when a ray
+reaches its shell before any closer hit.
 """
 
 from __future__ import annotations
