@@ -1,5 +1,5 @@
 """The ``subtrace`` command line: ``subtrace info [CAGE.obj] [--scheme S] [--level N]``,
-``subtrace render ...`` and ``subtrace compare A.exr B.exr ...``.
+``subtrace render ...``, ``subtrace compare A.exr B.exr ...`` and ``subtrace sweep ...``.
 
 Owns argument parsing, the text report and the error policy (design invariant 7): every
 :class:`subtrace.errors.SubtraceError` becomes one line ``subtrace: error: <message>`` on
@@ -87,12 +87,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="one TOML scene, or one or more OBJ cages")
     render.add_argument("-o", "--output", metavar="OUT.exr",
                         help="output EXR (default: the scene's output, else render.exr)")
-    render.add_argument("--width", metavar="W", help="image width in pixels")
-    render.add_argument("--height", metavar="H", help="image height in pixels")
-    render.add_argument("--fov", metavar="DEG", help="vertical field of view in degrees")
-    render.add_argument("--eye", nargs=3, metavar=("X", "Y", "Z"), help="camera position")
-    render.add_argument("--target", nargs=3, metavar=("X", "Y", "Z"), help="point looked at")
-    render.add_argument("--up", nargs=3, metavar=("X", "Y", "Z"), help="camera up vector")
+    _add_camera_options(render)
     tol = render.add_mutually_exclusive_group()
     tol.add_argument("--tolerance", metavar="PIXELS",
                      help="angular tolerance in pixels at the image centre (default 1)")
@@ -137,7 +132,77 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--no-flip", action="store_true",
                          help="skip the FLIP metric (the slowest one on large images)")
     compare.set_defaults(func=_cmd_compare)
+
+    sweep = sub.add_parser(
+        "sweep",
+        help="render scenes at several angular tolerances: time, memory, refinement, error",
+        description=(
+            "Render each scene at each angular tolerance (pixels) and at a much finer "
+            "reference tolerance, and measure what each costs (total / refine / trace time, "
+            "the median of --repeat renders; peak memory; patches refined, micro-triangles, "
+            "deepest level) and its error against the reference (depth in world units and "
+            "pixel footprints, normal angle, coverage mismatches, colour RMSE, mean FLIP). "
+            "Prints a table and writes DIR/sweep.csv, DIR/sweep.json, log-log plots and, per "
+            "scene, DIR/<scene>/tol_<T>.exr, tol_<T>_levels.png (refinement-level heat map) "
+            "and reference.exr. Each SCENE is a TOML scene or one OBJ cage; without SCENE the "
+            "built-in default scene is swept."
+        ),
+    )
+    sweep.add_argument("inputs", nargs="*", metavar="SCENE",
+                       help="TOML scenes or OBJ cages, one scene each")
+    sweep.add_argument("--tolerances", nargs="+", required=True, metavar="T",
+                       help="angular tolerances in pixels at the image centre, e.g. 8 4 2 1")
+    sweep.add_argument("--reference-tolerance", metavar="T",
+                       help="tolerance of the reference render in pixels (default: the "
+                            "finest of --tolerances / 4)")
+    sweep.add_argument("--repeat", default="1", metavar="N",
+                       help="renders per tolerance; times are their medians (default 1)")
+    sweep.add_argument("-o", "--output", required=True, metavar="DIR",
+                       help="folder for the table, images and plots (created if missing)")
+    _add_camera_options(sweep)
+    sweep.add_argument("--scheme", metavar="S", help="catmark or loop, for every object")
+    sweep.add_argument("--threads", type=_level_arg, metavar="N",
+                       help="worker threads (default: all cores)")
+    sweep.add_argument("--accel", choices=("projection", "bvh"), default=None,
+                       help="how rays find the patch shells they enter (as for render)")
+    sweep.add_argument("--quiet", action="store_true",
+                       help="print nothing on success (no table, no progress bar)")
+    sweep.set_defaults(func=_cmd_sweep)
     return parser
+
+
+def _add_camera_options(parser) -> None:
+    """The camera and resolution flags shared by ``render`` and ``sweep``."""
+    parser.add_argument("--width", metavar="W", help="image width in pixels")
+    parser.add_argument("--height", metavar="H", help="image height in pixels")
+    parser.add_argument("--fov", metavar="DEG", help="vertical field of view in degrees")
+    parser.add_argument("--eye", nargs=3, metavar=("X", "Y", "Z"), help="camera position")
+    parser.add_argument("--target", nargs=3, metavar=("X", "Y", "Z"), help="point looked at")
+    parser.add_argument("--up", nargs=3, metavar=("X", "Y", "Z"), help="camera up vector")
+
+
+def _scene_from_inputs(inputs, args, **overrides):
+    """The scene of ``inputs`` (one TOML scene, or OBJ cages; none: the built-in default
+    scene) with the camera / resolution / scheme flags of ``args`` and ``overrides``
+    (further :func:`subtrace.io.scene.apply_overrides` keywords) applied."""
+    from .errors import SceneError
+    from .io.scene import apply_overrides, load_scene, scene_for_meshes
+
+    if not inputs:
+        from .data import default_scene_path
+
+        scene = load_scene(default_scene_path())
+    elif len(inputs) == 1 and inputs[0].lower().endswith(".toml"):
+        scene = load_scene(inputs[0])
+    elif all(not p.lower().endswith(".toml") for p in inputs):
+        scene = scene_for_meshes(inputs, scheme=args.scheme)
+    else:
+        raise SceneError("give one TOML scene, or OBJ cages, not both")
+    vec = lambda v: None if v is None else " ".join(v)  # noqa: E731
+    return apply_overrides(
+        scene, width=args.width, height=args.height, fov=args.fov, eye=vec(args.eye),
+        target=vec(args.target), up=vec(args.up), scheme=args.scheme, **overrides,
+    )
 
 
 def run(argv=None):
@@ -274,29 +339,12 @@ def _cmd_info(args) -> int:
 
 
 def _cmd_render(args) -> int:
-    from .errors import SceneError
-    from .io.scene import apply_overrides, load_scene, scene_for_meshes
-
     inputs = list(args.inputs)
-    if not inputs:
-        from .data import default_scene_path
-
-        scene = load_scene(default_scene_path())
-        # the default scene lives in the package: write into the working directory
-        if args.output is None:
-            args.output = "render.exr"
-    elif len(inputs) == 1 and inputs[0].lower().endswith(".toml"):
-        scene = load_scene(inputs[0])
-    elif all(not p.lower().endswith(".toml") for p in inputs):
-        scene = scene_for_meshes(inputs, scheme=args.scheme)
-    else:
-        raise SceneError("give one TOML scene, or OBJ cages, not both")
-    vec = lambda v: None if v is None else " ".join(v)  # noqa: E731
-    scene = apply_overrides(
-        scene, width=args.width, height=args.height, fov=args.fov, eye=vec(args.eye),
-        target=vec(args.target), up=vec(args.up), tolerance=args.tolerance,
-        tolerance_deg=args.tolerance_deg, scheme=args.scheme, output=args.output,
-    )
+    # the default scene lives in the package: write into the working directory
+    if not inputs and args.output is None:
+        args.output = "render.exr"
+    scene = _scene_from_inputs(inputs, args, tolerance=args.tolerance,
+                               tolerance_deg=args.tolerance_deg, output=args.output)
     out = scene.output or "render.exr"
     png = os.path.splitext(out)[0] + ".png" if args.png else scene.preview
     from .io.exr import check_writable, write_exr
@@ -325,6 +373,34 @@ def _cmd_render(args) -> int:
             f"shade {st.time_shade:.3f}, write {time.perf_counter() - t0:.3f})"
             + (f"; preview {png}" if png else "")
         )
+    return 0
+
+
+# --------------------------------------------------------------------------------------
+# subtrace sweep
+# --------------------------------------------------------------------------------------
+
+
+def _cmd_sweep(args) -> int:
+    """Sweep the tolerances (:func:`subtrace.sweep.sweep`); the table on stdout, a progress
+    bar on stderr when it is a terminal."""
+    from .sweep import (ProgressBar, check_reference, check_repeat, check_tolerances,
+                        format_table, sweep)
+
+    tols = check_tolerances(args.tolerances, key="--tolerances")
+    reference = check_reference(args.reference_tolerance, tols, key="--reference-tolerance")
+    repeat = check_repeat(args.repeat, key="--repeat")
+    scenes = [_scene_from_inputs([path], args) for path in args.inputs] or [
+        _scene_from_inputs([], args)]
+    progress = ProgressBar() if sys.stderr.isatty() and not args.quiet else None
+    _start_numba(args)
+    records = sweep(scenes, tols, reference_tolerance=reference, repeat=repeat,
+                    output_dir=args.output, threads=args.threads, accel=args.accel,
+                    progress=progress)
+    if not args.quiet:
+        print(format_table(records))
+        print(f"wrote {os.path.join(args.output, 'sweep.csv')}, sweep.json, plots and images "
+              f"in {args.output}")
     return 0
 
 
