@@ -2,7 +2,8 @@
 
 Public API: :func:`load_cage`, :func:`make_cage`, :class:`Cage`, :class:`Mesh`,
 :func:`compare_images` (from :mod:`subtrace.compare`, imported on first use: it loads
-OpenImageIO) and the error types in :mod:`subtrace.errors`.
+OpenImageIO), ``sweep(...)`` (:mod:`subtrace.sweep`, imported on first use, callable as
+:func:`subtrace.sweep.sweep`) and the error types in :mod:`subtrace.errors`.
 """
 
 from __future__ import annotations
@@ -60,6 +61,12 @@ def __getattr__(name):
         from .compare import compare_images
 
         return compare_images
+    if name == "sweep":
+        # the module subtrace.sweep, which is callable as its function sweep(): once imported
+        # a submodule is its package's attribute, so the name can only mean the module
+        import importlib
+
+        return importlib.import_module(".sweep", __name__)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
@@ -69,6 +76,7 @@ __all__ = [
     "load_cage",
     "make_cage",
     "compare_images",
+    "sweep",
     "SubtraceError",
     "ObjError",
     "TopologyError",

@@ -26,6 +26,9 @@ Measurements (the columns are :data:`COLUMNS`, documented in the README):
           mean FLIP (:func:`subtrace.compare.compare_images`).
 Tolerances are in pixels at the image centre (``--tolerance``); the reference tolerance
 defaults to a quarter of the finest swept one.
+
+``subtrace.sweep`` is this module (a package's submodule is its attribute once imported), so
+the module is callable: ``subtrace.sweep(...)`` is ``subtrace.sweep.sweep(...)``.
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ import math
 import os
 import statistics
 import sys
+import types
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -564,3 +568,13 @@ class ProgressBar:
 
 __all__ = ["sweep", "SweepRecord", "COLUMNS", "PLOTS", "LEVEL_COLOURS", "ProgressBar",
            "format_table", "level_image", "image_errors", "check_tolerances"]
+
+
+class _CallableModule(types.ModuleType):
+    """This module's type: calling the module calls :func:`sweep` (module comment)."""
+
+    def __call__(self, *args, **kwargs):
+        return sweep(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _CallableModule
