@@ -319,6 +319,38 @@ def test_render_cli_accel_chooses_the_traversal(tmp_path, capsys):
     assert not (tmp_path / "x.exr").exists()
 
 
+@needs_shared
+def test_render_reports_progress_up_to_every_ray():
+    """``render_scene(progress=...)`` is told the rays whose hits are final, never fewer than
+    before, ending at all of them; a ProgressBar draws that on one line."""
+    import io
+
+    from subtrace.progress import ProgressBar
+
+    calls = []
+    scene = _scene([MODELS / "spot_control_mesh.obj"], (1.2, 0.6, 2.2), (0.0, 0.3, 0.0),
+                   width=48, height=36)
+    render_scene(scene, progress=lambda d, t, label: calls.append((d, t, label)))
+    done = [d for d, _, _ in calls]
+    assert len(calls) >= 3 and all(t == 48 * 36 for _, t, _ in calls)
+    assert done[0] == 0 and done[-1] == 48 * 36 and np.all(np.diff(done) >= 0)
+    out = io.StringIO()
+    bar = ProgressBar(out)
+    for d, t, label in calls:
+        bar(d, t, label)
+    text = out.getvalue()
+    assert text.count("\n") == 1 and text.endswith("\n") and "round" in text
+
+
+def test_render_cli_shows_no_progress_bar_off_a_terminal(tmp_path, capsys):
+    from subtrace.cli import main
+
+    assert main(["render", "-o", str(tmp_path / "x.exr"), "--width", "16", "--height",
+                 "12"]) == 0
+    err = capsys.readouterr().err
+    assert "\r[" not in err and "#" not in err
+
+
 def test_render_cli_bad_output_folder(tmp_path, capsys):
     from subtrace.cli import main
 

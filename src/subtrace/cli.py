@@ -355,7 +355,10 @@ def _cmd_render(args) -> int:
     from .render import render_scene, result_attributes
 
     _start_numba(args)
-    result = render_scene(scene, threads=args.threads, accel=args.accel)
+    from .progress import ProgressBar
+
+    progress = ProgressBar() if sys.stderr.isatty() and not args.quiet else None
+    result = render_scene(scene, threads=args.threads, accel=args.accel, progress=progress)
     import time
 
     t0 = time.perf_counter()
@@ -384,7 +387,8 @@ def _cmd_render(args) -> int:
 def _cmd_sweep(args) -> int:
     """Sweep the tolerances (:func:`subtrace.sweep.sweep`); the table on stdout, a progress
     bar on stderr when it is a terminal."""
-    from .sweep import (ProgressBar, check_reference, check_repeat, check_tolerances,
+    from .progress import ProgressBar
+    from .sweep import (check_reference, check_repeat, check_tolerances,
                         format_table, sweep)
 
     tols = check_tolerances(args.tolerances, key="--tolerances")

@@ -409,13 +409,15 @@ class _Memos:
         stats.memo_full = self.full + int(sum(m[-1][M_FULL] for m in self.m))
 
 
-def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, accel=None):
+def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, accel=None,
+               progress=None):
     """Run the refinement rounds; returns (hits (H*W, 6), grid pools, isolated pieces, leaf
     tables, every patch refined). ``compiling``: the process compiling the trace kernels
     (``warmup.start``), waited for before the first round. ``accel``: how a ray finds the
     shells it enters, ``"projection"`` (the shells binned into image tiles,
     ``accel/projection.py``) or ``"bvh"`` (``accel/bvh.py``); default
-    ``config.PRIMARY_ACCEL``. Either structure is built here (preprocess time)."""
+    ``config.PRIMARY_ACCEL``. Either structure is built here (preprocess time).
+    ``progress(done, total, label)``: told after each round how many rays are final."""
     from . import tasks, warmup
     from .accel.projection import no_tiles, project_shells
     from .trace.camera import camera_frame
@@ -481,6 +483,8 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
         req = request[rays]
         asked = req >= 0
         rays = rays[asked]
+        if progress is not None:
+            progress(W * H - len(rays), W * H, f"round {round_no + 1}")
         if not len(rays):
             break
         t0 = time.perf_counter()
@@ -533,7 +537,9 @@ def _patch_colors(table, scene):
 
 def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> RenderResult:
     """Render a :class:`subtrace.io.scene.Scene`; returns the channels and statistics.
-    ``accel``: how rays find the shells they enter (see :func:`trace_hits`)."""
+    ``accel``: how rays find the shells they enter (see :func:`trace_hits`). ``progress``:
+    None, or called as ``progress(done, total, label)`` with the rays whose hits are final
+    out of all (e.g. :class:`subtrace.progress.ProgressBar`); it reaches done == total."""
     from . import tasks, warmup
     from .shade import shade_kernel
     from .trace.camera import camera_frame
@@ -573,8 +579,11 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
         stats.patches = table.n_patches
         stats.rays = camera.width * camera.height
         stats.time_preprocess = time.perf_counter() - t0
+        if progress is not None:
+            progress(0, stats.rays, "tracing")
         hits, pools, iso, tables, built = trace_hits(table, camera, tol_rad, stats,
-                                                     compiling=compiling, accel=accel)
+                                                     compiling=compiling, accel=accel,
+                                                     progress=progress)
     except BaseException:
         warmup.stop(compiling)
         raise

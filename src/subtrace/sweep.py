@@ -46,6 +46,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from .errors import SceneError, SubtraceError
+from .progress import ProgressBar
 
 # The plots written beside sweep.csv: file name -> what it shows (log-log, a line per scene).
 PLOTS = {
@@ -547,23 +548,6 @@ def format_table(records) -> str:
     lines = ["  ".join(x.rjust(w) if k else x.ljust(w) for k, (x, w) in
                        enumerate(zip(row, widths))) for row in (head, *rows)]
     return "\n".join(line.rstrip() for line in lines)
-
-
-class ProgressBar:
-    """A one-line progress bar on ``stream`` (default stderr), redrawn in place; the
-    ``progress`` argument of :func:`sweep`. Ends its line when done == total."""
-
-    WIDTH = 30
-
-    def __init__(self, stream=None):
-        self.stream = stream or sys.stderr
-
-    def __call__(self, done: int, total: int, label: str) -> None:
-        filled = self.WIDTH * done // max(total, 1)
-        bar = "#" * filled + "." * (self.WIDTH - filled)
-        end = "\n" if done >= total else ""
-        self.stream.write(f"\r[{bar}] {done}/{total} {label}\033[K{end}")
-        self.stream.flush()
 
 
 __all__ = ["sweep", "SweepRecord", "COLUMNS", "PLOTS", "LEVEL_COLOURS", "ProgressBar",
