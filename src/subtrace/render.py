@@ -37,8 +37,9 @@ class RenderStats:
     time_total: float = 0.0
     patches: int = 0
     patches_refined: int = 0
-    # built: 2 per cell kept by a thread or isolated, fans per ray (threads take bands as
-    # they are free, so with several threads the count may differ slightly between runs)
+    # built: 2 per cell a thread evaluated first (kept, or a fan counted once) or isolated
+    # (threads take bands as they are free, so with several threads the count may differ
+    # slightly between runs)
     micro_triangles: int = 0
     grid_points: int = 0
     pieces: int = 0  # regular sub-patches and cells of the isolated irregular patches

@@ -410,6 +410,7 @@ def _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, src, s, lev0, ci0, 
 
 M_NODES, M_NETS, M_CELLS, M_FULL = range(4)
 NOT_YET, FAN = -1, -2
+COUNTED = -3  # an item root: a one-cell piece (evaluated per ray) whose triangles counted
 
 
 @leaf_njit
@@ -482,8 +483,9 @@ def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, ki
                     i0, j0, lo, hi, rest_lo, rest_hi, nets, cells, mem, slack, hit, scratch):
     """Closest hit on the pieces of Catmull-Clark patch ``p`` (slot ``s``; the arrays of
     ``kernels.trace_round``'s ``iso``) nearer than hit[H_T]; updates ``hit``. Returns the
-    number of micro-triangles built: the cells this ray stored in the memo ``mem`` and the
-    cells it evaluated on the spot (fans). ``ray`` = (ox, oy, oz, ix, iy, iz, kx, ky, kz,
+    number of micro-triangles built: the cells this ray was the first of its thread to
+    evaluate (stored in the memo ``mem``, or fans and one-cell pieces, evaluated on the spot
+    by every ray but counted once), and any it split on the spot when the memo was full. ``ray`` = (ox, oy, oz, ix, iy, iz, kx, ky, kz,
     sx, sy, sz, dx, dy, dz): origin, inverse direction, shear constants and direction.
 
     A Bezier piece (item ``it``; a regular patch is one) is refined to its own grid depth
@@ -526,10 +528,13 @@ def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, ki
                 if pd > 0:
                     cnt[M_FULL] = 1
                 zero = np.int64(0)  # (literal arguments would compile another _descend)
-                tested += _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, nets, nk,
-                                   zero, zero, zero, nets, nk, pd, oi, oj, depth, item_side, it,
-                                   slack, hit, code, it, work, st, st_t, zero, tmp_t, order, lv,
-                                   lp)
+                n_t = _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, nets, nk, zero,
+                               zero, zero, nets, nk, pd, oi, oj, depth, item_side, it, slack,
+                               hit, code, it, work, st, st_t, zero, tmp_t, order, lv, lp)
+                if pd > 0 or node == NOT_YET:  # a one-cell piece counts once per thread
+                    tested += n_t
+                    if pd == 0:
+                        root_m[it] = COUNTED
                 continue
             lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(nets, nk)
             node = _new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2,
@@ -546,7 +551,8 @@ def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, ki
             node, parent, ci, cj, lev = st[sp, 0], st[sp, 1], st[sp, 2], st[sp, 3], st[sp, 4]
             if lev == pd:
                 r = data[node]
-                if r == NOT_YET:
+                first = r == NOT_YET
+                if first:
                     if _fan_samples(ci, cj, pd, depth, item_side, it):
                         r = data[node] = FAN
                     elif cnt[M_CELLS] < len(m_cells) // 4:
@@ -555,9 +561,11 @@ def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, ki
                     else:
                         cnt[M_FULL] = 1
                         r = FAN
-                if r < 0:  # evaluated on the spot
-                    tested += _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, ci, cj, pd,
-                                    oi, oj, depth, item_side, it, slack, hit, code, it, lv, lp)
+                if r < 0:  # evaluated on the spot (a fan's triangles count once per thread)
+                    n_t = _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, ci, cj, pd, oi, oj,
+                                depth, item_side, it, slack, hit, code, it, lv, lp)
+                    if first:
+                        tested += n_t
                 else:
                     _corner_params(lp, oi + ci, oj + cj, inv)
                     tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, m_cells, 4 * r, lp, slack, hit,
