@@ -667,3 +667,21 @@ def test_regular_patches_appended_directly_equal_the_general_append():
     assert np.array_equal(a.patch_iso, b.patch_iso)
     for name in a.a:
         assert np.array_equal(a.a[name], b.a[name]), name
+
+
+@needs_shared
+def test_catmark_micro_triangles_grow_with_the_tolerance_until_the_pixels_bound_them():
+    """Coarse tolerances: each halving multiplies the micro-triangles built by 1.5-4.5 (cells
+    a quarter the area, 4x, where whole cells are met; less where a ray meets only part of
+    a cell), and fans count once, not once per ray. Fine tolerances: cells are below a
+    pixel, each ray builds the few it meets, and the count stops growing."""
+    counts = {}
+    for tol in (16.0, 8.0, 4.0, 1.0, 0.5):
+        scene = _scene([MODELS / "spot_control_mesh.obj"], (1.2, 0.6, 2.2), (0.0, 0.3, 0.0),
+                       width=160, height=120, tolerance=tol)
+        st = render_scene(scene).stats
+        counts[tol] = st.micro_triangles
+        assert st.micro_triangles <= 8 * st.pixels_covered
+    for coarse, fine in ((16.0, 8.0), (8.0, 4.0)):
+        assert 1.5 <= counts[fine] / counts[coarse] <= 4.5, counts
+    assert counts[0.5] <= 1.3 * counts[1.0], counts
