@@ -1,0 +1,344 @@
+"""Every intersection of many lines with a Catmull-Clark limit surface, to a given precision.
+
+The method of the "Chinese paper" (docs/seeds.md section 1: patch grids, multi-level 1-to-4
+segmentation with AABBs of index ranges), with the patch grid replaced by the exact Bezier
+net of each patch: a sub-patch is a de Casteljau sub-net made on a stack while a line
+descends, so nothing is stored per level and memory does not grow with the precision.
+
+* Items (:mod:`subtrace.trace.lines`): the regular patches' Bezier nets; irregular patches
+  (an extraordinary vertex, a crease, a boundary) whose shell some line meets are isolated
+  (:func:`subtrace.patches.isolate.build_isolated`) into regular Bezier pieces down to the
+  depth where the cells left at the feature are no larger than ``precision / 2`` (their
+  control-edge length bound, with ``IRREGULAR_MARGIN``); those cells are bilinear quads of
+  exact limit points. Only lines' candidates are kept, never a refined mesh.
+* Depth is set per sub-net by its flatness bound (``tol_flat = precision / 2``, see
+  :mod:`subtrace.trace.lines`); hits are found by Newton on the exact net from the flat
+  leaf's triangles (a point within rounding of the surface), or kept from the triangle
+  (within ``tol_flat``) where Newton fails.
+* Hits found from several leaves or patches (shared sides and corners) are merged; a line
+  that passes within ``precision`` of the surface without crossing it (tangent) gives one hit
+  with ``tangent`` True at its closest approach; one that enters and leaves within
+  ``precision`` gives one tangent hit; one lying in a flat region gives one tangent hit per
+  contact run (the closest point found; every point of the run is as good).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import SubtraceError
+
+# Lines per kernel call: bounds the candidate buffer (CHUNK x cap x 8 doubles).
+CHUNK = 4096
+# Candidate rows per line at first; lines with more are run again with room for all.
+CAP = 16
+# The isolation of irregular patches stops when IRREGULAR_MARGIN x (the cells' control-edge
+# bound) is at most precision / 2 (as patches/isolate.py, that bound is measured, not proven,
+# at extraordinary vertices); deepest isolation level:
+IRREGULAR_MARGIN = 1.25
+MAX_ISOLATION = 40
+MODES = ("all", "first")
+
+
+@dataclass(frozen=True, eq=False)
+class Hits:
+    """Intersections, one entry per hit, sorted by line then ``t``.
+
+    ``line`` (k,) int64, ``t`` (k,), ``point`` (k,3) (``origin + t * direction``), ``ptex``
+    (k,) int32 and ``uv`` (k,2) (``cage.evaluate(ptex, uv)`` is within ``precision`` of
+    ``point``), ``normal`` (k,3) unit limit normal (ptex orientation), ``tangent`` (k,) bool.
+    ``stats``: items (patches and isolated pieces), items entered and leaves reached per line.
+    """
+
+    line: np.ndarray
+    t: np.ndarray
+    point: np.ndarray
+    ptex: np.ndarray
+    uv: np.ndarray
+    normal: np.ndarray
+    tangent: np.ndarray
+    n_lines: int
+    precision: float
+    stats: dict
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def of_line(self, i: int) -> np.ndarray:
+        """Indices of line ``i``'s hits."""
+        a, b = np.searchsorted(self.line, [i, i + 1])
+        return np.arange(a, b)
+
+
+def _as_lines(a, name):
+    try:
+        arr = np.asarray(a, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise SubtraceError(f"{name}: expected numbers, (n,3): {exc}") from None
+    if arr.ndim == 1 and arr.shape[0] == 3:
+        arr = arr[None]
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise SubtraceError(f"{name}: expected an array of shape (n,3), got {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise SubtraceError(f"{name}: every component must be finite")
+    return np.ascontiguousarray(arr)
+
+
+class _Items:
+    """The Bezier items of a cage for one precision (built lazily, per line batch)."""
+
+    def __init__(self, cage, precision):
+        from .patches.table import build_patch_table
+
+        self.cage = cage
+        self.table = build_patch_table([cage])
+        tb = self.table
+        reg = np.nonzero(tb.regular)[0]
+        self.nets = [tb.nets]
+        self.exact = [np.ones(len(reg), bool)]
+        self.ptex = [tb.ptex[reg]]
+        self.uv0 = [tb.ptex_uv0[reg]]
+        self.scale = [tb.ptex_scale[reg]]
+        self.irregular = np.nonzero(~tb.regular)[0]
+        self.built = np.zeros(len(self.irregular), bool)
+        self.precision = precision
+        self._finish()
+
+    def _finish(self):
+        self.all_nets = np.ascontiguousarray(np.concatenate(self.nets)) if self.nets else \
+            np.zeros((0, 4, 4, 3))
+        self.all_exact = np.concatenate(self.exact)
+        self.all_ptex = np.concatenate(self.ptex).astype(np.int32)
+        self.all_uv0 = np.concatenate(self.uv0)
+        self.all_scale = np.concatenate(self.scale)
+        from .accel.bvh import build_bvh
+
+        n = len(self.all_nets)
+        flat = self.all_nets.reshape(n, 16, 3)
+        self.item_min = np.ascontiguousarray(flat.min(axis=1)) if n else np.zeros((0, 3))
+        self.item_max = np.ascontiguousarray(flat.max(axis=1)) if n else np.zeros((0, 3))
+        # cells are bilinear stand-ins: their boxes grow by the cell bound, within which the
+        # true surface lies
+        cell = ~self.all_exact
+        self.item_min[cell] -= 0.5 * self.precision
+        self.item_max[cell] += 0.5 * self.precision
+        self.bvh = build_bvh(self.item_min, self.item_max) if n else None
+
+    def need(self, org, dirs, t_lo, t_hi, pad):
+        """Isolate the irregular patches whose shells these lines meet (once each)."""
+        todo = ~self.built
+        if not todo.any():
+            return
+        rows = self.irregular[todo]
+        lo = self.table.shell_min[rows] - pad
+        hi = self.table.shell_max[rows] + pad
+        hit = np.zeros(len(rows), bool)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / dirs
+            for a in range(0, len(org), 256):
+                o = org[a:a + 256, None, :]
+                iv = inv[a:a + 256, None, :]
+                t0 = (lo[None] - o) * iv
+                t1 = (hi[None] - o) * iv
+                tn = np.nanmax(np.minimum(t0, t1), axis=2)
+                tf = np.nanmin(np.maximum(t0, t1), axis=2)
+                ok = np.maximum(tn, t_lo) <= np.minimum(tf, t_hi)
+                hit |= ok.any(axis=0)
+        sel = np.nonzero(todo)[0][hit]
+        if not len(sel):
+            return
+        self.built[sel] = True
+        self._isolate(self.irregular[sel])
+        self._finish()
+
+    def _isolate(self, rows):
+        from .patches.isolate import build_isolated
+
+        tb = self.table
+        obj = tb.objects[0]
+        bound = IRREGULAR_MARGIN * tb.edge_bound[rows]
+        allowed = 0.5 * self.precision
+        with np.errstate(divide="ignore", invalid="ignore"):
+            d = np.ceil(np.log(allowed / bound) / np.log(tb.rate[rows]) - 1e-9)
+        d = np.where(bound <= allowed, 0, d)
+        d = np.clip(np.where(np.isfinite(d), d, MAX_ISOLATION), 0, MAX_ISOLATION).astype(np.int64)
+        (root, level, i0, j0, bez, _), (croot, ci, cj, cpts, _) = build_isolated(
+            obj, tb.face[rows], d)
+        # pieces: the patch parameters (i0 + s, j0 + t) / 2^level
+        if len(root):
+            p = rows[root]
+            sc = 0.5 ** level.astype(np.float64)
+            self.nets.append(bez)
+            self.exact.append(np.ones(len(root), bool))
+            self.ptex.append(tb.ptex[p])
+            self.uv0.append(tb.ptex_uv0[p] + tb.ptex_scale[p, None] * np.stack(
+                [i0 * sc, j0 * sc], axis=1))
+            self.scale.append(tb.ptex_scale[p] * sc)
+        if len(croot):
+            p = rows[croot]
+            sc = 0.5 ** d[croot].astype(np.float64)
+            # a cell's corners (0,0) (1,0) (1,1) (0,1) as a degree-elevated bilinear net
+            g = np.arange(4) / 3.0
+            s, t = g[:, None, None], g[None, :, None]
+            c = cpts[:, None, None]  # (c,1,1,4,3)
+            net = ((1 - s) * (1 - t) * c[..., 0, :] + s * (1 - t) * c[..., 1, :]
+                   + s * t * c[..., 2, :] + (1 - s) * t * c[..., 3, :])
+            self.nets.append(np.ascontiguousarray(net))
+            self.exact.append(np.zeros(len(croot), bool))
+            self.ptex.append(tb.ptex[p])
+            self.uv0.append(tb.ptex_uv0[p] + tb.ptex_scale[p, None] * np.stack(
+                [ci * sc, cj * sc], axis=1))
+            self.scale.append(tb.ptex_scale[p] * sc)
+
+
+def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf),
+                    mode="all", threads=None) -> Hits:
+    """Every intersection of the lines ``origins + t * directions`` (t in ``t_range``) with
+    the limit surface of Catmull-Clark ``cage``, to ``precision`` (model units): each
+    ``point`` lies within ``precision`` of the surface and of ``cage.evaluate(ptex, uv)``.
+    ``mode="first"`` keeps each line's nearest hit. ``threads``: worker threads (default all
+    cores). See the module doc for tangent lines and flat regions. Returns :class:`Hits`."""
+    from .tasks import run_tasks, set_threads, thread_count
+    from .trace.lines import N_FIELDS, lines_task, merge_candidates
+
+    if getattr(cage, "scheme", None) != "catmark":
+        raise SubtraceError(
+            "intersect_lines: only Catmull-Clark cages are supported (Loop is not yet); "
+            "load the cage with scheme='catmark'")
+    org = _as_lines(origins, "origins")
+    dirs = _as_lines(directions, "directions")
+    if len(org) != len(dirs):
+        raise SubtraceError(f"origins and directions differ in length: {len(org)} vs {len(dirs)}")
+    if (np.abs(dirs).sum(axis=1) == 0).any():
+        raise SubtraceError("directions: every direction must be non-zero")
+    try:
+        precision = float(precision)
+    except (TypeError, ValueError):
+        raise SubtraceError(f"precision: expected a number > 0, got {precision!r}") from None
+    if not (precision > 0 and math.isfinite(precision)):
+        raise SubtraceError(f"precision: expected a finite number > 0, got {precision!r}")
+    try:
+        t_lo, t_hi = (float(x) for x in t_range)
+    except (TypeError, ValueError):
+        raise SubtraceError(f"t_range: expected (t_min, t_max), got {t_range!r}") from None
+    if not t_lo < t_hi or math.isnan(t_lo) or math.isnan(t_hi):
+        raise SubtraceError(f"t_range: expected t_min < t_max, got {t_range!r}")
+    if mode not in MODES:
+        raise SubtraceError(f"mode: expected one of {', '.join(MODES)}, got {mode!r}")
+
+    items = _Items(cage, precision)
+    tol_flat = 0.5 * precision
+    touch_tol = precision
+    scale = float(np.abs(items.table.shell_max).max(initial=1.0)
+                  + np.abs(items.table.shell_min).max(initial=0.0))
+    res_tol = max(1e-3 * precision, 64 * np.finfo(float).eps * scale)
+    n_lines = len(org)
+    dlen = np.linalg.norm(dirs, axis=1)
+    out_rows, out_tan, out_line = [], [], []
+    entered = leaves = 0
+    old = thread_count() if threads is not None else None
+    if threads is not None:
+        set_threads(threads)
+    try:
+        for a in range(0, n_lines, CHUNK):
+            b = min(a + CHUNK, n_lines)
+            o, d = org[a:b], dirs[a:b]
+            items.need(o, d, t_lo, t_hi, touch_tol)
+            if items.bvh is None:
+                break
+            bv = items.bvh
+            cap = CAP
+            sel = np.arange(b - a)
+            while len(sel):
+                oo, dd = np.ascontiguousarray(o[sel]), np.ascontiguousarray(d[sel])
+                cand = np.empty((len(sel), cap, N_FIELDS))
+                count = np.empty(len(sel), np.int64)
+                stats = np.empty((len(sel), 2), np.int64)
+                run_tasks(lines_task, oo, dd, t_lo, t_hi, items.all_nets, items.all_exact,
+                          items.item_min, items.item_max, bv.node_min, bv.node_max,
+                          bv.node_first, bv.node_count, bv.prims, tol_flat, touch_tol,
+                          res_tol, cap, cand, count, stats)
+                over = count > cap
+                done = ~over
+                keep = np.zeros((len(sel), cap), bool)
+                tan = np.zeros((len(sel), cap), bool)
+                merge_candidates(cand, count, dlen[a:b][sel], precision, keep, tan)
+                rows_valid = np.arange(cap)[None, :] < np.minimum(count, cap)[:, None]
+                k = keep & rows_valid & done[:, None]
+                li, ci = np.nonzero(k)
+                out_rows.append(cand[li, ci])
+                out_tan.append(tan[li, ci])
+                out_line.append(a + sel[li])
+                entered += int(stats[done, 0].sum())
+                leaves += int(stats[done, 1].sum())
+                cap = int(count[over].max(initial=0)) + 1
+                sel = sel[over]
+    finally:
+        if threads is not None:
+            set_threads(old)
+    return _hits(items, org, dirs, out_rows, out_tan, out_line, mode, n_lines, precision,
+                 dict(items=len(items.all_nets), items_entered=entered, leaves=leaves))
+
+
+def _hits(items, org, dirs, rows, tans, lines, mode, n_lines, precision, stats) -> Hits:
+    from .trace.lines import C_A, C_B, C_ITEM, C_T
+
+    rows = np.concatenate(rows) if rows else np.zeros((0, 8))
+    tan = np.concatenate(tans) if tans else np.zeros(0, bool)
+    line = np.concatenate(lines).astype(np.int64) if lines else np.zeros(0, np.int64)
+    order = np.lexsort((rows[:, C_T], line))
+    rows, tan, line = rows[order], tan[order], line[order]
+    if mode == "first" and len(line):
+        first = np.r_[True, line[1:] != line[:-1]]
+        rows, tan, line = rows[first], tan[first], line[first]
+    t = rows[:, C_T].copy()
+    item = rows[:, C_ITEM].astype(np.int64)
+    ab = rows[:, [C_A, C_B]]
+    uv = items.all_uv0[item] + items.all_scale[item, None] * ab
+    point = org[line] + t[:, None] * dirs[line]
+    normal = _normals(items.all_nets, item, ab)
+    return Hits(line=line, t=t, point=point, ptex=items.all_ptex[item].astype(np.int32),
+                uv=uv, normal=normal, tangent=tan.astype(bool), n_lines=n_lines,
+                precision=precision, stats=stats)
+
+
+def _normals(nets, item, ab):
+    """Unit normals of items ``item`` at parameters ``ab``; where the derivatives vanish (an
+    extraordinary corner), the normal a little inside the item."""
+    from .trace.bezier import bez_derivatives
+
+    out = np.empty((len(item), 3))
+    for k in range(len(item)):
+        a, b = ab[k]
+        for step in (0.0, 1e-6, 1e-4):
+            aa = min(max(a, step), 1 - step)
+            bb = min(max(b, step), 1 - step)
+            du, dv = bez_derivatives(nets[item[k]], aa, bb)
+            n = np.cross(du, dv)
+            ln = np.linalg.norm(n)
+            if ln > 0:
+                out[k] = n / ln
+                break
+        else:
+            out[k] = np.nan
+    return out
+
+
+def torus_cage(n_major: int = 14, n_minor: int = 14, R: float = 1.0, r: float = 0.35):
+    """A closed torus cage of ``n_major x n_minor`` quads (every vertex of valence 4, so
+    every patch is a regular bicubic), centred at the origin around the z axis. 14 x 14 gives
+    the 196 patches of the paper's second experiment."""
+    from .cage import make_cage
+
+    i, j = np.meshgrid(np.arange(n_major), np.arange(n_minor), indexing="ij")
+    a = 2 * np.pi * i / n_major
+    b = 2 * np.pi * j / n_minor
+    pts = np.stack([(R + r * np.cos(b)) * np.cos(a), (R + r * np.cos(b)) * np.sin(a),
+                    r * np.sin(b)], axis=-1).reshape(-1, 3)
+    vid = lambda p, q: (p % n_major) * n_minor + (q % n_minor)  # noqa: E731
+    faces = np.stack([vid(i, j), vid(i + 1, j), vid(i + 1, j + 1), vid(i, j + 1)],
+                     axis=-1).reshape(-1, 4)
+    return make_cage(pts, np.full(len(faces), 4), faces.ravel(), scheme="catmark")

@@ -1,0 +1,493 @@
+"""Line / surface intersection kernels: every hit of many lines with a set of Bezier items.
+
+An *item* is one bicubic Bezier net (4,4,3) over a square of some patch's parameters: a
+regular patch, a regular piece of an isolated irregular patch, or (degree-elevated bilinear)
+an exact-limit-point cell next to an extraordinary vertex. Items sit in a BVH over their
+net boxes. Per line (nothing is stored between lines):
+
+1. BVH traversal with the line (a parameter interval, possibly infinite both ways) against
+   item boxes padded by ``touch_tol``.
+2. Inside an item, the paper's multi-level 1-to-4 segmentation, lazily: a sub-net (de
+   Casteljau halving, on a stack) whose padded box the line misses is dropped; one the line
+   enters is split again until it is *flat*: ``flatness(net) <= tol_flat`` where
+
+       flatness = max_ij |b_ij - L(i/3, j/3)|  +  |b00 - b30 - b03 + b33| / 4
+
+   ``L`` is the bilinear interpolant of the corners. ``L`` is itself a bicubic Bezier patch
+   with control points ``L(i/3, j/3)`` (degree elevation), so the patch minus ``L`` has
+   control points ``b_ij - L(i/3, j/3)`` and by the convex-hull property lies within the
+   first term of ``L``; the second bounds ``|L - T|`` for the two corner triangles ``T``
+   (``L - T = -t (1 - s) twist``). Both terms are second differences: each halving divides
+   them by about 4, so the depth is about ``log4(flatness(root) / tol_flat)``.
+3. At a flat leaf: the two corner triangles (watertight test) seed Newton on the exact net
+   (unknowns s, t, line parameter); a root inside the leaf's square (up to ``PARAM_SLACK``) is
+   a *crossing*. If Newton fails, the triangle hit itself is kept (within ``tol_flat`` of the
+   surface). Without a crossing, Gauss-Newton minimises the line's distance to the net; a
+   minimum inside the square within ``touch_tol`` is a *touch* (a tangent contact).
+4. :func:`merge_candidates` turns each line's candidates into hits: see its docstring.
+
+Candidates are rows of ``N_FIELDS`` float64 (``C_*`` columns) in a per-line buffer of
+``cap`` rows; ``count`` may exceed ``cap`` (then the caller runs the line again, larger).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from .. import config
+from .bezier import _bez_point, _copy_net, _split, bez_derivatives
+from .prims import _shear, _tri
+
+# Deepest halving of an item: 2^-40 of its side is below what double parameters resolve.
+MAX_DEPTH = 40
+# Work nets on the descent stack: each level keeps at most 3 siblings, plus 6 for splitting.
+STACK_NETS = 3 * MAX_DEPTH + 8
+# BVH traversal stack (the trees built here are far shallower).
+NODE_STACK = 128
+# Newton iterations for a crossing / Gauss-Newton iterations for a touch.
+NEWTON_ITERS = 16
+# A root found from a leaf counts if it lies within this much (in the leaf's parameter
+# units) of the leaf's square: roots on a shared side are found from both sides and merged.
+PARAM_SLACK = 1e-6
+# Gauss-Newton for touches is damped by this fraction of the normal matrix's trace, so a
+# line lying in a flat region (a singular problem) still takes finite steps.
+GN_DAMPING = 1e-12
+
+N_FIELDS = 8
+C_T, C_ITEM, C_A, C_B, C_KIND, C_COS, C_DIST, C_SIZE = range(N_FIELDS)
+KIND_CROSS = 1.0
+KIND_TOUCH = 2.0
+
+
+@nb.njit(cache=True)
+def _slab(o0, o1, o2, i0, i1, i2, lo0, lo1, lo2, hi0, hi1, hi2, pad, tlo, thi):
+    """Does the line o + t d (``i`` = 1/d) meet the box [lo - pad, hi + pad] for t in
+    [tlo, thi]? IEEE infinities handle zero direction components."""
+    a = (lo0 - pad - o0) * i0
+    b = (hi0 + pad - o0) * i0
+    tn = min(a, b)
+    tf = max(a, b)
+    a = (lo1 - pad - o1) * i1
+    b = (hi1 + pad - o1) * i1
+    tn = max(tn, min(a, b))
+    tf = min(tf, max(a, b))
+    a = (lo2 - pad - o2) * i2
+    b = (hi2 + pad - o2) * i2
+    tn = max(tn, min(a, b))
+    tf = min(tf, max(a, b))
+    if tn != tn or tf != tf:  # NaN: origin on a slab plane of a zero component
+        return True
+    tf = tf + 1e-15 * abs(tf) + 1e-300
+    return max(tn, tlo) <= min(tf, thi)
+
+
+@nb.njit(cache=True)
+def net_flatness(w, q):
+    """Distance bound between net ``w[q]``'s patch and its corner triangles (module doc)."""
+    e = 0.0
+    for i in range(4):
+        s = i / 3.0
+        for j in range(4):
+            t = j / 3.0
+            d2 = 0.0
+            for k in range(3):
+                L = ((1 - s) * (1 - t) * w[q, 0, 0, k] + s * (1 - t) * w[q, 3, 0, k]
+                     + (1 - s) * t * w[q, 0, 3, k] + s * t * w[q, 3, 3, k])
+                d = w[q, i, j, k] - L
+                d2 += d * d
+            e = max(e, math.sqrt(d2))
+    tw = 0.0
+    for k in range(3):
+        d = w[q, 0, 0, k] - w[q, 3, 0, k] - w[q, 0, 3, k] + w[q, 3, 3, k]
+        tw += d * d
+    return e + 0.25 * math.sqrt(tw)
+
+
+@nb.njit(cache=True)
+def _newton_cross(w, q, s, t, tau, o0, o1, o2, d0, d1, d2, res_tol):
+    """Newton on S(s, t) = o + tau d for net ``w[q]``; returns (ok, s, t, tau)."""
+    for _ in range(NEWTON_ITERS):
+        x, y, z = _bez_point(w, q, s, t)
+        su, sv = bez_derivatives(w[q], s, t)
+        r0 = x - o0 - tau * d0
+        r1 = y - o1 - tau * d1
+        r2 = z - o2 - tau * d2
+        # solve [su sv -d] (ds dt dtau) = -r by Cramer's rule
+        c0, c1, c2 = -d0, -d1, -d2
+        det = (su[0] * (sv[1] * c2 - sv[2] * c1) - sv[0] * (su[1] * c2 - su[2] * c1)
+               + c0 * (su[1] * sv[2] - su[2] * sv[1]))
+        if det == 0.0 or det != det:
+            return False, s, t, tau
+        b0, b1, b2 = -r0, -r1, -r2
+        ds = (b0 * (sv[1] * c2 - sv[2] * c1) - sv[0] * (b1 * c2 - b2 * c1)
+              + c0 * (b1 * sv[2] - b2 * sv[1])) / det
+        dt = (su[0] * (b1 * c2 - b2 * c1) - b0 * (su[1] * c2 - su[2] * c1)
+              + c0 * (su[1] * b2 - su[2] * b1)) / det
+        dtau = (su[0] * (sv[1] * b2 - sv[2] * b1) - sv[0] * (su[1] * b2 - su[2] * b1)
+                + b0 * (su[1] * sv[2] - su[2] * sv[1])) / det
+        s += ds
+        t += dt
+        tau += dtau
+        if abs(s) > 4.0 or abs(t) > 4.0:  # left the leaf's neighbourhood: not its root
+            return False, s, t, tau
+    x, y, z = _bez_point(w, q, s, t)
+    r0 = x - o0 - tau * d0
+    r1 = y - o1 - tau * d1
+    r2 = z - o2 - tau * d2
+    return math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) <= res_tol, s, t, tau
+
+
+@nb.njit(cache=True)
+def _closest(w, q, o0, o1, o2, e0, e1, e2):
+    """Gauss-Newton minimum of the distance from net ``w[q]``'s patch to the line through o
+    with unit direction e, started at the leaf's centre; returns (s, t, distance, tau)."""
+    s = 0.5
+    t = 0.5
+    for _ in range(NEWTON_ITERS):
+        x, y, z = _bez_point(w, q, s, t)
+        su, sv = bez_derivatives(w[q], s, t)
+        rx, ry, rz = x - o0, y - o1, z - o2
+        p = rx * e0 + ry * e1 + rz * e2
+        rx, ry, rz = rx - p * e0, ry - p * e1, rz - p * e2
+        pu = su[0] * e0 + su[1] * e1 + su[2] * e2
+        ux, uy, uz = su[0] - pu * e0, su[1] - pu * e1, su[2] - pu * e2
+        pv = sv[0] * e0 + sv[1] * e1 + sv[2] * e2
+        vx, vy, vz = sv[0] - pv * e0, sv[1] - pv * e1, sv[2] - pv * e2
+        a = ux * ux + uy * uy + uz * uz
+        b = ux * vx + uy * vy + uz * vz
+        c = vx * vx + vy * vy + vz * vz
+        g0 = -(ux * rx + uy * ry + uz * rz)
+        g1 = -(vx * rx + vy * ry + vz * rz)
+        lam = GN_DAMPING * (a + c) + 1e-300
+        a += lam
+        c += lam
+        det = a * c - b * b
+        if det <= 0.0 or det != det:
+            break
+        ds = (c * g0 - b * g1) / det
+        dt = (a * g1 - b * g0) / det
+        s = min(max(s + ds, -0.5), 1.5)
+        t = min(max(t + dt, -0.5), 1.5)
+        if abs(ds) + abs(dt) < 1e-14:
+            break
+    x, y, z = _bez_point(w, q, s, t)
+    rx, ry, rz = x - o0, y - o1, z - o2
+    p = rx * e0 + ry * e1 + rz * e2
+    rx, ry, rz = rx - p * e0, ry - p * e1, rz - p * e2
+    return s, t, math.sqrt(rx * rx + ry * ry + rz * rz), p
+
+
+@nb.njit(cache=True)
+def _push(cand, line, n, cap, t, item, a, b, kind, cs, dist, size):
+    if n < cap:
+        cand[line, n, C_T] = t
+        cand[line, n, C_ITEM] = item
+        cand[line, n, C_A] = a
+        cand[line, n, C_B] = b
+        cand[line, n, C_KIND] = kind
+        cand[line, n, C_COS] = cs
+        cand[line, n, C_DIST] = dist
+        cand[line, n, C_SIZE] = size
+    return n + 1
+
+
+@nb.njit(cache=True)
+def _unit_normal_cos(w, q, s, t, e0, e1, e2):
+    """Cosine between the unit normal of net ``w[q]`` at (s, t) and the direction e."""
+    su, sv = bez_derivatives(w[q], s, t)
+    nx = su[1] * sv[2] - su[2] * sv[1]
+    ny = su[2] * sv[0] - su[0] * sv[2]
+    nz = su[0] * sv[1] - su[1] * sv[0]
+    ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if ln == 0.0:
+        return 0.0
+    return (nx * e0 + ny * e1 + nz * e2) / ln
+
+
+@nb.njit(cache=True)
+def _in_item(a, b):
+    """Item parameters (a, b) inside the item's square, up to PARAM_SLACK."""
+    return a >= -PARAM_SLACK and a <= 1.0 + PARAM_SLACK and b >= -PARAM_SLACK and (
+        b <= 1.0 + PARAM_SLACK)
+
+
+@nb.njit(cache=True)
+def _leaf(w, q, u0, v0, size, item, line, n, cap, cand, verts, ob0, ob1, ob2, d0, d1, d2,
+          e0, e1, e2, dlen, kx, ky, kz, sx, sy, sz, tbase, tlo, thi, exact, touch_tol,
+          res_tol, slack):
+    """Crossings, else a touch, of the line with flat leaf net ``w[q]`` (module doc, step
+    3); appends candidates for line ``line`` from row ``n``; returns the new count."""
+    for k in range(3):
+        verts[0, k] = w[q, 0, 0, k]
+        verts[1, k] = w[q, 3, 0, k]
+        verts[2, k] = w[q, 3, 3, k]
+        verts[3, k] = w[q, 0, 3, k]
+    ob = (ob0, ob1, ob2)
+    tmax = thi - tbase
+    found = False
+    diag = 0.0
+    for k in range(3):
+        lo = min(min(verts[0, k], verts[1, k]), min(verts[2, k], verts[3, k]))
+        hi = max(max(verts[0, k], verts[1, k]), max(verts[2, k], verts[3, k]))
+        diag += (hi - lo) * (hi - lo)
+    diag = math.sqrt(diag)
+    for tri in range(2):
+        c = 2 if tri == 0 else 3
+        b_ = 1 if tri == 0 else 2
+        th, ba, bb, bc = _tri(ob[kx], ob[ky], ob[kz], kx, ky, kz, sx, sy, sz, 0, b_, c, verts,
+                              tmax, slack)
+        if th == np.inf:
+            continue
+        # leaf parameters of the triangle hit (corners (0,0) (1,0) (1,1) (0,1))
+        if tri == 0:
+            s0, t0 = bb + bc, bc
+        else:
+            s0, t0 = bb, bb + bc
+        ok = False
+        s, t, tau = s0, t0, th
+        if exact:
+            # Newton on the exact net; a root outside this leaf but inside the item is as
+            # exact (the net is the item's polynomial there): it is kept, and merged with
+            # the same root found from its own leaf
+            ok, s, t, tau = _newton_cross(w, q, s0, t0, th, ob0, ob1, ob2, d0, d1, d2,
+                                          res_tol)
+            ok = ok and _in_item(u0 + size * s, v0 + size * t)
+        inexact = 0.0
+        if not ok:
+            s, t, tau = s0, t0, th  # the triangle's hit: within tol_flat of the surface
+            inexact = 1.0
+        tt = tbase + tau
+        if tt < tlo or tt > thi:
+            continue
+        a = min(max(u0 + size * s, 0.0), 1.0)
+        b = min(max(v0 + size * t, 0.0), 1.0)
+        cs = _unit_normal_cos(w, q, (a - u0) / size, (b - v0) / size, e0, e1, e2)
+        n = _push(cand, line, n, cap, tt, item, a, b, KIND_CROSS, cs, inexact, diag)
+        found = True
+    if found:
+        return n
+    if exact:
+        # no triangle hit: Newton from the centre still finds a crossing between the
+        # triangles and the surface (a line through a gap of at most tol_flat)
+        x, y, z = _bez_point(w, q, 0.5, 0.5)
+        tau0 = ((x - ob0) * d0 + (y - ob1) * d1 + (z - ob2) * d2) / (dlen * dlen)
+        ok, s, t, tau = _newton_cross(w, q, 0.5, 0.5, tau0, ob0, ob1, ob2, d0, d1, d2,
+                                      res_tol)
+        if ok and _in_item(u0 + size * s, v0 + size * t):
+            tt = tbase + tau
+            if tt >= tlo and tt <= thi:
+                a = min(max(u0 + size * s, 0.0), 1.0)
+                b = min(max(v0 + size * t, 0.0), 1.0)
+                cs = _unit_normal_cos(w, q, (a - u0) / size, (b - v0) / size, e0, e1, e2)
+                return _push(cand, line, n, cap, tt, item, a, b, KIND_CROSS, cs, 0.0, diag)
+    # a touch: the closest approach inside the leaf, within touch_tol
+    s, t, dist, p = _closest(w, q, ob0, ob1, ob2, e0, e1, e2)
+    if (dist <= touch_tol and s >= -PARAM_SLACK and s <= 1.0 + PARAM_SLACK
+            and t >= -PARAM_SLACK and t <= 1.0 + PARAM_SLACK):
+        tt = tbase + p / dlen
+        if tt >= tlo and tt <= thi:
+            s = min(max(s, 0.0), 1.0)
+            t = min(max(t, 0.0), 1.0)
+            cs = _unit_normal_cos(w, q, s, t, e0, e1, e2)
+            n = _push(cand, line, n, cap, tt, item, u0 + size * s, v0 + size * t,
+                      KIND_TOUCH, cs, dist, diag)
+    return n
+
+
+@nb.njit(cache=True, nogil=True)
+def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, exact, item_min, item_max,
+               node_min, node_max, node_first, node_count, prims, tol_flat, touch_tol,
+               res_tol, cap, cand, count, stats):
+    """Candidates of lines ``task, task + n_tasks, ...`` (module doc). ``org``, ``dirs`` (L,3);
+    ``nets`` (N,4,4,3) items, ``exact`` (N,) bool (False: a bilinear cell, no Newton),
+    ``item_min/max`` (N,3) net boxes; BVH arrays as accel/bvh.py; ``cand`` (L, cap,
+    N_FIELDS) out, ``count`` (L,) out; ``stats`` (L, 2) out: items entered, leaves reached."""
+    slack = config.TRI_SLACK
+    w = np.empty((STACK_NETS, 4, 4, 3))
+    su0 = np.empty(STACK_NETS)
+    sv0 = np.empty(STACK_NETS)
+    ssz = np.empty(STACK_NETS)
+    sdep = np.empty(STACK_NETS, np.int64)
+    nodes = np.empty(NODE_STACK, np.int64)
+    verts = np.empty((4, 3))
+    for line in range(task, len(org), n_tasks):
+        n = 0
+        entered = 0
+        leaves = 0
+        o0, o1, o2 = org[line, 0], org[line, 1], org[line, 2]
+        d0, d1, d2 = dirs[line, 0], dirs[line, 1], dirs[line, 2]
+        dlen = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        e0, e1, e2 = d0 / dlen, d1 / dlen, d2 / dlen
+        i0, i1, i2 = 1.0 / d0, 1.0 / d1, 1.0 / d2
+        tlo, thi = t_lo, t_hi
+        count[line] = 0
+        stats[line, 0] = 0
+        stats[line, 1] = 0
+        if len(node_first) == 0:
+            continue
+        # a base point on the line before every item: the triangle tests measure t from it
+        # (one origin per line keeps them watertight on shared edges)
+        if tlo > -np.inf:
+            tbase = tlo
+        else:
+            tn = -np.inf
+            for k in range(3):
+                dk = dirs[line, k]
+                if dk != 0.0:
+                    a = (node_min[0, k] - touch_tol - org[line, k]) / dk
+                    b = (node_max[0, k] + touch_tol - org[line, k]) / dk
+                    tn = max(tn, min(a, b))
+            if tn == -np.inf:
+                tn = 0.0
+            tbase = tn - 1.0 - abs(tn) * 1e-9
+        ob0, ob1, ob2 = o0 + tbase * d0, o1 + tbase * d1, o2 + tbase * d2
+        kx, ky, kz, sx, sy, sz = _shear(d0, d1, d2)
+        # BVH traversal over item boxes
+        top = 0
+        nodes[top] = 0
+        top = 1
+        while top > 0:
+            top -= 1
+            nd = nodes[top]
+            if not _slab(o0, o1, o2, i0, i1, i2, node_min[nd, 0], node_min[nd, 1],
+                         node_min[nd, 2], node_max[nd, 0], node_max[nd, 1], node_max[nd, 2],
+                         touch_tol, tlo, thi):
+                continue
+            if node_count[nd] == 0:
+                nodes[top] = node_first[nd]
+                nodes[top + 1] = node_first[nd] + 1
+                top += 2
+                continue
+            for r in range(node_first[nd], node_first[nd] + node_count[nd]):
+                it = prims[r]
+                if not _slab(o0, o1, o2, i0, i1, i2, item_min[it, 0], item_min[it, 1],
+                             item_min[it, 2], item_max[it, 0], item_max[it, 1],
+                             item_max[it, 2], touch_tol, tlo, thi):
+                    continue
+                entered += 1
+                # 1-to-4 segmentation of the item, on a stack of nets
+                _copy_net(w, 0, nets, it)
+                su0[0], sv0[0], ssz[0], sdep[0] = 0.0, 0.0, 1.0, 0
+                sp = 1
+                while sp > 0:
+                    q = sp - 1
+                    sp = q
+                    if sdep[q] > 0:  # the root's box was tested above
+                        lo0 = lo1 = lo2 = np.inf
+                        hi0 = hi1 = hi2 = -np.inf
+                        for a in range(4):
+                            for c in range(4):
+                                x, y, z = w[q, a, c, 0], w[q, a, c, 1], w[q, a, c, 2]
+                                lo0, hi0 = min(lo0, x), max(hi0, x)
+                                lo1, hi1 = min(lo1, y), max(hi1, y)
+                                lo2, hi2 = min(lo2, z), max(hi2, z)
+                        if not _slab(o0, o1, o2, i0, i1, i2, lo0, lo1, lo2, hi0, hi1, hi2,
+                                     touch_tol, tlo, thi):
+                            continue
+                    if sdep[q] >= MAX_DEPTH or net_flatness(w, q) <= tol_flat:
+                        leaves += 1
+                        n = _leaf(w, q, su0[q], sv0[q], ssz[q], it, line, n, cap, cand,
+                                  verts, ob0, ob1, ob2, d0, d1, d2, e0, e1, e2, dlen, kx,
+                                  ky, kz, sx, sy, sz, tbase, tlo, thi, exact[it], touch_tol,
+                                  res_tol, slack)
+                        continue
+                    # split into w[q+3 .. q+6] (scratch q+1, q+2); children back to q, q+1..
+                    _split(w, q, w, q + 3)
+                    h = 0.5 * ssz[q]
+                    u, v, dep = su0[q], sv0[q], sdep[q] + 1
+                    for ch in range(4):
+                        _copy_net(w, sp, w, q + 3 + ch)
+                        su0[sp] = u + h * (ch & 1)
+                        sv0[sp] = v + h * (ch >> 1)
+                        ssz[sp] = h
+                        sdep[sp] = dep
+                        sp += 1
+        count[line] = n
+        stats[line, 0] = entered
+        stats[line, 1] = leaves
+
+
+@nb.njit(cache=True, nogil=True)
+def merge_candidates(cand, count, dlen, precision, keep, tangent):
+    """Turn each line's candidates into hits, in place: sort by t; then
+
+    * crossings (C_DIST 0: Newton's exact root, 1: a triangle's hit, kept only where no
+      root is) whose points lie within ``precision`` of each other are one hit (a hit on a
+      side or corner shared by leaves or patches is found from each of them): with the same
+      orientation (sign of normal . direction) they are duplicates; with opposite ones the
+      line enters and leaves within ``precision``: one hit, tangent;
+    * a touch whose point lies within ``precision`` of the tangent plane of a crossing is
+      part of that crossing (the line runs that close to the surface there) and is dropped;
+    * touches in a run (each within the two leaves' sizes of the next) are one contact: the
+      closest is kept, tangent (a tangent line, or a line lying in a flat region).
+
+    ``keep[line, i]`` says which of the sorted rows are hits; ``tangent[line, i]`` flags."""
+    for line in range(len(count)):
+        n = min(count[line], cand.shape[1])
+        c = cand[line]
+        # insertion sort by t (few candidates per line)
+        for i in range(1, n):
+            j = i
+            while j > 0 and c[j - 1, C_T] > c[j, C_T]:
+                for f in range(N_FIELDS):
+                    tmp = c[j - 1, f]
+                    c[j - 1, f] = c[j, f]
+                    c[j, f] = tmp
+                j -= 1
+        L = dlen[line]
+        for i in range(n):
+            keep[line, i] = True
+            tangent[line, i] = False
+        # duplicate and grazing crossings
+        last = -1
+        for i in range(n):
+            if c[i, C_KIND] != KIND_CROSS:
+                continue
+            if last >= 0:
+                gap = (c[i, C_T] - c[last, C_T]) * L
+                same = (c[i, C_COS] > 0.0) == (c[last, C_COS] > 0.0)
+                if gap <= precision or (same and gap * min(abs(c[i, C_COS]),
+                                                            abs(c[last, C_COS])) <= precision):
+                    # the same crossing (a side's root found twice, or a triangle's hit
+                    # beside the root, within precision of the tangent plane); or, with
+                    # opposite orientations, the line enters and leaves within precision
+                    if not same:
+                        tangent[line, last] = True
+                    if c[last, C_DIST] > 0.0 and c[i, C_DIST] == 0.0:
+                        # keep the exact root (Newton's) rather than a triangle's hit
+                        keep[line, last] = False
+                        tangent[line, i] = tangent[line, last]
+                        last = i
+                    else:
+                        keep[line, i] = False
+                    continue
+            last = i
+        # touches absorbed by crossings
+        for i in range(n):
+            if c[i, C_KIND] != KIND_TOUCH:
+                continue
+            for j in range(n):
+                if c[j, C_KIND] == KIND_CROSS and keep[line, j]:
+                    if abs(c[i, C_T] - c[j, C_T]) * L * abs(c[j, C_COS]) <= precision:
+                        keep[line, i] = False
+                        break
+        # runs of touches: keep the closest of each
+        best = -1
+        prev = -1
+        for i in range(n):
+            if c[i, C_KIND] != KIND_TOUCH or not keep[line, i]:
+                continue
+            if prev >= 0 and (c[i, C_T] - c[prev, C_T]) * L <= (
+                    c[i, C_SIZE] + c[prev, C_SIZE] + precision):
+                if c[i, C_DIST] < c[best, C_DIST]:
+                    keep[line, best] = False
+                    best = i
+                else:
+                    keep[line, i] = False
+            else:
+                best = i
+            prev = i
+            tangent[line, i] = True
