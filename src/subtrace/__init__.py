@@ -3,7 +3,8 @@
 Public API: :func:`load_cage`, :func:`make_cage`, :class:`Cage`, :class:`Mesh`,
 :func:`compare_images` (from :mod:`subtrace.compare`, imported on first use: it loads
 OpenImageIO), ``sweep(...)`` (:mod:`subtrace.sweep`, imported on first use, callable as
-:func:`subtrace.sweep.sweep`) and the error types in :mod:`subtrace.errors`.
+:func:`subtrace.sweep.sweep`), :func:`intersect_lines` (:mod:`subtrace.lines`, imported on
+first use) and the error types in :mod:`subtrace.errors`.
 """
 
 from __future__ import annotations
@@ -61,6 +62,11 @@ def __getattr__(name):
         from .compare import compare_images
 
         return compare_images
+    if name == "intersect_lines":
+        # imported on first use: it loads the patch table and the line kernels
+        from .lines import intersect_lines
+
+        return intersect_lines
     if name == "sweep":
         # the module subtrace.sweep, which is callable as its function sweep(): once imported
         # a submodule is its package's attribute, so the name can only mean the module
@@ -77,6 +83,7 @@ __all__ = [
     "make_cage",
     "compare_images",
     "sweep",
+    "intersect_lines",
     "SubtraceError",
     "ObjError",
     "TopologyError",

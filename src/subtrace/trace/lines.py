@@ -62,7 +62,7 @@ KIND_CROSS = 1.0
 KIND_TOUCH = 2.0
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _slab(o0, o1, o2, i0, i1, i2, lo0, lo1, lo2, hi0, hi1, hi2, pad, tlo, thi):
     """Does the line o + t d (``i`` = 1/d) meet the box [lo - pad, hi + pad] for t in
     [tlo, thi]? IEEE infinities handle zero direction components."""
@@ -84,7 +84,7 @@ def _slab(o0, o1, o2, i0, i1, i2, lo0, lo1, lo2, hi0, hi1, hi2, pad, tlo, thi):
     return max(tn, tlo) <= min(tf, thi)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def net_flatness(w, q):
     """Distance bound between net ``w[q]``'s patch and its corner triangles (module doc)."""
     e = 0.0
@@ -106,7 +106,7 @@ def net_flatness(w, q):
     return e + 0.25 * math.sqrt(tw)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _newton_cross(w, q, s, t, tau, o0, o1, o2, d0, d1, d2, res_tol):
     """Newton on S(s, t) = o + tau d for net ``w[q]``; returns (ok, s, t, tau)."""
     for _ in range(NEWTON_ITERS):
@@ -140,7 +140,7 @@ def _newton_cross(w, q, s, t, tau, o0, o1, o2, d0, d1, d2, res_tol):
     return math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) <= res_tol, s, t, tau
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _closest(w, q, o0, o1, o2, e0, e1, e2):
     """Gauss-Newton minimum of the distance from net ``w[q]``'s patch to the line through o
     with unit direction e, started at the leaf's centre; returns (s, t, distance, tau)."""
@@ -180,7 +180,7 @@ def _closest(w, q, o0, o1, o2, e0, e1, e2):
     return s, t, math.sqrt(rx * rx + ry * ry + rz * rz), p
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _push(cand, line, n, cap, t, item, a, b, kind, cs, dist, size):
     if n < cap:
         cand[line, n, C_T] = t
@@ -194,7 +194,7 @@ def _push(cand, line, n, cap, t, item, a, b, kind, cs, dist, size):
     return n + 1
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _unit_normal_cos(w, q, s, t, e0, e1, e2):
     """Cosine between the unit normal of net ``w[q]`` at (s, t) and the direction e."""
     su, sv = bez_derivatives(w[q], s, t)
@@ -207,14 +207,14 @@ def _unit_normal_cos(w, q, s, t, e0, e1, e2):
     return (nx * e0 + ny * e1 + nz * e2) / ln
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _in_item(a, b):
     """Item parameters (a, b) inside the item's square, up to PARAM_SLACK."""
     return a >= -PARAM_SLACK and a <= 1.0 + PARAM_SLACK and b >= -PARAM_SLACK and (
         b <= 1.0 + PARAM_SLACK)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _leaf(w, q, u0, v0, size, item, line, n, cap, cand, verts, ob0, ob1, ob2, d0, d1, d2,
           e0, e1, e2, dlen, kx, ky, kz, sx, sy, sz, tbase, tlo, thi, exact, touch_tol,
           res_tol, slack):
@@ -297,7 +297,7 @@ def _leaf(w, q, u0, v0, size, item, line, n, cap, cand, verts, ob0, ob1, ob2, d0
     return n
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, exact, item_min, item_max,
                node_min, node_max, node_first, node_count, prims, tol_flat, touch_tol,
                res_tol, cap, cand, count, stats):
@@ -410,7 +410,7 @@ def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, exact, item_min, item
         stats[line, 1] = leaves
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def merge_candidates(cand, count, dlen, precision, keep, tangent):
     """Turn each line's candidates into hits, in place: sort by t; then
 
