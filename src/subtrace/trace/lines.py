@@ -141,34 +141,65 @@ def _newton_cross(w, q, s, t, tau, o0, o1, o2, d0, d1, d2, res_tol):
 
 
 @nb.njit(cache=True, error_model="numpy")
+def _bez_d2(w, q, s, t):
+    """Point, first and second derivatives of net ``w[q]`` at (s, t): six (3,) arrays
+    (P, Ps, Pt, Pss, Pst, Ptt)."""
+    ss, st = 1.0 - s, 1.0 - t
+    b = (ss * ss * ss, 3.0 * s * ss * ss, 3.0 * s * s * ss, s * s * s)
+    db = (-3.0 * ss * ss, 3.0 * ss * (ss - 2.0 * s), 3.0 * s * (2.0 * ss - s), 3.0 * s * s)
+    ddb = (6.0 * ss, 6.0 * (3.0 * s - 2.0), 6.0 * (1.0 - 3.0 * s), 6.0 * s)
+    c = (st * st * st, 3.0 * t * st * st, 3.0 * t * t * st, t * t * t)
+    dc = (-3.0 * st * st, 3.0 * st * (st - 2.0 * t), 3.0 * t * (2.0 * st - t), 3.0 * t * t)
+    ddc = (6.0 * st, 6.0 * (3.0 * t - 2.0), 6.0 * (1.0 - 3.0 * t), 6.0 * t)
+    out = np.zeros((6, 3))
+    for i in range(4):
+        for j in range(4):
+            for k in range(3):
+                x = w[q, i, j, k]
+                out[0, k] += b[i] * c[j] * x
+                out[1, k] += db[i] * c[j] * x
+                out[2, k] += b[i] * dc[j] * x
+                out[3, k] += ddb[i] * c[j] * x
+                out[4, k] += db[i] * dc[j] * x
+                out[5, k] += b[i] * ddc[j] * x
+    return out
+
+
+@nb.njit(cache=True, error_model="numpy")
 def _closest(w, q, o0, o1, o2, e0, e1, e2):
-    """Gauss-Newton minimum of the distance from net ``w[q]``'s patch to the line through o
-    with unit direction e, started at the leaf's centre; returns (s, t, distance, tau)."""
+    """Newton minimum of the distance from net ``w[q]``'s patch to the line through o with
+    unit direction e (gradient of |r_perp|^2 / 2 with its full Hessian; damped, and Gauss-
+    Newton where the Hessian is not positive), started at the leaf's centre; returns
+    (s, t, distance, tau)."""
     s = 0.5
     t = 0.5
     for _ in range(NEWTON_ITERS):
-        x, y, z = _bez_point(w, q, s, t)
-        su, sv = bez_derivatives(w[q], s, t)
-        rx, ry, rz = x - o0, y - o1, z - o2
+        D = _bez_d2(w, q, s, t)
+        rx, ry, rz = D[0, 0] - o0, D[0, 1] - o1, D[0, 2] - o2
         p = rx * e0 + ry * e1 + rz * e2
         rx, ry, rz = rx - p * e0, ry - p * e1, rz - p * e2
-        pu = su[0] * e0 + su[1] * e1 + su[2] * e2
-        ux, uy, uz = su[0] - pu * e0, su[1] - pu * e1, su[2] - pu * e2
-        pv = sv[0] * e0 + sv[1] * e1 + sv[2] * e2
-        vx, vy, vz = sv[0] - pv * e0, sv[1] - pv * e1, sv[2] - pv * e2
+        pu = D[1, 0] * e0 + D[1, 1] * e1 + D[1, 2] * e2
+        ux, uy, uz = D[1, 0] - pu * e0, D[1, 1] - pu * e1, D[1, 2] - pu * e2
+        pv = D[2, 0] * e0 + D[2, 1] * e1 + D[2, 2] * e2
+        vx, vy, vz = D[2, 0] - pv * e0, D[2, 1] - pv * e1, D[2, 2] - pv * e2
         a = ux * ux + uy * uy + uz * uz
         b = ux * vx + uy * vy + uz * vz
         c = vx * vx + vy * vy + vz * vz
         g0 = -(ux * rx + uy * ry + uz * rz)
         g1 = -(vx * rx + vy * ry + vz * rz)
         lam = GN_DAMPING * (a + c) + 1e-300
-        a += lam
-        c += lam
-        det = a * c - b * b
+        # the full Hessian adds r_perp . second derivatives
+        ha = a + rx * D[3, 0] + ry * D[3, 1] + rz * D[3, 2] + lam
+        hb = b + rx * D[4, 0] + ry * D[4, 1] + rz * D[4, 2]
+        hc = c + rx * D[5, 0] + ry * D[5, 1] + rz * D[5, 2] + lam
+        det = ha * hc - hb * hb
+        if not (ha > 0.0 and det > 0.0):
+            ha, hb, hc = a + lam, b, c + lam  # Gauss-Newton: always a descent direction
+            det = ha * hc - hb * hb
         if det <= 0.0 or det != det:
             break
-        ds = (c * g0 - b * g1) / det
-        dt = (a * g1 - b * g0) / det
+        ds = (hc * g0 - hb * g1) / det
+        dt = (ha * g1 - hb * g0) / det
         s = min(max(s + ds, -0.5), 1.5)
         t = min(max(t + dt, -0.5), 1.5)
         if abs(ds) + abs(dt) < 1e-14:

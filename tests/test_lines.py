@@ -1,0 +1,251 @@
+"""Line / surface intersection (subtrace.lines): the paper's Table 1 situations built on real
+patches, random lines against a brute-force reference, hit points against the exact
+evaluator, memory that does not grow with the precision, and the CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import subtrace
+from subtrace.cli import main
+from subtrace.errors import SubtraceError
+from subtrace.lines import intersect_lines, torus_cage
+
+PREC = 1e-3
+
+
+@pytest.fixture(scope="module")
+def torus():
+    return torus_cage()
+
+
+@pytest.fixture(scope="module")
+def cube():
+    pts = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+    faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+    return subtrace.make_cage(pts, [4] * 6, np.ravel(faces), scheme="catmark")
+
+
+def reference_hits(cage, level, org, dirs):
+    """Brute force: the line parameters of every hit with every triangle (two per quad) of
+    the level-``level`` uniform refinement with its vertices pushed to the limit; hits on
+    shared edges (equal t) counted once."""
+    mesh = cage.refine(level)
+    P = cage.limit(level)[0]
+    q = mesh.face_verts.reshape(-1, 4)
+    tris = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
+    A, B, C = P[tris[:, 0]], P[tris[:, 1]], P[tris[:, 2]]
+    e1, e2 = B - A, C - A
+    out = []
+    for o, d in zip(org, dirs):
+        pv = np.cross(d, e2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / (e1 * pv).sum(1)
+            tv = o - A
+            u = (tv * pv).sum(1) * inv
+            qv = np.cross(tv, e1)
+            v = (d * qv).sum(1) * inv
+            t = (e2 * qv).sum(1) * inv
+        ts = np.sort(t[(u >= 0) & (v >= 0) & (u + v <= 1) & np.isfinite(t)])
+        out.append(ts[np.r_[True, np.diff(ts) > 1e-9]] if len(ts) else ts)
+    return out
+
+
+def _surface(cage, ptex, uv):
+    P, du, dv = cage.evaluate(np.array([ptex]), np.array([uv], float))
+    n = np.cross(du[0], dv[0])
+    return P[0], du[0], dv[0], n / np.linalg.norm(n)
+
+
+# ---------------------------------------------------------------------------------------
+# the paper's Table 1 situations, on real patches of the torus (outer, convex side)
+# ---------------------------------------------------------------------------------------
+
+# ptex 0's neighbourhood at uv (0.5, 0.5) is on the outer equator side (convex)
+def test_table1_one_intersection_along_the_normal(torus):
+    for uv in ((0.5, 0.5), (0.3, 0.7)):  # cases 1 and 2
+        P, _, _, n = _surface(torus, 0, uv)
+        h = intersect_lines(torus, [P + 0.05 * n], [-n], PREC, t_range=(0, 0.1))
+        assert len(h) == 1 and not h.tangent[0]
+        # Newton on the exact net: far inside the precision
+        assert np.linalg.norm(h.point[0] - P) < 1e-9
+        assert h.t[0] == pytest.approx(0.05, abs=1e-9)
+        assert np.dot(h.normal[0], n) > 1 - 1e-9
+
+
+def test_table1_tangent_line(torus):
+    P, du, _, n = _surface(torus, 0, (0.5, 0.5))
+    e = du / np.linalg.norm(du)
+    h = intersect_lines(torus, [P - 0.2 * e], [e], PREC, t_range=(0, 0.4))
+    assert len(h) == 1 and h.tangent[0]
+    # the reported point is within precision of the surface and of its own (ptex, uv)
+    assert np.linalg.norm(h.point[0] - P) < 0.05
+    Q = torus.evaluate(h.ptex, h.uv)[0][0]
+    assert np.linalg.norm(Q - h.point[0]) <= PREC
+
+
+def test_table1_two_intersections(torus):
+    P1 = _surface(torus, 0, (0.2, 0.3))[0]
+    P2 = _surface(torus, 0, (0.8, 0.9))[0]
+    h = intersect_lines(torus, [P1], [P2 - P1], PREC, t_range=(-0.5, 1.5))
+    assert len(h) == 2 and not h.tangent.any()
+    np.testing.assert_allclose(h.t, [0.0, 1.0], atol=1e-9)
+    np.testing.assert_allclose(h.point, [P1, P2], atol=1e-9)
+
+
+def test_table1_misses(torus):
+    P, du, _, n = _surface(torus, 0, (0.5, 0.5))
+    e = du / np.linalg.norm(du)
+    # case 5: a tangent line moved off the convex surface by twice the precision
+    Q = P + 2 * PREC * n
+    h = intersect_lines(torus, [Q - 0.2 * e], [e], PREC, t_range=(0, 0.4))
+    assert len(h) == 0
+    # within the precision it touches
+    Q = P + 0.5 * PREC * n
+    h = intersect_lines(torus, [Q - 0.2 * e], [e], PREC, t_range=(0, 0.4))
+    assert len(h) == 1 and h.tangent[0]
+    # case 6: far away: rejected by the patch boxes, nothing refined
+    h = intersect_lines(torus, [[5.0, 5.0, 5.0]], [[0.0, 0.0, 1.0]], PREC,
+                        t_range=(-np.inf, np.inf))
+    assert len(h) == 0 and h.stats["items_entered"] == 0
+
+
+def test_shared_edges_and_vertices_counted_once(torus):
+    # the x axis passes through patch corners (torus vertices on the x-z plane)
+    h = intersect_lines(torus, [[-3.0, 0, 0]], [[1.0, 0, 0]], PREC)
+    assert len(h) == 4
+    np.testing.assert_allclose(np.abs(h.point[:, 0]), [1.294263748, 0.639715497,
+                                                       0.639715497, 1.294263748], atol=1e-8)
+    np.testing.assert_allclose(h.normal[:, 0], [-1, 1, -1, 1], atol=1e-9)
+
+
+def test_flat_region_line_lying_in_it():
+    # a plane of regular patches (a 6 x 6 grid, the middle 2 x 2 faces are regular and flat)
+    g = np.array([[x, y, 0.0] for y in range(7) for x in range(7)], float)
+    faces = [[y * 7 + x, y * 7 + x + 1, (y + 1) * 7 + x + 1, (y + 1) * 7 + x]
+             for y in range(6) for x in range(6)]
+    cage = subtrace.make_cage(g, [4] * 36, np.ravel(faces), scheme="catmark")
+    h = intersect_lines(cage, [[2.2, 3.1, 0.0]], [[1.0, 0.0, 0.0]], PREC, t_range=(0, 2.5))
+    assert len(h) == 1 and h.tangent[0]
+    assert abs(h.point[0, 2]) < 1e-12
+    # crossing the plane: one transverse hit
+    h = intersect_lines(cage, [[3.1, 3.2, 1.0]], [[0.1, 0.0, -1.0]], PREC)
+    assert len(h) == 1 and not h.tangent[0]
+    np.testing.assert_allclose(h.point[0], [3.2, 3.2, 0.0], atol=1e-12)
+
+
+# ---------------------------------------------------------------------------------------
+# random lines against the brute-force reference
+# ---------------------------------------------------------------------------------------
+
+# Reference error: the level-5 limit mesh of the torus deviates from the surface by at most
+# its chord error, about h^2 k / 8 = (0.45/32)^2 * 3 / 8 < 1e-4; along a line crossing at
+# angle theta that is 1e-4 / sin(theta) in t: lines crossing below 0.1 rad are left out.
+REF_TOL = PREC + 1e-3
+
+
+@pytest.mark.parametrize("which", ["torus", "cube"])
+def test_random_lines_against_brute_force(which, torus, cube):
+    cage = torus if which == "torus" else cube
+    rng = np.random.default_rng(7)
+    lo, hi = cage.bounds()
+    n = 24
+    org = rng.uniform(lo, hi, (n, 3))
+    dirs = rng.normal(size=(n, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    h = intersect_lines(cage, org, dirs, PREC, t_range=(-np.inf, np.inf))
+    ref = reference_hits(cage, 5 if which == "torus" else 6, org, dirs)
+    compared = 0
+    for i in range(n):
+        idx = h.of_line(i)
+        if h.tangent[idx].any() or np.any(np.abs((h.normal[idx] * dirs[i]).sum(1)) < 0.1):
+            continue  # grazing: the reference's chords may pass either side
+        assert len(idx) == len(ref[i]), (i, h.t[idx], ref[i])
+        np.testing.assert_allclose(h.t[idx], ref[i], atol=REF_TOL)
+        compared += 1
+    assert compared >= n // 2
+    assert len(h) > n  # the lines do hit
+    # every hit: its (ptex, uv) evaluates within precision of its point; crossings exactly
+    P = cage.evaluate(h.ptex, h.uv)[0]
+    err = np.linalg.norm(P - h.point, axis=1)
+    assert err.max() <= PREC
+    assert np.median(err[~h.tangent]) < 1e-9
+    # sorted by line then t
+    assert np.all(np.diff(h.line) >= 0)
+    same = np.diff(h.line) == 0
+    assert np.all(np.diff(h.t)[same] > 0)
+    # the first mode keeps each line's nearest hit
+    f = intersect_lines(cage, org, dirs, PREC, t_range=(-np.inf, np.inf), mode="first")
+    firsts = np.r_[True, h.line[1:] != h.line[:-1]]
+    np.testing.assert_array_equal(f.line, h.line[firsts])
+    np.testing.assert_allclose(f.t, h.t[firsts])
+
+
+def test_precision_changes_depth_not_memory(torus):
+    rng = np.random.default_rng(3)
+    org = rng.uniform(-1, 1, (50, 3))
+    dirs = rng.normal(size=(50, 3))
+    coarse = intersect_lines(torus, org, dirs, 1e-2, t_range=(-np.inf, np.inf))
+    fine = intersect_lines(torus, org, dirs, 1e-8, t_range=(-np.inf, np.inf))
+    # the same items (patch nets) whatever the precision: nothing refined is stored
+    assert coarse.stats["items"] == fine.stats["items"] == 4 * 196
+    P = torus.evaluate(fine.ptex, fine.uv)[0]
+    assert np.linalg.norm(P - fine.point, axis=1).max() <= 1e-8
+    assert len(fine.line) == len(coarse.line) or coarse.tangent.any()
+
+
+def test_bad_input(torus):
+    with pytest.raises(SubtraceError, match="precision"):
+        intersect_lines(torus, [[0, 0, 0]], [[1, 0, 0]], 0.0)
+    with pytest.raises(SubtraceError, match="non-zero"):
+        intersect_lines(torus, [[0, 0, 0]], [[0, 0, 0]], 1e-3)
+    with pytest.raises(SubtraceError, match="shape"):
+        intersect_lines(torus, [[0, 0]], [[1, 0]], 1e-3)
+    with pytest.raises(SubtraceError, match="mode"):
+        intersect_lines(torus, [[0, 0, 0]], [[1, 0, 0]], 1e-3, mode="nearest")
+    assert subtrace.intersect_lines is intersect_lines
+
+
+# ---------------------------------------------------------------------------------------
+# CLI
+# ---------------------------------------------------------------------------------------
+
+
+def _write_cage(path, cage):
+    fv = cage.face_verts.reshape(-1, 4) + 1
+    path.write_text("".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in cage.points.tolist())
+                    + "".join(f"f {a} {b} {c} {d}\n" for a, b, c, d in fv.tolist()))
+
+
+def test_cli_intersect(tmp_path, torus, capsys):
+    cage = tmp_path / "torus.obj"
+    _write_cage(cage, torus)
+    lines = tmp_path / "lines.csv"
+    lines.write_text("ox,oy,oz,dx,dy,dz\n-3,0,0,1,0,0\n0,0,5,0,0,-1\n")
+    out = tmp_path / "hits.csv"
+    assert main(["intersect", str(cage), "--lines", str(lines), "--precision", "0.001",
+                 "-o", str(out)]) == 0
+    rows = out.read_text().splitlines()
+    assert rows[0] == "line,t,x,y,z,ptex,u,v,nx,ny,nz,tangent"
+    assert len(rows) == 5 and all(r.startswith("0,") for r in rows[1:])
+    js = tmp_path / "hits.json"
+    assert main(["intersect", str(cage), "--lines", str(lines), "--precision", "0.001",
+                 "--json", "-o", str(js)]) == 0
+    data = json.loads(js.read_text())
+    assert len(data["hits"]) == 4 and data["hits"][0]["line"] == 0
+    # bad input: one line on stderr, exit 2, no output file
+    capsys.readouterr()
+    bad = tmp_path / "bad.csv"
+    for args in (["--precision", "-1"], ["--precision", "x"]):
+        assert main(["intersect", str(cage), "--lines", str(lines), "-o", str(bad)]
+                    + args) == 2
+    lines.write_text("ox,oy,dx\n1,2,3\n")
+    assert main(["intersect", str(cage), "--lines", str(lines), "--precision", "0.01",
+                 "-o", str(bad)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 3 and all(e.startswith("subtrace: error: ") for e in err)
+    assert "missing column" in err[-1]
+    assert not bad.exists()
