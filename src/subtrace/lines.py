@@ -306,25 +306,34 @@ def _hits(items, org, dirs, rows, tans, lines, mode, n_lines, precision, stats) 
 
 
 def _normals(nets, item, ab):
-    """Unit normals of items ``item`` at parameters ``ab``; where the derivatives vanish (an
-    extraordinary corner), the normal a little inside the item."""
-    from .trace.bezier import bez_derivatives
-
-    out = np.empty((len(item), 3))
-    for k in range(len(item)):
-        a, b = ab[k]
-        for step in (0.0, 1e-6, 1e-4):
-            aa = min(max(a, step), 1 - step)
-            bb = min(max(b, step), 1 - step)
-            du, dv = bez_derivatives(nets[item[k]], aa, bb)
-            n = np.cross(du, dv)
-            ln = np.linalg.norm(n)
-            if ln > 0:
-                out[k] = n / ln
-                break
-        else:
-            out[k] = np.nan
+    """Unit normals of items ``item`` at parameters ``ab`` (vectorised Bernstein
+    derivatives); where they vanish (an extraordinary corner), the normal a little inside."""
+    out = np.full((len(item), 3), np.nan)
+    todo = np.arange(len(item))
+    for step in (0.0, 1e-6, 1e-4):
+        if not len(todo):
+            break
+        a = np.clip(ab[todo, 0], step, 1 - step)
+        b = np.clip(ab[todo, 1], step, 1 - step)
+        ba, da = _bernstein(a)
+        bb, db = _bernstein(b)
+        N = nets[item[todo]]  # (m,4,4,3)
+        du = np.einsum("mi,mj,mijk->mk", da, bb, N)
+        dv = np.einsum("mi,mj,mijk->mk", ba, db, N)
+        n = np.cross(du, dv)
+        ln = np.linalg.norm(n, axis=1)
+        ok = ln > 0
+        out[todo[ok]] = n[ok] / ln[ok, None]
+        todo = todo[~ok]
     return out
+
+
+def _bernstein(x):
+    """Cubic Bernstein values and derivatives at x (m,): two (m,4) arrays."""
+    y = 1.0 - x
+    b = np.stack([y**3, 3 * x * y**2, 3 * x**2 * y, x**3], axis=1)
+    d = np.stack([-3 * y**2, 3 * y * (y - 2 * x), 3 * x * (2 * y - x), 3 * x**2], axis=1)
+    return b, d
 
 
 def torus_cage(n_major: int = 14, n_minor: int = 14, R: float = 1.0, r: float = 0.35):
