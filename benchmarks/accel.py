@@ -1,0 +1,292 @@
+"""Benchmark: primary-ray acceleration, the projection of the shells onto the image against
+the BVH, on every scene at several image sizes.
+
+    python benchmarks/accel.py [SCENE.toml ...] [--sizes 640x360 1280x720 1920x1080]
+                               [--repeat 3]
+
+Default scenes: every ``scenes/*.toml``. Each scene runs in a fresh subprocess; at each size
+one cold pair of renders is discarded, then ``repeat`` pairs alternate the two methods
+(BVH first in even pairs, projection first in odd ones) so both see the same drift of a
+shared machine; figures are medians. Columns:
+
+* ``trace bvh`` / ``trace proj``: ``subtrace:time_trace`` (every round of primary rays,
+  patch intersection included) with ``accel="bvh"`` / ``"projection"``; ``ratio``: the
+  median of the per-pair ratios projection / BVH.
+* ``build bvh`` / ``build proj``: ``build_bvh`` / ``project_shells`` called alone on the
+  render's shells (medians of ``repeat``); both are also inside ``time_preprocess``.
+* ``MB bvh`` / ``MB proj``: bytes of the structure's arrays (BVH nodes and primitive ids;
+  tile offsets, tile lists and keys); ``peak`` columns: the build's peak of traced
+  allocations (``tracemalloc``, which sees numpy's buffers, scratch included).
+* ``walk bvh`` / ``walk proj``: the shell walk alone, no patch intersected: each pixel's ray
+  finds the shells it enters before its final hit distance (taken from the render) by
+  the same traversal as the trace kernel (BVH: node slabs, near child first; projection:
+  its tile's list up to the first key beyond the hit), on the same threads. A lower bound
+  on the walk inside the trace (there the hit distance shrinks as patches are hit).
+* ``walk2 bvh`` / ``walk2 proj``: the same walk with an infinite bound until it reaches the
+  shell of the patch the ray hits, then that hit's distance (as if no other patch were hit):
+  the order in which the trace meets the shells; an upper bound on the walk inside the
+  trace. ``walk/trace``: ``walk2 bvh`` over ``trace bvh``.
+* ``boxes/ray``: ray / box tests per ray in that walk (BVH: node and shell slabs;
+  projection: shell slabs of the listed shells before the stop); ``entered``: shells per
+  ray entered before the final hit (the same for both); ``visit``: shells per ray the
+  progressive walk enters, i.e. patches the trace would intersect in that order.
+* ``tris``: ``subtrace:micro_triangles`` of the render (cells evaluated).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+import tracemalloc
+from pathlib import Path
+
+import numba as nb
+import numpy as np
+
+from _common import REPO, import_subtrace  # benchmarks/ is on sys.path when run as a script
+
+import_subtrace()
+from subtrace.accel.projection import TILE  # noqa: E402
+from subtrace.trace.prims import H_SLOT, H_T, _slab, ray_setup  # noqa: E402
+
+DEFAULT_SIZES = ["640x360", "1280x720", "1920x1080"]
+
+
+@nb.njit(cache=True, nogil=True)
+def _walk(task, n_tasks, frame, width, height, t_hit, p_hit, progressive, shell_min,
+          shell_max, off, items, key, per_row, node_min, node_max, node_first, node_count,
+          prims, stack, counts):
+    """Rows task, task + n_tasks, ...: for each pixel's ray, the shells entered before
+    ``t_hit`` through the tiles (``off`` non-empty) or the BVH; ``counts[r]`` = (box
+    tests, shells entered). ``progressive``: the bound is infinite until the walk reaches
+    the shell of the patch hit, ``p_hit`` (-1: none), as if only that patch were hit: the
+    shells entered are then the patches the trace would intersect in this walk's order."""
+    ox, oy, oz = frame[0, 0], frame[0, 1], frame[0, 2]
+    projected = len(off) > 1
+    for row in range(task, height, n_tasks):
+        for col in range(width):
+            r = row * width + col
+            dx, dy, dz = ray_setup(frame, row, col)
+            ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
+            tmax = np.inf if progressive else t_hit[r]
+            tests = 0
+            entered = 0
+            if projected:
+                # the tile's list, nearest box first, up to the first key beyond the hit
+                t = (row // TILE) * per_row + col // TILE
+                for j in range(off[t], off[t + 1]):
+                    p = items[j]
+                    if key[p] >= tmax:
+                        break
+                    tests += 1
+                    if _slab(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, tmax) < np.inf:
+                        entered += 1
+                        if p == p_hit[r]:
+                            tmax = t_hit[r]
+            else:
+                # the BVH: near child first, as trace.kernels._trace_task
+                sp = 0
+                tests += 1
+                if _slab(ox, oy, oz, ix, iy, iz, node_min, node_max, 0, tmax) < np.inf:
+                    stack[task, 0] = 0
+                    sp = 1
+                while sp > 0:
+                    sp -= 1
+                    node = stack[task, sp]
+                    cnt = node_count[node]
+                    if cnt > 0:
+                        for j in range(node_first[node], node_first[node] + cnt):
+                            tests += 1
+                            if _slab(ox, oy, oz, ix, iy, iz, shell_min, shell_max, prims[j],
+                                     tmax) < np.inf:
+                                entered += 1
+                                if prims[j] == p_hit[r]:
+                                    tmax = t_hit[r]
+                        continue
+                    left = node_first[node]
+                    tl = _slab(ox, oy, oz, ix, iy, iz, node_min, node_max, left, tmax)
+                    tr = _slab(ox, oy, oz, ix, iy, iz, node_min, node_max, left + 1, tmax)
+                    tests += 2
+                    if tl < np.inf and tr < np.inf:
+                        near, far = (left, left + 1) if tl <= tr else (left + 1, left)
+                        stack[task, sp] = far
+                        stack[task, sp + 1] = near
+                        sp += 2
+                    elif tl < np.inf:
+                        stack[task, sp] = left
+                        sp += 1
+                    elif tr < np.inf:
+                        stack[task, sp] = left + 1
+                        sp += 1
+            counts[r, 0] = tests
+            counts[r, 1] = entered
+
+
+def _traced_peak(fn):
+    """(result, peak MB of traced allocations while ``fn()`` ran)."""
+    tracemalloc.start()
+    try:
+        out = fn()
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    return out, peak / 2**20
+
+
+def worker(scene_path: str, sizes: list[tuple[int, int]], repeat: int) -> list[dict]:
+    from subtrace import config, tasks
+    from subtrace.accel.bvh import build_bvh
+    from subtrace.accel.projection import no_tiles, project_shells
+    from subtrace.io.scene import apply_overrides, load_scene
+    from subtrace.patches.table import build_patch_table
+    from subtrace.render import RenderStats, load_objects, render_scene, trace_hits
+    from subtrace.trace.camera import camera_frame
+
+    base = load_scene(scene_path)
+    cages = load_objects(base)
+    table = build_patch_table(cages)
+    rows = []
+    for width, height in sizes:
+        scene = apply_overrides(base, width=width, height=height)
+        runs = {"bvh": [], "projection": []}
+        ratios = []
+        for k in range(repeat + 1):  # pair 0: cold, discarded
+            order = ("bvh", "projection") if k % 2 == 0 else ("projection", "bvh")
+            pair = {}
+            for m in order:
+                res = render_scene(scene, cages=cages, accel=m)
+                pair[m] = res.stats
+            if k:
+                for m in order:
+                    runs[m].append(pair[m])
+                ratios.append(pair["projection"].time_trace / pair["bvh"].time_trace)
+        camera = res.camera
+        frame = camera_frame(camera)
+        # the structures alone: build times, array bytes, peak traced allocations
+        args = (table.shell_min, table.shell_max)
+        t_bvh, t_proj = [], []
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            bvh = build_bvh(*args)
+            t_bvh.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            tiles = project_shells(*args, frame, width, height)
+            t_proj.append(time.perf_counter() - t0)
+        _, peak_bvh = _traced_peak(lambda: build_bvh(*args))
+        _, peak_proj = _traced_peak(lambda: project_shells(*args, frame, width, height))
+        mb_bvh = sum(a.nbytes for a in (bvh.node_min, bvh.node_max, bvh.node_first,
+                                        bvh.node_count, bvh.prims)) / 2**20
+        mb_proj = sum(a.nbytes for a in (tiles.off, tiles.items, tiles.key)) / 2**20
+        # the walk alone, up to each ray's final hit (the same for both methods)
+        hits, pools = trace_hits(table, camera, scene.render.tolerance_rad(camera),
+                                 RenderStats(), accel="bvh")[:2]
+        t_hit = np.ascontiguousarray(hits[:, H_T])
+        slot = hits[:, H_SLOT].astype(np.int64)  # -1: no hit; <= -2: a Catmull-Clark patch
+        p_hit = np.where(slot < -1, -slot - 2, -1).astype(np.int64)
+        p_hit[slot >= 0] = pools.a["slot_patch"][slot[slot >= 0]]  # (Loop grids)
+        n_t = tasks.thread_count()
+        stack = np.empty((n_t, config.STACK_SIZE), np.int64)
+        walk = {}
+        for m in ("bvh", "projection"):
+            if m == "bvh":
+                tl, b = no_tiles()[:3], bvh
+            else:
+                tl, b = (tiles.off, tiles.items, tiles.key), build_bvh(np.zeros((0, 3)),
+                                                                       np.zeros((0, 3)))
+            counts = np.zeros((width * height, 2), np.int64)
+            per_row = np.int64(tiles.per_row)
+            walk_args = (table.shell_min, table.shell_max, *tl, per_row, b.node_min,
+                         b.node_max, b.node_first, b.node_count, b.prims, stack, counts)
+            times = {False: [], True: []}
+            for _ in range(repeat + 1):  # the first: compile or cache load
+                for progressive in (False, True):
+                    t0 = time.perf_counter()
+                    tasks.run_tasks(_walk, frame, width, height, t_hit, p_hit, progressive,
+                                    *walk_args)
+                    times[progressive].append(time.perf_counter() - t0)
+                    if not progressive:
+                        mean = counts.mean(axis=0).tolist()
+            walk[m] = (statistics.median(times[False][1:]), mean, counts[:, 1].mean(),
+                       statistics.median(times[True][1:]))
+        assert walk["bvh"][1][1] == walk["projection"][1][1], "walks disagree on shells"
+
+        def med(m, f):
+            return statistics.median(getattr(s, f) for s in runs[m])
+
+        rows.append({
+            "size": f"{width}x{height}", "patches": table.n_patches,
+            "trace_bvh": med("bvh", "time_trace"), "trace_proj": med("projection", "time_trace"),
+            "ratio": statistics.median(ratios), "ratios": ratios,
+            "total_bvh": med("bvh", "time_total"), "total_proj": med("projection", "time_total"),
+            "rounds": runs["bvh"][0].rounds,
+            "build_bvh": statistics.median(t_bvh), "build_proj": statistics.median(t_proj),
+            "mb_bvh": mb_bvh, "mb_proj": mb_proj, "peak_bvh": peak_bvh, "peak_proj": peak_proj,
+            "walk_bvh": walk["bvh"][0], "walk_proj": walk["projection"][0],
+            "walk2_bvh": walk["bvh"][3], "walk2_proj": walk["projection"][3],
+            "boxes_bvh": walk["bvh"][1][0], "boxes_proj": walk["projection"][1][0],
+            "entered": walk["bvh"][1][1],
+            "visits_bvh": walk["bvh"][2], "visits_proj": walk["projection"][2],
+            "tris_bvh": med("bvh", "micro_triangles"),
+            "tris_proj": med("projection", "micro_triangles"),
+        })
+    return rows
+
+
+def _size(text: str) -> tuple[int, int]:
+    w, h = text.lower().split("x")
+    return int(w), int(h)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("scenes", nargs="*",
+                    default=[str(s) for s in sorted((REPO / "scenes").glob("*.toml"))])
+    ap.add_argument("--sizes", nargs="+", default=DEFAULT_SIZES, type=str)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--json", help="also write the rows to this file")
+    ap.add_argument("--worker", nargs=3, help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.worker:
+        s, sizes, r = args.worker
+        print(json.dumps(worker(s, [_size(z) for z in sizes.split(",")], int(r))))
+        return 0
+    sizes = [_size(z) for z in args.sizes]
+    print(f"{args.repeat} alternated pairs per size (medians), cpus {os.cpu_count()}, "
+          f"threads {len(os.sched_getaffinity(0))}")
+    cols = ("scene", "size", "patches", "trace bvh", "trace proj", "ratio", "build bvh",
+            "build proj", "MB bvh", "MB proj", "peak bvh", "peak proj", "walk bvh",
+            "walk proj", "walk2 bvh", "walk2 proj", "walk/trace", "boxes bvh", "boxes proj", "entered", "visit bvh",
+            "visit proj", "tris bvh", "tris proj")
+    print(" ".join(f"{c:>10}" for c in cols))
+    all_rows = []
+    for scene in args.scenes:
+        out = subprocess.run(
+            [sys.executable, __file__, "--worker", scene,
+             ",".join(f"{w}x{h}" for w, h in sizes), str(args.repeat)],
+            check=True, capture_output=True, text=True,
+        ).stdout
+        for r in json.loads(out.strip().splitlines()[-1]):
+            r["scene"] = Path(scene).stem
+            all_rows.append(r)
+            row = (r["scene"], r["size"], r["patches"], f"{r['trace_bvh']:.4f}",
+                   f"{r['trace_proj']:.4f}", f"{r['ratio']:.2f}", f"{r['build_bvh']:.4f}",
+                   f"{r['build_proj']:.4f}", f"{r['mb_bvh']:.2f}", f"{r['mb_proj']:.2f}",
+                   f"{r['peak_bvh']:.2f}", f"{r['peak_proj']:.2f}", f"{r['walk_bvh']:.4f}",
+                   f"{r['walk_proj']:.4f}", f"{r['walk2_bvh']:.4f}", f"{r['walk2_proj']:.4f}",
+                   f"{r['walk2_bvh'] / r['trace_bvh']:.2f}",
+                   f"{r['boxes_bvh']:.1f}", f"{r['boxes_proj']:.1f}", f"{r['entered']:.2f}",
+                   f"{r['visits_bvh']:.2f}", f"{r['visits_proj']:.2f}",
+                   f"{r['tris_bvh']:.0f}", f"{r['tris_proj']:.0f}")
+            print(" ".join(f"{c:>10}" for c in row), flush=True)
+    if args.json:
+        Path(args.json).write_text(json.dumps(all_rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
