@@ -557,20 +557,32 @@ def test_memo_and_threads_do_not_change_the_image(monkeypatch):
 @needs_shared
 def test_warmup_compiles_the_kernels_a_render_uses():
     """On a cold cache a second process compiles the trace and shade kernels from empty
-    inputs (``subtrace.warmup``); that only helps if their types are exactly those of a
-    render: a render after the warm-up adds no compiled specialisation."""
-    from subtrace import shade, tasks, warmup
-    from subtrace.trace import kernels
+    inputs (``subtrace.warmup``); that only helps if it does compile (or load) them, with
+    exactly the types of a render: in a fresh process, the warm-up alone gives each kernel
+    one specialisation, and a render after it adds none."""
+    import subprocess
+    import sys
 
-    n = tasks.max_threads()
-    warmup.compile_kernels(n)
-    before = (set(kernels._trace_task.signatures), set(shade._shade_task.signatures))
-    mesh = MODELS / "spot_control_mesh.obj"
-    res = render_scene(_scene([mesh], (1.2, 0.6, 2.2), (0.0, 0.3, 0.0)), threads=n)
-    assert res.stats.pixels_covered > 100
-    after = (set(kernels._trace_task.signatures), set(shade._shade_task.signatures))
-    assert after == before
-    assert warmup.start(n) is None  # cached now: no second process
+    from subtrace import tasks, warmup
+
+    code = f"""
+from subtrace import shade, tasks, warmup
+from subtrace.trace import kernels
+from subtrace.io.scene import scene_from_dict
+from subtrace.render import render_scene
+warmup.compile_kernels({tasks.max_threads()})
+sigs = lambda: (len(kernels._trace_task.signatures), len(shade._shade_task.signatures))
+before = sigs()
+scene = scene_from_dict({{"object": [{{"mesh": {str(MODELS / "spot_control_mesh.obj")!r}}}],
+    "camera": {{"eye": [1.2, 0.6, 2.2], "target": [0.0, 0.3, 0.0], "width": 32,
+                "height": 24}}}})
+assert render_scene(scene).stats.pixels_covered > 20
+print(before, sigs())
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.split()
+    assert "".join(out) == "(1,1)(1,1)", out
+    assert warmup.start(tasks.max_threads()) is None  # cached now: no second process
 
 
 @needs_shared

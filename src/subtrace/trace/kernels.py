@@ -135,7 +135,8 @@ def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_c
     def work(t, a, b):
         _trace_task(t, rays, bands[a:b + 1], *args)
 
-    run_chunks(work, n_bands, BAND_CHUNK, n=len(mems))
+    # (at least one call: the warm-up compiles the kernel by tracing no rays)
+    run_chunks(work, max(n_bands, 1), BAND_CHUNK, n=len(mems))
 
 
 def candidate_lists(n_rays):
