@@ -92,12 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
     tol.add_argument("--tolerance", metavar="PIXELS",
                      help="angular tolerance in pixels at the image centre (default 1)")
     tol.add_argument("--tolerance-deg", metavar="DEG", help="angular tolerance in degrees")
-    render.add_argument("--scheme", metavar="S", help="catmark or loop, for every object")
-    render.add_argument("--threads", type=_level_arg, metavar="N",
-                        help="worker threads (default: all cores)")
-    render.add_argument("--accel", choices=("projection", "bvh"), default=None,
-                        help="how rays find the patch shells they enter: shells projected "
-                             "onto image tiles (default) or a BVH")
+    _add_render_options(render)
     render.add_argument("--png", action="store_true",
                         help="also write an sRGB PNG preview next to the EXR")
     render.add_argument("--quiet", action="store_true", help="print nothing on success")
@@ -160,11 +155,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("-o", "--output", required=True, metavar="DIR",
                        help="folder for the table, images and plots (created if missing)")
     _add_camera_options(sweep)
-    sweep.add_argument("--scheme", metavar="S", help="catmark or loop, for every object")
-    sweep.add_argument("--threads", type=_level_arg, metavar="N",
-                       help="worker threads (default: all cores)")
-    sweep.add_argument("--accel", choices=("projection", "bvh"), default=None,
-                       help="how rays find the patch shells they enter (as for render)")
+    _add_render_options(sweep)
     sweep.add_argument("--quiet", action="store_true",
                        help="print nothing on success (no table, no progress bar)")
     sweep.set_defaults(func=_cmd_sweep)
@@ -197,6 +188,16 @@ def build_parser() -> argparse.ArgumentParser:
                            help="worker threads (default: all cores)")
     intersect.set_defaults(func=_cmd_intersect)
     return parser
+
+
+def _add_render_options(parser) -> None:
+    """The options of how objects are rendered, shared by ``render`` and ``sweep``."""
+    parser.add_argument("--scheme", metavar="S", help="catmark or loop, for every object")
+    parser.add_argument("--threads", type=_level_arg, metavar="N",
+                        help="worker threads (default: all cores)")
+    parser.add_argument("--accel", choices=("projection", "bvh"), default=None,
+                        help="how rays find the patch shells they enter: shells projected "
+                             "onto image tiles (default) or a BVH")
 
 
 def _add_camera_options(parser) -> None:

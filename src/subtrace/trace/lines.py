@@ -38,7 +38,7 @@ import numba as nb
 import numpy as np
 
 from .. import config
-from .bezier import _bez_point, _copy_net, _split, bez_derivatives
+from .bezier import _bez_point, _copy_net, _net_box, _split, bez_derivatives
 from .prims import _shear, _tri
 
 # Deepest halving of an item: 2^-40 of its side is below what double parameters resolve.
@@ -407,14 +407,7 @@ def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, exact, item_min, item
                     q = sp - 1
                     sp = q
                     if sdep[q] > 0:  # the root's box was tested above
-                        lo0 = lo1 = lo2 = np.inf
-                        hi0 = hi1 = hi2 = -np.inf
-                        for a in range(4):
-                            for c in range(4):
-                                x, y, z = w[q, a, c, 0], w[q, a, c, 1], w[q, a, c, 2]
-                                lo0, hi0 = min(lo0, x), max(hi0, x)
-                                lo1, hi1 = min(lo1, y), max(hi1, y)
-                                lo2, hi2 = min(lo2, z), max(hi2, z)
+                        lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(w, q)
                         if not _slab(o0, o1, o2, i0, i1, i2, lo0, lo1, lo2, hi0, hi1, hi2,
                                      touch_tol, tlo, thi):
                             continue
