@@ -676,7 +676,8 @@ class _Reader:
             bad = indices[(indices < 0) | (indices >= count)]
             if len(bad):
                 self.fail(number, f"tag '{name}': {what} index {bad[0]} out of range: the "
-                          f"file has {count} {what}s (tag indices are 0-based)")
+                          f"file has {count} {'vertices' if what == 'vertex' else 'faces'} (tag indices "
+                          "are 0-based: the first is 0)")
 
         # Materials: every MTL definition in order, then names used but never defined.
         local_ids: dict = {}

@@ -1,0 +1,187 @@
+"""Long-running random fuzzer of subtrace's input readers (issue 8).
+
+Mutates the bad-input corpus (tests/bad_inputs/) and valid cages and scenes (byte flips,
+insertions of junk, truncation, line shuffles and duplications, number swaps) and feeds each
+result to the OBJ reader (``subtrace.io.obj.read_obj``), the scene reader
+(``subtrace.io.scene.load_scene``) and ``subtrace info``. An input passes when it reads or
+raises a SubtraceError; anything else (another exception, a hang past ``--timeout``, a
+multi-line or traceback-bearing ``info`` error) is a crash and the input is saved under
+``--out``. Prints inputs tried, outcomes by kind, and crashes.
+
+    python benchmarks/fuzz.py --seconds 3600 [--seed N] [--out fuzz_crashes] [--timeout 10]
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import os
+import random
+import re
+import signal
+import sys
+import time
+import traceback
+import warnings
+from collections import Counter
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+CORPUS = REPO / "tests" / "bad_inputs"
+NUMBER = re.compile(rb"-?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?")
+SWAPS = [b"0", b"-1", b"1", b"3", b"1e300", b"-1e308", b"nan", b"inf", b"0.5", b"99999999999",
+         b"2/1/0", b"", b"1.5", b"-0", b"32768", b"180"]
+
+
+class Hang(Exception):
+    pass
+
+
+def _alarm(signum, frame):
+    raise Hang()
+
+
+def seeds() -> tuple[list[bytes], list[bytes]]:
+    """(OBJ seeds, TOML seeds): the corpus, the scenes' cages where present, the sample cage."""
+    objs = [p.read_bytes() for p in sorted(CORPUS.glob("*.obj"))]
+    tomls = [p.read_bytes() for p in sorted(CORPUS.glob("*.toml")) if p.name != "EXPECTED.toml"]
+    from subtrace.data import sample_cage_path
+
+    objs.append(Path(sample_cage_path()).read_bytes())
+    shapes = REPO.parent / "shared" / "oracle" / "shapes"
+    if shapes.is_dir():
+        objs += [p.read_bytes() for p in sorted(shapes.glob("*.obj"))[:40]
+                 if p.stat().st_size < 200_000]
+    return objs, tomls
+
+
+def mutate(rng: random.Random, data: bytes) -> tuple[bytes, str]:
+    """One to three random mutations of ``data``; returns (bytes, names of mutations)."""
+    names = []
+    for _ in range(rng.randint(1, 3)):
+        kind = rng.choice(["flip", "insert", "truncate", "shuffle", "duplicate", "delete_line",
+                           "number", "number", "number"])
+        names.append(kind)
+        if kind == "flip" and data:
+            b = bytearray(data)
+            for _ in range(rng.randint(1, 4)):
+                i = rng.randrange(len(b))
+                b[i] ^= 1 << rng.randrange(8)
+            data = bytes(b)
+        elif kind == "insert":
+            i = rng.randint(0, len(data))
+            junk = rng.choice([bytes(rng.randrange(256) for _ in range(rng.randint(1, 8))),
+                               b"\r\n", b"\t", b"\\\n", b"/", b" 0", b"\x00", b"\xff\xfe"])
+            data = data[:i] + junk + data[i:]
+        elif kind == "truncate" and data:
+            data = data[: rng.randrange(len(data))]
+        elif kind in ("shuffle", "duplicate", "delete_line"):
+            lines = data.split(b"\n")
+            if kind == "shuffle":
+                rng.shuffle(lines)
+            elif kind == "duplicate":
+                lines.insert(rng.randint(0, len(lines)), rng.choice(lines))
+            elif len(lines) > 1:
+                del lines[rng.randrange(len(lines))]
+            data = b"\n".join(lines)
+        elif kind == "number":
+            spans = [m.span() for m in NUMBER.finditer(data)]
+            if spans:
+                a, b = rng.choice(spans)
+                data = data[:a] + rng.choice(SWAPS) + data[b:]
+    return data, "+".join(names)
+
+
+def check(target: str, path: Path) -> str:
+    """Run one target on ``path``: the outcome kind ("ok", "error:<Class>") or raise."""
+    from subtrace.errors import SubtraceError
+
+    if target == "obj":
+        from subtrace.io.obj import read_obj
+
+        try:
+            read_obj(path)
+        except SubtraceError as err:
+            return f"error:{type(err).__name__}"
+        return "ok"
+    if target == "scene":
+        from subtrace.io.scene import load_scene
+
+        try:
+            load_scene(path)
+        except SubtraceError as err:
+            return f"error:{type(err).__name__}"
+        return "ok"
+    # subtrace info: exit 0, or exit 2 with one error line and no traceback
+    from subtrace.cli import main
+
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        code = main(["info", str(path)])
+    text = err.getvalue()
+    errors = [line for line in text.splitlines() if not line.startswith("subtrace: warning:")]
+    if code == 0:
+        return "ok"
+    if code == 2 and len(errors) == 1 and errors[0].startswith("subtrace: error: "):
+        return "info-error"
+    raise AssertionError(f"info exit {code}, stderr {text!r}")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seconds", type=float, default=60.0, help="how long to run (default 60)")
+    ap.add_argument("--seed", type=int, default=None, help="random seed (default: time)")
+    ap.add_argument("--timeout", type=float, default=10.0,
+                    help="seconds one input may take before it counts as a hang")
+    ap.add_argument("--out", default="fuzz_crashes", help="folder for crashing inputs")
+    args = ap.parse_args(argv)
+    seed = args.seed if args.seed is not None else int(time.time())
+    rng = random.Random(seed)
+    objs, tomls = seeds()
+    work = Path(args.out) / "work"
+    work.mkdir(parents=True, exist_ok=True)
+    (work / "cube.obj").write_bytes((CORPUS / "cube.obj").read_bytes())  # scenes' mesh
+    warnings.simplefilter("ignore")
+    signal.signal(signal.SIGALRM, _alarm)
+    outcomes: Counter = Counter()
+    crashes = []
+    tried = 0
+    t_end = time.monotonic() + args.seconds
+    while time.monotonic() < t_end:
+        target = rng.choice(["obj", "obj", "info", "scene"])
+        base = rng.choice(tomls if target == "scene" else objs)
+        data, how = mutate(rng, base)
+        path = work / ("input.toml" if target == "scene" else "input.obj")
+        path.write_bytes(data)
+        tried += 1
+        signal.setitimer(signal.ITIMER_REAL, args.timeout)
+        try:
+            kind = check(target, path)
+        except Hang:
+            kind = "CRASH:hang"
+        except Exception as exc:  # noqa: BLE001 - a crash is what we look for
+            kind = f"CRASH:{type(exc).__name__}"
+            detail = traceback.format_exc()
+        else:
+            detail = None
+        finally:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+        outcomes[(target, kind)] += 1
+        if kind.startswith("CRASH"):
+            name = Path(args.out) / f"crash_{len(crashes):04d}_{target}{path.suffix}"
+            name.write_bytes(data)
+            name.with_suffix(name.suffix + ".txt").write_text(
+                f"target {target}, mutations {how}, seed {seed}\n{detail or kind}\n")
+            crashes.append((name, kind))
+            print(f"crash: {kind} on {target} -> {name}", file=sys.stderr)
+    print(f"seed {seed}: {tried} inputs in {args.seconds:.0f} s, {len(crashes)} crashes")
+    for (target, kind), n in sorted(outcomes.items()):
+        print(f"  {target:6s} {kind:28s} {n}")
+    for name, kind in crashes[:20]:
+        print(f"  crash {kind}: {name}")
+    return 1 if crashes else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,235 @@
+"""Bad input never crashes (issue 8): the corpus ``tests/bad_inputs/`` through ``subtrace
+render`` and ``subtrace info``.
+
+``tests/bad_inputs/EXPECTED.toml`` maps each file to the text its one-line error must contain
+(``[error]``), or lists it as valid degenerate input that must render (``[renders]``). Every
+bad input must give exit code 2, exactly one stderr line ``subtrace: error: <file>...``, no
+traceback, and leave nothing in the output folder. The reader-level cases (and a hypothesis
+fuzz of the OBJ reader) are in tests/test_obj.py and tests/test_scene.py; this file checks the
+whole command line. A bounded hypothesis fuzz of the scene reader is at the end; the long
+fuzzer is ``benchmarks/fuzz.py``. ``SUBTRACE_SLOW_TESTS=1`` also renders the valence-1000
+cage (about 35 s).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from subtrace.cli import main
+from subtrace.errors import SceneError, SubtraceError
+
+CORPUS = Path(__file__).resolve().parent / "bad_inputs"
+EXPECTED = tomllib.loads((CORPUS / "EXPECTED.toml").read_text())
+RENDER_ARGS = ["--width", "16", "--height", "12", "--quiet"]
+
+
+def run(capsys, argv):
+    """main(argv) -> (exit code, stdout, stderr); a raised exception fails the test."""
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def assert_one_line_error(err: str, file_name: str, words: str):
+    assert "Traceback" not in err, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("subtrace: error: "), err
+    assert file_name in lines[0], err
+    assert words in lines[0], err
+
+
+def render(capsys, tmp_path, path, *extra):
+    out = tmp_path / "out" / "render.exr"
+    out.parent.mkdir()
+    code, stdout, err = run(capsys, ["render", path, "-o", out, *RENDER_ARGS, *extra])
+    return code, stdout, err, out
+
+
+def test_corpus_is_listed_completely():
+    listed = set(EXPECTED["error"]) | set(EXPECTED["renders"]["files"]) | set(EXPECTED["xfail"])
+    present = {p.name for p in CORPUS.iterdir() if p.name != "EXPECTED.toml"}
+    assert listed == present
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED["error"]))
+def test_bad_input_is_one_clean_line(capsys, tmp_path, name):
+    words = EXPECTED["error"][name]
+    named = EXPECTED.get("error_file", {}).get(name, name)
+    code, stdout, err, out = render(capsys, tmp_path, CORPUS / name)
+    assert code == 2, err
+    assert_one_line_error(err, named, words)
+    assert list(out.parent.iterdir()) == []  # no output, no temporary file
+    if name.endswith(".obj"):
+        code, stdout, err = run(capsys, ["info", CORPUS / name])
+        assert code == 2 and stdout == ""
+        assert_one_line_error(err, named, words)
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED["renders"]["files"]))
+def test_degenerate_but_valid_input_renders(capsys, tmp_path, name):
+    code, stdout, err, out = render(capsys, tmp_path, CORPUS / name)
+    assert code == 0, err
+    assert "Traceback" not in err and "error" not in err
+    assert sorted(p.name for p in out.parent.iterdir()) == ["render.exr"]
+    if name == "ok_unknown_tag.obj":
+        assert err.startswith("subtrace: warning: ") and "unknown tag 'frobnicate'" in err
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED["xfail"]))
+def test_known_failures(capsys, tmp_path, name):
+    pytest.xfail(EXPECTED["xfail"][name])
+
+
+# --------------------------------------------------------------------------------------
+# generated cases: large faces and valences must render or fail cleanly
+# --------------------------------------------------------------------------------------
+
+
+def test_vertex_of_valence_1000_reads_and_renders(capsys, tmp_path):
+    n = 1000
+    lines = ["v 0 0 0"]
+    for i in range(n):
+        a = 2 * math.pi * i / n
+        lines.append(f"v {math.cos(a):.6f} {math.sin(a):.6f} {0.1 * math.sin(3 * a):.6f}")
+    lines += [f"f 1 {i + 2} {(i + 1) % n + 2}" for i in range(n)]
+    path = tmp_path / "valence_1000.obj"
+    path.write_text("\n".join(lines) + "\n")
+    code, stdout, err = run(capsys, ["info", path])
+    assert code == 0 and "Traceback" not in err, err
+    if not os.environ.get("SUBTRACE_SLOW_TESTS"):
+        return  # the render itself takes about 35 s on 2 cores (found by this test)
+    code, _, err, out = render(capsys, tmp_path, path)
+    assert code == 0, err
+    assert out.exists()
+
+
+@pytest.mark.xfail(run=False, reason="a face with 10,000 vertices: render did not finish in "
+                   "60 s (renderer: refinement of the n-gon's n sub-patches); it should render "
+                   "or fail cleanly")
+def test_face_with_10000_vertices_renders_or_fails_cleanly(capsys, tmp_path):
+    n = 10000
+    lines = [f"v {math.cos(2 * math.pi * i / n):.6f} {math.sin(2 * math.pi * i / n):.6f} 0"
+             for i in range(n)]
+    lines.append("f " + " ".join(str(i + 1) for i in range(n)))
+    path = tmp_path / "face_10000.obj"
+    path.write_text("\n".join(lines) + "\n")
+    code, _, err, out = render(capsys, tmp_path, path)
+    assert code in (0, 2), err
+    assert "Traceback" not in err
+
+
+# --------------------------------------------------------------------------------------
+# options and output paths
+# --------------------------------------------------------------------------------------
+
+
+def test_unknown_option(capsys, tmp_path):
+    # argparse's usage error: usage lines then "subtrace render: error: ..." (see
+    # test_cli.test_usage_errors_exit_2), exit 2, nothing written
+    code, _, err, out = render(capsys, tmp_path, CORPUS / "cube.obj", "--frobnicate")
+    assert code == 2
+    assert "Traceback" not in err
+    assert "unrecognized arguments: --frobnicate" in err
+    assert list(out.parent.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "flags, words",
+    [(["--width", "0"], "--width"), (["--height", "-3"], "--height"),
+     (["--width", "32769"], "--width"), (["--fov", "0"], "--fov"), (["--fov", "180"], "--fov"),
+     (["--tolerance", "0"], "--tolerance"), (["--tolerance", "-1"], "--tolerance")],
+)
+def test_bad_option_values(capsys, tmp_path, flags, words):
+    code, _, err, out = render(capsys, tmp_path, CORPUS / "cube.obj", *flags)
+    assert code == 2, err
+    assert "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[-1].startswith("subtrace: error: ") and words in err, err
+    assert list(out.parent.iterdir()) == []
+
+
+def test_output_in_missing_folder(capsys, tmp_path):
+    out = tmp_path / "missing" / "render.exr"
+    code, _, err = run(capsys, ["render", CORPUS / "cube.obj", "-o", out, *RENDER_ARGS])
+    assert code == 2
+    assert_one_line_error(err, "render.exr", "missing")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_output_under_a_file(capsys, tmp_path):
+    (tmp_path / "a_file").write_text("")
+    out = tmp_path / "a_file" / "render.exr"
+    code, _, err = run(capsys, ["render", CORPUS / "cube.obj", "-o", out, *RENDER_ARGS])
+    assert code == 2
+    assert_one_line_error(err, "render.exr", "")
+    assert [p.name for p in tmp_path.iterdir()] == ["a_file"]
+
+
+def test_output_in_read_only_folder(capsys, tmp_path):
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    folder.chmod(0o555)
+    try:
+        probe = folder / "probe"
+        try:
+            probe.write_text("")
+        except OSError:
+            pass
+        else:
+            probe.unlink()
+            pytest.skip("running as root: a read-only folder is still writable")
+        code, _, err = run(capsys, ["render", CORPUS / "cube.obj", "-o", folder / "r.exr",
+                                    *RENDER_ARGS])
+        assert code == 2
+        assert_one_line_error(err, "r.exr", "ermission")
+        assert list(folder.iterdir()) == []
+    finally:
+        folder.chmod(0o755)
+
+
+def test_output_on_read_only_file_system(capsys):
+    # /proc refuses new files even to root
+    code, _, err = run(capsys, ["render", CORPUS / "cube.obj", "-o", "/proc/subtrace.exr",
+                                *RENDER_ARGS])
+    assert code == 2
+    assert_one_line_error(err, "/proc/subtrace.exr", "")
+
+
+# --------------------------------------------------------------------------------------
+# a bounded fuzz of the scene reader (the OBJ reader's is in test_obj.py)
+# --------------------------------------------------------------------------------------
+
+_SCENE = (CORPUS / "ok_scene.toml").read_text()
+
+
+@settings(max_examples=120, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.one_of(
+    st.binary(max_size=200),
+    st.builds(lambda cut, junk: _SCENE.encode()[:cut] + junk + _SCENE.encode()[cut:],
+              st.integers(0, len(_SCENE)), st.binary(max_size=12)),
+    st.builds(lambda cut, n: _SCENE.encode()[:cut] + _SCENE.encode()[cut + n:],
+              st.integers(0, len(_SCENE)), st.integers(1, 12)),
+    st.text(alphabet=' \t\r\n#[]=".,-+0123456789eEinfatruobjcmshwdl', max_size=160)
+    .map(str.encode),
+))
+def test_scene_reader_fuzz(tmp_path, data):
+    from subtrace.io.scene import load_scene
+
+    (tmp_path / "cube.obj").write_bytes((CORPUS / "cube.obj").read_bytes())
+    path = tmp_path / "scene.toml"
+    path.write_bytes(data)
+    try:
+        load_scene(path)
+    except SubtraceError as err:
+        message = str(err)
+        assert message and "\n" not in message.strip()
+        assert isinstance(err, SceneError) or str(tmp_path) in message
