@@ -112,7 +112,7 @@ def test_vertex_of_valence_1000_reads_and_renders(capsys, tmp_path):
 
 
 @pytest.mark.xfail(run=False, reason="a face with 10,000 vertices: render did not finish in "
-                   "60 s (renderer: refinement of the n-gon's n sub-patches); it should render "
+                   "60 s (renderer; where the time goes is not yet located); it should render "
                    "or fail cleanly")
 def test_face_with_10000_vertices_renders_or_fails_cleanly(capsys, tmp_path):
     n = 10000
