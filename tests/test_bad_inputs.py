@@ -20,8 +20,8 @@ from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
 
+from fuzzing import mutations
 from subtrace.cli import main
 from subtrace.errors import SceneError, SubtraceError
 
@@ -212,15 +212,7 @@ _SCENE = (CORPUS / "ok_scene.toml").read_text()
 
 @settings(max_examples=120, deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(data=st.one_of(
-    st.binary(max_size=200),
-    st.builds(lambda cut, junk: _SCENE.encode()[:cut] + junk + _SCENE.encode()[cut:],
-              st.integers(0, len(_SCENE)), st.binary(max_size=12)),
-    st.builds(lambda cut, n: _SCENE.encode()[:cut] + _SCENE.encode()[cut + n:],
-              st.integers(0, len(_SCENE)), st.integers(1, 12)),
-    st.text(alphabet=' \t\r\n#[]=".,-+0123456789eEinfatruobjcmshwdl', max_size=160)
-    .map(str.encode),
-))
+@given(data=mutations(_SCENE, ' \t\r\n#[]=".,-+0123456789eEinfatruobjcmshwdl', 160, 12))
 def test_scene_reader_fuzz(tmp_path, data):
     from subtrace.io.scene import load_scene
 

@@ -13,6 +13,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from fuzzing import mutations
 from subtrace.errors import ObjError, SubtraceWarning
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material, ObjData, read_obj
 
@@ -599,14 +600,7 @@ _VALID = (SQUARE + "vt 0 0\nvn 0 0 1\nf 1/1/1 2/1/1 3/1/1 4/1/1\nf -1 -2 -3\n"
 
 @settings(max_examples=150, deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(garbage=st.one_of(
-    st.binary(max_size=200),
-    st.builds(lambda cut, junk: _VALID.encode()[:cut] + junk + _VALID.encode()[cut:],
-              st.integers(0, len(_VALID)), st.binary(max_size=12)),
-    st.builds(lambda cut, n: _VALID.encode()[:cut] + _VALID.encode()[cut + n:],
-              st.integers(0, len(_VALID)), st.integers(1, 8)),
-    st.text(alphabet=" \t\r\n\\#/-+.0123456789eEfvtngosl", max_size=120).map(str.encode),
-))
+@given(garbage=mutations(_VALID, " \t\r\n\\#/-+.0123456789eEfvtngosl", 120, 8))
 def test_garbage_parses_or_raises_obj_error(tmp_path, garbage):
     path = tmp_path / "fuzz.obj"
     path.write_bytes(garbage)
