@@ -30,13 +30,18 @@ def cube():
 
 
 def reference_hits(cage, level, org, dirs):
-    """Brute force: the line parameters of every hit with every triangle (two per quad) of
-    the level-``level`` uniform refinement with its vertices pushed to the limit; hits on
-    shared edges (equal t) counted once."""
+    """Brute force: the line parameters of every hit with every triangle (Loop) or two
+    triangles per quad (Catmull-Clark) of the level-``level`` uniform refinement with its
+    vertices pushed to the limit (exact limit masks); hits on shared edges (equal t)
+    counted once."""
     mesh = cage.refine(level)
     P = cage.limit(level)[0]
-    q = mesh.face_verts.reshape(-1, 4)
-    tris = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
+    keep = ~mesh.face_hole
+    if cage.scheme == "loop":
+        tris = mesh.face_verts.reshape(-1, 3)[keep]
+    else:
+        q = mesh.face_verts.reshape(-1, 4)[keep]
+        tris = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
     A, B, C = P[tris[:, 0]], P[tris[:, 1]], P[tris[:, 2]]
     e1, e2 = B - A, C - A
     out = []

@@ -87,40 +87,75 @@ def _as_lines(a, name):
     return np.ascontiguousarray(arr)
 
 
-class _Items:
-    """The Bezier items of a cage for one precision (built lazily, per line batch)."""
+class _Base:
+    """What a cage's line queries share whatever the precision (kept on the cage, see
+    :func:`_items_for`): the patch table and the regular patches' Bezier nets."""
 
-    def __init__(self, cage, precision):
+    def __init__(self, cage):
         from .patches.table import build_patch_table
 
-        self.cage = cage
-        self.table = build_patch_table([cage])
-        tb = self.table
-        reg = np.nonzero(tb.regular)[0]
-        self.nets = [tb.nets]
-        self.exact = [np.ones(len(reg), bool)]
-        self.ptex = [tb.ptex[reg]]
-        self.uv0 = [tb.ptex_uv0[reg]]
-        self.scale = [tb.ptex_scale[reg]]
-        self.irregular = np.nonzero(~tb.regular)[0]
+        self.table = tb = build_patch_table([cage])
+        self.loop = cage.scheme == "loop"
+        if self.loop:
+            from .lines_loop import box_nets, loop_regular
+
+            obj = tb.objects[0]
+            regular = loop_regular(obj.level, cage.options, tb.face)
+            reg = np.nonzero(regular)[0]
+            self.nets = box_nets(obj.level, obj.points, tb.face[reg])
+        else:
+            regular = tb.regular
+            reg = np.nonzero(regular)[0]
+            self.nets = tb.nets
+        self.reg = reg
+        self.irregular = np.nonzero(~regular)[0]
+
+
+class _Items:
+    """The Bezier items of a cage for one precision: the regular patches' nets, and the
+    pieces and cells of the irregular patches some line's shell test asked for (isolated
+    lazily, per line batch, and kept for later calls at the same precision)."""
+
+    def __init__(self, base, precision):
+        tb = self.table = base.table
+        self.base = base
+        reg = base.reg
+        # per kind (quads, triangles): nets, exact, ptex, uv0, scale
+        self.parts = {False: [[], [], [], [], []], True: [[], [], [], [], []]}
+        self._add(base.loop, base.nets, True, tb.ptex[reg], tb.ptex_uv0[reg],
+                  tb.ptex_scale[reg])
+        self.irregular = base.irregular
         self.built = np.zeros(len(self.irregular), bool)
         self.precision = precision
         self._finish()
 
+    def _add(self, tri, nets, exact, ptex, uv0, scale):
+        for lst, x in zip(self.parts[tri], (nets, np.full(len(nets), exact), ptex, uv0,
+                                            scale)):
+            lst.append(x)
+
     def _finish(self):
-        self.all_nets = np.ascontiguousarray(np.concatenate(self.nets)) if self.nets else \
-            np.zeros((0, 4, 4, 3))
-        self.all_exact = np.concatenate(self.exact)
-        self.all_ptex = np.concatenate(self.ptex).astype(np.int32)
-        self.all_uv0 = np.concatenate(self.uv0)
-        self.all_scale = np.concatenate(self.scale)
         from .accel.bvh import build_bvh
 
-        n = len(self.all_nets)
-        flat = self.all_nets.reshape(n, 16, 3)
-        self.item_min = np.ascontiguousarray(flat.min(axis=1)) if n else np.zeros((0, 3))
-        self.item_max = np.ascontiguousarray(flat.max(axis=1)) if n else np.zeros((0, 3))
-        # cells are bilinear stand-ins: their boxes grow by the cell bound, within which the
+        cat = {tri: [np.concatenate(x) if x else None for x in self.parts[tri]]
+               for tri in (False, True)}
+        q, t = cat[False], cat[True]
+        self.all_nets = np.ascontiguousarray(q[0]) if q[0] is not None else \
+            np.zeros((0, 4, 4, 3))
+        self.all_tnets = np.ascontiguousarray(t[0]) if t[0] is not None else \
+            np.zeros((0, 15, 3))
+        nq, nt = len(self.all_nets), len(self.all_tnets)
+        both = [x for x in (q, t) if x[0] is not None]
+        self.all_exact = np.concatenate([x[1] for x in both]).astype(bool)
+        self.all_ptex = np.concatenate([x[2] for x in both]).astype(np.int32)
+        self.all_uv0 = np.concatenate([x[3] for x in both])
+        self.all_scale = np.concatenate([x[4] for x in both])
+        pts = np.concatenate([self.all_nets.reshape(nq, 16, 3),
+                              np.pad(self.all_tnets, ((0, 0), (0, 1), (0, 0)), mode="edge")])
+        n = nq + nt
+        self.item_min = np.ascontiguousarray(pts.min(axis=1)) if n else np.zeros((0, 3))
+        self.item_max = np.ascontiguousarray(pts.max(axis=1)) if n else np.zeros((0, 3))
+        # cells are flat stand-ins: their boxes grow by the cell bound, within which the
         # true surface lies
         cell = ~self.all_exact
         self.item_min[cell] -= 0.5 * self.precision
@@ -151,8 +186,24 @@ class _Items:
         if not len(sel):
             return
         self.built[sel] = True
-        self._isolate(self.irregular[sel])
+        if self.base.loop:
+            self._isolate_loop(self.irregular[sel])
+        else:
+            self._isolate(self.irregular[sel])
         self._finish()
+
+    def _isolate_loop(self, rows):
+        from .lines_loop import isolate_loop
+
+        tb = self.table
+        root, org, sc, nets, exact = isolate_loop(tb.objects[0], tb.face[rows],
+                                                  0.5 * self.precision, MAX_ISOLATION)
+        p = rows[root]
+        for ex in (True, False):
+            k = exact == ex
+            self._add(True, nets[k], ex, tb.ptex[p[k]],
+                      tb.ptex_uv0[p[k]] + tb.ptex_scale[p[k], None] * org[k],
+                      tb.ptex_scale[p[k]] * sc[k])
 
     def _isolate(self, rows):
         from .patches.isolate import build_isolated
@@ -171,12 +222,8 @@ class _Items:
         if len(root):
             p = rows[root]
             sc = 0.5 ** level.astype(np.float64)
-            self.nets.append(bez)
-            self.exact.append(np.ones(len(root), bool))
-            self.ptex.append(tb.ptex[p])
-            self.uv0.append(tb.ptex_uv0[p] + tb.ptex_scale[p, None] * np.stack(
-                [i0 * sc, j0 * sc], axis=1))
-            self.scale.append(tb.ptex_scale[p] * sc)
+            self._add(False, bez, True, tb.ptex[p], tb.ptex_uv0[p] + tb.ptex_scale[p, None]
+                      * np.stack([i0 * sc, j0 * sc], axis=1), tb.ptex_scale[p] * sc)
         if len(croot):
             p = rows[croot]
             sc = 0.5 ** d[croot].astype(np.float64)
@@ -186,12 +233,30 @@ class _Items:
             c = cpts[:, None, None]  # (c,1,1,4,3)
             net = ((1 - s) * (1 - t) * c[..., 0, :] + s * (1 - t) * c[..., 1, :]
                    + s * t * c[..., 2, :] + (1 - s) * t * c[..., 3, :])
-            self.nets.append(np.ascontiguousarray(net))
-            self.exact.append(np.zeros(len(croot), bool))
-            self.ptex.append(tb.ptex[p])
-            self.uv0.append(tb.ptex_uv0[p] + tb.ptex_scale[p, None] * np.stack(
-                [ci * sc, cj * sc], axis=1))
-            self.scale.append(tb.ptex_scale[p] * sc)
+            self._add(False, np.ascontiguousarray(net), False, tb.ptex[p], tb.ptex_uv0[p]
+                      + tb.ptex_scale[p, None] * np.stack([ci * sc, cj * sc], axis=1),
+                      tb.ptex_scale[p] * sc)
+
+
+# precisions whose items a cage keeps (the most recently used)
+CACHED_PRECISIONS = 4
+
+
+def _items_for(cage, precision) -> _Items:
+    """The cage's items at ``precision``, kept on the cage (its ``_cache``, which lives and
+    dies with the immutable cage) so that repeated calls skip the patch table, the Bezier
+    conversion and the isolation already done; the latest ``CACHED_PRECISIONS`` are kept."""
+    store = cage._cache.setdefault("lines", {})
+    if "base" not in store:
+        store["base"] = _Base(cage)
+    by_prec = store.setdefault("items", {})
+    items = by_prec.pop(precision, None)
+    if items is None:
+        items = _Items(store["base"], precision)
+    by_prec[precision] = items  # most recent last
+    while len(by_prec) > CACHED_PRECISIONS:
+        by_prec.pop(next(iter(by_prec)))
+    return items
 
 
 def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf),
@@ -203,11 +268,11 @@ def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf
     cores). See the module doc for tangent lines and flat regions. Returns :class:`Hits`."""
     from .tasks import run_tasks, set_threads, thread_count
     from .trace.lines import N_FIELDS, lines_task, merge_candidates
+    from .trace.lines_loop import TRI_SPLIT
 
-    if getattr(cage, "scheme", None) != "catmark":
-        raise SubtraceError(
-            "intersect_lines: only Catmull-Clark cages are supported (Loop is not yet); "
-            "load the cage with scheme='catmark'")
+    if getattr(cage, "scheme", None) not in ("catmark", "loop"):
+        raise SubtraceError("intersect_lines: expected a Catmull-Clark or Loop cage "
+                            "(subtrace.load_cage / make_cage)")
     org = _as_lines(origins, "origins")
     dirs = _as_lines(directions, "directions")
     if len(org) != len(dirs):
@@ -229,7 +294,7 @@ def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf
     if mode not in MODES:
         raise SubtraceError(f"mode: expected one of {', '.join(MODES)}, got {mode!r}")
 
-    items = _Items(cage, precision)
+    items = _items_for(cage, precision)
     tol_flat = 0.5 * precision
     touch_tol = precision
     scale = float(np.abs(items.table.shell_max).max(initial=1.0)
@@ -257,10 +322,11 @@ def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf
                 cand = np.empty((len(sel), cap, N_FIELDS))
                 count = np.empty(len(sel), np.int64)
                 stats = np.empty((len(sel), 2), np.int64)
-                run_tasks(lines_task, oo, dd, t_lo, t_hi, items.all_nets, items.all_exact,
+                run_tasks(lines_task, oo, dd, t_lo, t_hi, items.all_nets, items.all_tnets,
+                          TRI_SPLIT, items.all_exact,
                           items.item_min, items.item_max, bv.node_min, bv.node_max,
                           bv.node_first, bv.node_count, bv.prims, tol_flat, touch_tol,
-                          res_tol, cap, cand, count, stats)
+                          res_tol, mode == "first", cap, cand, count, stats)
                 over = count > cap
                 done = ~over
                 keep = np.zeros((len(sel), cap), bool)
@@ -280,7 +346,7 @@ def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf
         if threads is not None:
             set_threads(old)
     return _hits(items, org, dirs, out_rows, out_tan, out_line, mode, n_lines, precision,
-                 dict(items=len(items.all_nets), items_entered=entered, leaves=leaves))
+                 dict(items=len(items.all_exact), items_entered=entered, leaves=leaves))
 
 
 def _hits(items, org, dirs, rows, tans, lines, mode, n_lines, precision, stats) -> Hits:
@@ -299,7 +365,14 @@ def _hits(items, org, dirs, rows, tans, lines, mode, n_lines, precision, stats) 
     ab = rows[:, [C_A, C_B]]
     uv = items.all_uv0[item] + items.all_scale[item, None] * ab
     point = org[line] + t[:, None] * dirs[line]
-    normal = _normals(items.all_nets, item, ab)
+    normal = np.empty((len(item), 3))
+    quad = item < len(items.all_nets)
+    normal[quad] = _normals(items.all_nets, item[quad], ab[quad])
+    if not quad.all():
+        from .lines_loop import tri_normals
+
+        normal[~quad] = tri_normals(items.all_tnets, item[~quad] - len(items.all_nets),
+                                    ab[~quad])
     return Hits(line=line, t=t, point=point, ptex=items.all_ptex[item].astype(np.int32),
                 uv=uv, normal=normal, tangent=tan.astype(bool), n_lines=n_lines,
                 precision=precision, stats=stats)

@@ -1,15 +1,23 @@
 """Line / surface intersection kernels: every hit of many lines with a set of Bezier items.
 
-An *item* is one bicubic Bezier net (4,4,3) over a square of some patch's parameters: a
-regular patch, a regular piece of an isolated irregular patch, or (degree-elevated bilinear)
-an exact-limit-point cell next to an extraordinary vertex. Items sit in a BVH over their
-net boxes. Per line (nothing is stored between lines):
+An *item* is a Bezier net over part of some patch's parameters, of one of two kinds:
+
+* a bicubic net (4,4,3) over a square (Catmull-Clark): a regular patch, a regular piece of
+  an isolated irregular patch, or (degree-elevated bilinear) an exact-limit-point cell next
+  to an extraordinary vertex;
+* a quartic triangular net (15,3) over a triangle (Loop, :mod:`subtrace.trace.lines_loop`):
+  a regular box-spline patch or piece, or (degree-elevated linear) an exact-limit-point
+  cell.
+
+Items sit in a BVH over their boxes. Item ``i`` is quad ``i`` for ``i < len(nets)``, else
+triangle ``i - len(nets)``. Per line (nothing is stored between lines):
 
 1. BVH traversal with the line (a parameter interval, possibly infinite both ways) against
-   item boxes padded by ``touch_tol``.
+   boxes padded by ``touch_tol``, nearer child first.
 2. Inside an item, the paper's multi-level 1-to-4 segmentation, lazily: a sub-net (de
    Casteljau halving, on a stack) whose padded box the line misses is dropped; one the line
-   enters is split again until it is *flat*: ``flatness(net) <= tol_flat`` where
+   enters is split again until it is *flat*: its patch lies within ``tol_flat`` of its
+   corner triangles. For a bicubic net
 
        flatness = max_ij |b_ij - L(i/3, j/3)|  +  |b00 - b30 - b03 + b33| / 4
 
@@ -18,13 +26,20 @@ net boxes. Per line (nothing is stored between lines):
    control points ``b_ij - L(i/3, j/3)`` and by the convex-hull property lies within the
    first term of ``L``; the second bounds ``|L - T|`` for the two corner triangles ``T``
    (``L - T = -t (1 - s) twist``). Both terms are second differences: each halving divides
-   them by about 4, so the depth is about ``log4(flatness(root) / tol_flat)``.
-3. At a flat leaf: the two corner triangles (watertight test) seed Newton on the exact net
-   (unknowns s, t, line parameter); a root inside the leaf's square (up to ``PARAM_SLACK``) is
-   a *crossing*. If Newton fails, the triangle hit itself is kept (within ``tol_flat`` of the
-   surface). Without a crossing, Gauss-Newton minimises the line's distance to the net; a
-   minimum inside the square within ``touch_tol`` is a *touch* (a tangent contact).
-4. :func:`merge_candidates` turns each line's candidates into hits: see its docstring.
+   them by about 4, so the depth is about ``log4(flatness(root) / tol_flat)``. A triangular
+   net has the same bound without the twist (:func:`~subtrace.trace.lines_loop.tri_flatness`).
+   Children are visited nearest first (entry into their boxes).
+3. At a flat leaf: the corner triangles (watertight test) seed Newton on the exact net
+   (unknowns s, t, line parameter); a root inside the item (up to ``PARAM_SLACK``) is a
+   *crossing*. If Newton fails, the triangle hit itself is kept (within ``tol_flat`` of the
+   surface). Without a crossing, Newton (full Hessian) minimises the line's distance to the
+   net; a minimum inside the leaf within ``touch_tol`` is a *touch* (a tangent contact). On
+   a cell (a flat stand-in within ``tol_flat`` of the surface) a touch must be within
+   ``touch_tol - tol_flat``, so the surface is within ``touch_tol`` of the line there.
+4. With ``first``, a crossing at ``t`` stops the descent into boxes entered beyond ``t``
+   plus the distance within which :func:`merge_candidates` could still merge a later
+   candidate into it (``2 touch_tol / |cos|`` along the line).
+5. :func:`merge_candidates` turns each line's candidates into hits: see its docstring.
 
 Candidates are rows of ``N_FIELDS`` float64 (``C_*`` columns) in a per-line buffer of
 ``cap`` rows; ``count`` may exceed ``cap`` (then the caller runs the line again, larger).
@@ -38,23 +53,29 @@ import numba as nb
 import numpy as np
 
 from .. import config
-from .bezier import _bez_point, _copy_net, _net_box, _split, bez_derivatives
+from .bezier import _copy_net, _net_box, _split
+from .lines_loop import (
+    N_TRI, TRI_MONO, mono_eval, tri_box, tri_flatness, tri_monomials, tri_split,
+)
 from .prims import _shear, _tri
 
 # Deepest halving of an item: 2^-40 of its side is below what double parameters resolve.
 MAX_DEPTH = 40
-# Work nets on the descent stack: each level keeps at most 3 siblings, plus 6 for splitting.
-STACK_NETS = 3 * MAX_DEPTH + 8
+# Work nets on the descent stack: each level keeps at most 3 siblings, plus 10 for splitting.
+STACK_NETS = 3 * MAX_DEPTH + 16
 # BVH traversal stack (the trees built here are far shallower).
 NODE_STACK = 128
-# Newton iterations for a crossing / Gauss-Newton iterations for a touch.
+# Newton iterations for a crossing / for a touch.
 NEWTON_ITERS = 16
 # A root found from a leaf counts if it lies within this much (in the leaf's parameter
-# units) of the leaf's square: roots on a shared side are found from both sides and merged.
+# units) of the item: roots on a shared side are found from both sides and merged.
 PARAM_SLACK = 1e-6
-# Gauss-Newton for touches is damped by this fraction of the normal matrix's trace, so a
-# line lying in a flat region (a singular problem) still takes finite steps.
+# Newton for touches is damped by this fraction of the normal matrix's trace, so a line
+# lying in a flat region (a singular problem) still takes finite steps.
 GN_DAMPING = 1e-12
+# With ``first``, crossings this close to tangent (|cos| of normal and line) stop the
+# descent as if they were at this cosine (the merge distance grows as 1/|cos|).
+FIRST_MIN_COS = 1e-3
 
 N_FIELDS = 8
 C_T, C_ITEM, C_A, C_B, C_KIND, C_COS, C_DIST, C_SIZE = range(N_FIELDS)
@@ -63,9 +84,9 @@ KIND_TOUCH = 2.0
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _slab(o0, o1, o2, i0, i1, i2, lo0, lo1, lo2, hi0, hi1, hi2, pad, tlo, thi):
-    """Does the line o + t d (``i`` = 1/d) meet the box [lo - pad, hi + pad] for t in
-    [tlo, thi]? IEEE infinities handle zero direction components."""
+def _slab_t(o0, o1, o2, i0, i1, i2, lo0, lo1, lo2, hi0, hi1, hi2, pad, tlo, thi):
+    """Where the line o + t d (``i`` = 1/d) enters the box [lo - pad, hi + pad] for t in
+    [tlo, thi], or inf if it misses. IEEE infinities handle zero direction components."""
     a = (lo0 - pad - o0) * i0
     b = (hi0 + pad - o0) * i0
     tn = min(a, b)
@@ -79,9 +100,10 @@ def _slab(o0, o1, o2, i0, i1, i2, lo0, lo1, lo2, hi0, hi1, hi2, pad, tlo, thi):
     tn = max(tn, min(a, b))
     tf = min(tf, max(a, b))
     if tn != tn or tf != tf:  # NaN: origin on a slab plane of a zero component
-        return True
+        return tlo
     tf = tf + 1e-15 * abs(tf) + 1e-300
-    return max(tn, tlo) <= min(tf, thi)
+    tn = max(tn, tlo)
+    return tn if tn <= min(tf, thi) else np.inf
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -107,43 +129,9 @@ def net_flatness(w, q):
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _newton_cross(w, q, s, t, tau, o0, o1, o2, d0, d1, d2, res_tol):
-    """Newton on S(s, t) = o + tau d for net ``w[q]``; returns (ok, s, t, tau)."""
-    for _ in range(NEWTON_ITERS):
-        x, y, z = _bez_point(w, q, s, t)
-        su, sv = bez_derivatives(w[q], s, t)
-        r0 = x - o0 - tau * d0
-        r1 = y - o1 - tau * d1
-        r2 = z - o2 - tau * d2
-        # solve [su sv -d] (ds dt dtau) = -r by Cramer's rule
-        c0, c1, c2 = -d0, -d1, -d2
-        det = (su[0] * (sv[1] * c2 - sv[2] * c1) - sv[0] * (su[1] * c2 - su[2] * c1)
-               + c0 * (su[1] * sv[2] - su[2] * sv[1]))
-        if det == 0.0 or det != det:
-            return False, s, t, tau
-        b0, b1, b2 = -r0, -r1, -r2
-        ds = (b0 * (sv[1] * c2 - sv[2] * c1) - sv[0] * (b1 * c2 - b2 * c1)
-              + c0 * (b1 * sv[2] - b2 * sv[1])) / det
-        dt = (su[0] * (b1 * c2 - b2 * c1) - b0 * (su[1] * c2 - su[2] * c1)
-              + c0 * (su[1] * b2 - su[2] * b1)) / det
-        dtau = (su[0] * (sv[1] * b2 - sv[2] * b1) - sv[0] * (su[1] * b2 - su[2] * b1)
-                + b0 * (su[1] * sv[2] - su[2] * sv[1])) / det
-        s += ds
-        t += dt
-        tau += dtau
-        if abs(s) > 4.0 or abs(t) > 4.0:  # left the leaf's neighbourhood: not its root
-            return False, s, t, tau
-    x, y, z = _bez_point(w, q, s, t)
-    r0 = x - o0 - tau * d0
-    r1 = y - o1 - tau * d1
-    r2 = z - o2 - tau * d2
-    return math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) <= res_tol, s, t, tau
-
-
-@nb.njit(cache=True, error_model="numpy")
-def _bez_d2(w, q, s, t):
-    """Point, first and second derivatives of net ``w[q]`` at (s, t): six (3,) arrays
-    (P, Ps, Pt, Pss, Pst, Ptt)."""
+def _quad_eval(w, q, s, t, out, second):
+    """Point, first and (with ``second``) second derivatives of bicubic net ``w[q]`` at
+    (s, t) into ``out`` rows P, Ps, Pt, Pss, Pst, Ptt."""
     ss, st = 1.0 - s, 1.0 - t
     b = (ss * ss * ss, 3.0 * s * ss * ss, 3.0 * s * s * ss, s * s * s)
     db = (-3.0 * ss * ss, 3.0 * ss * (ss - 2.0 * s), 3.0 * s * (2.0 * ss - s), 3.0 * s * s)
@@ -151,7 +139,9 @@ def _bez_d2(w, q, s, t):
     c = (st * st * st, 3.0 * t * st * st, 3.0 * t * t * st, t * t * t)
     dc = (-3.0 * st * st, 3.0 * st * (st - 2.0 * t), 3.0 * t * (2.0 * st - t), 3.0 * t * t)
     ddc = (6.0 * st, 6.0 * (3.0 * t - 2.0), 6.0 * (1.0 - 3.0 * t), 6.0 * t)
-    out = np.zeros((6, 3))
+    for r in range(6 if second else 3):
+        for k in range(3):
+            out[r, k] = 0.0
     for i in range(4):
         for j in range(4):
             for k in range(3):
@@ -159,22 +149,64 @@ def _bez_d2(w, q, s, t):
                 out[0, k] += b[i] * c[j] * x
                 out[1, k] += db[i] * c[j] * x
                 out[2, k] += b[i] * dc[j] * x
-                out[3, k] += ddb[i] * c[j] * x
-                out[4, k] += db[i] * dc[j] * x
-                out[5, k] += b[i] * ddc[j] * x
-    return out
+                if second:
+                    out[3, k] += ddb[i] * c[j] * x
+                    out[4, k] += db[i] * dc[j] * x
+                    out[5, k] += b[i] * ddc[j] * x
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _closest(w, q, o0, o1, o2, e0, e1, e2):
-    """Newton minimum of the distance from net ``w[q]``'s patch to the line through o with
-    unit direction e (gradient of |r_perp|^2 / 2 with its full Hessian; damped, and Gauss-
-    Newton where the Hessian is not positive), started at the leaf's centre; returns
-    (s, t, distance, tau)."""
-    s = 0.5
-    t = 0.5
+def _eval(tri, w, q, mono, s, t, out, second):
+    """:func:`_quad_eval` of quad net ``w[q]``, or the triangle net whose monomial
+    coefficients are ``mono`` (``tri``)."""
+    if tri:
+        mono_eval(mono, s, t, out, second)
+    else:
+        _quad_eval(w, q, s, t, out, second)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _newton_cross(tri, w, q, mono, D, s, t, tau, o0, o1, o2, d0, d1, d2, res_tol):
+    """Newton on S(s, t) = o + tau d for the leaf's net; returns (ok, s, t, tau)."""
     for _ in range(NEWTON_ITERS):
-        D = _bez_d2(w, q, s, t)
+        _eval(tri, w, q, mono, s, t, D, False)
+        r0 = D[0, 0] - o0 - tau * d0
+        r1 = D[0, 1] - o1 - tau * d1
+        r2 = D[0, 2] - o2 - tau * d2
+        su0, su1, su2 = D[1, 0], D[1, 1], D[1, 2]
+        sv0, sv1, sv2 = D[2, 0], D[2, 1], D[2, 2]
+        # solve [su sv -d] (ds dt dtau) = -r by Cramer's rule
+        c0, c1, c2 = -d0, -d1, -d2
+        det = (su0 * (sv1 * c2 - sv2 * c1) - sv0 * (su1 * c2 - su2 * c1)
+               + c0 * (su1 * sv2 - su2 * sv1))
+        if det == 0.0 or det != det:
+            return False, s, t, tau
+        b0, b1, b2 = -r0, -r1, -r2
+        ds = (b0 * (sv1 * c2 - sv2 * c1) - sv0 * (b1 * c2 - b2 * c1)
+              + c0 * (b1 * sv2 - b2 * sv1)) / det
+        dt = (su0 * (b1 * c2 - b2 * c1) - b0 * (su1 * c2 - su2 * c1)
+              + c0 * (su1 * b2 - su2 * b1)) / det
+        dtau = (su0 * (sv1 * b2 - sv2 * b1) - sv0 * (su1 * b2 - su2 * b1)
+                + b0 * (su1 * sv2 - su2 * sv1)) / det
+        s += ds
+        t += dt
+        tau += dtau
+        if abs(s) > 4.0 or abs(t) > 4.0:  # left the leaf's neighbourhood: not its root
+            return False, s, t, tau
+    _eval(tri, w, q, mono, s, t, D, False)
+    r0 = D[0, 0] - o0 - tau * d0
+    r1 = D[0, 1] - o1 - tau * d1
+    r2 = D[0, 2] - o2 - tau * d2
+    return math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) <= res_tol, s, t, tau
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _closest(tri, w, q, mono, D, s, t, o0, o1, o2, e0, e1, e2):
+    """Newton minimum of the distance from the leaf's patch to the line through o with unit
+    direction e (gradient of |r_perp|^2 / 2 with its full Hessian; damped, and Gauss-Newton
+    where the Hessian is not positive), started at (s, t); returns (s, t, distance, tau)."""
+    for _ in range(NEWTON_ITERS):
+        _eval(tri, w, q, mono, s, t, D, True)
         rx, ry, rz = D[0, 0] - o0, D[0, 1] - o1, D[0, 2] - o2
         p = rx * e0 + ry * e1 + rz * e2
         rx, ry, rz = rx - p * e0, ry - p * e1, rz - p * e2
@@ -204,8 +236,8 @@ def _closest(w, q, o0, o1, o2, e0, e1, e2):
         t = min(max(t + dt, -0.5), 1.5)
         if abs(ds) + abs(dt) < 1e-14:
             break
-    x, y, z = _bez_point(w, q, s, t)
-    rx, ry, rz = x - o0, y - o1, z - o2
+    _eval(tri, w, q, mono, s, t, D, False)
+    rx, ry, rz = D[0, 0] - o0, D[0, 1] - o1, D[0, 2] - o2
     p = rx * e0 + ry * e1 + rz * e2
     rx, ry, rz = rx - p * e0, ry - p * e1, rz - p * e2
     return s, t, math.sqrt(rx * rx + ry * ry + rz * rz), p
@@ -226,12 +258,12 @@ def _push(cand, line, n, cap, t, item, a, b, kind, cs, dist, size):
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _unit_normal_cos(w, q, s, t, e0, e1, e2):
-    """Cosine between the unit normal of net ``w[q]`` at (s, t) and the direction e."""
-    su, sv = bez_derivatives(w[q], s, t)
-    nx = su[1] * sv[2] - su[2] * sv[1]
-    ny = su[2] * sv[0] - su[0] * sv[2]
-    nz = su[0] * sv[1] - su[1] * sv[0]
+def _unit_normal_cos(tri, w, q, mono, D, s, t, e0, e1, e2):
+    """Cosine between the unit normal of the leaf's patch at (s, t) and the direction e."""
+    _eval(tri, w, q, mono, s, t, D, False)
+    nx = D[1, 1] * D[2, 2] - D[1, 2] * D[2, 1]
+    ny = D[1, 2] * D[2, 0] - D[1, 0] * D[2, 2]
+    nz = D[1, 0] * D[2, 1] - D[1, 1] * D[2, 0]
     ln = math.sqrt(nx * nx + ny * ny + nz * nz)
     if ln == 0.0:
         return 0.0
@@ -239,41 +271,69 @@ def _unit_normal_cos(w, q, s, t, e0, e1, e2):
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _in_item(a, b):
-    """Item parameters (a, b) inside the item's square, up to PARAM_SLACK."""
-    return a >= -PARAM_SLACK and a <= 1.0 + PARAM_SLACK and b >= -PARAM_SLACK and (
-        b <= 1.0 + PARAM_SLACK)
+def _inside(tri, a, b, slack):
+    """Parameters (a, b) inside the unit square (or triangle), up to ``slack``."""
+    if tri:
+        return a >= -slack and b >= -slack and a + b <= 1.0 + slack
+    return a >= -slack and a <= 1.0 + slack and b >= -slack and b <= 1.0 + slack
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _leaf(w, q, u0, v0, size, item, line, n, cap, cand, verts, ob0, ob1, ob2, d0, d1, d2,
-          e0, e1, e2, dlen, kx, ky, kz, sx, sy, sz, tbase, tlo, thi, exact, touch_tol,
-          res_tol, slack):
-    """Crossings, else a touch, of the line with flat leaf net ``w[q]`` (module doc, step
-    3); appends candidates for line ``line`` from row ``n``; returns the new count."""
-    for k in range(3):
-        verts[0, k] = w[q, 0, 0, k]
-        verts[1, k] = w[q, 3, 0, k]
-        verts[2, k] = w[q, 3, 3, k]
-        verts[3, k] = w[q, 0, 3, k]
+def _clamp(tri, a, b):
+    """Parameters (a, b) moved into the unit square (or triangle)."""
+    a = min(max(a, 0.0), 1.0)
+    b = min(max(b, 0.0), 1.0)
+    if tri and a + b > 1.0:
+        h = 0.5 * (a + b - 1.0)
+        a, b = max(a - h, 0.0), max(b - h, 0.0)
+        a, b = min(a, 1.0 - b), b
+    return a, b
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _leaf(tri, w, wt, q, mono, D, u0, v0, size, item, line, n, cap, cand, verts, ob0, ob1,
+          ob2, d0, d1, d2, e0, e1, e2, dlen, kx, ky, kz, sx, sy, sz, tbase, tlo, thi, exact,
+          touch_tol, res_tol, slack, cell_tol):
+    """Crossings, else a touch, of the line with flat leaf ``q`` (net ``w[q]``, or ``wt[q]``
+    with ``tri``; item parameters ``(u0, v0) + size * (s, t)``) (module doc, step 3);
+    appends candidates for line ``line`` from row ``n``; returns the new count."""
+    if tri:
+        tri_monomials(wt, q, TRI_MONO, mono)
+        for k in range(3):
+            verts[0, k] = wt[q, 0, k]
+            verts[1, k] = wt[q, 4, k]
+            verts[2, k] = wt[q, N_TRI - 1, k]
+        n_verts, n_tris = 3, 1
+    else:
+        for k in range(3):
+            verts[0, k] = w[q, 0, 0, k]
+            verts[1, k] = w[q, 3, 0, k]
+            verts[2, k] = w[q, 3, 3, k]
+            verts[3, k] = w[q, 0, 3, k]
+        n_verts, n_tris = 4, 2
     ob = (ob0, ob1, ob2)
     tmax = thi - tbase
     found = False
     diag = 0.0
     for k in range(3):
-        lo = min(min(verts[0, k], verts[1, k]), min(verts[2, k], verts[3, k]))
-        hi = max(max(verts[0, k], verts[1, k]), max(verts[2, k], verts[3, k]))
+        lo = hi = verts[0, k]
+        for c in range(1, n_verts):
+            lo = min(lo, verts[c, k])
+            hi = max(hi, verts[c, k])
         diag += (hi - lo) * (hi - lo)
     diag = math.sqrt(diag)
-    for tri in range(2):
-        c = 2 if tri == 0 else 3
-        b_ = 1 if tri == 0 else 2
+    for tr in range(n_tris):
+        c = 2 if tr == 0 else 3
+        b_ = 1 if tr == 0 else 2
         th, ba, bb, bc = _tri(ob[kx], ob[ky], ob[kz], kx, ky, kz, sx, sy, sz, 0, b_, c, verts,
                               tmax, slack)
         if th == np.inf:
             continue
-        # leaf parameters of the triangle hit (corners (0,0) (1,0) (1,1) (0,1))
-        if tri == 0:
+        # leaf parameters of the triangle hit (corners (0,0) (1,0) (1,1) (0,1), or (0,0)
+        # (1,0) (0,1))
+        if tri:
+            s0, t0 = bb, bc
+        elif tr == 0:
             s0, t0 = bb + bc, bc
         else:
             s0, t0 = bb, bb + bc
@@ -283,9 +343,9 @@ def _leaf(w, q, u0, v0, size, item, line, n, cap, cand, verts, ob0, ob1, ob2, d0
             # Newton on the exact net; a root outside this leaf but inside the item is as
             # exact (the net is the item's polynomial there): it is kept, and merged with
             # the same root found from its own leaf
-            ok, s, t, tau = _newton_cross(w, q, s0, t0, th, ob0, ob1, ob2, d0, d1, d2,
-                                          res_tol)
-            ok = ok and _in_item(u0 + size * s, v0 + size * t)
+            ok, s, t, tau = _newton_cross(tri, w, q, mono, D, s0, t0, th, ob0, ob1, ob2, d0,
+                                          d1, d2, res_tol)
+            ok = ok and _inside(tri, u0 + size * s, v0 + size * t, PARAM_SLACK)
         inexact = 0.0
         if not ok:
             s, t, tau = s0, t0, th  # the triangle's hit: within tol_flat of the surface
@@ -293,57 +353,90 @@ def _leaf(w, q, u0, v0, size, item, line, n, cap, cand, verts, ob0, ob1, ob2, d0
         tt = tbase + tau
         if tt < tlo or tt > thi:
             continue
-        a = min(max(u0 + size * s, 0.0), 1.0)
-        b = min(max(v0 + size * t, 0.0), 1.0)
-        cs = _unit_normal_cos(w, q, (a - u0) / size, (b - v0) / size, e0, e1, e2)
+        a, b = _clamp(tri, u0 + size * s, v0 + size * t)
+        cs = _unit_normal_cos(tri, w, q, mono, D, (a - u0) / size, (b - v0) / size, e0, e1,
+                              e2)
         n = _push(cand, line, n, cap, tt, item, a, b, KIND_CROSS, cs, inexact, diag)
         found = True
     if found:
         return n
+    mid = 1.0 / 3.0 if tri else 0.5
     if exact:
         # no triangle hit: Newton from the centre still finds a crossing between the
         # triangles and the surface (a line through a gap of at most tol_flat)
-        x, y, z = _bez_point(w, q, 0.5, 0.5)
-        tau0 = ((x - ob0) * d0 + (y - ob1) * d1 + (z - ob2) * d2) / (dlen * dlen)
-        ok, s, t, tau = _newton_cross(w, q, 0.5, 0.5, tau0, ob0, ob1, ob2, d0, d1, d2,
-                                      res_tol)
-        if ok and _in_item(u0 + size * s, v0 + size * t):
+        _eval(tri, w, q, mono, mid, mid, D, False)
+        tau0 = ((D[0, 0] - ob0) * d0 + (D[0, 1] - ob1) * d1 + (D[0, 2] - ob2) * d2) / (
+            dlen * dlen)
+        ok, s, t, tau = _newton_cross(tri, w, q, mono, D, mid, mid, tau0, ob0, ob1, ob2, d0,
+                                      d1, d2, res_tol)
+        if ok and _inside(tri, u0 + size * s, v0 + size * t, PARAM_SLACK):
             tt = tbase + tau
             if tt >= tlo and tt <= thi:
-                a = min(max(u0 + size * s, 0.0), 1.0)
-                b = min(max(v0 + size * t, 0.0), 1.0)
-                cs = _unit_normal_cos(w, q, (a - u0) / size, (b - v0) / size, e0, e1, e2)
+                a, b = _clamp(tri, u0 + size * s, v0 + size * t)
+                cs = _unit_normal_cos(tri, w, q, mono, D, (a - u0) / size, (b - v0) / size,
+                                      e0, e1, e2)
                 return _push(cand, line, n, cap, tt, item, a, b, KIND_CROSS, cs, 0.0, diag)
-    # a touch: the closest approach inside the leaf, within touch_tol
-    s, t, dist, p = _closest(w, q, ob0, ob1, ob2, e0, e1, e2)
-    if (dist <= touch_tol and s >= -PARAM_SLACK and s <= 1.0 + PARAM_SLACK
-            and t >= -PARAM_SLACK and t <= 1.0 + PARAM_SLACK):
+    # a touch: the closest approach inside the leaf, within touch_tol (of the surface, so
+    # of a cell's stand-in by cell_tol less)
+    s, t, dist, p = _closest(tri, w, q, mono, D, mid, mid, ob0, ob1, ob2, e0, e1, e2)
+    lim = touch_tol if exact else touch_tol - cell_tol
+    if dist <= lim and _inside(tri, s, t, PARAM_SLACK):
         tt = tbase + p / dlen
         if tt >= tlo and tt <= thi:
-            s = min(max(s, 0.0), 1.0)
-            t = min(max(t, 0.0), 1.0)
-            cs = _unit_normal_cos(w, q, s, t, e0, e1, e2)
+            s, t = _clamp(tri, s, t)
+            cs = _unit_normal_cos(tri, w, q, mono, D, s, t, e0, e1, e2)
             n = _push(cand, line, n, cap, tt, item, u0 + size * s, v0 + size * t,
                       KIND_TOUCH, cs, dist, diag)
     return n
 
 
+@nb.njit(cache=True, error_model="numpy")
+def _sub_entry(tri, w, wt, q, o0, o1, o2, i0, i1, i2, pad, tlo, thi):
+    """Entry of the line into the box of sub-net ``w[q]`` (or ``wt[q]``), inf on a miss."""
+    if tri:
+        lo0, lo1, lo2, hi0, hi1, hi2 = tri_box(wt, q)
+    else:
+        lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(w, q)
+    return _slab_t(o0, o1, o2, i0, i1, i2, lo0, lo1, lo2, hi0, hi1, hi2, pad, tlo, thi)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _copy_sub(tri, w, wt, dst, src):
+    """Sub-net ``src`` to stack slot ``dst`` (quad ``w`` or triangle ``wt``)."""
+    if tri:
+        for p in range(N_TRI):
+            for k in range(3):
+                wt[dst, p, k] = wt[src, p, k]
+    else:
+        _copy_net(w, dst, w, src)
+
+
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, exact, item_min, item_max,
-               node_min, node_max, node_first, node_count, prims, tol_flat, touch_tol,
-               res_tol, cap, cand, count, stats):
+def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, tnets, split, exact, item_min,
+               item_max, node_min, node_max, node_first, node_count, prims, tol_flat,
+               touch_tol, res_tol, first, cap, cand, count, stats):
     """Candidates of lines ``task, task + n_tasks, ...`` (module doc). ``org``, ``dirs`` (L,3);
-    ``nets`` (N,4,4,3) items, ``exact`` (N,) bool (False: a bilinear cell, no Newton),
-    ``item_min/max`` (N,3) net boxes; BVH arrays as accel/bvh.py; ``cand`` (L, cap,
-    N_FIELDS) out, ``count`` (L,) out; ``stats`` (L, 2) out: items entered, leaves reached."""
+    ``nets`` (Q,4,4,3) quad items, ``tnets`` (T,15,3) triangle items (item ``Q + i``),
+    ``split`` the triangle split matrices (``lines_loop.TRI_SPLIT``), ``exact`` (Q+T,) bool
+    (False: a flat cell, no Newton), ``item_min/max`` (Q+T,3) boxes; BVH arrays as
+    accel/bvh.py; ``first``: stop as module doc step 4; ``cand`` (L, cap, N_FIELDS) out,
+    ``count`` (L,) out; ``stats`` (L, 2) out: items entered, leaves reached."""
     slack = config.TRI_SLACK
+    n_quad = len(nets)
     w = np.empty((STACK_NETS, 4, 4, 3))
+    wt = np.empty((STACK_NETS, N_TRI, 3))
     su0 = np.empty(STACK_NETS)
     sv0 = np.empty(STACK_NETS)
     ssz = np.empty(STACK_NETS)
+    sent = np.empty(STACK_NETS)
     sdep = np.empty(STACK_NETS, np.int64)
     nodes = np.empty(NODE_STACK, np.int64)
+    nodes_t = np.empty(NODE_STACK)
     verts = np.empty((4, 3))
+    mono = np.empty((N_TRI, 3))
+    D = np.empty((6, 3))
+    kid_t = np.empty(4)
+    kid_order = np.empty(4, np.int64)
     for line in range(task, len(org), n_tasks):
         n = 0
         entered = 0
@@ -354,6 +447,7 @@ def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, exact, item_min, item
         e0, e1, e2 = d0 / dlen, d1 / dlen, d2 / dlen
         i0, i1, i2 = 1.0 / d0, 1.0 / d1, 1.0 / d2
         tlo, thi = t_lo, t_hi
+        tcut = thi  # boxes entered beyond tcut are skipped (``first``)
         count[line] = 0
         stats[line, 0] = 0
         stats[line, 1] = 0
@@ -376,58 +470,111 @@ def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, exact, item_min, item
             tbase = tn - 1.0 - abs(tn) * 1e-9
         ob0, ob1, ob2 = o0 + tbase * d0, o1 + tbase * d1, o2 + tbase * d2
         kx, ky, kz, sx, sy, sz = _shear(d0, d1, d2)
-        # BVH traversal over item boxes
-        top = 0
-        nodes[top] = 0
+        # BVH traversal over item boxes, nearer child first
+        nodes_t[0] = _slab_t(o0, o1, o2, i0, i1, i2, node_min[0, 0], node_min[0, 1],
+                             node_min[0, 2], node_max[0, 0], node_max[0, 1], node_max[0, 2],
+                             touch_tol, tlo, thi)
+        nodes[0] = 0
         top = 1
         while top > 0:
             top -= 1
             nd = nodes[top]
-            if not _slab(o0, o1, o2, i0, i1, i2, node_min[nd, 0], node_min[nd, 1],
-                         node_min[nd, 2], node_max[nd, 0], node_max[nd, 1], node_max[nd, 2],
-                         touch_tol, tlo, thi):
+            if nodes_t[top] > tcut:
                 continue
             if node_count[nd] == 0:
-                nodes[top] = node_first[nd]
-                nodes[top + 1] = node_first[nd] + 1
-                top += 2
+                c0 = node_first[nd]
+                ta = _slab_t(o0, o1, o2, i0, i1, i2, node_min[c0, 0], node_min[c0, 1],
+                             node_min[c0, 2], node_max[c0, 0], node_max[c0, 1],
+                             node_max[c0, 2], touch_tol, tlo, tcut)
+                tb = _slab_t(o0, o1, o2, i0, i1, i2, node_min[c0 + 1, 0],
+                             node_min[c0 + 1, 1], node_min[c0 + 1, 2], node_max[c0 + 1, 0],
+                             node_max[c0 + 1, 1], node_max[c0 + 1, 2], touch_tol, tlo, tcut)
+                near, far = (c0, c0 + 1) if ta <= tb else (c0 + 1, c0)
+                tnear, tfar = min(ta, tb), max(ta, tb)
+                if tfar < np.inf:
+                    nodes[top] = far
+                    nodes_t[top] = tfar
+                    top += 1
+                if tnear < np.inf:
+                    nodes[top] = near
+                    nodes_t[top] = tnear
+                    top += 1
                 continue
             for r in range(node_first[nd], node_first[nd] + node_count[nd]):
                 it = prims[r]
-                if not _slab(o0, o1, o2, i0, i1, i2, item_min[it, 0], item_min[it, 1],
+                te = _slab_t(o0, o1, o2, i0, i1, i2, item_min[it, 0], item_min[it, 1],
                              item_min[it, 2], item_max[it, 0], item_max[it, 1],
-                             item_max[it, 2], touch_tol, tlo, thi):
+                             item_max[it, 2], touch_tol, tlo, tcut)
+                if te == np.inf:
                     continue
                 entered += 1
-                # 1-to-4 segmentation of the item, on a stack of nets
-                _copy_net(w, 0, nets, it)
-                su0[0], sv0[0], ssz[0], sdep[0] = 0.0, 0.0, 1.0, 0
+                # 1-to-4 segmentation of the item, on a stack of nets, nearest child first
+                tri = it >= n_quad
+                if tri:
+                    for p in range(N_TRI):
+                        for k in range(3):
+                            wt[0, p, k] = tnets[it - n_quad, p, k]
+                else:
+                    _copy_net(w, 0, nets, it)
+                su0[0], sv0[0], ssz[0], sdep[0], sent[0] = 0.0, 0.0, 1.0, 0, te
                 sp = 1
                 while sp > 0:
                     q = sp - 1
                     sp = q
-                    if sdep[q] > 0:  # the root's box was tested above
-                        lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(w, q)
-                        if not _slab(o0, o1, o2, i0, i1, i2, lo0, lo1, lo2, hi0, hi1, hi2,
-                                     touch_tol, tlo, thi):
-                            continue
-                    if sdep[q] >= MAX_DEPTH or net_flatness(w, q) <= tol_flat:
-                        leaves += 1
-                        n = _leaf(w, q, su0[q], sv0[q], ssz[q], it, line, n, cap, cand,
-                                  verts, ob0, ob1, ob2, d0, d1, d2, e0, e1, e2, dlen, kx,
-                                  ky, kz, sx, sy, sz, tbase, tlo, thi, exact[it], touch_tol,
-                                  res_tol, slack)
+                    if sent[q] > tcut:
                         continue
-                    # split into w[q+3 .. q+6] (scratch q+1, q+2); children back to q, q+1..
-                    _split(w, q, w, q + 3)
+                    flat = tri_flatness(wt, q) if tri else net_flatness(w, q)
+                    if sdep[q] >= MAX_DEPTH or flat <= tol_flat:
+                        leaves += 1
+                        n0 = n
+                        n = _leaf(tri, w, wt, q, mono, D, su0[q], sv0[q], ssz[q], it, line, n,
+                                  cap, cand, verts, ob0, ob1, ob2, d0, d1, d2, e0, e1, e2,
+                                  dlen, kx, ky, kz, sx, sy, sz, tbase, tlo, thi, exact[it],
+                                  touch_tol, res_tol, slack, tol_flat)
+                        if first:
+                            for i in range(n0, min(n, cap)):
+                                if cand[line, i, C_KIND] == KIND_CROSS:
+                                    cs = max(abs(cand[line, i, C_COS]), FIRST_MIN_COS)
+                                    tcut = min(tcut, cand[line, i, C_T]
+                                               + 2.0 * touch_tol / (cs * dlen))
+                        continue
+                    # the children: quads into q+6 .. q+9 (scratch q+4, q+5), triangles into
+                    # q+4 .. q+7; those the line enters go back to q, q+1, .. farthest first
+                    d_kids = q + 4 if tri else q + 6
+                    if tri:
+                        tri_split(wt, q, split, d_kids)
+                    else:
+                        _split(w, q, w, d_kids)
                     h = 0.5 * ssz[q]
                     u, v, dep = su0[q], sv0[q], sdep[q] + 1
+                    m = 0
                     for ch in range(4):
-                        _copy_net(w, sp, w, q + 3 + ch)
-                        su0[sp] = u + h * (ch & 1)
-                        sv0[sp] = v + h * (ch >> 1)
-                        ssz[sp] = h
+                        tk = _sub_entry(tri, w, wt, d_kids + ch, o0, o1, o2, i0, i1, i2,
+                                        touch_tol, tlo, tcut)
+                        if tk == np.inf:
+                            continue
+                        j = m  # insertion, descending entry
+                        while j > 0 and kid_t[j - 1] < tk:
+                            kid_t[j] = kid_t[j - 1]
+                            kid_order[j] = kid_order[j - 1]
+                            j -= 1
+                        kid_t[j] = tk
+                        kid_order[j] = ch
+                        m += 1
+                    for j in range(m):
+                        ch = kid_order[j]
+                        _copy_sub(tri, w, wt, sp, d_kids + ch)
+                        if tri:
+                            # Loop's child order; child 3 (the middle) turned half a turn
+                            su0[sp] = u + h * (ch == 1 or ch == 3)
+                            sv0[sp] = v + h * (ch == 2 or ch == 3)
+                            ssz[sp] = -h if ch == 3 else h
+                        else:
+                            su0[sp] = u + h * (ch & 1)
+                            sv0[sp] = v + h * (ch >> 1)
+                            ssz[sp] = h
                         sdep[sp] = dep
+                        sent[sp] = kid_t[j]
                         sp += 1
         count[line] = n
         stats[line, 0] = entered
