@@ -122,6 +122,46 @@ def test_isolated_pieces_and_cells(icosahedron):
     np.testing.assert_allclose(area, 0.5, rtol=1e-12)
 
 
+@pytest.mark.parametrize("which", ["disc", "creased"])
+def test_boundary_and_crease_patches_are_box_splines(which, disc, icosahedron):
+    """Triangles along a boundary or an infinitely sharp crease whose crease vertices are
+    regular (3 faces on the triangle's side) are box splines with phantom points: their
+    nets equal the exact evaluator (level-1 faces, ptex parameters of their base face)."""
+    from subtrace.lines_loop import F_INF
+
+    if which == "disc":
+        cage = disc
+    else:  # the icosahedron with the five edges around vertex 0 infinitely sharp
+        ring = [11, 5, 1, 7, 10]
+        cage = subtrace.make_cage(icosahedron.points, icosahedron.face_sizes,
+                                  icosahedron.face_verts, scheme="loop",
+                                  crease_edges=[(a, b) for a, b in zip(ring, np.roll(ring, 1))],
+                                  crease_sharpness=[10.0] * 5)
+    lev = cage.level_topology(1)
+    faces = np.arange(lev.n_faces)
+    reg = faces[loop_regular(lev, cage.options, faces)]
+    sharp_v = np.zeros(lev.n_verts, bool)
+    sharp_v[lev.edge_verts[lev.edge_sharpness >= F_INF].ravel()] = True
+    on = sharp_v[lev.face_verts.reshape(-1, 3)[reg]].any(axis=1)
+    assert on.sum() >= 10  # phantom-point patches exist
+    rng = np.random.default_rng(4)
+    st = _random_st(rng, len(reg))
+    uv = CHILD_ORIGIN[reg % 4] + CHILD_SCALE[reg % 4, None] * st
+    P = np.einsum("mp,mpx->mx", bernstein(st), box_nets(lev, cage.refine(1).points, reg))
+    np.testing.assert_allclose(P, cage.evaluate(reg // 4, uv)[0], atol=1e-12)
+
+
+def test_boundary_items_do_not_follow_precision(disc):
+    """Along a boundary the pieces are regular boundary patches after a level or two: items
+    grow with log(1 / precision), not with the boundary's length / precision."""
+    rng = np.random.default_rng(8)
+    org = rng.uniform(-2, 2, (40, 3))
+    dirs = rng.normal(size=(40, 3))
+    n = [intersect_lines(disc, org, dirs, p, t_range=(-np.inf, np.inf)).stats["items"]
+         for p in (1e-2, 1e-6)]
+    assert n[1] < 3 * n[0] < 3000
+
+
 # ---------------------------------------------------------------------------------------
 # the paper's Table 1 situations, on a regular and on an extraordinary patch
 # ---------------------------------------------------------------------------------------

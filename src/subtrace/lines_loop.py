@@ -30,7 +30,8 @@ import numpy as np
 import numba as nb
 
 from .patches.evaluate import _BOX_COEF, _BOX_MONO, _BOX_POINTS, _LATTICE_DIRS, _TRI_CORNER, _TRI_LEAD
-from .subdiv.limit import _SMOOTH, classify, limit_points
+from .subdiv.creases import F_INF
+from .subdiv.limit import _CREASE, _SMOOTH, classify, limit_points
 from .trace.lines_loop import CHILD_ORIGIN, CHILD_SCALE, TRI_JK, TRI_MONO, TRI_PARAMS, bernstein
 
 # Bezier net (15) from the 12 box-spline points: the box spline's polynomial at the domain
@@ -45,7 +46,9 @@ REGULAR_VALENCE = 6
 
 
 def loop_regular(level, options, faces) -> np.ndarray:
-    """(len(faces),) bool: the triangles of ``level`` that are regular quartic box splines."""
+    """(len(faces),) bool: the triangles of ``level`` that are regular quartic box splines:
+    three smooth, valence-6, crease-free corners, or a regular boundary (see
+    :func:`_boundary_recipe`)."""
     faces = np.asarray(faces, dtype=np.int64)
     if len(faces) == 0:
         return np.zeros(0, dtype=bool)
@@ -54,19 +57,112 @@ def loop_regular(level, options, faces) -> np.ndarray:
     corners = level.face_verts[np.minimum(fo[faces][:, None] + np.arange(3),
                                           len(level.face_verts) - 1)]
     cls = classify(level, options, corners)
-    ok = ((cls[corners] == _SMOOTH)
-          & (np.diff(level.vert_edge_offsets)[corners] == REGULAR_VALENCE)
-          & (np.diff(level.vert_face_offsets)[corners] == REGULAR_VALENCE))
-    return tri & ok.all(axis=1) & ~level.face_hole[faces]
+    n_edges = np.diff(level.vert_edge_offsets)[corners]
+    n_faces = np.diff(level.vert_face_offsets)[corners]
+    inner = ((cls[corners] == _SMOOTH) & (n_edges == REGULAR_VALENCE)
+             & (n_faces == REGULAR_VALENCE))
+    ok = tri & inner.all(axis=1) & ~level.face_hole[faces]
+    # crease vertices (a boundary, or an infinitely sharp crease): _boundary_recipe decides
+    border = (cls[corners] == _CREASE) & level.vert_manifold[corners]
+    maybe = np.nonzero(tri & ~ok & (inner | border).all(axis=1) & border.any(axis=1)
+                       & ~level.face_hole[faces])[0]
+    if len(maybe):
+        sharp = level.edge_sharpness >= F_INF
+        for i in maybe:
+            ok[i] = _boundary_recipe(level, int(faces[i]), sharp) is not None
+    return ok
 
 
 def box_nets(level, points, faces) -> np.ndarray:
     """(m,15,3) triangular Bezier nets of the regular triangles ``faces`` of ``level``."""
-    ids = np.empty((len(faces), len(_BOX_POINTS)), dtype=np.int64)
+    faces = np.asarray(faces, dtype=np.int64)
+    fo = level.face_offsets
+    corners = level.face_verts[fo[faces][:, None] + np.arange(3)]
+    sharp = level.edge_sharpness >= F_INF
+    on_crease = np.zeros(level.n_verts, dtype=bool)
+    on_crease[level.edge_verts[sharp].ravel()] = True
+    inner = ~on_crease[corners].any(axis=1)  # else a crease corner: phantom points
+    X = np.empty((len(faces), len(_BOX_POINTS), 3))
+    rows = np.nonzero(inner)[0]
+    ids = np.empty((len(rows), len(_BOX_POINTS)), dtype=np.int64)
     _box_points(level.face_offsets, level.face_verts, level.vert_face_offsets, level.vert_faces,
                 level.vert_edge_offsets, level.vert_edges, level.edge_verts,
-                np.asarray(faces, dtype=np.int64), _RING_SLOT, ids)
-    return np.ascontiguousarray(np.einsum("pk,mkx->mpx", BOX_TO_TRI, points[ids]))
+                faces[rows], _RING_SLOT, ids)
+    X[rows] = points[ids]
+    for i in np.nonzero(~inner)[0]:
+        a, b, r = _boundary_recipe(level, int(faces[i]), sharp)
+        X[i] = points[a] + np.where(b[:, None] >= 0, points[b] - points[r], 0.0)
+    return np.ascontiguousarray(np.einsum("pk,mkx->mpx", BOX_TO_TRI, X))
+
+
+def _boundary_recipe(level, f, sharp_edge):
+    """The 12 box-spline points of triangle ``f`` with corners on a boundary or an
+    infinitely sharp crease, or None.
+
+    A *regular crease vertex* has 3 faces on the triangle's side, between its two sharp
+    edges (a boundary vertex of 4 edges, or an interior one of 6 whose sharp edges are
+    opposite), and no other sharp edge. The lattice points beyond the crease are replaced by
+    the *phantom* points that mirror the triangle's side across a sharp edge (a, b):
+    ``a + b - r``, r the lattice point across (a, b) from it, so that the box spline's
+    smooth rules reproduce the crease rules there (edge: (3/8)(a + b) + (1/8)(r + a + b - r)
+    = (a + b) / 2; vertex: the ring's two phantoms add up to what the rule 3/4, 1/8, 1/8
+    needs), and the side's surface is that box spline (checked against the exact evaluator
+    in the tests). Returns ``(a, b, r)`` (12,) int64 each, the point ``a`` (b = r = -1) or
+    the phantom ``a + b - r``; None where some point cannot be so made (the triangle is
+    then isolated further)."""
+    fo, fv = level.face_offsets, level.face_verts
+    ve, veo, vf, vfo = level.vert_edges, level.vert_edge_offsets, level.vert_faces, level.vert_face_offsets
+    ev = level.edge_verts
+    at = {}
+    for k in range(3):
+        c = int(fv[fo[f] + k])
+        ring = ve[veo[c]:veo[c + 1]]
+        n = len(ring)
+        slot = int(np.nonzero(vf[vfo[c]:vfo[c + 1]] == f)[0][0])
+        cut = np.nonzero(sharp_edge[ring])[0]
+        if len(cut) == 0 and n == 6:
+            fan = np.roll(ring, -slot)  # a smooth regular corner: the whole ring
+            lead = 0
+        elif len(cut) == 2 and (n == 4 and list(cut) == [0, 3] or n == 6 and cut[1] - cut[0] == 3):
+            # the triangle's side: edges from the sharp one before the face to the next
+            s0 = cut[0] if cut[0] <= slot < cut[1] else cut[1]
+            fan = np.roll(ring, -s0)[:4]
+            lead = (slot - s0) % n
+        else:
+            return None
+        at[tuple(_TRI_CORNER[k])] = c
+        for t in range(6):
+            m = lead + t if lead + t < len(fan) else lead + t - 6
+            if len(fan) == 4 and not 0 <= m < 4:
+                continue  # beyond the crease
+            e = fan[m % 6]
+            far = int(ev[e, 1] if ev[e, 0] == c else ev[e, 0])
+            q = tuple(_TRI_CORNER[k] + _LATTICE_DIRS[(_TRI_LEAD[k] + t) % 6])
+            if at.setdefault(q, far) != far:
+                return None  # the ring does not lie on one lattice (not regular)
+    out = np.full((3, len(_BOX_POINTS)), -1, dtype=np.int64)
+    for i, q in enumerate(_BOX_POINTS.tolist()):
+        if tuple(q) in at:
+            out[0, i] = at[tuple(q)]
+            continue
+        for d in range(6):
+            a = tuple(np.add(q, _LATTICE_DIRS[d]))
+            b = tuple(np.add(q, _LATTICE_DIRS[(d + 1) % 6]))
+            r = tuple(np.add(a, _LATTICE_DIRS[(d + 1) % 6]))
+            if a in at and b in at and r in at and _edge_is(level, at[a], at[b], sharp_edge):
+                out[:, i] = at[a], at[b], at[r]
+                break
+        else:
+            return None
+    return out[0], out[1], out[2]
+
+
+def _edge_is(level, a, b, flag):
+    """``flag`` of the edge joining vertices a and b (False if there is none)."""
+    for e in level.vert_edges[level.vert_edge_offsets[a]:level.vert_edge_offsets[a + 1]]:
+        if b in level.edge_verts[e]:
+            return bool(flag[e])
+    return False
 
 
 def _ring_slots():
