@@ -198,6 +198,11 @@ def _add_render_options(parser) -> None:
     parser.add_argument("--accel", choices=("projection", "bvh"), default=None,
                         help="how rays find the patch shells they enter: shells projected "
                              "onto image tiles (default) or a BVH")
+    parser.add_argument("--max-memory", metavar="SIZE",
+                        help="memory budget of a render, e.g. 500M or 2G (a bare number is "
+                             "MiB; default: half the memory available at the start). "
+                             "Refinement that would exceed it is capped at a coarser level, "
+                             "with a warning")
 
 
 def _add_camera_options(parser) -> None:
@@ -230,7 +235,8 @@ def _scene_from_inputs(inputs, args, **overrides):
     vec = lambda v: None if v is None else " ".join(v)  # noqa: E731
     return apply_overrides(
         scene, width=args.width, height=args.height, fov=args.fov, eye=vec(args.eye),
-        target=vec(args.target), up=vec(args.up), scheme=args.scheme, **overrides,
+        target=vec(args.target), up=vec(args.up), scheme=args.scheme,
+        max_memory=getattr(args, "max_memory", None), **overrides,
     )
 
 

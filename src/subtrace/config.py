@@ -37,3 +37,52 @@ STACK_SIZE = 128
 # bit (the same limit point computed at two levels); this closes those gaps (1e-12 of a
 # triangle is far below anything visible) without letting rays through.
 TRI_SLACK = 1e-12
+
+# Memory budget of a render (``--max-memory``, ``[render] max_memory``). The default is this
+# fraction of the memory the kernel says is available when the render starts (MemAvailable:
+# free memory plus what the page cache can give back), or of the physical memory where that
+# cannot be read: half leaves room for the rest of the machine and for the estimate's error,
+# and taking what is available rather than the total keeps a render from pushing other
+# processes into swap or the OOM killer.
+MEMORY_DEFAULT_FRACTION = 0.5
+# Without /proc/meminfo or sysconf: 4 GiB.
+MEMORY_FALLBACK_BYTES = 4 << 30
+
+# What the budget is checked against (estimates, bytes; each above the measured figure,
+# see patches/table.py: memory_estimate and tests/test_memory.py):
+# per pixel: hits, requests, candidate lists, channel planes and the EXR / PNG write
+# (measured 160-235 B at 4096x256 and 2048x2048)
+MEMORY_BYTES_PER_PIXEL = 320
+# per patch of the table: its arrays, the cage's refined levels, the shells' projection
+MEMORY_BYTES_PER_PATCH = 2048
+# per grid point of a built Loop patch: points, normals, quadtree boxes, and the transient
+# refinement of the patch's neighbourhood (measured 370-530 B per point on Spot and the
+# torus over all refined patches)
+MEMORY_BYTES_PER_GRID_POINT = 640
+# per level of an irregular Catmull-Clark patch: its pieces (3 Bezier nets and boxes per
+# level) and the isolation's cut of its neighbourhood
+MEMORY_BYTES_PER_ISOLATED_LEVEL = 16384
+# a thread's memo of split Bezier nets (trace/bezier.py) is kept within what the budget
+# leaves over, but not below this (below it rays split on the spot: slower, same image)
+MEMORY_MEMO_MIN_BYTES = 8 << 20
+
+
+def default_max_memory() -> int:
+    """The default memory budget of a render in bytes: ``MEMORY_DEFAULT_FRACTION`` of
+    MemAvailable (Linux), else of the physical memory, else ``MEMORY_FALLBACK_BYTES``."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(MEMORY_DEFAULT_FRACTION * int(line.split()[1]) * 1024)
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        import os
+
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+        if total > 0:
+            return int(MEMORY_DEFAULT_FRACTION * total)
+    except (AttributeError, ValueError, OSError):
+        pass
+    return MEMORY_FALLBACK_BYTES

@@ -23,7 +23,8 @@ from .accel.bvh import build_bvh, no_bvh
 from .patches.bspline import net_bounds
 from .patches.isolate import build_isolated
 from .patches.grids import build_grids, grid_params, leaf_corners
-from .patches.table import build_patch_table, choose_depths, edge_sampling
+from .patches.table import (build_patch_table, choose_depths, depth_cap, edge_sampling,
+                            memory_estimate)
 from .trace.kernels import H_T, HIT_FIELDS, candidate_lists, trace_round
 
 
@@ -45,8 +46,10 @@ class RenderStats:
     pieces: int = 0  # regular sub-patches and cells of the isolated irregular patches
     memo_nodes: int = 0  # quadtree nodes of Bezier pieces split and kept by the threads
     memo_full: int = 0  # times a thread's memo ran out during a round (rays split on the spot)
+    memo_bytes: int = 0  # bytes of the memos' stores in use at the end
     rounds: int = 0
     max_depth: int = 0
+    depth_cap: int = -1  # the grid depth the memory budget capped refinement at (-1: none)
     pixels_covered: int = 0
     rays: int = 0
 
@@ -362,10 +365,27 @@ class _Memos:
     went on without storing) is doubled before the next."""
 
     START = {"child": 1 << 22, "nets": 1 << 19, "cells": 1 << 20}  # virtual: touched as used
+    # rows per unit of START (a cell has 4 corner rows) and bytes per row: a node (child,
+    # box, slab, data), a net, a cell corner
+    ROWS = {"child": 1, "nets": 1, "cells": 4}
+    ROW_BYTES = {"child": 8 + 48 + 40 + 8, "nets": 4 * 4 * 3 * 8, "cells": 3 * 8}
 
-    def __init__(self, n_threads):
+    def __init__(self, n_threads, max_bytes=None):
+        # each store at most its share (that of START) of max_bytes per thread
+        start = {k: self.START[k] * self.ROWS[k] for k in self.START}
+        total = sum(start[k] * self.ROW_BYTES[k] for k in start)
+        self.max_rows = {k: (None if max_bytes is None else
+                             max(64, int(max_bytes * start[k] / total)))
+                         for k in start}
         self.m = [self._grow(None, 0, "child", "nets", "cells") for _ in range(n_threads)]
         self.full = 0
+
+    def _rows(self, name, current):
+        """Rows of store ``name`` after a growth from ``current`` rows: double (at least
+        START), within the budget's share."""
+        n = max(2 * current, self.START[name] * self.ROWS[name])
+        cap = self.max_rows[name]
+        return n if cap is None else max(current, min(n, cap))
 
     def _grow(self, old, n_items, *which):
         """A memo with room for ``n_items`` items, the stores named in ``which`` doubled."""
@@ -380,16 +400,17 @@ class _Memos:
             root, child, box, slab, data, nets, cells, cnt = old
         if len(root) < n_items:
             root = np.concatenate([root, np.full(max(n_items, 2 * len(root)) - len(root), -1)])
-        if "child" in which:
-            n = max(2 * len(child), self.START["child"])
+        n = self._rows("child", len(child))
+        if "child" in which and n > len(child):
             used = cnt[M_NODES]
             child, box, slab, data = (_grown(child, used, n), _grown(box, used, n),
                                       _grown(slab, used, n), _grown(data, used, n))
-        if "nets" in which:
-            nets = _grown(nets, cnt[M_NETS], max(2 * len(nets), self.START["nets"]))
-        if "cells" in which:
-            cells = _grown(cells, 4 * cnt[M_CELLS],
-                           max(2 * len(cells), 4 * self.START["cells"]))
+        n = self._rows("nets", len(nets))
+        if "nets" in which and n > len(nets):
+            nets = _grown(nets, cnt[M_NETS], n)
+        n = 4 * (self._rows("cells", len(cells)) // 4)
+        if "cells" in which and n > len(cells):
+            cells = _grown(cells, 4 * cnt[M_CELLS], n)
         cnt[M_FULL] = 0
         return root, child, box, slab, data, nets, cells, cnt
 
@@ -404,21 +425,27 @@ class _Memos:
         return tuple(self.m)
 
     def finish(self, stats):
-        from .trace.bezier import M_FULL, M_NODES
+        from .trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
 
         stats.memo_nodes = int(sum(m[-1][M_NODES] for m in self.m))
+        stats.memo_bytes = int(sum(
+            m[-1][M_NODES] * self.ROW_BYTES["child"] + m[-1][M_NETS] * self.ROW_BYTES["nets"]
+            + 4 * m[-1][M_CELLS] * self.ROW_BYTES["cells"] for m in self.m))
         stats.memo_full = self.full + int(sum(m[-1][M_FULL] for m in self.m))
 
 
 def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, accel=None,
-               progress=None):
+               progress=None, max_memory=None):
     """Run the refinement rounds; returns (hits (H*W, 6), grid pools, isolated pieces, leaf
     tables, every patch refined). ``compiling``: the process compiling the trace kernels
     (``warmup.start``), waited for before the first round. ``accel``: how a ray finds the
     shells it enters, ``"projection"`` (the shells binned into image tiles,
     ``accel/projection.py``) or ``"bvh"`` (``accel/bvh.py``); default
     ``config.PRIMARY_ACCEL``. Either structure is built here (preprocess time).
-    ``progress(done, total, label)``: told after each round how many rays are final."""
+    ``progress(done, total, label)``: told after each round how many rays are final.
+    ``max_memory``: a budget in bytes (None: none); depths whose estimate
+    (``patches.table.memory_estimate``) exceeds it are capped, with a warning, and the
+    threads' memos are kept within what is left."""
     from . import tasks, warmup
     from .accel.projection import no_tiles, project_shells
     from .trace.camera import camera_frame
@@ -441,13 +468,25 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     t0 = time.perf_counter()
     record = {}
     depths = choose_depths(table, eye, tol_rad, max_depth, record)  # (isolates: refinement)
+    memo_bytes = None
+    if max_memory is not None:
+        n_threads = tasks.thread_count()
+        left = max_memory - config.MEMORY_MEMO_MIN_BYTES * n_threads
+        cap = depth_cap(table, depths, W * H, left)
+        if cap is not None:
+            _warn_capped(max_memory, cap, depths, memory_estimate(table, depths, W * H))
+            record = {}
+            depths = choose_depths(table, eye, tol_rad, max(cap, 0), record)
+            stats.depth_cap = max(cap, 0)
+        left -= memory_estimate(table, depths, W * H)
+        memo_bytes = config.MEMORY_MEMO_MIN_BYTES + max(left, 0) // n_threads
     edge_depth, reg_side = edge_sampling(table, depths)
     stats.time_refine += time.perf_counter() - t0
     tested = np.empty(W * H, dtype=np.int64)  # (round 0 writes every ray's entries)
     tables = _leaf_tables(int(depths[~table.is_quad].max(initial=0)))  # (Loop grids only)
     pools = _Pools(table.n_patches)
     iso = _Pieces(table.n_patches)
-    memos = _Memos(tasks.thread_count())
+    memos = _Memos(tasks.thread_count(), memo_bytes)
     reg = np.nonzero(table.regular)[0]
     n_irr = int(np.count_nonzero(table.is_quad & ~table.regular))
     iso.reserve("items", len(reg) + 16 * n_irr)
@@ -510,6 +549,38 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
 # --------------------------------------------------------------------------------------
 # scenes
 # --------------------------------------------------------------------------------------
+
+
+def _mib(n: int) -> str:
+    return f"{n / 2**30:.1f} GiB" if n >= 10 * 2**30 else f"{n / 2**20:.0f} MiB"
+
+
+def _warn_capped(budget, cap, depths, estimate):
+    """The one warning of a render whose refinement the memory budget capped."""
+    import warnings
+
+    from .errors import SubtraceWarning
+
+    warnings.warn(SubtraceWarning(
+        f"memory budget {_mib(budget)}: refinement capped at depth {max(cap, 0)} below the "
+        f"patches (the tolerance needs depth {int(depths.max(initial=0))}, an estimated "
+        f"{_mib(estimate)}), so the image is coarser than the tolerance; raise --max-memory "
+        "(or [render] max_memory in the scene) to refine fully"), stacklevel=2)
+
+
+def check_memory(table, n_pixels: int, budget: int, width: int, height: int):
+    """Raise SceneError when even unrefined patches (depth 0) would not fit ``budget``."""
+    from . import tasks
+    from .errors import SceneError
+
+    need = (memory_estimate(table, np.zeros(table.n_patches, np.int32), n_pixels)
+            + config.MEMORY_MEMO_MIN_BYTES * tasks.thread_count())
+    if need > budget:
+        raise SceneError(
+            f"a {width}x{height} render of {table.n_patches} patches needs at least "
+            f"{_mib(need)} (about {config.MEMORY_BYTES_PER_PIXEL} bytes per pixel) but the "
+            f"memory budget is {_mib(budget)}: lower the resolution or raise --max-memory "
+            "(or [render] max_memory in the scene)")
 
 
 def load_objects(scene):
@@ -576,6 +647,9 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
             lo = np.min([b[0] for b in bounds], axis=0)
             hi = np.max([b[1] for b in bounds], axis=0)
         camera = scene.make_camera(lo, hi)
+        budget = scene.render.max_memory
+        budget = config.default_max_memory() if budget is None else budget
+        check_memory(table, camera.width * camera.height, budget, camera.width, camera.height)
         tol_rad = scene.render.tolerance_rad(camera)
         stats.patches = table.n_patches
         stats.rays = camera.width * camera.height
@@ -584,7 +658,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
             progress(0, stats.rays, "tracing")
         hits, pools, iso, tables, built = trace_hits(table, camera, tol_rad, stats,
                                                      compiling=compiling, accel=accel,
-                                                     progress=progress)
+                                                     progress=progress, max_memory=budget)
     except BaseException:
         warmup.stop(compiling)
         raise

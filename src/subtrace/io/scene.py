@@ -36,6 +36,9 @@ Schema (every table and key optional unless marked *required*)::
     background = [0.0, 0.0, 0.0]    # linear RGB in 0..1; default black
     headlight = true                # a directional light from the eye; default true
     headlight_intensity = 1.0       # >= 0; default 1
+    max_memory = "4G"               # memory budget: a number of MiB or a size with a unit
+                                    #   (K, M, G, T: powers of 1024); default half of the
+                                    #   memory available when the render starts
 
     [[light]]                       # directional lights, any number
     direction = [-1.0, -1.0, -0.5]  # *required*: the direction the light travels (from the
@@ -89,7 +92,8 @@ BOUNDARIES = {
 _TOP_KEYS = ("object", "camera", "render", "light", "output", "preview")
 _OBJECT_KEYS = ("mesh", "scheme", "boundary", "color")
 _CAMERA_KEYS = ("eye", "target", "up", "fov", "width", "height")
-_RENDER_KEYS = ("tolerance", "tolerance_deg", "background", "headlight", "headlight_intensity")
+_RENDER_KEYS = ("tolerance", "tolerance_deg", "background", "headlight", "headlight_intensity",
+                "max_memory")
 _LIGHT_KEYS = ("direction", "color", "intensity")
 # Camera field -> scene key / command-line option
 _CAMERA_FIELD_KEY = {
@@ -166,6 +170,7 @@ class RenderSettings:
     background: tuple[float, float, float] = DEFAULT_BACKGROUND
     headlight: bool = True
     headlight_intensity: float = DEFAULT_HEADLIGHT_INTENSITY
+    max_memory: int | None = None  # bytes; None: config.default_max_memory() at render time
 
     def tolerance_rad(self, camera: Camera) -> float:
         """The angular tolerance in radians (pixels times the camera's pixel angle)."""
@@ -397,6 +402,9 @@ def _render(ctx, table) -> RenderSettings:
         values["headlight_intensity"] = ctx.call(
             where + ("headlight_intensity",), _non_negative, table["headlight_intensity"]
         )
+    if "max_memory" in table:
+        values["max_memory"] = ctx.call(where + ("max_memory",), parse_memory,
+                                        table["max_memory"])
     return RenderSettings(**values)
 
 
@@ -692,6 +700,7 @@ _OPTION = {
     "scheme": "--scheme",
     "output": "--output",
     "preview": "--preview",
+    "max_memory": "--max-memory",
 }
 
 
@@ -709,6 +718,7 @@ def apply_overrides(
     scheme=None,
     output=None,
     preview=None,
+    max_memory=None,
 ) -> Scene:
     """A new Scene with command-line values replacing the file's; None means not given.
 
@@ -761,6 +771,8 @@ def apply_overrides(
         value = _parse_float(tolerance_deg, "tolerance_deg")
         value = _option("tolerance_deg", _positive, value, "degrees")
         render = replace(render, tolerance_px=None, tolerance_deg=value)
+    if max_memory is not None:
+        render = replace(render, max_memory=_option("max_memory", parse_memory, max_memory))
 
     objects = scene.objects
     if scheme is not None:
@@ -812,6 +824,39 @@ def _parse_vector(value, name: str):
                 f"expected 3 numbers like 1,2,3, got {value!r}", key=_OPTION[name]
             ) from None
     return value
+
+
+_MEMORY_UNITS = {"": 1 << 20, "k": 1 << 10, "m": 1 << 20, "g": 1 << 30, "t": 1 << 40}
+
+
+def parse_memory(value) -> int:
+    """A memory size in bytes from a number of MiB (``500``) or a number with a unit
+    (``500M``, ``2G``, ``1.5GiB``, ``2048K``; powers of 1024). Raises SceneError unless it
+    is a positive size of at least 1 MiB."""
+    hint = "expected a size such as 500M or 2G (a bare number is MiB)"
+    if isinstance(value, bool):
+        raise SceneError(f"{hint}, got {_show(value)}")
+    if isinstance(value, (int, float)):
+        number, unit = float(value), ""
+    elif isinstance(value, str):
+        m = re.fullmatch(r"\s*([-+]?[0-9.]+(?:e[-+]?[0-9]+)?)\s*([kmgt]?)(?:i?b)?\s*", value,
+                         flags=re.IGNORECASE)
+        if m is None:
+            raise SceneError(f"{hint}, got {value!r}")
+        try:
+            number = float(m.group(1))
+        except ValueError:
+            raise SceneError(f"{hint}, got {value!r}") from None
+        unit = m.group(2).lower()
+    else:
+        raise SceneError(f"{hint}, got {_show(value)}")
+    size = number * _MEMORY_UNITS[unit]
+    if not (math.isfinite(size) and size >= 1 << 20):
+        shown = repr(value) if isinstance(value, str) else _show(value)
+        raise SceneError(f"{hint}, at least 1M, got {shown}")
+    if size > 1 << 60:
+        raise SceneError(f"{hint}, at most 2^60 bytes, got {value!r}")
+    return int(size)
 
 
 def _parse_choice(value, choices: dict) -> str:

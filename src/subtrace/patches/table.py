@@ -306,6 +306,35 @@ def choose_depths(table: PatchTable, eye: np.ndarray, tol_rad: float, max_depth:
     return depths
 
 
+def memory_estimate(table, depths, n_pixels: int) -> int:
+    """A conservative estimate (bytes) of a render's memory with grid depths ``depths``:
+    the image's per-pixel buffers, the patch table, every Loop patch built as a grid at its
+    depth and every irregular Catmull-Clark patch isolated to its depth, as if rays reached
+    them all (the per-thread memos of split nets are kept within what is left:
+    ``render._Memos``). The constants are ``config.MEMORY_*``."""
+    loop = ~table.is_quad
+    N = (1 << depths[loop].astype(np.int64)) if loop.any() else np.zeros(0, np.int64)
+    grid_points = int(((N + 1) * (N + 2) // 2).sum())
+    iso = table.is_quad & ~table.regular
+    iso_levels = int((depths[iso].astype(np.int64) + 1).sum())
+    return (config.MEMORY_BYTES_PER_PIXEL * int(n_pixels)
+            + config.MEMORY_BYTES_PER_PATCH * table.n_patches
+            + config.MEMORY_BYTES_PER_GRID_POINT * grid_points
+            + config.MEMORY_BYTES_PER_ISOLATED_LEVEL * iso_levels)
+
+
+def depth_cap(table, depths, n_pixels: int, budget: int):
+    """The deepest grid depth ``cap`` at which ``np.minimum(depths, cap)`` fits ``budget``
+    bytes (:func:`memory_estimate`), or None when ``depths`` fit as they are; -1 when
+    nothing fits (not even depth 0)."""
+    if memory_estimate(table, depths, n_pixels) <= budget:
+        return None
+    for cap in range(int(depths.max(initial=0)) - 1, -1, -1):
+        if memory_estimate(table, np.minimum(depths, cap), n_pixels) <= budget:
+            return cap
+    return -1
+
+
 def edge_sampling(table, depths):
     """Make both sides of every edge sample it alike (design invariant 4); raises ``depths``
     in place and returns ``(edge_depth, reg_side)``.
