@@ -131,14 +131,21 @@ def test_face_with_10000_vertices_renders_or_fails_cleanly(capsys, tmp_path):
 # --------------------------------------------------------------------------------------
 
 
-def test_unknown_option(capsys, tmp_path):
-    # argparse's usage error: usage lines then "subtrace render: error: ..." (see
-    # test_cli.test_usage_errors_exit_2), exit 2, nothing written
-    code, _, err, out = render(capsys, tmp_path, CORPUS / "cube.obj", "--frobnicate")
+@pytest.mark.parametrize("command", ["render", "sweep", "compare", "intersect", "info"])
+def test_unknown_option(capsys, tmp_path, command):
+    # one line naming the option and the subcommand's help, exit 2, nothing written
+    if command == "render":
+        code, _, err, out = render(capsys, tmp_path, CORPUS / "cube.obj", "--frobnicate")
+        assert list(out.parent.iterdir()) == []
+    else:
+        required = {"sweep": ["--tolerances", "1", "-o", tmp_path / "sw"],
+                    "compare": ["a.exr", "b.exr"], "info": [],
+                    "intersect": ["c.obj", "--lines", "l.csv", "--precision", "1"]}[command]
+        code, _, err = run(capsys, [command, *required, "--frobnicate"])
+        assert list(tmp_path.iterdir()) == []
     assert code == 2
-    assert "Traceback" not in err
-    assert "unrecognized arguments: --frobnicate" in err
-    assert list(out.parent.iterdir()) == []
+    assert err == (f"subtrace: error: unknown option '--frobnicate' (see subtrace {command} "
+                   "--help)\n")
 
 
 @pytest.mark.parametrize(

@@ -247,9 +247,13 @@ def test_bad_scheme_is_one_line_error(capsys):
      ["info", "a.obj", "b.obj"]],
 )
 def test_usage_errors_exit_2(capsys, argv):
+    # one line naming the problem and where the help is, no usage text (issue 8)
     assert main(argv) == 2
     _, err = capsys.readouterr()
-    assert "usage:" in err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("subtrace: error: "), err
+    assert lines[0].endswith(" --help)")
+    assert "usage:" not in err
     assert "Traceback" not in err
 
 

@@ -36,8 +36,23 @@ def _level_arg(text: str) -> int:
     return value
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line, ``subtrace: error: <problem>
+    (see <command> --help)``, exit code 2 (design invariant 7), instead of argparse's usage
+    text followed by the error."""
+
+    def error(self, message):
+        unknown = "unrecognized arguments: "
+        if message.startswith(unknown):
+            first = message[len(unknown):].split()[0]
+            kind = "option" if first.startswith("-") else "argument"
+            message = f"unknown {kind} {first!r}"
+        print(f"{PROG}: error: {_one_line(message)} (see {self.prog} --help)", file=sys.stderr)
+        raise SystemExit(2)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog=PROG,
         description="Exact Catmull-Clark and Loop subdivision surfaces (OpenSubdiv rules).",
     )
@@ -253,7 +268,10 @@ def main(argv=None, own_process: bool = False) -> int:
     """
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
+        args, extra = parser.parse_known_args(argv)
+        if extra:  # name the subcommand whose options these are not
+            sub = parser._subparsers._group_actions[0].choices.get(getattr(args, "command", None))
+            (sub or parser).error("unrecognized arguments: " + " ".join(extra))
     except SystemExit as exc:  # --help / --version exit 0, usage errors exit 2
         return int(exc.code or 0) if not isinstance(exc.code, str) else 2
     args.own_process = own_process
