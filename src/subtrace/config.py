@@ -21,6 +21,18 @@ GRID_RINGS = 2
 # control points' hull (by 5 % of the cage in the worst case measured).
 SHELL_CHAIKIN_MARGIN = 0.25
 
+# Largest coordinate magnitude a render accepts (io/obj.py: check_coordinates): the
+# renderer squares distances and multiplies up to three coordinates (1e100^3 = 1e300 is
+# still below the largest double, 1.8e308); a cage at 1e100 renders (tested), one at 1e300
+# overflowed to inf and never finished.
+MAX_COORDINATE = 1e100
+
+# Largest vertex valence a render accepts (a Catmull-Clark face of more vertices gives its
+# centre that valence; io/obj.py: check_valences). Isolating an extraordinary vertex costs
+# time growing with its valence at every level: valence 1000 renders in about 35 s on 2
+# cores, a 10,000-vertex face had not finished after 60 s (in isolated_depths' refinement).
+MAX_VALENCE = 1024
+
 # Deepest grid of one patch (2^n x 2^n cells): bounds memory when the eye is inside a shell.
 MAX_GRID_DEPTH = 8
 

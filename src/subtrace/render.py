@@ -635,6 +635,12 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     try:
         if cages is None:
             cages = load_objects(scene)
+        from .io.obj import check_coordinates, check_valences
+
+        for c in cages:
+            check_coordinates(c.path, c.points, config.MAX_COORDINATE)
+            check_valences(c.path, c.face_sizes, np.diff(c.base.vert_edge_offsets),
+                           config.MAX_VALENCE, c.scheme == "catmark")
         stats.time_load = time.perf_counter() - t_start
 
         t0 = time.perf_counter()

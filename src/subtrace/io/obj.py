@@ -991,3 +991,61 @@ def _scan_bytes(data, start, points, uvs, normals, face_sizes, corners, other, s
     counts[5] = no
     counts[6] = ns
     return True
+
+
+def statement_line(path, keyword: str, index: int) -> int | None:
+    """The 1-based line of the ``index``-th (0-based) ``keyword`` statement of the OBJ file
+    ``path`` (e.g. the line of vertex ``index`` for ``"v"``), or None where it cannot be
+    found. For messages about a file that was read without error."""
+    try:
+        raw = _read_bytes(os.fspath(path))
+        text = raw.decode("utf-8", errors="replace")
+    except (ObjError, OSError, TypeError):
+        return None
+    lines, numbers = _logical_lines(text)
+    seen = 0
+    for line, number in zip(lines, numbers):
+        parts = line.split(None, 1)
+        if parts and parts[0] == keyword:
+            if seen == index:
+                return number
+            seen += 1
+    return None
+
+
+def check_coordinates(path, points, limit: float) -> None:
+    """Raise ObjError naming the line of the first vertex of ``points`` (V,3) with a
+    coordinate of magnitude above ``limit`` (``config.MAX_COORDINATE``)."""
+    import numpy as np
+
+    big = np.nonzero(np.abs(points).max(axis=1, initial=0.0) > limit)[0] if len(points) else []
+    if len(big):
+        i = int(big[0])
+        value = float(np.abs(points[i]).max())
+        raise ObjError(
+            path, statement_line(path, "v", i) if path else None,
+            f"vertex {i + 1} has a coordinate of magnitude {value:.3g}; subtrace renders "
+            f"coordinates up to {limit:.0e} (beyond, squared distances overflow double "
+            "precision): scale the model down")
+
+
+def check_valences(path, face_sizes, valence, limit: int, catmark: bool) -> None:
+    """Raise ObjError naming the line of the first face with more than ``limit`` vertices
+    (Catmull-Clark: its centre becomes a vertex of that valence) or of the first vertex
+    of valence above ``limit`` (``config.MAX_VALENCE``)."""
+    import numpy as np
+
+    hint = (f"subtrace renders valences up to {limit} (refining around such a vertex takes "
+            "minutes and more): split the face or the fan")
+    if catmark:
+        big = np.nonzero(np.asarray(face_sizes) > limit)[0]
+        if len(big):
+            f = int(big[0])
+            raise ObjError(path, statement_line(path, "f", f) if path else None,
+                           f"face {f + 1} has {int(face_sizes[f])} vertices, so its centre "
+                           f"has valence {int(face_sizes[f])}; {hint}")
+    big = np.nonzero(np.asarray(valence) > limit)[0]
+    if len(big):
+        v = int(big[0])
+        raise ObjError(path, statement_line(path, "v", v) if path else None,
+                       f"vertex {v + 1} has valence {int(valence[v])}; {hint}")
