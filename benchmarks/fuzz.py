@@ -3,7 +3,9 @@
 Mutates the bad-input corpus (tests/bad_inputs/) and valid cages and scenes (byte flips,
 insertions of junk, truncation, line shuffles and duplications, number swaps) and feeds each
 result to the OBJ reader (``subtrace.io.obj.read_obj``), the scene reader
-(``subtrace.io.scene.load_scene``) and ``subtrace info``. An input passes when it reads or
+(``subtrace.io.scene.load_scene``) and ``subtrace info``; a fraction of the cages
+(``--render-fraction``) is rendered at 32x24 by ``subtrace render`` in a process of its own
+(exit 0 with an image, or exit 2 with one error line and nothing left behind). An input passes when it reads or
 raises a SubtraceError; anything else (another exception, a hang past ``--timeout``, a
 multi-line or traceback-bearing ``info`` error) is a crash and the input is saved under
 ``--out``. Prints inputs tried, outcomes by kind, and crashes.
@@ -128,6 +130,35 @@ def check(target: str, path: Path) -> str:
     raise AssertionError(f"info exit {code}, stderr {text!r}")
 
 
+def check_render(path: Path, timeout: float) -> str:
+    """``subtrace render`` of the cage ``path`` at 32x24 in a process of its own (a kernel
+    cannot be interrupted in-process): "ok" (exit 0 and an image), "render-error" (exit 2,
+    one error line, no image and no temporary file left); raise otherwise, ``Hang`` past
+    ``timeout`` seconds."""
+    import subprocess
+
+    out_dir = path.parent / "render_out"
+    out_dir.mkdir(exist_ok=True)
+    for old in out_dir.iterdir():
+        old.unlink()
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-m", "subtrace.cli", "render", str(path), "--width", "32",
+             "--height", "24", "--quiet", "-o", str(out_dir / "r.exr")],
+            capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        raise Hang() from None
+    text = proc.stderr
+    left = sorted(p.name for p in out_dir.iterdir())
+    errors = [line for line in text.splitlines() if not line.startswith("subtrace: warning:")]
+    if proc.returncode == 0 and left == ["r.exr"] and "Traceback" not in text:
+        return "ok"
+    if (proc.returncode == 2 and len(errors) == 1 and errors[0].startswith("subtrace: error: ")
+            and not left):
+        return "render-error"
+    raise AssertionError(f"render exit {proc.returncode}, files {left}, stderr {text[-2000:]!r}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=60.0, help="how long to run (default 60)")
@@ -135,6 +166,11 @@ def main(argv=None) -> int:
     ap.add_argument("--timeout", type=float, default=10.0,
                     help="seconds one input may take before it counts as a hang")
     ap.add_argument("--out", default="fuzz_crashes", help="folder for crashing inputs")
+    ap.add_argument("--render-fraction", type=float, default=0.1,
+                    help="fraction of mutated cages also rendered at 32x24 by `subtrace "
+                         "render` in a process of its own (default 0.1)")
+    ap.add_argument("--render-timeout", type=float, default=30.0,
+                    help="seconds one render may take before it counts as a hang (default 30)")
     args = ap.parse_args(argv)
     seed = args.seed if args.seed is not None else int(time.time())
     rng = random.Random(seed)
@@ -155,9 +191,12 @@ def main(argv=None) -> int:
         path = work / ("input.toml" if target == "scene" else "input.obj")
         path.write_bytes(data)
         tried += 1
-        signal.setitimer(signal.ITIMER_REAL, args.timeout)
+        if target != "scene" and rng.random() < args.render_fraction:
+            target = "render"
+        signal.setitimer(signal.ITIMER_REAL, 0 if target == "render" else args.timeout)
         try:
-            kind = check(target, path)
+            kind = (check_render(path, args.render_timeout) if target == "render"
+                    else check(target, path))
         except Hang:
             kind = "CRASH:hang"
         except Exception as exc:  # noqa: BLE001 - a crash is what we look for
