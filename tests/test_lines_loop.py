@@ -284,13 +284,26 @@ def test_first_is_the_nearest_of_all(which, icosahedron):
     rng = np.random.default_rng(5)
     org = rng.uniform(-1.5, 1.5, (300, 3))
     dirs = rng.normal(size=(300, 3))
+    # and lines that enter and leave within the precision (one tangent hit, from two
+    # crossings: "first" must not stop before the second)
+    ptex = rng.integers(0, len(cage.face_sizes), 40)
+    P, du, dv = cage.evaluate(ptex, np.full((40, 2), 0.25))
+    n = np.cross(du, dv)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    e = du / np.linalg.norm(du, axis=1, keepdims=True)
+    org = np.concatenate([org, P - 1e-8 * n - 0.1 * e])
+    dirs = np.concatenate([dirs, e])
     a = intersect_lines(cage, org, dirs, PREC, t_range=(-np.inf, np.inf))
     f = intersect_lines(cage, org, dirs, PREC, t_range=(-np.inf, np.inf), mode="first")
     firsts = np.r_[True, a.line[1:] != a.line[:-1]]
     np.testing.assert_array_equal(f.line, a.line[firsts])
     np.testing.assert_allclose(f.t, a.t[firsts], atol=1e-12)
     np.testing.assert_array_equal(f.tangent, a.tangent[firsts])
+    assert a.tangent[firsts][a.line[firsts] >= 300].sum() >= 8
     # and it stopped early: fewer leaves than the full descent
+    a = intersect_lines(cage, org[:300], dirs[:300], PREC, t_range=(-np.inf, np.inf))
+    f = intersect_lines(cage, org[:300], dirs[:300], PREC, t_range=(-np.inf, np.inf),
+                        mode="first")
     assert f.stats["leaves"] < 0.8 * a.stats["leaves"]
 
 
