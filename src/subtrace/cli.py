@@ -293,26 +293,64 @@ def main(argv=None, own_process: bool = False) -> int:
 
 
 def _start_numba(args) -> None:
-    """Set up Numba's CPU target (its first use, before any kernel is loaded) without
-    scipy.linalg.
+    """Trim Numba's set-up in a process of its own (:func:`run`); elsewhere do nothing.
 
-    That set-up imports scipy.linalg only to ask whether np.dot may call BLAS (which decides
-    just how np.convolve / np.correlate are compiled), and the import costs about 0.2 s, more
-    than the rest of the set-up. Outside a process of its own (:func:`run`), or when
-    scipy.linalg is already imported, nothing is done. The import is refused only during
-    the set-up: a kernel that needs BLAS still imports scipy.linalg when it is compiled.
+    Numba's cache loader "refreshes" its CPU target before every load: it registers the
+    typing and lowering of everything Numba supports (about 270 registries), and on the
+    way imports scipy.linalg only to ask whether np.dot may call BLAS (about 0.2 s alone).
+    A kernel read back from the cache needs none of that, only Numba's runtime (memory
+    management), which its machine code links against. So here:
+
+    * loading a cached kernel initialises the runtime and skips the refresh;
+    * scipy.linalg is refused while a kernel loads (its pickled environment imports
+      numba.np.arraymath, whose import asks for BLAS) and while Numba's compiler sets the
+      target up for a kernel that is not in the cache; a kernel that needs BLAS still
+      imports scipy.linalg when it is compiled.
+
+    Numbas whose loader is organised differently are left alone (the command is then just
+    slower); tests run the command in fresh processes on warm and cold caches.
     """
-    if not getattr(args, "own_process", False) or "scipy.linalg" in sys.modules:
+    if not getattr(args, "own_process", False):
         return
     try:
+        from numba.core.caching import Cache
         from numba.core.registry import cpu_target
-    except ImportError:  # pragma: no cover - a Numba without this internal module
+        from numba.core.runtime import rtsys
+    except ImportError:  # pragma: no cover - a Numba without these internal modules
         return
-    sys.modules["scipy.linalg"] = None  # `import scipy.linalg...` raises ImportError
-    try:
-        cpu_target.target_context.refresh()
-    finally:
-        del sys.modules["scipy.linalg"]
+    if not all(hasattr(Cache, name) for name in ("_load_overload",
+                                                   "_guard_against_spurious_io_errors")):
+        return  # pragma: no cover - a Numba whose cache loader is organised differently
+
+    def load_overload(self, sig, target_context):
+        rtsys.initialize(target_context)  # idempotent; loaded code calls into the runtime
+        with _without_scipy_linalg(), self._guard_against_spurious_io_errors():
+            return self._load_overload(sig, target_context)
+        # None (a miss: the kernel compiles) when the guard swallowed an I/O error
+
+    context = cpu_target.target_context
+    full_refresh = context.refresh
+
+    def refresh():
+        with _without_scipy_linalg():
+            return full_refresh()
+
+    Cache.load_overload = load_overload
+    context.refresh = refresh
+
+
+class _without_scipy_linalg:
+    """Make ``import scipy.linalg`` raise ImportError inside the block, unless it is
+    imported already (or refused by an enclosing block)."""
+
+    def __enter__(self):
+        self._refused = "scipy.linalg" not in sys.modules
+        if self._refused:
+            sys.modules["scipy.linalg"] = None
+
+    def __exit__(self, *exc):
+        if self._refused:
+            del sys.modules["scipy.linalg"]
 
 
 def _exit_now(code: int):
