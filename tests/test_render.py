@@ -94,6 +94,76 @@ def test_shells_contain_limit_of_perturbed_cages(seed, name):
     assert np.all(P <= table.shell_max[:, None, :] + 1e-12)
 
 
+def _isolated_shells(cage, tol_rad):
+    """The patch table and the shells the depth choice tightens (eye on the +z side, three
+    bounding-box diagonals away), with the patches it tightened."""
+    from subtrace.patches.table import choose_depths
+
+    table = build_patch_table([cage])
+    lo, hi = table.shell_min.copy(), table.shell_max.copy()
+    centre = 0.5 * (lo.min(axis=0) + hi.max(axis=0))
+    eye = centre + np.array([0.0, 0.0, 3.0 * np.linalg.norm(hi.max(axis=0) - lo.min(axis=0))])
+    choose_depths(table, eye, tol_rad, config.MAX_GRID_DEPTH, {}, (lo, hi))
+    changed = np.any(lo != table.shell_min, axis=1) | np.any(hi != table.shell_max, axis=1)
+    return table, lo, hi, changed
+
+
+ISOLATED_SHAPES = [n for n in GRID_SHAPES if n.startswith("catmark")]
+
+
+@needs_shared
+@pytest.mark.parametrize("name", ISOLATED_SHAPES)
+def test_isolated_shells_contain_limit_grids(name):
+    """Invariant 2 for the shells tightened by the depth choice's isolation (the union of
+    the Bezier boxes and one-ring boxes of what an irregular patch was refined into): the
+    exact limit points of a depth-5 grid of every patch lie inside, and the tightened ones
+    are much smaller than the patches' one-ring boxes (else the tightening does nothing)."""
+    cage = _load(name)
+    table, lo, hi, changed = _isolated_shells(cage, 1e-4)
+    assert changed.any() == bool((~table.regular).any())
+    o = table.objects[0]
+    P, _ = build_grids(o.level, o.points, cage.options, table.face, 5)
+    assert np.all(P >= lo[:, None, :] - 1e-12)
+    assert np.all(P <= hi[:, None, :] + 1e-12)
+    if changed.any():
+        old = np.prod(table.shell_max[changed] - table.shell_min[changed], axis=1)
+        new = np.prod(hi[changed] - lo[changed], axis=1)
+        assert np.median(new / np.where(old > 0, old, 1.0)) < 0.5
+
+
+@needs_shared
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), name=st.sampled_from(ISOLATED_SHAPES),
+       tol_exp=st.floats(-5.0, -1.0))
+def test_isolated_shells_contain_limit_of_perturbed_cages(seed, name, tol_exp):
+    """Same, for random perturbations of the cage points and tolerances (each tolerance
+    stops the isolation at other levels, so other boxes end the union)."""
+    base = _load(name)
+    rng = np.random.default_rng(seed)
+    pts = base.points + rng.normal(scale=0.3, size=base.points.shape)
+    cage = subtrace.make_cage(
+        pts, base.face_sizes, base.face_verts, base.scheme, boundary=base.options.boundary,
+        smooth_triangles=base.options.smooth_triangles,
+    )
+    table, lo, hi, _ = _isolated_shells(cage, 10.0**tol_exp)
+    o = table.objects[0]
+    P, _ = build_grids(o.level, o.points, cage.options, table.face, 4)
+    assert np.all(P >= lo[:, None, :] - 1e-12)
+    assert np.all(P <= hi[:, None, :] + 1e-12)
+
+
+@needs_shared
+def test_isolated_shells_contain_spot():
+    """On Spot (many extraordinary vertices), at about a pixel of the default scene."""
+    cage = subtrace.load_cage(MODELS / "spot_control_mesh.obj")
+    table, lo, hi, changed = _isolated_shells(cage, 1e-3)
+    assert changed.sum() > 100
+    o = table.objects[0]
+    P, _ = build_grids(o.level, o.points, cage.options, table.face, 4)
+    assert np.all(P >= lo[:, None, :] - 1e-12)
+    assert np.all(P <= hi[:, None, :] + 1e-12)
+
+
 def _scene(meshes, eye, target, width=64, height=48, fov=60.0, tolerance=1.0, colors=None):
     objects = [{"mesh": str(m)} for m in meshes]
     for o, c in zip(objects, colors or []):

@@ -455,19 +455,14 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     frame = camera_frame(camera)
     eye = frame[0]
     t0 = time.perf_counter()
-    accel = config.PRIMARY_ACCEL if accel is None else accel
-    if accel == "projection":
-        tiles = project_shells(table.shell_min, table.shell_max, frame, W, H).kernel_tuple()
-        bvh = no_bvh()
-    elif accel == "bvh":
-        tiles = no_tiles()
-        bvh = build_bvh(table.shell_min, table.shell_max)
-    else:
-        raise ValueError(f"unknown acceleration {accel!r}")
-    stats.time_preprocess += time.perf_counter() - t0
-    t0 = time.perf_counter()
-    record = {}
-    depths = choose_depths(table, eye, tol_rad, max_depth, record)  # (isolates: refinement)
+
+    def depth_choice(cap):
+        # (isolates: refinement); the isolation also tightens the irregular patches' shells
+        record = {}
+        shells = table.shell_min.copy(), table.shell_max.copy()
+        return choose_depths(table, eye, tol_rad, cap, record, shells), record, shells
+
+    depths, record, (shell_min, shell_max) = depth_choice(max_depth)
     memo_bytes = None
     if max_memory is not None:
         n_threads = tasks.thread_count()
@@ -475,13 +470,23 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
         cap = depth_cap(table, depths, W * H, left)
         if cap is not None:
             _warn_capped(max_memory, cap, depths, memory_estimate(table, depths, W * H))
-            record = {}
-            depths = choose_depths(table, eye, tol_rad, max(cap, 0), record)
+            depths, record, (shell_min, shell_max) = depth_choice(max(cap, 0))
             stats.depth_cap = max(cap, 0)
         left -= memory_estimate(table, depths, W * H)
         memo_bytes = config.MEMORY_MEMO_MIN_BYTES + max(left, 0) // n_threads
     edge_depth, reg_side = edge_sampling(table, depths)
     stats.time_refine += time.perf_counter() - t0
+    t0 = time.perf_counter()
+    accel = config.PRIMARY_ACCEL if accel is None else accel
+    if accel == "projection":
+        tiles = project_shells(shell_min, shell_max, frame, W, H).kernel_tuple()
+        bvh = no_bvh()
+    elif accel == "bvh":
+        tiles = no_tiles()
+        bvh = build_bvh(shell_min, shell_max)
+    else:
+        raise ValueError(f"unknown acceleration {accel!r}")
+    stats.time_preprocess += time.perf_counter() - t0
     tested = np.empty(W * H, dtype=np.int64)  # (round 0 writes every ray's entries)
     tables = _leaf_tables(int(depths[~table.is_quad].max(initial=0)))  # (Loop grids only)
     pools = _Pools(table.n_patches)
@@ -512,7 +517,7 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
         trace_round(
             rays, frame, W, round_no,
             bvh.node_min, bvh.node_max, bvh.node_first, bvh.node_count,
-            bvh.prims, tiles, table.shell_min, table.shell_max, pools.patch_slot,
+            bvh.prims, tiles, shell_min, shell_max, pools.patch_slot,
             g["slot_depth"], g["slot_vert_off"], g["slot_node_off"], g["slot_quad"],
             g["slot_round"], g["verts"], g["node_lo"], g["node_hi"],
             tables.lc_off, tables.lc_data, iso.kernel_tuple(),

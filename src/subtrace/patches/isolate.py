@@ -55,13 +55,19 @@ def box_distance(bmin, bmax, p):
     return np.sqrt((q * q).sum(axis=1))
 
 
-def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0):
+def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0, boxes=None):
     """Depths (len(faces),) int32 of the irregular quads ``faces`` of ``obj``'s patch level,
     none above ``cap`` (their conservative depths, (len(faces),) int). With a dict
     ``record``, what each level's refinement made is kept in it (see :class:`_Level`), for
     :func:`build_isolated` to take instead of refining the same faces again; the irregular
     corners are then refined down to ``record_depth`` at least (a patch's depth may be
-    raised later, to its neighbours', and its pieces are built down to it)."""
+    raised later, to its neighbours', and its pieces are built down to it).
+
+    ``boxes`` = (lo, hi), each (len(faces),3) float64 filled with +inf / -inf: each face
+    refined at least once gets the union of the boxes of what its refinement ended in (the
+    Bezier nets of its regular descendants, the control-point boxes of the one-rings of the
+    irregular ones it stopped at), a bound of its limit surface far tighter than its own
+    one-ring's box; the others are left as they are."""
     from .table import one_ring_shells
 
     faces = np.asarray(faces, dtype=np.int64)
@@ -88,6 +94,9 @@ def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0):
             bez = bezier_nets(cur_pts[control_grids(cur, kids[reg])])
             lo, hi, bound = net_bounds(bez)
             n = _levels_needed(bound, box_distance(lo, hi, eye), tol_rad)
+            if boxes is not None:
+                np.minimum.at(boxes[0], kid_root[reg], lo)
+                np.maximum.at(boxes[1], kid_root[reg], hi)
             sets = kid_active[reg]
             np.maximum.at(need, kid_root[reg][sets], k + n[sets].astype(np.int64))
         if record is not None:
@@ -98,6 +107,9 @@ def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0):
         np.maximum.at(need, kid_root[irr][kid_active[irr]], k)
         more = kid_active[irr] & ~flat & (k < cap[kid_root[irr]])
         keep = more | (k < record_depth if record is not None else False)
+        if boxes is not None:  # the irregular children refined no further
+            np.minimum.at(boxes[0], kid_root[irr[~keep]], smin[~keep])
+            np.maximum.at(boxes[1], kid_root[irr[~keep]], smax[~keep])
         root, start, active = kid_root[irr[keep]], kids[irr[keep]], more[keep]
     return np.minimum(need, cap).astype(np.int32)
 

@@ -280,12 +280,14 @@ def _subdominant(valence: np.ndarray, quad: bool) -> np.ndarray:
 
 
 def choose_depths(table: PatchTable, eye: np.ndarray, tol_rad: float, max_depth: int,
-                  record=None):
+                  record=None, shells=None):
     """Grid depth of every patch: the smallest n with ``edge_bound * rate^n`` at most
     ``tol_rad`` times the distance from the eye to the patch's shell (capped); irregular
     quads needing more than depth 0 are then isolated (:mod:`subtrace.patches.isolate`).
     With a dict ``record``, ``record[object id]`` keeps what the isolation made (see
-    :func:`~subtrace.patches.isolate.isolated_depths`)."""
+    :func:`~subtrace.patches.isolate.isolated_depths`). ``shells`` = (lo, hi), each (P,3),
+    the shells to tighten: an isolated patch's shell becomes the box of what its isolation
+    ended in (intersected with its own shell); the others' are left as they are."""
     d = box_distance(table.shell_min, table.shell_max, eye)
     allowed = d * tol_rad
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -301,8 +303,16 @@ def choose_depths(table: PatchTable, eye: np.ndarray, tol_rad: float, max_depth:
             sel = sel[depths[sel] > 0]
         if len(sel) and depths[sel].max() > 0:
             rec = record.setdefault(oid, {}) if record is not None else None
+            boxes = None
+            if shells is not None:
+                boxes = (np.full((len(sel), 3), np.inf), np.full((len(sel), 3), -np.inf))
             depths[sel] = isolated_depths(o, table.face[sel], depths[sel], eye, tol_rad, rec,
-                                          int(depths[sel].max()))
+                                          int(depths[sel].max()), boxes)
+            if shells is not None:
+                done = np.isfinite(boxes[0]).all(axis=1)
+                at = sel[done]
+                shells[0][at] = np.maximum(shells[0][at], boxes[0][done])
+                shells[1][at] = np.minimum(shells[1][at], boxes[1][done])
     return depths
 
 
