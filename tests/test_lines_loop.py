@@ -335,3 +335,21 @@ def test_setup_is_cached_on_the_cage(icosahedron):
     for prec in (1e-2, 1e-4, 1e-5, 1e-6, 1e-7):
         intersect_lines(cage, o, d, prec)
     assert len(store["items"]) == 4 and PREC not in store["items"]
+
+
+def test_cli_intersect_loop_cage(tmp_path, icosahedron):
+    from subtrace.cli import main
+
+    cage = tmp_path / "ico.obj"
+    fv = icosahedron.face_verts.reshape(-1, 3) + 1
+    cage.write_text("".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in icosahedron.points.tolist())
+                    + "".join(f"f {a} {b} {c}\n" for a, b, c in fv.tolist()))
+    lines = tmp_path / "lines.csv"
+    lines.write_text("ox,oy,oz,dx,dy,dz\n0,0,3,0,0,-1\n3,3,3,1,0,0\n")
+    out = tmp_path / "hits.csv"
+    assert main(["intersect", str(cage), "--lines", str(lines), "--precision", "0.001",
+                 "-o", str(out)]) == 0
+    rows = [r.split(",") for r in out.read_text().splitlines()[1:]]
+    assert [r[0] for r in rows] == ["0", "0"]  # in and out on the z axis, nothing for line 1
+    ref = intersect_lines(icosahedron, [[0, 0, 3]], [[0, 0, -1]], 1e-3)
+    np.testing.assert_allclose([float(r[1]) for r in rows], ref.t, rtol=1e-12)

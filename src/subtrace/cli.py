@@ -179,14 +179,17 @@ def build_parser() -> argparse.ArgumentParser:
         "intersect",
         help="every intersection of lines with the limit surface, to a precision",
         description=(
-            "Intersect lines with the exact Catmull-Clark limit surface of CAGE: every hit, "
-            "each within --precision (model units) of the surface. Lines come from a CSV "
-            "with columns ox,oy,oz,dx,dy,dz (a header row naming them); hits go to a CSV "
-            "with columns line,t,x,y,z,ptex,u,v,nx,ny,nz,tangent (sorted by line, then t), "
-            "or JSON with --json; to stdout without -o."
+            "Intersect lines with the exact Catmull-Clark or Loop limit surface of CAGE: "
+            "every hit, each within --precision (model units) of the surface. Lines come "
+            "from a CSV with columns ox,oy,oz,dx,dy,dz (a header row naming them); hits go "
+            "to a CSV with columns line,t,x,y,z,ptex,u,v,nx,ny,nz,tangent (sorted by line, "
+            "then t), or JSON with --json; to stdout without -o."
         ),
     )
-    intersect.add_argument("cage", metavar="CAGE.obj", help="Catmull-Clark OBJ cage")
+    intersect.add_argument("cage", metavar="CAGE.obj", help="OBJ cage")
+    intersect.add_argument("--scheme", metavar="S",
+                           help="catmark or loop (default: loop for an all-triangle cage, "
+                                "else catmark)")
     intersect.add_argument("--lines", required=True, metavar="LINES.csv",
                            help="CSV with columns ox,oy,oz,dx,dy,dz")
     intersect.add_argument("--precision", required=True, metavar="D",
@@ -547,7 +550,7 @@ def _cmd_intersect(args) -> int:
     except OSError as exc:
         raise SubtraceError(f"{args.lines}: {exc.strerror or exc}") from None
     data = np.array(rows, dtype=np.float64).reshape(-1, 6)
-    cage = load_cage(args.cage, scheme="catmark")
+    cage = load_cage(args.cage, scheme=args.scheme)
     out = args.output
     if out is not None:
         folder = os.path.dirname(os.path.abspath(out))

@@ -1,25 +1,36 @@
-"""Every intersection of many lines with a Catmull-Clark limit surface, to a given precision.
+"""Every intersection of many lines with a Catmull-Clark or Loop limit surface, to a given
+precision.
 
 The method of the "Chinese paper" (docs/seeds.md section 1: patch grids, multi-level 1-to-4
 segmentation with AABBs of index ranges), with the patch grid replaced by the exact Bezier
 net of each patch: a sub-patch is a de Casteljau sub-net made on a stack while a line
 descends, so nothing is stored per level and memory does not grow with the precision.
 
-* Items (:mod:`subtrace.trace.lines`): the regular patches' Bezier nets; irregular patches
+* Items (:mod:`subtrace.trace.lines`): the regular patches' Bezier nets (bicubic for
+  Catmull-Clark; quartic triangular for Loop, :mod:`subtrace.lines_loop`); irregular patches
   (an extraordinary vertex, a crease, a boundary) whose shell some line meets are isolated
-  (:func:`subtrace.patches.isolate.build_isolated`) into regular Bezier pieces down to the
-  depth where the cells left at the feature are no larger than ``precision / 2`` (their
-  control-edge length bound, with ``IRREGULAR_MARGIN``); those cells are bilinear quads of
-  exact limit points. Only lines' candidates are kept, never a refined mesh.
+  into regular Bezier pieces plus *cells* of exact limit points at the feature (bilinear
+  quads, or flat triangles), each within ``precision / 2`` of the surface over it:
+  Catmull-Clark by :func:`subtrace.patches.isolate.build_isolated` down to the depth where
+  the cells' control-edge bound (with ``IRREGULAR_MARGIN``, measured) allows it; Loop by
+  :func:`subtrace.lines_loop.isolate_loop`, where a cell's bound is the diagonal of its
+  one-ring's box (proven) and triangles along boundaries and infinitely sharp creases are
+  regular pieces too (phantom points). Only lines' candidates are kept, never a refined
+  mesh.
 * Depth is set per sub-net by its flatness bound (``tol_flat = precision / 2``, see
   :mod:`subtrace.trace.lines`); hits are found by Newton on the exact net from the flat
   leaf's triangles (a point within rounding of the surface), or kept from the triangle
-  (within ``tol_flat``) where Newton fails.
+  (within ``tol_flat``) where Newton fails or the item is a cell.
 * Hits found from several leaves or patches (shared sides and corners) are merged; a line
   that passes within ``precision`` of the surface without crossing it (tangent) gives one hit
   with ``tangent`` True at its closest approach; one that enters and leaves within
   ``precision`` gives one tangent hit; one lying in a flat region gives one tangent hit per
   contact run (the closest point found; every point of the run is as good).
+* ``mode="first"`` visits boxes nearest first and stops entering those beyond the first
+  crossing found plus the distance within which a later candidate could merge with it.
+* A cage's items are kept on the cage for the latest ``CACHED_PRECISIONS`` precisions
+  (:func:`_items_for`): a repeated call skips the patch table, the Bezier conversion and the
+  isolation done before.
 """
 
 from __future__ import annotations
@@ -262,7 +273,7 @@ def _items_for(cage, precision) -> _Items:
 def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf),
                     mode="all", threads=None) -> Hits:
     """Every intersection of the lines ``origins + t * directions`` (t in ``t_range``) with
-    the limit surface of Catmull-Clark ``cage``, to ``precision`` (model units): each
+    the limit surface of ``cage`` (Catmull-Clark or Loop), to ``precision`` (model units): each
     ``point`` lies within ``precision`` of the surface and of ``cage.evaluate(ptex, uv)``.
     ``mode="first"`` keeps each line's nearest hit. ``threads``: worker threads (default all
     cores). See the module doc for tangent lines and flat regions. Returns :class:`Hits`."""

@@ -1,4 +1,5 @@
-"""Loop cages as line-query items: quartic triangular Bezier nets (:mod:`subtrace.trace.lines_loop`).
+"""Loop cages as line-query items: quartic triangular Bezier nets
+(:mod:`subtrace.trace.lines_loop`).
 
 A Loop patch is a triangle of the cage. It is *regular* when its three corners are smooth,
 of valence 6 and crease-free (the exact evaluator's test, :mod:`subtrace.patches.evaluate`):
@@ -29,14 +30,17 @@ import numpy as np
 
 import numba as nb
 
-from .patches.evaluate import _BOX_COEF, _BOX_MONO, _BOX_POINTS, _LATTICE_DIRS, _TRI_CORNER, _TRI_LEAD
+from .patches.evaluate import (
+    _BOX_COEF, _BOX_MONO, _BOX_POINTS, _LATTICE_DIRS, _TRI_CORNER, _TRI_LEAD,
+)
 from .subdiv.creases import F_INF
 from .subdiv.limit import _CREASE, _SMOOTH, classify, limit_points
 from .trace.lines_loop import CHILD_ORIGIN, CHILD_SCALE, TRI_JK, TRI_MONO, TRI_PARAMS, bernstein
 
 # Bezier net (15) from the 12 box-spline points: the box spline's polynomial at the domain
 # points, fitted in the Bernstein basis
-_box_at = (TRI_PARAMS[:, 0:1] ** _BOX_MONO[:, 0] * TRI_PARAMS[:, 1:2] ** _BOX_MONO[:, 1]) @ _BOX_COEF
+_box_at = (TRI_PARAMS[:, 0:1] ** _BOX_MONO[:, 0]
+           * TRI_PARAMS[:, 1:2] ** _BOX_MONO[:, 1]) @ _BOX_COEF
 BOX_TO_TRI = np.ascontiguousarray(np.linalg.solve(bernstein(TRI_PARAMS), _box_at))
 # a flat triangle of corners A (0,0), B (1,0), C (0,1) as a quartic net: L(j/4, k/4)
 FLAT_TO_TRI = np.ascontiguousarray(np.stack(
@@ -111,7 +115,8 @@ def _boundary_recipe(level, f, sharp_edge):
     the phantom ``a + b - r``; None where some point cannot be so made (the triangle is
     then isolated further)."""
     fo, fv = level.face_offsets, level.face_verts
-    ve, veo, vf, vfo = level.vert_edges, level.vert_edge_offsets, level.vert_faces, level.vert_face_offsets
+    ve, veo = level.vert_edges, level.vert_edge_offsets
+    vf, vfo = level.vert_faces, level.vert_face_offsets
     ev = level.edge_verts
     at = {}
     for k in range(3):
