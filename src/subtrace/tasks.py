@@ -45,21 +45,33 @@ def run_tasks(kernel, *args, n: int | None = None) -> None:
 
 def run_chunks(work, n_items: int, chunk: int, n: int | None = None) -> None:
     """``work(t, a, b)`` for the chunks [a, b) of ``range(n_items)``, ``chunk`` items each,
-    on n threads (default :func:`thread_count`) that take the next chunk as they finish one
-    (so a thread with cheaper chunks takes more of them); ``t`` is the thread's index, for
-    buffers of its own. Re-raises the first error."""
+    on n threads (default :func:`thread_count`); ``t`` is the thread's index, for buffers of
+    its own. Re-raises the first error.
+
+    Each thread owns a contiguous segment (an n-th of the items) and takes its chunks front
+    to back; a thread whose segment is done takes the next chunk from the back of the
+    segment with the most left. So a thread with cheaper chunks takes more of them, and
+    each thread's items stay mostly contiguous: neighbouring image rows, whose rays reuse
+    what the thread's memo split for the rows before (with chunks handed out in turn, both
+    threads split most patches)."""
     n = thread_count() if n is None else n
     lock = threading.Lock()
-    start = [0]
+    front = [n_items * t // n for t in range(n)]
+    back = front[1:] + [n_items]
 
     def worker(t):
         while True:
             with lock:
-                a = start[0]
-                start[0] = a + chunk
-            if a >= n_items:
-                return
-            work(t, a, min(a + chunk, n_items))
+                if front[t] < back[t]:
+                    a = front[t]
+                    b = front[t] = min(a + chunk, back[t])
+                else:
+                    v = max(range(n), key=lambda k: back[k] - front[k])
+                    if back[v] <= front[v]:
+                        return
+                    b = back[v]
+                    a = back[v] = max(front[v], b - chunk)
+            work(t, a, b)
 
     if n == 1:
         worker(0)
