@@ -185,8 +185,8 @@ def worker(scene_path: str, sizes: list[tuple[int, int]], repeat: int) -> list[d
         # the walk alone, up to each ray's final hit (the same for both methods)
         hits, pools = trace_hits(table, camera, scene.render.tolerance_rad(camera),
                                  RenderStats(), accel="bvh")[:2]
-        t_hit = np.ascontiguousarray(hits[:, H_T])
-        slot = hits[:, H_SLOT].astype(np.int64)  # -1: no hit; <= -2: a Catmull-Clark patch
+        t_hit = np.ascontiguousarray(hits[H_T])
+        slot = hits[H_SLOT].astype(np.int64)  # -1: no hit; <= -2: a Catmull-Clark patch
         p_hit = np.where(slot < -1, -slot - 2, -1).astype(np.int64)
         p_hit[slot >= 0] = pools.a["slot_patch"][slot[slot >= 0]]  # (Loop grids)
         n_t = tasks.thread_count()

@@ -664,6 +664,7 @@ def test_patches_are_built_only_for_rays_that_reach_them_first(accel):
     shells a ray remembers between rounds) builds patches that a nearer surface hides."""
     from subtrace.render import RenderStats, trace_hits
     from subtrace.trace.camera import camera_frame
+    from subtrace.trace.prims import H_T
 
     mesh = MODELS / "spot_control_mesh.obj"
     scene = _scene([mesh], (1.2, 0.6, 2.2), (0.0, 0.3, 0.0), width=96, height=72)
@@ -683,7 +684,7 @@ def test_patches_are_built_only_for_rays_that_reach_them_first(accel):
         t1 = (table.shell_max[asked][:, None, :] - frame[0]) * inv
     near = np.maximum(np.nanmax(np.minimum(t0, t1), axis=2), 0.0)
     far = np.nanmin(np.maximum(t0, t1), axis=2)
-    t_hit = hits[:, 0]
+    t_hit = hits[H_T]
     reached_first = (near <= far * (1 + 1e-9)) & (near < t_hit * (1 + 1e-9))
     assert np.all(reached_first.any(axis=1))
 

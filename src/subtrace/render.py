@@ -436,7 +436,8 @@ class _Memos:
 
 def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, accel=None,
                progress=None, max_memory=None):
-    """Run the refinement rounds; returns (hits (H*W, 6), grid pools, isolated pieces, leaf
+    """Run the refinement rounds; returns (hits (6, H*W): ``prims.H_*`` rows; a miss has
+    only H_T = inf and H_SLOT = -1; grid pools, isolated pieces, leaf
     tables, every patch refined). ``compiling``: the process compiling the trace kernels
     (``warmup.start``), waited for before the first round. ``accel``: how a ray finds the
     shells it enters, ``"projection"`` (the shells binned into image tiles,
@@ -498,7 +499,7 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     iso.reserve("nets", len(reg) + 16 * n_irr)
     iso.append_regular(reg, depths[reg], reg_side, table.nets, table.shell_min[reg],
                        table.shell_max[reg])
-    hits = np.empty((W * H, HIT_FIELDS))
+    hits = np.empty((HIT_FIELDS, W * H))
     request = np.empty(W * H, dtype=np.int64)
     cands = candidate_lists(W * H)
     rays = np.arange(W * H, dtype=np.int64)
@@ -698,7 +699,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
         np.asarray(scene.render.background, dtype=np.float64), rgba, nrm, level, patch,
         objid, uv,
     )
-    z = hits[:, H_T]
+    z = hits[H_T]
     stats.pixels_covered = int(np.isfinite(z).sum())
     channels = {name: planes[k].reshape(H, W) for k, name in enumerate(names)}
     channels = {**{c: channels[c] for c in "RGBA"}, "Z": z.astype(np.float32).reshape(H, W),

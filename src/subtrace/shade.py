@@ -41,11 +41,11 @@ def _shade_task(task, n_tasks, frame, width, hits, slot_patch, slot_depth, slot_
 
     ``lights`` (L,6): direction the light travels (unit) and its colour times intensity.
     """
-    n_pix = hits.shape[0]
+    n_pix = hits.shape[1]
     n_blocks = (n_pix + SHADE_BLOCK - 1) // SHADE_BLOCK
     for blk in range(task, n_blocks, n_tasks):
         for r in range(blk * SHADE_BLOCK, min(n_pix, (blk + 1) * SHADE_BLOCK)):
-            t = hits[r, H_T]
+            t = hits[H_T, r]
             if not (t < np.inf):
                 out_rgba[r, 0] = background[0]
                 out_rgba[r, 1] = background[1]
@@ -60,14 +60,14 @@ def _shade_task(task, n_tasks, frame, width, hits, slot_patch, slot_depth, slot_
             row = r // width
             col = r - row * width
             dx, dy, dz = ray_setup(frame, row, col)
-            s = np.int64(hits[r, H_SLOT])
+            s = np.int64(hits[H_SLOT, r])
             if s < 0:
                 # a Catmull-Clark patch: H_TRI is the piece hit, (B1, B2) the patch parameter
                 p = -s - 2
-                u = hits[r, H_B1]
-                v = hits[r, H_B2]
-                depth = np.int64(hits[r, H_LEAF])
-                it = np.int64(hits[r, H_TRI])
+                u = hits[H_B1, r]
+                v = hits[H_B2, r]
+                depth = np.int64(hits[H_LEAF, r])
+                it = np.int64(hits[H_TRI, r])
                 if item_kind[it] == 0:
                     # a Bezier piece over a dyadic square of the patch (the whole of a regular one)
                     sc = 1 << item_level[it]
@@ -79,7 +79,7 @@ def _shade_task(task, n_tasks, frame, width, hits, slot_patch, slot_depth, slot_
                                               v * (1 << depth) - item_j0[it])
             else:
                 nx, ny, nz, u, v, depth, p = _grid_normal(
-                    hits[r], s, slot_patch, slot_depth, slot_quad, slot_vert_off, verts, normals,
+                    hits, r, s, slot_patch, slot_depth, slot_quad, slot_vert_off, verts, normals,
                     lc_off, lc_data, uv_off, uv_data)
             out_n[r, 0] = nx
             out_n[r, 1] = ny
@@ -128,21 +128,21 @@ def _bezier_normal(net, u, v):
 
 
 @nb.njit(cache=True)
-def _grid_normal(hit, s, slot_patch, slot_depth, slot_quad, slot_vert_off, verts, normals,
+def _grid_normal(hits, r, s, slot_patch, slot_depth, slot_quad, slot_vert_off, verts, normals,
                  lc_off, lc_data, uv_off, uv_data):
     """Normal, patch parameter, depth and patch of a hit on a stored grid: the exact limit
     normals of the micro-face's corners interpolated (the micro-triangle's own normal where
     they are undefined)."""
-    leaf = np.int64(hit[H_LEAF])
-    b1 = hit[H_B1]
-    b2 = hit[H_B2]
+    leaf = np.int64(hits[H_LEAF, r])
+    b1 = hits[H_B1, r]
+    b2 = hits[H_B2, r]
     b0 = 1.0 - b1 - b2
     depth = slot_depth[s]
     quad = slot_quad[s]
     q = 1 if quad else 0
     base = lc_off[depth, q] + leaf
     ca = lc_data[base, 0]
-    if hit[H_TRI] == 0.0:
+    if hits[H_TRI, r] == 0.0:
         cb = lc_data[base, 1]
         cc = lc_data[base, 2]
     else:

@@ -65,8 +65,8 @@ def compile_kernels(threads: int) -> None:
 
     i64, f64 = np.zeros(0, np.int64), np.zeros((0, 3))
     frame = np.zeros((4, 3))
-    hits = np.zeros((0, HIT_FIELDS))
-    misses = np.full((2, HIT_FIELDS), np.inf)  # two pixels: the output planes' layout
+    hits = np.zeros((HIT_FIELDS, 0))
+    misses = np.full((HIT_FIELDS, 2), np.inf)  # two pixels: the output planes' layout
     pools, iso, tables = _Pools(0), _Pieces(0), _LeafTables(0)
     memos = _Memos(threads)
     g, q = pools.a, iso.a

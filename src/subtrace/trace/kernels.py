@@ -98,7 +98,7 @@ def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_c
                 tiles, shell_min, shell_max, patch_slot, slot_depth, slot_vert_off, slot_node_off,
                 slot_quad, slot_round, verts, node_lo, node_hi, lc_off, lc_data, iso, mems,
                 cands, slack, hits, request, tested):
-    """One round for the rays ``rays`` (sorted pixel indices): update ``hits`` (n_pixels, 6)
+    """One round for the rays ``rays`` (sorted pixel indices): update ``hits`` (6, n_pixels)
     and set ``request[r]`` to the nearest unbuilt patch the ray reaches first (or -1).
     Round 0 starts every ray afresh: it writes ``hits``, ``tested``, ``request`` and the
     candidate counts of each ray without reading them (they need no initial values).
@@ -212,7 +212,7 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_min,
                 tested[r] = 0
             else:
                 for k in range(HIT_FIELDS):
-                    hit[k] = hits[r, k]
+                    hit[k] = hits[k, r]
             ray = (ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz)
             # the shells the ray may enter, one at a time, from one of three sources: the
             # unbuilt shells it remembers from its last round (nearest first: no traversal),
@@ -298,5 +298,10 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_min,
                         req = p
             request[r] = req if req_t < hit[H_T] else -1
             cand_n[r] = n_c if n_c <= CANDIDATES else -1
-            for k in range(HIT_FIELDS):
-                hits[r, k] = hit[k]
+            # (a miss writes only its t and slot: fields by rows, so what the shading reads
+            # of the misses is contiguous)
+            hits[H_T, r] = hit[H_T]
+            hits[H_SLOT, r] = hit[H_SLOT]
+            if hit[H_T] < np.inf:
+                for k in range(HIT_FIELDS):
+                    hits[k, r] = hit[k]
