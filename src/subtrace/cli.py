@@ -511,7 +511,6 @@ def _cmd_intersect(args) -> int:
     """Every hit of the lines of a CSV with a cage's limit surface
     (:func:`subtrace.lines.intersect_lines`), written as CSV or JSON (temporary file, then
     rename: no partial output)."""
-    import csv
     import json
     import math
     import tempfile
@@ -532,25 +531,20 @@ def _cmd_intersect(args) -> int:
     if not (precision > 0 and math.isfinite(precision)):
         raise SubtraceError(f"--precision {args.precision}: expected a finite number > 0")
     t_range = (number(args.t_min, "t-min"), number(args.t_max, "t-max"))
-    cols = ("ox", "oy", "oz", "dx", "dy", "dz")
-    try:
-        with open(args.lines, newline="") as fh:
-            reader = csv.DictReader(fh)
-            missing = [c for c in cols if c not in (reader.fieldnames or ())]
-            if missing:
-                raise SubtraceError(f"{args.lines}: missing column(s) {', '.join(missing)} "
-                                    "(expected a header ox,oy,oz,dx,dy,dz)")
-            rows = []
-            for row in reader:
-                try:
-                    rows.append([float(row[c]) for c in cols])
-                except (TypeError, ValueError):
-                    raise SubtraceError(f"{args.lines}:{reader.line_num}: expected six "
-                                        "numbers") from None
-    except OSError as exc:
-        raise SubtraceError(f"{args.lines}: {exc.strerror or exc}") from None
-    data = np.array(rows, dtype=np.float64).reshape(-1, 6)
-    cage = load_cage(args.cage, scheme=args.scheme)
+    for value, key in zip(t_range, ("t-min", "t-max")):
+        if math.isnan(value):
+            raise SubtraceError(f"--{key} {value}: expected a number (or -inf / inf), not nan")
+    if not t_range[0] < t_range[1]:
+        raise SubtraceError(f"--t-max {args.t_max}: expected a number above --t-min "
+                            f"{args.t_min}")
+    data = _read_lines_csv(args.lines)
+    cage = load_cage(args.cage, scheme="catmark")
+    from . import config
+    from .io.obj import check_coordinates, check_valences
+
+    check_coordinates(cage.path, cage.points, config.MAX_COORDINATE)
+    check_valences(cage.path, cage.face_sizes, np.diff(cage.base.vert_edge_offsets),
+                   config.MAX_VALENCE, True)
     out = args.output
     if out is not None:
         folder = os.path.dirname(os.path.abspath(out))
@@ -588,6 +582,66 @@ def _cmd_intersect(args) -> int:
     except OSError as exc:
         raise SubtraceError(f"{out}: {exc.strerror or exc}") from None
     return 0
+
+
+_LINE_COLUMNS = ("ox", "oy", "oz", "dx", "dy", "dz")
+
+
+def _read_lines_csv(path):
+    """(n, 6) float64 origins and directions from a CSV with a header naming the columns
+    ox,oy,oz,dx,dy,dz (others are ignored). Raises SubtraceError naming the file, the line
+    and the problem: an unreadable or non-UTF-8 file, no header, a missing column, a row of
+    the wrong length, a value that is not a finite number, a zero direction."""
+    import csv
+    import math
+
+    import numpy as np
+
+    from .errors import SubtraceError
+    from .io.text import BadByte, utf8_text
+
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read()
+    except OSError as exc:
+        raise SubtraceError(f"{path}: cannot read the lines: {exc.strerror or exc}") from None
+    try:
+        text = utf8_text(raw)
+    except BadByte as err:
+        raise SubtraceError(f"{path}:{err.line}: {err}; save the file as UTF-8") from None
+    if not text.strip():
+        raise SubtraceError(f"{path}: empty file: expected a header ox,oy,oz,dx,dy,dz and "
+                            "a row of numbers per line")
+    reader = csv.reader(text.splitlines())
+    header = [h.strip() for h in next(reader)]
+    missing = [c for c in _LINE_COLUMNS if c not in header]
+    if missing:
+        raise SubtraceError(f"{path}:{reader.line_num}: missing column(s) {', '.join(missing)} "
+                            "(expected a header ox,oy,oz,dx,dy,dz)")
+    index = [header.index(c) for c in _LINE_COLUMNS]
+    rows = []
+    for row in reader:
+        where = f"{path}:{reader.line_num}"
+        if not any(cell.strip() for cell in row):
+            continue  # blank line
+        if len(row) != len(header):
+            raise SubtraceError(f"{where}: expected {len(header)} values "
+                                f"({','.join(header)}), got {len(row)}")
+        values = []
+        for c, k in zip(_LINE_COLUMNS, index):
+            cell = row[k].strip()
+            try:
+                v = float(cell)
+            except ValueError:
+                raise SubtraceError(f"{where}: {c}: {cell!r} is not a number") from None
+            if not math.isfinite(v):
+                raise SubtraceError(f"{where}: {c}: {cell!r} is not a finite number")
+            values.append(v)
+        if values[3] == values[4] == values[5] == 0.0:
+            raise SubtraceError(f"{where}: the direction (0, 0, 0) is zero: a line needs a "
+                                "direction")
+        rows.append(values)
+    return np.array(rows, dtype=np.float64).reshape(-1, 6)
 
 
 # --------------------------------------------------------------------------------------

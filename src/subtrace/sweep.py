@@ -148,11 +148,11 @@ def sweep(scenes, tolerances, *, reference_tolerance=None, repeat: int = 1,
         progress(0, total, names[0])
     records = []
     for name, scene in zip(names, scenes):
+        ref, _ = _render(scene, ref_tol, threads, accel)  # (a bad option fails here)
         folder = None
-        if output_dir is not None:
+        if output_dir is not None:  # made once the first render has succeeded
             folder = os.path.join(output_dir, name)
             os.makedirs(folder, exist_ok=True)
-        ref, _ = _render(scene, ref_tol, threads, accel)
         done += 1
         if progress:
             progress(done, total, f"{name} reference {ref_tol:g} px")
