@@ -538,7 +538,7 @@ def _cmd_intersect(args) -> int:
         raise SubtraceError(f"--t-max {args.t_max}: expected a number above --t-min "
                             f"{args.t_min}")
     data = _read_lines_csv(args.lines)
-    cage = load_cage(args.cage, scheme="catmark")
+    cage = load_cage(args.cage, scheme=args.scheme)
     from . import config
     from .io.obj import check_coordinates, check_valences
 
