@@ -137,6 +137,7 @@ class _Items:
                   tb.ptex_scale[reg])
         self.irregular = base.irregular
         self.built = np.zeros(len(self.irregular), bool)
+        self.shell_bvh = None  # over the irregular patches' shells, made at first need
         self.precision = precision
         self._finish()
 
@@ -175,24 +176,22 @@ class _Items:
 
     def need(self, org, dirs, t_lo, t_hi, pad):
         """Isolate the irregular patches whose shells these lines meet (once each)."""
+        from .trace.lines import mark_shells
+
         todo = ~self.built
         if not todo.any():
             return
-        rows = self.irregular[todo]
-        lo = self.table.shell_min[rows] - pad
-        hi = self.table.shell_max[rows] + pad
-        hit = np.zeros(len(rows), bool)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / dirs
-            for a in range(0, len(org), 256):
-                o = org[a:a + 256, None, :]
-                iv = inv[a:a + 256, None, :]
-                t0 = (lo[None] - o) * iv
-                t1 = (hi[None] - o) * iv
-                tn = np.nanmax(np.minimum(t0, t1), axis=2)
-                tf = np.nanmin(np.maximum(t0, t1), axis=2)
-                ok = np.maximum(tn, t_lo) <= np.minimum(tf, t_hi)
-                hit |= ok.any(axis=0)
+        if self.shell_bvh is None:
+            from .accel.bvh import build_bvh
+
+            self.shell_min = np.ascontiguousarray(self.table.shell_min[self.irregular])
+            self.shell_max = np.ascontiguousarray(self.table.shell_max[self.irregular])
+            self.shell_bvh = build_bvh(self.shell_min, self.shell_max)
+        bv = self.shell_bvh
+        hit = np.zeros(len(self.irregular), bool)
+        mark_shells(org, dirs, t_lo, t_hi, pad, self.shell_min, self.shell_max, bv.node_min,
+                    bv.node_max, bv.node_first, bv.node_count, bv.prims, self.built, hit)
+        hit = hit[todo]
         sel = np.nonzero(todo)[0][hit]
         if not len(sel):
             return
@@ -279,7 +278,7 @@ def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf
     cores). See the module doc for tangent lines and flat regions. Returns :class:`Hits`."""
     from .tasks import run_tasks, set_threads, thread_count
     from .trace.lines import N_FIELDS, lines_task, merge_candidates
-    from .trace.lines_loop import TRI_SPLIT
+    from .trace.lines_loop import SPLIT_COL, SPLIT_PTR, SPLIT_W
 
     if getattr(cage, "scheme", None) not in ("catmark", "loop"):
         raise SubtraceError("intersect_lines: expected a Catmull-Clark or Loop cage "
@@ -334,7 +333,7 @@ def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf
                 count = np.empty(len(sel), np.int64)
                 stats = np.empty((len(sel), 2), np.int64)
                 run_tasks(lines_task, oo, dd, t_lo, t_hi, items.all_nets, items.all_tnets,
-                          TRI_SPLIT, items.all_exact,
+                          SPLIT_PTR, SPLIT_COL, SPLIT_W, items.all_exact,
                           items.item_min, items.item_max, bv.node_min, bv.node_max,
                           bv.node_first, bv.node_count, bv.prims, tol_flat, touch_tol,
                           res_tol, mode == "first", cap, cand, count, stats)

@@ -57,7 +57,7 @@ from .bezier import _copy_net, _net_box, _split
 from .lines_loop import (
     N_TRI, TRI_MONO, mono_eval, tri_box, tri_flatness, tri_monomials, tri_split,
 )
-from .prims import _shear, _tri
+from .prims import _shear, _tri, leaf_njit
 
 # Deepest halving of an item: 2^-40 of its side is below what double parameters resolve.
 MAX_DEPTH = 40
@@ -83,7 +83,7 @@ KIND_CROSS = 1.0
 KIND_TOUCH = 2.0
 
 
-@nb.njit(cache=True, error_model="numpy")
+@leaf_njit
 def _slab_t(o0, o1, o2, i0, i1, i2, lo0, lo1, lo2, hi0, hi1, hi2, pad, tlo, thi):
     """Where the line o + t d (``i`` = 1/d) enters the box [lo - pad, hi + pad] for t in
     [tlo, thi], or inf if it misses. IEEE infinities handle zero direction components."""
@@ -106,7 +106,7 @@ def _slab_t(o0, o1, o2, i0, i1, i2, lo0, lo1, lo2, hi0, hi1, hi2, pad, tlo, thi)
     return tn if tn <= min(tf, thi) else np.inf
 
 
-@nb.njit(cache=True, error_model="numpy")
+@leaf_njit
 def net_flatness(w, q):
     """Distance bound between net ``w[q]``'s patch and its corner triangles (module doc)."""
     e = 0.0
@@ -128,34 +128,58 @@ def net_flatness(w, q):
     return e + 0.25 * math.sqrt(tw)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@leaf_njit
 def _quad_eval(w, q, s, t, out, second):
     """Point, first and (with ``second``) second derivatives of bicubic net ``w[q]`` at
-    (s, t) into ``out`` rows P, Ps, Pt, Pss, Pst, Ptt."""
+    (s, t) into ``out`` rows P, Ps, Pt, Pss, Pst, Ptt (scalar sums: this is Newton's
+    inner loop)."""
     ss, st = 1.0 - s, 1.0 - t
     b = (ss * ss * ss, 3.0 * s * ss * ss, 3.0 * s * s * ss, s * s * s)
     db = (-3.0 * ss * ss, 3.0 * ss * (ss - 2.0 * s), 3.0 * s * (2.0 * ss - s), 3.0 * s * s)
-    ddb = (6.0 * ss, 6.0 * (3.0 * s - 2.0), 6.0 * (1.0 - 3.0 * s), 6.0 * s)
     c = (st * st * st, 3.0 * t * st * st, 3.0 * t * t * st, t * t * t)
     dc = (-3.0 * st * st, 3.0 * st * (st - 2.0 * t), 3.0 * t * (2.0 * st - t), 3.0 * t * t)
+    px = py = pz = ux = uy = uz = vx = vy = vz = 0.0
+    for i in range(4):
+        bi, dbi = b[i], db[i]
+        for j in range(4):
+            x, y, z = w[q, i, j, 0], w[q, i, j, 1], w[q, i, j, 2]
+            f, fu, fv = bi * c[j], dbi * c[j], bi * dc[j]
+            px += f * x
+            py += f * y
+            pz += f * z
+            ux += fu * x
+            uy += fu * y
+            uz += fu * z
+            vx += fv * x
+            vy += fv * y
+            vz += fv * z
+    out[0, 0], out[0, 1], out[0, 2] = px, py, pz
+    out[1, 0], out[1, 1], out[1, 2] = ux, uy, uz
+    out[2, 0], out[2, 1], out[2, 2] = vx, vy, vz
+    if not second:
+        return
+    ddb = (6.0 * ss, 6.0 * (3.0 * s - 2.0), 6.0 * (1.0 - 3.0 * s), 6.0 * s)
     ddc = (6.0 * st, 6.0 * (3.0 * t - 2.0), 6.0 * (1.0 - 3.0 * t), 6.0 * t)
-    for r in range(6 if second else 3):
-        for k in range(3):
-            out[r, k] = 0.0
+    ax = ay = az = mx = my = mz = cx = cy = cz = 0.0
     for i in range(4):
         for j in range(4):
-            for k in range(3):
-                x = w[q, i, j, k]
-                out[0, k] += b[i] * c[j] * x
-                out[1, k] += db[i] * c[j] * x
-                out[2, k] += b[i] * dc[j] * x
-                if second:
-                    out[3, k] += ddb[i] * c[j] * x
-                    out[4, k] += db[i] * dc[j] * x
-                    out[5, k] += b[i] * ddc[j] * x
+            x, y, z = w[q, i, j, 0], w[q, i, j, 1], w[q, i, j, 2]
+            f, fm, fc = ddb[i] * c[j], db[i] * dc[j], b[i] * ddc[j]
+            ax += f * x
+            ay += f * y
+            az += f * z
+            mx += fm * x
+            my += fm * y
+            mz += fm * z
+            cx += fc * x
+            cy += fc * y
+            cz += fc * z
+    out[3, 0], out[3, 1], out[3, 2] = ax, ay, az
+    out[4, 0], out[4, 1], out[4, 2] = mx, my, mz
+    out[5, 0], out[5, 1], out[5, 2] = cx, cy, cz
 
 
-@nb.njit(cache=True, error_model="numpy")
+@leaf_njit
 def _eval(tri, w, q, mono, s, t, out, second):
     """:func:`_quad_eval` of quad net ``w[q]``, or the triangle net whose monomial
     coefficients are ``mono`` (``tri``)."""
@@ -165,7 +189,7 @@ def _eval(tri, w, q, mono, s, t, out, second):
         _quad_eval(w, q, s, t, out, second)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@leaf_njit
 def _newton_cross(tri, w, q, mono, D, s, t, tau, o0, o1, o2, d0, d1, d2, res_tol):
     """Newton on S(s, t) = o + tau d for the leaf's net; returns (ok, s, t, tau)."""
     for _ in range(NEWTON_ITERS):
@@ -200,7 +224,7 @@ def _newton_cross(tri, w, q, mono, D, s, t, tau, o0, o1, o2, d0, d1, d2, res_tol
     return math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) <= res_tol, s, t, tau
 
 
-@nb.njit(cache=True, error_model="numpy")
+@leaf_njit
 def _closest(tri, w, q, mono, D, s, t, o0, o1, o2, e0, e1, e2):
     """Newton minimum of the distance from the leaf's patch to the line through o with unit
     direction e (gradient of |r_perp|^2 / 2 with its full Hessian; damped, and Gauss-Newton
@@ -243,7 +267,7 @@ def _closest(tri, w, q, mono, D, s, t, o0, o1, o2, e0, e1, e2):
     return s, t, math.sqrt(rx * rx + ry * ry + rz * rz), p
 
 
-@nb.njit(cache=True, error_model="numpy")
+@leaf_njit
 def _push(cand, line, n, cap, t, item, a, b, kind, cs, dist, size):
     if n < cap:
         cand[line, n, C_T] = t
@@ -257,7 +281,7 @@ def _push(cand, line, n, cap, t, item, a, b, kind, cs, dist, size):
     return n + 1
 
 
-@nb.njit(cache=True, error_model="numpy")
+@leaf_njit
 def _unit_normal_cos(tri, w, q, mono, D, s, t, e0, e1, e2):
     """Cosine between the unit normal of the leaf's patch at (s, t) and the direction e."""
     _eval(tri, w, q, mono, s, t, D, False)
@@ -270,7 +294,7 @@ def _unit_normal_cos(tri, w, q, mono, D, s, t, e0, e1, e2):
     return (nx * e0 + ny * e1 + nz * e2) / ln
 
 
-@nb.njit(cache=True, error_model="numpy")
+@leaf_njit
 def _inside(tri, a, b, slack):
     """Parameters (a, b) inside the unit square (or triangle), up to ``slack``."""
     if tri:
@@ -278,7 +302,7 @@ def _inside(tri, a, b, slack):
     return a >= -slack and a <= 1.0 + slack and b >= -slack and b <= 1.0 + slack
 
 
-@nb.njit(cache=True, error_model="numpy")
+@leaf_njit
 def _clamp(tri, a, b):
     """Parameters (a, b) moved into the unit square (or triangle)."""
     a = min(max(a, 0.0), 1.0)
@@ -290,7 +314,7 @@ def _clamp(tri, a, b):
     return a, b
 
 
-@nb.njit(cache=True, error_model="numpy")
+@leaf_njit
 def _leaf(tri, w, wt, q, mono, D, u0, v0, size, item, line, n, cap, cand, verts, ob0, ob1,
           ob2, d0, d1, d2, e0, e1, e2, dlen, kx, ky, kz, sx, sy, sz, tbase, tlo, thi, exact,
           touch_tol, res_tol, slack, cell_tol):
@@ -390,7 +414,7 @@ def _leaf(tri, w, wt, q, mono, D, u0, v0, size, item, line, n, cap, cand, verts,
     return n
 
 
-@nb.njit(cache=True, error_model="numpy")
+@leaf_njit
 def _sub_entry(tri, w, wt, q, o0, o1, o2, i0, i1, i2, pad, tlo, thi):
     """Entry of the line into the box of sub-net ``w[q]`` (or ``wt[q]``), inf on a miss."""
     if tri:
@@ -400,7 +424,7 @@ def _sub_entry(tri, w, wt, q, o0, o1, o2, i0, i1, i2, pad, tlo, thi):
     return _slab_t(o0, o1, o2, i0, i1, i2, lo0, lo1, lo2, hi0, hi1, hi2, pad, tlo, thi)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@leaf_njit
 def _copy_sub(tri, w, wt, dst, src):
     """Sub-net ``src`` to stack slot ``dst`` (quad ``w`` or triangle ``wt``)."""
     if tri:
@@ -412,12 +436,14 @@ def _copy_sub(tri, w, wt, dst, src):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, tnets, split, exact, item_min,
-               item_max, node_min, node_max, node_first, node_count, prims, tol_flat,
-               touch_tol, res_tol, first, cap, cand, count, stats):
+def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, tnets, split_ptr, split_col,
+               split_w, exact, item_min, item_max, node_min, node_max, node_first,
+               node_count, prims, tol_flat, touch_tol, res_tol, first, cap, cand, count,
+               stats):
     """Candidates of lines ``task, task + n_tasks, ...`` (module doc). ``org``, ``dirs`` (L,3);
     ``nets`` (Q,4,4,3) quad items, ``tnets`` (T,15,3) triangle items (item ``Q + i``),
-    ``split`` the triangle split matrices (``lines_loop.TRI_SPLIT``), ``exact`` (Q+T,) bool
+    ``split_ptr``, ``split_col``, ``split_w`` the triangle split (``lines_loop.SPLIT_*``),
+    ``exact`` (Q+T,) bool
     (False: a flat cell, no Newton), ``item_min/max`` (Q+T,3) boxes; BVH arrays as
     accel/bvh.py; ``first``: stop as module doc step 4; ``cand`` (L, cap, N_FIELDS) out,
     ``count`` (L,) out; ``stats`` (L, 2) out: items entered, leaves reached."""
@@ -542,7 +568,7 @@ def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, tnets, split, exact, 
                     # q+4 .. q+7; those the line enters go back to q, q+1, .. farthest first
                     d_kids = q + 4 if tri else q + 6
                     if tri:
-                        tri_split(wt, q, split, d_kids)
+                        tri_split(wt, q, split_ptr, split_col, split_w, d_kids)
                     else:
                         _split(w, q, w, d_kids)
                     h = 0.5 * ssz[q]
@@ -662,3 +688,37 @@ def merge_candidates(cand, count, dlen, precision, keep, tangent):
                 best = i
             prev = i
             tangent[line, i] = True
+
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def mark_shells(org, dirs, t_lo, t_hi, pad, box_min, box_max, node_min, node_max,
+                node_first, node_count, prims, done, hit):
+    """``hit[i] = True`` for every box ``i`` (``box_min/max`` (B,3), under a BVH of them,
+    accel/bvh.py) that one of the lines meets within [t_lo, t_hi], padded by ``pad``;
+    boxes with ``done[i]`` are skipped."""
+    nodes = np.empty(NODE_STACK, np.int64)
+    for line in range(len(org)):
+        o0, o1, o2 = org[line, 0], org[line, 1], org[line, 2]
+        i0, i1, i2 = 1.0 / dirs[line, 0], 1.0 / dirs[line, 1], 1.0 / dirs[line, 2]
+        nodes[0] = 0
+        top = 1
+        while top > 0:
+            top -= 1
+            nd = nodes[top]
+            if _slab_t(o0, o1, o2, i0, i1, i2, node_min[nd, 0], node_min[nd, 1],
+                       node_min[nd, 2], node_max[nd, 0], node_max[nd, 1], node_max[nd, 2],
+                       pad, t_lo, t_hi) == np.inf:
+                continue
+            if node_count[nd] == 0:
+                nodes[top] = node_first[nd]
+                nodes[top + 1] = node_first[nd] + 1
+                top += 2
+                continue
+            for r in range(node_first[nd], node_first[nd] + node_count[nd]):
+                b = prims[r]
+                if done[b] or hit[b]:
+                    continue
+                hit[b] = _slab_t(o0, o1, o2, i0, i1, i2, box_min[b, 0], box_min[b, 1],
+                                 box_min[b, 2], box_max[b, 0], box_max[b, 1], box_max[b, 2],
+                                 pad, t_lo, t_hi) < np.inf

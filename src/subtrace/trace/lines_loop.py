@@ -24,8 +24,9 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
+
+from .prims import leaf_njit
 
 DEGREE = 4
 N_TRI = 15  # control points of a quartic triangular net
@@ -76,11 +77,16 @@ _V = bernstein(TRI_PARAMS)  # collocation matrix: unisolvent at the domain point
 TRI_SPLIT = np.ascontiguousarray(np.stack([
     _exact(np.linalg.solve(_V, bernstein(CHILD_ORIGIN[c] + CHILD_SCALE[c] * TRI_PARAMS)),
            2.0**-DEGREE) for c in range(4)]))
+# its nonzero weights, row 15 c + p (child c, point p) in CSR form, for the kernels
+_nz = TRI_SPLIT.reshape(4 * N_TRI, N_TRI) != 0
+SPLIT_PTR = np.concatenate([[0], np.cumsum(_nz.sum(axis=1))]).astype(np.int64)
+SPLIT_COL = np.ascontiguousarray(np.nonzero(_nz)[1], dtype=np.int64)
+SPLIT_W = np.ascontiguousarray(TRI_SPLIT.reshape(4 * N_TRI, N_TRI)[_nz])
 # monomial coefficients from a net (integer weights)
 TRI_MONO = np.ascontiguousarray(_exact(np.linalg.solve(monomials(TRI_PARAMS), _V), 1.0))
 
 
-@nb.njit(cache=True, error_model="numpy")
+@leaf_njit
 def tri_flatness(w, q):
     """Distance bound between net ``w[q]``'s patch and its corner triangle (module doc)."""
     e = 0.0
@@ -99,7 +105,7 @@ def tri_flatness(w, q):
     return math.sqrt(e)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@leaf_njit
 def tri_box(w, q):
     """Box of the control points of net ``w[q]`` (it contains the patch)."""
     lo0 = lo1 = lo2 = np.inf
@@ -112,24 +118,27 @@ def tri_box(w, q):
     return lo0, lo1, lo2, hi0, hi1, hi2
 
 
-@nb.njit(cache=True, error_model="numpy")
-def tri_split(w, q, split, d0):
-    """Child ``c`` of net ``w[q]`` into ``w[d0 + c]`` (c = 0..3; ``d0 > q``)."""
-    for c in range(4):
-        for p in range(N_TRI):
-            x = y = z = 0.0
-            for r in range(N_TRI):
-                a = split[c, p, r]
-                if a != 0.0:
-                    x += a * w[q, r, 0]
-                    y += a * w[q, r, 1]
-                    z += a * w[q, r, 2]
-            w[d0 + c, p, 0] = x
-            w[d0 + c, p, 1] = y
-            w[d0 + c, p, 2] = z
+@leaf_njit
+def tri_split(w, q, split_ptr, split_col, split_w, d0):
+    """Child ``c`` of net ``w[q]`` into ``w[d0 + c]`` (c = 0..3; ``d0 > q``): row
+    ``15 c + p`` of ``TRI_SPLIT`` as its nonzero weights (CSR: ``SPLIT_PTR``,
+    ``SPLIT_COL``, ``SPLIT_W``)."""
+    for row in range(4 * N_TRI):
+        x = y = z = 0.0
+        for i in range(split_ptr[row], split_ptr[row + 1]):
+            r = split_col[i]
+            a = split_w[i]
+            x += a * w[q, r, 0]
+            y += a * w[q, r, 1]
+            z += a * w[q, r, 2]
+        c = d0 + row // N_TRI
+        p = row % N_TRI
+        w[c, p, 0] = x
+        w[c, p, 1] = y
+        w[c, p, 2] = z
 
 
-@nb.njit(cache=True, error_model="numpy")
+@leaf_njit
 def tri_monomials(w, q, mono_from_net, out):
     """Monomial coefficients (15,3) of net ``w[q]`` into ``out``."""
     for m in range(N_TRI):
@@ -145,35 +154,55 @@ def tri_monomials(w, q, mono_from_net, out):
         out[m, 2] = z
 
 
-@nb.njit(cache=True, error_model="numpy")
+@leaf_njit
 def mono_eval(c, s, t, out, second):
     """Point, first and (with ``second``) second derivatives of the quartic with monomial
-    coefficients ``c`` (15,3) at (s, t) into ``out`` rows P, Ps, Pt, Pss, Pst, Ptt."""
+    coefficients ``c`` (15,3) at (s, t) into ``out`` rows P, Ps, Pt, Pss, Pst, Ptt (scalar
+    sums: this is Newton's inner loop)."""
     s2, t2 = s * s, t * t
     ps = (1.0, s, s2, s2 * s, s2 * s2)
     pt = (1.0, t, t2, t2 * t, t2 * t2)
-    rows = 6 if second else 3
-    for r in range(rows):
-        for k in range(3):
-            out[r, k] = 0.0
+    px = py = pz = ux = uy = uz = vx = vy = vz = 0.0
     m = 0
     for k in range(DEGREE + 1):
         for j in range(DEGREE + 1 - k):
-            f0 = ps[j] * pt[k]
+            x, y, z = c[m, 0], c[m, 1], c[m, 2]
+            f = ps[j] * pt[k]
             fs = j * ps[j - 1] * pt[k] if j > 0 else 0.0
             ft = k * ps[j] * pt[k - 1] if k > 0 else 0.0
-            for x in range(3):
-                cx = c[m, x]
-                out[0, x] += f0 * cx
-                out[1, x] += fs * cx
-                out[2, x] += ft * cx
-            if second:
-                fss = j * (j - 1) * ps[j - 2] * pt[k] if j > 1 else 0.0
-                fst = j * k * ps[j - 1] * pt[k - 1] if j > 0 and k > 0 else 0.0
-                ftt = k * (k - 1) * ps[j] * pt[k - 2] if k > 1 else 0.0
-                for x in range(3):
-                    cx = c[m, x]
-                    out[3, x] += fss * cx
-                    out[4, x] += fst * cx
-                    out[5, x] += ftt * cx
+            px += f * x
+            py += f * y
+            pz += f * z
+            ux += fs * x
+            uy += fs * y
+            uz += fs * z
+            vx += ft * x
+            vy += ft * y
+            vz += ft * z
             m += 1
+    out[0, 0], out[0, 1], out[0, 2] = px, py, pz
+    out[1, 0], out[1, 1], out[1, 2] = ux, uy, uz
+    out[2, 0], out[2, 1], out[2, 2] = vx, vy, vz
+    if not second:
+        return
+    ax = ay = az = mx = my = mz = cx = cy = cz = 0.0
+    m = 0
+    for k in range(DEGREE + 1):
+        for j in range(DEGREE + 1 - k):
+            x, y, z = c[m, 0], c[m, 1], c[m, 2]
+            fss = j * (j - 1) * ps[j - 2] * pt[k] if j > 1 else 0.0
+            fst = j * k * ps[j - 1] * pt[k - 1] if j > 0 and k > 0 else 0.0
+            ftt = k * (k - 1) * ps[j] * pt[k - 2] if k > 1 else 0.0
+            ax += fss * x
+            ay += fss * y
+            az += fss * z
+            mx += fst * x
+            my += fst * y
+            mz += fst * z
+            cx += ftt * x
+            cy += ftt * y
+            cz += ftt * z
+            m += 1
+    out[3, 0], out[3, 1], out[3, 2] = ax, ay, az
+    out[4, 0], out[4, 1], out[4, 2] = mx, my, mz
+    out[5, 0], out[5, 1], out[5, 2] = cx, cy, cz
