@@ -278,3 +278,35 @@ def test_scene_reader_fuzz(tmp_path, data):
         message = str(err)
         assert message and "\n" not in message.strip()
         assert isinstance(err, SceneError) or str(tmp_path) in message
+
+
+@pytest.mark.parametrize("name, words", [("cube.obj", "permission denied"),
+                                         ("ok_scene.toml", "permission denied")])
+def test_unreadable_input(capsys, tmp_path, name, words):
+    import shutil
+    import subprocess
+    import sys
+
+    path = tmp_path / name
+    shutil.copy(CORPUS / name, path)
+    if name.endswith(".toml"):
+        shutil.copy(CORPUS / "cube.obj", tmp_path / "cube.obj")
+    path.chmod(0)
+    out = tmp_path / "out" / "r.exr"
+    out.parent.mkdir()
+    argv = ["render", str(path), "-o", str(out), *RENDER_ARGS]
+    try:
+        if hasattr(os, "geteuid") and os.geteuid() == 0:  # root reads anything: drop that
+            prefix = _without_dac_override()
+            if prefix is None:
+                pytest.skip("running as root without setpriv: every file is readable")
+            proc = subprocess.run([*prefix, sys.executable, "-m", "subtrace.cli", *argv],
+                                  capture_output=True, text=True, timeout=120)
+            code, err = proc.returncode, proc.stderr
+        else:
+            code, _, err = run(capsys, argv)
+        assert code == 2, err
+        assert_one_line_error(err, name, words)
+        assert list(out.parent.iterdir()) == []
+    finally:
+        path.chmod(0o644)
