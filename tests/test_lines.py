@@ -59,6 +59,29 @@ def reference_hits(cage, level, org, dirs):
     return out
 
 
+def check_random_lines(cage, level, n, seed, precision=PREC, ref_tol=None):
+    """``n`` random lines through ``cage``'s box against :func:`reference_hits` at ``level``:
+    equal hit counts and ``t`` within ``ref_tol`` (default ``REF_TOL``) on every line that
+    crosses at more than 0.1 rad (at least half of them); returns (org, dirs, hits)."""
+    rng = np.random.default_rng(seed)
+    lo, hi = cage.bounds()
+    org = rng.uniform(lo, hi, (n, 3))
+    dirs = rng.normal(size=(n, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    h = intersect_lines(cage, org, dirs, precision, t_range=(-np.inf, np.inf))
+    ref = reference_hits(cage, level, org, dirs)
+    compared = 0
+    for i in range(n):
+        idx = h.of_line(i)
+        if h.tangent[idx].any() or np.any(np.abs((h.normal[idx] * dirs[i]).sum(1)) < 0.1):
+            continue  # grazing: the reference's chords may pass either side
+        assert len(idx) == len(ref[i]), (i, h.t[idx], ref[i])
+        np.testing.assert_allclose(h.t[idx], ref[i], atol=REF_TOL if ref_tol is None else ref_tol)
+        compared += 1
+    assert compared >= n // 2
+    return org, dirs, h
+
+
 def _surface(cage, ptex, uv):
     P, du, dv = cage.evaluate(np.array([ptex]), np.array([uv], float))
     n = np.cross(du[0], dv[0])
@@ -155,24 +178,8 @@ REF_TOL = PREC + 1e-3
 @pytest.mark.parametrize("which", ["torus", "cube"])
 def test_random_lines_against_brute_force(which, torus, cube):
     cage = torus if which == "torus" else cube
-    rng = np.random.default_rng(7)
-    lo, hi = cage.bounds()
-    n = 24
-    org = rng.uniform(lo, hi, (n, 3))
-    dirs = rng.normal(size=(n, 3))
-    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-    h = intersect_lines(cage, org, dirs, PREC, t_range=(-np.inf, np.inf))
-    ref = reference_hits(cage, 5 if which == "torus" else 6, org, dirs)
-    compared = 0
-    for i in range(n):
-        idx = h.of_line(i)
-        if h.tangent[idx].any() or np.any(np.abs((h.normal[idx] * dirs[i]).sum(1)) < 0.1):
-            continue  # grazing: the reference's chords may pass either side
-        assert len(idx) == len(ref[i]), (i, h.t[idx], ref[i])
-        np.testing.assert_allclose(h.t[idx], ref[i], atol=REF_TOL)
-        compared += 1
-    assert compared >= n // 2
-    assert len(h) > n  # the lines do hit
+    org, dirs, h = check_random_lines(cage, 5 if which == "torus" else 6, 24, seed=7)
+    assert len(h) > len(org)  # the lines do hit
     # every hit: its (ptex, uv) evaluates within precision of its point; crossings exactly
     P = cage.evaluate(h.ptex, h.uv)[0]
     err = np.linalg.norm(P - h.point, axis=1)

@@ -16,7 +16,7 @@ from subtrace.lines import intersect_lines, torus_cage
 from subtrace.lines_loop import box_nets, isolate_loop, loop_regular
 from subtrace.trace.lines_loop import CHILD_ORIGIN, CHILD_SCALE, TRI_SPLIT, bernstein
 
-from test_lines import reference_hits
+from test_lines import check_random_lines
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 MODELS = SHARED / "models"
@@ -229,24 +229,8 @@ def test_random_lines_against_brute_force(which, request):
     if which == "spot" and not (MODELS / "spot_low_resolution.obj").exists():
         pytest.skip("../shared models not present")
     cage = request.getfixturevalue(which)
-    rng = np.random.default_rng(11)
-    lo, hi = cage.bounds()
-    n = 30
-    org = rng.uniform(lo, hi, (n, 3))
-    dirs = rng.normal(size=(n, 3))
-    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-    h = intersect_lines(cage, org, dirs, PREC, t_range=(-np.inf, np.inf))
-    ref = reference_hits(cage, CASES[which], org, dirs)
-    compared = 0
-    for i in range(n):
-        idx = h.of_line(i)
-        if h.tangent[idx].any() or np.any(np.abs((h.normal[idx] * dirs[i]).sum(1)) < 0.1):
-            continue  # grazing: the reference's chords may pass either side
-        assert len(idx) == len(ref[i]), (i, h.t[idx], ref[i])
-        np.testing.assert_allclose(h.t[idx], ref[i], atol=REF_TOL)
-        compared += 1
-    assert compared >= n // 2
-    assert len(h) >= n // 2
+    org, dirs, h = check_random_lines(cage, CASES[which], 30, seed=11, ref_tol=REF_TOL)
+    assert len(h) >= len(org) // 2
     # every hit: its (ptex, uv) evaluates within precision of its point, most exactly
     P = cage.evaluate(h.ptex, h.uv)[0]
     err = np.linalg.norm(P - h.point, axis=1)

@@ -129,21 +129,13 @@ def net_flatness(w, q):
 
 
 @leaf_njit
-def _quad_eval(w, q, s, t, out, second):
-    """Point, first and (with ``second``) second derivatives of bicubic net ``w[q]`` at
-    (s, t) into ``out`` rows P, Ps, Pt, Pss, Pst, Ptt (scalar sums: this is Newton's
-    inner loop)."""
-    ss, st = 1.0 - s, 1.0 - t
-    b = (ss * ss * ss, 3.0 * s * ss * ss, 3.0 * s * s * ss, s * s * s)
-    db = (-3.0 * ss * ss, 3.0 * ss * (ss - 2.0 * s), 3.0 * s * (2.0 * ss - s), 3.0 * s * s)
-    c = (st * st * st, 3.0 * t * st * st, 3.0 * t * t * st, t * t * t)
-    dc = (-3.0 * st * st, 3.0 * st * (st - 2.0 * t), 3.0 * t * (2.0 * st - t), 3.0 * t * t)
+def _quad_sums(w, q, a1, b1, a2, b2, a3, b3, out, row):
+    """``out[row + r] = sum_ij ar[i] br[j] w[q, i, j]`` for r = 0, 1, 2 (scalar sums)."""
     px = py = pz = ux = uy = uz = vx = vy = vz = 0.0
     for i in range(4):
-        bi, dbi = b[i], db[i]
         for j in range(4):
             x, y, z = w[q, i, j, 0], w[q, i, j, 1], w[q, i, j, 2]
-            f, fu, fv = bi * c[j], dbi * c[j], bi * dc[j]
+            f, fu, fv = a1[i] * b1[j], a2[i] * b2[j], a3[i] * b3[j]
             px += f * x
             py += f * y
             pz += f * z
@@ -153,30 +145,25 @@ def _quad_eval(w, q, s, t, out, second):
             vx += fv * x
             vy += fv * y
             vz += fv * z
-    out[0, 0], out[0, 1], out[0, 2] = px, py, pz
-    out[1, 0], out[1, 1], out[1, 2] = ux, uy, uz
-    out[2, 0], out[2, 1], out[2, 2] = vx, vy, vz
-    if not second:
-        return
-    ddb = (6.0 * ss, 6.0 * (3.0 * s - 2.0), 6.0 * (1.0 - 3.0 * s), 6.0 * s)
-    ddc = (6.0 * st, 6.0 * (3.0 * t - 2.0), 6.0 * (1.0 - 3.0 * t), 6.0 * t)
-    ax = ay = az = mx = my = mz = cx = cy = cz = 0.0
-    for i in range(4):
-        for j in range(4):
-            x, y, z = w[q, i, j, 0], w[q, i, j, 1], w[q, i, j, 2]
-            f, fm, fc = ddb[i] * c[j], db[i] * dc[j], b[i] * ddc[j]
-            ax += f * x
-            ay += f * y
-            az += f * z
-            mx += fm * x
-            my += fm * y
-            mz += fm * z
-            cx += fc * x
-            cy += fc * y
-            cz += fc * z
-    out[3, 0], out[3, 1], out[3, 2] = ax, ay, az
-    out[4, 0], out[4, 1], out[4, 2] = mx, my, mz
-    out[5, 0], out[5, 1], out[5, 2] = cx, cy, cz
+    out[row, 0], out[row, 1], out[row, 2] = px, py, pz
+    out[row + 1, 0], out[row + 1, 1], out[row + 1, 2] = ux, uy, uz
+    out[row + 2, 0], out[row + 2, 1], out[row + 2, 2] = vx, vy, vz
+
+
+@leaf_njit
+def _quad_eval(w, q, s, t, out, second):
+    """Point, first and (with ``second``) second derivatives of bicubic net ``w[q]`` at
+    (s, t) into ``out`` rows P, Ps, Pt, Pss, Pst, Ptt (Newton's inner loop)."""
+    ss, st = 1.0 - s, 1.0 - t
+    b = (ss * ss * ss, 3.0 * s * ss * ss, 3.0 * s * s * ss, s * s * s)
+    db = (-3.0 * ss * ss, 3.0 * ss * (ss - 2.0 * s), 3.0 * s * (2.0 * ss - s), 3.0 * s * s)
+    c = (st * st * st, 3.0 * t * st * st, 3.0 * t * t * st, t * t * t)
+    dc = (-3.0 * st * st, 3.0 * st * (st - 2.0 * t), 3.0 * t * (2.0 * st - t), 3.0 * t * t)
+    _quad_sums(w, q, b, c, db, c, b, dc, out, 0)
+    if second:
+        ddb = (6.0 * ss, 6.0 * (3.0 * s - 2.0), 6.0 * (1.0 - 3.0 * s), 6.0 * s)
+        ddc = (6.0 * st, 6.0 * (3.0 * t - 2.0), 6.0 * (1.0 - 3.0 * t), 6.0 * t)
+        _quad_sums(w, q, ddb, c, db, dc, b, ddc, out, 3)
 
 
 @leaf_njit

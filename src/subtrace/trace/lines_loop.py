@@ -155,21 +155,17 @@ def tri_monomials(w, q, mono_from_net, out):
 
 
 @leaf_njit
-def mono_eval(c, s, t, out, second):
-    """Point, first and (with ``second``) second derivatives of the quartic with monomial
-    coefficients ``c`` (15,3) at (s, t) into ``out`` rows P, Ps, Pt, Pss, Pst, Ptt (scalar
-    sums: this is Newton's inner loop)."""
-    s2, t2 = s * s, t * t
-    ps = (1.0, s, s2, s2 * s, s2 * s2)
-    pt = (1.0, t, t2, t2 * t, t2 * t2)
+def _mono_sums(c, ps, pt, a1, b1, a2, b2, a3, b3, out, row):
+    """``out[row + r]``: the (ar, br)-th derivative (in s, t) of the quartic with monomial
+    coefficients ``c``, for r = 0, 1, 2, from the powers ``ps``, ``pt`` (scalar sums)."""
     px = py = pz = ux = uy = uz = vx = vy = vz = 0.0
     m = 0
     for k in range(DEGREE + 1):
         for j in range(DEGREE + 1 - k):
             x, y, z = c[m, 0], c[m, 1], c[m, 2]
-            f = ps[j] * pt[k]
-            fs = j * ps[j - 1] * pt[k] if j > 0 else 0.0
-            ft = k * ps[j] * pt[k - 1] if k > 0 else 0.0
+            f = _deriv(ps, j, a1) * _deriv(pt, k, b1)
+            fs = _deriv(ps, j, a2) * _deriv(pt, k, b2)
+            ft = _deriv(ps, j, a3) * _deriv(pt, k, b3)
             px += f * x
             py += f * y
             pz += f * z
@@ -180,29 +176,29 @@ def mono_eval(c, s, t, out, second):
             vy += ft * y
             vz += ft * z
             m += 1
-    out[0, 0], out[0, 1], out[0, 2] = px, py, pz
-    out[1, 0], out[1, 1], out[1, 2] = ux, uy, uz
-    out[2, 0], out[2, 1], out[2, 2] = vx, vy, vz
-    if not second:
-        return
-    ax = ay = az = mx = my = mz = cx = cy = cz = 0.0
-    m = 0
-    for k in range(DEGREE + 1):
-        for j in range(DEGREE + 1 - k):
-            x, y, z = c[m, 0], c[m, 1], c[m, 2]
-            fss = j * (j - 1) * ps[j - 2] * pt[k] if j > 1 else 0.0
-            fst = j * k * ps[j - 1] * pt[k - 1] if j > 0 and k > 0 else 0.0
-            ftt = k * (k - 1) * ps[j] * pt[k - 2] if k > 1 else 0.0
-            ax += fss * x
-            ay += fss * y
-            az += fss * z
-            mx += fst * x
-            my += fst * y
-            mz += fst * z
-            cx += ftt * x
-            cy += ftt * y
-            cz += ftt * z
-            m += 1
-    out[3, 0], out[3, 1], out[3, 2] = ax, ay, az
-    out[4, 0], out[4, 1], out[4, 2] = mx, my, mz
-    out[5, 0], out[5, 1], out[5, 2] = cx, cy, cz
+    out[row, 0], out[row, 1], out[row, 2] = px, py, pz
+    out[row + 1, 0], out[row + 1, 1], out[row + 1, 2] = ux, uy, uz
+    out[row + 2, 0], out[row + 2, 1], out[row + 2, 2] = vx, vy, vz
+
+
+@leaf_njit
+def _deriv(p, j, a):
+    """The a-th derivative of x^j (a <= 2) from the powers ``p`` of x."""
+    if a == 0:
+        return p[j]
+    if a == 1:
+        return j * p[j - 1] if j > 0 else 0.0
+    return j * (j - 1) * p[j - 2] if j > 1 else 0.0
+
+
+@leaf_njit
+def mono_eval(c, s, t, out, second):
+    """Point, first and (with ``second``) second derivatives of the quartic with monomial
+    coefficients ``c`` (15,3) at (s, t) into ``out`` rows P, Ps, Pt, Pss, Pst, Ptt
+    (Newton's inner loop)."""
+    s2, t2 = s * s, t * t
+    ps = (1.0, s, s2, s2 * s, s2 * s2)
+    pt = (1.0, t, t2, t2 * t, t2 * t2)
+    _mono_sums(c, ps, pt, 0, 0, 1, 0, 0, 1, out, 0)
+    if second:
+        _mono_sums(c, ps, pt, 2, 0, 1, 1, 0, 2, out, 3)
