@@ -584,7 +584,8 @@ def check_memory(table, n_pixels: int, budget: int, width: int, height: int):
     if need > budget:
         raise SceneError(
             f"a {width}x{height} render of {table.n_patches} patches needs at least "
-            f"{_mib(need)} (about {config.MEMORY_BYTES_PER_PIXEL} bytes per pixel) but the "
+            f"{_mib(need)} ({config.MEMORY_BYTES_PER_PIXEL} bytes per pixel, "
+            f"{config.MEMORY_BYTES_PER_PATCH} per patch) but the "
             f"memory budget is {_mib(budget)}: lower the resolution or raise --max-memory "
             "(or [render] max_memory in the scene)")
 
