@@ -544,7 +544,7 @@ def _cmd_intersect(args) -> int:
 
     check_coordinates(cage.path, cage.points, config.MAX_COORDINATE)
     check_valences(cage.path, cage.face_sizes, np.diff(cage.base.vert_edge_offsets),
-                   config.MAX_VALENCE, True)
+                   config.MAX_VALENCE, cage.scheme == "catmark")
     out = args.output
     if out is not None:
         folder = os.path.dirname(os.path.abspath(out))
