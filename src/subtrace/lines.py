@@ -383,6 +383,16 @@ def _hits(items, org, dirs, rows, tans, lines, mode, n_lines, precision, stats) 
 
         normal[~quad] = tri_normals(items.all_tnets, item[~quad] - len(items.all_nets),
                                     ab[~quad])
+    cell = np.nonzero(~items.all_exact[item])[0]
+    if len(cell):
+        # a cell is a flat stand-in: the limit normal from the exact evaluator instead
+        cage = items.table.objects[0].cage
+        _, du, dv = cage.evaluate(items.all_ptex[item[cell]],
+                                  np.clip(uv[cell], 0.0, 1.0))
+        n = np.cross(du, dv)
+        ln = np.linalg.norm(n, axis=1)
+        ok = ln > 0
+        normal[cell[ok]] = n[ok] / ln[ok, None]
     return Hits(line=line, t=t, point=point, ptex=items.all_ptex[item].astype(np.int32),
                 uv=uv, normal=normal, tangent=tan.astype(bool), n_lines=n_lines,
                 precision=precision, stats=stats)
