@@ -214,6 +214,26 @@ def test_shared_edge_hit_once(icosahedron):
         assert np.linalg.norm(h.point[0] - P) <= PREC
 
 
+def test_flat_region_line_lying_in_it():
+    # a planar triangular lattice (valence 6 inside, a boundary around): a flat surface
+    n = 7
+    pts = np.array([[x + 0.5 * y, y * np.sqrt(3) / 2, 0.0] for y in range(n) for x in range(n)])
+    v = lambda x, y: y * n + x  # noqa: E731
+    f = [t for y in range(n - 1) for x in range(n - 1)
+         for t in ([v(x, y), v(x + 1, y), v(x, y + 1)],
+                   [v(x + 1, y), v(x + 1, y + 1), v(x, y + 1)])]
+    cage = subtrace.make_cage(pts, [3] * len(f), np.ravel(f), scheme="loop")
+    # a line lying in the plane, inside: one tangent hit on it
+    h = intersect_lines(cage, [[3.0, 2.6, 0.0]], [[1.0, 0.1, 0.0]], PREC, t_range=(0, 2.0))
+    assert len(h) == 1 and h.tangent[0]
+    assert abs(h.point[0, 2]) < 1e-12
+    # crossing the plane: one transverse hit, exact
+    h = intersect_lines(cage, [[4.1, 2.7, 1.0]], [[0.1, 0.0, -1.0]], PREC)
+    assert len(h) == 1 and not h.tangent[0]
+    np.testing.assert_allclose(h.point[0], [4.2, 2.7, 0.0], atol=1e-12)
+    assert abs(h.normal[0, 2]) == pytest.approx(1.0)
+
+
 # ---------------------------------------------------------------------------------------
 # random lines against the brute-force reference
 # ---------------------------------------------------------------------------------------
