@@ -172,3 +172,29 @@ def test_random_cameras_in_and_around_objects(mesh, seed):
                                  table.shell_max, table.shell_min) for k in range(8)], 1)
     side = (corners - frame[0]) @ normal
     assert ((side.min(axis=1) < 0) & (side.max(axis=1) > 0)).any()
+
+
+def test_two_tasks_project_as_one(monkeypatch):
+    """The projection split over two tasks (blocks of boxes each, counts per task) lists
+    exactly what one task lists, for a few thousand boxes that land across the image."""
+    from subtrace import tasks
+    from subtrace.accel import projection
+
+    rng = np.random.default_rng(7)
+    cam = Camera(eye=(0.0, -4.0, 0.5), target=(0.0, 0.0, 0.0), up=(0.0, 0.0, 1.0),
+                 fov_deg=60.0, width=97, height=61)
+    frame = camera_frame(cam)
+    c = rng.normal(0, 1.5, (3000, 3))
+    half = np.abs(rng.normal(0, 0.1, (3000, 3)))
+    lo, hi = c - half, c + half
+    tasks.set_threads(2)
+    try:
+        monkeypatch.setattr(projection, "_PARALLEL_MIN", 0)
+        two = project_shells(lo, hi, frame, cam.width, cam.height)
+        monkeypatch.setattr(projection, "_PARALLEL_MIN", 10**9)
+        one = project_shells(lo, hi, frame, cam.width, cam.height)
+    finally:
+        tasks.set_threads(None)
+    assert len(one.items) > 5 * len(lo)
+    for a, b in zip(two.kernel_tuple(), one.kernel_tuple()):
+        np.testing.assert_array_equal(a, b)

@@ -74,3 +74,25 @@ def test_table_matches_its_plain_construction(threads):
             assert (table.edges[sl, k:] == -1).all()
         for name in ("shell_min", "nets", "edges", "ptex_uv0"):
             assert getattr(table, name).flags.c_contiguous, name
+
+
+def test_control_grids_on_two_tasks_equal_one(monkeypatch):
+    """control_grids split over two tasks (blocks of faces) gathers what one task does."""
+    from subtrace.patches import bspline
+
+    path = SHARED / "models" / "spot_control_mesh.obj"
+    if not path.exists():
+        pytest.skip(f"{path} not present")
+    cage = load_cage(path)
+    lev = cage.level_topology(2)
+    faces = np.nonzero(regular_mask(lev, cage.options, np.arange(lev.n_faces)))[0]
+    assert len(faces) > 2 * bspline._GRID_BLOCK
+    tasks.set_threads(2)
+    try:
+        monkeypatch.setattr(bspline, "_GRID_PARALLEL_MIN", 0)
+        two = control_grids(lev, faces)
+        monkeypatch.setattr(bspline, "_GRID_PARALLEL_MIN", 10**9)
+        one = control_grids(lev, faces)
+    finally:
+        tasks.set_threads(None)
+    np.testing.assert_array_equal(two, one)

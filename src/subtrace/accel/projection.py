@@ -24,6 +24,8 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from .. import tasks
+
 TILE = 2  # pixels per tile side
 
 
@@ -56,65 +58,74 @@ def project_shells(bmin, bmax, frame, width: int, height: int) -> Tiles:
     tx = -(-int(width) // TILE)
     ty = -(-int(height) // TILE)
     rect = np.empty((len(bmin), 4), np.int64)
-    count = np.zeros(tx * ty + 1, np.int64)
-    _rectangles(bmin, bmax, np.ascontiguousarray(eye), inv, int(width), int(height), tx, ty,
-                rect, count, key)
+    n_tasks = tasks.thread_count() if len(bmin) >= _PARALLEL_MIN else 1
+    count = np.zeros((n_tasks, tx * ty + 1), np.int64)
+    tasks.run_tasks(_rectangles, bmin, bmax, np.ascontiguousarray(eye), inv, int(width),
+                    int(height), tx, ty, rect, count, key, n=n_tasks)
     off = np.zeros(tx * ty + 1, np.int64)
-    np.cumsum(count[:-1], out=off[1:])
+    np.cumsum(count.sum(axis=0)[:-1], out=off[1:])
     items = np.empty(int(off[-1]), np.int32)
-    _fill(np.argsort(key), rect, tx, off.copy(), items)  # (ties: any fixed order will do)
+    seen = np.nonzero(rect[:, 0] <= rect[:, 2])[0]  # (the others are in no tile)
+    # nearest first (ties: any fixed order will do)
+    _fill(seen[np.argsort(key[seen])], rect, tx, off.copy(), items)
     return Tiles(off, items, key, tx)
 
 
-@nb.njit(cache=True)
-def _rectangles(bmin, bmax, eye, inv, width, height, tx, ty, rect, count, key):
+_BLOCK = 256  # boxes a task projects at a time
+_PARALLEL_MIN = 16 * _BLOCK  # fewer boxes than this: projected on one thread
+
+
+@nb.njit(cache=True, nogil=True)
+def _rectangles(task, n_tasks, bmin, bmax, eye, inv, width, height, tx, ty, rect, count, key):
     """Each box's tile rectangle ``rect[i]`` = (x0, y0, x1, y1), inclusive, empty (x0 > x1)
-    when it lies behind the eye plane; counts per tile into ``count``; the distance from
-    the eye to each box into ``key``."""
-    for i in range(len(bmin)):
-        d2 = 0.0
-        for k in range(3):
-            g = max(max(bmin[i, k] - eye[k], 0.0), eye[k] - bmax[i, k])
-            d2 += g * g
-        key[i] = np.sqrt(d2)
-        c0 = r0 = np.inf
-        c1 = r1 = -np.inf
-        front = 0
-        behind = 0
-        for k in range(8):
-            x = (bmax[i, 0] if k & 1 else bmin[i, 0]) - eye[0]
-            y = (bmax[i, 1] if k & 2 else bmin[i, 1]) - eye[1]
-            z = (bmax[i, 2] if k & 4 else bmin[i, 2]) - eye[2]
-            a0 = inv[0, 0] * x + inv[0, 1] * y + inv[0, 2] * z
-            a1 = inv[1, 0] * x + inv[1, 1] * y + inv[1, 2] * z
-            a2 = inv[2, 0] * x + inv[2, 1] * y + inv[2, 2] * z
-            scale = abs(x) + abs(y) + abs(z)
-            if a0 > 1e-9 * scale:
-                front += 1
-                c0 = min(c0, a1 / a0)
-                c1 = max(c1, a1 / a0)
-                r0 = min(r0, a2 / a0)
-                r1 = max(r1, a2 / a0)
-            elif a0 <= 0.0:
-                behind += 1
-        if behind == 8:
-            rect[i, 0], rect[i, 1], rect[i, 2], rect[i, 3] = 0, 0, -1, -1
-            continue
-        if front < 8:  # reaches the eye plane: every pixel
-            c0, r0, c1, r1 = 0.0, 0.0, width - 1.0, height - 1.0
-        # pixel centres are at integer (col, row); one pixel more on each side for rounding
-        x0 = max(int(np.floor(max(c0, -2.0))) - 1, 0)
-        y0 = max(int(np.floor(max(r0, -2.0))) - 1, 0)
-        x1 = min(int(np.ceil(min(c1, width + 1.0))) + 1, width - 1)
-        y1 = min(int(np.ceil(min(r1, height + 1.0))) + 1, height - 1)
-        if x0 > x1 or y0 > y1:
-            rect[i, 0], rect[i, 1], rect[i, 2], rect[i, 3] = 0, 0, -1, -1
-            continue
-        rect[i, 0], rect[i, 1] = x0 // TILE, y0 // TILE
-        rect[i, 2], rect[i, 3] = x1 // TILE, y1 // TILE
-        for b in range(rect[i, 1], rect[i, 3] + 1):
-            for a in range(rect[i, 0], rect[i, 2] + 1):
-                count[b * tx + a] += 1
+    when it lies behind the eye plane or outside the image; counts per tile into
+    ``count[task]``; the distance from the eye to each box into ``key``. Task ``task`` of
+    ``n_tasks`` (tasks.run_tasks) takes every n_tasks-th block of ``_BLOCK`` boxes."""
+    for b0 in range(task * _BLOCK, len(bmin), n_tasks * _BLOCK):
+        for i in range(b0, min(b0 + _BLOCK, len(bmin))):
+            d2 = 0.0
+            for k in range(3):
+                g = max(max(bmin[i, k] - eye[k], 0.0), eye[k] - bmax[i, k])
+                d2 += g * g
+            key[i] = np.sqrt(d2)
+            c0 = r0 = np.inf
+            c1 = r1 = -np.inf
+            front = 0
+            behind = 0
+            for k in range(8):
+                x = (bmax[i, 0] if k & 1 else bmin[i, 0]) - eye[0]
+                y = (bmax[i, 1] if k & 2 else bmin[i, 1]) - eye[1]
+                z = (bmax[i, 2] if k & 4 else bmin[i, 2]) - eye[2]
+                a0 = inv[0, 0] * x + inv[0, 1] * y + inv[0, 2] * z
+                a1 = inv[1, 0] * x + inv[1, 1] * y + inv[1, 2] * z
+                a2 = inv[2, 0] * x + inv[2, 1] * y + inv[2, 2] * z
+                scale = abs(x) + abs(y) + abs(z)
+                if a0 > 1e-9 * scale:
+                    front += 1
+                    c0 = min(c0, a1 / a0)
+                    c1 = max(c1, a1 / a0)
+                    r0 = min(r0, a2 / a0)
+                    r1 = max(r1, a2 / a0)
+                elif a0 <= 0.0:
+                    behind += 1
+            if behind == 8:
+                rect[i, 0], rect[i, 1], rect[i, 2], rect[i, 3] = 0, 0, -1, -1
+                continue
+            if front < 8:  # reaches the eye plane: every pixel
+                c0, r0, c1, r1 = 0.0, 0.0, width - 1.0, height - 1.0
+            # pixel centres are at integer (col, row); one pixel more on each side for rounding
+            x0 = max(int(np.floor(max(c0, -2.0))) - 1, 0)
+            y0 = max(int(np.floor(max(r0, -2.0))) - 1, 0)
+            x1 = min(int(np.ceil(min(c1, width + 1.0))) + 1, width - 1)
+            y1 = min(int(np.ceil(min(r1, height + 1.0))) + 1, height - 1)
+            if x0 > x1 or y0 > y1:
+                rect[i, 0], rect[i, 1], rect[i, 2], rect[i, 3] = 0, 0, -1, -1
+                continue
+            rect[i, 0], rect[i, 1] = x0 // TILE, y0 // TILE
+            rect[i, 2], rect[i, 3] = x1 // TILE, y1 // TILE
+            for b in range(rect[i, 1], rect[i, 3] + 1):
+                for a in range(rect[i, 0], rect[i, 2] + 1):
+                    count[task, b * tx + a] += 1
 
 
 @nb.njit(cache=True)

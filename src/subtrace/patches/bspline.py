@@ -26,6 +26,7 @@ import numba as nb
 import numpy as np
 
 from ..subdiv.limit import _SMOOTH, classify
+from ..tasks import run_tasks
 
 # uniform cubic B-spline control points -> Bezier control points of the middle span
 _TO_BEZIER = np.array(
@@ -55,44 +56,54 @@ def control_grids(level, faces) -> np.ndarray:
     """(m, 4, 4) int64 point ids of the control grids of regular quads ``faces``."""
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     out = np.empty((len(faces), 4, 4), dtype=np.int64)
-    _control_grids(
-        level.face_offsets, level.face_verts, level.vert_face_offsets, level.vert_faces,
-        level.vert_face_corner, level.vert_edge_offsets, level.vert_edges, level.edge_verts,
-        faces, _B_CORNER, _LEAD, _TRAIL, out,
+    run_tasks(
+        _control_grids, level.face_offsets, level.face_verts, level.vert_face_offsets,
+        level.vert_faces, level.vert_face_corner, level.vert_edge_offsets, level.vert_edges,
+        level.edge_verts, faces, _B_CORNER, _LEAD, _TRAIL, out,
+        n=None if len(faces) >= _GRID_PARALLEL_MIN else 1,
     )
     return out
 
 
-@nb.njit(cache=True)
-def _control_grids(fo, fv, vfo, vf, vfc, veo, ve, ev, faces, bc, lead, trail, out):
+_GRID_BLOCK = 256  # faces a task gathers at a time
+_GRID_PARALLEL_MIN = 8 * _GRID_BLOCK  # fewer faces than this: one thread
+
+
+@nb.njit(cache=True, nogil=True)
+def _control_grids(task, n_tasks, fo, fv, vfo, vf, vfc, veo, ve, ev, faces, bc, lead, trail,
+                   out):
+    """Task ``task`` of ``n_tasks`` (tasks.run_tasks): blocks of _GRID_BLOCK faces, every
+    n_tasks-th."""
     dirs = np.empty((4, 2), dtype=np.int64)
-    for m in range(len(faces)):
-        f = faces[m]
-        for i in range(4):
-            c = fv[fo[f] + i]
-            x0, y0 = bc[i, 0], bc[i, 1]
-            out[m, x0, y0] = c
-            a = vfo[c]
-            pos = 0
-            for j in range(4):
-                if vf[a + j] == f:
-                    pos = j
-            # the other three faces around the corner, counter-clockwise from f
-            for q in range(2):
-                dirs[0, q] = trail[i, q]
-                dirs[1, q] = -lead[i, q]
-                dirs[2, q] = -trail[i, q]
-                dirs[3, q] = lead[i, q]
-            for k in range(1, 4):
-                j = (pos + k) % 4
-                g = vf[a + j]
-                kk = vfc[a + j]
-                diag = fv[fo[g] + (kk + 2) % 4]
-                out[m, x0 + dirs[k - 1, 0] + dirs[k, 0], y0 + dirs[k - 1, 1] + dirs[k, 1]] = diag
-                if k >= 2:
-                    e = ve[veo[c] + j]
-                    other = ev[e, 1] if ev[e, 0] == c else ev[e, 0]
-                    out[m, x0 + dirs[k - 1, 0], y0 + dirs[k - 1, 1]] = other
+    for b0 in range(task * _GRID_BLOCK, len(faces), n_tasks * _GRID_BLOCK):
+        for m in range(b0, min(b0 + _GRID_BLOCK, len(faces))):
+            f = faces[m]
+            for i in range(4):
+                c = fv[fo[f] + i]
+                x0, y0 = bc[i, 0], bc[i, 1]
+                out[m, x0, y0] = c
+                a = vfo[c]
+                pos = 0
+                for j in range(4):
+                    if vf[a + j] == f:
+                        pos = j
+                # the other three faces around the corner, counter-clockwise from f
+                for q in range(2):
+                    dirs[0, q] = trail[i, q]
+                    dirs[1, q] = -lead[i, q]
+                    dirs[2, q] = -trail[i, q]
+                    dirs[3, q] = lead[i, q]
+                for k in range(1, 4):
+                    j = (pos + k) % 4
+                    g = vf[a + j]
+                    kk = vfc[a + j]
+                    diag = fv[fo[g] + (kk + 2) % 4]
+                    x1, y1 = x0 + dirs[k - 1, 0], y0 + dirs[k - 1, 1]
+                    out[m, x1 + dirs[k, 0], y1 + dirs[k, 1]] = diag
+                    if k >= 2:
+                        e = ve[veo[c] + j]
+                        other = ev[e, 1] if ev[e, 0] == c else ev[e, 0]
+                        out[m, x1, y1] = other
 
 
 def bezier_nets(cv: np.ndarray) -> np.ndarray:
