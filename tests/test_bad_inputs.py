@@ -215,10 +215,25 @@ def _without_dac_override():
     return [setpriv, f"--inh-caps={caps}", f"--bounding-set={caps}"]
 
 
-def test_output_in_read_only_folder(capsys, tmp_path):
+def _run_without_root_powers(capsys, argv, as_root, skip_reason):
+    """(exit code, stderr) of the command ``argv``: in this process, or, as root, in a
+    process without root's file-permission powers (skipped with ``skip_reason`` where that
+    cannot be had)."""
     import subprocess
     import sys
 
+    if not as_root:
+        code, _, err = run(capsys, argv)
+        return code, err
+    prefix = _without_dac_override()
+    if prefix is None:
+        pytest.skip(skip_reason)
+    proc = subprocess.run([*prefix, sys.executable, "-m", "subtrace.cli", *argv],
+                          capture_output=True, text=True, timeout=120)
+    return proc.returncode, proc.stderr
+
+
+def test_output_in_read_only_folder(capsys, tmp_path):
     folder = tmp_path / "ro"
     folder.mkdir()
     folder.chmod(0o555)
@@ -232,15 +247,9 @@ def test_output_in_read_only_folder(capsys, tmp_path):
             probe.unlink()
             as_root = True  # root writes anywhere: run the command without that power
         argv = ["render", str(CORPUS / "cube.obj"), "-o", str(folder / "r.exr"), *RENDER_ARGS]
-        if not as_root:
-            code, _, err = run(capsys, argv)
-        else:
-            prefix = _without_dac_override()
-            if prefix is None:
-                pytest.skip("running as root without setpriv: a read-only folder is writable")
-            proc = subprocess.run([*prefix, sys.executable, "-m", "subtrace.cli", *argv],
-                                  capture_output=True, text=True, timeout=120)
-            code, err = proc.returncode, proc.stderr
+        code, err = _run_without_root_powers(
+            capsys, argv, as_root, "running as root without setpriv: a read-only folder is "
+            "writable")
         assert code == 2, err
         assert_one_line_error(err, "r.exr", "ermission")
         assert list(folder.iterdir()) == []
@@ -284,8 +293,6 @@ def test_scene_reader_fuzz(tmp_path, data):
                                          ("ok_scene.toml", "permission denied")])
 def test_unreadable_input(capsys, tmp_path, name, words):
     import shutil
-    import subprocess
-    import sys
 
     path = tmp_path / name
     shutil.copy(CORPUS / name, path)
@@ -296,15 +303,9 @@ def test_unreadable_input(capsys, tmp_path, name, words):
     out.parent.mkdir()
     argv = ["render", str(path), "-o", str(out), *RENDER_ARGS]
     try:
-        if hasattr(os, "geteuid") and os.geteuid() == 0:  # root reads anything: drop that
-            prefix = _without_dac_override()
-            if prefix is None:
-                pytest.skip("running as root without setpriv: every file is readable")
-            proc = subprocess.run([*prefix, sys.executable, "-m", "subtrace.cli", *argv],
-                                  capture_output=True, text=True, timeout=120)
-            code, err = proc.returncode, proc.stderr
-        else:
-            code, _, err = run(capsys, argv)
+        as_root = hasattr(os, "geteuid") and os.geteuid() == 0  # root reads anything: drop that
+        code, err = _run_without_root_powers(
+            capsys, argv, as_root, "running as root without setpriv: every file is readable")
         assert code == 2, err
         assert_one_line_error(err, name, words)
         assert list(out.parent.iterdir()) == []

@@ -75,18 +75,23 @@ def test_shells_contain_limit_grids(name):
     assert np.all(P <= table.shell_max[:, None, :] + 1e-12)
 
 
+def _perturbed(name, seed):
+    """The oracle shape ``name`` with its points moved at random (any positions are valid)."""
+    base = _load(name)
+    rng = np.random.default_rng(seed)
+    pts = base.points + rng.normal(scale=0.3, size=base.points.shape)
+    return subtrace.make_cage(
+        pts, base.face_sizes, base.face_verts, base.scheme, boundary=base.options.boundary,
+        smooth_triangles=base.options.smooth_triangles,
+    )
+
+
 @needs_shared
 @settings(max_examples=15, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), name=st.sampled_from(GRID_SHAPES))
 def test_shells_contain_limit_of_perturbed_cages(seed, name):
     """Same, for random perturbations of the cage points (any positions are valid)."""
-    base = _load(name)
-    rng = np.random.default_rng(seed)
-    pts = base.points + rng.normal(scale=0.3, size=base.points.shape)
-    cage = subtrace.make_cage(
-        pts, base.face_sizes, base.face_verts, base.scheme, boundary=base.options.boundary,
-        smooth_triangles=base.options.smooth_triangles,
-    )
+    cage = _perturbed(name, seed)
     table = build_patch_table([cage])
     o = table.objects[0]
     P, _ = build_grids(o.level, o.points, cage.options, table.face, 2)
@@ -138,13 +143,7 @@ def test_isolated_shells_contain_limit_grids(name):
 def test_isolated_shells_contain_limit_of_perturbed_cages(seed, name, tol_exp):
     """Same, for random perturbations of the cage points and tolerances (each tolerance
     stops the isolation at other levels, so other boxes end the union)."""
-    base = _load(name)
-    rng = np.random.default_rng(seed)
-    pts = base.points + rng.normal(scale=0.3, size=base.points.shape)
-    cage = subtrace.make_cage(
-        pts, base.face_sizes, base.face_verts, base.scheme, boundary=base.options.boundary,
-        smooth_triangles=base.options.smooth_triangles,
-    )
+    cage = _perturbed(name, seed)
     table, lo, hi, _ = _isolated_shells(cage, 10.0**tol_exp)
     o = table.objects[0]
     P, _ = build_grids(o.level, o.points, cage.options, table.face, 4)
