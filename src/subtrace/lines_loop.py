@@ -96,7 +96,7 @@ def box_nets(level, points, faces) -> np.ndarray:
     for i in np.nonzero(~inner)[0]:
         a, b, r = _boundary_recipe(level, int(faces[i]), sharp)
         X[i] = points[a] + np.where(b[:, None] >= 0, points[b] - points[r], 0.0)
-    return np.ascontiguousarray(np.einsum("pk,mkx->mpx", BOX_TO_TRI, X))
+    return np.ascontiguousarray(np.matmul(BOX_TO_TRI, X))
 
 
 def _boundary_recipe(level, f, sharp_edge):
@@ -229,7 +229,7 @@ def isolate_loop(obj, faces, allowed, max_level):
             corners = cur.face_verts[fo[start[small]][:, None] + np.arange(3)]
             P = limit_points(cur, pts, options, which=corners.ravel())[0].reshape(-1, 3, 3)
             _append(out, root[small], org[small], scale[small],
-                    np.einsum("pc,mcx->mpx", FLAT_TO_TRI, P), False)
+                    np.matmul(FLAT_TO_TRI, P), False)
         keep = ~small
         if not keep.any():
             break
