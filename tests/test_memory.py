@@ -125,3 +125,49 @@ def test_estimate_grows_with_depth_and_cap_fits():
     assert depth_cap(table, depths, 1000, est[5] - 1) == 4
     assert depth_cap(table, depths, 1000, est[2]) == 2
     assert depth_cap(table, depths, 1000, est[0] - 1) == -1
+
+
+def test_tile_lists_over_the_budget_fall_back_to_the_bvh(capsys, tmp_path):
+    """With the eye inside Spot many shells reach the eye plane and sit in every tile: a
+    budget that fits the refinement but not those lists renders through the BVH, with one
+    warning, the same image, and ``subtrace:accel`` saying so."""
+    from subtrace import config, tasks
+    from subtrace.accel.projection import project_shells, tiles_bytes
+    from subtrace.io.scene import scene_from_dict
+    from subtrace.patches.table import build_patch_table, choose_depths, memory_estimate
+    from subtrace.render import load_objects
+    from subtrace.trace.camera import camera_frame
+
+    spot = ROOT.parent / "shared" / "models" / "spot_control_mesh.obj"
+    if not spot.exists():
+        pytest.skip(f"{spot} not present")
+    argv = [spot, "--eye", "0", "0.05", "0.2", "--target", "0.3", "0.15", "1.2", "--fov",
+            "120"]
+    code, err, free = render(capsys, tmp_path, *argv, name="free.exr")
+    assert code == 0 and err == "", err
+    # the budget: the refinement's estimate and the memos' minimum, plus half the lists
+    scene = scene_from_dict({"object": [{"mesh": str(spot)}],
+                             "camera": {"eye": [0, 0.05, 0.2], "target": [0.3, 0.15, 1.2],
+                                        "fov": 120, "width": 160, "height": 120}})
+    table = build_patch_table(load_objects(scene))
+    camera = scene.make_camera(table.shell_min.min(0), table.shell_max.max(0))
+    frame = camera_frame(camera)
+    shells = table.shell_min.copy(), table.shell_max.copy()
+    depths = choose_depths(table, frame[0], scene.render.tolerance_rad(camera),
+                           config.MAX_GRID_DEPTH, {}, shells)
+    tiles = project_shells(*shells, frame, 160, 120)
+    lists = tiles_bytes(len(tiles.items), len(tiles.off) - 1)
+    need = (memory_estimate(table, depths, 160 * 120)
+            + config.MEMORY_MEMO_MIN_BYTES * tasks.thread_count())
+    assert lists > 1 << 20
+    budget = (need + lists // 2) // 1024
+    code, err, tight = render(capsys, tmp_path, *argv, "--max-memory", f"{budget}K",
+                              name="tight.exr")
+    assert code == 0, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "tile lists would not fit" in lines[0], err
+    a, _ = read_exr(str(free))
+    b, attrs = read_exr(str(tight))
+    assert attrs["subtrace:accel"] == "bvh"
+    for name in a:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)

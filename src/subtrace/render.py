@@ -50,6 +50,8 @@ class RenderStats:
     rounds: int = 0
     max_depth: int = 0
     depth_cap: int = -1  # the grid depth the memory budget capped refinement at (-1: none)
+    # 1: the projection's tile lists did not fit the memory budget, so rays walked the BVH
+    accel_fallback: int = 0
     pixels_covered: int = 0
     rays: int = 0
 
@@ -448,7 +450,7 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     (``patches.table.memory_estimate``) exceeds it are capped, with a warning, and the
     threads' memos are kept within what is left."""
     from . import tasks, warmup
-    from .accel.projection import no_tiles, project_shells
+    from .accel.projection import no_tiles, project_shells, tiles_bytes
     from .trace.camera import camera_frame
 
     max_depth = config.MAX_GRID_DEPTH if max_depth is None else max_depth
@@ -464,29 +466,37 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
         return choose_depths(table, eye, tol_rad, cap, record, shells), record, shells
 
     depths, record, (shell_min, shell_max) = depth_choice(max_depth)
-    memo_bytes = None
+    n_threads = tasks.thread_count()
+    left = None  # bytes of the budget left for the tile lists and the memos
     if max_memory is not None:
-        n_threads = tasks.thread_count()
         left = max_memory - config.MEMORY_MEMO_MIN_BYTES * n_threads
         cap = depth_cap(table, depths, W * H, left)
         if cap is not None:
             _warn_capped(max_memory, cap, depths, memory_estimate(table, depths, W * H))
             depths, record, (shell_min, shell_max) = depth_choice(max(cap, 0))
             stats.depth_cap = max(cap, 0)
-        left -= memory_estimate(table, depths, W * H)
-        memo_bytes = config.MEMORY_MEMO_MIN_BYTES + max(left, 0) // n_threads
+        left = max(left - memory_estimate(table, depths, W * H), 0)
     edge_depth, reg_side = edge_sampling(table, depths)
     stats.time_refine += time.perf_counter() - t0
     t0 = time.perf_counter()
     accel = config.PRIMARY_ACCEL if accel is None else accel
+    if accel not in ("projection", "bvh"):
+        raise ValueError(f"unknown acceleration {accel!r}")
+    tiles = None
     if accel == "projection":
-        tiles = project_shells(shell_min, shell_max, frame, W, H).kernel_tuple()
+        projected = project_shells(shell_min, shell_max, frame, W, H, max_bytes=left)
+        if projected is None:  # the lists would not fit the budget: the BVH's do (O(N))
+            _warn_tiles(max_memory)
+            stats.accel_fallback = 1
+        else:
+            tiles = projected.kernel_tuple()
+            if left is not None:
+                left -= tiles_bytes(len(projected.items), len(projected.off) - 1)
         bvh = no_bvh()
-    elif accel == "bvh":
+    if tiles is None:
         tiles = no_tiles()
         bvh = build_bvh(shell_min, shell_max)
-    else:
-        raise ValueError(f"unknown acceleration {accel!r}")
+    memo_bytes = None if left is None else config.MEMORY_MEMO_MIN_BYTES + left // n_threads
     stats.time_preprocess += time.perf_counter() - t0
     tested = np.empty(W * H, dtype=np.int64)  # (round 0 writes every ray's entries)
     tables = _leaf_tables(int(depths[~table.is_quad].max(initial=0)))  # (Loop grids only)
@@ -572,6 +582,19 @@ def _warn_capped(budget, cap, depths, estimate):
         f"patches (the tolerance needs depth {int(depths.max(initial=0))}, an estimated "
         f"{_mib(estimate)}), so the image is coarser than the tolerance; raise --max-memory "
         "(or [render] max_memory in the scene) to refine fully"), stacklevel=2)
+
+
+def _warn_tiles(budget):
+    """The one warning of a render whose tile lists the memory budget refused."""
+    import warnings
+
+    from .errors import SubtraceWarning
+
+    warnings.warn(SubtraceWarning(
+        f"memory budget {_mib(budget)}: the projection's tile lists would not fit (many "
+        "shells reach the eye plane, e.g. with the eye inside a model), so rays walk the "
+        "shells' BVH instead (same image, slower); raise --max-memory to project"),
+        stacklevel=2)
 
 
 def check_memory(table, n_pixels: int, budget: int, width: int, height: int):
@@ -709,7 +732,8 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     stats.time_total = time.perf_counter() - t_start
     schemes = tuple(c.scheme for c in cages)
     refined = table.object_id[built]
-    return RenderResult(channels, stats, camera, tol_rad, schemes, refined, accel)
+    used = "bvh" if stats.accel_fallback else accel
+    return RenderResult(channels, stats, camera, tol_rad, schemes, refined, used)
 
 
 def result_attributes(result: RenderResult, scene) -> dict:

@@ -45,9 +45,12 @@ def no_tiles():
     return np.zeros(1, np.int64), np.zeros(0, np.int32), np.zeros(0), np.int64(0)
 
 
-def project_shells(bmin, bmax, frame, width: int, height: int) -> Tiles:
+def project_shells(bmin, bmax, frame, width: int, height: int,
+                   max_bytes: int | None = None) -> Tiles | None:
     """Bin the boxes ``[bmin, bmax]`` (N,3) into the tiles of a ``width`` x ``height`` image
-    seen through ``frame`` (``trace.camera.camera_frame``)."""
+    seen through ``frame`` (``trace.camera.camera_frame``). With ``max_bytes``: None, and
+    nothing allocated, when the tile lists would take more (boxes that reach the eye plane
+    are listed in every tile: with the eye inside a model they can be many)."""
     bmin = np.ascontiguousarray(bmin, dtype=np.float64)
     bmax = np.ascontiguousarray(bmax, dtype=np.float64)
     eye = frame[0]
@@ -64,11 +67,18 @@ def project_shells(bmin, bmax, frame, width: int, height: int) -> Tiles:
                     int(height), tx, ty, rect, count, key, n=n_tasks)
     off = np.zeros(tx * ty + 1, np.int64)
     np.cumsum(count.sum(axis=0)[:-1], out=off[1:])
+    if max_bytes is not None and tiles_bytes(int(off[-1]), tx * ty) > max_bytes:
+        return None
     items = np.empty(int(off[-1]), np.int32)
     seen = np.nonzero(rect[:, 0] <= rect[:, 2])[0]  # (the others are in no tile)
     # nearest first (ties: any fixed order will do)
     _fill(seen[np.argsort(key[seen])], rect, tx, off.copy(), items)
     return Tiles(off, items, key, tx)
+
+
+def tiles_bytes(n_items: int, n_tiles: int) -> int:
+    """Bytes of the tile lists of ``n_items`` entries over ``n_tiles`` tiles."""
+    return 4 * n_items + 8 * (n_tiles + 1)
 
 
 _BLOCK = 256  # boxes a task projects at a time
