@@ -25,7 +25,7 @@ from .patches.isolate import build_isolated
 from .patches.grids import build_grids, grid_params, leaf_corners
 from .patches.table import (build_patch_table, choose_depths, depth_cap, edge_sampling,
                             memory_estimate)
-from .trace.kernels import H_T, HIT_FIELDS, candidate_lists, trace_round
+from .trace.kernels import HIT_FIELDS, candidate_lists, trace_round
 
 
 @dataclass
@@ -643,7 +643,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     None, or called as ``progress(done, total, label)`` with the rays whose hits are final
     out of all (e.g. :class:`subtrace.progress.ProgressBar`); it reaches done == total."""
     from . import tasks, warmup
-    from .shade import shade_kernel
+    from .shade import CHANNELS, miss_values, shade_kernel
     from .trace.camera import camera_frame
 
     t_start = time.perf_counter()
@@ -703,11 +703,8 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     W, H = camera.width, camera.height
     n = W * H
     # the channels as float32 planes, written in place by the kernel (no conversion pass)
-    names = ("R", "G", "B", "A", "N.X", "N.Y", "N.Z", "level", "patch_id", "object_id", "u",
-             "v")
-    planes = np.empty((len(names), n), dtype=np.float32)
-    rgba, nrm, level, patch, objid, uv = (planes[0:4].T, planes[4:7].T, planes[7],
-                                          planes[8], planes[9], planes[10:12].T)
+    planes = np.empty((len(CHANNELS), n), dtype=np.float32)
+    covered = np.zeros(tasks.thread_count(), np.int64)
     lights = np.array(
         [[*l.direction, *(np.asarray(l.color) * l.intensity)] for l in scene.lights],
         dtype=np.float64,
@@ -720,14 +717,10 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
         tables.uv_off, tables.uv_data, table.object_id, table.ptex, table.ptex_uv0,
         table.ptex_scale, table.level0, _patch_colors(table, scene), q["kind"], q["ref"],
         q["level"], q["i0"], q["j0"], q["nets"], q["normals"], q["cells"], lights, headlight,
-        np.asarray(scene.render.background, dtype=np.float64), rgba, nrm, level, patch,
-        objid, uv,
+        miss_values(scene.render.background), planes, covered,
     )
-    z = hits[H_T]
-    stats.pixels_covered = int(np.isfinite(z).sum())
-    channels = {name: planes[k].reshape(H, W) for k, name in enumerate(names)}
-    channels = {**{c: channels[c] for c in "RGBA"}, "Z": z.astype(np.float32).reshape(H, W),
-                **{c: channels[c] for c in names[4:]}}
+    stats.pixels_covered = int(covered.sum())
+    channels = {name: planes[k].reshape(H, W) for k, name in enumerate(CHANNELS)}
     stats.time_shade = time.perf_counter() - t0
     stats.time_total = time.perf_counter() - t_start
     schemes = tuple(c.scheme for c in cages)

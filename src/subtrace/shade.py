@@ -19,12 +19,27 @@ from .trace.bezier import bez_derivatives
 from .trace.kernels import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, ray_setup
 
 
+# the planes the shading fills, in this order, and what a pixel whose ray missed holds
+# (R, G, B: the background colour)
+CHANNELS = ("R", "G", "B", "A", "Z", "N.X", "N.Y", "N.Z", "level", "patch_id", "object_id",
+            "u", "v")
+C_R, C_A, C_Z, C_N, C_LEVEL, C_PATCH, C_OBJECT, C_U = 0, 3, 4, 5, 8, 9, 10, 11
+MISS = (0.0, 0.0, 0.0, 0.0, np.inf, 0.0, 0.0, 0.0, -1.0, -1.0, -1.0, 0.0, 0.0)
+
+
 def shade_kernel(*args):
-    """Fill the per-pixel outputs (flat over pixels) from ``hits``; the arguments are
+    """Fill the planes (flat over pixels) from ``hits``; the arguments are
     :func:`_shade_task`'s after its first two (the pixels are shared among threads)."""
     from .tasks import run_tasks
 
     run_tasks(_shade_task, *args)
+
+
+def miss_values(background) -> np.ndarray:
+    """(len(CHANNELS),) float32: each plane's value where the ray missed."""
+    miss = np.array(MISS, dtype=np.float32)
+    miss[C_R:C_R + 3] = background
+    return miss
 
 
 SHADE_BLOCK = 1024  # consecutive pixels shaded together
@@ -35,28 +50,28 @@ def _shade_task(task, n_tasks, frame, width, hits, slot_patch, slot_depth, slot_
                 slot_vert_off, verts, normals, lc_off, lc_data, uv_off, uv_data, patch_object,
                 patch_ptex, patch_uv0, patch_scale, patch_level0, patch_color, item_kind,
                 item_ref, item_level, item_i0, item_j0, item_nets, cell_normals, cells, lights,
-                headlight, background, out_rgba, out_n, out_level, out_patch, out_object,
-                out_uv):
-    """Shade the blocks of pixels ``task, task + n_tasks, ...``.
+                headlight, miss, planes, covered):
+    """Shade the blocks of pixels ``task, task + n_tasks, ...`` into ``planes``
+    (len(CHANNELS), n_pixels) float32: each block is first filled with ``miss``
+    (:func:`miss_values`; contiguous stores), then its hits are shaded over it.
+    ``covered[task]`` receives the number of hits the task shaded.
 
     ``lights`` (L,6): direction the light travels (unit) and its colour times intensity.
     """
     n_pix = hits.shape[1]
     n_blocks = (n_pix + SHADE_BLOCK - 1) // SHADE_BLOCK
+    n_hit = 0
     for blk in range(task, n_blocks, n_tasks):
-        for r in range(blk * SHADE_BLOCK, min(n_pix, (blk + 1) * SHADE_BLOCK)):
+        b0 = blk * SHADE_BLOCK
+        b1 = min(n_pix, b0 + SHADE_BLOCK)
+        for k in range(planes.shape[0]):
+            planes[k, b0:b1] = miss[k]
+        for r in range(b0, b1):
             t = hits[H_T, r]
             if not (t < np.inf):
-                out_rgba[r, 0] = background[0]
-                out_rgba[r, 1] = background[1]
-                out_rgba[r, 2] = background[2]
-                out_rgba[r, 3] = 0.0
-                out_n[r, 0] = out_n[r, 1] = out_n[r, 2] = 0.0  # (no slices: no views)
-                out_level[r] = -1.0
-                out_patch[r] = -1.0
-                out_object[r] = -1.0
-                out_uv[r, 0] = out_uv[r, 1] = 0.0
                 continue
+            n_hit += 1
+            planes[C_Z, r] = t
             row = r // width
             col = r - row * width
             dx, dy, dz = ray_setup(frame, row, col)
@@ -81,14 +96,14 @@ def _shade_task(task, n_tasks, frame, width, hits, slot_patch, slot_depth, slot_
                 nx, ny, nz, u, v, depth, p = _grid_normal(
                     hits, r, s, slot_patch, slot_depth, slot_quad, slot_vert_off, verts, normals,
                     lc_off, lc_data, uv_off, uv_data)
-            out_n[r, 0] = nx
-            out_n[r, 1] = ny
-            out_n[r, 2] = nz
-            out_uv[r, 0] = patch_uv0[p, 0] + patch_scale[p] * u
-            out_uv[r, 1] = patch_uv0[p, 1] + patch_scale[p] * v
-            out_level[r] = patch_level0[p] + depth
-            out_patch[r] = patch_ptex[p]
-            out_object[r] = patch_object[p]
+            planes[C_N, r] = nx
+            planes[C_N + 1, r] = ny
+            planes[C_N + 2, r] = nz
+            planes[C_U, r] = patch_uv0[p, 0] + patch_scale[p] * u
+            planes[C_U + 1, r] = patch_uv0[p, 1] + patch_scale[p] * v
+            planes[C_LEVEL, r] = patch_level0[p] + depth
+            planes[C_PATCH, r] = patch_ptex[p]
+            planes[C_OBJECT, r] = patch_object[p]
             # two-sided Lambert: headlight plus directional lights
             sgn = -1.0 if nx * dx + ny * dy + nz * dz > 0.0 else 1.0
             fx, fy, fz = sgn * nx, sgn * ny, sgn * nz
@@ -104,10 +119,11 @@ def _shade_task(task, n_tasks, frame, width, hits, slot_patch, slot_depth, slot_
                     lr += c * lights[k, 3]
                     lg += c * lights[k, 4]
                     lb += c * lights[k, 5]
-            out_rgba[r, 0] = patch_color[p, 0] * lr
-            out_rgba[r, 1] = patch_color[p, 1] * lg
-            out_rgba[r, 2] = patch_color[p, 2] * lb
-            out_rgba[r, 3] = 1.0
+            planes[C_R, r] = patch_color[p, 0] * lr
+            planes[C_R + 1, r] = patch_color[p, 1] * lg
+            planes[C_R + 2, r] = patch_color[p, 2] * lb
+            planes[C_A, r] = 1.0
+    covered[task] = n_hit
 
 
 @nb.njit(cache=True)

@@ -59,7 +59,7 @@ def compile_kernels(threads: int) -> None:
 
     from . import config, tasks
     from .render import _LeafTables, _Memos, _Pieces, _Pools
-    from .shade import shade_kernel
+    from .shade import CHANNELS, miss_values, shade_kernel
     from .accel.projection import no_tiles
     from .trace.kernels import HIT_FIELDS, candidate_lists, trace_round
 
@@ -79,15 +79,14 @@ def compile_kernels(threads: int) -> None:
                     tables.lc_data, iso.kernel_tuple(), memos.kernel_tuple(0),
                     candidate_lists(0), config.TRI_SLACK, hits, i64, i64)
         i32 = np.zeros(0, np.int32)
-        planes = np.zeros((12, 2), np.float32)
+        planes = np.zeros((len(CHANNELS), 2), np.float32)
         shade_kernel(frame, 1, misses, g["slot_patch"], g["slot_depth"], g["slot_quad"],
                      g["slot_vert_off"], g["verts"], g["normals"], tables.lc_off,
                      tables.lc_data, tables.uv_off, tables.uv_data, i32, i32,
                      np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int8), np.zeros((0, 3)),
                      q["kind"], q["ref"], q["level"], q["i0"], q["j0"], q["nets"],
-                     q["normals"], q["cells"], np.zeros((0, 6)), np.zeros(1), np.zeros(3),
-                     planes[0:4].T, planes[4:7].T, planes[7], planes[8], planes[9],
-                     planes[10:12].T)
+                     q["normals"], q["cells"], np.zeros((0, 6)), np.zeros(1),
+                     miss_values((0.0, 0.0, 0.0)), planes, np.zeros(threads, np.int64))
     finally:
         tasks.set_threads(None)
 
