@@ -11,10 +11,12 @@ from pathlib import Path
 
 import numpy as np
 
+import subtrace
 from subtrace.io.exr import read_exr
 
-REPO = Path(__file__).resolve().parents[1]
-SRC = REPO / "src"
+# the subtrace this process imported (installed or the sources): the fresh processes must
+# share its Numba cache, which is keyed on those files
+SRC = Path(subtrace.__file__).resolve().parents[1]
 
 
 def _python(code: str, **env_extra) -> str:
