@@ -11,11 +11,14 @@ descends, so nothing is stored per level and memory does not grow with the preci
   (an extraordinary vertex, a crease, a boundary) whose shell some line meets are isolated
   into regular Bezier pieces plus *cells* of exact limit points at the feature (bilinear
   quads, or flat triangles), each within ``precision / 2`` of the surface over it:
-  Catmull-Clark by :func:`subtrace.patches.isolate.build_isolated` down to the depth where
-  the cells' control-edge bound (with ``IRREGULAR_MARGIN``, measured) allows it; Loop by
-  :func:`subtrace.lines_loop.isolate_loop`, where a cell's bound is the diagonal of its
-  one-ring's box (proven) and triangles along boundaries and infinitely sharp creases are
-  regular pieces too (phantom points). Only lines' candidates are kept, never a refined
+  Catmull-Clark by :func:`subtrace.patches.isolate.build_isolated`, Loop by
+  :func:`subtrace.lines_loop.isolate_loop`, down to the depth where every cell's one-ring
+  box has a diagonal of at most ``precision / 2`` (proven: the cell's surface and its flat
+  stand-in both lie in that hull; Chaikin creases above sharpness 1, which can leave it, are
+  given ``config.SHELL_CHAIKIN_MARGIN`` as the shells are); for Loop, triangles along
+  boundaries and infinitely sharp creases are regular pieces too (phantom points). (For
+  Catmull-Clark, cells touching the mesh's boundary keep a measured bound: see
+  ``_Items._isolate``.) Only lines' candidates are kept, never a refined
   mesh.
 * Depth is set per sub-net by its flatness bound (``tol_flat = precision / 2``, see
   :mod:`subtrace.trace.lines`); hits are found by Newton on the exact net from the flat
@@ -46,9 +49,9 @@ from .errors import SubtraceError
 CHUNK = 4096
 # Candidate rows per line at first; lines with more are run again with room for all.
 CAP = 16
-# The isolation of irregular patches stops when IRREGULAR_MARGIN x (the cells' control-edge
-# bound) is at most precision / 2 (as patches/isolate.py, that bound is measured, not proven,
-# at extraordinary vertices); deepest isolation level:
+# A Catmull-Clark patch's isolation depth is first guessed from IRREGULAR_MARGIN x its
+# control-edge bound (as patches/isolate.py; measured, not proven, at extraordinary
+# vertices), then deepened until every cell's proven bound holds; deepest level:
 IRREGULAR_MARGIN = 1.25
 MAX_ISOLATION = 40
 MODES = ("all", "first")
@@ -139,6 +142,8 @@ class _Items:
         self.built = np.zeros(len(self.irregular), bool)
         self.shell_bvh = None  # over the irregular patches' shells, made at first need
         self.precision = precision
+        # the largest proven bound (one-ring box diagonal) of an interior Catmull-Clark cell
+        self.cell_bound = 0.0
         self._finish()
 
     def _add(self, tri, nets, exact, ptex, uv0, scale):
@@ -216,18 +221,47 @@ class _Items:
                       tb.ptex_scale[p[k]] * sc[k])
 
     def _isolate(self, rows):
+        from . import config
         from .patches.isolate import build_isolated
 
         tb = self.table
         obj = tb.objects[0]
         bound = IRREGULAR_MARGIN * tb.edge_bound[rows]
         allowed = 0.5 * self.precision
+        # a first guess of each patch's depth from the control-edge bound (measured)
         with np.errstate(divide="ignore", invalid="ignore"):
             d = np.ceil(np.log(allowed / bound) / np.log(tb.rate[rows]) - 1e-9)
         d = np.where(bound <= allowed, 0, d)
         d = np.clip(np.where(np.isfinite(d), d, MAX_ISOLATION), 0, MAX_ISOLATION).astype(np.int64)
-        (root, level, i0, j0, bez, _), (croot, ci, cj, cpts, _) = build_isolated(
-            obj, tb.face[rows], d)
+        # Chaikin creases above sharpness 1 may leave the one-ring hull (as the shells allow)
+        grow = 1.0
+        if obj.cage.options.chaikin and np.any(obj.level.edge_sharpness > 1.0):
+            grow += 2.0 * np.sqrt(3.0) * config.SHELL_CHAIKIN_MARGIN
+        # then one level more for every patch with a cell whose one-ring box diagonal (the
+        # proven bound) is above precision / 2, until none is; cells on the mesh's boundary
+        # keep the first guess (along a boundary every level doubles the cells: the proven
+        # bound there would cost 4-8x the items until boundary patches become regular pieces)
+        subs, cells = [[] for _ in range(6)], [[] for _ in range(4)]
+        todo = np.arange(len(rows))
+        while len(todo):
+            (root, level, i0, j0, bez, _), (croot, ci, cj, cpts, _, diag, edge) = \
+                build_isolated(obj, tb.face[rows[todo]], d[todo], ring=True)
+            again = np.zeros(len(todo), bool)
+            again[croot[(grow * diag > allowed) & ~edge]] = True
+            again &= d[todo] < MAX_ISOLATION
+            for lst, a in zip(subs, (todo[root], level, i0, j0, bez, ~again[root])):
+                lst.append(a)
+            for lst, a in zip(cells, (todo[croot], ci, cj, cpts)):
+                lst.append(a)
+            keep_c = ~again[croot]
+            cells = [lst[:-1] + [lst[-1][keep_c]] for lst in cells]
+            kept = (grow * diag)[keep_c & ~edge]
+            self.cell_bound = max(self.cell_bound, float(kept.max(initial=0.0)))
+            d[todo[again]] += 1
+            todo = todo[again]
+        keep = np.concatenate(subs[5])
+        root, level, i0, j0, bez = (np.concatenate(a)[keep] for a in subs[:5])
+        croot, ci, cj, cpts = (np.concatenate(a) for a in cells)
         # pieces: the patch parameters (i0 + s, j0 + t) / 2^level
         if len(root):
             p = rows[root]

@@ -135,7 +135,7 @@ class _Level:
         return out
 
 
-def build_isolated(obj, faces, depth, eye=None, tol_rad=None, record=None):
+def build_isolated(obj, faces, depth, eye=None, tol_rad=None, record=None, ring=False):
     """Feature-adaptive pieces of the irregular quads ``faces`` of ``obj``'s patch level,
     refined down to grid depth ``depth`` (a scalar, or one per face): every grid cell of a
     patch is covered either by a regular sub-patch (a bicubic Bezier net over a dyadic
@@ -149,13 +149,18 @@ def build_isolated(obj, faces, depth, eye=None, tol_rad=None, record=None):
     its Bezier bound as seen from ``eye`` at ``tol_rad`` (as :func:`isolated_depths`), at
     least its level and at most its patch's depth; the patch's depth without an eye);
     ``cells`` = (root index (c,), cell i, j (c,) in units of 2^-depth, corner points (c,4,3),
-    corner unit normals (c,4,3), NaN where undefined).
+    corner unit normals (c,4,3), NaN where undefined), and with ``ring`` the diagonal (c,)
+    of the box of each cell's one-ring control points and whether the cell touches the
+    mesh's boundary (c,) bool: the cell's limit surface and its corners' bilinear patch both
+    lie in their convex hull (every rule's weights are non-negative, save Chaikin creases
+    above sharpness 1: ``config.SHELL_CHAIKIN_MARGIN``), so no point of either is farther
+    than the diagonal from the other.
     """
     options = obj.cage.options
     faces = np.asarray(faces, dtype=np.int64)
     depth = np.broadcast_to(np.asarray(depth, dtype=np.int64), faces.shape)
     subs = [[], [], [], [], [], []]
-    cells = [[], [], [], [], []]
+    cells = [[] for _ in range(7 if ring else 5)]
     zero = np.zeros(len(faces), dtype=np.int64)
     levels = record["levels"] if record is not None and eye is not None else []
     # groups of the frontier: (level, points, root index, face in the level, i0, j0, whether
@@ -195,7 +200,8 @@ def build_isolated(obj, faces, depth, eye=None, tol_rad=None, record=None):
     out_subs = (tuple(np.concatenate(a) for a in subs) if subs[0]
                 else (*empty, np.zeros((0, 4, 4, 3)), empty[0]))
     out_cells = (tuple(np.concatenate(a) for a in cells) if cells[0]
-                 else (*empty[:3], np.zeros((0, 4, 3)), np.zeros((0, 4, 3))))
+                 else (*empty[:3], np.zeros((0, 4, 3)), np.zeros((0, 4, 3)),
+                       *((np.zeros(0), np.zeros(0, bool)) if ring else ())))
     return out_subs, out_cells
 
 
@@ -229,7 +235,9 @@ def _next_level(subs, k, cur, cur_pts, kids, reg, root, i0, j0, depth, eye, tol_
 
 def _add_cells(cells, level, points, options, faces, root, i0, j0):
     """Append the cells ``faces`` of ``level`` (exact limit points and unit normals of their
-    corners, NaN normals where undefined) to the lists ``cells``."""
+    corners, NaN normals where undefined, and, when ``cells`` has seven lists, the
+    diagonals of their one-rings' boxes and whether they touch the mesh's boundary) to the
+    lists ``cells``."""
     from ..subdiv.limit import limit_points
 
     fo = level.face_offsets
@@ -241,6 +249,13 @@ def _add_cells(cells, level, points, options, faces, root, i0, j0):
         nrm = np.where(length > 0, nrm / length, np.nan)
     for lst, a in zip(cells, (root, i0, j0, P.reshape(-1, 4, 3), nrm.reshape(-1, 4, 3))):
         lst.append(a)
+    if len(cells) > 5:
+        from .table import one_ring_shells
+
+        lo, hi, _, _ = one_ring_shells(level, faces, points)
+        cells[5].append(np.linalg.norm(hi - lo, axis=1))
+        # (a cut's own outer edges lie beyond the cells' one-rings: not their boundary)
+        cells[6].append(level.vert_boundary()[corners].any(axis=1))
 
 
 @nb.njit(cache=True)
