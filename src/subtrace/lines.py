@@ -241,7 +241,7 @@ class _Items:
         # proven bound) is above precision / 2, until none is; cells on the mesh's boundary
         # keep the first guess (along a boundary every level doubles the cells: the proven
         # bound there would cost 4-8x the items until boundary patches become regular pieces)
-        subs, cells = [[] for _ in range(6)], [[] for _ in range(4)]
+        subs, cells = [[] for _ in range(5)], [[] for _ in range(4)]
         todo = np.arange(len(rows))
         while len(todo):
             (root, level, i0, j0, bez, _), (croot, ci, cj, cpts, _, diag, edge) = \
@@ -249,18 +249,17 @@ class _Items:
             again = np.zeros(len(todo), bool)
             again[croot[(grow * diag > allowed) & ~edge]] = True
             again &= d[todo] < MAX_ISOLATION
-            for lst, a in zip(subs, (todo[root], level, i0, j0, bez, ~again[root])):
-                lst.append(a)
+            # what the patches done now were built into
+            keep_s, keep_c = ~again[root], ~again[croot]
+            for lst, a in zip(subs, (todo[root], level, i0, j0, bez)):
+                lst.append(a[keep_s])
             for lst, a in zip(cells, (todo[croot], ci, cj, cpts)):
-                lst.append(a)
-            keep_c = ~again[croot]
-            cells = [lst[:-1] + [lst[-1][keep_c]] for lst in cells]
+                lst.append(a[keep_c])
             kept = (grow * diag)[keep_c & ~edge]
             self.cell_bound = max(self.cell_bound, float(kept.max(initial=0.0)))
             d[todo[again]] += 1
             todo = todo[again]
-        keep = np.concatenate(subs[5])
-        root, level, i0, j0, bez = (np.concatenate(a)[keep] for a in subs[:5])
+        root, level, i0, j0, bez = (np.concatenate(a) for a in subs)
         croot, ci, cj, cpts = (np.concatenate(a) for a in cells)
         # pieces: the patch parameters (i0 + s, j0 + t) / 2^level
         if len(root):
