@@ -1,18 +1,13 @@
-"""Thin launcher for the subtrace command line: ``python cli.py info [CAGE.obj]``.
+"""Launcher for the subtrace command line from a source checkout: ``python cli.py render``.
 
-Uses the installed package when there is one, else the sources in ``src/`` next to this file.
+Runs the sources in ``src/`` next to this file, even where another subtrace is installed.
 """
 
 import sys
 from pathlib import Path
 
-try:
-    import subtrace.cli  # noqa: F401
-except ModuleNotFoundError as exc:
-    if exc.name != "subtrace":
-        raise
-    sys.path.insert(0, str(Path(__file__).resolve().parent / "src"))
+sys.path.insert(0, str(Path(__file__).resolve().parent / "src"))
 
-from subtrace.cli import run
+from subtrace.cli import run  # noqa: E402
 
 run()

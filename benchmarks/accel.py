@@ -139,13 +139,14 @@ def _traced_peak(fn):
 
 
 def worker(scene_path: str, sizes: list[tuple[int, int]], repeat: int) -> list[dict]:
-    from subtrace import config, tasks
+    from subtrace import config
+    from subtrace.runtime import threads as tasks
     from subtrace.accel.bvh import build_bvh
     from subtrace.accel.projection import no_tiles, project_shells
     from subtrace.io.scene import apply_overrides, load_scene
     from subtrace.patches.table import build_patch_table
     from subtrace.render import RenderStats, load_objects, render_scene, trace_hits
-    from subtrace.trace.camera import camera_frame
+    from subtrace.camera import camera_frame
 
     base = load_scene(scene_path)
     cages = load_objects(base)

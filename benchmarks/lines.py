@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 
 import subtrace
-from subtrace.lines import intersect_lines, torus_cage
-from subtrace.tasks import set_threads
+from subtrace.lines.api import intersect_lines, torus_cage
+from subtrace.runtime.threads import set_threads
 
 SPOT = Path(__file__).resolve().parents[2] / "shared" / "models" / "spot_low_resolution.obj"
 
@@ -84,10 +84,10 @@ def main():
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--spot", default=str(SPOT), help="Spot's low-resolution Loop cage")
     a = ap.parse_args()
-    from subtrace.lines_loop import box_nets, loop_regular
+    from subtrace.lines.loop_items import box_nets, loop_regular
     from subtrace.patches.table import build_patch_table
-    from subtrace.trace.lines import net_flatness
-    from subtrace.trace.lines_loop import tri_flatness
+    from subtrace.lines.kernels import net_flatness
+    from subtrace.lines.tri_nets import tri_flatness
 
     torus = torus_cage()
     spot = subtrace.load_cage(a.spot) if Path(a.spot).exists() else None

@@ -1,4 +1,4 @@
-"""Tests of subtrace.trace.camera: frame conventions, pixel angle, auto camera, validation."""
+"""Tests of subtrace.camera: frame conventions, pixel angle, auto camera, validation."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from subtrace.errors import SceneError
-from subtrace.trace.camera import (
+from subtrace.camera import (
     AUTO_VIEW_DIRECTION,
     MAX_RESOLUTION,
     Camera,

@@ -129,7 +129,7 @@ def test_header_attributes_round_trip(tmp_path):
 
 
 def test_camera_header_attributes(tmp_path):
-    from subtrace.trace.camera import Camera
+    from subtrace.camera import Camera
 
     cam = Camera((0, 0, 5), (0, 0, 0), (0, 1, 0), 40, W, H)
     path = tmp_path / "film.exr"

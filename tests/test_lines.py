@@ -1,4 +1,4 @@
-"""Line / surface intersection (subtrace.lines): the paper's Table 1 situations built on real
+"""Line / surface intersection (subtrace.lines.api): the paper's Table 1 situations built on real
 patches, random lines against a brute-force reference, hit points against the exact
 evaluator, memory that does not grow with the precision, and the CLI."""
 
@@ -13,7 +13,7 @@ import pytest
 import subtrace
 from subtrace.cli import main
 from subtrace.errors import SubtraceError
-from subtrace.lines import intersect_lines, torus_cage
+from subtrace.lines.api import intersect_lines, torus_cage
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 
@@ -272,7 +272,7 @@ def _cell_errors(cage, precision):
     (``cage.evaluate``) and the cell's bilinear patch at the same parameters (3 x 3
     samples inside; at most 300 cells), the number of cells, and the largest proven bound
     (one-ring box diagonal) of the interior cells."""
-    from subtrace import lines as L
+    from subtrace.lines import api as L
 
     items = L._items_for(cage, precision)
     items._isolate(items.irregular)

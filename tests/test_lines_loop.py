@@ -1,4 +1,4 @@
-"""Line / surface intersection on Loop cages (subtrace.lines with subtrace.lines_loop): the
+"""Line / surface intersection on Loop cages (subtrace.lines.api with subtrace.lines.loop_items): the
 quartic Bezier items against the exact evaluator, the Table 1 situations on regular and
 extraordinary patches, random lines against a brute-force reference (a closed model with
 extraordinary vertices, all-extraordinary icosahedron, a cage with a boundary), the oracle's
@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 import subtrace
-from subtrace.lines import intersect_lines, torus_cage
-from subtrace.lines_loop import box_nets, isolate_loop, loop_regular
-from subtrace.trace.lines_loop import CHILD_ORIGIN, CHILD_SCALE, TRI_SPLIT, bernstein
+from subtrace.lines.api import intersect_lines, torus_cage
+from subtrace.lines.loop_items import box_nets, isolate_loop, loop_regular
+from subtrace.lines.tri_nets import CHILD_ORIGIN, CHILD_SCALE, TRI_SPLIT, bernstein
 
 from test_lines import check_random_lines
 
@@ -127,7 +127,7 @@ def test_boundary_and_crease_patches_are_box_splines(which, disc, icosahedron):
     """Triangles along a boundary or an infinitely sharp crease whose crease vertices are
     regular (3 faces on the triangle's side) are box splines with phantom points: their
     nets equal the exact evaluator (level-1 faces, ptex parameters of their base face)."""
-    from subtrace.lines_loop import F_INF
+    from subtrace.lines.loop_items import F_INF
 
     if which == "disc":
         cage = disc

@@ -111,7 +111,7 @@ def test_sweep_takes_the_budget(capsys, tmp_path):
 
 
 def test_estimate_grows_with_depth_and_cap_fits():
-    from subtrace.cage import load_cage
+    from subtrace.mesh.cage import load_cage
     from subtrace.io.scene import load_scene
     from subtrace.patches.table import build_patch_table, depth_cap, memory_estimate
 
@@ -131,12 +131,13 @@ def test_tile_lists_over_the_budget_fall_back_to_the_bvh(capsys, tmp_path):
     """With the eye inside Spot many shells reach the eye plane and sit in every tile: a
     budget that fits the refinement but not those lists renders through the BVH, with one
     warning, the same image, and ``subtrace:accel`` saying so."""
-    from subtrace import config, tasks
+    from subtrace import config
+    from subtrace.runtime import threads as tasks
     from subtrace.accel.projection import project_shells, tiles_bytes
     from subtrace.io.scene import scene_from_dict
     from subtrace.patches.table import build_patch_table, choose_depths, memory_estimate
     from subtrace.render import load_objects
-    from subtrace.trace.camera import camera_frame
+    from subtrace.camera import camera_frame
 
     spot = ROOT.parent / "shared" / "models" / "spot_control_mesh.obj"
     if not spot.exists():

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from subtrace.accel.projection import TILE, project_shells
 from subtrace.io.scene import scene_from_dict
 from subtrace.render import render_scene
-from subtrace.trace.camera import Camera, camera_frame
+from subtrace.camera import Camera, camera_frame
 
 MODELS = Path(__file__).resolve().parents[2] / "shared" / "models"
 
@@ -177,7 +177,7 @@ def test_random_cameras_in_and_around_objects(mesh, seed):
 def test_two_tasks_project_as_one(monkeypatch):
     """The projection split over two tasks (blocks of boxes each, counts per task) lists
     exactly what one task lists, for a few thousand boxes that land across the image."""
-    from subtrace import tasks
+    from subtrace.runtime import threads as tasks
     from subtrace.accel import projection
 
     rng = np.random.default_rng(7)

@@ -323,7 +323,7 @@ def test_hits_lie_on_the_limit_surface(mesh, eye, target):
     assert len(hit) > 200
     rng = np.random.default_rng(1)
     pick = rng.choice(hit, size=min(150, len(hit)), replace=False)
-    from subtrace.trace.camera import camera_frame
+    from subtrace.camera import camera_frame
 
     frame = camera_frame(res.camera)
     row, col = np.divmod(pick, res.camera.width)
@@ -394,7 +394,7 @@ def test_render_reports_progress_up_to_every_ray():
     before, ending at all of them; a ProgressBar draws that on one line."""
     import io
 
-    from subtrace.progress import ProgressBar
+    from subtrace.runtime.progress import ProgressBar
 
     calls = []
     scene = _scene([MODELS / "spot_control_mesh.obj"], (1.2, 0.6, 2.2), (0.0, 0.3, 0.0),
@@ -606,7 +606,8 @@ def test_memo_and_threads_do_not_change_the_image(monkeypatch):
     """Rays share their Bezier splits through a per-thread memo; a memo that runs out makes
     the rays split on the spot instead. Neither the memo's size nor the thread count may
     change a single bit of the image (the same cells, boxes and order either way)."""
-    from subtrace import render, tasks
+    from subtrace import render
+    from subtrace.runtime import threads as tasks
 
     mesh = MODELS / "spot_control_mesh.obj"
     scene = _scene([mesh], (1.2, 0.6, 2.2), (0.0, 0.3, 0.0), width=96, height=72,
@@ -626,16 +627,17 @@ def test_memo_and_threads_do_not_change_the_image(monkeypatch):
 @needs_shared
 def test_warmup_compiles_the_kernels_a_render_uses():
     """On a cold cache a second process compiles the trace and shade kernels from empty
-    inputs (``subtrace.warmup``); that only helps if it does compile (or load) them, with
+    inputs (``subtrace.runtime.warmup``); that only helps if it does compile (or load) them, with
     exactly the types of a render: in a fresh process, the warm-up alone gives each kernel
     one specialisation, and a render after it adds none."""
     import subprocess
     import sys
 
-    from subtrace import tasks, warmup
+    from subtrace.runtime import threads as tasks, warmup
 
     code = f"""
-from subtrace import shade, tasks, warmup
+from subtrace import shade
+from subtrace.runtime import threads as tasks, warmup
 from subtrace.trace import kernels
 from subtrace.io.scene import scene_from_dict
 from subtrace.render import render_scene
@@ -662,7 +664,7 @@ def test_patches_are_built_only_for_rays_that_reach_them_first(accel):
     for the nearest unbuilt shell it enters; asking for a farther one (a wrong order of the
     shells a ray remembers between rounds) builds patches that a nearer surface hides."""
     from subtrace.render import RenderStats, trace_hits
-    from subtrace.trace.camera import camera_frame
+    from subtrace.camera import camera_frame
     from subtrace.trace.prims import H_T
 
     mesh = MODELS / "spot_control_mesh.obj"

@@ -22,7 +22,7 @@ from subtrace.io.scene import (
     scene_for_meshes,
     scene_from_dict,
 )
-from subtrace.trace.camera import Camera
+from subtrace.camera import Camera
 
 TRI = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
 

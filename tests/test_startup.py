@@ -63,8 +63,8 @@ import sys
 import argparse
 import numpy as np
 import numba
-from subtrace.cli import _start_numba
-_start_numba(argparse.Namespace(own_process=True))
+from subtrace.runtime.jit import trim_loader
+trim_loader()
 
 @numba.njit
 def f(a):

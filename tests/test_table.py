@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from subtrace import config, load_cage, tasks
+from subtrace import config, load_cage
+from subtrace.runtime import threads as tasks
 from subtrace.errors import SubtraceWarning
 from subtrace.patches.bspline import bezier_nets, control_grids, net_bounds, regular_mask
 from subtrace.patches.table import _shells, _subdominant, build_patch_table

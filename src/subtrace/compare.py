@@ -29,7 +29,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .errors import SubtraceError
+from subtrace.errors import SubtraceError
 
 PASS, WARN, FAIL = "pass", "warn", "fail"
 EXIT_CODES = {PASS: 0, WARN: 1, FAIL: 2}
@@ -173,7 +173,7 @@ class Comparison:
         """Write :meth:`diff_channels` as an EXR (verdict in the header) and optionally a PNG
         heat map of :meth:`heat` (black: equal, red: half the fail threshold, yellow:
         at the threshold, white: twice it or more)."""
-        from .io.exr import write_exr, write_png
+        from subtrace.io.exr import write_exr, write_png
 
         attrs = {"compare_verdict": self.verdict}
         write_exr(path, self.diff_channels(), attrs)
@@ -334,7 +334,7 @@ def _channels(image, label: str) -> tuple[dict, str]:
     """(channels, name for messages) of a path or a channel dict."""
     if isinstance(image, dict):
         return image, f"image {label}"
-    from .io.exr import read_exr
+    from subtrace.io.exr import read_exr
 
     path = os.fsdecode(os.fspath(image))
     try:

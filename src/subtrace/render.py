@@ -18,14 +18,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import config
-from .accel.bvh import build_bvh, no_bvh
-from .patches.bspline import net_bounds
-from .patches.isolate import build_isolated
-from .patches.grids import build_grids, grid_params, leaf_corners
-from .patches.table import (build_patch_table, choose_depths, depth_cap, edge_sampling,
+from subtrace import config
+from subtrace.accel.bvh import build_bvh, no_bvh
+from subtrace.patches.bspline import net_bounds
+from subtrace.patches.isolate import build_isolated
+from subtrace.patches.grids import build_grids, grid_params, leaf_corners
+from subtrace.patches.table import (build_patch_table, choose_depths, depth_cap, edge_sampling,
                             memory_estimate)
-from .trace.kernels import HIT_FIELDS, candidate_lists, trace_round
+from subtrace.trace.kernels import HIT_FIELDS, candidate_lists, trace_round
 
 
 @dataclass
@@ -304,7 +304,7 @@ class _Pieces(_Growable):
         ``side`` (m,4)) made of ``subs`` and ``cells`` (see
         :func:`~subtrace.patches.isolate.build_isolated`); each piece samples its sides as
         finely as the pieces beside it (:func:`~subtrace.patches.isolate.item_sides`)."""
-        from .patches.isolate import item_sides, rest_boxes
+        from subtrace.patches.isolate import item_sides, rest_boxes
 
         (sr, sl, si, sj, nets, sd), (cr, ci, cj, cp, cn) = subs, cells
         lo_s, hi_s, _ = net_bounds(nets)
@@ -391,7 +391,7 @@ class _Memos:
 
     def _grow(self, old, n_items, *which):
         """A memo with room for ``n_items`` items, the stores named in ``which`` doubled."""
-        from .trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
+        from subtrace.trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
 
         if old is None:
             root = np.full(0, -1, np.int64)
@@ -417,7 +417,7 @@ class _Memos:
         return root, child, box, slab, data, nets, cells, cnt
 
     def kernel_tuple(self, n_items):
-        from .trace.bezier import M_FULL
+        from subtrace.trace.bezier import M_FULL
 
         for k, m in enumerate(self.m):
             self.full += int(m[-1][M_FULL])
@@ -427,7 +427,7 @@ class _Memos:
         return tuple(self.m)
 
     def finish(self, stats):
-        from .trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
+        from subtrace.trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
 
         stats.memo_nodes = int(sum(m[-1][M_NODES] for m in self.m))
         stats.memo_bytes = int(sum(
@@ -449,9 +449,9 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     ``max_memory``: a budget in bytes (None: none); depths whose estimate
     (``patches.table.memory_estimate``) exceeds it are capped, with a warning, and the
     threads' memos are kept within what is left."""
-    from . import tasks, warmup
-    from .accel.projection import no_tiles, project_shells, tiles_bytes
-    from .trace.camera import camera_frame
+    from subtrace.runtime import threads as tasks, warmup
+    from subtrace.accel.projection import no_tiles, project_shells, tiles_bytes
+    from subtrace.camera import camera_frame
 
     max_depth = config.MAX_GRID_DEPTH if max_depth is None else max_depth
     W, H = camera.width, camera.height
@@ -517,7 +517,7 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     if compiling is not None:
         # a cold cache: while the trace kernels compile elsewhere, compile what the rounds
         # need here (exact limit points of isolated cells), on inputs of the same types
-        from .subdiv.limit import limit_points
+        from subtrace.subdiv.limit import limit_points
 
         for o in table.objects[:1]:
             limit_points(o.level, o.points, o.cage.options, which=np.zeros(0, np.int64))
@@ -575,7 +575,7 @@ def _warn_capped(budget, cap, depths, estimate):
     """The one warning of a render whose refinement the memory budget capped."""
     import warnings
 
-    from .errors import SubtraceWarning
+    from subtrace.errors import SubtraceWarning
 
     warnings.warn(SubtraceWarning(
         f"memory budget {_mib(budget)}: refinement capped at depth {max(cap, 0)} below the "
@@ -588,7 +588,7 @@ def _warn_tiles(budget):
     """The one warning of a render whose tile lists the memory budget refused."""
     import warnings
 
-    from .errors import SubtraceWarning
+    from subtrace.errors import SubtraceWarning
 
     warnings.warn(SubtraceWarning(
         f"memory budget {_mib(budget)}: the projection's tile lists would not fit (many "
@@ -599,8 +599,8 @@ def _warn_tiles(budget):
 
 def check_memory(table, n_pixels: int, budget: int, width: int, height: int):
     """Raise SceneError when even unrefined patches (depth 0) would not fit ``budget``."""
-    from . import tasks
-    from .errors import SceneError
+    from subtrace.runtime import threads as tasks
+    from subtrace.errors import SceneError
 
     need = (memory_estimate(table, np.zeros(table.n_patches, np.int32), n_pixels)
             + config.MEMORY_MEMO_MIN_BYTES * tasks.thread_count())
@@ -615,13 +615,13 @@ def check_memory(table, n_pixels: int, budget: int, width: int, height: int):
 
 def load_objects(scene):
     """Cages of the scene's objects (scheme / boundary overrides applied)."""
-    from .cage import load_cage
+    from subtrace.mesh.cage import load_cage
 
     return [load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code) for o in scene.objects]
 
 
 def _patch_colors(table, scene):
-    from .io.obj import DEFAULT_DIFFUSE
+    from subtrace.io.obj import DEFAULT_DIFFUSE
 
     colors = np.empty((table.n_patches, 3))
     for oid, o in enumerate(table.objects):
@@ -641,14 +641,14 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     """Render a :class:`subtrace.io.scene.Scene`; returns the channels and statistics.
     ``accel``: how rays find the shells they enter (see :func:`trace_hits`). ``progress``:
     None, or called as ``progress(done, total, label)`` with the rays whose hits are final
-    out of all (e.g. :class:`subtrace.progress.ProgressBar`); it reaches done == total."""
-    from . import tasks, warmup
-    from .shade import CHANNELS, miss_values, shade_kernel
-    from .trace.camera import camera_frame
+    out of all (e.g. :class:`subtrace.runtime.progress.ProgressBar`); it reaches done == total."""
+    from subtrace.runtime import threads as tasks, warmup
+    from subtrace.shade import CHANNELS, miss_values, shade_kernel
+    from subtrace.camera import camera_frame
 
     t_start = time.perf_counter()
     if threads is not None:
-        from .errors import SceneError
+        from subtrace.errors import SceneError
 
         n_max = tasks.max_threads()
         if not 1 <= int(threads) <= n_max:
@@ -656,7 +656,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
                              key="--threads")
     accel = config.PRIMARY_ACCEL if accel is None else accel
     if accel not in ("projection", "bvh"):
-        from .errors import SceneError
+        from subtrace.errors import SceneError
 
         raise SceneError(f"expected projection or bvh, got {accel!r}", key="--accel")
     tasks.set_threads(threads)
@@ -665,7 +665,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     try:
         if cages is None:
             cages = load_objects(scene)
-        from .io.obj import check_coordinates, check_valences
+        from subtrace.io.obj import check_coordinates, check_valences
 
         for c in cages:
             check_coordinates(c.path, c.points, config.MAX_COORDINATE)

@@ -12,11 +12,11 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
+from subtrace.runtime.jit import nb
 import numpy as np
 
-from .trace.bezier import bez_derivatives
-from .trace.kernels import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, ray_setup
+from subtrace.trace.bezier import bez_derivatives
+from subtrace.trace.kernels import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, ray_setup
 
 
 # the planes the shading fills, in this order, and what a pixel whose ray missed holds
@@ -30,7 +30,7 @@ MISS = (0.0, 0.0, 0.0, 0.0, np.inf, 0.0, 0.0, 0.0, -1.0, -1.0, -1.0, 0.0, 0.0)
 def shade_kernel(*args):
     """Fill the planes (flat over pixels) from ``hits``; the arguments are
     :func:`_shade_task`'s after its first two (the pixels are shared among threads)."""
-    from .tasks import run_tasks
+    from subtrace.runtime.threads import run_tasks
 
     run_tasks(_shade_task, *args)
 

@@ -16,10 +16,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba as nb
+from subtrace.runtime.jit import nb
 import numpy as np
 
-from .. import config
+from subtrace import config
 
 _BINS = 16
 

@@ -21,10 +21,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba as nb
+from subtrace.runtime.jit import nb
 import numpy as np
 
-from .. import tasks
+from subtrace.runtime import threads as tasks
 
 TILE = 2  # pixels per tile side
 

@@ -201,7 +201,7 @@ def _check_integers(name: str, array: np.ndarray) -> None:
 
 
 def _header(attributes: dict) -> dict:
-    from subtrace import __version__
+    from subtrace.version import VERSION as __version__
 
     header = {"Software": f"subtrace {__version__}", "subtrace:version": __version__}
     for key, value in attributes.items():

@@ -27,7 +27,7 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-import numba as nb
+from subtrace.runtime.jit import nb
 import numpy as np
 
 from subtrace.errors import ObjError, SubtraceWarning
@@ -124,7 +124,7 @@ def _read_bytes(path: str) -> bytes:
 
 def _decode(path: str, data: bytes) -> str:
     """UTF-8 text without a byte-order mark; a bad byte is an error naming its line."""
-    from .text import BadByte, utf8_text
+    from subtrace.io.text import BadByte, utf8_text
 
     try:
         return utf8_text(data)

@@ -22,7 +22,7 @@ Schema (every table and key optional unless marked *required*)::
     color    = [0.8, 0.6, 0.4]      # linear RGB in 0..1; overrides the OBJ's materials
 
     [camera]                        # without eye and target: an automatic camera framing
-    eye    = [3.0, 2.0, 5.0]        #   all objects (subtrace.trace.camera.auto_camera);
+    eye    = [3.0, 2.0, 5.0]        #   all objects (subtrace.camera.auto_camera);
     target = [0.0, 0.5, 0.0]        #   give both eye and target, or neither
     up     = [0.0, 1.0, 0.0]        # default [0, 1, 0]; must not be along target - eye
                                     #   (the automatic camera uses it too)
@@ -63,8 +63,8 @@ from pathlib import Path
 from subtrace.errors import SceneError
 from subtrace.io.text import BadByte, utf8_text
 from subtrace.io.obj import BOUNDARY_EDGE_AND_CORNER, BOUNDARY_EDGE_ONLY, BOUNDARY_NONE
-from subtrace.trace.camera import _show  # the same rendering of values in messages
-from subtrace.trace.camera import (
+from subtrace.camera import _show  # the same rendering of values in messages
+from subtrace.camera import (
     Camera,
     auto_camera,
     check_fov,

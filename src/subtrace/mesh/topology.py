@@ -25,10 +25,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba as nb
+from subtrace.runtime.jit import nb
 import numpy as np
 
-from .. import config
+from subtrace import config
 
 INF_SHARP = np.float32(config.SHARPNESS_INFINITE)
 

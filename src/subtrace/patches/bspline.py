@@ -22,11 +22,11 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
+from subtrace.runtime.jit import nb
 import numpy as np
 
-from ..subdiv.limit import _SMOOTH, classify
-from ..tasks import run_tasks
+from subtrace.subdiv.limit import _SMOOTH, classify
+from subtrace.runtime.threads import run_tasks
 
 # uniform cubic B-spline control points -> Bezier control points of the middle span
 _TO_BEZIER = np.array(

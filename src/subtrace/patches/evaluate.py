@@ -25,9 +25,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import config
-from ..subdiv.limit import _SMOOTH, classify, extract, limit_points, smooth_edge_tangents
-from ..subdiv.refine import refine_level, refine_points
+from subtrace import config
+from subtrace.subdiv.limit import _SMOOTH, classify, extract, limit_points, smooth_edge_tangents
+from subtrace.subdiv.refine import refine_level, refine_points
 
 
 def ptex_layout(cage):

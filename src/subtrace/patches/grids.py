@@ -23,10 +23,10 @@ from functools import lru_cache
 
 import numpy as np
 
-from .. import config
-from ..mesh.topology import Level, Options, _compact
-from ..subdiv.limit import _gather, extract, limit_points
-from ..subdiv.refine import refine_level, refine_points
+from subtrace import config
+from subtrace.mesh.topology import Level, Options, _compact
+from subtrace.subdiv.limit import _gather, extract, limit_points
+from subtrace.subdiv.refine import refine_level, refine_points
 
 
 def grid_size(n: int, quad: bool) -> int:

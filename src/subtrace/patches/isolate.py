@@ -17,10 +17,10 @@ conservative depth. Its grid is still uniform, so every cell satisfies the crite
 
 from __future__ import annotations
 
-import numba as nb
+from subtrace.runtime.jit import nb
 import numpy as np
 
-from .bspline import bezier_nets, control_grids, net_bounds, regular_mask
+from subtrace.patches.bspline import bezier_nets, control_grids, net_bounds, regular_mask
 
 # The control-edge bound of a cell at an extraordinary vertex is not a proven bound (measured
 # up to 0.8 % short on Spot); irregular cells stop refining only with this much to spare.
@@ -40,8 +40,8 @@ def _children(level, points, faces, options):
     """Cut the neighbourhood of quads ``faces`` out of ``level``, refine it once; return the
     refined cut, its points, the faces' four children each (in the cut) and which of those
     are regular."""
-    from ..subdiv.refine import refine_level, refine_points
-    from .grids import _cut_around
+    from subtrace.subdiv.refine import refine_level, refine_points
+    from subtrace.patches.grids import _cut_around
 
     cur, cur_pts, start = _cut_around(level, points, faces, 1)
     ref = refine_level(cur, options)
@@ -68,7 +68,7 @@ def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0, 
     Bezier nets of its regular descendants, the control-point boxes of the one-rings of the
     irregular ones it stopped at), a bound of its limit surface far tighter than its own
     one-ring's box; the others are left as they are."""
-    from .table import one_ring_shells
+    from subtrace.patches.table import one_ring_shells
 
     faces = np.asarray(faces, dtype=np.int64)
     cap = np.asarray(cap, dtype=np.int64)
@@ -238,7 +238,7 @@ def _add_cells(cells, level, points, options, faces, root, i0, j0):
     corners, NaN normals where undefined, and, when ``cells`` has seven lists, the
     diagonals of their one-rings' boxes and whether they touch the mesh's boundary) to the
     lists ``cells``."""
-    from ..subdiv.limit import limit_points
+    from subtrace.subdiv.limit import limit_points
 
     fo = level.face_offsets
     corners = level.face_verts[fo[faces][:, None] + np.arange(4)]
@@ -250,7 +250,7 @@ def _add_cells(cells, level, points, options, faces, root, i0, j0):
     for lst, a in zip(cells, (root, i0, j0, P.reshape(-1, 4, 3), nrm.reshape(-1, 4, 3))):
         lst.append(a)
     if len(cells) > 5:
-        from .table import one_ring_shells
+        from subtrace.patches.table import one_ring_shells
 
         lo, hi, _, _ = one_ring_shells(level, faces, points)
         cells[5].append(np.linalg.norm(hi - lo, axis=1))

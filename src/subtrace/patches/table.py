@@ -29,15 +29,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numba as nb
+from subtrace.runtime.jit import nb
 import numpy as np
 
-from .. import config
-from ..tasks import run_tasks
-from ..patches.evaluate import ptex_layout
-from ..subdiv import catmark, loop
-from .bspline import _TO_BEZIER, _net_summary, _to_bezier, control_grids, regular_mask
-from .isolate import box_distance, isolated_depths
+from subtrace import config
+from subtrace.runtime.threads import run_tasks
+from subtrace.patches.evaluate import ptex_layout
+from subtrace.subdiv import catmark, loop
+from subtrace.patches.bspline import _TO_BEZIER, _net_summary, _to_bezier, control_grids, regular_mask
+from subtrace.patches.isolate import box_distance, isolated_depths
 
 # ptex offset of the child at corner j of a regular face (quads keep the parent's orientation)
 _QUAD_CHILD_UV0 = np.array([[0.0, 0.0], [0.5, 0.0], [0.5, 0.5], [0.0, 0.5]])

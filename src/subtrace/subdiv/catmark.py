@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
+from subtrace.runtime.jit import nb
 import numpy as np
 
 REGULAR_VALENCE = 4

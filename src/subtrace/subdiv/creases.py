@@ -7,7 +7,7 @@ to the last bits. Rules are bit values as in Sdc: smooth 1, dart 2, crease 4, co
 
 from __future__ import annotations
 
-import numba as nb
+from subtrace.runtime.jit import nb
 import numpy as np
 
 RULE_SMOOTH = 1

@@ -27,12 +27,12 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
+from subtrace.runtime.jit import nb
 import numpy as np
 
-from ..mesh.topology import Level, Options, _compact, build_level
-from . import catmark, loop
-from .creases import F0, F_INF, RULE_CORNER, RULE_CREASE, RULE_SMOOTH, rule_of
+from subtrace.mesh.topology import Level, Options, _compact, build_level
+from subtrace.subdiv import catmark, loop
+from subtrace.subdiv.creases import F0, F_INF, RULE_CORNER, RULE_CREASE, RULE_SMOOTH, rule_of
 
 # vertex classes
 _ISOLATED = 0
@@ -450,7 +450,7 @@ def _gather_index(offsets, rows):
 
 
 def _hard_limits(level, points, options, hard, P, du, dv, rows):
-    from .refine import refine_level, refine_points
+    from subtrace.subdiv.refine import refine_level, refine_points
 
     cur_level, cur_pts = level, points
     ids = hard.astype(np.int64)  # vertex ids in the current level
@@ -515,7 +515,7 @@ def ring_matrix(level: Level, options: Options, v: int, depth: int = 1):
 
 
 def _sub_ring_matrix(sub: Level, options: Options, sv: int, depth: int):
-    from .refine import refine_level, refine_points
+    from subtrace.subdiv.refine import refine_level, refine_points
 
     ring = ring_of(sub, sv)
     W = np.eye(sub.n_verts)
@@ -575,7 +575,7 @@ def _eigen_limit(level, points, options, v, row, P, du, dv, _refined=0):
     if changes and _refined < 8:
         # the ring changes shape once (n-gons at level 0, or a ring that touches itself on
         # a small cage and lists a vertex twice): refine first, until it is stationary
-        from .refine import refine_level, refine_points
+        from subtrace.subdiv.refine import refine_level, refine_points
 
         ref = refine_level(sub, options)
         pts = refine_points(ref, points[sub_to_cur])

@@ -18,12 +18,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba as nb
+from subtrace.runtime.jit import nb
 import numpy as np
 
-from ..mesh.topology import Level, Options, build_level
-from . import catmark, loop
-from .creases import (
+from subtrace.mesh.topology import Level, Options, build_level
+from subtrace.subdiv import catmark, loop
+from subtrace.subdiv.creases import (
     F0,
     RULE_CREASE,
     RULE_DART,

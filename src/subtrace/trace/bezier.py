@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .prims import (
+from subtrace.trace.prims import (
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, _slab, _tri, inline_njit, leaf_njit, push_sorted,
     slab_bounds, slab_range,
 )

@@ -23,12 +23,12 @@ reaches its shell before any closer hit.
 from __future__ import annotations
 
 
-import numba as nb
+from subtrace.runtime.jit import nb
 import numpy as np
 
-from ..accel.projection import TILE
-from .bezier import MAX_SIDE_SAMPLES, intersect_patch
-from .prims import (  # noqa: F401  (H_* are re-exported for the driver)
+from subtrace.accel.projection import TILE
+from subtrace.trace.bezier import MAX_SIDE_SAMPLES, intersect_patch
+from subtrace.trace.prims import (  # noqa: F401  (H_* are re-exported for the driver)
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, _shear, _slab, _tri, leaf_njit,
     push_sorted, ray_setup,
 )
@@ -119,7 +119,7 @@ def trace_round(rays, frame, width, round_no, bvh_min, bvh_max, bvh_first, bvh_c
     memo holds changes the work, never a hit, so the image does not depend on the threads.
     ``cands`` (:func:`candidate_lists`) carries each ray's unbuilt shells to the next round.
     """
-    from ..tasks import run_chunks
+    from subtrace.runtime.threads import run_chunks
 
     max_d = int(iso[4].max(initial=0))
     band_rows = BAND_ROWS * int(width)

@@ -5,27 +5,8 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
+from subtrace.runtime.jit import inline_njit, leaf_njit, nb
 import numpy as np
-
-def leaf_njit(fn):
-    """Compile a helper of the per-ray path without Numba's reference counting (``_nrt=False``).
-
-    A helper that takes arrays would otherwise count references to each array it is passed
-    or views (an out-of-line atomic increment and decrement per array per call): about a
-    quarter of the trace time. These helpers only read and write the arrays they are given,
-    never allocate or keep them, so the counts are not needed. Division follows IEEE
-    (``error_model="numpy"``: 1/0 is inf for axis-parallel rays, no check per division).
-    """
-    return nb.njit(cache=True, _nrt=False, error_model="numpy")(fn)
-
-
-def inline_njit(fn):
-    """A :func:`leaf_njit` helper called once per ray (or per ray and piece) with many array
-    arguments, inlined into its caller by Numba: a call passes every field of every array
-    on the stack (hundreds of words), which cost more than the work of a typical call."""
-    return nb.njit(cache=True, _nrt=False, error_model="numpy", inline="always")(fn)
-
 
 # hit record layout (float64 per ray): t, slot, leaf, triangle, b1, b2
 H_T, H_SLOT, H_LEAF, H_TRI, H_B1, H_B2 = range(6)

@@ -1,4 +1,4 @@
-# subtrace.trace.camera: the pinhole camera and its primary rays.
+# subtrace.camera: the pinhole camera and its primary rays.
 #
 # Owns the camera model only (no scene parsing, no tracing). Conventions:
 #   forward = normalize(target - eye); right = normalize(forward x up);
@@ -21,7 +21,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from subtrace.runtime.jit import nb
+
+njit = nb.njit
 
 from subtrace.errors import SceneError
 

@@ -6,13 +6,13 @@ segmentation with AABBs of index ranges), with the patch grid replaced by the ex
 net of each patch: a sub-patch is a de Casteljau sub-net made on a stack while a line
 descends, so nothing is stored per level and memory does not grow with the precision.
 
-* Items (:mod:`subtrace.trace.lines`): the regular patches' Bezier nets (bicubic for
-  Catmull-Clark; quartic triangular for Loop, :mod:`subtrace.lines_loop`); irregular patches
+* Items (:mod:`subtrace.lines.kernels`): the regular patches' Bezier nets (bicubic for
+  Catmull-Clark; quartic triangular for Loop, :mod:`subtrace.lines.loop_items`); irregular patches
   (an extraordinary vertex, a crease, a boundary) whose shell some line meets are isolated
   into regular Bezier pieces plus *cells* of exact limit points at the feature (bilinear
   quads, or flat triangles), each within ``precision / 2`` of the surface over it:
   Catmull-Clark by :func:`subtrace.patches.isolate.build_isolated`, Loop by
-  :func:`subtrace.lines_loop.isolate_loop`, down to the depth where every cell's one-ring
+  :func:`subtrace.lines.loop_items.isolate_loop`, down to the depth where every cell's one-ring
   box has a diagonal of at most ``precision / 2`` (proven: the cell's surface and its flat
   stand-in both lie in that hull; Chaikin creases above sharpness 1, which can leave it, are
   given ``config.SHELL_CHAIKIN_MARGIN`` as the shells are); for Loop, triangles along
@@ -21,7 +21,7 @@ descends, so nothing is stored per level and memory does not grow with the preci
   ``_Items._isolate``.) Only lines' candidates are kept, never a refined
   mesh.
 * Depth is set per sub-net by its flatness bound (``tol_flat = precision / 2``, see
-  :mod:`subtrace.trace.lines`); hits are found by Newton on the exact net from the flat
+  :mod:`subtrace.lines.kernels`); hits are found by Newton on the exact net from the flat
   leaf's triangles (a point within rounding of the surface), or kept from the triangle
   (within ``tol_flat``) where Newton fails or the item is a cell.
 * Hits found from several leaves or patches (shared sides and corners) are merged; a line
@@ -43,7 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import SubtraceError
+from subtrace.errors import SubtraceError
 
 # Lines per kernel call: bounds the candidate buffer (CHUNK x cap x 8 doubles).
 CHUNK = 4096
@@ -106,12 +106,12 @@ class _Base:
     :func:`_items_for`): the patch table and the regular patches' Bezier nets."""
 
     def __init__(self, cage):
-        from .patches.table import build_patch_table
+        from subtrace.patches.table import build_patch_table
 
         self.table = tb = build_patch_table([cage])
         self.loop = cage.scheme == "loop"
         if self.loop:
-            from .lines_loop import box_nets, loop_regular
+            from subtrace.lines.loop_items import box_nets, loop_regular
 
             obj = tb.objects[0]
             regular = loop_regular(obj.level, cage.options, tb.face)
@@ -152,7 +152,7 @@ class _Items:
             lst.append(x)
 
     def _finish(self):
-        from .accel.bvh import build_bvh
+        from subtrace.accel.bvh import build_bvh
 
         cat = {tri: [np.concatenate(x) if x else None for x in self.parts[tri]]
                for tri in (False, True)}
@@ -181,13 +181,13 @@ class _Items:
 
     def need(self, org, dirs, t_lo, t_hi, pad):
         """Isolate the irregular patches whose shells these lines meet (once each)."""
-        from .trace.lines import mark_shells
+        from subtrace.lines.kernels import mark_shells
 
         todo = ~self.built
         if not todo.any():
             return
         if self.shell_bvh is None:
-            from .accel.bvh import build_bvh
+            from subtrace.accel.bvh import build_bvh
 
             self.shell_min = np.ascontiguousarray(self.table.shell_min[self.irregular])
             self.shell_max = np.ascontiguousarray(self.table.shell_max[self.irregular])
@@ -208,7 +208,7 @@ class _Items:
         self._finish()
 
     def _isolate_loop(self, rows):
-        from .lines_loop import isolate_loop
+        from subtrace.lines.loop_items import isolate_loop
 
         tb = self.table
         root, org, sc, nets, exact = isolate_loop(tb.objects[0], tb.face[rows],
@@ -221,8 +221,8 @@ class _Items:
                       tb.ptex_scale[p[k]] * sc[k])
 
     def _isolate(self, rows):
-        from . import config
-        from .patches.isolate import build_isolated
+        from subtrace import config
+        from subtrace.patches.isolate import build_isolated
 
         tb = self.table
         obj = tb.objects[0]
@@ -309,9 +309,9 @@ def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf
     ``point`` lies within ``precision`` of the surface and of ``cage.evaluate(ptex, uv)``.
     ``mode="first"`` keeps each line's nearest hit. ``threads``: worker threads (default all
     cores). See the module doc for tangent lines and flat regions. Returns :class:`Hits`."""
-    from .tasks import run_tasks, set_threads, thread_count
-    from .trace.lines import N_FIELDS, lines_task, merge_candidates
-    from .trace.lines_loop import SPLIT_COL, SPLIT_PTR, SPLIT_W
+    from subtrace.runtime.threads import run_tasks, set_threads, thread_count
+    from subtrace.lines.kernels import N_FIELDS, lines_task, merge_candidates
+    from subtrace.lines.tri_nets import SPLIT_COL, SPLIT_PTR, SPLIT_W
 
     if getattr(cage, "scheme", None) not in ("catmark", "loop"):
         raise SubtraceError("intersect_lines: expected a Catmull-Clark or Loop cage "
@@ -393,7 +393,7 @@ def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf
 
 
 def _hits(items, org, dirs, rows, tans, lines, mode, n_lines, precision, stats) -> Hits:
-    from .trace.lines import C_A, C_B, C_ITEM, C_T
+    from subtrace.lines.kernels import C_A, C_B, C_ITEM, C_T
 
     rows = np.concatenate(rows) if rows else np.zeros((0, 8))
     tan = np.concatenate(tans) if tans else np.zeros(0, bool)
@@ -412,7 +412,7 @@ def _hits(items, org, dirs, rows, tans, lines, mode, n_lines, precision, stats) 
     quad = item < len(items.all_nets)
     normal[quad] = _normals(items.all_nets, item[quad], ab[quad])
     if not quad.all():
-        from .lines_loop import tri_normals
+        from subtrace.lines.loop_items import tri_normals
 
         normal[~quad] = tri_normals(items.all_tnets, item[~quad] - len(items.all_nets),
                                     ab[~quad])
@@ -466,7 +466,7 @@ def torus_cage(n_major: int = 14, n_minor: int = 14, R: float = 1.0, r: float = 
     """A closed torus cage of ``n_major x n_minor`` quads (every vertex of valence 4, so
     every patch is a regular bicubic), centred at the origin around the z axis. 14 x 14 gives
     the 196 patches of the paper's second experiment."""
-    from .cage import make_cage
+    from subtrace.mesh.cage import make_cage
 
     i, j = np.meshgrid(np.arange(n_major), np.arange(n_minor), indexing="ij")
     a = 2 * np.pi * i / n_major

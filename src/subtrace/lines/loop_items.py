@@ -1,5 +1,5 @@
 """Loop cages as line-query items: quartic triangular Bezier nets
-(:mod:`subtrace.trace.lines_loop`).
+(:mod:`subtrace.lines.tri_nets`).
 
 A Loop patch is a triangle of the cage. It is *regular* when its three corners are smooth,
 of valence 6 and crease-free (the exact evaluator's test, :mod:`subtrace.patches.evaluate`):
@@ -28,14 +28,14 @@ from __future__ import annotations
 
 import numpy as np
 
-import numba as nb
+from subtrace.runtime.jit import nb
 
-from .patches.evaluate import (
+from subtrace.patches.evaluate import (
     _BOX_COEF, _BOX_MONO, _BOX_POINTS, _LATTICE_DIRS, _TRI_CORNER, _TRI_LEAD,
 )
-from .subdiv.creases import F_INF
-from .subdiv.limit import _CREASE, _SMOOTH, classify, limit_points
-from .trace.lines_loop import CHILD_ORIGIN, CHILD_SCALE, TRI_JK, TRI_MONO, TRI_PARAMS, bernstein
+from subtrace.subdiv.creases import F_INF
+from subtrace.subdiv.limit import _CREASE, _SMOOTH, classify, limit_points
+from subtrace.lines.tri_nets import CHILD_ORIGIN, CHILD_SCALE, TRI_JK, TRI_MONO, TRI_PARAMS, bernstein
 
 # Bezier net (15) from the 12 box-spline points: the box spline's polynomial at the domain
 # points, fitted in the Bernstein basis
@@ -209,8 +209,8 @@ def isolate_loop(obj, faces, allowed, max_level):
     ``(root (n,), uv0 (n,2), scale (n,), nets (n,15,3), exact (n,) bool)``, ``root``
     indexing ``faces``, ``uv0``/``scale`` in the patch's parameters (module doc). Cells are
     left at ``max_level`` whatever their size (a measured stop, never reached in practice)."""
-    from .patches.isolate import _children
-    from .patches.table import one_ring_shells
+    from subtrace.patches.isolate import _children
+    from subtrace.patches.table import one_ring_shells
 
     options = obj.cage.options
     out = [[], [], [], [], []]

@@ -8,7 +8,7 @@ calling them on empty inputs of exactly the types a render passes, and stores th
 shared cache; the first process waits for it before tracing and then loads them from the
 cache. On a warm cache nothing is started.
 
-    python -m subtrace.warmup THREADS      # what the second process runs
+    python -m subtrace.runtime.warmup THREADS      # what the second process runs
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ def start(threads: int):
     if _cached("_trace_task") and _cached("_shade_task"):
         return None
     try:
-        return subprocess.Popen([sys.executable, "-m", "subtrace.warmup", str(int(threads))],
+        return subprocess.Popen([sys.executable, "-m", "subtrace.runtime.warmup", str(int(threads))],
                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL)
     except OSError:  # no second process: the kernels compile when first called
@@ -57,11 +57,12 @@ def compile_kernels(threads: int) -> None:
     types of a render on ``threads`` threads (empty inputs: nothing is traced)."""
     import numpy as np
 
-    from . import config, tasks
-    from .render import _LeafTables, _Memos, _Pieces, _Pools
-    from .shade import CHANNELS, miss_values, shade_kernel
-    from .accel.projection import no_tiles
-    from .trace.kernels import HIT_FIELDS, candidate_lists, trace_round
+    from subtrace import config
+    from subtrace.runtime import threads as tasks
+    from subtrace.render import _LeafTables, _Memos, _Pieces, _Pools
+    from subtrace.shade import CHANNELS, miss_values, shade_kernel
+    from subtrace.accel.projection import no_tiles
+    from subtrace.trace.kernels import HIT_FIELDS, candidate_lists, trace_round
 
     i64, f64 = np.zeros(0, np.int64), np.zeros((0, 3))
     frame = np.zeros((4, 3))

@@ -45,8 +45,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from .errors import SceneError, SubtraceError
-from .progress import ProgressBar
+from subtrace.errors import SceneError, SubtraceError
+from subtrace.runtime.progress import ProgressBar
 
 # The plots written beside sweep.csv: file name -> what it shows (log-log, a line per scene).
 PLOTS = {
@@ -134,7 +134,7 @@ def sweep(scenes, tolerances, *, reference_tolerance=None, repeat: int = 1,
     scenes = [_as_scene(s) for s in scenes]
     if not scenes:
         raise SceneError("give at least one scene", key="scenes")
-    from .render import load_objects
+    from subtrace.render import load_objects
 
     for scene in scenes:
         load_objects(scene)  # bad cages fail here, before anything is written
@@ -172,7 +172,7 @@ def sweep(scenes, tolerances, *, reference_tolerance=None, repeat: int = 1,
                 record.exr = f"{name}/{stem}.exr"
                 record.levels_png = f"{name}/{stem}_levels.png"
                 _write_exr(os.path.join(output_dir, record.exr), result, scene, tol)
-                from .io.exr import write_png
+                from subtrace.io.exr import write_png
 
                 write_png(os.path.join(output_dir, record.levels_png),
                           level_image(result.channels["level"]))
@@ -243,7 +243,7 @@ def prepare_output_dir(path) -> str:
         reason = "permission denied" if isinstance(err, PermissionError) else (
             err.strerror or str(err))
         raise SubtraceError(f"output folder {path}: cannot create it: {reason}") from None
-    from .io.exr import check_writable
+    from subtrace.io.exr import check_writable
 
     try:
         check_writable(os.path.join(path, "sweep.csv"))
@@ -261,7 +261,7 @@ def _number(value) -> float:
 
 def _as_scene(scene):
     """A Scene, or the Scene of a TOML path / of one OBJ cage."""
-    from .io.scene import Scene, load_scene, scene_for_meshes
+    from subtrace.io.scene import Scene, load_scene, scene_for_meshes
 
     if isinstance(scene, Scene):
         return scene
@@ -290,7 +290,7 @@ def _render(scene, tol_px: float, threads, accel):
     """Render ``scene`` at ``tol_px``; returns (RenderResult, peak memory in bytes or None)."""
     from dataclasses import replace
 
-    from .render import render_scene
+    from subtrace.render import render_scene
 
     scene = replace(scene, render=replace(scene.render, tolerance_px=tol_px, tolerance_deg=None))
     probe = PeakMemory()
@@ -370,7 +370,7 @@ def _record(name, tol_px, ref_tol_px, runs, ref) -> SweepRecord:
 
 def image_errors(result, ref) -> dict:
     """The error columns of a render against the reference render (module comment)."""
-    from .compare import compare_images
+    from subtrace.compare import compare_images
 
     c, r = result.channels, ref.channels
     z = np.asarray(c["Z"], np.float64)
@@ -412,8 +412,8 @@ def _write_exr(path, result, scene, tol_px) -> None:
     """The render's EXR with the header ``subtrace render`` writes (tolerance ``tol_px``)."""
     from dataclasses import replace
 
-    from .io.exr import write_exr
-    from .render import result_attributes
+    from subtrace.io.exr import write_exr
+    from subtrace.render import result_attributes
 
     scene = replace(scene, render=replace(scene.render, tolerance_px=tol_px, tolerance_deg=None))
     write_exr(path, result.channels, result_attributes(result, scene))
@@ -432,7 +432,7 @@ def write_csv(records, path) -> None:
 def write_json(records, path) -> None:
     """sweep.json: ``{"columns": COLUMNS, "records": [...], "plots": ..., "level_colours":
     ...}``; non-finite numbers become strings (JSON has none)."""
-    from . import __version__
+    from subtrace.version import VERSION as __version__
 
     clean = lambda v: str(v) if isinstance(v, float) and not math.isfinite(v) else v  # noqa: E731
     doc = {

@@ -1,4 +1,4 @@
-"""Quartic triangular Bezier nets for the line kernels (:mod:`subtrace.trace.lines`): Loop items.
+"""Quartic triangular Bezier nets for the line kernels (:mod:`subtrace.lines.kernels`): Loop items.
 
 A regular Loop patch is a quartic box spline, i.e. one quartic polynomial over its triangle;
 it is stored as its *triangular Bezier net* of 15 control points ``b[j, k]`` (``j + k <= 4``,
@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from .prims import leaf_njit
+from subtrace.trace.prims import leaf_njit
 
 DEGREE = 4
 N_TRI = 15  # control points of a quartic triangular net

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import TopologyError
-from .mesh.topology import (
+from subtrace.errors import TopologyError
+from subtrace.mesh.topology import (
     BOUNDARY_EDGE_ONLY,
     Level,
     Options,
@@ -80,7 +80,7 @@ class Cage:
 
     def _levels(self, level: int):
         """[(Level, points)] for levels 0..level, computed once and cached."""
-        from .subdiv.refine import refine_level, refine_points
+        from subtrace.subdiv.refine import refine_level, refine_points
 
         levels = self._cache.setdefault("levels", [(self.base, self.points, None)])
         while len(levels) <= level:
@@ -116,7 +116,7 @@ class Cage:
         vertex's counter-clockwise ring; ``du x dv`` is the outward normal); only their
         directions are meaningful at extraordinary vertices.
         """
-        from .subdiv.limit import limit_points
+        from subtrace.subdiv.limit import limit_points
 
         level = _check_level(level)
         lev, pts, _ = self._levels(level)[level]
@@ -128,7 +128,7 @@ class Cage:
         ``ptex_face`` (m,) int, ``uv`` (m,2) float in OpenSubdiv's ptex convention. Returns
         ``(P, dPdu, dPdv)`` each (m,3) float64, derivatives with respect to the ptex (u,v).
         """
-        from .patches.evaluate import evaluate
+        from subtrace.patches.evaluate import evaluate
 
         return evaluate(self, ptex_face, uv)
 
@@ -241,7 +241,7 @@ def load_cage(path, scheme: str | None = None, boundary: int | None = None) -> C
 
     ``boundary`` (0 none, 1 edge-and-corner, 2 edge-only) overrides the file's
     ``interpolateboundary`` tag."""
-    from .io.obj import read_obj
+    from subtrace.io.obj import read_obj
 
     data = read_obj(path)
     return make_cage(

@@ -10,9 +10,9 @@ This module imports only argparse at the top; the cage, subdivision and limit co
 imported by the subcommand that needs them. (``import subtrace`` itself loads numpy and
 Numba, about 0.3 s, which ``subtrace --help`` still pays.)
 
-:func:`run` is the process entry point (``cli.py``, ``python -m subtrace.cli``, the
+:func:`run` is the process entry point (``cli.py``, ``python -m subtrace.cli.main``, the
 ``subtrace`` script); it trims two fixed costs of a short process that :func:`main`, which
-tests call in-process, leaves alone: see :func:`_start_numba` and :func:`_exit_now`.
+tests call in-process, leaves alone: see :func:`_trim_numba` and :func:`_exit_now`.
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog=PROG,
         description="Exact Catmull-Clark and Loop subdivision surfaces (OpenSubdiv rules).",
     )
-    from . import __version__
+    from subtrace.version import VERSION as __version__
 
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
@@ -237,11 +237,11 @@ def _scene_from_inputs(inputs, args, **overrides):
     """The scene of ``inputs`` (one TOML scene, or OBJ cages; none: the built-in default
     scene) with the camera / resolution / scheme flags of ``args`` and ``overrides``
     (further :func:`subtrace.io.scene.apply_overrides` keywords) applied."""
-    from .errors import SceneError
-    from .io.scene import apply_overrides, load_scene, scene_for_meshes
+    from subtrace.errors import SceneError
+    from subtrace.io.scene import apply_overrides, load_scene, scene_for_meshes
 
     if not inputs:
-        from .data import default_scene_path
+        from subtrace.data import default_scene_path
 
         scene = load_scene(default_scene_path())
     elif len(inputs) == 1 and inputs[0].lower().endswith(".toml"):
@@ -267,7 +267,7 @@ def main(argv=None, own_process: bool = False) -> int:
     """Run the command line; returns the exit code (0 ok, 2 bad input or usage).
 
     own_process: this process exists only to run this command (:func:`run`), so the
-    process-wide shortcut of :func:`_start_numba` is allowed.
+    process-wide shortcut of :func:`_trim_numba` is allowed.
     """
     parser = build_parser()
     try:
@@ -278,7 +278,7 @@ def main(argv=None, own_process: bool = False) -> int:
     except SystemExit as exc:  # --help / --version exit 0, usage errors exit 2
         return int(exc.code or 0) if not isinstance(exc.code, str) else 2
     args.own_process = own_process
-    from .errors import SubtraceError
+    from subtrace.errors import SubtraceError
 
     try:
         with _one_line_warnings():
@@ -295,65 +295,13 @@ def main(argv=None, own_process: bool = False) -> int:
         return 1
 
 
-def _start_numba(args) -> None:
-    """Trim Numba's set-up in a process of its own (:func:`run`); elsewhere do nothing.
+def _trim_numba(args) -> None:
+    """Trim Numba's set-up (:func:`subtrace.runtime.jit.trim_loader`) in a process of its
+    own (:func:`run`); in-process callers (tests) keep Numba as it is."""
+    if getattr(args, "own_process", False):
+        from subtrace.runtime.jit import trim_loader
 
-    Numba's cache loader "refreshes" its CPU target before every load: it registers the
-    typing and lowering of everything Numba supports (about 270 registries), and on the
-    way imports scipy.linalg only to ask whether np.dot may call BLAS (about 0.2 s alone).
-    A kernel read back from the cache needs none of that, only Numba's runtime (memory
-    management), which its machine code links against. So here:
-
-    * loading a cached kernel initialises the runtime and skips the refresh;
-    * scipy.linalg is refused while a kernel loads (its pickled environment imports
-      numba.np.arraymath, whose import asks for BLAS) and while Numba's compiler sets the
-      target up for a kernel that is not in the cache; a kernel that needs BLAS still
-      imports scipy.linalg when it is compiled.
-
-    Numbas whose loader is organised differently are left alone (the command is then just
-    slower); tests run the command in fresh processes on warm and cold caches.
-    """
-    if not getattr(args, "own_process", False):
-        return
-    try:
-        from numba.core.caching import Cache
-        from numba.core.registry import cpu_target
-        from numba.core.runtime import rtsys
-    except ImportError:  # pragma: no cover - a Numba without these internal modules
-        return
-    if not all(hasattr(Cache, name) for name in ("_load_overload",
-                                                   "_guard_against_spurious_io_errors")):
-        return  # pragma: no cover - a Numba whose cache loader is organised differently
-
-    def load_overload(self, sig, target_context):
-        rtsys.initialize(target_context)  # idempotent; loaded code calls into the runtime
-        with _without_scipy_linalg(), self._guard_against_spurious_io_errors():
-            return self._load_overload(sig, target_context)
-        # None (a miss: the kernel compiles) when the guard swallowed an I/O error
-
-    context = cpu_target.target_context
-    full_refresh = context.refresh
-
-    def refresh():
-        with _without_scipy_linalg():
-            return full_refresh()
-
-    Cache.load_overload = load_overload
-    context.refresh = refresh
-
-
-class _without_scipy_linalg:
-    """Make ``import scipy.linalg`` raise ImportError inside the block, unless it is
-    imported already (or refused by an enclosing block)."""
-
-    def __enter__(self):
-        self._refused = "scipy.linalg" not in sys.modules
-        if self._refused:
-            sys.modules["scipy.linalg"] = None
-
-    def __exit__(self, *exc):
-        if self._refused:
-            del sys.modules["scipy.linalg"]
+        trim_loader()
 
 
 def _exit_now(code: int):
@@ -385,7 +333,7 @@ class _one_line_warnings:
         saved = self._saved
 
         def show(message, category, filename, lineno, file=None, line=None):
-            from .errors import SubtraceWarning
+            from subtrace.errors import SubtraceWarning
 
             if issubclass(category, SubtraceWarning):
                 print(f"{PROG}: warning: {_one_line(str(message))}", file=file or sys.stderr)
@@ -408,11 +356,11 @@ class _one_line_warnings:
 
 
 def _cmd_info(args) -> int:
-    from . import load_cage
+    from subtrace import load_cage
 
-    _start_numba(args)
+    _trim_numba(args)
     if args.cage is None:
-        from .data import sample_cage_path
+        from subtrace.data import sample_cage_path
 
         path = sample_cage_path()
         label = f"{path} (built-in sample: Spot by Keenan Crane, public domain)"
@@ -441,15 +389,15 @@ def _cmd_render(args) -> int:
                                tolerance_deg=args.tolerance_deg, output=args.output)
     out = scene.output or "render.exr"
     png = os.path.splitext(out)[0] + ".png" if args.png else scene.preview
-    from .io.exr import check_writable, write_exr
+    from subtrace.io.exr import check_writable, write_exr
 
     check_writable(out)
     if png:
         check_writable(png)
-    from .render import render_scene, result_attributes
+    from subtrace.render import render_scene, result_attributes
 
-    _start_numba(args)
-    from .progress import ProgressBar
+    _trim_numba(args)
+    from subtrace.runtime.progress import ProgressBar
 
     progress = ProgressBar() if sys.stderr.isatty() and not args.quiet else None
     result = render_scene(scene, threads=args.threads, accel=args.accel, progress=progress)
@@ -481,8 +429,8 @@ def _cmd_render(args) -> int:
 def _cmd_sweep(args) -> int:
     """Sweep the tolerances (:func:`subtrace.sweep.sweep`); the table on stdout, a progress
     bar on stderr when it is a terminal."""
-    from .progress import ProgressBar
-    from .sweep import (check_reference, check_repeat, check_tolerances,
+    from subtrace.runtime.progress import ProgressBar
+    from subtrace.sweep import (check_reference, check_repeat, check_tolerances,
                         format_table, sweep)
 
     tols = check_tolerances(args.tolerances, key="--tolerances")
@@ -491,7 +439,7 @@ def _cmd_sweep(args) -> int:
     scenes = [_scene_from_inputs([path], args) for path in args.inputs] or [
         _scene_from_inputs([], args)]
     progress = ProgressBar() if sys.stderr.isatty() and not args.quiet else None
-    _start_numba(args)
+    _trim_numba(args)
     records = sweep(scenes, tols, reference_tolerance=reference, repeat=repeat,
                     output_dir=args.output, threads=args.threads, accel=args.accel,
                     progress=progress)
@@ -509,7 +457,7 @@ def _cmd_sweep(args) -> int:
 
 def _cmd_intersect(args) -> int:
     """Every hit of the lines of a CSV with a cage's limit surface
-    (:func:`subtrace.lines.intersect_lines`), written as CSV or JSON (temporary file, then
+    (:func:`subtrace.lines.api.intersect_lines`), written as CSV or JSON (temporary file, then
     rename: no partial output)."""
     import json
     import math
@@ -517,9 +465,9 @@ def _cmd_intersect(args) -> int:
 
     import numpy as np
 
-    from .cage import load_cage
-    from .errors import SubtraceError
-    from .lines import intersect_lines
+    from subtrace.mesh.cage import load_cage
+    from subtrace.errors import SubtraceError
+    from subtrace.lines.api import intersect_lines
 
     def number(text, key):
         try:
@@ -539,8 +487,8 @@ def _cmd_intersect(args) -> int:
                             f"{args.t_min}")
     data = _read_lines_csv(args.lines)
     cage = load_cage(args.cage, scheme=args.scheme)
-    from . import config
-    from .io.obj import check_coordinates, check_valences
+    from subtrace import config
+    from subtrace.io.obj import check_coordinates, check_valences
 
     check_coordinates(cage.path, cage.points, config.MAX_COORDINATE)
     check_valences(cage.path, cage.face_sizes, np.diff(cage.base.vert_edge_offsets),
@@ -550,7 +498,7 @@ def _cmd_intersect(args) -> int:
         folder = os.path.dirname(os.path.abspath(out))
         if not os.path.isdir(folder):
             raise SubtraceError(f"{out}: no such folder {folder}")
-    _start_numba(args)
+    _trim_numba(args)
     hits = intersect_lines(cage, data[:, :3], data[:, 3:], precision, t_range=t_range,
                            mode="first" if args.first else "all", threads=args.threads)
     if args.json:
@@ -597,8 +545,8 @@ def _read_lines_csv(path):
 
     import numpy as np
 
-    from .errors import SubtraceError
-    from .io.text import BadByte, utf8_text
+    from subtrace.errors import SubtraceError
+    from subtrace.io.text import BadByte, utf8_text
 
     try:
         with open(path, "rb") as fh:
@@ -653,9 +601,9 @@ def _cmd_compare(args) -> int:
     """Compare two images; exit code by idiff's convention (see the subparser)."""
     import json
 
-    from .compare import (EXIT_MISMATCH, EXIT_UNREADABLE, ImageMismatchError,
+    from subtrace.compare import (EXIT_MISMATCH, EXIT_UNREADABLE, ImageMismatchError,
                           UnreadableImageError, compare_images)
-    from .errors import SubtraceError
+    from subtrace.errors import SubtraceError
 
     thresholds = _compare_thresholds(args)
     png = None
@@ -664,7 +612,7 @@ def _cmd_compare(args) -> int:
             raise SubtraceError("--png writes the heat map of --diff: give --diff OUT.exr too")
         png = os.path.splitext(args.diff)[0] + ".png"
     if args.diff:
-        from .io.exr import check_writable
+        from subtrace.io.exr import check_writable
 
         check_writable(args.diff)
         if png:
@@ -692,8 +640,8 @@ def _cmd_compare(args) -> int:
 def _compare_thresholds(args) -> dict:
     """--fail/--warn/... values as {group: {field: value}}; a bare value is the colour
     group's. Raises SubtraceError naming the option for a bad group or number."""
-    from .compare import GROUPS
-    from .errors import SubtraceError
+    from subtrace.compare import GROUPS
+    from subtrace.errors import SubtraceError
 
     thresholds: dict = {}
     for name in ("fail", "failpercent", "warn", "warnpercent", "hardfail"):
@@ -867,5 +815,5 @@ def _surface_vertices(lev):
     return keep
 
 
-if __name__ == "__main__":  # python -m subtrace.cli
+if __name__ == "__main__":  # python -m subtrace.cli.main
     run()

@@ -5,7 +5,7 @@ An *item* is a Bezier net over part of some patch's parameters, of one of two ki
 * a bicubic net (4,4,3) over a square (Catmull-Clark): a regular patch, a regular piece of
   an isolated irregular patch, or (degree-elevated bilinear) an exact-limit-point cell next
   to an extraordinary vertex;
-* a quartic triangular net (15,3) over a triangle (Loop, :mod:`subtrace.trace.lines_loop`):
+* a quartic triangular net (15,3) over a triangle (Loop, :mod:`subtrace.lines.tri_nets`):
   a regular box-spline patch or piece, or (degree-elevated linear) an exact-limit-point
   cell.
 
@@ -27,7 +27,7 @@ triangle ``i - len(nets)``. Per line (nothing is stored between lines):
    first term of ``L``; the second bounds ``|L - T|`` for the two corner triangles ``T``
    (``L - T = -t (1 - s) twist``). Both terms are second differences: each halving divides
    them by about 4, so the depth is about ``log4(flatness(root) / tol_flat)``. A triangular
-   net has the same bound without the twist (:func:`~subtrace.trace.lines_loop.tri_flatness`).
+   net has the same bound without the twist (:func:`~subtrace.lines.tri_nets.tri_flatness`).
    Children are visited nearest first (entry into their boxes).
 3. At a flat leaf: the corner triangles (watertight test) seed Newton on the exact net
    (unknowns s, t, line parameter); a root inside the item (up to ``PARAM_SLACK``) is a
@@ -49,15 +49,15 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
+from subtrace.runtime.jit import nb
 import numpy as np
 
-from .. import config
-from .bezier import _copy_net, _net_box, _split
-from .lines_loop import (
+from subtrace import config
+from subtrace.trace.bezier import _copy_net, _net_box, _split
+from subtrace.lines.tri_nets import (
     N_TRI, TRI_MONO, mono_eval, tri_box, tri_flatness, tri_monomials, tri_split,
 )
-from .prims import _shear, _tri, leaf_njit
+from subtrace.trace.prims import _shear, _tri, leaf_njit
 
 # Deepest halving of an item: 2^-40 of its side is below what double parameters resolve.
 MAX_DEPTH = 40
