@@ -30,14 +30,14 @@ def _set_cache_dir() -> None:
     base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "subtrace"
     folder = base / f"numba-{h.hexdigest()[:16]}"
     if not folder.exists():
-        _prune(base)
+        prune_caches(base)
     os.environ["NUMBA_CACHE_DIR"] = str(folder)
 
 
 CACHES_KEPT = 8  # cache folders of other source versions kept (other checkouts, branches)
 
 
-def _prune(base: Path) -> None:
+def prune_caches(base: Path) -> None:
     """Remove all but the ``CACHES_KEPT`` most recently used cache folders (each edit of the
     sources starts a new one)."""
     try:
