@@ -423,6 +423,27 @@ def test_cli_import_loads_no_numba(modules):
            "Numba or OpenImageIO", cli_reaches_heavy(modules))
 
 
+def test_scenes_need_only_the_repository():
+    """Every mesh of scenes/*.toml lies in the repository (models/), exists, and is listed
+    with its licence in models/README.md: the scenes render from a plain clone."""
+    import tomllib
+
+    listed = (ROOT / "models" / "README.md").read_text(encoding="utf-8")
+    bad = []
+    for scene in sorted((ROOT / "scenes").glob("*.toml")):
+        for obj in tomllib.loads(scene.read_text(encoding="utf-8")).get("object", []):
+            mesh = (scene.parent / obj["mesh"]).resolve()
+            if not mesh.is_relative_to(ROOT):
+                bad.append(f"{rel(scene)}: mesh {obj['mesh']} lies outside the repository")
+            elif not mesh.is_file():
+                bad.append(f"{rel(scene)}: mesh {obj['mesh']} is missing")
+            elif not mesh.is_relative_to(ROOT / "models"):
+                bad.append(f"{rel(scene)}: mesh {obj['mesh']} is not under models/")
+            elif f"`{mesh.relative_to(ROOT / 'models').as_posix()}`" not in listed:
+                bad.append(f"{rel(scene)}: mesh {obj['mesh']} is not listed in models/README.md")
+    report("scene meshes that a clone does not provide", bad)
+
+
 # --------------------------------------------------------------------------------------
 # the checker itself, on small made-up packages
 # --------------------------------------------------------------------------------------
