@@ -30,12 +30,8 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENES_DIR = ROOT / "scenes"
 GOLDEN_DIR = ROOT / "golden_images"
 FAILURE_DIR = ROOT / "test_output" / "golden"
-SHARED = ROOT.parent / "shared"
+MODELS = ROOT / "models"  # the scenes' meshes, in the repository (models/README.md)
 SCENES = sorted(p.stem for p in SCENES_DIR.glob("*.toml"))
-
-needs_shared = pytest.mark.skipif(
-    not (SHARED / "models").is_dir(), reason="../shared/models not present"
-)
 
 # Small renders: each golden stays well under 100 KB and all eight render in about a second
 # once the kernels are compiled. The scenes' own tolerance (1 px) is kept, so the goldens
@@ -130,7 +126,6 @@ def write_failure(name: str, rendered: dict, comparison) -> list[Path]:
     return paths
 
 
-@needs_shared
 @pytest.mark.parametrize("name", SCENES)
 def test_golden(name, update_golden):
     """Each scene renders to its golden image within GOLDEN_THRESHOLDS."""
@@ -189,8 +184,6 @@ def test_golden_header_and_size(name):
 
 def test_missing_golden_names_the_command(tmp_path, monkeypatch):
     """A missing golden fails with the exact command that creates it."""
-    if not (SHARED / "models").is_dir():
-        pytest.skip("../shared/models not present")
     monkeypatch.setattr(f"{__name__}.GOLDEN_DIR", tmp_path)
     with pytest.raises(pytest.fail.Exception) as info:
         test_golden("creases", update_golden=False)
@@ -199,7 +192,6 @@ def test_missing_golden_names_the_command(tmp_path, monkeypatch):
     assert "missing" in message
 
 
-@needs_shared
 def test_update_golden_writes_and_keeps_unchanged_files(tmp_path, monkeypatch):
     """--update-golden creates a missing golden that then passes, leaves an equal one
     untouched (same bytes: no new DateTime) and rewrites one whose pixels differ."""
@@ -217,7 +209,6 @@ def test_update_golden_writes_and_keeps_unchanged_files(tmp_path, monkeypatch):
     np.testing.assert_array_equal(read_exr(path)[0]["Z"], channels["Z"])
 
 
-@needs_shared
 def test_failure_writes_render_reference_and_difference(tmp_path, monkeypatch):
     """A golden that no longer matches (depth 1 % off) fails, naming the images it wrote."""
     if not golden_path("creases").exists():
@@ -421,7 +412,6 @@ def reference_check(channels: dict, scene, tol_rad: float) -> dict:
     }
 
 
-@needs_shared
 @pytest.mark.parametrize("name", SCENES)
 def test_golden_matches_independent_reference(name):
     """Each golden image is right, not only what the code produced: coverage, depth and
@@ -443,7 +433,7 @@ def test_golden_matches_independent_reference(name):
 # the thresholds catch real changes
 # --------------------------------------------------------------------------------------
 
-CREASES_OBJ = SHARED / "oracle" / "shapes" / "catmark_cubes_semisharp.obj"
+CREASES_OBJ = MODELS / "opensubdiv" / "catmark_cubes_semisharp.obj"
 CREASE_LINE = "t crease 2/1/0  8  9  2.0"  # one semi-sharp crease of the creases scene
 
 
@@ -459,7 +449,6 @@ def perturbed_creases_scene(tmp_path, sharpness: float):
     )
 
 
-@needs_shared
 @pytest.mark.parametrize("sharpness", [1.0, 2.5])
 def test_thresholds_catch_crease_change(tmp_path, sharpness):
     """Changing one crease's sharpness (2 -> 1 or 2.5) fails the golden comparison through
@@ -473,7 +462,6 @@ def test_thresholds_catch_crease_change(tmp_path, sharpness):
     assert comparison.groups["normals"].verdict == FAIL
 
 
-@needs_shared
 def test_reference_check_rejects_a_wrong_crease(tmp_path):
     """The reference check has teeth: a render whose crease is wrong (sharpness 1 instead of
     2) departs from the reference of the unchanged scene. (Sharpness 2.5 moves the surface
@@ -483,7 +471,6 @@ def test_reference_check_rejects_a_wrong_crease(tmp_path):
     assert len(bad["depth"]) + len(bad["normals"]) > 10
 
 
-@needs_shared
 @pytest.mark.parametrize("tolerance", [0.5, 2.0])
 def test_thresholds_catch_one_level_change(tolerance):
     """Halving or doubling the tolerance refines (nearly) every patch one level deeper or
