@@ -54,7 +54,7 @@ def test_tiny_budget_caps_refinement_with_one_warning(capsys, tmp_path):
 
 def test_budget_in_the_scene_file(capsys, tmp_path):
     text = SPOT_LOOP.read_text().replace("[render]", '[render]\nmax_memory = "40M"')
-    text = text.replace("../../shared", str(ROOT.parent / "shared"))
+    text = text.replace('"../models/', '"' + (ROOT / "models").as_posix() + "/")
     scene = tmp_path / "s.toml"
     scene.write_text(text)
     code, err, _ = render(capsys, tmp_path, scene)
