@@ -28,6 +28,7 @@ import OpenImageIO as oiio
 
 from subtrace.errors import SubtraceError
 from subtrace.io.atomic import atomic_paths, check_writable, path_str
+from subtrace.version import VERSION
 
 CHANNEL_ORDER = ("R", "G", "B", "A", "Z", "N.X", "N.Y", "N.Z", "level", "patch_id", "object_id")
 HALF_CHANNELS = frozenset(("R", "G", "B", "A"))
@@ -195,9 +196,7 @@ def _check_integers(name: str, array: np.ndarray) -> None:
 
 
 def _header(attributes: dict) -> dict:
-    from subtrace.version import VERSION as __version__
-
-    header = {"Software": f"subtrace {__version__}", "subtrace:version": __version__}
+    header = {"Software": f"subtrace {VERSION}", "subtrace:version": VERSION}
     for key, value in attributes.items():
         if not isinstance(key, str) or not key:
             raise TypeError(f"attribute names must be non-empty strings, got {key!r}")

@@ -100,7 +100,7 @@ def read_obj(path) -> ObjData:
     path = os.fspath(path)
     if isinstance(path, bytes):
         path = os.fsdecode(path)
-    raw = read_text_bytes(path)
+    raw = read_obj_bytes(path)
     # ASCII is valid UTF-8 without a byte-order mark: only other files need checking first
     text = None if raw.isascii() else decode_obj(path, raw)
     data = ObjReader(path).read_fast(raw) or ObjReader(path).read(
@@ -115,7 +115,7 @@ def _error(path: str):
     return lambda problem, line: ObjError(path, line, problem)
 
 
-def read_text_bytes(path: str) -> bytes:
+def read_obj_bytes(path: str) -> bytes:
     """The bytes of the OBJ file ``path``; ObjError naming it when it cannot be read."""
     return read_bytes(path, _error(path), expected="an OBJ file")
 
@@ -745,7 +745,7 @@ def statement_line(path, keyword: str, index: int) -> int | None:
     ``path`` (e.g. the line of vertex ``index`` for ``"v"``), or None where it cannot be
     found. For messages about a file that was read without error."""
     try:
-        raw = read_text_bytes(os.fspath(path))
+        raw = read_obj_bytes(os.fspath(path))
         text = raw.decode("utf-8", errors="replace")
     except (ObjError, OSError, TypeError):
         return None
