@@ -13,9 +13,10 @@ import numpy as np
 from subtrace.cli.common import trim_numba
 from subtrace.config import SHARPNESS_INFINITE
 from subtrace.data import sample_cage_path
+from subtrace.io.scene import BOUNDARIES
 from subtrace.mesh.cage import load_cage
 
-BOUNDARY_NAMES = {0: "none", 1: "edge-and-corner", 2: "edge-only"}
+BOUNDARY_NAMES = {code: name for name, code in BOUNDARIES.items()}  # Sdc code -> scene name
 SIZE_NAMES = {3: "triangles", 4: "quads", 5: "pentagons", 6: "hexagons"}
 
 
