@@ -67,3 +67,10 @@ answer = {"missing": [n for n in subtrace.__all__ if getattr(subtrace, n, None) 
           "sweep_callable": callable(subtrace.sweep)}
 """
     assert _fresh(code) == {"missing": [], "sweep_callable": True}
+
+
+def test_sweep_package_loads_numpy_only():
+    """``from subtrace.sweep import PeakMemory, format_table`` (benchmarks use them) loads
+    neither Numba nor OpenImageIO nor matplotlib: the sweep imports those when it runs."""
+    answer = _fresh("from subtrace.sweep import PeakMemory, format_table\n" + REPORT)
+    assert answer == {"heavy": ["numpy"], "numba_cache_dir": None}

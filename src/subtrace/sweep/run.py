@@ -2,6 +2,10 @@
 swept one and measures each render (times, peak memory, refinement counts, image errors
 against the reference; see :mod:`subtrace.sweep`); the checks of its inputs; the output
 folder's EXRs and heat maps.
+
+Importing the package loads numpy only: the scene reader and renderer (Numba), the image
+comparison and the EXR writer (OpenImageIO) are imported by the functions that use them, so
+``from subtrace.sweep import PeakMemory`` or ``format_table`` stays light.
 """
 
 from __future__ import annotations
@@ -16,10 +20,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from subtrace.compare import compare_images
 from subtrace.errors import SceneError, SubtraceError
 from subtrace.io.atomic import check_writable
-from subtrace.io.scene import Scene, load_scene, scene_for_meshes
 from subtrace.sweep.plot import level_image, plot
 from subtrace.sweep.report import SweepRecord, write_csv, write_json
 
@@ -167,6 +169,8 @@ def _number(value) -> float:
 
 def _as_scene(scene):
     """A Scene, or the Scene of a TOML path / of one OBJ cage."""
+    from subtrace.io.scene import Scene, load_scene, scene_for_meshes  # Numba (camera.py)
+
     if isinstance(scene, Scene):
         return scene
     path = os.fsdecode(os.fspath(scene))
@@ -262,6 +266,8 @@ def _record(name, tol_px, ref_tol_px, runs, ref) -> SweepRecord:
 
 def image_errors(result, ref) -> dict:
     """The error columns of a render against the reference render (module comment)."""
+    from subtrace.compare import compare_images  # OpenImageIO
+
     c, r = result.channels, ref.channels
     z = np.asarray(c["Z"], np.float64)
     z_ref = np.asarray(r["Z"], np.float64)
