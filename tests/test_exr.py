@@ -12,6 +12,7 @@ import pytest
 import subtrace
 from subtrace.errors import SubtraceError
 from subtrace.io import exr
+from subtrace.io.atomic import atomic_paths, write_text
 from subtrace.io.exr import CHANNEL_ORDER, read_exr, srgb8, write_exr, write_png
 
 H, W = 7, 9
@@ -271,6 +272,29 @@ def test_failed_rename_leaves_existing_file_intact(tmp_path, monkeypatch):
     assert str(path) in str(info.value)
     assert path.read_bytes() == b"previous render"
     assert listing(tmp_path) == ["film.exr"]
+
+
+def test_interrupt_while_writing_leaves_existing_file_intact(tmp_path):
+    # io/atomic is the one writer of EXRs, PNGs, sweep tables and intersect hits: an
+    # interrupt (any BaseException) removes the temporary and keeps the old file
+    path = tmp_path / "hits.csv"
+    path.write_text("old\n")
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_paths([path]) as (temp,):
+            with open(temp, "w") as fh:
+                fh.write("half")
+            raise KeyboardInterrupt
+    assert path.read_text() == "old\n"
+    assert listing(tmp_path) == ["hits.csv"]
+    write_text(path, "new\n")
+    assert path.read_text() == "new\n"
+    assert listing(tmp_path) == ["hits.csv"]
+
+
+def test_text_writer_names_a_missing_folder(tmp_path):
+    with pytest.raises(SubtraceError, match="does not exist"):
+        write_text(tmp_path / "no" / "sweep.csv", "x\n")
+    assert listing(tmp_path) == []
 
 
 def test_exr_not_written_when_preview_folder_is_missing(tmp_path):

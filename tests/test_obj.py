@@ -625,14 +625,14 @@ def test_errors_carry_path_and_line(tmp_path):
 
 def _both_readers(path: Path):
     """(read_fast result or None, read result or the ObjError it raised) for one file."""
-    from subtrace.io.obj import _decode, _Reader
+    from subtrace.io.obj import ObjReader, decode_obj
 
     raw = path.read_bytes()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SubtraceWarning)
-        fast = _Reader(str(path)).read_fast(raw)
+        fast = ObjReader(str(path)).read_fast(raw)
         try:
-            slow = _Reader(str(path)).read(_decode(str(path), raw))
+            slow = ObjReader(str(path)).read(decode_obj(str(path), raw))
         except ObjError as err:
             slow = err
     return fast, slow

@@ -7,7 +7,8 @@ OpenImageIO and sets no environment variable):
 * :func:`compare_images` (:mod:`subtrace.compare`);
 * ``sweep(...)``: the module :mod:`subtrace.sweep`, callable as :func:`subtrace.sweep.sweep`;
 * :func:`intersect_lines` (:mod:`subtrace.lines.api`);
-* the error types of :mod:`subtrace.errors`.
+* the error types of :mod:`subtrace.errors` (and :class:`TopologyKind`, what a
+  TopologyError is about).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ _LAZY = {
     "SubtraceError": "subtrace.errors",
     "ObjError": "subtrace.errors",
     "TopologyError": "subtrace.errors",
+    "TopologyKind": "subtrace.errors",
     "SceneError": "subtrace.errors",
 }
 

@@ -25,7 +25,7 @@ from subtrace.runtime.jit import nb
 
 njit = nb.njit
 
-from subtrace.errors import SceneError
+from subtrace.errors import SceneError, show_value
 
 MAX_RESOLUTION = 32768  # pixels per side, inclusive
 AUTO_VIEW_DIRECTION = (1.0, 0.6, 1.6)  # auto_camera: from the box centre towards the eye
@@ -218,17 +218,17 @@ def check_vector(value, key: str) -> tuple[float, float, float]:
         raise SceneError(f"expected 3 numbers [x, y, z], got {value!r}", key=key)
     items = list(value)
     if len(items) != 3 or not all(_is_number(v) for v in items):
-        raise SceneError(f"expected 3 numbers [x, y, z], got {_show(value)}", key=key)
+        raise SceneError(f"expected 3 numbers [x, y, z], got {show_value(value)}", key=key)
     out = tuple(float(v) for v in items)
     if not all(math.isfinite(v) for v in out):
-        raise SceneError(f"expected finite numbers, got {_show(value)}", key=key)
+        raise SceneError(f"expected finite numbers, got {show_value(value)}", key=key)
     return out
 
 
 def check_fov(value, key: str) -> float:
     """A vertical field of view in degrees, strictly between 0 and 180."""
     if not _is_number(value):
-        raise SceneError(f"expected a number of degrees, got {_show(value)}", key=key)
+        raise SceneError(f"expected a number of degrees, got {show_value(value)}", key=key)
     value = float(value)
     if not (0.0 < value < 180.0):
         raise SceneError(
@@ -242,10 +242,10 @@ def check_fov(value, key: str) -> float:
 def check_resolution(value, key: str) -> int:
     """An image size in pixels, 1..MAX_RESOLUTION."""
     if not _is_number(value) or isinstance(value, (float, np.floating)):
-        raise SceneError(f"expected a whole number of pixels, got {_show(value)}", key=key)
+        raise SceneError(f"expected a whole number of pixels, got {show_value(value)}", key=key)
     if not (1 <= value <= MAX_RESOLUTION):
         raise SceneError(
-            f"must be between 1 and {MAX_RESOLUTION} pixels, got {_show(value)}", key=key
+            f"must be between 1 and {MAX_RESOLUTION} pixels, got {show_value(value)}", key=key
         )
     return int(value)
 
@@ -304,15 +304,3 @@ def _basis(eye, target, up):
 
 def _fmt(v) -> str:
     return "[" + ", ".join(f"{float(x):.9g}" for x in v) + "]"
-
-
-def _show(value) -> str:
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_show(v) for v in value) + "]"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return repr(value)
-    if isinstance(value, dict):
-        return "a table"
-    return str(value)

@@ -28,8 +28,10 @@ import os
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+import OpenImageIO as oiio
 
 from subtrace.errors import SubtraceError
+from subtrace.io.exr import read_exr, write_exr, write_png
 
 PASS, WARN, FAIL = "pass", "warn", "fail"
 EXIT_CODES = {PASS: 0, WARN: 1, FAIL: 2}
@@ -173,8 +175,6 @@ class Comparison:
         """Write :meth:`diff_channels` as an EXR (verdict in the header) and optionally a PNG
         heat map of :meth:`heat` (black: equal, red: half the fail threshold, yellow:
         at the threshold, white: twice it or more)."""
-        from subtrace.io.exr import write_exr, write_png
-
         attrs = {"compare_verdict": self.verdict}
         write_exr(path, self.diff_channels(), attrs)
         if png_path is not None:
@@ -334,8 +334,6 @@ def _channels(image, label: str) -> tuple[dict, str]:
     """(channels, name for messages) of a path or a channel dict."""
     if isinstance(image, dict):
         return image, f"image {label}"
-    from subtrace.io.exr import read_exr
-
     path = os.fsdecode(os.fspath(image))
     try:
         channels, _ = read_exr(path)
@@ -360,8 +358,6 @@ def _finite_or_inf(x: np.ndarray) -> np.ndarray:
 def _mean_flip(ca: dict, cb: dict) -> float | None:
     """Mean LDR FLIP error of R,G,B clipped to [0,1], ``cb`` as the reference; None when
     OpenImageIO has no FLIP_diff."""
-    import OpenImageIO as oiio
-
     flip_diff = getattr(oiio.ImageBufAlgo, "FLIP_diff", None)
     if flip_diff is None:
         return None

@@ -1,4 +1,4 @@
-"""Error types of subtrace.
+"""Error types of subtrace, and how a value a user gave is shown in a message.
 
 Every failure a user can cause (a malformed file, a bad option, an impossible topology) is
 raised as a :class:`SubtraceError` whose message names the file, the line and the problem,
@@ -6,6 +6,8 @@ so the command-line front end can print one line and exit with code 2.
 """
 
 from __future__ import annotations
+
+from enum import Enum
 
 
 class SubtraceError(Exception):
@@ -23,11 +25,28 @@ class ObjError(SubtraceError):
         super().__init__(f"{where}: {problem}")
 
 
-class TopologyError(SubtraceError):
-    """A cage whose topology subtrace cannot subdivide (e.g. a Loop cage with quads)."""
+class TopologyKind(str, Enum):
+    """What is wrong with a cage's topology (:attr:`TopologyError.kind`). A str enum, so a
+    kind also equals its name as text (``err.kind == "scheme"``)."""
 
-    def __init__(self, kind: str, message: str, path=None):
-        self.kind = kind
+    EMPTY = "empty"  # no faces
+    FACE = "face"  # a face with fewer than 3 vertices, or face sizes not matching the indices
+    INDEX = "index"  # a face index out of range
+    POINTS = "points"  # a vertex coordinate that is not finite
+    SCHEME = "scheme"  # an unknown scheme, or a Loop cage with faces other than triangles
+
+    def __str__(self) -> str:
+        return self.value
+
+
+class TopologyError(SubtraceError):
+    """A cage whose topology subtrace cannot subdivide (e.g. a Loop cage with quads).
+
+    kind: a :class:`TopologyKind` (or its text, which is converted; an unknown one is a
+    ValueError, a programming error)."""
+
+    def __init__(self, kind: TopologyKind | str, message: str, path=None):
+        self.kind = TopologyKind(kind)
         self.path = None if path is None else str(path)
         prefix = f"{self.path}: " if self.path else ""
         super().__init__(f"{prefix}{message}")
@@ -57,3 +76,17 @@ class SceneError(SubtraceError):
 
 class SubtraceWarning(UserWarning):
     """Input subtrace can use but that deserves a note (an ignored OBJ statement, a missing MTL)."""
+
+
+def show_value(value) -> str:
+    """A value from a scene file or an option as an error message shows it: TOML's spelling
+    (``true``, ``[1, 2]``, ``'text'``), ``a table`` for a table."""
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(show_value(v) for v in value) + "]"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return repr(value)
+    if isinstance(value, dict):
+        return "a table"
+    return str(value)

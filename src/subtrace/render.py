@@ -665,7 +665,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     try:
         if cages is None:
             cages = load_objects(scene)
-        from subtrace.io.obj import check_coordinates, check_valences
+        from subtrace.io.limits import check_coordinates, check_valences
 
         for c in cages:
             check_coordinates(c.path, c.points, config.MAX_COORDINATE)

@@ -1,32 +1,34 @@
-# subtrace.io.exr: the renderer's film on disk: multi-channel OpenEXR and an 8-bit PNG
-# preview, both through OpenImageIO.
-#
-# Channels are (H,W) arrays, row 0 at the top. Names and pixel types written:
-#   R, G, B, A                      half     colour (linear, already composited), coverage
-#   Z                               float32  ray distance t (+inf where no hit)
-#   N.X, N.Y, N.Z                   float32  shading normal (world space)
-#   level, patch_id, object_id      float32  integers stored exactly (|value| <= 2^24;
-#                                            -1 where no hit)
-# in that order in the written spec; any other channel name is written as float32 after them.
-# OpenEXR stores channels sorted by name, so the order a reader reports is its own;
-# read_exr returns the order above. Compression is ZIP. Header attributes are str, int
-# (32-bit; larger ones are stored as decimal strings), float (stored as 32-bit), 3 floats
-# (V3f), 16 floats (M44f) or bool (int 0/1); names starting with `oiio:` are OpenImageIO's
-# own hints and are not stored in the file.
-# Every file is written to a hidden temporary in the destination folder and moved into place
-# with os.replace, so a failure never leaves a partial file and never touches an existing
-# one; failures raise SubtraceError naming the path.
+"""The renderer's film on disk: multi-channel OpenEXR and an 8-bit PNG
+preview, both through OpenImageIO.
+
+Channels are (H,W) arrays, row 0 at the top. Names and pixel types written:
+  R, G, B, A                      half     colour (linear, already composited), coverage
+  Z                               float32  ray distance t (+inf where no hit)
+  N.X, N.Y, N.Z                   float32  shading normal (world space)
+  level, patch_id, object_id      float32  integers stored exactly (|value| <= 2^24;
+                                           -1 where no hit)
+in that order in the written spec; any other channel name is written as float32 after them.
+OpenEXR stores channels sorted by name, so the order a reader reports is its own;
+read_exr returns the order above. Compression is ZIP. Header attributes are str, int
+(32-bit; larger ones are stored as decimal strings), float (stored as 32-bit), 3 floats
+(V3f), 16 floats (M44f) or bool (int 0/1); names starting with `oiio:` are OpenImageIO's
+own hints and are not stored in the file.
+Every file is written through :mod:`subtrace.io.atomic` (a hidden temporary in the
+destination folder, then os.replace), so a failure never leaves a partial file and never
+touches an existing one; failures raise SubtraceError naming the path.
+"""
 
 from __future__ import annotations
 
 import os
-import secrets
 import threading
 
 import numpy as np
 import OpenImageIO as oiio
 
 from subtrace.errors import SubtraceError
+from subtrace.io.atomic import atomic_paths, check_writable, path_str
+from subtrace.version import VERSION
 
 CHANNEL_ORDER = ("R", "G", "B", "A", "Z", "N.X", "N.Y", "N.Z", "level", "patch_id", "object_id")
 HALF_CHANNELS = frozenset(("R", "G", "B", "A"))
@@ -96,13 +98,6 @@ def write_exr(path, channels: dict, attributes: dict | None = None, png_path=Non
     _write_all(jobs)
 
 
-def check_writable(path) -> None:
-    """Raise SubtraceError now if ``path`` cannot be written (missing folder, a directory,
-    no permission), so that a long render fails before it starts. Leaves nothing behind."""
-    path_str = _path_str(path)
-    os.unlink(_make_temp(path_str))
-
-
 def write_png(path, rgb_linear) -> None:
     """Write (H,W,3) linear RGB as an 8-bit sRGB PNG (clipped to 0..1, NaN -> 0).
 
@@ -134,19 +129,19 @@ def read_exr(path) -> tuple[dict[str, np.ndarray], dict]:
     int, float, or a tuple for vectors / matrices), plus ``compression``.
     Raises SubtraceError naming the file when it is missing or cannot be read.
     """
-    path_str = _path_str(path)
-    if not os.path.exists(path_str):
-        raise SubtraceError(f"{path_str}: no such file")
-    if os.path.isdir(path_str):
-        raise SubtraceError(f"{path_str}: is a directory, expected an image file")
-    inp = oiio.ImageInput.open(path_str)
+    file = path_str(path)
+    if not os.path.exists(file):
+        raise SubtraceError(f"{file}: no such file")
+    if os.path.isdir(file):
+        raise SubtraceError(f"{file}: is a directory, expected an image file")
+    inp = oiio.ImageInput.open(file)
     if inp is None:
-        raise SubtraceError(f"{path_str}: cannot read the image: {_oiio_error()}")
+        raise SubtraceError(f"{file}: cannot read the image: {_oiio_error()}")
     try:
         spec = inp.spec()
         pixels = inp.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
         if pixels is None:
-            raise SubtraceError(f"{path_str}: cannot read the pixels: {_oiio_error(inp)}")
+            raise SubtraceError(f"{file}: cannot read the pixels: {_oiio_error(inp)}")
         attributes = {}
         for param in spec.extra_attribs:
             value = param.value
@@ -201,9 +196,7 @@ def _check_integers(name: str, array: np.ndarray) -> None:
 
 
 def _header(attributes: dict) -> dict:
-    from subtrace.version import VERSION as __version__
-
-    header = {"Software": f"subtrace {__version__}", "subtrace:version": __version__}
+    header = {"Software": f"subtrace {VERSION}", "subtrace:version": VERSION}
     for key, value in attributes.items():
         if not isinstance(key, str) or not key:
             raise TypeError(f"attribute names must be non-empty strings, got {key!r}")
@@ -246,74 +239,36 @@ def _png_spec(width: int, height: int):
 
 
 def _write_all(jobs) -> None:
-    """Write each (path, format, spec, pixels) to a temporary, then move all into place.
+    """Write each (path, format, spec, pixels) to a temporary, then move all into place
+    (:func:`subtrace.io.atomic.atomic_paths`).
 
     pixels: an (H,W,C) array, a list of C (H,W) float32 channels (see _write_image), or a
     function returning one of those. Every temporary is created first (so a bad folder fails
     before anything is written); the jobs after the first are written on threads of their
     own while the first is written here (OpenImageIO releases the GIL while it encodes).
     """
-    temps: list[str | None] = []
     errors: list[BaseException | None] = [None] * len(jobs)
+    with atomic_paths([path for path, _, _, _ in jobs]) as temps:
 
-    def write(k: int) -> None:
-        path, fmt, spec, pixels = jobs[k]
-        try:
-            _write_image(_path_str(path), temps[k], fmt, spec,
-                         pixels() if callable(pixels) else pixels)
-        except BaseException as exc:  # re-raised below, once every writer has finished
-            errors[k] = exc
+        def write(k: int) -> None:
+            path, fmt, spec, pixels = jobs[k]
+            try:
+                _write_image(path_str(path), temps[k], fmt, spec,
+                             pixels() if callable(pixels) else pixels)
+            except BaseException as exc:  # re-raised below, once every writer has finished
+                errors[k] = exc
 
-    try:
-        for path, _, _, _ in jobs:
-            temps.append(_make_temp(_path_str(path)))
         helpers = [threading.Thread(target=write, args=(k,)) for k in range(1, len(jobs))]
         for helper in helpers:
             helper.start()
-        write(0)
-        for helper in helpers:
-            helper.join()
+        try:
+            write(0)
+        finally:
+            for helper in helpers:
+                helper.join()
         for exc in errors:
             if exc is not None:
                 raise exc
-        for k, (path, _, _, _) in enumerate(jobs):
-            try:
-                os.replace(temps[k], _path_str(path))
-            except OSError as err:
-                raise SubtraceError(
-                    f"{_path_str(path)}: cannot write the file: {_reason(err)}"
-                ) from None
-            temps[k] = None
-    finally:
-        for temp in temps:
-            if temp is not None:
-                try:
-                    os.unlink(temp)
-                except OSError:
-                    pass
-
-
-def _make_temp(path_str: str) -> str:
-    """Create an empty hidden temporary beside path_str (mode 0666 less the umask)."""
-    folder, name = os.path.split(os.path.abspath(path_str))
-    if os.path.isdir(path_str):
-        raise SubtraceError(f"{path_str}: is a directory, expected a file name")
-    if not os.path.isdir(folder):
-        what = "is not a directory" if os.path.exists(folder) else "does not exist"
-        raise SubtraceError(
-            f"{path_str}: cannot write the file: the folder {folder} {what}; create it first"
-        )
-    for _ in range(100):
-        temp = os.path.join(folder, f".{name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-        try:
-            fd = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-        except FileExistsError:
-            continue
-        except OSError as err:
-            raise SubtraceError(f"{path_str}: cannot write the file: {_reason(err)}") from None
-        os.close(fd)
-        return temp
-    raise SubtraceError(f"{path_str}: cannot create a temporary file in {folder}")
 
 
 def _write_image(path_str: str, temp: str, fmt: str, spec, pixels) -> None:
@@ -349,17 +304,6 @@ def _write_rows(out, arrays: list[np.ndarray]) -> bool:
         if not out.write_scanlines(y0, y1, 0, chunk):
             return False
     return True
-
-
-def _path_str(path) -> str:
-    path = os.fspath(path)
-    return os.fsdecode(path) if isinstance(path, bytes) else path
-
-
-def _reason(err: OSError) -> str:
-    if isinstance(err, PermissionError):
-        return "permission denied"
-    return err.strerror or str(err)
 
 
 def _oiio_error(obj=None) -> str:

@@ -1,22 +1,24 @@
-# subtrace.io.obj: Wavefront OBJ cages with OpenSubdiv `t` tags -> ObjData.
-#
-# Owns the text format only; topology checks beyond index ranges live in mesh/. Layout of
-# ObjData, every array C-contiguous:
-#   points (V,3) f8 from `v`; uvs (T,2) f8 from `vt`; normals (N,3) f8 from `vn`.
-#   Faces as written, never triangulated: face_sizes (F,) i4 and face_verts (sum,) i4,
-#   0-based, in file order and winding. face_uvs / face_normals (sum,) i4 are aligned with
-#   face_verts and hold -1 where a corner names no vt / vn.
-#   face_material / face_group / face_object (F,) i4 index the name tuples (-1: no material).
-#   Tags: crease_edges (k,2) i4 + crease_sharpness (k,) f4, corner_verts (c,) i4 +
-#   corner_sharpness (c,) f4, hole_faces (h,) i4, all 0-based; sharpness >= 10 is infinite.
-# Tags follow OpenSubdiv's regression reader (regression/common/shape_utils.cpp parses
-# `t name nI/nF/nS ints floats strings`, far_utils.h interprets it); see _Reader._tag.
-# Speed: a jitted byte scanner (_scan_bytes) reads the v / vt / vn / f lines and lists the
-# other statements for Python; anything it cannot read exactly as the statement reader does
-# (continuation lines, malformed or out-of-range values) sends the file to the statement
-# reader (_Reader.read), which is also the tests' oracle. That reader splits statements in
-# one Python pass keeping number tokens as strings; numpy converts each block in bulk, and
-# only a failed conversion walks the rows again to name the first bad line.
+"""Wavefront OBJ cages with OpenSubdiv `t` tags -> ObjData.
+
+Owns the text format only; topology checks beyond index ranges live in mesh/, the range
+checks a render applies (coordinates, valences) in :mod:`subtrace.io.limits`. Layout of
+ObjData, every array C-contiguous:
+  points (V,3) f8 from `v`; uvs (T,2) f8 from `vt`; normals (N,3) f8 from `vn`.
+  Faces as written, never triangulated: face_sizes (F,) i4 and face_verts (sum,) i4,
+  0-based, in file order and winding. face_uvs / face_normals (sum,) i4 are aligned with
+  face_verts and hold -1 where a corner names no vt / vn.
+  face_material / face_group / face_object (F,) i4 index the name tuples (-1: no material).
+  Tags: crease_edges (k,2) i4 + crease_sharpness (k,) f4, corner_verts (c,) i4 +
+  corner_sharpness (c,) f4, hole_faces (h,) i4, all 0-based; sharpness >= 10 is infinite.
+Tags follow OpenSubdiv's regression reader (regression/common/shape_utils.cpp parses
+`t name nI/nF/nS ints floats strings`, far_utils.h interprets it); see ObjReader._tag.
+Speed: a jitted byte scanner (:mod:`subtrace.io.obj_scan`) reads the v / vt / vn / f lines
+and lists the other statements for Python; anything it cannot read exactly as the statement
+reader does (continuation lines, malformed or out-of-range values) sends the file to the
+statement reader (ObjReader.read), which is also the tests' oracle. That reader splits
+statements in one Python pass keeping number tokens as strings; numpy converts each block in
+bulk, and only a failed conversion walks the rows again to name the first bad line.
+"""
 
 from __future__ import annotations
 
@@ -27,10 +29,11 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-from subtrace.runtime.jit import nb
 import numpy as np
 
 from subtrace.errors import ObjError, SubtraceWarning
+from subtrace.io.obj_scan import MAX_INDEX, scan
+from subtrace.io.text import decode, read_bytes
 
 DEFAULT_NAME = "default"  # group / object of faces before any `g` / `o`
 DEFAULT_DIFFUSE = (0.8, 0.8, 0.8)  # Kd of a material with no (readable) definition
@@ -38,8 +41,6 @@ DEFAULT_DIFFUSE = (0.8, 0.8, 0.8)  # Kd of a material with no (readable) definit
 BOUNDARY_NONE = 0  # Sdc VTX_BOUNDARY_NONE
 BOUNDARY_EDGE_AND_CORNER = 1  # Sdc VTX_BOUNDARY_EDGE_AND_CORNER
 BOUNDARY_EDGE_ONLY = 2  # Sdc VTX_BOUNDARY_EDGE_ONLY (OpenSubdiv's default)
-
-_MAX_INDEX = 2**31 - 1  # indices are stored as int32
 
 _CREASE_METHODS = {"normal": "uniform", "chaikin": "chaikin"}
 _SMOOTH_TRIANGLES = ("catmark", "smooth")
@@ -99,37 +100,29 @@ def read_obj(path) -> ObjData:
     path = os.fspath(path)
     if isinstance(path, bytes):
         path = os.fsdecode(path)
-    raw = _read_bytes(path)
+    raw = read_obj_bytes(path)
     # ASCII is valid UTF-8 without a byte-order mark: only other files need checking first
-    text = None if raw.isascii() else _decode(path, raw)
-    data = _Reader(path).read_fast(raw) or _Reader(path).read(
-        _decode(path, raw) if text is None else text)
+    text = None if raw.isascii() else decode_obj(path, raw)
+    data = ObjReader(path).read_fast(raw) or ObjReader(path).read(
+        decode_obj(path, raw) if text is None else text)
     for message in data.warnings:
         warnings.warn(message, SubtraceWarning, stacklevel=2)
     return data
 
 
-def _read_bytes(path: str) -> bytes:
-    try:
-        return Path(path).read_bytes()
-    except IsADirectoryError:
-        raise ObjError(path, None, "is a directory, expected an OBJ file") from None
-    except FileNotFoundError:
-        raise ObjError(path, None, "no such file") from None
-    except PermissionError:
-        raise ObjError(path, None, "cannot read the file: permission denied") from None
-    except OSError as err:
-        raise ObjError(path, None, f"cannot read the file: {err.strerror or err}") from None
+def _error(path: str):
+    """The ``error(problem, line)`` of :mod:`subtrace.io.text` for the OBJ file ``path``."""
+    return lambda problem, line: ObjError(path, line, problem)
 
 
-def _decode(path: str, data: bytes) -> str:
-    """UTF-8 text without a byte-order mark; a bad byte is an error naming its line."""
-    from subtrace.io.text import BadByte, utf8_text
+def read_obj_bytes(path: str) -> bytes:
+    """The bytes of the OBJ file ``path``; ObjError naming it when it cannot be read."""
+    return read_bytes(path, _error(path), expected="an OBJ file")
 
-    try:
-        return utf8_text(data)
-    except BadByte as err:
-        raise ObjError(path, err.line, f"{err}; save the file as UTF-8") from None
+
+def decode_obj(path: str, data: bytes) -> str:
+    """UTF-8 text without a byte-order mark; a bad byte is an ObjError naming its line."""
+    return decode(data, _error(path))
 
 
 def _logical_lines(text: str):
@@ -169,8 +162,9 @@ def _runs_to_array(runs: list, num_faces: int, ids: dict) -> np.ndarray:
     return out
 
 
-class _Reader:
-    """One pass over the statements, then bulk conversion and validation."""
+class ObjReader:
+    """One pass over the statements, then bulk conversion and validation (:meth:`read`), or
+    the byte scanner's result completed (:meth:`read_fast`). One reader per file read."""
 
     def __init__(self, path: str):
         self.path = path
@@ -215,26 +209,16 @@ class _Reader:
     def read_fast(self, data: bytes) -> ObjData | None:
         """What `read` returns, from the byte scanner; None where only `read` can tell.
 
-        The scanner (_scan_bytes) reads v / vt / vn / f lines and lists the other statements
-        for _statement. Continuation lines, anything malformed or out of range, and errors of
-        other statements go to `read` (on a fresh _Reader), which reports them.
+        The scanner (:func:`subtrace.io.obj_scan.scan`) reads v / vt / vn / f lines and lists
+        the other statements for _statement. Continuation lines, anything malformed or out of range, and errors of
+        other statements go to `read` (on a fresh ObjReader), which reports them.
         """
         if b"\\" in data:
             return None
-        start = 3 if data.startswith(b"\xef\xbb\xbf") else 0
-        max_lines = data.count(b"\n") + (data.count(b"\r") if b"\r" in data else 0) + 1
-        points = np.empty(3 * max_lines)
-        uvs = np.empty(2 * max_lines)
-        normals = np.empty(3 * max_lines)
-        face_sizes = np.empty(max_lines, dtype=np.int32)
-        corners = np.empty((3, len(data) // 2 + 1), dtype=np.int32)
-        other = np.empty((max_lines, 4), dtype=np.int64)
-        slow = np.empty((3 * max_lines, 4), dtype=np.int64)
-        counts = np.zeros(7, dtype=np.int64)
-        buffer = np.frombuffer(data, dtype=np.uint8)
-        if not _scan_bytes(buffer, start, points, uvs, normals, face_sizes, corners, other,
-                           slow, counts):
+        scanned = scan(data)
+        if scanned is None:
             return None
+        points, uvs, normals, face_sizes, corners, other, slow, counts = scanned
         nv, nt, nn, nf, nc, no, ns = counts.tolist()
         if nf == 0:
             return None
@@ -373,6 +357,18 @@ class _Reader:
         if name not in _TAGS:
             self.warn(number, f"unknown tag '{name}' ignored (known: {', '.join(sorted(_TAGS))})")
             return
+        ints, floats, strings = self._tag_values(number, name, parts)
+        if name in ("crease", "corner"):
+            self._tag_sharpness(number, name, ints, floats, strings)
+        elif name == "hole":
+            if floats or strings:
+                self.fail(number, f"tag 'hole' takes face indices only (n/0/0), got {parts[2]}")
+            self.holes.append((number, np.array(ints, dtype=np.int64)))
+        else:
+            self._tag_option(number, name, parts[2], ints, floats, strings)
+
+    def _tag_values(self, number, name, parts) -> tuple[list, list, list]:
+        """The ints, floats and strings of a tag line, as its count header announces them."""
         header = parts[2].split("/") if len(parts) > 2 else []
         if len(header) != 3 or not all(h.isascii() and h.isdigit() for h in header):
             got = f"'{parts[2]}'" if len(parts) > 2 else "nothing"
@@ -395,7 +391,7 @@ class _Reader:
                 ints.append(int(token))
             except ValueError:
                 self.fail(number, f"tag '{name}': '{token}' is not an integer")
-            if abs(ints[-1]) > _MAX_INDEX:
+            if abs(ints[-1]) > MAX_INDEX:
                 self.fail(number, f"tag '{name}': index {token} out of range")
         floats = []
         for token in values[n_ints : n_ints + n_floats]:
@@ -406,56 +402,59 @@ class _Reader:
             if math.isnan(value):
                 self.fail(number, f"tag '{name}': '{token}' is not a number")
             floats.append(value)
-        strings = values[n_ints + n_floats :]
-        counts = (n_ints, n_floats, n_strings)
+        return ints, floats, values[n_ints + n_floats :]
 
-        if name in ("crease", "corner"):
-            # far_utils.h reads crease ints pairwise, (v0 v1) (v2 v3) ..., not as a chain, and
-            # drops an odd last one; here an odd count is an error. Both tags take one
-            # sharpness for all or one per edge / vertex (OpenSubdiv indexes a crease's floats
-            # by int position, floatargs[2k] for edge k, which only works with one float).
-            # OpenSubdiv clamps negative sharpness to 0; here it is an error.
-            items = n_ints // 2 if name == "crease" else n_ints
-            if name == "crease" and (n_ints < 2 or n_ints % 2):
-                self.fail(
-                    number,
-                    "tag 'crease' needs pairs of vertex indices v0 v1 [v2 v3 ...] "
-                    f"(one pair per edge), got {n_ints} integers",
-                )
-            if name == "corner" and n_ints < 1:
-                self.fail(number, "tag 'corner' needs at least one vertex index")
-            if n_floats not in (1, items) or n_strings:
-                per = "edge" if name == "crease" else "vertex"
-                self.fail(
-                    number,
-                    f"tag '{name}' needs 1 sharpness value or one per {per} ({items}) and "
-                    f"no strings, got {n_floats} floats and {n_strings} strings",
-                )
-            for value in floats:
-                if value < 0.0:
-                    self.fail(number, f"tag '{name}': negative sharpness {value:g}")
-            with np.errstate(over="ignore"):  # beyond float32 is infinitely sharp anyway
-                sharpness = np.array(floats * items if n_floats == 1 else floats,
-                                     dtype=np.float32)
-            if name == "crease":
-                pairs = np.array(ints, dtype=np.int64).reshape(-1, 2)
-                loops = pairs[pairs[:, 0] == pairs[:, 1]]
-                if len(loops):
-                    self.fail(number, f"tag 'crease': edge {loops[0][0]} {loops[0][1]} "
-                              "joins a vertex to itself")
-                self.creases.append((number, pairs, sharpness))
-            else:
-                self.corners.append((number, np.array(ints, dtype=np.int64), sharpness))
-        elif name == "hole":
-            if n_floats or n_strings:
-                self.fail(number, f"tag 'hole' takes face indices only (n/0/0), got {parts[2]}")
-            self.holes.append((number, np.array(ints, dtype=np.int64)))
-        elif name == "interpolateboundary":
+    def _tag_sharpness(self, number, name, ints, floats, strings):
+        """A `crease` or `corner` tag: vertex pairs / vertices and their sharpness.
+
+        far_utils.h reads crease ints pairwise, (v0 v1) (v2 v3) ..., not as a chain, and
+        drops an odd last one; here an odd count is an error. Both tags take one sharpness for
+        all or one per edge / vertex (OpenSubdiv indexes a crease's floats by int position,
+        floatargs[2k] for edge k, which only works with one float). OpenSubdiv clamps negative
+        sharpness to 0; here it is an error.
+        """
+        n_ints, n_floats, n_strings = len(ints), len(floats), len(strings)
+        items = n_ints // 2 if name == "crease" else n_ints
+        if name == "crease" and (n_ints < 2 or n_ints % 2):
+            self.fail(
+                number,
+                "tag 'crease' needs pairs of vertex indices v0 v1 [v2 v3 ...] "
+                f"(one pair per edge), got {n_ints} integers",
+            )
+        if name == "corner" and n_ints < 1:
+            self.fail(number, "tag 'corner' needs at least one vertex index")
+        if n_floats not in (1, items) or n_strings:
+            per = "edge" if name == "crease" else "vertex"
+            self.fail(
+                number,
+                f"tag '{name}' needs 1 sharpness value or one per {per} ({items}) and "
+                f"no strings, got {n_floats} floats and {n_strings} strings",
+            )
+        for value in floats:
+            if value < 0.0:
+                self.fail(number, f"tag '{name}': negative sharpness {value:g}")
+        with np.errstate(over="ignore"):  # beyond float32 is infinitely sharp anyway
+            sharpness = np.array(floats * items if n_floats == 1 else floats, dtype=np.float32)
+        if name == "crease":
+            pairs = np.array(ints, dtype=np.int64).reshape(-1, 2)
+            loops = pairs[pairs[:, 0] == pairs[:, 1]]
+            if len(loops):
+                self.fail(number, f"tag 'crease': edge {loops[0][0]} {loops[0][1]} "
+                          "joins a vertex to itself")
+            self.creases.append((number, pairs, sharpness))
+        else:
+            self.corners.append((number, np.array(ints, dtype=np.int64), sharpness))
+
+    def _tag_option(self, number, name, header, ints, floats, strings):
+        """An `interpolateboundary`, `creasemethod` or `smoothtriangles` tag (count header
+        ``header`` as written)."""
+        counts = (len(ints), len(floats), len(strings))
+        if name == "interpolateboundary":
             if counts != (1, 0, 0):
                 self.fail(
                     number,
                     "tag 'interpolateboundary' expects 1/0/0 and one integer: 0 (none), "
-                    f"1 (edge and corner) or 2 (edge only); got {parts[2]}",
+                    f"1 (edge and corner) or 2 (edge only); got {header}",
                 )
             if ints[0] not in (BOUNDARY_NONE, BOUNDARY_EDGE_AND_CORNER, BOUNDARY_EDGE_ONLY):
                 self.fail(
@@ -466,7 +465,7 @@ class _Reader:
             self.boundary = ints[0]
         elif name == "creasemethod":
             if counts != (0, 0, 1) or strings[0] not in _CREASE_METHODS:
-                got = strings[0] if counts == (0, 0, 1) else parts[2]
+                got = strings[0] if counts == (0, 0, 1) else header
                 self.fail(
                     number,
                     "tag 'creasemethod' expects 0/0/1 and the string 'normal' or 'chaikin', "
@@ -475,7 +474,7 @@ class _Reader:
             self.crease_method = _CREASE_METHODS[strings[0]]
         else:  # smoothtriangles
             if counts != (0, 0, 1) or strings[0] not in _SMOOTH_TRIANGLES:
-                got = strings[0] if counts == (0, 0, 1) else parts[2]
+                got = strings[0] if counts == (0, 0, 1) else header
                 self.fail(
                     number,
                     "tag 'smoothtriangles' expects 0/0/1 and the string 'catmark' or "
@@ -648,7 +647,7 @@ class _Reader:
                     if index + before < 0:
                         self.fail(number, f"relative {what} index {index} out of range: "
                                   f"only {before} {keyword} lines before this face")
-                elif (check_forward and index > total) or index > _MAX_INDEX:
+                elif (check_forward and index > total) or index > MAX_INDEX:
                     self.fail(number, f"{what} index {index} out of range: the file has "
                               f"{total} {keyword} lines")
             start += size
@@ -741,264 +740,12 @@ class _Reader:
         )
 
 
-# -- byte scanner (the fast path) --------------------------------------------------------------
-# Reads v / vt / vn / f lines straight from the file's bytes and lists every other statement
-# for _Reader._statement. It accepts only what it can read exactly as the statement reader
-# does and answers False for anything else (a malformed or out-of-range value, a byte it
-# cannot classify), after which the statement reader reads the file again and reports it.
-
-_FAST_MAX_DIGITS = 18  # significant digits kept in an int64 mantissa (< 10^18)
-_FAST_MAX_POW10 = 22  # 10^22 is the largest power of ten a double holds exactly
-_POW10 = np.array([10.0**k for k in range(_FAST_MAX_POW10 + 1)])  # each exact
-
-
-# byte classes: 1 whitespace inside a line for str.split() (\t \v \f \x1c-\x1f, space),
-# 2 no more tokens after it on the line (\n, \r, the # of a comment)
-_BYTE_CLASS = np.zeros(256, dtype=np.uint8)
-_BYTE_CLASS[[9, 11, 12, 28, 29, 30, 31, 32]] = 1
-_BYTE_CLASS[[10, 13, 35]] = 2
-
-
-@nb.njit(cache=True)
-def _is_space(b):
-    return _BYTE_CLASS[b] == 1
-
-
-@nb.njit(cache=True)
-def _ends_tokens(b):
-    return _BYTE_CLASS[b] == 2
-
-
-@nb.njit(cache=True)
-def _parse_float(data, a, b):
-    """(code, value) of the token data[a:b]: code 0 for a value equal to float()'s, 1 for a
-    decimal number float() must convert (too many digits or a large exponent), 2 for
-    anything else.
-
-    Clinger's fast path: a mantissa m <= 2^53 and a power 10^k with |k| <= 22 are exact
-    doubles, so the single rounding of m * 10^k or m / 10^-k is the correctly rounded value.
-    """
-    i = a
-    neg = False
-    if data[i] == 43 or data[i] == 45:  # + or -
-        neg = data[i] == 45
-        i += 1
-    mantissa = 0
-    digits = 0  # significant digits in the mantissa
-    point = 0  # digits of the mantissa after the decimal point
-    seen = False
-    exact = True
-    after = False
-    while i < b:
-        c = data[i]
-        if 48 <= c <= 57:
-            seen = True
-            if digits < _FAST_MAX_DIGITS:
-                mantissa = mantissa * 10 + (c - 48)
-                if mantissa > 0:
-                    digits += 1
-                if after:
-                    point += 1
-            else:
-                exact = False  # a digit the mantissa cannot hold: float() converts this one
-        elif c == 46 and not after:  # .
-            after = True
-        else:
-            break
-        i += 1
-    if not seen:
-        return 2, 0.0
-    exponent = 0
-    if i < b and (data[i] == 101 or data[i] == 69):  # e or E
-        i += 1
-        eneg = False
-        if i < b and (data[i] == 43 or data[i] == 45):
-            eneg = data[i] == 45
-            i += 1
-        if i == b:
-            return 2, 0.0
-        while i < b and 48 <= data[i] <= 57:
-            if exponent < 100000:
-                exponent = exponent * 10 + (data[i] - 48)
-            i += 1
-        if eneg:
-            exponent = -exponent
-    if i != b:
-        return 2, 0.0
-    if not exact:
-        return 1, 0.0
-    if mantissa == 0:
-        return 0, -0.0 if neg else 0.0
-    power = exponent - point
-    if mantissa > 2**53 or power > _FAST_MAX_POW10 or power < -_FAST_MAX_POW10:
-        return 1, 0.0
-    scale = _POW10[abs(power)]
-    value = mantissa * scale if power >= 0 else mantissa / scale
-    return 0, -value if neg else value
-
-
-@nb.njit(cache=True)
-def _parse_index(data, a, b):
-    """The OBJ index data[a:b] as written (1-based, or negative to count back); 0 for
-    anything the statement reader would reject or convert differently."""
-    i = a
-    neg = False
-    if i < b and (data[i] == 43 or data[i] == 45):
-        neg = data[i] == 45
-        i += 1
-    if i == b or b - i > 10:
-        return 0
-    value = 0
-    while i < b:
-        c = data[i]
-        if not 48 <= c <= 57:
-            return 0
-        value = value * 10 + (c - 48)
-        i += 1
-    if value > _MAX_INDEX:
-        return 0
-    return -value if neg else value
-
-
-@nb.njit(cache=True)
-def _scan_bytes(data, start, points, uvs, normals, face_sizes, corners, other, slow, counts):
-    """Read the statements of `data` (uint8) from byte `start`; True when it read them all.
-
-    Fills points / uvs / normals (flat float64), face_sizes and corners (3, C) int32 rows of
-    v / vt / vn indices (-1 where absent); other (n,4) gets (start, end, line, faces so far)
-    of every other statement, comment removed; slow (n,4) gets (start, end, block, index) of
-    numbers for float() (block 0 points, 1 uvs, 2 normals). counts gets the numbers of
-    points, uvs, normals, faces, corners, other statements and slow numbers.
-    """
-    n = len(data)
-    elements = np.zeros(3, dtype=np.int64)  # v, vt, vn statements read so far
-    nf = nc = no = ns = 0
-    number = 0
-    i = start
-    while i < n:
-        number += 1
-        # the keyword: 0 v, 1 vt, 2 vn, 3 f, -1 any other statement, and -2 none (a blank
-        # or comment line)
-        s = i
-        j = s
-        while j < n and _is_space(data[j]):
-            j += 1
-        k = j
-        while k < n and _BYTE_CLASS[data[k]] == 0 and data[k] < 128:
-            k += 1
-        kind = -2 if k == j and (j == n or _ends_tokens(data[j])) else -1
-        if k == n or _BYTE_CLASS[data[k]] != 0:
-            if k - j == 1:
-                kind = 0 if data[j] == 118 else (3 if data[j] == 102 else -1)
-            elif k - j == 2 and data[j] == 118:
-                kind = 1 if data[j + 1] == 116 else (2 if data[j + 1] == 110 else -1)
-        # the tokens after the keyword; v / vn keep 3 numbers, vt 2 (w, colours ignored)
-        width = 2 if kind == 1 else 3
-        size = 0
-        p = k
-        while kind >= 0:
-            while p < n and _is_space(data[p]):
-                p += 1
-            if p == n or _ends_tokens(data[p]):
-                break
-            q = p
-            while q < n and _BYTE_CLASS[data[q]] == 0:
-                q += 1
-            if kind == 3:
-                # a corner v, v/vt, v//vn or v/vt/vn, 0-based: negative indices count back
-                # from the elements read so far, positive ones are checked at the end
-                a = p
-                b = p
-                for field in range(3):
-                    b = a
-                    while b < q and data[b] != 47:  # /
-                        b += 1
-                    index = -1
-                    if b > a or field == 0:
-                        index = _parse_index(data, a, b)
-                        if index > 0:
-                            index -= 1
-                        elif index < 0:
-                            index += elements[field]
-                        else:
-                            return False
-                        if index < 0:
-                            return False
-                    corners[field, nc + size] = index
-                    a = b + 1
-                if b < q:
-                    return False  # a fourth field
-            elif size < width:
-                code, value = _parse_float(data, p, q)
-                if code == 2:
-                    return False
-                index = width * elements[kind] + size
-                if kind == 0:
-                    points[index] = value
-                elif kind == 1:
-                    uvs[index] = value
-                else:
-                    normals[index] = value
-                if code == 1:
-                    slow[ns, 0] = p
-                    slow[ns, 1] = q
-                    slow[ns, 2] = kind
-                    slow[ns, 3] = index
-                    ns += 1
-            else:
-                break
-            size += 1
-            p = q
-        # the rest of the line (ignored tokens, a comment) and its end: \n, \r or \r\n
-        e = p
-        end = -1
-        while e < n and data[e] != 10 and data[e] != 13:
-            if data[e] == 35 and end < 0:
-                end = e
-            e += 1
-        i = e + 2 if e + 1 < n and data[e] == 13 and data[e + 1] == 10 else e + 1
-        if kind == -2:
-            continue
-        if kind == -1:
-            # any other statement, its comment removed, for the statement reader
-            other[no, 0] = s
-            other[no, 1] = e if end < 0 else end
-            other[no, 2] = number
-            other[no, 3] = nf
-            no += 1
-        elif kind == 3:
-            if size < 3:
-                return False
-            face_sizes[nf] = size
-            nf += 1
-            nc += size
-        else:
-            if size < (1 if kind == 1 else 3):
-                return False
-            if size == 1:
-                uvs[2 * elements[1] + 1] = 0.0  # vt u: v defaults to 0
-            elements[kind] += 1
-    # positive indices may name elements defined later: check them against the totals
-    for c in range(nc):
-        for field in range(3):
-            if corners[field, c] >= elements[field]:
-                return False
-    counts[0] = elements[0]
-    counts[1] = elements[1]
-    counts[2] = elements[2]
-    counts[3] = nf
-    counts[4] = nc
-    counts[5] = no
-    counts[6] = ns
-    return True
-
-
 def statement_line(path, keyword: str, index: int) -> int | None:
     """The 1-based line of the ``index``-th (0-based) ``keyword`` statement of the OBJ file
     ``path`` (e.g. the line of vertex ``index`` for ``"v"``), or None where it cannot be
     found. For messages about a file that was read without error."""
     try:
-        raw = _read_bytes(os.fspath(path))
+        raw = read_obj_bytes(os.fspath(path))
         text = raw.decode("utf-8", errors="replace")
     except (ObjError, OSError, TypeError):
         return None
@@ -1011,41 +758,3 @@ def statement_line(path, keyword: str, index: int) -> int | None:
                 return number
             seen += 1
     return None
-
-
-def check_coordinates(path, points, limit: float) -> None:
-    """Raise ObjError naming the line of the first vertex of ``points`` (V,3) with a
-    coordinate of magnitude above ``limit`` (``config.MAX_COORDINATE``)."""
-    import numpy as np
-
-    big = np.nonzero(np.abs(points).max(axis=1, initial=0.0) > limit)[0] if len(points) else []
-    if len(big):
-        i = int(big[0])
-        value = float(np.abs(points[i]).max())
-        raise ObjError(
-            path, statement_line(path, "v", i) if path else None,
-            f"vertex {i + 1} has a coordinate of magnitude {value:.3g}; subtrace renders "
-            f"coordinates up to {limit:.0e} (beyond, squared distances overflow double "
-            "precision): scale the model down")
-
-
-def check_valences(path, face_sizes, valence, limit: int, catmark: bool) -> None:
-    """Raise ObjError naming the line of the first face with more than ``limit`` vertices
-    (Catmull-Clark: its centre becomes a vertex of that valence) or of the first vertex
-    of valence above ``limit`` (``config.MAX_VALENCE``)."""
-    import numpy as np
-
-    hint = (f"subtrace renders valences up to {limit} (refining around such a vertex takes "
-            "minutes and more): split the face or the fan")
-    if catmark:
-        big = np.nonzero(np.asarray(face_sizes) > limit)[0]
-        if len(big):
-            f = int(big[0])
-            raise ObjError(path, statement_line(path, "f", f) if path else None,
-                           f"face {f + 1} has {int(face_sizes[f])} vertices, so its centre "
-                           f"has valence {int(face_sizes[f])}; {hint}")
-    big = np.nonzero(np.asarray(valence) > limit)[0]
-    if len(big):
-        v = int(big[0])
-        raise ObjError(path, statement_line(path, "v", v) if path else None,
-                       f"vertex {v + 1} has valence {int(valence[v])}; {hint}")

@@ -60,10 +60,9 @@ import tomllib
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from subtrace.errors import SceneError
-from subtrace.io.text import BadByte, utf8_text
+from subtrace.errors import SceneError, show_value
+from subtrace.io.text import decode, read_bytes
 from subtrace.io.obj import BOUNDARY_EDGE_AND_CORNER, BOUNDARY_EDGE_ONLY, BOUNDARY_NONE
-from subtrace.camera import _show  # the same rendering of values in messages
 from subtrace.camera import (
     Camera,
     auto_camera,
@@ -206,7 +205,7 @@ def load_scene(path) -> Scene:
     path = os.fspath(path)
     if isinstance(path, bytes):
         path = os.fsdecode(path)
-    text = _decode(path, _read_bytes(path))
+    text = _read_text(path)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
@@ -274,26 +273,14 @@ def scene_for_meshes(meshes, scheme: str | None = None) -> Scene:
         raise SceneError(err.problem, key=key) from None
 
 
-def _read_bytes(path: str) -> bytes:
-    try:
-        return Path(path).read_bytes()
-    except IsADirectoryError:
-        raise SceneError("is a directory, expected a TOML scene file", path=path) from None
-    except FileNotFoundError:
-        raise SceneError("no such scene file", path=path) from None
-    except PermissionError:
-        raise SceneError("cannot read the file: permission denied", path=path) from None
-    except OSError as err:
-        raise SceneError(f"cannot read the file: {err.strerror or err}", path=path) from None
+def _read_text(path: str) -> str:
+    """The scene file's text; SceneError naming the file (and the line of a bad byte)."""
 
+    def error(problem, line):
+        return SceneError(problem, path=path, line=line)
 
-def _decode(path: str, data: bytes) -> str:
-    """UTF-8 text (a byte-order mark is dropped); a bad byte is an error naming its line."""
-    try:
-        return utf8_text(data)
-    except BadByte as err:
-        raise SceneError(f"{err}; save the scene file as UTF-8", path=path,
-                         line=err.line) from None
+    data = read_bytes(path, error, expected="a TOML scene file", noun="scene file")
+    return decode(data, error, noun="scene file")
 
 
 _AT_LINE = re.compile(r"\s*\(at line (\d+), column (\d+)\)\s*$")
@@ -396,7 +383,7 @@ def _render(ctx, table) -> RenderSettings:
     if "headlight" in table:
         value = table["headlight"]
         if not isinstance(value, bool):
-            raise ctx.error(where + ("headlight",), f"expected true or false, got {_show(value)}")
+            raise ctx.error(where + ("headlight",), f"expected true or false, got {show_value(value)}")
         values["headlight"] = value
     if "headlight_intensity" in table:
         values["headlight_intensity"] = ctx.call(
@@ -434,7 +421,7 @@ def _lights(ctx, raw) -> tuple[Light, ...]:
 
 def _mesh_path(ctx, keypath, value, base_dir: str) -> str:
     if not isinstance(value, str) or not value.strip():
-        raise ctx.error(keypath, f"expected a file name in quotes, got {_show(value)}")
+        raise ctx.error(keypath, f"expected a file name in quotes, got {show_value(value)}")
     full = os.path.normpath(os.path.join(base_dir, os.path.expanduser(value)))
     if os.path.isdir(full):
         raise ctx.error(keypath, f"{full} is a directory, expected an OBJ file")
@@ -452,7 +439,7 @@ def _out_path(ctx, d: dict, key: str, base_dir: str) -> str | None:
         return None
     value = d[key]
     if not isinstance(value, str) or not value.strip():
-        raise ctx.error((key,), f"expected a file name in quotes, got {_show(value)}")
+        raise ctx.error((key,), f"expected a file name in quotes, got {show_value(value)}")
     return os.path.normpath(os.path.join(base_dir, os.path.expanduser(value)))
 
 
@@ -469,7 +456,7 @@ def _choice(ctx, keypath, value, choices: dict) -> str:
 def _number(value, what: str = "") -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         unit = f" of {what}" if what else ""
-        raise SceneError(f"expected a number{unit}, got {_show(value)}")
+        raise SceneError(f"expected a number{unit}, got {show_value(value)}")
     value = float(value)
     if not math.isfinite(value):
         raise SceneError(f"expected a finite number, got {value}")
@@ -495,7 +482,7 @@ def _color(value) -> tuple[float, float, float]:
     rgb = check_vector(value, "color")
     if not all(0.0 <= c <= 1.0 for c in rgb):
         raise SceneError(
-            f"color components must be between 0 and 1 (linear RGB), got {_show(value)}"
+            f"color components must be between 0 and 1 (linear RGB), got {show_value(value)}"
         )
     return rgb
 
@@ -546,7 +533,7 @@ class _Context:
 
     def table(self, keypath, value, name: str) -> dict:
         if not isinstance(value, dict):
-            raise self.error(keypath, f"expected a table {name}, got {_show(value)}")
+            raise self.error(keypath, f"expected a table {name}, got {show_value(value)}")
         return value
 
     def table_list(self, keypath, value, name: str) -> list:
@@ -554,7 +541,7 @@ class _Context:
         if isinstance(value, dict):
             return [value]
         if not isinstance(value, list) or not all(isinstance(t, dict) for t in value):
-            raise self.error(keypath, f"expected {name} tables, got {_show(value)}")
+            raise self.error(keypath, f"expected {name} tables, got {show_value(value)}")
         return value
 
     def array_tables(self, name: str, value, allowed, required: str, hint: str) -> list:
@@ -835,7 +822,7 @@ def parse_memory(value) -> int:
     is a positive size of at least 1 MiB."""
     hint = "expected a size such as 500M or 2G (a bare number is MiB)"
     if isinstance(value, bool):
-        raise SceneError(f"{hint}, got {_show(value)}")
+        raise SceneError(f"{hint}, got {show_value(value)}")
     if isinstance(value, (int, float)):
         number, unit = float(value), ""
     elif isinstance(value, str):
@@ -849,10 +836,10 @@ def parse_memory(value) -> int:
             raise SceneError(f"{hint}, got {value!r}") from None
         unit = m.group(2).lower()
     else:
-        raise SceneError(f"{hint}, got {_show(value)}")
+        raise SceneError(f"{hint}, got {show_value(value)}")
     size = number * _MEMORY_UNITS[unit]
     if not (math.isfinite(size) and size >= 1 << 20):
-        shown = repr(value) if isinstance(value, str) else _show(value)
+        shown = repr(value) if isinstance(value, str) else show_value(value)
         raise SceneError(f"{hint}, at least 1M, got {shown}")
     if size > 1 << 60:
         raise SceneError(f"{hint}, at most 2^60 bytes, got {value!r}")
@@ -863,7 +850,7 @@ def _parse_choice(value, choices: dict) -> str:
     """The canonical name: the mapping's value when it is a name, else the key."""
     names = ", ".join(repr(c) for c in choices)
     if not isinstance(value, str):
-        raise SceneError(f"expected one of {names}, got {_show(value)}")
+        raise SceneError(f"expected one of {names}, got {show_value(value)}")
     key = value.strip().lower().replace("_", "-")
     if key not in choices:
         raise SceneError(f"unknown value {value!r}: use one of {names}")

@@ -1,0 +1,71 @@
+"""``subtrace compare A.exr B.exr``: compare two renders channel group by channel group
+(:func:`subtrace.compare.compare_images`), exit code by idiff's convention: 0 pass,
+1 warning, 2 failure (or bad options), 3 size or channel mismatch, 4 an unreadable file."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+
+from subtrace.cli.common import PROG, one_line
+from subtrace.cli.parser import THRESHOLD_OPTIONS
+from subtrace.compare import (EXIT_MISMATCH, EXIT_UNREADABLE, GROUPS, ImageMismatchError,
+                              UnreadableImageError, compare_images)
+from subtrace.errors import SubtraceError
+from subtrace.io.atomic import check_writable
+
+
+def execute(args) -> int:
+    """Compare, print the table (or JSON), write the difference image; the exit code."""
+    thresholds = thresholds_of(args)
+    png = None
+    if args.png:
+        if not args.diff:
+            raise SubtraceError("--png writes the heat map of --diff: give --diff OUT.exr too")
+        png = os.path.splitext(args.diff)[0] + ".png"
+    if args.diff:
+        check_writable(args.diff)
+        if png:
+            check_writable(png)
+    try:
+        result = compare_images(args.image_a, args.image_b, thresholds, flip=not args.no_flip)
+    except (UnreadableImageError, ImageMismatchError) as exc:
+        print(f"{PROG}: error: {one_line(str(exc))}", file=sys.stderr)
+        return EXIT_UNREADABLE if isinstance(exc, UnreadableImageError) else EXIT_MISMATCH
+    if args.diff:
+        result.write_diff(args.diff, png_path=png)
+    if args.json:
+        report = {"a": args.image_a, "b": args.image_b, **result.as_dict()}
+        if args.diff:
+            report["diff"] = args.diff
+        print(json.dumps(report, indent=2))
+    else:
+        print(f"A: {args.image_a}\nB: {args.image_b}")
+        print(result.table())
+        if args.diff:
+            print(f"difference: {args.diff}" + (f", heat map: {png}" if png else ""))
+    return result.exit_code
+
+
+def thresholds_of(args) -> dict:
+    """--fail/--warn/... values as {group: {field: value}}; a bare value is the colour
+    group's. Raises SubtraceError naming the option for a bad group or number."""
+    thresholds: dict = {}
+    for name in THRESHOLD_OPTIONS:
+        for text in getattr(args, name):
+            group, _, value = text.rpartition("=")
+            group = group.strip() or "colour"
+            if group not in GROUPS:
+                raise SubtraceError(
+                    f"--{name} {text}: unknown channel group {group!r}: use one of "
+                    f"{', '.join(GROUPS)}"
+                )
+            try:
+                number = float(value)
+            except ValueError:
+                number = float("nan")
+            if not number >= 0:  # also NaN
+                raise SubtraceError(f"--{name} {text}: expected a number >= 0, got {value!r}")
+            thresholds.setdefault(group, {})[name] = number
+    return thresholds

@@ -1,0 +1,105 @@
+"""The one way subtrace writes a file: to a hidden temporary in the destination folder, then
+``os.replace`` onto the destination (design invariant 7).
+
+A failure at any point (an error, an interrupt: any BaseException) removes the temporaries
+and leaves an existing destination untouched, so no half-written file is ever seen.
+:func:`atomic_paths` hands out temporary *paths* (for writers that open files by name, such
+as OpenImageIO) and moves them all into place at the end; :func:`write_text` writes a string.
+Failures raise :class:`subtrace.errors.SubtraceError` naming the destination.
+"""
+
+from __future__ import annotations
+
+import os
+import secrets
+from contextlib import contextmanager
+
+from subtrace.errors import SubtraceError
+
+TEMP_ATTEMPTS = 100  # names tried before giving up on a free temporary name
+
+
+def path_str(path) -> str:
+    """``path`` (str, bytes or path-like) as str."""
+    path = os.fspath(path)
+    return os.fsdecode(path) if isinstance(path, bytes) else path
+
+
+def reason(err: OSError) -> str:
+    """The short reason of an OSError for a message: ``permission denied`` or its strerror."""
+    if isinstance(err, PermissionError):
+        return "permission denied"
+    return err.strerror or str(err)
+
+
+def make_temp(path) -> str:
+    """Create an empty hidden temporary beside ``path`` (mode 0666 less the umask); returns
+    its path. Raises SubtraceError naming ``path`` when the folder is missing, ``path`` is a
+    directory, or the folder cannot be written."""
+    target = path_str(path)
+    folder, name = os.path.split(os.path.abspath(target))
+    if os.path.isdir(target):
+        raise SubtraceError(f"{target}: is a directory, expected a file name")
+    if not os.path.isdir(folder):
+        what = "is not a directory" if os.path.exists(folder) else "does not exist"
+        raise SubtraceError(
+            f"{target}: cannot write the file: the folder {folder} {what}; create it first"
+        )
+    for _ in range(TEMP_ATTEMPTS):
+        temp = os.path.join(folder, f".{name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
+        try:
+            fd = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        except FileExistsError:
+            continue
+        except OSError as err:
+            raise SubtraceError(f"{target}: cannot write the file: {reason(err)}") from None
+        os.close(fd)
+        return temp
+    raise SubtraceError(f"{target}: cannot create a temporary file in {folder}")
+
+
+def check_writable(path) -> None:
+    """Raise SubtraceError now if ``path`` cannot be written (missing folder, a directory,
+    no permission), so that a long job fails before it starts. Leaves nothing behind."""
+    os.unlink(make_temp(path))
+
+
+@contextmanager
+def atomic_paths(paths):
+    """Yield a temporary path for each of ``paths`` (all created first, so a bad folder fails
+    before anything is written); when the block ends normally move each into place, in
+    order. On any failure, and for temporaries not moved, remove them."""
+    temps: list[str | None] = []
+    try:
+        for path in paths:
+            temps.append(make_temp(path))
+        yield list(temps)
+        for k, path in enumerate(paths):
+            try:
+                os.replace(temps[k], path_str(path))
+            except OSError as err:
+                raise SubtraceError(
+                    f"{path_str(path)}: cannot write the file: {reason(err)}"
+                ) from None
+            temps[k] = None
+    finally:
+        for temp in temps:
+            if temp is not None:
+                try:
+                    os.unlink(temp)
+                except OSError:
+                    pass
+
+
+def write_text(path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` through a temporary (module comment)."""
+    with atomic_paths([path]) as (temp,):
+        try:
+            with open(temp, "w", encoding="utf-8") as fh:
+                fh.write(text)
+        except OSError as err:
+            raise SubtraceError(
+                f"{path_str(path)}: cannot write the file: {reason(err)}") from None
+
+
+__all__ = ["atomic_paths", "write_text", "check_writable", "make_temp", "path_str", "reason"]
