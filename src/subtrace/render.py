@@ -138,7 +138,7 @@ class _Depths:
     left: int | None
 
 
-def _choose_depths(table, eye, tol_rad, max_depth, max_memory, stats) -> _Depths:
+def _choose_depths(table, eye, tol_rad, max_depth, max_memory, n_pixels, stats) -> _Depths:
     """Each patch's grid depth (isolating irregular patches, which also tightens their
     shells), capped with a warning where the memory budget ``max_memory`` asks."""
 
@@ -147,7 +147,6 @@ def _choose_depths(table, eye, tol_rad, max_depth, max_memory, stats) -> _Depths
         shells = table.shell_min.copy(), table.shell_max.copy()
         return choose_depths(table, eye, tol_rad, cap, record, shells), record, shells
 
-    n_pixels = stats.rays
     depths, record, (shell_min, shell_max) = choose(max_depth)
     left = None
     if max_memory is not None:
@@ -196,7 +195,7 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     W, H = camera.width, camera.height
     frame = camera_frame(camera)
     t0 = time.perf_counter()
-    chosen = _choose_depths(table, frame[0], tol_rad, max_depth, max_memory, stats)
+    chosen = _choose_depths(table, frame[0], tol_rad, max_depth, max_memory, W * H, stats)
     stats.time_refine += time.perf_counter() - t0
     t0 = time.perf_counter()
     tiles, bvh = _shell_walk(chosen, frame, W, H, accel, max_memory, stats)

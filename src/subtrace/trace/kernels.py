@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from subtrace import config
 from subtrace.accel.bvh import box_entry, bvh_next_leaf, bvh_start, traversal_stack
 from subtrace.accel.projection import TILE
 from subtrace.runtime.jit import inline_njit, leaf_njit, nb
@@ -143,7 +144,8 @@ def _scratch(max_d):
     record."""
     n = 6 * max_d + 8
     stack, stack_t = traversal_stack()
-    return (stack, stack_t, np.empty(64, np.int64), np.empty((3 * max_d + 10, 4, 4, 3)),
+    return (stack, stack_t, np.empty(config.STACK_SIZE, np.int64),
+            np.empty((3 * max_d + 10, 4, 4, 3)),
             np.empty((n, 5), np.int64), np.empty(n), np.empty(4), np.empty(4, np.int64),
             np.empty((4 * MAX_SIDE_SAMPLES + 8, 3)), np.empty((4 * MAX_SIDE_SAMPLES + 8, 2)),
             np.empty(HIT_FIELDS))
