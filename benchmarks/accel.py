@@ -19,15 +19,16 @@ shared machine; figures are medians. Columns:
   allocations (``tracemalloc``, which sees numpy's buffers, scratch included).
 * ``walk bvh`` / ``walk proj``: the shell walk alone, no patch intersected: each pixel's ray
   finds the shells it enters before its final hit distance (taken from the render) by
-  the same traversal as the trace kernel (BVH: node slabs, near child first; projection:
+  the trace kernel's own traversal (BVH: accel/bvh.py, near child first; projection:
   its tile's list up to the first key beyond the hit), on the same threads. A lower bound
   on the walk inside the trace (there the hit distance shrinks as patches are hit).
 * ``walk2 bvh`` / ``walk2 proj``: the same walk with an infinite bound until it reaches the
   shell of the patch the ray hits, then that hit's distance (as if no other patch were hit):
   the order in which the trace meets the shells; an upper bound on the walk inside the
   trace. ``walk/trace``: ``walk2 bvh`` over ``trace bvh``.
-* ``boxes/ray``: ray / box tests per ray in that walk (BVH: node and shell slabs;
-  projection: shell slabs of the listed shells before the stop); ``entered``: shells per
+* ``shells bvh`` / ``shells proj``: shell slabs per ray in that walk (BVH: the shells of
+  the leaves reached, ``leaves bvh`` of them, each after at least one node slab;
+  projection: the listed shells before the stop); ``entered``: shells per
   ray entered before the final hit (the same for both); ``visit``: shells per ray the
   progressive walk enters, i.e. patches the trace would intersect in that order.
 * ``tris``: ``subtrace:micro_triangles`` of the render (cells evaluated).
@@ -45,86 +46,69 @@ import time
 import tracemalloc
 from pathlib import Path
 
-import numba as nb
 import numpy as np
 
 from _common import REPO, import_subtrace  # benchmarks/ is on sys.path when run as a script
 
 import_subtrace()
+from subtrace.accel.bvh import (box_entry, bvh_next_leaf, bvh_start,  # noqa: E402
+                                traversal_stack)
 from subtrace.accel.projection import TILE  # noqa: E402
-from subtrace.trace.prims import H_SLOT, H_T, _slab, ray_setup  # noqa: E402
+from subtrace.runtime.jit import nb  # noqa: E402
+from subtrace.trace.prims import ray_setup  # noqa: E402
 
 DEFAULT_SIZES = ["640x360", "1280x720", "1920x1080"]
 
 
 @nb.njit(cache=True, nogil=True)
 def _walk(task, n_tasks, frame, width, height, t_hit, p_hit, progressive, shell_min,
-          shell_max, off, items, key, per_row, node_min, node_max, node_first, node_count,
-          prims, stack, counts):
+          shell_max, tiles, bvh, counts):
     """Rows task, task + n_tasks, ...: for each pixel's ray, the shells entered before
-    ``t_hit`` through the tiles (``off`` non-empty) or the BVH; ``counts[r]`` = (box
-    tests, shells entered). ``progressive``: the bound is infinite until the walk reaches
-    the shell of the patch hit, ``p_hit`` (-1: none), as if only that patch were hit: the
-    shells entered are then the patches the trace would intersect in this walk's order."""
+    ``t_hit`` through the tiles (``tiles.off`` non-empty) or the BVH, by the traversal of
+    the trace kernel (accel/bvh.py); ``counts[r]`` = (shells tested, shells entered, BVH
+    leaves reached). ``progressive``: the bound is infinite until the walk reaches the shell
+    of the patch hit, ``p_hit`` (-1: none), as if only that patch were hit: the shells
+    entered are then the patches the trace would intersect in this walk's order."""
     ox, oy, oz = frame[0, 0], frame[0, 1], frame[0, 2]
-    projected = len(off) > 1
+    projected = len(tiles.off) > 1
+    stack, stack_t = traversal_stack()
     for row in range(task, height, n_tasks):
         for col in range(width):
             r = row * width + col
             dx, dy, dz = ray_setup(frame, row, col)
             ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
             tmax = np.inf if progressive else t_hit[r]
-            tests = 0
-            entered = 0
-            if projected:
-                # the tile's list, nearest box first, up to the first key beyond the hit
-                t = (row // TILE) * per_row + col // TILE
-                for j in range(off[t], off[t + 1]):
-                    p = items[j]
-                    if key[p] >= tmax:
-                        break
-                    tests += 1
-                    if _slab(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, tmax) < np.inf:
-                        entered += 1
-                        if p == p_hit[r]:
-                            tmax = t_hit[r]
+            tests = entered = leaves = 0
+            sp = 0
+            j = end = np.int64(0)
+            if projected:  # the tile's list, nearest box first, up to the first key beyond
+                t = (row // TILE) * tiles.per_row + col // TILE
+                j, end = tiles.off[t], tiles.off[t + 1]
             else:
-                # the BVH: near child first, as trace.kernels._trace_task
-                sp = 0
+                sp = bvh_start(ox, oy, oz, ix, iy, iz, bvh, 0.0, 0.0, tmax, stack, stack_t)
+            while True:
+                if j == end:
+                    j, end, sp = bvh_next_leaf(ox, oy, oz, ix, iy, iz, bvh, 0.0, 0.0, tmax,
+                                               stack, stack_t, sp)
+                    if j == end:
+                        break
+                    leaves += 1
+                if projected:
+                    p = np.int64(tiles.items[j])
+                    if tiles.key[p] >= tmax:
+                        break
+                else:
+                    p = bvh.prims[j]
+                j += 1
                 tests += 1
-                if _slab(ox, oy, oz, ix, iy, iz, node_min, node_max, 0, tmax) < np.inf:
-                    stack[task, 0] = 0
-                    sp = 1
-                while sp > 0:
-                    sp -= 1
-                    node = stack[task, sp]
-                    cnt = node_count[node]
-                    if cnt > 0:
-                        for j in range(node_first[node], node_first[node] + cnt):
-                            tests += 1
-                            if _slab(ox, oy, oz, ix, iy, iz, shell_min, shell_max, prims[j],
-                                     tmax) < np.inf:
-                                entered += 1
-                                if prims[j] == p_hit[r]:
-                                    tmax = t_hit[r]
-                        continue
-                    left = node_first[node]
-                    tl = _slab(ox, oy, oz, ix, iy, iz, node_min, node_max, left, tmax)
-                    tr = _slab(ox, oy, oz, ix, iy, iz, node_min, node_max, left + 1, tmax)
-                    tests += 2
-                    if tl < np.inf and tr < np.inf:
-                        near, far = (left, left + 1) if tl <= tr else (left + 1, left)
-                        stack[task, sp] = far
-                        stack[task, sp + 1] = near
-                        sp += 2
-                    elif tl < np.inf:
-                        stack[task, sp] = left
-                        sp += 1
-                    elif tr < np.inf:
-                        stack[task, sp] = left + 1
-                        sp += 1
+                if box_entry(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, 0.0, 0.0,
+                             tmax) < np.inf:
+                    entered += 1
+                    if p == p_hit[r]:
+                        tmax = t_hit[r]
             counts[r, 0] = tests
             counts[r, 1] = entered
+            counts[r, 2] = leaves
 
 
 def _traced_peak(fn):
@@ -139,10 +123,9 @@ def _traced_peak(fn):
 
 
 def worker(scene_path: str, sizes: list[tuple[int, int]], repeat: int) -> list[dict]:
-    from subtrace import config
-    from subtrace.runtime import threads as tasks
-    from subtrace.accel.bvh import build_bvh
+    from subtrace.accel.bvh import build_bvh, no_bvh
     from subtrace.accel.projection import no_tiles, project_shells
+    from subtrace.runtime import threads as tasks
     from subtrace.io.scene import apply_overrides, load_scene
     from subtrace.patches.table import build_patch_table
     from subtrace.render import RenderStats, load_objects, render_scene, trace_hits
@@ -184,31 +167,22 @@ def worker(scene_path: str, sizes: list[tuple[int, int]], repeat: int) -> list[d
                                         bvh.node_count, bvh.prims)) / 2**20
         mb_proj = sum(a.nbytes for a in (tiles.off, tiles.items, tiles.key)) / 2**20
         # the walk alone, up to each ray's final hit (the same for both methods)
-        hits, pools = trace_hits(table, camera, scene.render.tolerance_rad(camera),
+        hits, grids = trace_hits(table, camera, scene.render.tolerance_rad(camera),
                                  RenderStats(), accel="bvh")[:2]
-        t_hit = np.ascontiguousarray(hits[H_T])
-        slot = hits[H_SLOT].astype(np.int64)  # -1: no hit; <= -2: a Catmull-Clark patch
-        p_hit = np.where(slot < -1, -slot - 2, -1).astype(np.int64)
-        p_hit[slot >= 0] = pools.a["slot_patch"][slot[slot >= 0]]  # (Loop grids)
-        n_t = tasks.thread_count()
-        stack = np.empty((n_t, config.STACK_SIZE), np.int64)
+        t_hit = np.ascontiguousarray(hits.t)
+        prim = hits.prim  # -1: no hit; <= -2: a Catmull-Clark patch; >= 0: a Loop grid slot
+        p_hit = np.where(prim < -1, -prim - 2, -1).astype(np.int64)
+        p_hit[prim >= 0] = grids.slot_patch[prim[prim >= 0]]
         walk = {}
         for m in ("bvh", "projection"):
-            if m == "bvh":
-                tl, b = no_tiles()[:3], bvh
-            else:
-                tl, b = (tiles.off, tiles.items, tiles.key), build_bvh(np.zeros((0, 3)),
-                                                                       np.zeros((0, 3)))
-            counts = np.zeros((width * height, 2), np.int64)
-            per_row = np.int64(tiles.per_row)
-            walk_args = (table.shell_min, table.shell_max, *tl, per_row, b.node_min,
-                         b.node_max, b.node_first, b.node_count, b.prims, stack, counts)
+            tl, b = (no_tiles(), bvh) if m == "bvh" else (tiles, no_bvh())
+            counts = np.zeros((width * height, 3), np.int64)
             times = {False: [], True: []}
             for _ in range(repeat + 1):  # the first: compile or cache load
                 for progressive in (False, True):
                     t0 = time.perf_counter()
                     tasks.run_tasks(_walk, frame, width, height, t_hit, p_hit, progressive,
-                                    *walk_args)
+                                    table.shell_min, table.shell_max, tl, b, counts)
                     times[progressive].append(time.perf_counter() - t0)
                     if not progressive:
                         mean = counts.mean(axis=0).tolist()
@@ -230,6 +204,7 @@ def worker(scene_path: str, sizes: list[tuple[int, int]], repeat: int) -> list[d
             "walk_bvh": walk["bvh"][0], "walk_proj": walk["projection"][0],
             "walk2_bvh": walk["bvh"][3], "walk2_proj": walk["projection"][3],
             "boxes_bvh": walk["bvh"][1][0], "boxes_proj": walk["projection"][1][0],
+            "leaves_bvh": walk["bvh"][1][2],
             "entered": walk["bvh"][1][1],
             "visits_bvh": walk["bvh"][2], "visits_proj": walk["projection"][2],
             "tris_bvh": med("bvh", "micro_triangles"),
@@ -261,7 +236,8 @@ def main(argv=None) -> int:
           f"threads {len(os.sched_getaffinity(0))}")
     cols = ("scene", "size", "patches", "trace bvh", "trace proj", "ratio", "build bvh",
             "build proj", "MB bvh", "MB proj", "peak bvh", "peak proj", "walk bvh",
-            "walk proj", "walk2 bvh", "walk2 proj", "walk/trace", "boxes bvh", "boxes proj", "entered", "visit bvh",
+            "walk proj", "walk2 bvh", "walk2 proj", "walk/trace", "shells bvh", "leaves bvh",
+            "shells proj", "entered", "visit bvh",
             "visit proj", "tris bvh", "tris proj")
     print(" ".join(f"{c:>10}" for c in cols))
     all_rows = []
@@ -280,7 +256,8 @@ def main(argv=None) -> int:
                    f"{r['peak_bvh']:.2f}", f"{r['peak_proj']:.2f}", f"{r['walk_bvh']:.4f}",
                    f"{r['walk_proj']:.4f}", f"{r['walk2_bvh']:.4f}", f"{r['walk2_proj']:.4f}",
                    f"{r['walk2_bvh'] / r['trace_bvh']:.2f}",
-                   f"{r['boxes_bvh']:.1f}", f"{r['boxes_proj']:.1f}", f"{r['entered']:.2f}",
+                   f"{r['boxes_bvh']:.1f}", f"{r['leaves_bvh']:.1f}", f"{r['boxes_proj']:.1f}",
+                   f"{r['entered']:.2f}",
                    f"{r['visits_bvh']:.2f}", f"{r['visits_proj']:.2f}",
                    f"{r['tris_bvh']:.0f}", f"{r['tris_proj']:.0f}")
             print(" ".join(f"{c:>10}" for c in row), flush=True)

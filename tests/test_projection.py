@@ -196,5 +196,5 @@ def test_two_tasks_project_as_one(monkeypatch):
     finally:
         tasks.set_threads(None)
     assert len(one.items) > 5 * len(lo)
-    for a, b in zip(two.kernel_tuple(), one.kernel_tuple()):
+    for a, b in zip(two, one):
         np.testing.assert_array_equal(a, b)

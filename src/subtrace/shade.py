@@ -11,12 +11,14 @@ Lighting is Lambertian, two-sided: a headlight at the eye plus directional light
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
-from subtrace.runtime.jit import nb
 import numpy as np
 
+from subtrace.runtime.jit import nb
+from subtrace.runtime.threads import run_tasks
 from subtrace.trace.bezier import bez_derivatives
-from subtrace.trace.kernels import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, ray_setup
+from subtrace.trace.prims import ray_setup
 
 
 # the planes the shading fills, in this order, and what a pixel whose ray missed holds
@@ -27,12 +29,29 @@ C_R, C_A, C_Z, C_N, C_LEVEL, C_PATCH, C_OBJECT, C_U = 0, 3, 4, 5, 8, 9, 10, 11
 MISS = (0.0, 0.0, 0.0, 0.0, np.inf, 0.0, 0.0, 0.0, -1.0, -1.0, -1.0, 0.0, 0.0)
 
 
-def shade_kernel(*args):
-    """Fill the planes (flat over pixels) from ``hits``; the arguments are
-    :func:`_shade_task`'s after its first two (the pixels are shared among threads)."""
-    from subtrace.runtime.threads import run_tasks
+def shade(frame, width, hits, grids, iso, patches, lights, headlight, miss, planes, covered):
+    """Fill ``planes`` (len(CHANNELS), n_pixels) float32 from ``hits``
+    (:class:`~subtrace.trace.pools.Hits`) on every thread (blocks of pixels in turn).
 
-    run_tasks(_shade_task, *args)
+    ``grids``, ``iso``: the built Loop grids and Catmull-Clark pieces
+    (:class:`~subtrace.trace.pools.GridArrays`, :class:`~subtrace.trace.pools.PieceArrays`);
+    ``patches``: per patch, its ids and colour (:class:`PatchShading`); ``lights`` (L,6):
+    direction the light travels (unit) and its colour times intensity; ``headlight`` (1,);
+    ``miss`` (:func:`miss_values`); ``covered`` (threads,) int64 receives the hits each
+    thread shaded."""
+    run_tasks(_shade_task, frame, width, hits, grids, iso, patches, lights, headlight, miss,
+              planes, covered)
+
+
+class PatchShading(NamedTuple):
+    """Per patch (P,): what the shading writes besides the geometry."""
+
+    object_id: np.ndarray  # (P,) int32
+    ptex: np.ndarray  # (P,) int32: ptex face
+    uv0: np.ndarray  # (P,2) float64: the patch's origin in its ptex face
+    scale: np.ndarray  # (P,) float64: the patch's size in its ptex face
+    level0: np.ndarray  # (P,) int8: the patch level (0, or 1 for split n-gons)
+    color: np.ndarray  # (P,3) float64: diffuse colour
 
 
 def miss_values(background) -> np.ndarray:
@@ -46,19 +65,12 @@ SHADE_BLOCK = 1024  # consecutive pixels shaded together
 
 
 @nb.njit(cache=True, nogil=True)
-def _shade_task(task, n_tasks, frame, width, hits, slot_patch, slot_depth, slot_quad,
-                slot_vert_off, verts, normals, lc_off, lc_data, uv_off, uv_data, patch_object,
-                patch_ptex, patch_uv0, patch_scale, patch_level0, patch_color, item_kind,
-                item_ref, item_level, item_i0, item_j0, item_nets, cell_normals, cells, lights,
-                headlight, miss, planes, covered):
-    """Shade the blocks of pixels ``task, task + n_tasks, ...`` into ``planes``
-    (len(CHANNELS), n_pixels) float32: each block is first filled with ``miss``
-    (:func:`miss_values`; contiguous stores), then its hits are shaded over it.
-    ``covered[task]`` receives the number of hits the task shaded.
-
-    ``lights`` (L,6): direction the light travels (unit) and its colour times intensity.
-    """
-    n_pix = hits.shape[1]
+def _shade_task(task, n_tasks, frame, width, hits, grids, iso, patches, lights, headlight, miss,
+                planes, covered):
+    """Shade the blocks of pixels ``task, task + n_tasks, ...`` into ``planes`` (see
+    :func:`shade`): each block is first filled with ``miss`` (contiguous stores), then its
+    hits are shaded over it."""
+    n_pix = len(hits.t)
     n_blocks = (n_pix + SHADE_BLOCK - 1) // SHADE_BLOCK
     n_hit = 0
     for blk in range(task, n_blocks, n_tasks):
@@ -67,7 +79,7 @@ def _shade_task(task, n_tasks, frame, width, hits, slot_patch, slot_depth, slot_
         for k in range(planes.shape[0]):
             planes[k, b0:b1] = miss[k]
         for r in range(b0, b1):
-            t = hits[H_T, r]
+            t = hits.t[r]
             if not (t < np.inf):
                 continue
             n_hit += 1
@@ -75,35 +87,34 @@ def _shade_task(task, n_tasks, frame, width, hits, slot_patch, slot_depth, slot_
             row = r // width
             col = r - row * width
             dx, dy, dz = ray_setup(frame, row, col)
-            s = np.int64(hits[H_SLOT, r])
+            s = hits.prim[r]
             if s < 0:
-                # a Catmull-Clark patch: H_TRI is the piece hit, (B1, B2) the patch parameter
+                # a Catmull-Clark patch: the item hit, (a, b) the patch parameter
                 p = -s - 2
-                u = hits[H_B1, r]
-                v = hits[H_B2, r]
-                depth = np.int64(hits[H_LEAF, r])
-                it = np.int64(hits[H_TRI, r])
-                if item_kind[it] == 0:
+                u = hits.a[r]
+                v = hits.b[r]
+                depth = hits.leaf[r]
+                it = hits.item[r]
+                c = iso.ref[it]
+                if iso.kind[it] == 0:
                     # a Bezier piece over a dyadic square of the patch (the whole of a regular one)
-                    sc = 1 << item_level[it]
-                    nx, ny, nz = _bezier_normal(item_nets[item_ref[it]], u * sc - item_i0[it],
-                                                v * sc - item_j0[it])
+                    sc = 1 << iso.level[it]
+                    nx, ny, nz = _bezier_normal(iso.nets[c], u * sc - iso.i0[it],
+                                                v * sc - iso.j0[it])
                 else:
-                    nx, ny, nz = _cell_normal(cells[item_ref[it]], cell_normals[item_ref[it]],
-                                              u * (1 << depth) - item_i0[it],
-                                              v * (1 << depth) - item_j0[it])
+                    nx, ny, nz = _cell_normal(iso.cells[4 * c:4 * c + 4], iso.cell_normals[c],
+                                              u * (1 << depth) - iso.i0[it],
+                                              v * (1 << depth) - iso.j0[it])
             else:
-                nx, ny, nz, u, v, depth, p = _grid_normal(
-                    hits, r, s, slot_patch, slot_depth, slot_quad, slot_vert_off, verts, normals,
-                    lc_off, lc_data, uv_off, uv_data)
+                nx, ny, nz, u, v, depth, p = _grid_normal(hits, r, s, grids)
             planes[C_N, r] = nx
             planes[C_N + 1, r] = ny
             planes[C_N + 2, r] = nz
-            planes[C_U, r] = patch_uv0[p, 0] + patch_scale[p] * u
-            planes[C_U + 1, r] = patch_uv0[p, 1] + patch_scale[p] * v
-            planes[C_LEVEL, r] = patch_level0[p] + depth
-            planes[C_PATCH, r] = patch_ptex[p]
-            planes[C_OBJECT, r] = patch_object[p]
+            planes[C_U, r] = patches.uv0[p, 0] + patches.scale[p] * u
+            planes[C_U + 1, r] = patches.uv0[p, 1] + patches.scale[p] * v
+            planes[C_LEVEL, r] = patches.level0[p] + depth
+            planes[C_PATCH, r] = patches.ptex[p]
+            planes[C_OBJECT, r] = patches.object_id[p]
             # two-sided Lambert: headlight plus directional lights
             sgn = -1.0 if nx * dx + ny * dy + nz * dz > 0.0 else 1.0
             fx, fy, fz = sgn * nx, sgn * ny, sgn * nz
@@ -119,9 +130,9 @@ def _shade_task(task, n_tasks, frame, width, hits, slot_patch, slot_depth, slot_
                     lr += c * lights[k, 3]
                     lg += c * lights[k, 4]
                     lb += c * lights[k, 5]
-            planes[C_R, r] = patch_color[p, 0] * lr
-            planes[C_R + 1, r] = patch_color[p, 1] * lg
-            planes[C_R + 2, r] = patch_color[p, 2] * lb
+            planes[C_R, r] = patches.color[p, 0] * lr
+            planes[C_R + 1, r] = patches.color[p, 1] * lg
+            planes[C_R + 2, r] = patches.color[p, 2] * lb
             planes[C_A, r] = 1.0
     covered[task] = n_hit
 
@@ -144,27 +155,27 @@ def _bezier_normal(net, u, v):
 
 
 @nb.njit(cache=True)
-def _grid_normal(hits, r, s, slot_patch, slot_depth, slot_quad, slot_vert_off, verts, normals,
-                 lc_off, lc_data, uv_off, uv_data):
+def _grid_normal(hits, r, s, grids):
     """Normal, patch parameter, depth and patch of a hit on a stored grid: the exact limit
     normals of the micro-face's corners interpolated (the micro-triangle's own normal where
     they are undefined)."""
-    leaf = np.int64(hits[H_LEAF, r])
-    b1 = hits[H_B1, r]
-    b2 = hits[H_B2, r]
+    verts, normals, lc_data, uv_data = grids.verts, grids.normals, grids.lc_data, grids.uv_data
+    leaf = hits.leaf[r]
+    b1 = hits.a[r]
+    b2 = hits.b[r]
     b0 = 1.0 - b1 - b2
-    depth = slot_depth[s]
-    quad = slot_quad[s]
+    depth = grids.slot_depth[s]
+    quad = grids.slot_quad[s]
     q = 1 if quad else 0
-    base = lc_off[depth, q] + leaf
+    base = grids.lc_off[depth, q] + leaf
     ca = lc_data[base, 0]
-    if hits[H_TRI, r] == 0.0:
+    if hits.item[r] == 0:
         cb = lc_data[base, 1]
         cc = lc_data[base, 2]
     else:
         cb = lc_data[base, 2]
         cc = lc_data[base, 3]
-    vo = slot_vert_off[s]
+    vo = grids.slot_vert_off[s]
     nx = ny = nz = 0.0
     ok = True
     for a in range(3):
@@ -191,10 +202,10 @@ def _grid_normal(hits, r, s, slot_patch, slot_depth, slot_quad, slot_vert_off, v
         ln = math.sqrt(nx * nx + ny * ny + nz * nz)
     if ln > 0.0:
         nx, ny, nz = nx / ln, ny / ln, nz / ln
-    uo = uv_off[depth, q]
+    uo = grids.uv_off[depth, q]
     u = b0 * uv_data[uo + ca, 0] + b1 * uv_data[uo + cb, 0] + b2 * uv_data[uo + cc, 0]
     v = b0 * uv_data[uo + ca, 1] + b1 * uv_data[uo + cb, 1] + b2 * uv_data[uo + cc, 1]
-    return nx, ny, nz, u, v, depth, slot_patch[s]
+    return nx, ny, nz, u, v, depth, grids.slot_patch[s]
 
 
 @nb.njit(cache=True)

@@ -1,4 +1,5 @@
-"""Bounding volume hierarchy over boxes, as flat arrays (pbrt's LinearBVHNode layout).
+"""Bounding volume hierarchy over boxes, as flat arrays (pbrt's LinearBVHNode layout), and the
+one slab test and near-first traversal that every kernel walks boxes with.
 
 ``build_bvh(bmin, bmax)`` returns a :class:`BVH`:
 
@@ -10,22 +11,33 @@
 
 Built top-down by binned surface-area heuristic over centroids (16 bins), leaves of at most
 ``config.BVH_LEAF_SIZE`` primitives; deterministic.
+
+Traversal (:func:`bvh_start`, :func:`bvh_next_leaf`): a ray or line ``o + t d`` (given by
+its origin and ``1/d``) walks the nodes whose boxes, padded by ``pad``, it enters within
+``[tlo, thi]``, nearer child first, on a caller's stack of ``config.STACK_SIZE`` (node,
+entry distance) pairs; each call returns the next leaf's range of ``prims``. ``thi`` may
+shrink between calls (a closest-hit search): nodes entered beyond it are dropped as they
+are popped. The renderer's primary rays, the line queries and their shell marking all walk
+this way (inlined into each kernel).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
-from subtrace.runtime.jit import nb
 import numpy as np
 
 from subtrace import config
+from subtrace.runtime.jit import inline_njit, leaf_njit, nb
 
 _BINS = 16
+STACK_SIZE = config.STACK_SIZE  # (a global the jitted build reads as a constant)
+# a slab's exit distance is pushed out by this much of itself: the rounding of its three
+# operations (a few ulps), so a box is never missed by a ray that grazes it
+SLAB_ROUNDING = 1e-15
 
 
-@dataclass(frozen=True, eq=False)
-class BVH:
+class BVH(NamedTuple):
     node_min: np.ndarray
     node_max: np.ndarray
     node_first: np.ndarray
@@ -60,6 +72,97 @@ def build_bvh(bmin: np.ndarray, bmax: np.ndarray, leaf_size: int | None = None) 
 
 
 @nb.njit(cache=True)
+def traversal_stack():
+    """A traversal stack: node ids and their entry distances (from Python or a kernel)."""
+    return np.empty(STACK_SIZE, np.int64), np.empty(STACK_SIZE)
+
+
+@leaf_njit
+def slab_range(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tlo, thi):
+    """Entry and exit distances of the line ``o + t d`` (``i`` = 1/d) in the box [lo, hi]
+    clipped to [tlo, thi], or (inf, inf) if it misses it there. IEEE infinities handle zero
+    direction components; where one meets a slab plane (0 * inf: NaN) the box counts as
+    entered at ``tlo``. The exit is pushed out by ``SLAB_ROUNDING`` of itself."""
+    t0 = (lo0 - ox) * ix
+    t1 = (hi0 - ox) * ix
+    tn = min(t0, t1)
+    tf = max(t0, t1)
+    t0 = (lo1 - oy) * iy
+    t1 = (hi1 - oy) * iy
+    tn = max(tn, min(t0, t1))
+    tf = min(tf, max(t0, t1))
+    t0 = (lo2 - oz) * iz
+    t1 = (hi2 - oz) * iz
+    tn = max(tn, min(t0, t1))
+    tf = min(tf, max(t0, t1))
+    if tn != tn or tf != tf:
+        return tlo, thi
+    tf = tf + SLAB_ROUNDING * abs(tf) + 1e-300
+    tn = max(tn, tlo)
+    if tn <= min(tf, thi):
+        return tn, tf
+    return np.inf, np.inf
+
+
+@leaf_njit
+def slab_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tlo, thi):
+    """Entry distance of :func:`slab_range` (inf: a miss)."""
+    return slab_range(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tlo, thi)[0]
+
+
+@leaf_njit
+def box_entry(ox, oy, oz, ix, iy, iz, lo, hi, k, pad, tlo, thi):
+    """Entry distance into box ``k`` of (lo, hi) (N,3) padded by ``pad`` (inf: a miss)."""
+    return slab_range(ox, oy, oz, ix, iy, iz, lo[k, 0] - pad, lo[k, 1] - pad, lo[k, 2] - pad,
+                      hi[k, 0] + pad, hi[k, 1] + pad, hi[k, 2] + pad, tlo, thi)[0]
+
+
+@inline_njit
+def bvh_start(ox, oy, oz, ix, iy, iz, bvh, pad, tlo, thi, stack, stack_t):
+    """Start a traversal: the root on the stack if the line enters it; returns the stack
+    size."""
+    if len(bvh.node_count) == 0:
+        return 0
+    te = box_entry(ox, oy, oz, ix, iy, iz, bvh.node_min, bvh.node_max, 0, pad, tlo, thi)
+    if te == np.inf:
+        return 0
+    stack[0] = 0
+    stack_t[0] = te
+    return 1
+
+
+@inline_njit
+def bvh_next_leaf(ox, oy, oz, ix, iy, iz, bvh, pad, tlo, thi, stack, stack_t, sp):
+    """Pop nodes (nearer child first) until a leaf the line enters within [tlo, thi];
+    returns (first, end, sp): its range of ``bvh.prims`` and the new stack size, or
+    (0, 0, 0) when no node is left."""
+    while sp > 0:
+        sp -= 1
+        if stack_t[sp] > thi:  # a nearer hit was found since it was pushed
+            continue
+        node = stack[sp]
+        first = bvh.node_first[node]
+        cnt = bvh.node_count[node]
+        if cnt > 0:
+            return first, first + cnt, sp
+        ta = box_entry(ox, oy, oz, ix, iy, iz, bvh.node_min, bvh.node_max, first, pad, tlo, thi)
+        tb = box_entry(ox, oy, oz, ix, iy, iz, bvh.node_min, bvh.node_max, first + 1, pad,
+                       tlo, thi)
+        near, far, t_near, t_far = first, first + 1, ta, tb
+        if tb < ta:
+            near, far, t_near, t_far = first + 1, first, tb, ta
+        if t_far < np.inf:
+            stack[sp] = far
+            stack_t[sp] = t_far
+            sp += 1
+        if t_near < np.inf:
+            stack[sp] = near
+            stack_t[sp] = t_near
+            sp += 1
+    return np.int64(0), np.int64(0), np.int64(0)
+
+
+@nb.njit(cache=True)
 def _area(lo, hi):
     d0, d1, d2 = hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]
     if d0 < 0:
@@ -85,9 +188,9 @@ def _build(bmin, bmax, prims, leaf_size, node_min, node_max, first, count):
         for a in range(3):
             cent[p, a] = 0.5 * (bmin[p, a] + bmax[p, a])
     # explicit stack of (node index, start, end); children are written depth-first
-    st_node = np.empty(128, np.int64)
-    st_lo = np.empty(128, np.int64)
-    st_hi = np.empty(128, np.int64)
+    st_node = np.empty(STACK_SIZE, np.int64)
+    st_lo = np.empty(STACK_SIZE, np.int64)
+    st_hi = np.empty(STACK_SIZE, np.int64)
     st_node[0], st_lo[0], st_hi[0] = 0, 0, n
     sp = 1
     n_nodes = 1

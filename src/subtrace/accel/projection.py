@@ -19,7 +19,7 @@ below its best hit: no later shell can hold a nearer one. A box that reaches the
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from subtrace.runtime.jit import nb
 import numpy as np
@@ -29,20 +29,20 @@ from subtrace.runtime import threads as tasks
 TILE = 2  # pixels per tile side
 
 
-@dataclass(frozen=True, eq=False)
-class Tiles:
+class Tiles(NamedTuple):
+    """Per tile of ``TILE`` x ``TILE`` pixels (row-major, ``per_row`` tiles a row), the boxes
+    a ray through it may enter, nearest box first: ``items[off[k]:off[k+1]]`` (int32), and
+    each box's distance from the eye ``key`` (N,) float64. Passed to the kernels as is."""
+
     off: np.ndarray
     items: np.ndarray
     key: np.ndarray
-    per_row: int
-
-    def kernel_tuple(self):
-        return self.off, self.items, self.key, np.int64(self.per_row)
+    per_row: np.int64
 
 
-def no_tiles():
+def no_tiles() -> Tiles:
     """The kernels' tile arguments when rays traverse the BVH instead."""
-    return np.zeros(1, np.int64), np.zeros(0, np.int32), np.zeros(0), np.int64(0)
+    return Tiles(np.zeros(1, np.int64), np.zeros(0, np.int32), np.zeros(0), np.int64(0))
 
 
 def project_shells(bmin, bmax, frame, width: int, height: int,
@@ -73,7 +73,7 @@ def project_shells(bmin, bmax, frame, width: int, height: int,
     seen = np.nonzero(rect[:, 0] <= rect[:, 2])[0]  # (the others are in no tile)
     # nearest first (ties: any fixed order will do)
     _fill(seen[np.argsort(key[seen])], rect, tx, off.copy(), items)
-    return Tiles(off, items, key, tx)
+    return Tiles(off, items, key, np.int64(tx))
 
 
 def tiles_bytes(n_items: int, n_tiles: int) -> int:

@@ -192,10 +192,9 @@ class _Items:
             self.shell_min = np.ascontiguousarray(self.table.shell_min[self.irregular])
             self.shell_max = np.ascontiguousarray(self.table.shell_max[self.irregular])
             self.shell_bvh = build_bvh(self.shell_min, self.shell_max)
-        bv = self.shell_bvh
         hit = np.zeros(len(self.irregular), bool)
-        mark_shells(org, dirs, t_lo, t_hi, pad, self.shell_min, self.shell_max, bv.node_min,
-                    bv.node_max, bv.node_first, bv.node_count, bv.prims, self.built, hit)
+        mark_shells(org, dirs, t_lo, t_hi, pad, self.shell_min, self.shell_max, self.shell_bvh,
+                    self.built, hit)
         hit = hit[todo]
         sel = np.nonzero(todo)[0][hit]
         if not len(sel):
@@ -367,9 +366,8 @@ def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf
                 stats = np.empty((len(sel), 2), np.int64)
                 run_tasks(lines_task, oo, dd, t_lo, t_hi, items.all_nets, items.all_tnets,
                           SPLIT_PTR, SPLIT_COL, SPLIT_W, items.all_exact,
-                          items.item_min, items.item_max, bv.node_min, bv.node_max,
-                          bv.node_first, bv.node_count, bv.prims, tol_flat, touch_tol,
-                          res_tol, mode == "first", cap, cand, count, stats)
+                          items.item_min, items.item_max, bv, tol_flat, touch_tol, res_tol,
+                          mode == "first", cap, cand, count, stats)
                 over = count > cap
                 done = ~over
                 keep = np.zeros((len(sel), cap), bool)

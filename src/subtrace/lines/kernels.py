@@ -57,14 +57,15 @@ from subtrace.trace.bezier import _copy_net, _net_box, _split
 from subtrace.lines.tri_nets import (
     N_TRI, TRI_MONO, mono_eval, tri_box, tri_flatness, tri_monomials, tri_split,
 )
-from subtrace.trace.prims import _shear, _tri, leaf_njit
+from subtrace.accel.bvh import box_entry, bvh_next_leaf, bvh_start, slab_entry, traversal_stack
+from subtrace.runtime.jit import leaf_njit
+from subtrace.trace.prims import ray_triangle as _tri, shear as _shear
 
 # Deepest halving of an item: 2^-40 of its side is below what double parameters resolve.
 MAX_DEPTH = 40
 # Work nets on the descent stack: each level keeps at most 3 siblings, plus 10 for splitting.
 STACK_NETS = 3 * MAX_DEPTH + 16
 # BVH traversal stack (the trees built here are far shallower).
-NODE_STACK = 128
 # Newton iterations for a crossing / for a touch.
 NEWTON_ITERS = 16
 # A root found from a leaf counts if it lies within this much (in the leaf's parameter
@@ -81,29 +82,6 @@ N_FIELDS = 8
 C_T, C_ITEM, C_A, C_B, C_KIND, C_COS, C_DIST, C_SIZE = range(N_FIELDS)
 KIND_CROSS = 1.0
 KIND_TOUCH = 2.0
-
-
-@leaf_njit
-def _slab_t(o0, o1, o2, i0, i1, i2, lo0, lo1, lo2, hi0, hi1, hi2, pad, tlo, thi):
-    """Where the line o + t d (``i`` = 1/d) enters the box [lo - pad, hi + pad] for t in
-    [tlo, thi], or inf if it misses. IEEE infinities handle zero direction components."""
-    a = (lo0 - pad - o0) * i0
-    b = (hi0 + pad - o0) * i0
-    tn = min(a, b)
-    tf = max(a, b)
-    a = (lo1 - pad - o1) * i1
-    b = (hi1 + pad - o1) * i1
-    tn = max(tn, min(a, b))
-    tf = min(tf, max(a, b))
-    a = (lo2 - pad - o2) * i2
-    b = (hi2 + pad - o2) * i2
-    tn = max(tn, min(a, b))
-    tf = min(tf, max(a, b))
-    if tn != tn or tf != tf:  # NaN: origin on a slab plane of a zero component
-        return tlo
-    tf = tf + 1e-15 * abs(tf) + 1e-300
-    tn = max(tn, tlo)
-    return tn if tn <= min(tf, thi) else np.inf
 
 
 @leaf_njit
@@ -408,7 +386,8 @@ def _sub_entry(tri, w, wt, q, o0, o1, o2, i0, i1, i2, pad, tlo, thi):
         lo0, lo1, lo2, hi0, hi1, hi2 = tri_box(wt, q)
     else:
         lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(w, q)
-    return _slab_t(o0, o1, o2, i0, i1, i2, lo0, lo1, lo2, hi0, hi1, hi2, pad, tlo, thi)
+    return slab_entry(o0, o1, o2, i0, i1, i2, lo0 - pad, lo1 - pad, lo2 - pad, hi0 + pad,
+                      hi1 + pad, hi2 + pad, tlo, thi)
 
 
 @leaf_njit
@@ -424,16 +403,15 @@ def _copy_sub(tri, w, wt, dst, src):
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, tnets, split_ptr, split_col,
-               split_w, exact, item_min, item_max, node_min, node_max, node_first,
-               node_count, prims, tol_flat, touch_tol, res_tol, first, cap, cand, count,
-               stats):
+               split_w, exact, item_min, item_max, bvh, tol_flat, touch_tol, res_tol, first, cap,
+               cand, count, stats):
     """Candidates of lines ``task, task + n_tasks, ...`` (module doc). ``org``, ``dirs`` (L,3);
     ``nets`` (Q,4,4,3) quad items, ``tnets`` (T,15,3) triangle items (item ``Q + i``),
     ``split_ptr``, ``split_col``, ``split_w`` the triangle split (``lines_loop.SPLIT_*``),
     ``exact`` (Q+T,) bool
-    (False: a flat cell, no Newton), ``item_min/max`` (Q+T,3) boxes; BVH arrays as
-    accel/bvh.py; ``first``: stop as module doc step 4; ``cand`` (L, cap, N_FIELDS) out,
-    ``count`` (L,) out; ``stats`` (L, 2) out: items entered, leaves reached."""
+    (False: a flat cell, no Newton), ``item_min/max`` (Q+T,3) boxes; ``bvh`` over them
+    (:class:`~subtrace.accel.bvh.BVH`); ``first``: stop as module doc step 4; ``cand`` (L,
+    cap, N_FIELDS) out, ``count`` (L,) out; ``stats`` (L, 2) out: items entered, leaves reached."""
     slack = config.TRI_SLACK
     n_quad = len(nets)
     w = np.empty((STACK_NETS, 4, 4, 3))
@@ -443,8 +421,7 @@ def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, tnets, split_ptr, spl
     ssz = np.empty(STACK_NETS)
     sent = np.empty(STACK_NETS)
     sdep = np.empty(STACK_NETS, np.int64)
-    nodes = np.empty(NODE_STACK, np.int64)
-    nodes_t = np.empty(NODE_STACK)
+    nodes, nodes_t = traversal_stack()
     verts = np.empty((4, 3))
     mono = np.empty((N_TRI, 3))
     D = np.empty((6, 3))
@@ -464,7 +441,7 @@ def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, tnets, split_ptr, spl
         count[line] = 0
         stats[line, 0] = 0
         stats[line, 1] = 0
-        if len(node_first) == 0:
+        if len(bvh.node_first) == 0:
             continue
         # a base point on the line before every item: the triangle tests measure t from it
         # (one origin per line keeps them watertight on shared edges)
@@ -475,8 +452,8 @@ def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, tnets, split_ptr, spl
             for k in range(3):
                 dk = dirs[line, k]
                 if dk != 0.0:
-                    a = (node_min[0, k] - touch_tol - org[line, k]) / dk
-                    b = (node_max[0, k] + touch_tol - org[line, k]) / dk
+                    a = (bvh.node_min[0, k] - touch_tol - org[line, k]) / dk
+                    b = (bvh.node_max[0, k] + touch_tol - org[line, k]) / dk
                     tn = max(tn, min(a, b))
             if tn == -np.inf:
                 tn = 0.0
@@ -484,111 +461,88 @@ def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, tnets, split_ptr, spl
         ob0, ob1, ob2 = o0 + tbase * d0, o1 + tbase * d1, o2 + tbase * d2
         kx, ky, kz, sx, sy, sz = _shear(d0, d1, d2)
         # BVH traversal over item boxes, nearer child first
-        nodes_t[0] = _slab_t(o0, o1, o2, i0, i1, i2, node_min[0, 0], node_min[0, 1],
-                             node_min[0, 2], node_max[0, 0], node_max[0, 1], node_max[0, 2],
-                             touch_tol, tlo, thi)
-        nodes[0] = 0
-        top = 1
-        while top > 0:
-            top -= 1
-            nd = nodes[top]
-            if nodes_t[top] > tcut:
+        top = bvh_start(o0, o1, o2, i0, i1, i2, bvh, touch_tol, tlo, thi, nodes, nodes_t)
+        at = end = np.int64(0)  # the current leaf's range of bvh.prims
+        while True:
+            if at == end:
+                at, end, top = bvh_next_leaf(o0, o1, o2, i0, i1, i2, bvh, touch_tol, tlo, tcut,
+                                             nodes, nodes_t, top)
+                if at == end:
+                    break
+            it = bvh.prims[at]
+            at += 1
+            te = box_entry(o0, o1, o2, i0, i1, i2, item_min, item_max, it, touch_tol, tlo, tcut)
+            if te == np.inf:
                 continue
-            if node_count[nd] == 0:
-                c0 = node_first[nd]
-                ta = _slab_t(o0, o1, o2, i0, i1, i2, node_min[c0, 0], node_min[c0, 1],
-                             node_min[c0, 2], node_max[c0, 0], node_max[c0, 1],
-                             node_max[c0, 2], touch_tol, tlo, tcut)
-                tb = _slab_t(o0, o1, o2, i0, i1, i2, node_min[c0 + 1, 0],
-                             node_min[c0 + 1, 1], node_min[c0 + 1, 2], node_max[c0 + 1, 0],
-                             node_max[c0 + 1, 1], node_max[c0 + 1, 2], touch_tol, tlo, tcut)
-                near, far = (c0, c0 + 1) if ta <= tb else (c0 + 1, c0)
-                tnear, tfar = min(ta, tb), max(ta, tb)
-                if tfar < np.inf:
-                    nodes[top] = far
-                    nodes_t[top] = tfar
-                    top += 1
-                if tnear < np.inf:
-                    nodes[top] = near
-                    nodes_t[top] = tnear
-                    top += 1
-                continue
-            for r in range(node_first[nd], node_first[nd] + node_count[nd]):
-                it = prims[r]
-                te = _slab_t(o0, o1, o2, i0, i1, i2, item_min[it, 0], item_min[it, 1],
-                             item_min[it, 2], item_max[it, 0], item_max[it, 1],
-                             item_max[it, 2], touch_tol, tlo, tcut)
-                if te == np.inf:
+            entered += 1
+            # 1-to-4 segmentation of the item, on a stack of nets, nearest child first
+            tri = it >= n_quad
+            if tri:
+                for p in range(N_TRI):
+                    for k in range(3):
+                        wt[0, p, k] = tnets[it - n_quad, p, k]
+            else:
+                _copy_net(w, 0, nets, it)
+            su0[0], sv0[0], ssz[0], sdep[0], sent[0] = 0.0, 0.0, 1.0, 0, te
+            sp = 1
+            while sp > 0:
+                q = sp - 1
+                sp = q
+                if sent[q] > tcut:
                     continue
-                entered += 1
-                # 1-to-4 segmentation of the item, on a stack of nets, nearest child first
-                tri = it >= n_quad
+                flat = tri_flatness(wt, q) if tri else net_flatness(w, q)
+                if sdep[q] >= MAX_DEPTH or flat <= tol_flat:
+                    leaves += 1
+                    n0 = n
+                    n = _leaf(tri, w, wt, q, mono, D, su0[q], sv0[q], ssz[q], it, line, n,
+                              cap, cand, verts, ob0, ob1, ob2, d0, d1, d2, e0, e1, e2,
+                              dlen, kx, ky, kz, sx, sy, sz, tbase, tlo, thi, exact[it],
+                              touch_tol, res_tol, slack, tol_flat)
+                    if first:
+                        for i in range(n0, min(n, cap)):
+                            if cand[line, i, C_KIND] == KIND_CROSS:
+                                cs = max(abs(cand[line, i, C_COS]), FIRST_MIN_COS)
+                                tcut = min(tcut, cand[line, i, C_T]
+                                           + 2.0 * touch_tol / (cs * dlen))
+                    continue
+                # the children: quads into q+6 .. q+9 (scratch q+4, q+5), triangles into
+                # q+4 .. q+7; those the line enters go back to q, q+1, .. farthest first
+                d_kids = q + 4 if tri else q + 6
                 if tri:
-                    for p in range(N_TRI):
-                        for k in range(3):
-                            wt[0, p, k] = tnets[it - n_quad, p, k]
+                    tri_split(wt, q, split_ptr, split_col, split_w, d_kids)
                 else:
-                    _copy_net(w, 0, nets, it)
-                su0[0], sv0[0], ssz[0], sdep[0], sent[0] = 0.0, 0.0, 1.0, 0, te
-                sp = 1
-                while sp > 0:
-                    q = sp - 1
-                    sp = q
-                    if sent[q] > tcut:
+                    _split(w, q, w, d_kids)
+                h = 0.5 * ssz[q]
+                u, v, dep = su0[q], sv0[q], sdep[q] + 1
+                m = 0
+                for ch in range(4):
+                    tk = _sub_entry(tri, w, wt, d_kids + ch, o0, o1, o2, i0, i1, i2,
+                                    touch_tol, tlo, tcut)
+                    if tk == np.inf:
                         continue
-                    flat = tri_flatness(wt, q) if tri else net_flatness(w, q)
-                    if sdep[q] >= MAX_DEPTH or flat <= tol_flat:
-                        leaves += 1
-                        n0 = n
-                        n = _leaf(tri, w, wt, q, mono, D, su0[q], sv0[q], ssz[q], it, line, n,
-                                  cap, cand, verts, ob0, ob1, ob2, d0, d1, d2, e0, e1, e2,
-                                  dlen, kx, ky, kz, sx, sy, sz, tbase, tlo, thi, exact[it],
-                                  touch_tol, res_tol, slack, tol_flat)
-                        if first:
-                            for i in range(n0, min(n, cap)):
-                                if cand[line, i, C_KIND] == KIND_CROSS:
-                                    cs = max(abs(cand[line, i, C_COS]), FIRST_MIN_COS)
-                                    tcut = min(tcut, cand[line, i, C_T]
-                                               + 2.0 * touch_tol / (cs * dlen))
-                        continue
-                    # the children: quads into q+6 .. q+9 (scratch q+4, q+5), triangles into
-                    # q+4 .. q+7; those the line enters go back to q, q+1, .. farthest first
-                    d_kids = q + 4 if tri else q + 6
+                    j = m  # insertion, descending entry
+                    while j > 0 and kid_t[j - 1] < tk:
+                        kid_t[j] = kid_t[j - 1]
+                        kid_order[j] = kid_order[j - 1]
+                        j -= 1
+                    kid_t[j] = tk
+                    kid_order[j] = ch
+                    m += 1
+                for j in range(m):
+                    ch = kid_order[j]
+                    _copy_sub(tri, w, wt, sp, d_kids + ch)
                     if tri:
-                        tri_split(wt, q, split_ptr, split_col, split_w, d_kids)
+                        # Loop's child order; child 3 (the middle) turned half a turn
+                        su0[sp] = u + h * (ch == 1 or ch == 3)
+                        sv0[sp] = v + h * (ch == 2 or ch == 3)
+                        ssz[sp] = -h if ch == 3 else h
                     else:
-                        _split(w, q, w, d_kids)
-                    h = 0.5 * ssz[q]
-                    u, v, dep = su0[q], sv0[q], sdep[q] + 1
-                    m = 0
-                    for ch in range(4):
-                        tk = _sub_entry(tri, w, wt, d_kids + ch, o0, o1, o2, i0, i1, i2,
-                                        touch_tol, tlo, tcut)
-                        if tk == np.inf:
-                            continue
-                        j = m  # insertion, descending entry
-                        while j > 0 and kid_t[j - 1] < tk:
-                            kid_t[j] = kid_t[j - 1]
-                            kid_order[j] = kid_order[j - 1]
-                            j -= 1
-                        kid_t[j] = tk
-                        kid_order[j] = ch
-                        m += 1
-                    for j in range(m):
-                        ch = kid_order[j]
-                        _copy_sub(tri, w, wt, sp, d_kids + ch)
-                        if tri:
-                            # Loop's child order; child 3 (the middle) turned half a turn
-                            su0[sp] = u + h * (ch == 1 or ch == 3)
-                            sv0[sp] = v + h * (ch == 2 or ch == 3)
-                            ssz[sp] = -h if ch == 3 else h
-                        else:
-                            su0[sp] = u + h * (ch & 1)
-                            sv0[sp] = v + h * (ch >> 1)
-                            ssz[sp] = h
-                        sdep[sp] = dep
-                        sent[sp] = kid_t[j]
-                        sp += 1
+                        su0[sp] = u + h * (ch & 1)
+                        sv0[sp] = v + h * (ch >> 1)
+                        ssz[sp] = h
+                    sdep[sp] = dep
+                    sent[sp] = kid_t[j]
+                    sp += 1
         count[line] = n
         stats[line, 0] = entered
         stats[line, 1] = leaves
@@ -679,33 +633,21 @@ def merge_candidates(cand, count, dlen, precision, keep, tangent):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def mark_shells(org, dirs, t_lo, t_hi, pad, box_min, box_max, node_min, node_max,
-                node_first, node_count, prims, done, hit):
-    """``hit[i] = True`` for every box ``i`` (``box_min/max`` (B,3), under a BVH of them,
-    accel/bvh.py) that one of the lines meets within [t_lo, t_hi], padded by ``pad``;
-    boxes with ``done[i]`` are skipped."""
-    nodes = np.empty(NODE_STACK, np.int64)
+def mark_shells(org, dirs, t_lo, t_hi, pad, box_min, box_max, bvh, done, hit):
+    """``hit[i] = True`` for every box ``i`` (``box_min/max`` (B,3), under ``bvh``, a
+    :class:`~subtrace.accel.bvh.BVH` of them) that one of the lines meets within
+    [t_lo, t_hi], padded by ``pad``; boxes with ``done[i]`` are skipped."""
+    nodes, nodes_t = traversal_stack()
     for line in range(len(org)):
         o0, o1, o2 = org[line, 0], org[line, 1], org[line, 2]
         i0, i1, i2 = 1.0 / dirs[line, 0], 1.0 / dirs[line, 1], 1.0 / dirs[line, 2]
-        nodes[0] = 0
-        top = 1
+        top = bvh_start(o0, o1, o2, i0, i1, i2, bvh, pad, t_lo, t_hi, nodes, nodes_t)
         while top > 0:
-            top -= 1
-            nd = nodes[top]
-            if _slab_t(o0, o1, o2, i0, i1, i2, node_min[nd, 0], node_min[nd, 1],
-                       node_min[nd, 2], node_max[nd, 0], node_max[nd, 1], node_max[nd, 2],
-                       pad, t_lo, t_hi) == np.inf:
-                continue
-            if node_count[nd] == 0:
-                nodes[top] = node_first[nd]
-                nodes[top + 1] = node_first[nd] + 1
-                top += 2
-                continue
-            for r in range(node_first[nd], node_first[nd] + node_count[nd]):
-                b = prims[r]
+            at, end, top = bvh_next_leaf(o0, o1, o2, i0, i1, i2, bvh, pad, t_lo, t_hi, nodes,
+                                         nodes_t, top)
+            for r in range(at, end):
+                b = bvh.prims[r]
                 if done[b] or hit[b]:
                     continue
-                hit[b] = _slab_t(o0, o1, o2, i0, i1, i2, box_min[b, 0], box_min[b, 1],
-                                 box_min[b, 2], box_max[b, 0], box_max[b, 1], box_max[b, 2],
-                                 pad, t_lo, t_hi) < np.inf
+                hit[b] = box_entry(o0, o1, o2, i0, i1, i2, box_min, box_max, b, pad, t_lo,
+                                   t_hi) < np.inf

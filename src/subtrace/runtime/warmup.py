@@ -54,40 +54,35 @@ def stop(proc) -> None:
 
 def compile_kernels(threads: int) -> None:
     """Compile ``trace.kernels._trace_task`` and ``shade._shade_task`` with the argument
-    types of a render on ``threads`` threads (empty inputs: nothing is traced)."""
+    types of a render on ``threads`` threads: the bundles a render passes
+    (``trace/pools.py``), empty, so nothing is traced."""
     import numpy as np
 
     from subtrace import config
-    from subtrace.runtime import threads as tasks
-    from subtrace.render import _LeafTables, _Memos, _Pieces, _Pools
-    from subtrace.shade import CHANNELS, miss_values, shade_kernel
+    from subtrace.accel.bvh import no_bvh
     from subtrace.accel.projection import no_tiles
-    from subtrace.trace.kernels import HIT_FIELDS, candidate_lists, trace_round
+    from subtrace.runtime import threads as tasks
+    from subtrace.shade import CHANNELS, PatchShading, miss_values, shade
+    from subtrace.trace.kernels import trace_round
+    from subtrace.trace.pools import (LeafTables, LoopGrids, Memos, Pieces, candidate_lists,
+                                      hit_arrays)
 
-    i64, f64 = np.zeros(0, np.int64), np.zeros((0, 3))
+    i64 = np.zeros(0, np.int64)
     frame = np.zeros((4, 3))
-    hits = np.zeros((HIT_FIELDS, 0))
-    misses = np.full((HIT_FIELDS, 2), np.inf)  # two pixels: the output planes' layout
-    pools, iso, tables = _Pools(0), _Pieces(0), _LeafTables(0)
-    memos = _Memos(threads)
-    g, q = pools.a, iso.a
+    grids = LoopGrids(0).view(LeafTables(0))
+    iso = Pieces(0).view()
     tasks.set_threads(threads)
     try:
-        trace_round(i64, frame, 1, 0, f64, f64, i64, i64, i64, no_tiles(), f64, f64,
-                    pools.patch_slot,
-                    g["slot_depth"], g["slot_vert_off"], g["slot_node_off"], g["slot_quad"],
-                    g["slot_round"], g["verts"], g["node_lo"], g["node_hi"], tables.lc_off,
-                    tables.lc_data, iso.kernel_tuple(), memos.kernel_tuple(0),
-                    candidate_lists(0), config.TRI_SLACK, hits, i64, i64)
-        i32 = np.zeros(0, np.int32)
-        planes = np.zeros((len(CHANNELS), 2), np.float32)
-        shade_kernel(frame, 1, misses, g["slot_patch"], g["slot_depth"], g["slot_quad"],
-                     g["slot_vert_off"], g["verts"], g["normals"], tables.lc_off,
-                     tables.lc_data, tables.uv_off, tables.uv_data, i32, i32,
-                     np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int8), np.zeros((0, 3)),
-                     q["kind"], q["ref"], q["level"], q["i0"], q["j0"], q["nets"],
-                     q["normals"], q["cells"], np.zeros((0, 6)), np.zeros(1),
-                     miss_values((0.0, 0.0, 0.0)), planes, np.zeros(threads, np.int64))
+        trace_round(i64, frame, 1, 0, no_bvh(), no_tiles(), np.zeros((0, 3)), np.zeros((0, 3)),
+                    grids, iso, Memos(threads).views(0), candidate_lists(0), config.TRI_SLACK,
+                    hit_arrays(0), i64, i64)
+        misses = hit_arrays(2)  # two pixels, both missed: the output planes' layout
+        misses.t[:] = np.inf
+        patches = PatchShading(np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros((0, 2)),
+                               np.zeros(0), np.zeros(0, np.int8), np.zeros((0, 3)))
+        shade(frame, 1, misses, grids, iso, patches, np.zeros((0, 6)), np.zeros(1),
+              miss_values((0.0, 0.0, 0.0)), np.zeros((len(CHANNELS), 2), np.float32),
+              np.zeros(threads, np.int64))
     finally:
         tasks.set_threads(None)
 

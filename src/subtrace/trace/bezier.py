@@ -21,9 +21,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from subtrace.accel.bvh import box_entry, slab_entry, slab_range
+from subtrace.runtime.jit import inline_njit, leaf_njit
 from subtrace.trace.prims import (
-    H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, _slab, _tri, inline_njit, leaf_njit, push_sorted,
-    slab_bounds, slab_range,
+    H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, push_sorted, ray_triangle,
 )
 
 BOX_PAD = 1e-12
@@ -181,7 +182,7 @@ def _net_box(net, s):
 def _net_entry(ox, oy, oz, ix, iy, iz, net, s, tmax):
     """Entry distance of the ray into the (padded) box of net ``net[s]``; inf on a miss."""
     lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(net, s)
-    return slab_bounds(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tmax)
+    return slab_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, 0.0, tmax)
 
 
 SLAB_PAD = 1e-11  # a cell's slab is widened by this much of its net's largest coordinate
@@ -221,7 +222,7 @@ def _cell_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, box, slab, c, tmax):
     the ray misses either before ``tmax``. (The ray's stretch between the planes is widened
     by a relative 1e-9 for rounding.)"""
     tn, tf = slab_range(ox, oy, oz, ix, iy, iz, box[c, 0], box[c, 1], box[c, 2], box[c, 3],
-                        box[c, 4], box[c, 5], tmax)
+                        box[c, 4], box[c, 5], 0.0, tmax)
     if tn == np.inf:
         return np.inf
     nx, ny, nz = slab[c, 0], slab[c, 1], slab[c, 2]
@@ -316,7 +317,8 @@ def _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, i, j, depth, oi, oj, roo
     for k in range(n):
         b = k
         c = k + 1 if k + 1 < n else 0
-        t, ba, bb, bc = _tri(px, py, pz, kx, ky, kz, sx, sy, sz, n, b, c, lv, hit[H_T], slack)
+        t, ba, bb, bc = ray_triangle(px, py, pz, kx, ky, kz, sx, sy, sz, n, b, c, lv, hit[H_T],
+                                     slack)
         if t < hit[H_T]:
             _record(hit, t, code, item, root_depth, lp, n, b, c, ba, bb, bc)
     return n
@@ -341,8 +343,8 @@ def tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, v0, lp, slack, hit, code, i
     for tri in range(2):
         b = 1 + tri
         c = 2 + tri
-        t, ba, bb, bc = _tri(px, py, pz, kx, ky, kz, sx, sy, sz, v0, v0 + b, v0 + c, lv,
-                             hit[H_T], slack)
+        t, ba, bb, bc = ray_triangle(px, py, pz, kx, ky, kz, sx, sy, sz, v0, v0 + b, v0 + c,
+                                     lv, hit[H_T], slack)
         if t < hit[H_T]:
             _record(hit, t, code, item, depth, lp, 0, b, c, ba, bb, bc)
     return 2
@@ -479,10 +481,9 @@ def _expand(node, parent, ci, cj, lev, pd, mem, work):
 
 
 @inline_njit
-def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, kind, ref, level,
-                    i0, j0, lo, hi, rest_lo, rest_hi, nets, cells, mem, slack, hit, scratch):
-    """Closest hit on the pieces of Catmull-Clark patch ``p`` (slot ``s``; the arrays of
-    ``kernels.trace_round``'s ``iso``) nearer than hit[H_T]; updates ``hit``. Returns the
+def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch):
+    """Closest hit on the pieces of Catmull-Clark patch ``p`` (slot ``s`` of ``iso``, a
+    :class:`~subtrace.trace.pools.PieceArrays`) nearer than hit[H_T]; updates ``hit``. Returns the
     number of micro-triangles built: the cells this ray was the first of its thread to
     evaluate (stored in the memo ``mem``, or fans and one-cell pieces, evaluated on the spot
     by every ray but counted once), and any it split on the spot when the memo was full. ``ray`` = (ox, oy, oz, ix, iy, iz, kx, ky, kz,
@@ -495,20 +496,25 @@ def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, ki
     3*depth+10, 4,4,3), the stack ``st`` (>= 6*depth+8, 5) with entry distances ``st_t``,
     ``tmp_t`` / ``order`` (4,) and ``lv`` (K,3) / ``lp`` (K,2) (a cell's points and
     parameters) are the thread's ``scratch``. (Calls with more than 30 arguments are
-    compiled by Python as calls with ``*args``, which Numba cannot inline: hence the tuples.)
+    compiled by Python as calls with ``*args``, which Numba cannot inline: hence the
+    bundles.)
     """
     ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz = ray
     work, st, st_t, tmp_t, order, lv, lp = scratch
     root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
-    first, count = slot_first[s], slot_count[s]
+    item_depth, item_side, kind, ref, level = iso.depth_i, iso.side, iso.kind, iso.ref, iso.level
+    i0, j0, lo, hi, rest_lo, rest_hi = iso.i0, iso.j0, iso.lo, iso.hi, iso.rest_lo, iso.rest_hi
+    nets, cells = iso.nets, iso.cells
+    first, count = iso.first[s], iso.count[s]
     code = -2.0 - p
     tested = 0
     for it in range(first, first + count):
         if count > 1 and (it == first or level[it] != level[it - 1]):
             # the pieces of a level and all finer ones: skipped together on a miss
-            if _slab(ox, oy, oz, ix, iy, iz, rest_lo, rest_hi, it, hit[H_T]) == np.inf:
+            if box_entry(ox, oy, oz, ix, iy, iz, rest_lo, rest_hi, it, 0.0, 0.0,
+                         hit[H_T]) == np.inf:
                 break
-        if _slab(ox, oy, oz, ix, iy, iz, lo, hi, it, hit[H_T]) == np.inf:
+        if box_entry(ox, oy, oz, ix, iy, iz, lo, hi, it, 0.0, 0.0, hit[H_T]) == np.inf:
             continue
         depth = item_depth[it]  # its grid, in the patch's units
         inv = 1.0 / (1 << depth)
@@ -587,9 +593,9 @@ def intersect_patch(ray, p, s, slot_first, slot_count, item_depth, item_side, ki
                     te = _cell_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, box, slab, c + q,
                                      hit[H_T])
                 else:
-                    te = slab_bounds(ox, oy, oz, ix, iy, iz, box[c + q, 0], box[c + q, 1],
-                                     box[c + q, 2], box[c + q, 3], box[c + q, 4], box[c + q, 5],
-                                     hit[H_T])
+                    te = slab_entry(ox, oy, oz, ix, iy, iz, box[c + q, 0], box[c + q, 1],
+                                    box[c + q, 2], box[c + q, 3], box[c + q, 4], box[c + q, 5],
+                                    0.0, hit[H_T])
                 if te < np.inf:
                     n = push_sorted(tmp_t, order, n, te, q)
             for e in range(n):

@@ -1,56 +1,20 @@
-"""Ray primitives shared by the kernels: hit record layout, slab test, watertight ray /
-triangle test, ray set-up for a pixel and Woop's shear constants."""
+"""Ray primitives shared by the kernels: a ray's working hit record, the watertight ray /
+triangle test, ray set-up for a pixel, Woop's shear constants, and a sorted push for
+near-first descents. (The slab test is the BVH's, :mod:`subtrace.accel.bvh`.)"""
 
 from __future__ import annotations
 
 import math
 
-from subtrace.runtime.jit import inline_njit, leaf_njit, nb
 import numpy as np
 
-# hit record layout (float64 per ray): t, slot, leaf, triangle, b1, b2
+from subtrace.runtime.jit import leaf_njit
+
+# a ray's working hit record while it is traced (float64 (HIT_FIELDS,) in the thread's
+# scratch), stored per ray at the end as :class:`subtrace.trace.pools.Hits`' fields t, prim,
+# leaf, item, a, b
 H_T, H_SLOT, H_LEAF, H_TRI, H_B1, H_B2 = range(6)
 HIT_FIELDS = 6
-
-
-@leaf_njit
-def slab_bounds(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tmax):
-    """Entry distance of the ray into the box [lo, hi], or inf if it misses before tmax.
-
-    Robust to direction components of zero (IEEE infinities in ``i*``); the far distance is
-    widened by 1 + 2 gamma(3) as pbrt does, so a ray grazing a box is not lost to rounding.
-    """
-    return slab_range(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tmax)[0]
-
-
-@leaf_njit
-def slab_range(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tmax):
-    """Entry and exit distances of the ray in the box [lo, hi] (as :func:`slab_bounds`);
-    (inf, inf) if it misses before tmax."""
-    t0 = (lo0 - ox) * ix
-    t1 = (hi0 - ox) * ix
-    tn = min(t0, t1)
-    tf = max(t0, t1)
-    t0 = (lo1 - oy) * iy
-    t1 = (hi1 - oy) * iy
-    tn = max(tn, min(t0, t1))
-    tf = min(tf, max(t0, t1))
-    t0 = (lo2 - oz) * iz
-    t1 = (hi2 - oz) * iz
-    tn = max(tn, min(t0, t1))
-    tf = min(tf, max(t0, t1))
-    tf *= 1.0 + 6.7e-16
-    tn = max(tn, 0.0)
-    if tn <= tf and tn < tmax:
-        return tn, tf
-    return np.inf, np.inf
-
-
-@leaf_njit
-def _slab(ox, oy, oz, ix, iy, iz, lo, hi, k, tmax):
-    """Entry distance of the ray into box ``k`` of (lo, hi) (see :func:`slab_bounds`)."""
-    return slab_bounds(ox, oy, oz, ix, iy, iz, lo[k, 0], lo[k, 1], lo[k, 2], hi[k, 0],
-                       hi[k, 1], hi[k, 2], tmax)
 
 
 @leaf_njit
@@ -69,7 +33,7 @@ def push_sorted(ent_t, ent_i, n, te, item):
 
 
 @leaf_njit
-def _tri(ox, oy, oz, kx, ky, kz, sx, sy, sz, a, b, c, verts, tmax, slack):
+def ray_triangle(ox, oy, oz, kx, ky, kz, sx, sy, sz, a, b, c, verts, tmax, slack):
     """Watertight ray / triangle test (Woop, Benthin and Wald 2013) on vertices ``a, b, c``
     of ``verts``; ``ox, oy, oz`` is the ray origin's (kx, ky, kz) components. Returns (t, b_a, b_b, b_c) with t = inf on a miss. Edge functions of a
     shared edge are computed identically from both triangles, so no ray slips between them;
@@ -113,7 +77,7 @@ def ray_setup(frame, row, col):
 
 
 @leaf_njit
-def _shear(dx, dy, dz):
+def shear(dx, dy, dz):
     """Woop's permutation and shear constants of a ray direction."""
     ax, ay, az = abs(dx), abs(dy), abs(dz)
     kz = 0

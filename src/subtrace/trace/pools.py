@@ -1,0 +1,392 @@
+"""What the trace kernels read and grow between rounds: growable stores with named kernel views.
+
+* :class:`Pieces`: every Catmull-Clark patch built so far, as the kernels intersect it per
+  ray. A *slot* per patch (its first item, item count, the round it was built in, whether a
+  ray has tested it) and its *items* (contiguous): regular Bezier pieces over dyadic squares
+  of the patch, and cells of exact limit points, each with its grid depth and how its four
+  sides are sampled. A regular patch is one item, ready from the start (round -1); an
+  irregular patch is built on request into pieces (``patches/isolate.py``). Kernel view:
+  :class:`PieceArrays`.
+* :class:`LoopGrids`: grid points, normals and quadtree boxes of built Loop patches, and
+  their slots; with the read-only :class:`LeafTables` (leaf corners and grid parameters of
+  every depth) the kernel view :class:`GridArrays`.
+* :class:`Memos`: each thread's memo of the Bezier nets its rays split
+  (``trace/bezier.py``); kernel view: one :class:`Memo` per thread.
+* :class:`Candidates`: per ray, the unbuilt shells it entered before its best hit.
+* :class:`Hits`: per ray, the closest hit (see its fields).
+
+Kernel views are named tuples of arrays: Numba passes them as one argument and reads their
+fields by name at no cost, so no kernel reads a bundle by position.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import NamedTuple
+
+import numpy as np
+
+from subtrace.patches.bspline import net_bounds
+from subtrace.patches.grids import grid_params, leaf_corners
+from subtrace.patches.isolate import item_sides, rest_boxes
+from subtrace.trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
+
+CANDIDATES = 8  # unbuilt shells a ray remembers between rounds (more: it traverses again)
+
+
+class PieceArrays(NamedTuple):
+    """The kernels' view of :class:`Pieces` (P patches, S slots, I items)."""
+
+    patch_iso: np.ndarray  # (P,) int64: slot of each patch, -1 while unbuilt
+    first: np.ndarray  # (S,) int64: first item of the slot
+    count: np.ndarray  # (S,) int64: its item count
+    round: np.ndarray  # (S,) int64: round it was built in (-1: from the start)
+    depth_i: np.ndarray  # (I,) int64: grid depth, in the patch's units
+    side: np.ndarray  # (I,4) int64: sampling depth of each side, in the patch's units
+    kind: np.ndarray  # (I,) int8: 0 Bezier piece, 1 cell
+    ref: np.ndarray  # (I,) int64: row in nets (piece) or cells (cell, 4 rows each)
+    level: np.ndarray  # (I,) int64: the item's level
+    i0: np.ndarray  # (I,) int64: origin in units of 2^-level
+    j0: np.ndarray  # (I,) int64
+    lo: np.ndarray  # (I,3) float64: the item's box
+    hi: np.ndarray  # (I,3) float64
+    rest_lo: np.ndarray  # (I,3) float64: box of the item and the slot's items after it
+    rest_hi: np.ndarray  # (I,3) float64
+    nets: np.ndarray  # (., 4, 4, 3) float64: Bezier nets
+    cells: np.ndarray  # (., 3) float64: cell corners, 4 rows per cell
+    cell_normals: np.ndarray  # (., 4, 3) float64: exact limit normals at the corners
+    touched: np.ndarray  # (S,) uint8: set when a ray tests the slot
+
+
+class GridArrays(NamedTuple):
+    """The kernels' view of :class:`LoopGrids` and :class:`LeafTables` (G slots)."""
+
+    patch_slot: np.ndarray  # (P,) int64: slot of each patch, -1 while unbuilt
+    slot_patch: np.ndarray  # (G,) int64
+    slot_depth: np.ndarray  # (G,) int64: the grid's depth
+    slot_quad: np.ndarray  # (G,) bool
+    slot_vert_off: np.ndarray  # (G,) int64: first grid point in verts
+    slot_node_off: np.ndarray  # (G,) int64: first quadtree box in node_lo / node_hi
+    slot_round: np.ndarray  # (G,) int64: round it was built in
+    verts: np.ndarray  # (., 3) float64: grid points
+    normals: np.ndarray  # (., 3) float32: exact limit normals at the grid points
+    node_lo: np.ndarray  # (., 3) float64: quadtree boxes (level l at (4^l - 1) / 3)
+    node_hi: np.ndarray  # (., 3) float64
+    lc_off: np.ndarray  # (D+1, 2) int64: first leaf of (depth, quad) in lc_data
+    lc_data: np.ndarray  # (., 4) int32: leaf corners (a triangle's 4th is -1)
+    uv_off: np.ndarray  # (D+1, 2) int64: first point of (depth, quad) in uv_data
+    uv_data: np.ndarray  # (., 2) float64: grid parameters
+
+
+class Memo(NamedTuple):
+    """One thread's memo of split Bezier nets (``trace/bezier.py`` says what it holds)."""
+
+    root: np.ndarray  # (I,) int64: root node of each item or -1
+    child: np.ndarray  # (N,) int64: first of the four children of each node, or -1
+    box: np.ndarray  # (N,6) float64: each node's padded box
+    slab: np.ndarray  # (N,5) float64: a cell's slab (normal and range)
+    data: np.ndarray  # (N,) int64: each node's row in nets / cells, or a state code
+    nets: np.ndarray  # (., 4, 4, 3) float64
+    cells: np.ndarray  # (., 3) float64: cell corners, 4 rows per cell
+    cnt: np.ndarray  # (4,) int64: nodes, nets and cells used; a flag set when one ran out
+
+
+class Candidates(NamedTuple):
+    """Per ray, the unbuilt shells it entered before its best hit: a ray traced again after
+    they are built tests just those instead of traversing again."""
+
+    patch: np.ndarray  # (R, CANDIDATES) int32
+    t: np.ndarray  # (R, CANDIDATES) float64: entry distances
+    count: np.ndarray  # (R,) int8: how many, or -1 when there were more than CANDIDATES
+
+
+class Hits(NamedTuple):
+    """Per ray (pixel), its closest hit. A miss has t = inf and prim = -1 (nothing else is
+    written for it)."""
+
+    t: np.ndarray  # (R,) float64: distance from the eye along the unit direction
+    # (R,) int64: a Loop grid's slot (>= 0), or -2 - the Catmull-Clark patch (<= -2)
+    prim: np.ndarray
+    leaf: np.ndarray  # (R,) int64: the grid's micro-face; Catmull-Clark: the grid depth
+    item: np.ndarray  # (R,) int64: the micro-face's triangle (0, 1); Catmull-Clark: the item
+    a: np.ndarray  # (R,) float64: barycentric of the second corner; Catmull-Clark: u
+    b: np.ndarray  # (R,) float64: barycentric of the third corner; Catmull-Clark: v
+
+
+def candidate_lists(n_rays: int) -> Candidates:
+    """Empty candidate lists for ``n_rays`` rays (round 0 sets every ray's)."""
+    return Candidates(np.empty((n_rays, CANDIDATES), np.int32),
+                      np.empty((n_rays, CANDIDATES)), np.empty(n_rays, np.int8))
+
+
+def hit_arrays(n_rays: int) -> Hits:
+    """Hit records for ``n_rays`` rays (round 0 sets every ray's)."""
+    return Hits(np.empty(n_rays), np.empty(n_rays, np.int64), np.empty(n_rays, np.int64),
+                np.empty(n_rays, np.int64), np.empty(n_rays), np.empty(n_rays))
+
+
+class LeafTables:
+    """Leaf corners and grid parameters of every (depth, quad), concatenated for kernels."""
+
+    def __init__(self, max_depth: int):
+        D = max_depth + 1
+        self.lc_off = np.zeros((D, 2), dtype=np.int64)
+        self.uv_off = np.zeros((D, 2), dtype=np.int64)
+        lcs, uvs = [], []
+        n_lc = n_uv = 0
+        for d in range(D):
+            for q in (0, 1):
+                lc = leaf_corners(d, bool(q))
+                pad = np.full((len(lc), 4), -1, dtype=np.int32)
+                pad[:, : lc.shape[1]] = lc
+                self.lc_off[d, q] = n_lc
+                self.uv_off[d, q] = n_uv
+                lcs.append(pad)
+                uvs.append(grid_params(d, bool(q)))
+                n_lc += len(pad)
+                n_uv += len(uvs[-1])
+        self.lc_data = np.ascontiguousarray(np.concatenate(lcs))
+        self.uv_data = np.ascontiguousarray(np.concatenate(uvs))
+
+
+@functools.lru_cache(maxsize=4)
+def leaf_tables(max_depth: int) -> LeafTables:
+    """The (read-only) tables up to ``max_depth``, made once per process."""
+    return LeafTables(max_depth)
+
+
+def grown(a, n_used, size):
+    """``a`` with room for ``size`` rows (``np.empty``: pages are touched as used), its
+    first ``n_used`` rows copied."""
+    b = np.empty((size, *a.shape[1:]), a.dtype)
+    b[:n_used] = a[:n_used]
+    return b
+
+
+class Growable:
+    """Named arrays in groups that grow together (a group's arrays have one length). Storage
+    grows by doubling, so appending round after round copies each element O(1) times;
+    ``self.a[name]`` is a view of the filled part (a kernel's writes into it persist)."""
+
+    GROUPS: dict = {}  # group -> {name: (trailing shape, dtype)}
+
+    def __init__(self):
+        self._store = {}
+        self._used = {}
+        for group, names in self.GROUPS.items():
+            self._used[group] = 0
+            for name, (shape, dtype) in names.items():
+                self._store[name] = np.zeros((0, *shape), dtype=dtype)
+        self._refresh()
+
+    def _refresh(self):
+        self.a = {name: self._store[name][: self._used[group]]
+                  for group, names in self.GROUPS.items() for name in names}
+
+    def reserve(self, group, n):
+        """Make room for ``n`` rows of ``group`` in all (no copy later until they are used)."""
+        self._grow(group, n)
+
+    def _grow(self, group, end):
+        start = self._used[group]
+        for name in self.GROUPS[group]:
+            buf = self._store[name]
+            if end > len(buf):
+                self._store[name] = grown(buf, start, max(end, 2 * len(buf)))
+
+    def put(self, group, **values):
+        """Append rows to every array of ``group`` (zeros where no value is given); returns
+        the first new row."""
+        start = self._used[group]
+        end = start + len(next(iter(values.values())))
+        self._grow(group, end)
+        for name in self.GROUPS[group]:
+            self._store[name][start:end] = values.get(name, 0)
+        self._used[group] = end
+        self._refresh()
+        return start
+
+
+class LoopGrids(Growable):
+    """Grid points, normals and quadtree boxes of built Loop patches, and their slots."""
+
+    GROUPS = {
+        "rows": {"verts": ((3,), np.float64), "normals": ((3,), np.float32)},
+        "nodes": {"node_lo": ((3,), np.float64), "node_hi": ((3,), np.float64)},
+        "slots": {"slot_patch": ((), np.int64), "slot_depth": ((), np.int64),
+                  "slot_quad": ((), np.bool_), "slot_vert_off": ((), np.int64),
+                  "slot_node_off": ((), np.int64), "slot_round": ((), np.int64)},
+    }
+
+    def __init__(self, n_patches):
+        super().__init__()
+        self.patch_slot = np.full(n_patches, -1, dtype=np.int64)
+
+    def append(self, patches, depth, quad, P, N, lo, hi, round_no):
+        m = len(patches)
+        G = P.shape[1]
+        K = lo.shape[1]
+        v0 = self.put("rows", verts=P.reshape(-1, 3), normals=N.reshape(-1, 3))
+        n0 = self.put("nodes", node_lo=lo.reshape(-1, 3), node_hi=hi.reshape(-1, 3))
+        ar = np.arange(m, dtype=np.int64)
+        s0 = self.put("slots", slot_patch=patches, slot_depth=np.full(m, depth),
+                      slot_quad=np.full(m, quad), slot_vert_off=v0 + G * ar,
+                      slot_node_off=n0 + K * ar, slot_round=np.full(m, round_no))
+        self.patch_slot[patches] = s0 + ar
+
+    def view(self, tables: LeafTables) -> GridArrays:
+        a = self.a
+        return GridArrays(self.patch_slot, a["slot_patch"], a["slot_depth"], a["slot_quad"],
+                          a["slot_vert_off"], a["slot_node_off"], a["slot_round"], a["verts"],
+                          a["normals"], a["node_lo"], a["node_hi"], tables.lc_off,
+                          tables.lc_data, tables.uv_off, tables.uv_data)
+
+
+class Pieces(Growable):
+    """Every Catmull-Clark patch built so far, in slots of items (module doc)."""
+
+    GROUPS = {
+        "slots": {"patch": ((), np.int64), "first": ((), np.int64), "count": ((), np.int64),
+                  "round": ((), np.int64), "touched": ((), np.uint8)},
+        "items": {"kind": ((), np.int8), "ref": ((), np.int64), "level": ((), np.int64),
+                  "i0": ((), np.int64), "j0": ((), np.int64), "depth_i": ((), np.int64),
+                  "side": ((4,), np.int64), "lo": ((3,), np.float64),
+                  "hi": ((3,), np.float64), "rest_lo": ((3,), np.float64),
+                  "rest_hi": ((3,), np.float64)},
+        "nets": {"nets": ((4, 4, 3), np.float64)},
+        "cells": {"cells": ((4, 3), np.float64), "normals": ((4, 3), np.float64)},
+    }
+
+    def __init__(self, n_patches):
+        super().__init__()
+        self.patch_iso = np.full(n_patches, -1, dtype=np.int64)
+
+    def append(self, patches, depth, side, subs, cells, round_no):
+        """Slots for ``patches`` (grid depths ``depth`` (m,), how their sides are sampled
+        ``side`` (m,4)) made of ``subs`` and ``cells`` (see
+        :func:`~subtrace.patches.isolate.build_isolated`); each piece samples its sides as
+        finely as the pieces beside it (:func:`~subtrace.patches.isolate.item_sides`)."""
+        (sr, sl, si, sj, nets, sd), (cr, ci, cj, cp, cn) = subs, cells
+        lo_s, hi_s, _ = net_bounds(nets)
+        root = np.concatenate([sr, cr])
+        order = np.argsort(root, kind="stable")
+        level = np.r_[sl, depth[cr]][order]
+        i0, j0 = np.r_[si, ci][order], np.r_[sj, cj][order]
+        depth_i = np.r_[sd, depth[cr]][order].astype(np.int64)
+        count = np.bincount(root, minlength=len(patches))
+        first = np.cumsum(count) - count
+        item_side = np.empty((len(root), 4), np.int64)
+        item_sides(first, count, level, i0, j0, depth_i,
+                   np.ascontiguousarray(np.asarray(side).reshape(-1, 4), dtype=np.int64),
+                   item_side)
+        n0 = self.put("nets", nets=nets)
+        c0 = self.put("cells", cells=cp, normals=cn)
+        lo = np.concatenate([lo_s, cp.min(axis=1)])[order]
+        hi = np.concatenate([hi_s, cp.max(axis=1)])[order]
+        rest_lo, rest_hi = np.empty_like(lo), np.empty_like(hi)
+        rest_boxes(first, count, lo, hi, rest_lo, rest_hi)
+        i_start = self.put(
+            "items",
+            kind=np.r_[np.zeros(len(sr), np.int8), np.ones(len(cr), np.int8)][order],
+            ref=np.r_[n0 + np.arange(len(sr)), c0 + np.arange(len(cr))][order],
+            level=level, i0=i0, j0=j0, depth_i=depth_i, side=item_side, lo=lo, hi=hi,
+            rest_lo=rest_lo, rest_hi=rest_hi,
+        )
+        s0 = self.put("slots", patch=patches, first=i_start + first, count=count,
+                      round=np.full(len(patches), round_no))
+        self.patch_iso[patches] = s0 + np.arange(len(patches))
+        return len(sr), len(cr)
+
+    def append_regular(self, patches, depth, side, nets, lo, hi):
+        """Slots for regular patches, one Bezier piece each (the whole patch): what
+        :meth:`append` makes of them, without its general work. ``lo``, ``hi``: their nets'
+        boxes (the patch table's shells)."""
+        m = len(patches)
+        z = np.zeros(m, np.int64)
+        ar = np.arange(m, dtype=np.int64)
+        n0 = self.put("nets", nets=nets)
+        i_start = self.put("items", kind=np.zeros(m, np.int8), ref=n0 + ar, level=z, i0=z,
+                           j0=z, depth_i=depth, side=side, lo=lo, hi=hi, rest_lo=lo,
+                           rest_hi=hi)
+        s0 = self.put("slots", patch=patches, first=i_start + ar, count=np.ones(m, np.int64),
+                      round=np.full(m, -1))
+        self.patch_iso[patches] = s0 + ar
+
+    def view(self) -> PieceArrays:
+        a = self.a
+        return PieceArrays(self.patch_iso, a["first"], a["count"], a["round"], a["depth_i"],
+                           a["side"], a["kind"], a["ref"], a["level"], a["i0"], a["j0"],
+                           a["lo"], a["hi"], a["rest_lo"], a["rest_hi"], a["nets"],
+                           a["cells"].reshape(-1, 3), a["normals"], a["touched"])
+
+
+class Memos:
+    """Each thread's memo of the Bezier nets its rays split (``trace.bezier``: item roots,
+    node children, boxes and rows, the net store, the cell-corner store, counts). The stores
+    are allocated lazily by the OS (``np.empty``); one that ran out during a round (its rays
+    went on without storing) is doubled before the next."""
+
+    START = {"child": 1 << 22, "nets": 1 << 19, "cells": 1 << 20}  # virtual: touched as used
+    # rows per unit of START (a cell has 4 corner rows) and bytes per row: a node (child,
+    # box, slab, data), a net, a cell corner
+    ROWS = {"child": 1, "nets": 1, "cells": 4}
+    ROW_BYTES = {"child": 8 + 48 + 40 + 8, "nets": 4 * 4 * 3 * 8, "cells": 3 * 8}
+    MIN_ROWS = 64  # rows of a store at least, whatever the budget
+
+    def __init__(self, n_threads, max_bytes=None):
+        # each store at most its share (that of START) of max_bytes per thread
+        start = {k: self.START[k] * self.ROWS[k] for k in self.START}
+        total = sum(start[k] * self.ROW_BYTES[k] for k in start)
+        self.max_rows = {k: (None if max_bytes is None else
+                             max(self.MIN_ROWS, int(max_bytes * start[k] / total)))
+                         for k in start}
+        self.m = [self._grow(None, 0, "child", "nets", "cells") for _ in range(n_threads)]
+        self.full = 0
+
+    def _rows(self, name, current):
+        """Rows of store ``name`` after a growth from ``current`` rows: double (at least
+        START), within the budget's share."""
+        n = max(2 * current, self.START[name] * self.ROWS[name])
+        cap = self.max_rows[name]
+        return n if cap is None else max(current, min(n, cap))
+
+    def _grow(self, old, n_items, *which) -> Memo:
+        """A memo with room for ``n_items`` items, the stores named in ``which`` doubled."""
+        if old is None:
+            old = Memo(np.full(0, -1, np.int64), np.empty(0, np.int64), np.empty((0, 6)),
+                       np.empty((0, 5)), np.empty(0, np.int64), np.empty((0, 4, 4, 3)),
+                       np.empty((0, 3)), np.zeros(4, np.int64))
+        root, child, box, slab, data, nets, cells, cnt = old
+        if len(root) < n_items:
+            root = np.concatenate([root, np.full(max(n_items, 2 * len(root)) - len(root), -1)])
+        n = self._rows("child", len(child))
+        if "child" in which and n > len(child):
+            used = cnt[M_NODES]
+            child, box, slab, data = (grown(child, used, n), grown(box, used, n),
+                                      grown(slab, used, n), grown(data, used, n))
+        n = self._rows("nets", len(nets))
+        if "nets" in which and n > len(nets):
+            nets = grown(nets, cnt[M_NETS], n)
+        n = 4 * (self._rows("cells", len(cells)) // 4)
+        if "cells" in which and n > len(cells):
+            cells = grown(cells, 4 * cnt[M_CELLS], n)
+        cnt[M_FULL] = 0
+        return Memo(root, child, box, slab, data, nets, cells, cnt)
+
+    def views(self, n_items) -> tuple:
+        """One :class:`Memo` per thread with room for ``n_items`` items (a store that ran
+        out during the last round doubled)."""
+        for k, m in enumerate(self.m):
+            self.full += int(m.cnt[M_FULL])
+            if m.cnt[M_FULL] or len(m.root) < n_items:
+                self.m[k] = self._grow(m, n_items, *(("child", "nets", "cells")
+                                                     if m.cnt[M_FULL] else ()))
+        return tuple(self.m)
+
+    def finish(self, stats):
+        """Count what the memos hold into ``stats`` (memo_nodes, memo_bytes, memo_full)."""
+        stats.memo_nodes = int(sum(m.cnt[M_NODES] for m in self.m))
+        stats.memo_bytes = int(sum(
+            m.cnt[M_NODES] * self.ROW_BYTES["child"] + m.cnt[M_NETS] * self.ROW_BYTES["nets"]
+            + 4 * m.cnt[M_CELLS] * self.ROW_BYTES["cells"] for m in self.m))
+        stats.memo_full = self.full + int(sum(m.cnt[M_FULL] for m in self.m))

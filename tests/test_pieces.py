@@ -1,0 +1,219 @@
+"""Catmull-Clark patches as the renderer intersects them (trace.pools.Pieces,
+patches.isolate): regular patches as Bezier nets, irregular ones as feature-adaptive
+pieces and cells, at depths within the tolerance."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from shared_data import MODELS, load_shape, needs_shared
+
+import subtrace
+from subtrace.patches.grids import build_grids
+from subtrace.patches.table import build_patch_table
+
+PIECE_SHAPES = ["catmark_cube_creases1", "catmark_nonquads", "catmark_pole8",
+                "catmark_edgecorner", "catmark_chaikin1", "catmark_hole_test2"]
+
+
+@needs_shared
+@pytest.mark.parametrize("name", PIECE_SHAPES)
+def test_bicubic_grids_match_refinement(name):
+    """A regular patch evaluated the way the renderer does (its Bezier net: points and
+    derivatives) gives the limit points and normals of uniform refinement (to rounding),
+    and the net's box contains them."""
+    from subtrace.patches import bspline
+    from subtrace.trace.bezier import _bez_point, bez_derivatives
+
+    cage = load_shape(name)
+    lev = cage.level_topology(1)
+    pts = cage.refine(1).points
+    faces = np.nonzero(~lev.face_hole)[0]
+    reg = faces[bspline.regular_mask(lev, cage.options, faces)]
+    if len(reg) == 0:
+        pytest.skip("no regular patch")
+    nets = bspline.bezier_nets(pts[bspline.control_grids(lev, reg)])
+    lo, hi, _ = bspline.net_bounds(nets)
+    scale = float(np.abs(pts).max())
+    for depth in (0, 3):
+        n = (1 << depth) + 1
+        ref, nref = build_grids(lev, pts, cage.options, reg, depth)
+        for m, net in enumerate(nets):
+            for g in range(n * n):
+                j, i = divmod(g, n)
+                u, v = i / (n - 1), j / (n - 1)
+                p = np.array(_bez_point(nets, m, u, v))
+                assert np.abs(p - ref[m, g]).max() <= 1e-13 * scale
+                assert np.all(p >= lo[m] - 1e-12 * scale) and np.all(p <= hi[m] + 1e-12 * scale)
+                du, dv = bez_derivatives(net, u, v)
+                nrm = np.cross(du, dv)
+                assert np.abs(nrm / np.linalg.norm(nrm) - nref[m, g]).max() <= 1e-9
+
+
+@needs_shared
+@pytest.mark.parametrize("name", PIECE_SHAPES)
+def test_isolated_pieces_tile_the_grid(name):
+    """The pieces of an irregular patch cover every cell of its grid exactly once, and their
+    points are the grid's exact limit points (uniform refinement), to rounding."""
+    from subtrace.patches.isolate import build_isolated
+    from subtrace.trace.bezier import _bez_point
+
+    cage = load_shape(name)
+    table = build_patch_table([cage])
+    o = table.objects[0]
+    irr = np.nonzero(~table.regular)[0][:12]
+    scale = float(np.abs(o.points).max())
+    for depth in (0, 1, 3):
+        (sr, sl, si, sj, nets, _), (cr, ci, cj, cp, _) = build_isolated(o, table.face[irr], depth)
+        G = build_grids(o.level, o.points, cage.options, table.face[irr], depth)[0]
+        n = (1 << depth) + 1
+        G = G.reshape(len(irr), n, n, 3)
+        covered = np.zeros((len(irr), n - 1, n - 1), dtype=int)
+        for k, (r, lev_, i, j) in enumerate(zip(sr, sl, si, sj)):
+            m = 1 << (depth - lev_)
+            for a in range(m + 1):
+                for b in range(m + 1):
+                    p = np.array(_bez_point(nets, k, a / m, b / m))
+                    assert np.abs(p - G[r, j * m + b, i * m + a]).max() <= 1e-13 * scale
+            covered[r, j * m:(j + 1) * m, i * m:(i + 1) * m] += 1
+        for r, i, j, q in zip(cr, ci, cj, cp):
+            want = [G[r, j, i], G[r, j, i + 1], G[r, j + 1, i + 1], G[r, j + 1, i]]
+            assert np.abs(q - np.array(want)).max() <= 1e-13 * scale
+            covered[r, j, i] += 1
+        assert np.all(covered == 1)
+
+
+@needs_shared
+def test_rest_boxes_contain_the_later_items():
+    """The box a ray tests before a level's pieces contains every later piece of the patch
+    (a miss skips them all) and is no larger than their union."""
+    from subtrace.patches.isolate import build_isolated
+    from subtrace.trace.pools import Pieces
+
+    cage = subtrace.load_cage(MODELS / "spot_control_mesh.obj")
+    table = build_patch_table([cage])
+    irr = np.nonzero(~table.regular)[0][:40]
+    depth = np.full(len(irr), 4)
+    subs, cells = build_isolated(table.objects[0], table.face[irr], depth)
+    iso = Pieces(table.n_patches)
+    iso.append(irr, depth, np.repeat(depth, 4), subs, cells, 0)
+    a = iso.a
+    assert np.all(a["count"] > 1)
+    for f, c in zip(a["first"], a["count"]):
+        for it in range(f, f + c):
+            lo = a["lo"][it:f + c].min(axis=0)
+            hi = a["hi"][it:f + c].max(axis=0)
+            assert np.array_equal(a["rest_lo"][it], lo)
+            assert np.array_equal(a["rest_hi"][it], hi)
+
+
+@needs_shared
+def test_cells_subtend_at_most_the_tolerance():
+    """Invariant 3 on real grids: with the chosen depths, every cell side of every patch of
+    Spot (regular and isolated, and each piece of an isolated patch at its own depth)
+    subtends at most the tolerance at the eye (the bound is conservative) - and not far
+    below it for most patches (the bound is tight)."""
+    from subtrace.patches.table import choose_depths
+
+    cage = subtrace.load_cage(MODELS / "spot_control_mesh.obj")
+    table = build_patch_table([cage])
+    o = table.objects[0]
+    eye = np.array([2.393, 1.306, -3.637])
+    tol = np.radians(0.05)
+    depths = choose_depths(table, eye, tol, 8)
+    worst = []
+    for d in np.unique(depths):
+        ids = np.nonzero(depths == d)[0]
+        P = build_grids(o.level, o.points, cage.options, table.face[ids], int(d))[0]
+        n = (1 << d) + 1
+        G = P.reshape(len(ids), n, n, 3)
+        dist = np.linalg.norm(G - eye, axis=-1)
+        su = np.linalg.norm(np.diff(G, axis=2), axis=-1) / np.minimum(dist[:, :, 1:], dist[:, :, :-1])
+        sv = np.linalg.norm(np.diff(G, axis=1), axis=-1) / np.minimum(dist[:, 1:], dist[:, :-1])
+        worst.append(np.maximum(su.reshape(len(ids), -1).max(1), sv.reshape(len(ids), -1).max(1)))
+    # the pieces of isolated patches, each refined to its own depth
+    from subtrace.patches.isolate import build_isolated
+
+    irr = np.nonzero(~table.regular & (depths > 0))[0]
+    for d in np.unique(depths[irr]):
+        ids = irr[depths[irr] == d]
+        (_, lev, _, _, nets, own), _ = build_isolated(o, table.face[ids], int(d), eye, tol)
+        assert np.all((own >= lev) & (own <= d))
+        for pd in np.unique(own - lev):
+            sel = own - lev == pd
+            t = np.linspace(0.0, 1.0, (1 << pd) + 1)
+            B = np.stack([(1 - t) ** 3, 3 * t * (1 - t) ** 2, 3 * t * t * (1 - t), t ** 3], 1)
+            G = np.einsum("ia,jb,nabk->njik", B, B, nets[sel])  # (n, v, u, 3)
+            dist = np.linalg.norm(G - eye, axis=-1)
+            su = (np.linalg.norm(np.diff(G, axis=2), axis=-1)
+                  / np.minimum(dist[:, :, 1:], dist[:, :, :-1]))
+            sv = (np.linalg.norm(np.diff(G, axis=1), axis=-1)
+                  / np.minimum(dist[:, 1:], dist[:, :-1]))
+            worst.append(np.maximum(su.reshape(sel.sum(), -1).max(1),
+                                    sv.reshape(sel.sum(), -1).max(1)))
+    worst = np.concatenate(worst) / tol
+    assert worst.max() <= 1.0 + 1e-9
+    assert np.median(worst) > 0.4
+
+
+@needs_shared
+@pytest.mark.parametrize("record_depth", [0, 6])
+def test_isolation_taken_from_the_depth_choice_equals_a_fresh_one(record_depth):
+    """``build_isolated`` with the record of ``isolated_depths`` gives the same pieces and
+    cells as refining the requested patches afresh, also where a patch's depth was raised
+    beyond what the record reaches (it then refines further itself); recording deeper
+    (``record_depth``) does not change the depths chosen."""
+    from subtrace.patches.isolate import build_isolated, isolated_depths
+
+    cage = subtrace.load_cage(MODELS / "spot_control_mesh.obj")
+    table = build_patch_table([cage])
+    o = table.objects[0]
+    irr = np.nonzero(~table.regular)[0]
+    eye = np.array([0.3, 0.6, 2.2])
+    tol = 2e-3
+    record = {}
+    depths = isolated_depths(o, table.face[irr], np.full(len(irr), 6), eye, tol, record,
+                             record_depth)
+    assert np.array_equal(depths, isolated_depths(o, table.face[irr], np.full(len(irr), 6),
+                                                  eye, tol))
+    assert len(record["levels"]) >= (2 if record_depth == 0 else record_depth)
+    pick = np.arange(0, len(irr), 3)
+    dep = np.minimum(depths[pick] + (pick % 2), 6)  # some raised, as neighbours raise them
+    a = build_isolated(o, table.face[irr[pick]], dep, eye, tol, record)
+    b = build_isolated(o, table.face[irr[pick]], dep, eye, tol)
+    scale = float(np.abs(o.points).max())
+
+    def by_piece(arrays, n_keys):
+        order = np.lexsort(arrays[:n_keys][::-1])
+        return [x[order] for x in arrays]
+
+    (ar, al, ai, aj, an, ad), (br, bl, bi, bj, bn, bd) = by_piece(a[0], 4), by_piece(b[0], 4)
+    for x, y in ((ar, br), (al, bl), (ai, bi), (aj, bj), (ad, bd)):
+        assert np.array_equal(x, y)
+    assert np.abs(an - bn).max() <= 1e-13 * scale
+    (cr, ci, cj, cp, _), (dr, di, dj, dp, _) = by_piece(a[1], 3), by_piece(b[1], 3)
+    for x, y in ((cr, dr), (ci, di), (cj, dj)):
+        assert np.array_equal(x, y)
+    assert np.abs(cp - dp).max() <= 1e-13 * scale
+
+
+@needs_shared
+def test_regular_patches_appended_directly_equal_the_general_append():
+    """``Pieces.append_regular`` lays out regular patches as ``append`` does (one piece
+    each, sides as given, the net's box for both boxes)."""
+    from subtrace.trace.pools import Pieces
+
+    table = build_patch_table([subtrace.load_cage(MODELS / "spot_control_mesh.obj")])
+    reg = np.nonzero(table.regular)[0]
+    rng = np.random.default_rng(1)
+    depth = rng.integers(0, 6, len(reg))
+    side = depth[:, None] + rng.integers(0, 2, (len(reg), 4))
+    z = np.zeros(len(reg), np.int64)
+    none = np.zeros(0, np.int64)
+    a, b = Pieces(table.n_patches), Pieces(table.n_patches)
+    a.append(reg, depth, side, (np.arange(len(reg)), z, z, z, table.nets, depth),
+             (none, none, none, np.zeros((0, 4, 3)), np.zeros((0, 4, 3))), -1)
+    b.append_regular(reg, depth, side, table.nets, table.shell_min[reg], table.shell_max[reg])
+    assert np.array_equal(a.patch_iso, b.patch_iso)
+    for name in a.a:
+        assert np.array_equal(a.a[name], b.a[name]), name

@@ -1,0 +1,147 @@
+"""Bounding shells of patches contain their limit surface (design invariant 2): Loop grids
+and regular nets on real and perturbed cages, isolated irregular patches."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from shared_data import MODELS, load_shape, needs_shared
+
+import subtrace
+from subtrace import config
+from subtrace.patches.grids import build_grids, leaf_corners
+from subtrace.patches.table import build_patch_table
+
+GRID_SHAPES = [
+    "catmark_cube_creases1", "catmark_cubes_semisharp", "catmark_chaikin1", "catmark_edgenone",
+    "catmark_edgecorner", "catmark_hole_test2", "catmark_nonman_verts", "catmark_nonquads",
+    "catmark_pole8", "catmark_val2_interior", "loop_cube_creases1", "loop_saddle_edgecorner",
+    "loop_icosahedron", "loop_triangle_edgeonly",
+]
+
+
+@needs_shared
+@pytest.mark.parametrize("name", GRID_SHAPES)
+def test_grids_equal_uniform_refinement(name):
+    """Grids built by sparse local refinement are bit-identical to the limit points of a
+    uniform refinement (same arithmetic in the same order), so two patches that share a
+    vertex at the same depth share it exactly."""
+    cage = load_shape(name)
+    L0 = 1 if cage.scheme == "catmark" else 0
+    lev = cage.level_topology(L0)
+    faces = np.nonzero(~lev.face_hole)[0]
+    faces = faces[:: max(1, len(faces) // 6)]
+    quad = cage.scheme == "catmark"
+    k = 4 if quad else 3
+    for depth in (0, 2):
+        P, _ = build_grids(lev, cage.refine(L0).points, cage.options, faces, depth)
+        ref, _, _ = cage.limit(L0 + depth)
+        fine = cage.level_topology(L0 + depth)
+        m = 4**depth
+        slot = leaf_corners(depth, quad)
+        for a, f in enumerate(faces):
+            leaves = f * m + np.arange(m)
+            cv = fine.face_verts[fine.face_offsets[leaves][:, None] + np.arange(k)]
+            np.testing.assert_array_equal(P[a][slot], ref[cv])
+
+
+@needs_shared
+@pytest.mark.parametrize("name", GRID_SHAPES)
+def test_shells_contain_limit_grids(name):
+    """Invariant 2: the shell of every patch contains the exact limit points of its grid."""
+    cage = load_shape(name)
+    table = build_patch_table([cage])
+    o = table.objects[0]
+    P, _ = build_grids(o.level, o.points, cage.options, table.face, 3)
+    assert np.all(P >= table.shell_min[:, None, :] - 1e-12)
+    assert np.all(P <= table.shell_max[:, None, :] + 1e-12)
+
+
+def _perturbed(name, seed):
+    """The oracle shape ``name`` with its points moved at random (any positions are valid)."""
+    base = load_shape(name)
+    rng = np.random.default_rng(seed)
+    pts = base.points + rng.normal(scale=0.3, size=base.points.shape)
+    return subtrace.make_cage(
+        pts, base.face_sizes, base.face_verts, base.scheme, boundary=base.options.boundary,
+        smooth_triangles=base.options.smooth_triangles,
+    )
+
+
+@needs_shared
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), name=st.sampled_from(GRID_SHAPES))
+def test_shells_contain_limit_of_perturbed_cages(seed, name):
+    """Same, for random perturbations of the cage points (any positions are valid)."""
+    cage = _perturbed(name, seed)
+    table = build_patch_table([cage])
+    o = table.objects[0]
+    P, _ = build_grids(o.level, o.points, cage.options, table.face, 2)
+    assert np.all(P >= table.shell_min[:, None, :] - 1e-12)
+    assert np.all(P <= table.shell_max[:, None, :] + 1e-12)
+
+
+def _isolated_shells(cage, tol_rad):
+    """The patch table and the shells the depth choice tightens (eye on the +z side, three
+    bounding-box diagonals away), with the patches it tightened."""
+    from subtrace.patches.table import choose_depths
+
+    table = build_patch_table([cage])
+    lo, hi = table.shell_min.copy(), table.shell_max.copy()
+    centre = 0.5 * (lo.min(axis=0) + hi.max(axis=0))
+    eye = centre + np.array([0.0, 0.0, 3.0 * np.linalg.norm(hi.max(axis=0) - lo.min(axis=0))])
+    choose_depths(table, eye, tol_rad, config.MAX_GRID_DEPTH, {}, (lo, hi))
+    changed = np.any(lo != table.shell_min, axis=1) | np.any(hi != table.shell_max, axis=1)
+    return table, lo, hi, changed
+
+
+ISOLATED_SHAPES = [n for n in GRID_SHAPES if n.startswith("catmark")]
+
+
+@needs_shared
+@pytest.mark.parametrize("name", ISOLATED_SHAPES)
+def test_isolated_shells_contain_limit_grids(name):
+    """Invariant 2 for the shells tightened by the depth choice's isolation (the union of
+    the Bezier boxes and one-ring boxes of what an irregular patch was refined into): the
+    exact limit points of a depth-5 grid of every patch lie inside, and the tightened ones
+    are much smaller than the patches' one-ring boxes (else the tightening does nothing)."""
+    cage = load_shape(name)
+    table, lo, hi, changed = _isolated_shells(cage, 1e-4)
+    assert changed.any() == bool((~table.regular).any())
+    o = table.objects[0]
+    P, _ = build_grids(o.level, o.points, cage.options, table.face, 5)
+    assert np.all(P >= lo[:, None, :] - 1e-12)
+    assert np.all(P <= hi[:, None, :] + 1e-12)
+    if changed.any():
+        old = np.prod(table.shell_max[changed] - table.shell_min[changed], axis=1)
+        new = np.prod(hi[changed] - lo[changed], axis=1)
+        assert np.median(new / np.where(old > 0, old, 1.0)) < 0.5
+
+
+@needs_shared
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), name=st.sampled_from(ISOLATED_SHAPES),
+       tol_exp=st.floats(-5.0, -1.0))
+def test_isolated_shells_contain_limit_of_perturbed_cages(seed, name, tol_exp):
+    """Same, for random perturbations of the cage points and tolerances (each tolerance
+    stops the isolation at other levels, so other boxes end the union)."""
+    cage = _perturbed(name, seed)
+    table, lo, hi, _ = _isolated_shells(cage, 10.0**tol_exp)
+    o = table.objects[0]
+    P, _ = build_grids(o.level, o.points, cage.options, table.face, 4)
+    assert np.all(P >= lo[:, None, :] - 1e-12)
+    assert np.all(P <= hi[:, None, :] + 1e-12)
+
+
+@needs_shared
+def test_isolated_shells_contain_spot():
+    """On Spot (many extraordinary vertices), at about a pixel of the default scene."""
+    cage = subtrace.load_cage(MODELS / "spot_control_mesh.obj")
+    table, lo, hi, changed = _isolated_shells(cage, 1e-3)
+    assert changed.sum() > 100
+    o = table.objects[0]
+    P, _ = build_grids(o.level, o.points, cage.options, table.face, 4)
+    assert np.all(P >= lo[:, None, :] - 1e-12)
+    assert np.all(P <= hi[:, None, :] + 1e-12)
