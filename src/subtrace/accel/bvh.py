@@ -171,6 +171,82 @@ def _area(lo, hi):
 
 
 @nb.njit(cache=True)
+def _bin(c, lo, scale):
+    """The SAH bin of a centroid coordinate ``c`` (``lo``: the node's least)."""
+    return min(_BINS - 1, int((c - lo) * scale))
+
+
+@nb.njit(cache=True)
+def _sah_split(bmin, bmax, prims, cent, s, e, ax, clo, scale, bins):
+    """The last bin of the left side of the cheapest binned-SAH split of ``prims[s:e]``
+    along axis ``ax`` (-1: none); ``bins``: scratch (bin boxes and counts, the areas and
+    counts right of each bin, a box)."""
+    bin_lo, bin_hi, bin_n, right_area, right_n, lo, hi = bins
+    for b in range(_BINS):
+        bin_n[b] = 0
+        for a in range(3):
+            bin_lo[b, a] = np.inf
+            bin_hi[b, a] = -np.inf
+    for i in range(s, e):
+        p = prims[i]
+        b = _bin(cent[p, ax], clo, scale)
+        bin_n[b] += 1
+        for a in range(3):
+            bin_lo[b, a] = min(bin_lo[b, a], bmin[p, a])
+            bin_hi[b, a] = max(bin_hi[b, a], bmax[p, a])
+    for a in range(3):
+        lo[a] = np.inf
+        hi[a] = -np.inf
+    acc = 0
+    for b in range(_BINS - 1, 0, -1):
+        for a in range(3):
+            lo[a] = min(lo[a], bin_lo[b, a])
+            hi[a] = max(hi[a], bin_hi[b, a])
+        acc += bin_n[b]
+        right_area[b] = _area(lo, hi)
+        right_n[b] = acc
+    for a in range(3):
+        lo[a] = np.inf
+        hi[a] = -np.inf
+    acc = 0
+    best = np.inf
+    split = -1
+    for b in range(0, _BINS - 1):
+        for a in range(3):
+            lo[a] = min(lo[a], bin_lo[b, a])
+            hi[a] = max(hi[a], bin_hi[b, a])
+        acc += bin_n[b]
+        if acc == 0 or right_n[b + 1] == 0:
+            continue
+        cost = acc * _area(lo, hi) + right_n[b + 1] * right_area[b + 1]
+        if cost < best:
+            best = cost
+            split = b
+    return split
+
+
+@nb.njit(cache=True)
+def _partition(prims, cent, s, e, ax, clo, scale, split, tmp):
+    """Put ``prims[s:e]`` in bins up to ``split`` before the others, each side in its
+    order (stable: the build is deterministic); returns where the right side starts."""
+    k = 0
+    for i in range(s, e):
+        p = prims[i]
+        if _bin(cent[p, ax], clo, scale) <= split:
+            tmp[k] = p
+            k += 1
+    mid = s + k
+    for i in range(s, e):
+        p = prims[i]
+        if _bin(cent[p, ax], clo, scale) > split:
+            tmp[k] = p
+            k += 1
+    for i in range(e - s):
+        prims[s + i] = tmp[i]
+    return mid
+
+
+@nb.njit(cache=True)
 def _build(bmin, bmax, prims, leaf_size, node_min, node_max, first, count):
     # Written with scalar loops only: whole-array expressions, np.full and array-to-slice
     # assignment each pull a generic Numba implementation into the first compile (the slice
@@ -194,13 +270,8 @@ def _build(bmin, bmax, prims, leaf_size, node_min, node_max, first, count):
     st_node[0], st_lo[0], st_hi[0] = 0, 0, n
     sp = 1
     n_nodes = 1
-    bin_lo = np.empty((_BINS, 3))
-    bin_hi = np.empty((_BINS, 3))
-    bin_n = np.empty(_BINS, np.int64)
-    right_area = np.empty(_BINS)
-    right_n = np.empty(_BINS, np.int64)
-    lo = np.empty(3)
-    hi = np.empty(3)
+    bins = (np.empty((_BINS, 3)), np.empty((_BINS, 3)), np.empty(_BINS, np.int64),
+            np.empty(_BINS), np.empty(_BINS, np.int64), np.empty(3), np.empty(3))
     clo = np.empty(3)
     chi = np.empty(3)
     tmp = np.empty(n, np.int64)
@@ -231,65 +302,12 @@ def _build(bmin, bmax, prims, leaf_size, node_min, node_max, first, count):
             first[node] = s
             count[node] = cnt
             continue
-        # binned SAH along the widest centroid axis
-        for b in range(_BINS):
-            bin_n[b] = 0
-            for a in range(3):
-                bin_lo[b, a] = np.inf
-                bin_hi[b, a] = -np.inf
+        # binned SAH along the widest centroid axis, then a stable partition
         scale = _BINS / ext
-        for i in range(s, e):
-            p = prims[i]
-            b = min(_BINS - 1, int((cent[p, ax] - clo[ax]) * scale))
-            bin_n[b] += 1
-            for a in range(3):
-                bin_lo[b, a] = min(bin_lo[b, a], bmin[p, a])
-                bin_hi[b, a] = max(bin_hi[b, a], bmax[p, a])
-        for a in range(3):
-            lo[a] = np.inf
-            hi[a] = -np.inf
-        acc = 0
-        for b in range(_BINS - 1, 0, -1):
-            for a in range(3):
-                lo[a] = min(lo[a], bin_lo[b, a])
-                hi[a] = max(hi[a], bin_hi[b, a])
-            acc += bin_n[b]
-            right_area[b] = _area(lo, hi)
-            right_n[b] = acc
-        for a in range(3):
-            lo[a] = np.inf
-            hi[a] = -np.inf
-        acc = 0
-        best = np.inf
-        split = -1
-        for b in range(0, _BINS - 1):
-            for a in range(3):
-                lo[a] = min(lo[a], bin_lo[b, a])
-                hi[a] = max(hi[a], bin_hi[b, a])
-            acc += bin_n[b]
-            if acc == 0 or right_n[b + 1] == 0:
-                continue
-            cost = acc * _area(lo, hi) + right_n[b + 1] * right_area[b + 1]
-            if cost < best:
-                best = cost
-                split = b
-        # partition (stable within each side keeps the build deterministic)
+        split = _sah_split(bmin, bmax, prims, cent, s, e, ax, clo[ax], scale, bins)
         mid = s
         if split >= 0:
-            k = 0
-            for i in range(s, e):
-                p = prims[i]
-                if min(_BINS - 1, int((cent[p, ax] - clo[ax]) * scale)) <= split:
-                    tmp[k] = p
-                    k += 1
-            mid = s + k
-            for i in range(s, e):
-                p = prims[i]
-                if min(_BINS - 1, int((cent[p, ax] - clo[ax]) * scale)) > split:
-                    tmp[k] = p
-                    k += 1
-            for i in range(cnt):
-                prims[s + i] = tmp[i]
+            mid = _partition(prims, cent, s, e, ax, clo[ax], scale, split, tmp)
         if mid == s or mid == e:
             mid = s + cnt // 2  # degenerate binning: split the range in two
         left = n_nodes

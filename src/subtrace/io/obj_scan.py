@@ -132,7 +132,7 @@ def _parse_index(data, a, b):
     return -value if neg else value
 
 
-# scan_bytes is one loop over the file's bytes (about 130 lines) and is kept whole: its
+# scan_bytes is one loop over the file's bytes (about 130 lines) and is not split: its
 # state (byte position, line number, element / face / corner / statement counts) changes in
 # every branch, so helpers would each take and return most of it, and the per-token calls
 # sit on the hottest path of loading a cage. Each step carries a one-line comment instead.

@@ -401,6 +401,10 @@ def _copy_sub(tri, w, wt, dst, src):
         _copy_net(w, dst, w, src)
 
 
+# lines_task is one kernel (about 140 lines) and is not split: the item descent shares some
+# twenty scratch arrays and the line's set-up (base point, shear, cut-off) with the BVH walk
+# around it, and a call per item taking them all would pass every array's fields on the
+# stack (the cost jit.inline_njit exists to avoid). Each step carries a comment instead.
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, tnets, split_ptr, split_col,
                split_w, exact, item_min, item_max, bvh, tol_flat, touch_tol, res_tol, first, cap,

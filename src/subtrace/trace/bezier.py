@@ -480,6 +480,9 @@ def _expand(node, parent, ci, cj, lev, pd, mem, work):
     return first
 
 
+# intersect_patch (about 120 lines) is not split: it is inlined into the trace kernel once
+# (see kernels._trace_task), and its quadtree descent keeps the ray, the stack and the memo
+# in locals that helpers would have to take and return at every node.
 @inline_njit
 def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch):
     """Closest hit on the pieces of Catmull-Clark patch ``p`` (slot ``s`` of ``iso``, a
