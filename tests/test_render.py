@@ -102,7 +102,7 @@ def test_shells_contain_limit_of_perturbed_cages(seed, name):
 def _isolated_shells(cage, tol_rad):
     """The patch table and the shells the depth choice tightens (eye on the +z side, three
     bounding-box diagonals away), with the patches it tightened."""
-    from subtrace.patches.table import choose_depths
+    from subtrace.patches.criterion import choose_depths
 
     table = build_patch_table([cage])
     lo, hi = table.shell_min.copy(), table.shell_max.copy()
@@ -468,7 +468,7 @@ def test_bicubic_grids_match_refinement(name):
     derivatives) gives the limit points and normals of uniform refinement (to rounding),
     and the net's box contains them."""
     from subtrace.patches import bspline
-    from subtrace.trace.bezier import _bez_point, bez_derivatives
+    from subtrace.patches.basis import bez_derivatives, bez_point as _bez_point
 
     cage = _load(name)
     lev = cage.level_topology(1)
@@ -501,7 +501,7 @@ def test_isolated_pieces_tile_the_grid(name):
     """The pieces of an irregular patch cover every cell of its grid exactly once, and their
     points are the grid's exact limit points (uniform refinement), to rounding."""
     from subtrace.patches.isolate import build_isolated
-    from subtrace.trace.bezier import _bez_point
+    from subtrace.patches.basis import bez_point as _bez_point
 
     cage = _load(name)
     table = build_patch_table([cage])
@@ -558,7 +558,7 @@ def test_cells_subtend_at_most_the_tolerance():
     Spot (regular and isolated, and each piece of an isolated patch at its own depth)
     subtends at most the tolerance at the eye (the bound is conservative) - and not far
     below it for most patches (the bound is tight)."""
-    from subtrace.patches.table import choose_depths
+    from subtrace.patches.criterion import choose_depths
 
     cage = subtrace.load_cage(MODELS / "spot_control_mesh.obj")
     table = build_patch_table([cage])

@@ -20,11 +20,11 @@ import numpy as np
 
 from subtrace import config
 from subtrace.accel.bvh import build_bvh, no_bvh
-from subtrace.patches.bspline import net_bounds
+from subtrace.patches.basis import net_bounds
+from subtrace.patches.criterion import choose_depths, depth_cap, edge_sampling, memory_estimate
 from subtrace.patches.isolate import build_isolated
 from subtrace.patches.grids import build_grids, grid_params, leaf_corners
-from subtrace.patches.table import (build_patch_table, choose_depths, depth_cap, edge_sampling,
-                            memory_estimate)
+from subtrace.patches.table import build_patch_table
 from subtrace.trace.kernels import HIT_FIELDS, candidate_lists, trace_round
 
 

@@ -15,7 +15,7 @@ import math
 from subtrace.runtime.jit import nb
 import numpy as np
 
-from subtrace.trace.bezier import bez_derivatives
+from subtrace.patches.basis import bez_derivatives
 from subtrace.trace.kernels import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, ray_setup
 
 

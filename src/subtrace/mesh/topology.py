@@ -102,7 +102,7 @@ class Level:
 # --------------------------------------------------------------------------------------
 
 
-def _compact(ids: np.ndarray, n: int):
+def compact(ids: np.ndarray, n: int):
     """The distinct values of ``ids`` (all in 0..n-1) in increasing order, and the map from
     each value to its rank (-1 for values absent); O(n), no sort."""
     mask = np.zeros(n, dtype=bool)
@@ -477,7 +477,6 @@ def _tag_kernel(
     face_hole,
     boundary_mode,
 ):
-    inf = np.float32(10.0)
     n_verts = len(vert_face_offsets) - 1
     # 1. with boundary interpolation "none", faces at boundary vertices having a boundary
     #    edge that is not (tagged) infinitely sharp become holes -- before any sharpening
@@ -490,7 +489,7 @@ def _tag_kernel(
             exclude = False
             for j in range(vert_edge_offsets[v], vert_edge_offsets[v + 1]):
                 e = vert_edges[j]
-                if edge_n_uses[e] == 1 and edge_sharp[e] < inf:
+                if edge_n_uses[e] == 1 and edge_sharp[e] < INF_SHARP:
                     exclude = True
             if exclude:
                 for j in range(vert_face_offsets[v], vert_face_offsets[v + 1]):
@@ -498,7 +497,7 @@ def _tag_kernel(
     # 2. boundary and non-manifold edges are infinitely sharp
     for e in range(len(edge_sharp)):
         if edge_n_uses[e] < 2 or edge_nonman[e]:
-            edge_sharp[e] = inf
+            edge_sharp[e] = INF_SHARP
     # 3. corners (edge-and-corner mode) and non-manifold vertices are sharpened
     for v in range(n_verts):
         nf = vert_face_offsets[v + 1] - vert_face_offsets[v]
@@ -512,9 +511,9 @@ def _tag_kernel(
             if edge_nonman[e]:
                 n_nonman += 1
         if nf == 1 and ne == 2 and boundary_mode == 1:
-            vert_sharp[v] = inf
+            vert_sharp[v] = INF_SHARP
         elif vert_nonman[v]:
             # a plain non-manifold crease (two non-manifold edges, extra fins, no boundary)
             # keeps its sharpness
             if not (n_nonman == 2 and n_bnd == 0 and nf > ne):
-                vert_sharp[v] = inf
+                vert_sharp[v] = INF_SHARP

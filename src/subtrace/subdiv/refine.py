@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from subtrace.runtime.jit import nb
 import numpy as np
 
-from subtrace.mesh.topology import Level, Options, build_level
+from subtrace.mesh.topology import INF_SHARP, Level, Options, build_level
 from subtrace.subdiv import catmark, loop
 from subtrace.subdiv.creases import (
     F0,
@@ -95,10 +95,10 @@ def refine_points(ref: Refinement, points: np.ndarray) -> np.ndarray:
 
 def _decrement_all(s: np.ndarray) -> np.ndarray:
     s = s.astype(np.float32)
-    out = np.where(s >= np.float32(10.0), s, s - np.float32(1.0)).astype(np.float32)
+    out = np.where(s >= INF_SHARP, s, s - np.float32(1.0)).astype(np.float32)
     out[out <= 0] = 0
     out[s <= 1] = 0
-    out[s >= 10] = np.float32(10.0)
+    out[s >= INF_SHARP] = INF_SHARP
     return out
 
 
