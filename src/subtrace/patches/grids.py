@@ -24,8 +24,8 @@ from functools import lru_cache
 import numpy as np
 
 from subtrace import config
-from subtrace.mesh.topology import Level, Options, compact as _compact
-from subtrace.subdiv.limit import extract, gather as _gather, limit_points
+from subtrace.mesh.topology import Level, Options, compact as _compact, gather as _gather
+from subtrace.subdiv.limit import extract, limit_points
 from subtrace.subdiv.refine import refine_level, refine_points
 
 

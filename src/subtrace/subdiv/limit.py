@@ -29,7 +29,9 @@ import math
 
 import numpy as np
 
-from subtrace.mesh.topology import INF_SHARP, Level, Options, build_level, compact
+from subtrace.mesh.topology import (
+    INF_SHARP, Level, Options, build_level, compact, gather, gather_index,
+)
 from subtrace.runtime.jit import nb
 from subtrace.subdiv import catmark, loop
 from subtrace.subdiv.creases import F0, RULE_CORNER, RULE_CREASE, RULE_SMOOTH, rule_of
@@ -415,7 +417,7 @@ def extract(level: Level, verts: np.ndarray, rings: int = 2):
 def _cut(level: Level, faces: np.ndarray):
     """The sub-level made of ``faces`` (see :func:`extract`); also returns ``faces``."""
     fo, fv = level.face_offsets, level.face_verts
-    corners = _gather_index(fo, faces)
+    corners = gather_index(fo, faces)
     sizes = np.diff(fo)[faces]
     old_v, vmap = compact(fv[corners], level.n_verts)
     old_e, emap = compact(level.face_edges[corners], level.n_edges)
@@ -435,19 +437,6 @@ def _cut(level: Level, faces: np.ndarray):
         vert_nonmanifold=~level.vert_manifold[old_v],
     )
     return sub, old_v, vmap, faces
-
-
-def gather(offsets, values, rows):
-    return values[_gather_index(offsets, rows)]
-
-
-def _gather_index(offsets, rows):
-    starts = offsets[rows]
-    counts = offsets[rows + 1] - starts
-    if counts.sum() == 0:
-        return np.zeros(0, dtype=np.int64)
-    idx = np.repeat(starts - np.cumsum(np.r_[0, counts[:-1]]), counts)
-    return idx + np.arange(counts.sum())
 
 
 def _hard_limits(level, points, options, hard, P, du, dv, rows):
