@@ -1,6 +1,7 @@
-"""Line / surface intersection (subtrace.lines.api, subtrace.lines.items): the paper's Table 1 situations built on real
-patches, random lines against a brute-force reference, hit points against the exact
-evaluator, memory that does not grow with the precision, and the CLI."""
+"""Line / surface intersection (subtrace.lines.api, subtrace.lines.items): the paper's Table 1
+situations built on real patches, random lines against a brute-force reference (the
+ray / triangle oracle of tests/naive.py), hit points against the exact evaluator, memory
+that does not grow with the precision, and the CLI."""
 
 from __future__ import annotations
 

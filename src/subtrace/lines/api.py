@@ -32,8 +32,8 @@ descends, so nothing is stored per level and memory does not grow with the preci
 * ``mode="first"`` visits boxes nearest first and stops entering those beyond the first
   crossing found plus the distance within which a later candidate could merge with it.
 * A cage's items are kept on the cage for the latest ``CACHED_PRECISIONS`` precisions
-  (:func:`subtrace.lines.items.items_for`): a repeated call skips the patch table, the Bezier conversion and the
-  isolation done before.
+  (:func:`subtrace.lines.items.items_for`): a repeated call skips the patch table, the
+  Bezier conversion and the isolation done before.
 """
 
 from __future__ import annotations

@@ -43,8 +43,8 @@ from subtrace.accel.bvh import build_bvh
 from subtrace.lines.kernels import mark_shells
 from subtrace.mesh.topology import INF_SHARP
 from subtrace.patches.basis import (
-    BOX_POINTS, BOX_TO_TRI, CHILD_ORIGIN, CHILD_SCALE, FLAT_TO_TRI, LATTICE_DIRS, TRI_CORNER,
-    TRI_LEAD,
+    BOX_POINTS, BOX_TO_TRI, CHILD_ORIGIN, CHILD_SCALE, FLAT_TO_TRI, LATTICE_DIRS, N_TRI,
+    TRI_CORNER, TRI_LEAD,
 )
 from subtrace.patches.isolate import build_isolated, refine_children
 from subtrace.patches.shells import one_ring_shells
@@ -111,7 +111,7 @@ class Items:
         self.all_nets = np.ascontiguousarray(q[0]) if q[0] is not None else \
             np.zeros((0, 4, 4, 3))
         self.all_tnets = np.ascontiguousarray(t[0]) if t[0] is not None else \
-            np.zeros((0, 15, 3))
+            np.zeros((0, N_TRI, 3))
         nq, nt = len(self.all_nets), len(self.all_tnets)
         both = [x for x in (q, t) if x[0] is not None]
         self.all_exact = np.concatenate([x[1] for x in both]).astype(bool)
@@ -441,7 +441,7 @@ def isolate_loop(obj, faces, allowed, max_level):
         root, org, scale, start = root[~reg], org[~reg], scale[~reg], kids[~reg]
         level += 1
     if not out[0]:
-        return (np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros(0), np.zeros((0, 15, 3)),
+        return (np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros(0), np.zeros((0, N_TRI, 3)),
                 np.zeros(0, bool))
     return tuple(np.concatenate(a) for a in out)
 

@@ -7,13 +7,13 @@ control grid as the exact evaluator, :mod:`subtrace.patches.evaluate`). For such
 * :func:`control_grids` gathers the 16 point ids, ``[u index][v index]``, with ``u`` running
   from corner 0 to corner 1 and ``v`` from corner 0 to corner 3 (the grid layout of
   :mod:`subtrace.patches.grids`);
-* :func:`subtrace.patches.basis.bezier_nets` converts them to the patch's bicubic Bezier control net. The patch lies
-  in the net's convex hull, so the net's box is a containing shell much tighter than the box
-  of the 16 B-spline points (design invariant 2), and the partial derivatives are Bezier
-  patches with control points ``3 (b[i+1, j] - b[i, j])`` (resp. ``j``), so
-  :func:`~subtrace.patches.basis.net_bounds` gives the box and a bound on ``|dP/du|`` and ``|dP/dv|`` over the whole
-  patch: a grid cell at depth ``n`` has sides no longer than ``bound * 2^-n`` (the refinement
-  criterion, design invariant 3).
+* :func:`subtrace.patches.basis.bezier_nets` converts them to the patch's bicubic Bezier
+  control net. The patch lies in the net's convex hull, so the net's box is a containing
+  shell much tighter than the box of the 16 B-spline points (design invariant 2), and the
+  partial derivatives are Bezier patches with control points ``3 (b[i+1, j] - b[i, j])``
+  (resp. ``j``), so :func:`~subtrace.patches.basis.net_bounds` gives the box and a bound on
+  ``|dP/du|`` and ``|dP/dv|`` over the whole patch: a grid cell at depth ``n`` has sides no
+  longer than ``bound * 2^-n`` (the refinement criterion, design invariant 3).
 
 The renderer evaluates the nets themselves (``trace/bezier.py``).
 """
