@@ -89,6 +89,7 @@ def bez_point(nets, k, u, v):
         z += ba * cz
     return x, y, z
 
+
 @leaf_njit
 def bez_sums(net, a1, b1, a2, b2, a3, b3):
     """``sum_ij ar[i] br[j] net[i, j]`` for r = 1, 2, 3 (three 3-tuples): the tensor-product
@@ -192,6 +193,8 @@ def bez_normals(nets, rows, ab, out):
 
 @leaf_njit
 def split_row(a, b, c, d):
+    """De Casteljau halving of one cubic row ``a, b, c, d``: ``ab, abc, m, bcd, cd`` (the
+    left half is ``a, ab, abc, m``, the right half ``m, bcd, cd, d``)."""
     ab = 0.5 * (a + b)
     bc = 0.5 * (b + c)
     cd = 0.5 * (c + d)
