@@ -28,8 +28,9 @@ from pathlib import Path
 import numpy as np
 
 import subtrace
-from subtrace.lines.api import intersect_lines, torus_cage
+from subtrace.lines.api import intersect_lines
 from subtrace.runtime.threads import set_threads
+from subtrace.shapes import torus_cage
 
 SPOT = Path(__file__).resolve().parents[2] / "shared" / "models" / "spot_low_resolution.obj"
 
@@ -84,10 +85,9 @@ def main():
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--spot", default=str(SPOT), help="Spot's low-resolution Loop cage")
     a = ap.parse_args()
-    from subtrace.lines.loop_items import box_nets, loop_regular
+    from subtrace.lines.items import box_nets, loop_regular
+    from subtrace.patches.basis import net_flatness, tri_flatness
     from subtrace.patches.table import build_patch_table
-    from subtrace.lines.kernels import net_flatness
-    from subtrace.lines.tri_nets import tri_flatness
 
     torus = torus_cage()
     spot = subtrace.load_cage(a.spot) if Path(a.spot).exists() else None

@@ -27,7 +27,7 @@ import json, sys, warnings
 import numpy as np
 from subtrace import config
 from subtrace.io.scene import apply_overrides, load_scene
-from subtrace.patches import table as pt
+from subtrace.patches import criterion as pt
 from subtrace.render import render_scene
 from subtrace.sweep import PeakMemory
 

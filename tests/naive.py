@@ -96,3 +96,35 @@ def relations(n_verts, face_offsets, face_verts, edge_verts, face_edges, forward
     out.update(vert_faces=vert_faces, vert_face_corner=vert_face_corner, vert_edges=vert_edges,
                vert_manifold=manifold, edge_nonmanifold=edge_nonmanifold)
     return out
+
+
+def ray_triangles(origin, direction, A, B, C):
+    """Moller-Trumbore in float64, one line against many triangles: ``(t, u, v)``, each (m,),
+    with the line ``origin + t * direction`` (origin, direction (3,)) meeting the plane of
+    triangle ``(A[i], B[i], C[i])`` (each (m,3)) at barycentrics ``(1 - u - v, u, v)``;
+    NaN or inf where the line is parallel to the plane. The line hits the triangle where
+    ``u >= 0, v >= 0, u + v <= 1`` (:func:`ray_triangle_hits`)."""
+    A, B, C = (np.asarray(X, dtype=np.float64) for X in (A, B, C))
+    o = np.asarray(origin, dtype=np.float64)
+    d = np.asarray(direction, dtype=np.float64)
+    e1, e2 = B - A, C - A
+    pv = np.cross(d, e2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / (e1 * pv).sum(axis=1)
+        tv = o - A
+        u = (tv * pv).sum(axis=1) * inv
+        qv = np.cross(tv, e1)
+        v = (d * qv).sum(axis=1) * inv
+        t = (e2 * qv).sum(axis=1) * inv
+    return t, u, v
+
+
+def ray_triangle_hits(origin, direction, A, B, C, slack=0.0):
+    """``(t, index)`` of the triangles the line hits (barycentrics down to ``-slack``
+    allowed: a line through a shared edge hits both), sorted by ``t``."""
+    t, u, v = ray_triangles(origin, direction, A, B, C)
+    with np.errstate(invalid="ignore"):
+        hit = (u >= -slack) & (v >= -slack) & (u + v <= 1 + slack) & np.isfinite(t)
+    idx = np.nonzero(hit)[0]
+    order = np.argsort(t[idx], kind="stable")
+    return t[idx][order], idx[order]

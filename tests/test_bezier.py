@@ -7,7 +7,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from subtrace.trace.bezier import _bez_point, _cell_entry, _cell_slab, _net_box, _split
+from subtrace.patches.basis import bez_point, net_box, split_net
+from subtrace.trace.bezier import _cell_entry, _cell_slab
 
 
 def _sub_net(root, depth, i, j):
@@ -18,7 +19,7 @@ def _sub_net(root, depth, i, j):
     for lev in range(depth):
         shift = depth - 1 - lev
         q = ((i >> shift) & 1) + 2 * ((j >> shift) & 1)
-        _split(work, 0, work, 4)
+        split_net(work, 0, work, 4)
         work[0] = work[4 + q]
     return work[:1].copy()
 
@@ -35,19 +36,19 @@ def test_cell_slab_lets_through_rays_that_meet_the_cell(seed, depth, scale):
     n = 1 << depth
     i, j = (int(x) for x in rng.integers(0, n, 2))
     sub = _sub_net(root, depth, i, j)
-    box = np.array([_net_box(sub, 0)])
+    box = np.array([net_box(sub, 0)])
     slab = np.empty((1, 5))
     _cell_slab(sub, 0, slab, 0)
     # the cell's exact corners (as the renderer builds them), points of its two triangles
     # and points of its surface
-    corners = np.array([_bez_point(nets, 0, (i + di) / n, (j + dj) / n)
+    corners = np.array([bez_point(nets, 0, (i + di) / n, (j + dj) / n)
                         for di, dj in ((0, 0), (1, 0), (1, 1), (0, 1))])
     pts = []
     for tri in ((0, 1, 2), (0, 2, 3)):
         w = rng.dirichlet(np.ones(3), 20)
         pts.append(w @ corners[list(tri)])
     uv = (np.array([i, j]) + rng.random((20, 2))) / n
-    pts.append(np.array([_bez_point(nets, 0, u, v) for u, v in uv]))
+    pts.append(np.array([bez_point(nets, 0, u, v) for u, v in uv]))
     pts.append(corners)
     for p in np.concatenate(pts):
         o = p + rng.normal(0, 3 * scale, 3)
@@ -67,7 +68,7 @@ def test_cell_slab_culls_rays_that_pass_beside_a_flat_cell():
     g = np.stack(np.meshgrid(np.arange(4.0), np.arange(4.0), indexing="ij"), -1)
     # a plane tilted against every axis
     net = np.concatenate([g, (0.3 * g[..., :1] + 0.5 * g[..., 1:])], -1)[None]
-    box = np.array([_net_box(net, 0)])
+    box = np.array([net_box(net, 0)])
     slab = np.empty((1, 5))
     _cell_slab(net, 0, slab, 0)
     # parallel to the plane, above it, through the box
@@ -79,18 +80,3 @@ def test_cell_slab_culls_rays_that_pass_beside_a_flat_cell():
 
     assert slab_bounds(*args, *box[0], np.inf) < np.inf
     assert _cell_entry(*args, d[0], d[1], d[2], box, slab, 0, np.inf) == np.inf
-
-
-def test_quadrant_is_the_split_child():
-    """``_quadrant`` makes exactly the child that ``_split`` makes (the descent mixes both)."""
-    from subtrace.trace.bezier import _quadrant
-
-    rng = np.random.default_rng(3)
-    nets = rng.normal(size=(1, 4, 4, 3))
-    work = np.empty((8, 4, 4, 3))
-    _split(nets, 0, work, 4)
-    for cu in (0, 1):
-        for cv in (0, 1):
-            out = np.empty((2, 4, 4, 3))
-            _quadrant(nets, 0, cu, cv, out, 0)
-            assert np.array_equal(out[0], work[4 + cu + 2 * cv])

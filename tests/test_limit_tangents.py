@@ -11,7 +11,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from subtrace import make_cage
-from subtrace.patches import evaluate as ev
+from subtrace.patches import basis, evaluate as ev
 from subtrace.subdiv import limit
 from subtrace.subdiv.refine import refine_level, refine_points
 from test_properties import PROPS, _ptex_samples, cages
@@ -65,7 +65,7 @@ def test_dart_normals_follow_the_winding(shape, mirror):
         pts = pts * np.array([-1.0, 1.0, 1.0])
     cage = make_cage(pts, sizes, verts, **kw)
     cls = limit.classify(cage.base, cage.options)
-    assert cls[0] == cls[2] == limit._HARD_STATIONARY
+    assert cls[0] == cls[2] == limit.HARD_STATIONARY
     for level in (0, 1, 2):
         P, du, dv = cage.limit(level)
         n = np.cross(du, dv)
@@ -102,7 +102,7 @@ def _level_invariance(cage):
     eigen-analysed ones) must not depend on the level they are computed from: a vertex
     keeps its index through refinement."""
     cls = limit.classify(cage.base, cage.options)
-    keep = np.isin(cls, (limit._SMOOTH, limit._HARD_STATIONARY)) & cage.base.vert_manifold
+    keep = np.isin(cls, (limit.SMOOTH, limit.HARD_STATIONARY)) & cage.base.vert_manifold
     P0, du0, dv0 = cage.limit(0)
     P1, du1, dv1 = cage.limit(1)
     n = cage.base.n_verts
@@ -162,7 +162,7 @@ def test_box_spline_basis_is_the_limit_at_dyadic_points():
         ref = refine_level(lev, cage.options)
         X, W, lev = refine_points(ref, X), refine_points(ref, W), ref.child
     rows, uv = [], []
-    for a, b in ev._BOX_MONO:  # 15 points (a/4, b/4) with a + b <= 4
+    for a, b in basis.BOX_MONO:  # 15 points (a/4, b/4) with a + b <= 4
         q = np.array([a, b]) / 4.0
         v = int(np.argmin(np.linalg.norm(X[:, :2] - q, axis=1)))
         assert np.linalg.norm(X[v, :2] - q) < 1e-12
@@ -171,14 +171,14 @@ def test_box_spline_basis_is_the_limit_at_dyadic_points():
         rows.append(0.5 * W[v] + W[far].sum(axis=0) / 12.0)
         uv.append(q)
     rows = np.array(rows)
-    cols = [ids[tuple(p)] for p in ev._BOX_POINTS]
+    cols = [ids[tuple(p)] for p in basis.BOX_POINTS]
     # only the 12 points around the triangle carry weight
     others = np.delete(rows, cols, axis=1)
     assert np.abs(others).max() < 1e-15
-    V = np.array([[u**a * v**b for a, b in ev._BOX_MONO] for u, v in uv])
+    V = np.array([[u**a * v**b for a, b in basis.BOX_MONO] for u, v in uv])
     coef = np.linalg.solve(V, rows[:, cols])
     # 1e-12: a 15x15 solve at dyadic points; the table is exact (multiples of 1/24)
-    np.testing.assert_allclose(coef, ev._BOX_COEF, atol=1e-12)
+    np.testing.assert_allclose(coef, basis.BOX_COEF, atol=1e-12)
 
 
 @PROPS
@@ -206,7 +206,7 @@ def test_corner_normals_are_the_limit_normals(spec, seed):
         for k, corner in enumerate(table):
             c = 4 * f + (k if s < 0 else s) if is_loop else fo[f] + (k if s < 0 else s)
             w = lev1.face_verts[lev1.face_offsets[c] + k]
-            if cls1[w] == limit._SMOOTH and valence[w] != regular_valence:
+            if cls1[w] == limit.SMOOTH and valence[w] != regular_valence:
                 faces.append(ptex)
                 uvs.append(corner)
                 verts.append(w)

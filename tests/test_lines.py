@@ -1,6 +1,7 @@
-"""Line / surface intersection (subtrace.lines.api): the paper's Table 1 situations built on real
-patches, random lines against a brute-force reference, hit points against the exact
-evaluator, memory that does not grow with the precision, and the CLI."""
+"""Line / surface intersection (subtrace.lines.api, subtrace.lines.items): the paper's Table 1
+situations built on real patches, random lines against a brute-force reference (the
+ray / triangle oracle of tests/naive.py), hit points against the exact evaluator, memory
+that does not grow with the precision, and the CLI."""
 
 from __future__ import annotations
 
@@ -13,7 +14,11 @@ import pytest
 import subtrace
 from subtrace.cli import main
 from subtrace.errors import SubtraceError
-from subtrace.lines.api import intersect_lines, torus_cage
+from subtrace.lines.api import intersect_lines
+from subtrace.lines.items import items_for
+from subtrace.shapes import torus_cage
+
+import naive
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 
@@ -46,18 +51,9 @@ def reference_hits(cage, level, org, dirs):
         q = mesh.face_verts.reshape(-1, 4)[keep]
         tris = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
     A, B, C = P[tris[:, 0]], P[tris[:, 1]], P[tris[:, 2]]
-    e1, e2 = B - A, C - A
     out = []
     for o, d in zip(org, dirs):
-        pv = np.cross(d, e2)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / (e1 * pv).sum(1)
-            tv = o - A
-            u = (tv * pv).sum(1) * inv
-            qv = np.cross(tv, e1)
-            v = (d * qv).sum(1) * inv
-            t = (e2 * qv).sum(1) * inv
-        ts = np.sort(t[(u >= 0) & (v >= 0) & (u + v <= 1) & np.isfinite(t)])
+        ts, _ = naive.ray_triangle_hits(o, d, A, B, C)
         out.append(ts[np.r_[True, np.diff(ts) > 1e-9]] if len(ts) else ts)
     return out
 
@@ -272,9 +268,7 @@ def _cell_errors(cage, precision):
     (``cage.evaluate``) and the cell's bilinear patch at the same parameters (3 x 3
     samples inside; at most 300 cells), the number of cells, and the largest proven bound
     (one-ring box diagonal) of the interior cells."""
-    from subtrace.lines import api as L
-
-    items = L._items_for(cage, precision)
+    items = items_for(cage, precision)
     items._isolate(items.irregular)
     items._finish()
     cell = np.nonzero(~items.all_exact)[0]

@@ -1,4 +1,4 @@
-"""Line / surface intersection on Loop cages (subtrace.lines.api with subtrace.lines.loop_items): the
+"""Line / surface intersection on Loop cages (subtrace.lines.api with subtrace.lines.items): the
 quartic Bezier items against the exact evaluator, the Table 1 situations on regular and
 extraordinary patches, random lines against a brute-force reference (a closed model with
 extraordinary vertices, all-extraordinary icosahedron, a cage with a boundary), the oracle's
@@ -12,9 +12,13 @@ import numpy as np
 import pytest
 
 import subtrace
-from subtrace.lines.api import intersect_lines, torus_cage
-from subtrace.lines.loop_items import box_nets, isolate_loop, loop_regular
-from subtrace.lines.tri_nets import CHILD_ORIGIN, CHILD_SCALE, TRI_SPLIT, bernstein
+from subtrace.lines.api import intersect_lines
+from subtrace.lines.items import box_nets, isolate_loop, loop_regular
+from subtrace.mesh.topology import INF_SHARP
+from subtrace.patches.basis import CHILD_ORIGIN, CHILD_SCALE, TRI_SPLIT
+from subtrace.patches.basis import tri_bernstein as bernstein
+from subtrace.patches.table import build_patch_table
+from subtrace.shapes import torus_cage
 
 from test_lines import check_random_lines
 
@@ -102,8 +106,6 @@ def test_regular_patch_nets_are_the_box_splines(spot):
 
 
 def test_isolated_pieces_and_cells(icosahedron):
-    from subtrace.patches.table import build_patch_table
-
     tb = build_patch_table([icosahedron])
     allowed = 0.01
     root, uv0, scale, nets, exact = isolate_loop(tb.objects[0], tb.face[:3], allowed, 40)
@@ -127,8 +129,6 @@ def test_boundary_and_crease_patches_are_box_splines(which, disc, icosahedron):
     """Triangles along a boundary or an infinitely sharp crease whose crease vertices are
     regular (3 faces on the triangle's side) are box splines with phantom points: their
     nets equal the exact evaluator (level-1 faces, ptex parameters of their base face)."""
-    from subtrace.lines.loop_items import F_INF
-
     if which == "disc":
         cage = disc
     else:  # the icosahedron with the five edges around vertex 0 infinitely sharp
@@ -141,7 +141,7 @@ def test_boundary_and_crease_patches_are_box_splines(which, disc, icosahedron):
     faces = np.arange(lev.n_faces)
     reg = faces[loop_regular(lev, cage.options, faces)]
     sharp_v = np.zeros(lev.n_verts, bool)
-    sharp_v[lev.edge_verts[lev.edge_sharpness >= F_INF].ravel()] = True
+    sharp_v[lev.edge_verts[lev.edge_sharpness >= INF_SHARP].ravel()] = True
     on = sharp_v[lev.face_verts.reshape(-1, 3)[reg]].any(axis=1)
     assert on.sum() >= 10  # phantom-point patches exist
     rng = np.random.default_rng(4)

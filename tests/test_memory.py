@@ -113,7 +113,8 @@ def test_sweep_takes_the_budget(capsys, tmp_path):
 def test_estimate_grows_with_depth_and_cap_fits():
     from subtrace.mesh.cage import load_cage
     from subtrace.io.scene import load_scene
-    from subtrace.patches.table import build_patch_table, depth_cap, memory_estimate
+    from subtrace.patches.criterion import depth_cap, memory_estimate
+    from subtrace.patches.table import build_patch_table
 
     scene = load_scene(SPOT_LOOP)
     table = build_patch_table([load_cage(o.mesh, scheme=o.scheme) for o in scene.objects])
@@ -135,7 +136,8 @@ def test_tile_lists_over_the_budget_fall_back_to_the_bvh(capsys, tmp_path):
     from subtrace.runtime import threads as tasks
     from subtrace.accel.projection import project_shells, tiles_bytes
     from subtrace.io.scene import scene_from_dict
-    from subtrace.patches.table import build_patch_table, choose_depths, memory_estimate
+    from subtrace.patches.criterion import choose_depths, memory_estimate
+    from subtrace.patches.table import build_patch_table
     from subtrace.render import load_objects
     from subtrace.camera import camera_frame
 

@@ -107,10 +107,10 @@ def test_limit_normals_smooth(shapes, name):
     """Normals at smooth vertices where OpenSubdiv's tangent masks are exact."""
     z, meta, cage = shapes(name)
     diag = meta["bbox_diag"]
-    from subtrace.subdiv.limit import _SMOOTH, classify
+    from subtrace.subdiv.limit import SMOOTH, classify
 
     lev = cage.level_topology(3)
-    smooth = (classify(lev, cage.options) == _SMOOTH) & z["limit3_exact"].astype(bool)
+    smooth = (classify(lev, cage.options) == SMOOTH) & z["limit3_exact"].astype(bool)
     if not smooth.any():
         pytest.skip("no smooth exact vertices")
     _, du, dv = cage.limit(3)
@@ -150,11 +150,11 @@ def test_limit_normals_sharp(shapes, name):
     """
     z, meta, cage = shapes(name)
     diag = meta["bbox_diag"]
-    from subtrace.subdiv.limit import _CORNER, _CREASE, classify
+    from subtrace.subdiv.limit import CORNER, CREASE, classify
 
     lev = cage.level_topology(3)
     cls = classify(lev, cage.options)
-    sharp = np.isin(cls, (_CREASE, _CORNER)) & lev.vert_manifold & z["limit3_exact"].astype(bool)
+    sharp = np.isin(cls, (CREASE, CORNER)) & lev.vert_manifold & z["limit3_exact"].astype(bool)
     if not sharp.any():
         pytest.skip("no crease, boundary or corner vertices")
     _, du, dv = cage.limit(3)
@@ -164,10 +164,10 @@ def test_limit_normals_sharp(shapes, name):
     ok = sharp & (np.linalg.norm(n1, axis=1) > 1e-12 * diag**2)
     ok &= np.linalg.norm(n2, axis=1) > 1e-12 * diag**2
     interior = ~lev.vert_boundary()
-    other_side = ok & interior & (cls == _CREASE) & (np.einsum("ij,ij->i", du, du0) < 0)
+    other_side = ok & interior & (cls == CREASE) & (np.einsum("ij,ij->i", du, du0) < 0)
     same = ok & ~other_side
     assert _angles_deg(n1[same], n2[same]).max(initial=0) < 1e-4
-    crease = same & (cls == _CREASE)
+    crease = same & (cls == CREASE)
     assert _angles_deg(du[crease], du0[crease]).max(initial=0) < 1e-4
     assert _angles_deg(du[other_side], -du0[other_side]).max(initial=0) < 1e-4
     # the boundary is where OpenSubdiv's ring order is fixed: every boundary vertex compares
@@ -175,10 +175,10 @@ def test_limit_normals_sharp(shapes, name):
 
 
 def _smooth_corner_samples(cage, z, mask):
-    """Indices of the ptex-corner samples in ``mask`` whose vertex is smooth (class _SMOOTH)
+    """Indices of the ptex-corner samples in ``mask`` whose vertex is smooth (class SMOOTH)
     on level 1: corner j of a regular face is corner j of its child j there, and a ptex
     sub-face of an n-gon is a level-1 face."""
-    from subtrace.subdiv.limit import _SMOOTH, classify
+    from subtrace.subdiv.limit import SMOOTH, classify
 
     lev1 = cage.level_topology(1)
     cls1 = classify(lev1, cage.options)
@@ -195,7 +195,7 @@ def _smooth_corner_samples(cage, z, mask):
         f, s = z["sample_base_face"][i], z["sample_subface"][i]
         j = k if s < 0 else s  # which child of the base face
         c = 4 * f + j if cage.scheme == "loop" else fo[f] + j
-        if cls1[lev1.face_verts[lev1.face_offsets[c] + k]] == _SMOOTH:
+        if cls1[lev1.face_verts[lev1.face_offsets[c] + k]] == SMOOTH:
             out.append(i)
     return out
 

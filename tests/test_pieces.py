@@ -23,7 +23,7 @@ def test_bicubic_grids_match_refinement(name):
     derivatives) gives the limit points and normals of uniform refinement (to rounding),
     and the net's box contains them."""
     from subtrace.patches import bspline
-    from subtrace.trace.bezier import _bez_point, bez_derivatives
+    from subtrace.patches.basis import bez_derivatives, bez_point as _bez_point
 
     cage = load_shape(name)
     lev = cage.level_topology(1)
@@ -56,7 +56,7 @@ def test_isolated_pieces_tile_the_grid(name):
     """The pieces of an irregular patch cover every cell of its grid exactly once, and their
     points are the grid's exact limit points (uniform refinement), to rounding."""
     from subtrace.patches.isolate import build_isolated
-    from subtrace.trace.bezier import _bez_point
+    from subtrace.patches.basis import bez_point as _bez_point
 
     cage = load_shape(name)
     table = build_patch_table([cage])
@@ -113,7 +113,7 @@ def test_cells_subtend_at_most_the_tolerance():
     Spot (regular and isolated, and each piece of an isolated patch at its own depth)
     subtends at most the tolerance at the eye (the bound is conservative) - and not far
     below it for most patches (the bound is tight)."""
-    from subtrace.patches.table import choose_depths
+    from subtrace.patches.criterion import choose_depths
 
     cage = subtrace.load_cage(MODELS / "spot_control_mesh.obj")
     table = build_patch_table([cage])

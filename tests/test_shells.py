@@ -86,7 +86,7 @@ def test_shells_contain_limit_of_perturbed_cages(seed, name):
 def _isolated_shells(cage, tol_rad):
     """The patch table and the shells the depth choice tightens (eye on the +z side, three
     bounding-box diagonals away), with the patches it tightened."""
-    from subtrace.patches.table import choose_depths
+    from subtrace.patches.criterion import choose_depths
 
     table = build_patch_table([cage])
     lo, hi = table.shell_min.copy(), table.shell_max.copy()

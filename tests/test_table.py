@@ -1,5 +1,5 @@
 """subtrace.patches.table: the patch table against its plain construction (every patch's
-one-ring shell, then the regular patches' Bezier nets and bounds over it, bspline's public
+one-ring shell, then the regular patches' Bezier nets and bounds over it, the basis's public
 functions), bit for bit, for one and several objects and any thread count."""
 
 from __future__ import annotations
@@ -13,8 +13,11 @@ import pytest
 from subtrace import config, load_cage
 from subtrace.runtime import threads as tasks
 from subtrace.errors import SubtraceWarning
-from subtrace.patches.bspline import bezier_nets, control_grids, net_bounds, regular_mask
-from subtrace.patches.table import _shells, _subdominant, build_patch_table
+from subtrace.patches.basis import bezier_nets, net_bounds
+from subtrace.patches.bspline import control_grids, regular_mask
+from subtrace.patches.criterion import subdominant
+from subtrace.patches.shells import one_ring_shells
+from subtrace.patches.table import build_patch_table
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 SHAPES = SHARED / "oracle" / "shapes"
@@ -32,16 +35,12 @@ def _load(name):
 def plain_shells(o):
     """(shell_min, shell_max, edge_bound, rate, regular, nets) of one object, built plainly."""
     lev, pts, faces = o.level, o.points, o.patch_faces
-    n = len(faces)
-    smin, smax, ebound = np.empty((n, 3)), np.empty((n, 3)), np.empty(n)
-    valence = np.empty(n, dtype=np.int64)
-    _shells(faces, lev.face_offsets, lev.face_verts, lev.vert_face_offsets, lev.vert_faces,
-            pts, smin, smax, ebound, valence)
+    smin, smax, ebound, valence = one_ring_shells(lev, faces, pts)
     if o.cage.options.chaikin and np.any(lev.edge_sharpness > 1.0):
         margin = config.SHELL_CHAIKIN_MARGIN * (smax - smin).max(axis=1, keepdims=True)
         smin -= margin
         smax += margin
-    rate = _subdominant(valence, o.cage.scheme == "catmark")
+    rate = subdominant(valence, o.cage.scheme == "catmark")
     regular = regular_mask(lev, o.cage.options, faces)
     nets = bezier_nets(pts[control_grids(lev, faces[regular])])
     smin[regular], smax[regular], ebound[regular] = net_bounds(nets)

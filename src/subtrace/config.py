@@ -21,6 +21,12 @@ GRID_RINGS = 2
 # control points' hull (by 5 % of the cage in the worst case measured).
 SHELL_CHAIKIN_MARGIN = 0.25
 
+# The control-edge bound of a cell at an extraordinary vertex is not a proven bound (measured
+# up to 0.8 % short on Spot); irregular cells stop refining only with this much to spare
+# (patches/isolate.py), and line queries guess an irregular patch's first isolation depth
+# from this multiple of its bound (lines/items.py).
+IRREGULAR_MARGIN = 1.25
+
 # Largest coordinate magnitude a render accepts (io/obj.py: check_coordinates): the
 # renderer squares distances and multiplies up to three coordinates (1e100^3 = 1e300 is
 # still below the largest double, 1.8e308); a cage at 1e100 renders (tested), one at 1e300

@@ -29,8 +29,8 @@ from subtrace.io.obj import DEFAULT_DIFFUSE
 from subtrace.mesh.cage import load_cage
 from subtrace.patches.grids import build_grids, node_boxes, snap_sides
 from subtrace.patches.isolate import build_isolated
-from subtrace.patches.table import (build_patch_table, choose_depths, depth_cap, edge_sampling,
-                                    memory_estimate)
+from subtrace.patches.criterion import choose_depths, depth_cap, edge_sampling, memory_estimate
+from subtrace.patches.table import build_patch_table
 from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
 from subtrace.shade import CHANNELS, PatchShading, miss_values, shade

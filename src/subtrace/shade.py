@@ -15,9 +15,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from subtrace.patches.basis import bez_derivatives
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
-from subtrace.trace.bezier import bez_derivatives
 from subtrace.trace.prims import ray_setup
 
 

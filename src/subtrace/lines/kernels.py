@@ -5,7 +5,7 @@ An *item* is a Bezier net over part of some patch's parameters, of one of two ki
 * a bicubic net (4,4,3) over a square (Catmull-Clark): a regular patch, a regular piece of
   an isolated irregular patch, or (degree-elevated bilinear) an exact-limit-point cell next
   to an extraordinary vertex;
-* a quartic triangular net (15,3) over a triangle (Loop, :mod:`subtrace.lines.tri_nets`):
+* a quartic triangular net (15,3) over a triangle (Loop, :mod:`subtrace.patches.basis`):
   a regular box-spline patch or piece, or (degree-elevated linear) an exact-limit-point
   cell.
 
@@ -27,7 +27,7 @@ triangle ``i - len(nets)``. Per line (nothing is stored between lines):
    first term of ``L``; the second bounds ``|L - T|`` for the two corner triangles ``T``
    (``L - T = -t (1 - s) twist``). Both terms are second differences: each halving divides
    them by about 4, so the depth is about ``log4(flatness(root) / tol_flat)``. A triangular
-   net has the same bound without the twist (:func:`~subtrace.lines.tri_nets.tri_flatness`).
+   net has the same bound without the twist (:func:`~subtrace.patches.basis.tri_flatness`).
    Children are visited nearest first (entry into their boxes).
 3. At a flat leaf: the corner triangles (watertight test) seed Newton on the exact net
    (unknowns s, t, line parameter); a root inside the item (up to ``PARAM_SLACK``) is a
@@ -49,23 +49,21 @@ from __future__ import annotations
 
 import math
 
-from subtrace.runtime.jit import nb
 import numpy as np
 
 from subtrace import config
-from subtrace.trace.bezier import _copy_net, _net_box, _split
-from subtrace.lines.tri_nets import (
-    N_TRI, TRI_MONO, mono_eval, tri_box, tri_flatness, tri_monomials, tri_split,
-)
 from subtrace.accel.bvh import box_entry, bvh_next_leaf, bvh_start, slab_entry, traversal_stack
-from subtrace.runtime.jit import leaf_njit
-from subtrace.trace.prims import ray_triangle as _tri, shear as _shear
+from subtrace.patches.basis import (
+    N_TRI, TRI_MONO, bez_eval, copy_net as _copy_net, net_box, net_flatness,
+    split_net as _split, tri_box, tri_flatness, tri_mono_eval, tri_monomials, tri_split,
+)
+from subtrace.runtime.jit import leaf_njit, nb
+from subtrace.trace.prims import ray_triangle, shear
 
 # Deepest halving of an item: 2^-40 of its side is below what double parameters resolve.
 MAX_DEPTH = 40
 # Work nets on the descent stack: each level keeps at most 3 siblings, plus 10 for splitting.
 STACK_NETS = 3 * MAX_DEPTH + 16
-# BVH traversal stack (the trees built here are far shallower).
 # Newton iterations for a crossing / for a touch.
 NEWTON_ITERS = 16
 # A root found from a leaf counts if it lies within this much (in the leaf's parameter
@@ -85,73 +83,36 @@ KIND_TOUCH = 2.0
 
 
 @leaf_njit
-def net_flatness(w, q):
-    """Distance bound between net ``w[q]``'s patch and its corner triangles (module doc)."""
-    e = 0.0
-    for i in range(4):
-        s = i / 3.0
-        for j in range(4):
-            t = j / 3.0
-            d2 = 0.0
-            for k in range(3):
-                L = ((1 - s) * (1 - t) * w[q, 0, 0, k] + s * (1 - t) * w[q, 3, 0, k]
-                     + (1 - s) * t * w[q, 0, 3, k] + s * t * w[q, 3, 3, k])
-                d = w[q, i, j, k] - L
-                d2 += d * d
-            e = max(e, math.sqrt(d2))
-    tw = 0.0
-    for k in range(3):
-        d = w[q, 0, 0, k] - w[q, 3, 0, k] - w[q, 0, 3, k] + w[q, 3, 3, k]
-        tw += d * d
-    return e + 0.25 * math.sqrt(tw)
-
-
-@leaf_njit
-def _quad_sums(w, q, a1, b1, a2, b2, a3, b3, out, row):
-    """``out[row + r] = sum_ij ar[i] br[j] w[q, i, j]`` for r = 0, 1, 2 (scalar sums)."""
-    px = py = pz = ux = uy = uz = vx = vy = vz = 0.0
-    for i in range(4):
-        for j in range(4):
-            x, y, z = w[q, i, j, 0], w[q, i, j, 1], w[q, i, j, 2]
-            f, fu, fv = a1[i] * b1[j], a2[i] * b2[j], a3[i] * b3[j]
-            px += f * x
-            py += f * y
-            pz += f * z
-            ux += fu * x
-            uy += fu * y
-            uz += fu * z
-            vx += fv * x
-            vy += fv * y
-            vz += fv * z
-    out[row, 0], out[row, 1], out[row, 2] = px, py, pz
-    out[row + 1, 0], out[row + 1, 1], out[row + 1, 2] = ux, uy, uz
-    out[row + 2, 0], out[row + 2, 1], out[row + 2, 2] = vx, vy, vz
-
-
-@leaf_njit
-def _quad_eval(w, q, s, t, out, second):
-    """Point, first and (with ``second``) second derivatives of bicubic net ``w[q]`` at
-    (s, t) into ``out`` rows P, Ps, Pt, Pss, Pst, Ptt (Newton's inner loop)."""
-    ss, st = 1.0 - s, 1.0 - t
-    b = (ss * ss * ss, 3.0 * s * ss * ss, 3.0 * s * s * ss, s * s * s)
-    db = (-3.0 * ss * ss, 3.0 * ss * (ss - 2.0 * s), 3.0 * s * (2.0 * ss - s), 3.0 * s * s)
-    c = (st * st * st, 3.0 * t * st * st, 3.0 * t * t * st, t * t * t)
-    dc = (-3.0 * st * st, 3.0 * st * (st - 2.0 * t), 3.0 * t * (2.0 * st - t), 3.0 * t * t)
-    _quad_sums(w, q, b, c, db, c, b, dc, out, 0)
-    if second:
-        ddb = (6.0 * ss, 6.0 * (3.0 * s - 2.0), 6.0 * (1.0 - 3.0 * s), 6.0 * s)
-        ddc = (6.0 * st, 6.0 * (3.0 * t - 2.0), 6.0 * (1.0 - 3.0 * t), 6.0 * t)
-        _quad_sums(w, q, ddb, c, db, dc, b, ddc, out, 3)
+def _slab_t(o0, o1, o2, i0, i1, i2, lo0, lo1, lo2, hi0, hi1, hi2, pad, tlo, thi):
+    """Where the line o + t d (``i`` = 1/d) enters the box [lo - pad, hi + pad] for t in
+    [tlo, thi], or inf if it misses. IEEE infinities handle zero direction components."""
+    a = (lo0 - pad - o0) * i0
+    b = (hi0 + pad - o0) * i0
+    tn = min(a, b)
+    tf = max(a, b)
+    a = (lo1 - pad - o1) * i1
+    b = (hi1 + pad - o1) * i1
+    tn = max(tn, min(a, b))
+    tf = min(tf, max(a, b))
+    a = (lo2 - pad - o2) * i2
+    b = (hi2 + pad - o2) * i2
+    tn = max(tn, min(a, b))
+    tf = min(tf, max(a, b))
+    if tn != tn or tf != tf:  # NaN: origin on a slab plane of a zero component
+        return tlo
+    tf = tf + 1e-15 * abs(tf) + 1e-300
+    tn = max(tn, tlo)
+    return tn if tn <= min(tf, thi) else np.inf
 
 
 @leaf_njit
 def _eval(tri, w, q, mono, s, t, out, second):
-    """:func:`_quad_eval` of quad net ``w[q]``, or the triangle net whose monomial
-    coefficients are ``mono`` (``tri``)."""
+    """:func:`~subtrace.patches.basis.bez_eval` of quad net ``w[q]``, or the triangle net
+    whose monomial coefficients are ``mono`` (``tri``)."""
     if tri:
-        mono_eval(mono, s, t, out, second)
+        tri_mono_eval(mono, s, t, out, second)
     else:
-        _quad_eval(w, q, s, t, out, second)
+        bez_eval(w, q, s, t, out, second)
 
 
 @leaf_njit
@@ -314,8 +275,8 @@ def _leaf(tri, w, wt, q, mono, D, u0, v0, size, item, line, n, cap, cand, verts,
     for tr in range(n_tris):
         c = 2 if tr == 0 else 3
         b_ = 1 if tr == 0 else 2
-        th, ba, bb, bc = _tri(ob[kx], ob[ky], ob[kz], kx, ky, kz, sx, sy, sz, 0, b_, c, verts,
-                              tmax, slack)
+        th, ba, bb, bc = ray_triangle(ob[kx], ob[ky], ob[kz], kx, ky, kz, sx, sy, sz, 0, b_, c,
+                                      verts, tmax, slack)
         if th == np.inf:
             continue
         # leaf parameters of the triangle hit (corners (0,0) (1,0) (1,1) (0,1), or (0,0)
@@ -385,9 +346,8 @@ def _sub_entry(tri, w, wt, q, o0, o1, o2, i0, i1, i2, pad, tlo, thi):
     if tri:
         lo0, lo1, lo2, hi0, hi1, hi2 = tri_box(wt, q)
     else:
-        lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(w, q)
-    return slab_entry(o0, o1, o2, i0, i1, i2, lo0 - pad, lo1 - pad, lo2 - pad, hi0 + pad,
-                      hi1 + pad, hi2 + pad, tlo, thi)
+        lo0, lo1, lo2, hi0, hi1, hi2 = net_box(w, q)
+    return _slab_t(o0, o1, o2, i0, i1, i2, lo0, lo1, lo2, hi0, hi1, hi2, pad, tlo, thi)
 
 
 @leaf_njit
@@ -463,7 +423,7 @@ def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, tnets, split_ptr, spl
                 tn = 0.0
             tbase = tn - 1.0 - abs(tn) * 1e-9
         ob0, ob1, ob2 = o0 + tbase * d0, o1 + tbase * d1, o2 + tbase * d2
-        kx, ky, kz, sx, sy, sz = _shear(d0, d1, d2)
+        kx, ky, kz, sx, sy, sz = shear(d0, d1, d2)
         # BVH traversal over item boxes, nearer child first
         top = bvh_start(o0, o1, o2, i0, i1, i2, bvh, touch_tol, tlo, thi, nodes, nodes_t)
         at = end = np.int64(0)  # the current leaf's range of bvh.prims

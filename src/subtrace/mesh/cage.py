@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from subtrace.errors import TopologyError
+from subtrace.io.obj import read_obj
 from subtrace.mesh.topology import (
     BOUNDARY_EDGE_ONLY,
     Level,
@@ -22,6 +23,9 @@ from subtrace.mesh.topology import (
     build_level,
     tag_base_level,
 )
+from subtrace.patches.evaluate import evaluate
+from subtrace.subdiv.limit import limit_points
+from subtrace.subdiv.refine import refine_level, refine_points
 
 SCHEME_ALIASES = {
     "catmark": "catmark",
@@ -80,8 +84,6 @@ class Cage:
 
     def _levels(self, level: int):
         """[(Level, points)] for levels 0..level, computed once and cached."""
-        from subtrace.subdiv.refine import refine_level, refine_points
-
         levels = self._cache.setdefault("levels", [(self.base, self.points, None)])
         while len(levels) <= level:
             lev, pts, _ = levels[-1]
@@ -116,8 +118,6 @@ class Cage:
         vertex's counter-clockwise ring; ``du x dv`` is the outward normal); only their
         directions are meaningful at extraordinary vertices.
         """
-        from subtrace.subdiv.limit import limit_points
-
         level = _check_level(level)
         lev, pts, _ = self._levels(level)[level]
         return limit_points(lev, pts, self.options)
@@ -128,8 +128,6 @@ class Cage:
         ``ptex_face`` (m,) int, ``uv`` (m,2) float in OpenSubdiv's ptex convention. Returns
         ``(P, dPdu, dPdv)`` each (m,3) float64, derivatives with respect to the ptex (u,v).
         """
-        from subtrace.patches.evaluate import evaluate
-
         return evaluate(self, ptex_face, uv)
 
     # ----------------------------------------------------------------------------------
@@ -241,8 +239,6 @@ def load_cage(path, scheme: str | None = None, boundary: int | None = None) -> C
 
     ``boundary`` (0 none, 1 edge-and-corner, 2 edge-only) overrides the file's
     ``interpolateboundary`` tag."""
-    from subtrace.io.obj import read_obj
-
     data = read_obj(path)
     return make_cage(
         data.points,

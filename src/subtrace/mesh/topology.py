@@ -18,7 +18,10 @@ Tags follow OpenSubdiv's Far factory: boundary and non-manifold edges are infini
 non-manifold vertices (except those on a plain non-manifold crease) and, in edge-and-corner
 mode, topological corners are sharpened; with boundary interpolation ``none`` the faces at
 non-sharpened boundary vertices become holes. Sharpness is float32 like OpenSubdiv's, and
-every sharpness computation is done in float32 so fractional crease weights match it exactly.
+every sharpness computation is done in float32 so fractional crease weights match it exactly;
+``INF_SHARP`` (``config.SHARPNESS_INFINITE`` in float32) is the infinite sharpness every
+module compares with. :func:`gather` / :func:`compact` are the CSR helpers (rows of a
+relation, distinct ids and their ranks) the local cuts of ``subdiv`` and ``patches`` use.
 """
 
 from __future__ import annotations
@@ -102,7 +105,7 @@ class Level:
 # --------------------------------------------------------------------------------------
 
 
-def _compact(ids: np.ndarray, n: int):
+def compact(ids: np.ndarray, n: int):
     """The distinct values of ``ids`` (all in 0..n-1) in increasing order, and the map from
     each value to its rank (-1 for values absent); O(n), no sort."""
     mask = np.zeros(n, dtype=bool)
@@ -111,6 +114,21 @@ def _compact(ids: np.ndarray, n: int):
     rank = np.full(n, -1, dtype=np.int64)
     rank[kept] = np.arange(len(kept))
     return kept, rank
+
+
+def gather_index(offsets: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """Positions in a CSR relation's flat list of the entries of ``rows``, row after row."""
+    starts = offsets[rows]
+    counts = offsets[rows + 1] - starts
+    if counts.sum() == 0:
+        return np.zeros(0, dtype=np.int64)
+    idx = np.repeat(starts - np.cumsum(np.r_[0, counts[:-1]]), counts)
+    return idx + np.arange(counts.sum())
+
+
+def gather(offsets: np.ndarray, values: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """The entries of ``rows`` of the CSR relation ``(offsets, values)``, concatenated."""
+    return values[gather_index(offsets, rows)]
 
 
 def base_edges(face_offsets: np.ndarray, face_verts: np.ndarray, n_verts: int):
@@ -278,7 +296,23 @@ def _relations(face_offsets, face_verts, face_edges, edge_verts, face_edge_forwa
     faces: the last is the trailing edge of the last face. Vertices whose faces do not form
     a single fan keep their unordered lists and are flagged non-manifold.
     """
-    n_faces = len(face_offsets) - 1
+    _offsets(face_verts, face_edges, edge_verts, edge_face_offsets, vert_face_offsets,
+             vert_edge_offsets)
+    slot = _entries(face_offsets, face_verts, face_edges, edge_verts, edge_face_offsets,
+                    edge_faces, edge_face_corner, vert_face_offsets, vert_edge_offsets,
+                    vert_edges)
+    if detect:
+        _nonmanifold_edges(face_offsets, edge_verts, face_edge_forward, edge_face_offsets,
+                           edge_faces, edge_face_corner, edge_nonmanifold)
+    _order_rings(slot, edge_face_offsets, vert_face_offsets, vert_faces, vert_face_corner,
+                 vert_edge_offsets, vert_edges, edge_nonmanifold, vert_manifold)
+
+
+@nb.njit(cache=True)
+def _offsets(face_verts, face_edges, edge_verts, edge_face_offsets, vert_face_offsets,
+             vert_edge_offsets):
+    """The offsets of the edge -> faces, vertex -> faces and vertex -> edges lists (zeroed
+    on entry)."""
     n_edges = len(edge_verts)
     n_verts = len(vert_face_offsets) - 1
     # sizes of the lists, then their offsets
@@ -293,6 +327,17 @@ def _relations(face_offsets, face_verts, face_edges, edge_verts, face_edge_forwa
     for v in range(n_verts):
         vert_face_offsets[v + 1] += vert_face_offsets[v]
         vert_edge_offsets[v + 1] += vert_edge_offsets[v]
+
+
+@nb.njit(cache=True)
+def _entries(face_offsets, face_verts, face_edges, edge_verts, edge_face_offsets, edge_faces,
+             edge_face_corner, vert_face_offsets, vert_edge_offsets, vert_edges):
+    """Fill edge -> faces and vertex -> edges in corner / edge order; return each vertex's
+    corners ``slot`` (corners, 4) int32 (face, corner, leading edge, trailing edge), in
+    vertex order, for :func:`_order_rings`."""
+    n_faces = len(face_offsets) - 1
+    n_edges = len(edge_verts)
+    n_verts = len(vert_face_offsets) - 1
     # the entries, in corner order (edge order for vertex -> edges); a vertex's corners go to
     # `slot` first, with their leading and trailing edges for the ring walk, and reach
     # vert_faces / vert_face_corner in ring order (one row per corner: one cache line)
@@ -326,20 +371,35 @@ def _relations(face_offsets, face_verts, face_edges, edge_verts, face_edge_forwa
             v = edge_verts[e, i]
             vert_edges[vert_fill[v]] = e
             vert_fill[v] += 1
-    if detect:
-        for e in range(n_edges):
-            u0 = edge_face_offsets[e]
-            uses = edge_face_offsets[e + 1] - u0
-            bad = uses > 2 or uses < 1 or edge_verts[e, 0] == edge_verts[e, 1]
-            if uses == 2:
-                f0 = edge_faces[u0]
-                f1 = edge_faces[u0 + 1]
-                c0 = face_offsets[f0] + edge_face_corner[u0]
-                c1 = face_offsets[f1] + edge_face_corner[u0 + 1]
-                bad = bad or face_edge_forward[c0] == face_edge_forward[c1] or f0 == f1
-            edge_nonmanifold[e] = bad
+    return slot
 
-    # the rings; scratch buffers sized for the largest valence
+
+@nb.njit(cache=True)
+def _nonmanifold_edges(face_offsets, edge_verts, face_edge_forward, edge_face_offsets,
+                       edge_faces, edge_face_corner, edge_nonmanifold):
+    """Flag the edges used by more than two faces or none, joining a vertex to itself, or
+    used twice in the same direction or by one face."""
+    n_edges = len(edge_verts)
+    for e in range(n_edges):
+        u0 = edge_face_offsets[e]
+        uses = edge_face_offsets[e + 1] - u0
+        bad = uses > 2 or uses < 1 or edge_verts[e, 0] == edge_verts[e, 1]
+        if uses == 2:
+            f0 = edge_faces[u0]
+            f1 = edge_faces[u0 + 1]
+            c0 = face_offsets[f0] + edge_face_corner[u0]
+            c1 = face_offsets[f1] + edge_face_corner[u0 + 1]
+            bad = bad or face_edge_forward[c0] == face_edge_forward[c1] or f0 == f1
+        edge_nonmanifold[e] = bad
+
+
+@nb.njit(cache=True)
+def _order_rings(slot, edge_face_offsets, vert_face_offsets, vert_faces, vert_face_corner,
+                 vert_edge_offsets, vert_edges, edge_nonmanifold, vert_manifold):
+    """Order each vertex's faces and edges counter-clockwise (see :func:`_relations`) from
+    its corners ``slot``; set ``vert_manifold``."""
+    n_verts = len(vert_face_offsets) - 1
+    # scratch buffers sized for the largest valence
     max_nf = 1
     for v in range(n_verts):
         max_nf = max(max_nf, vert_face_offsets[v + 1] - vert_face_offsets[v])
@@ -399,6 +459,8 @@ def _relations(face_offsets, face_verts, face_edges, edge_verts, face_edge_forwa
             vert_edges[e0 + i] = slot[r, 2]
         if is_boundary:
             vert_edges[e0 + nf] = slot[f0 + order[nf - 1], 3]
+
+
 
 
 def tag_base_level(
@@ -477,7 +539,6 @@ def _tag_kernel(
     face_hole,
     boundary_mode,
 ):
-    inf = np.float32(10.0)
     n_verts = len(vert_face_offsets) - 1
     # 1. with boundary interpolation "none", faces at boundary vertices having a boundary
     #    edge that is not (tagged) infinitely sharp become holes -- before any sharpening
@@ -490,7 +551,7 @@ def _tag_kernel(
             exclude = False
             for j in range(vert_edge_offsets[v], vert_edge_offsets[v + 1]):
                 e = vert_edges[j]
-                if edge_n_uses[e] == 1 and edge_sharp[e] < inf:
+                if edge_n_uses[e] == 1 and edge_sharp[e] < INF_SHARP:
                     exclude = True
             if exclude:
                 for j in range(vert_face_offsets[v], vert_face_offsets[v + 1]):
@@ -498,7 +559,7 @@ def _tag_kernel(
     # 2. boundary and non-manifold edges are infinitely sharp
     for e in range(len(edge_sharp)):
         if edge_n_uses[e] < 2 or edge_nonman[e]:
-            edge_sharp[e] = inf
+            edge_sharp[e] = INF_SHARP
     # 3. corners (edge-and-corner mode) and non-manifold vertices are sharpened
     for v in range(n_verts):
         nf = vert_face_offsets[v + 1] - vert_face_offsets[v]
@@ -512,9 +573,9 @@ def _tag_kernel(
             if edge_nonman[e]:
                 n_nonman += 1
         if nf == 1 and ne == 2 and boundary_mode == 1:
-            vert_sharp[v] = inf
+            vert_sharp[v] = INF_SHARP
         elif vert_nonman[v]:
             # a plain non-manifold crease (two non-manifold edges, extra fins, no boundary)
             # keeps its sharpness
             if not (n_nonman == 2 and n_bnd == 0 and nf > ne):
-                vert_sharp[v] = inf
+                vert_sharp[v] = INF_SHARP

@@ -1,4 +1,4 @@
-"""Regular Catmull-Clark patches as bicubic B-splines: control grids, Bezier nets, bounds.
+"""Regular Catmull-Clark patches as bicubic B-splines: which faces are, and their control grids.
 
 A quad of the patch level whose four corners are smooth, valence 4 and crease-free is a
 uniform bicubic B-spline patch of the 16 points around it (the same test and the same
@@ -7,36 +7,27 @@ control grid as the exact evaluator, :mod:`subtrace.patches.evaluate`). For such
 * :func:`control_grids` gathers the 16 point ids, ``[u index][v index]``, with ``u`` running
   from corner 0 to corner 1 and ``v`` from corner 0 to corner 3 (the grid layout of
   :mod:`subtrace.patches.grids`);
-* :func:`bezier_nets` converts them to the patch's bicubic Bezier control net. The patch lies
-  in the net's convex hull, so the net's box is a containing shell much tighter than the box
-  of the 16 B-spline points (design invariant 2), and the partial derivatives are Bezier
-  patches with control points ``3 (b[i+1, j] - b[i, j])`` (resp. ``j``), so
-  :func:`net_bounds` gives the box and a bound on ``|dP/du|`` and ``|dP/dv|`` over the whole
-  patch: a grid cell at depth ``n`` has sides no longer than ``bound * 2^-n`` (the refinement
-  criterion, design invariant 3).
+* :func:`subtrace.patches.basis.bezier_nets` converts them to the patch's bicubic Bezier
+  control net. The patch lies in the net's convex hull, so the net's box is a containing
+  shell much tighter than the box of the 16 B-spline points (design invariant 2), and the
+  partial derivatives are Bezier patches with control points ``3 (b[i+1, j] - b[i, j])``
+  (resp. ``j``), so :func:`~subtrace.patches.basis.net_bounds` gives the box and a bound on
+  ``|dP/du|`` and ``|dP/dv|`` over the whole patch: a grid cell at depth ``n`` has sides no
+  longer than ``bound * 2^-n`` (the refinement criterion, design invariant 3).
 
 The renderer evaluates the nets themselves (``trace/bezier.py``).
 """
 
 from __future__ import annotations
 
-import math
-
-from subtrace.runtime.jit import nb
 import numpy as np
 
-from subtrace.subdiv.limit import _SMOOTH, classify
+from subtrace.patches.basis import B_CORNER, LEAD, TRAIL
+from subtrace.patches.basis import bezier_nets, net_bounds  # noqa: F401  (tests/test_render.py
+#   reads them here; they live in patches/basis.py)
+from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
-
-# uniform cubic B-spline control points -> Bezier control points of the middle span
-_TO_BEZIER = np.array(
-    [[1.0, 4.0, 1.0, 0.0], [0.0, 4.0, 2.0, 0.0], [0.0, 2.0, 4.0, 0.0], [0.0, 1.0, 4.0, 1.0]]
-) / 6.0
-
-# grid position of face corner i, and the directions of its leading / trailing edges
-_B_CORNER = np.array([[1, 1], [2, 1], [2, 2], [1, 2]], dtype=np.int64)
-_LEAD = np.array([[1, 0], [0, 1], [-1, 0], [0, -1]], dtype=np.int64)
-_TRAIL = np.array([[0, 1], [-1, 0], [0, -1], [1, 0]], dtype=np.int64)
+from subtrace.subdiv.limit import SMOOTH, classify
 
 
 def regular_mask(level, options, faces) -> np.ndarray:
@@ -48,7 +39,7 @@ def regular_mask(level, options, faces) -> np.ndarray:
     quad = (fo[faces + 1] - fo[faces]) == 4
     corners = level.face_verts[np.minimum(fo[faces][:, None] + np.arange(4), len(level.face_verts) - 1)]
     cls = classify(level, options, corners)
-    ok = (cls[corners] == _SMOOTH) & (np.diff(level.vert_edge_offsets)[corners] == 4)
+    ok = (cls[corners] == SMOOTH) & (np.diff(level.vert_edge_offsets)[corners] == 4)
     return quad & ok.all(axis=1)
 
 
@@ -59,7 +50,7 @@ def control_grids(level, faces) -> np.ndarray:
     run_tasks(
         _control_grids, level.face_offsets, level.face_verts, level.vert_face_offsets,
         level.vert_faces, level.vert_face_corner, level.vert_edge_offsets, level.vert_edges,
-        level.edge_verts, faces, _B_CORNER, _LEAD, _TRAIL, out,
+        level.edge_verts, faces, B_CORNER, LEAD, TRAIL, out,
         n=None if len(faces) >= _GRID_PARALLEL_MIN else 1,
     )
     return out
@@ -104,64 +95,3 @@ def _control_grids(task, n_tasks, fo, fv, vfo, vf, vfc, veo, ve, ev, faces, bc, 
                         e = ve[veo[c] + j]
                         other = ev[e, 1] if ev[e, 0] == c else ev[e, 0]
                         out[m, x1, y1] = other
-
-
-def bezier_nets(cv: np.ndarray) -> np.ndarray:
-    """(m,4,4,3) Bezier control nets of B-spline control grids ``cv`` (m,4,4,3)."""
-    out = np.empty((len(cv), 4, 4, 3))
-    _to_bezier(np.ascontiguousarray(cv, dtype=np.float64), _TO_BEZIER, out)
-    return out
-
-
-@nb.njit(cache=True)
-def _to_bezier(cv, M, out):
-    tmp = np.empty((4, 4, 3))
-    for m in range(cv.shape[0]):
-        for a in range(4):
-            for j in range(4):
-                for k in range(3):
-                    tmp[a, j, k] = (M[a, 0] * cv[m, 0, j, k] + M[a, 1] * cv[m, 1, j, k]
-                                    + M[a, 2] * cv[m, 2, j, k] + M[a, 3] * cv[m, 3, j, k])
-        for a in range(4):
-            for b in range(4):
-                for k in range(3):
-                    out[m, a, b, k] = (M[b, 0] * tmp[a, 0, k] + M[b, 1] * tmp[a, 1, k]
-                                       + M[b, 2] * tmp[a, 2, k] + M[b, 3] * tmp[a, 3, k])
-
-
-def net_bounds(bez: np.ndarray):
-    """``(lo, hi, bound)`` of Bezier nets (m,4,4,3): their boxes (each (m,3)), which contain
-    the patches, and (m,) a bound on |dP/du| and |dP/dv| over each patch (the largest
-    control point of the derivative nets)."""
-    lo = np.empty((len(bez), 3))
-    hi = np.empty((len(bez), 3))
-    bound = np.empty(len(bez))
-    _net_summary(np.ascontiguousarray(bez), lo, hi, bound)
-    return lo, hi, bound
-
-
-@nb.njit(cache=True)
-def _net_summary(bez, lo, hi, bound):
-    """Box of each net, and 3 max |b[i+1,j] - b[i,j]| over both directions."""
-    for m in range(bez.shape[0]):
-        for k in range(3):
-            lo[m, k] = np.inf
-            hi[m, k] = -np.inf
-        best = 0.0
-        for a in range(4):
-            for b in range(4):
-                for k in range(3):
-                    x = bez[m, a, b, k]
-                    lo[m, k] = min(lo[m, k], x)
-                    hi[m, k] = max(hi[m, k], x)
-                if a < 3:
-                    dx = bez[m, a + 1, b, 0] - bez[m, a, b, 0]
-                    dy = bez[m, a + 1, b, 1] - bez[m, a, b, 1]
-                    dz = bez[m, a + 1, b, 2] - bez[m, a, b, 2]
-                    best = max(best, math.sqrt(dx * dx + dy * dy + dz * dz))
-                if b < 3:
-                    dx = bez[m, a, b + 1, 0] - bez[m, a, b, 0]
-                    dy = bez[m, a, b + 1, 1] - bez[m, a, b, 1]
-                    dz = bez[m, a, b + 1, 2] - bez[m, a, b, 2]
-                    best = max(best, math.sqrt(dx * dx + dy * dy + dz * dz))
-        bound[m] = 3.0 * best

@@ -26,7 +26,11 @@ from __future__ import annotations
 import numpy as np
 
 from subtrace import config
-from subtrace.subdiv.limit import _SMOOTH, classify, extract, limit_points, smooth_edge_tangents
+from subtrace.patches.basis import (
+    B_CORNER, BOX_POINTS, LATTICE_DIRS, LEAD, TRAIL, TRI_CORNER, TRI_LEAD, box_spline_basis,
+    bspline_basis,
+)
+from subtrace.subdiv.limit import SMOOTH, classify, extract, limit_points, smooth_edge_tangents
 from subtrace.subdiv.refine import refine_level, refine_points
 
 
@@ -136,7 +140,7 @@ def _corner_derivatives(cage, faces, subface, uv, rows, dPdu, dPdv):
     p = pos[sel]  # the sample's corner of it
     w = child.face_verts[child.face_offsets[c] + p]
     valence = np.diff(child.vert_edge_offsets)[w]
-    todo = (cls[w] == _SMOOTH) & (valence != (6 if is_loop else 4))
+    todo = (cls[w] == SMOOTH) & (valence != (6 if is_loop else 4))
     if not todo.any():
         return
     sel, c, p, w, regular = sel[todo], c[todo], p[todo], w[todo], regular[todo]
@@ -227,95 +231,34 @@ def _fd_derivatives(cage, faces, subface, uv, P0):
 # --------------------------------------------------------------------------------------
 
 
-_B_CORNER = np.array([[1, 1], [2, 1], [2, 2], [1, 2]])  # grid position of face corner i
-_LEAD = np.array([[1, 0], [0, 1], [-1, 0], [0, -1]])  # direction of the leading edge at i
-_TRAIL = np.array([[0, 1], [-1, 0], [0, -1], [1, 0]])  # direction of the trailing edge at i
-
-
-def _bspline(t):
-    """Uniform cubic B-spline basis and derivative at t (arrays (m,)) -> (m,4), (m,4)."""
-    s = 1.0 - t
-    b = np.stack([s**3, 3 * t**3 - 6 * t**2 + 4, -3 * t**3 + 3 * t**2 + 3 * t + 1, t**3], 1) / 6
-    d = np.stack([-(s**2), 3 * t**2 - 4 * t, -3 * t**2 + 2 * t + 1, t**2], 1) / 2
-    return b, d
-
-
 def _grid16(level, f):
     """4x4 control points (vertex ids, [u index][v index]) of a regular quad ``f``."""
     fo, fv = level.face_offsets, level.face_verts
     G = -np.ones((4, 4), dtype=np.int64)
     corners = fv[fo[f] : fo[f] + 4]
     for i, c in enumerate(corners):
-        G[tuple(_B_CORNER[i])] = c
+        G[tuple(B_CORNER[i])] = c
         a = level.vert_face_offsets[c]
         ring = level.vert_faces[a : a + 4]
         rc = level.vert_face_corner[a : a + 4]
         pos = int(np.nonzero(ring == f)[0][0])
-        lead, trail = _LEAD[i], _TRAIL[i]
+        lead, trail = LEAD[i], TRAIL[i]
         # the other three faces counter-clockwise: their diagonals and shared edge ends
         dirs = [trail, -lead, -trail, lead]
         for k in (1, 2, 3):
             j = (pos + k) % 4
             g, kk = ring[j], rc[j]
             diag = fv[fo[g] + (kk + 2) % 4]
-            G[tuple(_B_CORNER[i] + dirs[k - 1] + dirs[k])] = diag
+            G[tuple(B_CORNER[i] + dirs[k - 1] + dirs[k])] = diag
             if k >= 2:
                 e = level.vert_edges[level.vert_edge_offsets[c] + j]
                 a0, b0 = level.edge_verts[e]
-                G[tuple(_B_CORNER[i] + dirs[k - 1])] = b0 if a0 == c else a0
+                G[tuple(B_CORNER[i] + dirs[k - 1])] = b0 if a0 == c else a0
     return G
 
 
-# A Loop triangle whose three corners are smooth, valence 6 and crease-free is a quartic box
-# spline of the 12 points around it. Lattice offsets of those points from corner 0, with
-# corner 1 at (1, 0) and corner 2 at (0, 1) (the triangle's own (u, v)):
-_BOX_POINTS = np.array(
-    [[-1, 0], [-1, 1], [-1, 2], [0, -1], [0, 0], [0, 1], [0, 2], [1, -1], [1, 0], [1, 1],
-     [2, -1], [2, 0]]
-)  # fmt: skip
-# the six lattice directions counter-clockwise, and where each corner's leading edge points
-_LATTICE_DIRS = np.array([[1, 0], [0, 1], [-1, 1], [-1, 0], [0, -1], [1, -1]])
-_TRI_CORNER = np.array([[0, 0], [1, 0], [0, 1]])
-_TRI_LEAD = np.array([0, 2, 4])
-# Basis: the weight of point k is sum over monomials u^a v^b (a + b <= 4, in this order) of
-# _BOX_COEF[monomial, k] / 24. It is the quartic that takes the exact limit values at the 15
-# vertices of the triangle's level-2 refinement (limit mask 1/2, 1/12 x 6 of a regular
-# vertex after two uniform steps); a quartic box-spline patch is fixed by them. The test
-# suite re-derives it that way (tests/test_limit_tangents.py).
-_BOX_MONO = np.array([(a, b) for a in range(5) for b in range(5 - a)])
-_BOX_COEF = np.array(
-    [
-        [2, 2, 0, 2, 12, 2, 0, 2, 2, 0, 0, 0],
-        [-4, 4, 0, -8, 0, 8, 0, -4, 4, 0, 0, 0],
-        [0, 0, 0, 12, -24, 12, 0, 0, 0, 0, 0, 0],
-        [4, -8, 4, -8, 16, -8, 0, 4, -8, 4, 0, 0],
-        [-2, 4, -2, 2, -2, -2, 2, -2, 4, -2, 0, 0],
-        [-8, -4, 0, -4, 0, 4, 0, 4, 8, 0, 0, 0],
-        [12, -12, 0, 12, -24, 12, 0, -12, 12, 0, 0, 0],
-        [0, 0, 0, -12, 24, -12, 0, 12, -24, 12, 0, 0],
-        [-4, 8, -4, 4, -4, -4, 4, -4, 8, -4, 0, 0],
-        [12, 0, 0, 0, -24, 0, 0, 0, 12, 0, 0, 0],
-        [-12, 12, 0, 0, 24, -24, 0, 0, -12, 12, 0, 0],
-        [0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
-        [-8, 4, 0, 4, 16, -8, 0, -8, -8, 4, 4, 0],
-        [4, -4, 0, -4, -4, 8, 0, 8, -4, -4, -4, 4],
-        [2, -2, 0, -2, -2, 4, 0, 4, -2, -2, -2, 2],
-    ],
-    dtype=np.float64,
-) / 24.0
-
-
-def _box_spline(u, v):
-    """Quartic box-spline basis and its u, v derivatives at (u, v): three (12,) arrays."""
-    a, b = _BOX_MONO[:, 0], _BOX_MONO[:, 1]
-    m = u**a * v**b
-    mu = np.where(a > 0, a * u ** np.maximum(a - 1, 0) * v**b, 0.0)
-    mv = np.where(b > 0, b * u**a * v ** np.maximum(b - 1, 0), 0.0)
-    return m @ _BOX_COEF, mu @ _BOX_COEF, mv @ _BOX_COEF
-
-
 def _grid12(level, f):
-    """The 12 control points (vertex ids, in _BOX_POINTS order) of a regular triangle ``f``."""
+    """The 12 control points (vertex ids, in BOX_POINTS order) of a regular triangle ``f``."""
     fo, fv = level.face_offsets, level.face_verts
     at = {}
     for k in range(3):
@@ -325,9 +268,9 @@ def _grid12(level, f):
         for t in range(6):
             a, b = level.edge_verts[level.vert_edges[ea + (slot + t) % 6]]
             far = b if a == c else a
-            at[tuple(_TRI_CORNER[k] + _LATTICE_DIRS[(_TRI_LEAD[k] + t) % 6])] = far
-        at[tuple(_TRI_CORNER[k])] = c
-    return np.array([at[tuple(q)] for q in _BOX_POINTS], dtype=np.int64)
+            at[tuple(TRI_CORNER[k] + LATTICE_DIRS[(TRI_LEAD[k] + t) % 6])] = far
+        at[tuple(TRI_CORNER[k])] = c
+    return np.array([at[tuple(q)] for q in BOX_POINTS], dtype=np.int64)
 
 
 def _descend(cage, faces, subface, uv, want_derivs):
@@ -366,17 +309,17 @@ def _descend(cage, faces, subface, uv, want_derivs):
             if sfo[f + 1] - sfo[f] != (3 if is_loop else 4):
                 continue
             cv = sub.face_verts[sfo[f] : sfo[f + 1]]
-            if not (np.all(cls[cv] == _SMOOTH) and np.all(val[cv] == reg_valence)):
+            if not (np.all(cls[cv] == SMOOTH) and np.all(val[cv] == reg_valence)):
                 continue
             if is_loop:
                 X = sub_pts[_grid12(sub, f)]  # (12,3)
-                b, bu, bv = _box_spline(loc[i, 0], loc[i, 1])
+                b, bu, bv = box_spline_basis(loc[i, 0], loc[i, 1])
                 P[i] = b @ X
                 lu, lv = bu @ X, bv @ X
             else:
                 X = sub_pts[_grid16(sub, f)]  # (4,4,3)
-                bu, du_ = _bspline(np.array([loc[i, 0]]))
-                bv, dv_ = _bspline(np.array([loc[i, 1]]))
+                bu, du_ = bspline_basis(np.array([loc[i, 0]]))
+                bv, dv_ = bspline_basis(np.array([loc[i, 1]]))
                 P[i] = np.einsum("i,j,ijk->k", bu[0], bv[0], X)
                 lu = np.einsum("i,j,ijk->k", du_[0], bv[0], X)
                 lv = np.einsum("i,j,ijk->k", bu[0], dv_[0], X)

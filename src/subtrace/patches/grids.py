@@ -24,8 +24,8 @@ from functools import lru_cache
 import numpy as np
 
 from subtrace import config
-from subtrace.mesh.topology import Level, Options, _compact
-from subtrace.subdiv.limit import _gather, extract, limit_points
+from subtrace.mesh.topology import Level, Options, compact as _compact, gather as _gather
+from subtrace.subdiv.limit import extract, limit_points
 from subtrace.subdiv.refine import refine_level, refine_points
 
 
@@ -105,7 +105,7 @@ def build_grids(level: Level, points: np.ndarray, options: Options, faces, depth
     cur, cur_pts = level, points
     start, m = faces.copy(), 1  # descendants of patch i: faces start[i] .. start[i]+m-1
     for _ in range(depth + 1):
-        cur, cur_pts, start = _cut_around(cur, cur_pts, start, m)
+        cur, cur_pts, start = cut_around(cur, cur_pts, start, m)
         if m == n_leaf:
             break
         ref = refine_level(cur, options)
@@ -137,7 +137,7 @@ def build_grids(level: Level, points: np.ndarray, options: Options, faces, depth
     return outP, outN
 
 
-def _cut_around(level: Level, points: np.ndarray, start: np.ndarray, m: int):
+def cut_around(level: Level, points: np.ndarray, start: np.ndarray, m: int):
     """Cut the faces within ``config.GRID_RINGS`` rings of the blocks ``start[i] .. +m`` out
     of ``level``; return the cut level, its points and the blocks' new starts (the cut keeps
     the faces' relative order, so blocks stay contiguous)."""

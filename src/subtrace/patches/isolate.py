@@ -3,7 +3,7 @@
 A patch with an extraordinary (or crease, boundary, ...) corner is not one polynomial, so the
 tight Bezier bound of regular patches (:mod:`subtrace.patches.bspline`) does not apply to it
 directly. Its conservative depth from the control edges and the subdominant eigenvalue
-(:func:`subtrace.patches.table.choose_depths`) overshoots: the eigenvalue governs only the
+(:func:`subtrace.patches.criterion.choose_depths`) overshoots: the eigenvalue governs only the
 shrinking corner next to the feature, not the rest of the patch.
 
 :func:`isolated_depths` refines such patches locally, one level at a time, the way
@@ -17,14 +17,16 @@ conservative depth. Its grid is still uniform, so every cell satisfies the crite
 
 from __future__ import annotations
 
-from subtrace.runtime.jit import nb
 import numpy as np
 
-from subtrace.patches.bspline import bezier_nets, control_grids, net_bounds, regular_mask
-
-# The control-edge bound of a cell at an extraordinary vertex is not a proven bound (measured
-# up to 0.8 % short on Spot); irregular cells stop refining only with this much to spare.
-IRREGULAR_MARGIN = 1.25
+from subtrace.config import IRREGULAR_MARGIN
+from subtrace.patches.basis import bezier_nets, net_bounds
+from subtrace.patches.bspline import control_grids, regular_mask
+from subtrace.patches.grids import cut_around
+from subtrace.patches.shells import box_distance, one_ring_shells
+from subtrace.runtime.jit import nb
+from subtrace.subdiv.limit import limit_points
+from subtrace.subdiv.refine import refine_level, refine_points
 
 
 def _levels_needed(bound, dist, tol_rad):
@@ -36,23 +38,15 @@ def _levels_needed(bound, dist, tol_rad):
     return np.where(np.isfinite(n), n, 1e9)
 
 
-def _children(level, points, faces, options):
-    """Cut the neighbourhood of quads ``faces`` out of ``level``, refine it once; return the
-    refined cut, its points, the faces' four children each (in the cut) and which of those
-    are regular."""
-    from subtrace.subdiv.refine import refine_level, refine_points
-    from subtrace.patches.grids import _cut_around
-
-    cur, cur_pts, start = _cut_around(level, points, faces, 1)
+def refine_children(level, points, faces, options):
+    """Cut the neighbourhood of ``faces`` out of ``level``, refine it once; return the refined
+    cut, its points, the faces' four children each (in the cut) and which of those are
+    regular bicubic patches."""
+    cur, cur_pts, start = cut_around(level, points, faces, 1)
     ref = refine_level(cur, options)
     cur_pts = refine_points(ref, cur_pts)
     kids = (4 * start[:, None] + np.arange(4)).ravel()
     return ref.child, cur_pts, kids, regular_mask(ref.child, options, kids)
-
-
-def box_distance(bmin, bmax, p):
-    q = np.maximum(np.maximum(bmin - p, 0.0), p - bmax)
-    return np.sqrt((q * q).sum(axis=1))
 
 
 def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0, boxes=None):
@@ -68,8 +62,6 @@ def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0, 
     Bezier nets of its regular descendants, the control-point boxes of the one-rings of the
     irregular ones it stopped at), a bound of its limit surface far tighter than its own
     one-ring's box; the others are left as they are."""
-    from subtrace.patches.table import one_ring_shells
-
     faces = np.asarray(faces, dtype=np.int64)
     cap = np.asarray(cap, dtype=np.int64)
     need = np.zeros(len(faces), dtype=np.int64)
@@ -85,7 +77,7 @@ def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0, 
     k = 0
     while len(root):
         parent_start = start
-        cur, cur_pts, kids, reg = _children(cur, cur_pts, start, options)
+        cur, cur_pts, kids, reg = refine_children(cur, cur_pts, start, options)
         k += 1
         kid_root = np.repeat(root, 4)
         kid_active = np.repeat(active, 4)
@@ -191,7 +183,7 @@ def build_isolated(obj, faces, depth, eye=None, tol_rad=None, record=None, ring=
                                        lv.n[lv.reg_rank[kid_rows[lv.reg[kid_rows]]]]))
             if not have.all():
                 fresh = ~have
-                ref, ref_pts, kids, reg = _children(cur, cur_pts, start[fresh], options)
+                ref, ref_pts, kids, reg = refine_children(cur, cur_pts, start[fresh], options)
                 nxt.append(_next_level(subs, k + 1, ref, ref_pts, kids, reg, root[fresh],
                                        i0[fresh], j0[fresh], depth, eye, tol_rad, False))
         groups = [g for g in nxt if len(g[2])]
@@ -238,8 +230,6 @@ def _add_cells(cells, level, points, options, faces, root, i0, j0):
     corners, NaN normals where undefined, and, when ``cells`` has seven lists, the
     diagonals of their one-rings' boxes and whether they touch the mesh's boundary) to the
     lists ``cells``."""
-    from subtrace.subdiv.limit import limit_points
-
     fo = level.face_offsets
     corners = level.face_verts[fo[faces][:, None] + np.arange(4)]
     P, du, dv = limit_points(level, points, options, which=corners.ravel())
@@ -250,8 +240,6 @@ def _add_cells(cells, level, points, options, faces, root, i0, j0):
     for lst, a in zip(cells, (root, i0, j0, P.reshape(-1, 4, 3), nrm.reshape(-1, 4, 3))):
         lst.append(a)
     if len(cells) > 5:
-        from subtrace.patches.table import one_ring_shells
-
         lo, hi, _, _ = one_ring_shells(level, faces, points)
         cells[5].append(np.linalg.norm(hi - lo, axis=1))
         # (a cut's own outer edges lie beyond the cells' one-rings: not their boundary)

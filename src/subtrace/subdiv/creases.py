@@ -7,8 +7,10 @@ to the last bits. Rules are bit values as in Sdc: smooth 1, dart 2, crease 4, co
 
 from __future__ import annotations
 
-from subtrace.runtime.jit import nb
 import numpy as np
+
+from subtrace.mesh.topology import INF_SHARP
+from subtrace.runtime.jit import nb
 
 RULE_SMOOTH = 1
 RULE_DART = 2
@@ -17,7 +19,6 @@ RULE_CORNER = 8
 
 F0 = np.float32(0.0)
 F1 = np.float32(1.0)
-F_INF = np.float32(10.0)
 F_075 = np.float32(0.75)
 F_025 = np.float32(0.25)
 
@@ -27,8 +28,8 @@ def decrement(s):
     """Uniform subdivision of one sharpness value."""
     if s <= F0:
         return F0
-    if s >= F_INF:
-        return F_INF
+    if s >= INF_SHARP:
+        return INF_SHARP
     if s > F1:
         return s - F1
     return F0
@@ -43,13 +44,13 @@ def child_edge_sharpness_at_vertex(s, around, chaikin):
         return decrement(s)
     if s <= F0:
         return F0
-    if s >= F_INF:
-        return F_INF
+    if s >= INF_SHARP:
+        return INF_SHARP
     total = F0
     count = 0
     for i in range(n):
         a = around[i]
-        if a > F0 and a < F_INF:
+        if a > F0 and a < INF_SHARP:
             count += 1
             total += a
     if count > 1:

@@ -27,20 +27,23 @@ from __future__ import annotations
 
 import math
 
-from subtrace.runtime.jit import nb
 import numpy as np
 
-from subtrace.mesh.topology import Level, Options, _compact, build_level
+from subtrace.mesh.topology import (
+    INF_SHARP, Level, Options, build_level, compact, gather, gather_index,
+)
+from subtrace.runtime.jit import nb
 from subtrace.subdiv import catmark, loop
-from subtrace.subdiv.creases import F0, F_INF, RULE_CORNER, RULE_CREASE, RULE_SMOOTH, rule_of
+from subtrace.subdiv.creases import F0, RULE_CORNER, RULE_CREASE, RULE_SMOOTH, rule_of
+from subtrace.subdiv.refine import refine_level, refine_points
 
 # vertex classes
-_ISOLATED = 0
-_SMOOTH = 1
-_CREASE = 2
-_CORNER = 3
-_HARD_SHARP = -1  # semi-sharp features remain: refine further
-_HARD_STATIONARY = -2  # nothing semi-sharp, but no exact closed-form mask: eigen-analysis
+ISOLATED = 0
+SMOOTH = 1
+CREASE = 2
+CORNER = 3
+HARD_SHARP = -1  # semi-sharp features remain: refine further
+HARD_STATIONARY = -2  # nothing semi-sharp, but no exact closed-form mask: eigen-analysis
 
 
 def limit_points(level: Level, points: np.ndarray, options: Options, which=None):
@@ -106,31 +109,31 @@ def _classify_kernel(
         fa, fb = vert_face_offsets[v], vert_face_offsets[v + 1]
         ea, eb = vert_edge_offsets[v], vert_edge_offsets[v + 1]
         if fa == fb:
-            out[v] = _ISOLATED
+            out[v] = ISOLATED
             continue
-        semi = vert_sharp[v] > F0 and vert_sharp[v] < F_INF
+        semi = vert_sharp[v] > F0 and vert_sharp[v] < INF_SHARP
         for i in range(eb - ea):
             s = edge_sharp[vert_edges[ea + i]]
             buf[i] = s
-            if s > F0 and s < F_INF:
+            if s > F0 and s < INF_SHARP:
                 semi = True
         if semi:
-            out[v] = _HARD_SHARP
+            out[v] = HARD_SHARP
             continue
         rule = rule_of(vert_sharp[v], buf[: eb - ea])
         if rule == RULE_CORNER:
-            out[v] = _CORNER
+            out[v] = CORNER
         elif rule == RULE_CREASE:
-            out[v] = _CREASE
+            out[v] = CREASE
         elif rule == RULE_SMOOTH:
             ok = vert_manifold[v] and (eb - ea) == (fb - fa) and (fb - fa) >= 3
             for i in range(fa, fb):
                 f = vert_faces[i]
                 if face_offsets[f + 1] - face_offsets[f] != reg_size:
                     ok = False
-            out[v] = _SMOOTH if ok else _HARD_STATIONARY
+            out[v] = SMOOTH if ok else HARD_STATIONARY
         else:  # dart
-            out[v] = _HARD_STATIONARY
+            out[v] = HARD_STATIONARY
 
 
 # --------------------------------------------------------------------------------------
@@ -180,7 +183,7 @@ def smooth_edge_tangents(level: Level, points: np.ndarray, options: Options, ver
     the derivative of the limit surface along the limit curve of the edge, up to a factor
     that depends on the valence only (regular vertices: 12x the derivative per unit edge
     of a bicubic B-spline patch for Catmark, 3x that of a quartic box-spline patch for Loop).
-    Every vertex must be of class ``_SMOOTH``. Returns (k,3) float64.
+    Every vertex must be of class ``SMOOTH``. Returns (k,3) float64.
     """
     scheme = loop if options.scheme == "loop" else catmark
     X = np.asarray(points, dtype=np.float64)
@@ -245,12 +248,12 @@ def _closed_form_kernel(
         ea, eb = vert_edge_offsets[v], vert_edge_offsets[v + 1]
         fa, fb = vert_face_offsets[v], vert_face_offsets[v + 1]
         ne = eb - ea
-        if c == _ISOLATED:
+        if c == ISOLATED:
             for k in range(3):
                 P[r, k] = X[v, k]
                 du[r, k] = 0.0
                 dv[r, k] = 0.0
-        elif c == _CORNER:
+        elif c == CORNER:
             for k in range(3):
                 P[r, k] = X[v, k]
             if ne >= 2:
@@ -261,7 +264,7 @@ def _closed_form_kernel(
                 for k in range(3):
                     du[r, k] = s * (X[a, k] - X[v, k])
                     dv[r, k] = s * (X[b, k] - X[v, k])
-        elif c == _CREASE:
+        elif c == CREASE:
             # the first two sharp edges in ring order lead and trail the span of faces
             # i0 .. i1-1 that the tangents describe (OpenSubdiv's "crease ends")
             i0 = 0
@@ -305,7 +308,7 @@ def _closed_form_kernel(
                     w = wi * _catmark_cross_face_weight(m, i)
                     for k in range(3):
                         dv[r, k] += w * X[q, k]
-        elif c == _SMOOTH:
+        elif c == SMOOTH:
             n = ne
             if is_loop:
                 vw, ew, dw = loop.smooth_limit_weights(n)
@@ -405,8 +408,8 @@ def extract(level: Level, verts: np.ndarray, rings: int = 2):
     fmask = np.zeros(level.n_faces, dtype=bool)
     for _ in range(rings):
         vs = np.nonzero(vmask)[0]
-        fmask[_gather(vf_off, vf, vs)] = True
-        vmask[_gather(fo, fv, np.nonzero(fmask)[0])] = True
+        fmask[gather(vf_off, vf, vs)] = True
+        vmask[gather(fo, fv, np.nonzero(fmask)[0])] = True
     faces = np.nonzero(fmask)[0]
     return _cut(level, faces)
 
@@ -414,10 +417,10 @@ def extract(level: Level, verts: np.ndarray, rings: int = 2):
 def _cut(level: Level, faces: np.ndarray):
     """The sub-level made of ``faces`` (see :func:`extract`); also returns ``faces``."""
     fo, fv = level.face_offsets, level.face_verts
-    corners = _gather_index(fo, faces)
+    corners = gather_index(fo, faces)
     sizes = np.diff(fo)[faces]
-    old_v, vmap = _compact(fv[corners], level.n_verts)
-    old_e, emap = _compact(level.face_edges[corners], level.n_edges)
+    old_v, vmap = compact(fv[corners], level.n_verts)
+    old_e, emap = compact(level.face_edges[corners], level.n_edges)
     offsets = np.zeros(len(faces) + 1, dtype=np.int64)
     np.cumsum(sizes, out=offsets[1:])
     sub = build_level(
@@ -436,22 +439,7 @@ def _cut(level: Level, faces: np.ndarray):
     return sub, old_v, vmap, faces
 
 
-def _gather(offsets, values, rows):
-    return values[_gather_index(offsets, rows)]
-
-
-def _gather_index(offsets, rows):
-    starts = offsets[rows]
-    counts = offsets[rows + 1] - starts
-    if counts.sum() == 0:
-        return np.zeros(0, dtype=np.int64)
-    idx = np.repeat(starts - np.cumsum(np.r_[0, counts[:-1]]), counts)
-    return idx + np.arange(counts.sum())
-
-
 def _hard_limits(level, points, options, hard, P, du, dv, rows):
-    from subtrace.subdiv.refine import refine_level, refine_points
-
     cur_level, cur_pts = level, points
     ids = hard.astype(np.int64)  # vertex ids in the current level
     owners = np.asarray(rows, dtype=np.int64)  # rows of P they fill
@@ -464,10 +452,10 @@ def _hard_limits(level, points, options, hard, P, du, dv, rows):
         done = c >= 0
         if done.any():
             _closed_form(sub, sub_pts, options, cls, sid[done], owners[done], P, du, dv)
-        stationary = c == _HARD_STATIONARY
+        stationary = c == HARD_STATIONARY
         for s, o in zip(sid[stationary], owners[stationary]):
             _eigen_limit(sub, sub_pts, options, int(s), int(o), P, du, dv)
-        keep = c == _HARD_SHARP
+        keep = c == HARD_SHARP
         if not keep.any():
             return
         ref = refine_level(sub, options)
@@ -515,8 +503,6 @@ def ring_matrix(level: Level, options: Options, v: int, depth: int = 1):
 
 
 def _sub_ring_matrix(sub: Level, options: Options, sv: int, depth: int):
-    from subtrace.subdiv.refine import refine_level, refine_points
-
     ring = ring_of(sub, sv)
     W = np.eye(sub.n_verts)
     lev = sub
@@ -575,8 +561,6 @@ def _eigen_limit(level, points, options, v, row, P, du, dv, _refined=0):
     if changes and _refined < 8:
         # the ring changes shape once (n-gons at level 0, or a ring that touches itself on
         # a small cage and lists a vertex twice): refine first, until it is stationary
-        from subtrace.subdiv.refine import refine_level, refine_points
-
         ref = refine_level(sub, options)
         pts = refine_points(ref, points[sub_to_cur])
         _eigen_limit(ref.child, pts, options, sv, row, P, du, dv, _refined + 1)

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from subtrace.runtime.jit import nb
 import numpy as np
 
-from subtrace.mesh.topology import Level, Options, build_level
+from subtrace.mesh.topology import INF_SHARP, Level, Options, build_level
 from subtrace.subdiv import catmark, loop
 from subtrace.subdiv.creases import (
     F0,
@@ -95,10 +95,10 @@ def refine_points(ref: Refinement, points: np.ndarray) -> np.ndarray:
 
 def _decrement_all(s: np.ndarray) -> np.ndarray:
     s = s.astype(np.float32)
-    out = np.where(s >= np.float32(10.0), s, s - np.float32(1.0)).astype(np.float32)
+    out = np.where(s >= INF_SHARP, s, s - np.float32(1.0)).astype(np.float32)
     out[out <= 0] = 0
     out[s <= 1] = 0
-    out[s >= 10] = np.float32(10.0)
+    out[s >= INF_SHARP] = INF_SHARP
     return out
 
 
@@ -306,25 +306,49 @@ def _refine_points_kernel(
     P,
     Q,
 ):
+    """Child points ``Q`` (child verts, d) from parent points ``P`` (parent verts, d): vertex
+    points first (rows 0 .. n_v - 1), then face points (Catmull-Clark), then edge points, as
+    OpenSubdiv numbers the child vertices. Face points come first: edge and vertex points
+    use them."""
     n_v = len(vert_face_offsets) - 1
     n_f = len(face_offsets) - 1
-    n_e = len(edge_verts)
-    d = P.shape[1]
     face_base = n_v
     edge_base = n_v if is_loop else n_v + n_f
-
-    # face points (Catmark): centroids
     if not is_loop:
-        for f in range(n_f):
-            a = face_offsets[f]
-            b = face_offsets[f + 1]
-            w = 1.0 / (b - a)
-            for c in range(d):
-                acc = 0.0
-                for i in range(a, b):
-                    acc += P[face_verts[i], c]
-                Q[face_base + f, c] = acc * w
+        _face_points(face_offsets, face_verts, P, Q, face_base)
+    _edge_points(is_loop, smooth_triangles, face_offsets, face_verts, edge_verts,
+                 edge_face_offsets, edge_faces, edge_face_corner, edge_sharp, edge_child_sharp,
+                 P, Q, face_base, edge_base)
+    _vertex_points(is_loop, chaikin, edge_verts, edge_sharp, edge_child_sharp,
+                   vert_face_offsets, vert_faces, vert_edge_offsets, vert_edges, vert_sharp,
+                   vert_child_sharp, P, Q, face_base)
 
+
+@nb.njit(cache=True)
+def _face_points(face_offsets, face_verts, P, Q, face_base):
+    """Catmull-Clark face points (centroids) into ``Q[face_base + f]``."""
+    n_f = len(face_offsets) - 1
+    d = P.shape[1]
+    # face points (Catmark): centroids
+    for f in range(n_f):
+        a = face_offsets[f]
+        b = face_offsets[f + 1]
+        w = 1.0 / (b - a)
+        for c in range(d):
+            acc = 0.0
+            for i in range(a, b):
+                acc += P[face_verts[i], c]
+            Q[face_base + f, c] = acc * w
+
+
+@nb.njit(cache=True)
+def _edge_points(is_loop, smooth_triangles, face_offsets, face_verts, edge_verts,
+                 edge_face_offsets, edge_faces, edge_face_corner, edge_sharp, edge_child_sharp,
+                 P, Q, face_base, edge_base):
+    """Edge points into ``Q[edge_base + e]``: crease midpoints, smooth masks, and their blend
+    where a crease turns smooth."""
+    n_e = len(edge_verts)
+    d = P.shape[1]
     # edge points
     for e in range(n_e):
         q = edge_base + e
@@ -369,6 +393,15 @@ def _refine_points_kernel(
                     acc += fw * Q[face_base + f, c]
             Q[q, c] = acc
 
+
+@nb.njit(cache=True)
+def _vertex_points(is_loop, chaikin, edge_verts, edge_sharp, edge_child_sharp,
+                   vert_face_offsets, vert_faces, vert_edge_offsets, vert_edges, vert_sharp,
+                   vert_child_sharp, P, Q, face_base):
+    """Vertex points into ``Q[v]``: the parent's rule (smooth / dart, crease, corner),
+    blended with the child's by the fractional weight where the rule changes."""
+    n_v = len(vert_face_offsets) - 1
+    d = P.shape[1]
     # vertex points
     for v in range(n_v):
         fa = vert_face_offsets[v]

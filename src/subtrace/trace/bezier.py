@@ -23,78 +23,15 @@ import numpy as np
 
 from subtrace.accel.bvh import box_entry, slab_entry, slab_range
 from subtrace.runtime.jit import inline_njit, leaf_njit
+from subtrace.patches.basis import (
+    copy_net as _copy_net, bez_point as _bez_point, net_box as _net_box, quadrant as _quadrant,
+    split_net as _split,
+)
 from subtrace.trace.prims import (
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, push_sorted, ray_triangle,
 )
 
-BOX_PAD = 1e-12
 MAX_SIDE_SAMPLES = 256  # samples per cell side at most (2^(side depth - depth))
-
-
-@leaf_njit
-def _bez_point(nets, k, u, v):
-    """Point of the Bezier patch ``nets[k]`` (4,4,3) at (u, v): one code path for every
-    caller, so a point shared by cells is computed bit-identically by each."""
-    su = 1.0 - u
-    sv = 1.0 - v
-    bu0, bu1, bu2, bu3 = su * su * su, 3.0 * u * su * su, 3.0 * u * u * su, u * u * u
-    bv0, bv1, bv2, bv3 = sv * sv * sv, 3.0 * v * sv * sv, 3.0 * v * v * sv, v * v * v
-    x = y = z = 0.0
-    for a in range(4):
-        ba = bu0 if a == 0 else (bu1 if a == 1 else (bu2 if a == 2 else bu3))
-        cx = (bv0 * nets[k, a, 0, 0] + bv1 * nets[k, a, 1, 0] + bv2 * nets[k, a, 2, 0]
-              + bv3 * nets[k, a, 3, 0])
-        cy = (bv0 * nets[k, a, 0, 1] + bv1 * nets[k, a, 1, 1] + bv2 * nets[k, a, 2, 1]
-              + bv3 * nets[k, a, 3, 1])
-        cz = (bv0 * nets[k, a, 0, 2] + bv1 * nets[k, a, 1, 2] + bv2 * nets[k, a, 2, 2]
-              + bv3 * nets[k, a, 3, 2])
-        x += ba * cx
-        y += ba * cy
-        z += ba * cz
-    return x, y, z
-
-
-@leaf_njit
-def bez_derivatives(net, u, v):
-    """dP/du and dP/dv of the Bezier patch ``net`` at (u, v): two 3-tuples."""
-    su = 1.0 - u
-    sv = 1.0 - v
-    bu = (su * su * su, 3.0 * u * su * su, 3.0 * u * u * su, u * u * u)
-    bv = (sv * sv * sv, 3.0 * v * sv * sv, 3.0 * v * v * sv, v * v * v)
-    du = (-3.0 * su * su, 3.0 * su * (su - 2.0 * u), 3.0 * u * (2.0 * su - u), 3.0 * u * u)
-    dv = (-3.0 * sv * sv, 3.0 * sv * (sv - 2.0 * v), 3.0 * v * (2.0 * sv - v), 3.0 * v * v)
-    ux = uy = uz = vx = vy = vz = 0.0
-    for a in range(4):
-        for c in range(4):
-            wu = du[a] * bv[c]
-            wv = bu[a] * dv[c]
-            ux += wu * net[a, c, 0]
-            uy += wu * net[a, c, 1]
-            uz += wu * net[a, c, 2]
-            vx += wv * net[a, c, 0]
-            vy += wv * net[a, c, 1]
-            vz += wv * net[a, c, 2]
-    return (ux, uy, uz), (vx, vy, vz)
-
-
-@leaf_njit
-def _split_row(a, b, c, d):
-    ab = 0.5 * (a + b)
-    bc = 0.5 * (b + c)
-    cd = 0.5 * (c + d)
-    abc = 0.5 * (ab + bc)
-    bcd = 0.5 * (bc + cd)
-    m = 0.5 * (abc + bcd)
-    return ab, abc, m, bcd, cd
-
-
-@leaf_njit
-def _copy_net(dst, d, src, s):
-    """``dst[d] = src[s]`` for Bezier nets (4,4,3), element by element (no array views)."""
-    for a in range(4):
-        for c in range(4):
-            for k in range(3):
-                dst[d, a, c, k] = src[s, a, c, k]
 
 
 @leaf_njit
@@ -104,78 +41,6 @@ def _corner_params(lp, gi, gj, inv):
     for k in range(4):
         lp[k, 0] = (gi + (1 if k == 1 or k == 2 else 0)) * inv
         lp[k, 1] = (gj + (1 if k >= 2 else 0)) * inv
-
-
-@leaf_njit
-def _split(src, s, w, d0):
-    """Write the four child nets of net ``src[s]`` into ``w[d0 .. d0+3]`` (child ``cu + 2 cv``
-    covers the half cu in u and cv in v), using ``w[d0-2]``, ``w[d0-1]`` as scratch."""
-    h0 = d0 - 2
-    for c in range(4):  # halve along u (first index)
-        for k in range(3):
-            p0, p1, p2, p3 = src[s, 0, c, k], src[s, 1, c, k], src[s, 2, c, k], src[s, 3, c, k]
-            ab, abc, m, bcd, cd = _split_row(p0, p1, p2, p3)
-            w[h0, 0, c, k], w[h0, 1, c, k], w[h0, 2, c, k], w[h0, 3, c, k] = p0, ab, abc, m
-            w[h0 + 1, 0, c, k], w[h0 + 1, 1, c, k] = m, bcd
-            w[h0 + 1, 2, c, k], w[h0 + 1, 3, c, k] = cd, p3
-    for h in range(2):  # then along v
-        src_h = h0 + h
-        lo = d0 + h
-        hi = d0 + h + 2
-        for a in range(4):
-            for k in range(3):
-                p0, p1 = w[src_h, a, 0, k], w[src_h, a, 1, k]
-                p2, p3 = w[src_h, a, 2, k], w[src_h, a, 3, k]
-                ab, abc, m, bcd, cd = _split_row(p0, p1, p2, p3)
-                w[lo, a, 0, k], w[lo, a, 1, k], w[lo, a, 2, k], w[lo, a, 3, k] = p0, ab, abc, m
-                w[hi, a, 0, k], w[hi, a, 1, k], w[hi, a, 2, k], w[hi, a, 3, k] = m, bcd, cd, p3
-
-
-@leaf_njit
-def _quadrant(src, s, cu, cv, w, d):
-    """Write child ``cu + 2 cv`` of net ``src[s]`` (as :func:`_split` makes it) into
-    ``w[d]``, using ``w[d + 1]`` as scratch."""
-    for c in range(4):  # halve along u, keep half cu
-        for k in range(3):
-            p0, p1, p2, p3 = src[s, 0, c, k], src[s, 1, c, k], src[s, 2, c, k], src[s, 3, c, k]
-            ab, abc, m, bcd, cd = _split_row(p0, p1, p2, p3)
-            if cu == 0:
-                w[d + 1, 0, c, k], w[d + 1, 1, c, k], w[d + 1, 2, c, k], w[d + 1, 3, c, k] = (
-                    p0, ab, abc, m)
-            else:
-                w[d + 1, 0, c, k], w[d + 1, 1, c, k], w[d + 1, 2, c, k], w[d + 1, 3, c, k] = (
-                    m, bcd, cd, p3)
-    for a in range(4):  # then along v, keep half cv
-        for k in range(3):
-            p0, p1 = w[d + 1, a, 0, k], w[d + 1, a, 1, k]
-            p2, p3 = w[d + 1, a, 2, k], w[d + 1, a, 3, k]
-            ab, abc, m, bcd, cd = _split_row(p0, p1, p2, p3)
-            if cv == 0:
-                w[d, a, 0, k], w[d, a, 1, k], w[d, a, 2, k], w[d, a, 3, k] = p0, ab, abc, m
-            else:
-                w[d, a, 0, k], w[d, a, 1, k], w[d, a, 2, k], w[d, a, 3, k] = m, bcd, cd, p3
-
-
-@leaf_njit
-def _pad(lo0, lo1, lo2, hi0, hi1, hi2):
-    """A box widened by ``BOX_PAD`` of its largest coordinate (for rounding)."""
-    pad = BOX_PAD * max(max(abs(lo0), abs(hi0)), max(max(abs(lo1), abs(hi1)),
-                                                     max(abs(lo2), abs(hi2))))
-    return lo0 - pad, lo1 - pad, lo2 - pad, hi0 + pad, hi1 + pad, hi2 + pad
-
-
-@leaf_njit
-def _net_box(net, s):
-    """Padded box of the control points of ``net[s]`` (it contains the patch)."""
-    lo0 = lo1 = lo2 = np.inf
-    hi0 = hi1 = hi2 = -np.inf
-    for a in range(4):
-        for c in range(4):
-            x, y, z = net[s, a, c, 0], net[s, a, c, 1], net[s, a, c, 2]
-            lo0, hi0 = min(lo0, x), max(hi0, x)
-            lo1, hi1 = min(lo1, y), max(hi1, y)
-            lo2, hi2 = min(lo2, z), max(hi2, z)
-    return _pad(lo0, lo1, lo2, hi0, hi1, hi2)
 
 
 @leaf_njit

@@ -10,7 +10,7 @@ import numpy as np
 
 from subtrace import config
 from subtrace.errors import SceneError, SubtraceWarning
-from subtrace.patches.table import memory_estimate
+from subtrace.patches.criterion import memory_estimate
 from subtrace.runtime import threads as tasks
 
 

@@ -26,7 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from subtrace.patches.bspline import net_bounds
+from subtrace.patches.basis import net_bounds
 from subtrace.patches.grids import grid_params, leaf_corners
 from subtrace.patches.isolate import item_sides, rest_boxes
 from subtrace.trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES

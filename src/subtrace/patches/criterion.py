@@ -1,0 +1,149 @@
+"""The refinement criterion: each patch's grid depth from the eye, and the memory it costs.
+
+A grid cell of a patch at depth ``n`` is no longer than ``edge_bound * rate^n``
+(:mod:`subtrace.patches.table`); :func:`choose_depths` takes the smallest ``n`` at which
+that is within ``tol_rad`` (radians) times the distance from the eye to the patch's shell
+(design invariant 3), isolating irregular Catmull-Clark patches for a tighter answer
+(:mod:`subtrace.patches.isolate`). :func:`memory_estimate` and :func:`depth_cap` bound the
+render's memory for those depths, :func:`edge_sampling` makes both sides of every edge
+sample it alike (design invariant 4). Depths are (P,) int32 per patch of the table.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from subtrace import config
+from subtrace.patches.isolate import isolated_depths
+from subtrace.patches.shells import box_distance
+from subtrace.runtime.jit import nb
+from subtrace.subdiv import catmark, loop
+
+
+def subdominant(valence: np.ndarray, quad: bool) -> np.ndarray:
+    """Per-level contraction of control edges at a vertex of this valence (at least 1/2)."""
+    scheme = catmark if quad else loop
+    return np.maximum(scheme.subdominant_eigenvalue(np.maximum(valence, 3)), 0.5)
+
+
+def choose_depths(table, eye: np.ndarray, tol_rad: float, max_depth: int,
+                  record=None, shells=None):
+    """Grid depth of every patch: the smallest n with ``edge_bound * rate^n`` at most
+    ``tol_rad`` times the distance from the eye to the patch's shell (capped); irregular
+    quads needing more than depth 0 are then isolated (:mod:`subtrace.patches.isolate`).
+    With a dict ``record``, ``record[object id]`` keeps what the isolation made (see
+    :func:`~subtrace.patches.isolate.isolated_depths`). ``shells`` = (lo, hi), each (P,3),
+    the shells to tighten: an isolated patch's shell becomes the box of what its isolation
+    ended in (intersected with its own shell); the others' are left as they are."""
+    d = box_distance(table.shell_min, table.shell_max, eye)
+    allowed = d * tol_rad
+    with np.errstate(divide="ignore", invalid="ignore"):
+        n = np.log(allowed / table.edge_bound) / np.log(table.rate)
+    n = np.where(allowed >= table.edge_bound, 0.0, np.ceil(n - 1e-9))
+    n = np.where(np.isfinite(n), n, max_depth)
+    depths = np.clip(n, 0, max_depth).astype(np.int32)
+    for oid, o in enumerate(table.objects):
+        if o.cage.scheme != "catmark":
+            continue
+        sel = np.nonzero((table.object_id == oid) & ~table.regular)[0]
+        if record is None:
+            sel = sel[depths[sel] > 0]
+        if len(sel) and depths[sel].max() > 0:
+            rec = record.setdefault(oid, {}) if record is not None else None
+            boxes = None
+            if shells is not None:
+                boxes = (np.full((len(sel), 3), np.inf), np.full((len(sel), 3), -np.inf))
+            depths[sel] = isolated_depths(o, table.face[sel], depths[sel], eye, tol_rad, rec,
+                                          int(depths[sel].max()), boxes)
+            if shells is not None:
+                done = np.isfinite(boxes[0]).all(axis=1)
+                at = sel[done]
+                shells[0][at] = np.maximum(shells[0][at], boxes[0][done])
+                shells[1][at] = np.minimum(shells[1][at], boxes[1][done])
+    return depths
+
+
+def memory_estimate(table, depths, n_pixels: int) -> int:
+    """A conservative estimate (bytes) of a render's memory with grid depths ``depths``:
+    the image's per-pixel buffers, the patch table, every Loop patch built as a grid at its
+    depth and every irregular Catmull-Clark patch isolated to its depth, as if rays reached
+    them all (the per-thread memos of split nets are kept within what is left:
+    ``render._Memos``). The constants are ``config.MEMORY_*``."""
+    loop = ~table.is_quad
+    N = (1 << depths[loop].astype(np.int64)) if loop.any() else np.zeros(0, np.int64)
+    grid_points = int(((N + 1) * (N + 2) // 2).sum())
+    iso = table.is_quad & ~table.regular
+    iso_levels = int((depths[iso].astype(np.int64) + 1).sum())
+    return (config.MEMORY_BYTES_PER_PIXEL * int(n_pixels)
+            + config.MEMORY_BYTES_PER_PATCH * table.n_patches
+            + config.MEMORY_BYTES_PER_GRID_POINT * grid_points
+            + config.MEMORY_BYTES_PER_ISOLATED_LEVEL * iso_levels)
+
+
+def depth_cap(table, depths, n_pixels: int, budget: int):
+    """The deepest grid depth ``cap`` at which ``np.minimum(depths, cap)`` fits ``budget``
+    bytes (:func:`memory_estimate`), or None when ``depths`` fit as they are; -1 when
+    nothing fits (not even depth 0)."""
+    if memory_estimate(table, depths, n_pixels) <= budget:
+        return None
+    for cap in range(int(depths.max(initial=0)) - 1, -1, -1):
+        if memory_estimate(table, np.minimum(depths, cap), n_pixels) <= budget:
+            return cap
+    return -1
+
+
+def edge_sampling(table, depths):
+    """Make both sides of every edge sample it alike (design invariant 4); raises ``depths``
+    in place and returns ``(edge_depth, reg_side)``.
+
+    * An irregular Catmull-Clark patch (built into pieces, ``patches/isolate.py``) is raised
+      to the depth of every neighbour, repeatedly, so it is never coarser than a neighbour
+      and equal to its irregular neighbours: its sides need no extra samples.
+    * A regular patch (intersected directly) samples a side shared with a finer neighbour at
+      the neighbour's depth (``reg_side`` (R,4)), fanning its cells there.
+    * Loop grids snap a side to the coarsest depth on its edge (``edge_depth``, per edge).
+    """
+    n_e = max(table.n_edges, 1)
+    iso = table.is_quad & ~table.regular
+    nb_max = np.empty(table.edges.shape, dtype=np.int64)
+    edge_depth = np.empty(n_e, dtype=np.int64)
+    _sample_edges(table.edges, depths, iso, nb_max, edge_depth)
+    reg_side = np.maximum(depths[table.regular][:, None], nb_max[table.regular])
+    return edge_depth, np.ascontiguousarray(reg_side, dtype=np.int64)
+
+
+@nb.njit(cache=True)
+def _sample_edges(edges, depths, iso, nb_max, edge_depth):
+    """Raise the ``iso`` patches to their neighbours' depths until none changes (in place);
+    fill the deepest patch on each side's edge (``nb_max``) and the shallowest per edge."""
+    best = np.full(len(edge_depth), -1, np.int64)
+    for p in range(len(depths)):
+        for k in range(4):
+            e = edges[p, k]
+            if e >= 0:
+                best[e] = max(best[e], depths[p])
+    changed = True
+    while changed:
+        changed = False
+        for p in range(len(depths)):
+            if not iso[p]:
+                continue
+            m = depths[p]
+            for k in range(4):
+                e = edges[p, k]
+                if e >= 0:
+                    m = max(m, best[e])
+            if m > depths[p]:
+                depths[p] = m
+                changed = True
+                for k in range(4):
+                    e = edges[p, k]
+                    if e >= 0:
+                        best[e] = max(best[e], m)
+    edge_depth[:] = np.iinfo(np.int32).max
+    for p in range(len(depths)):
+        for k in range(4):
+            e = edges[p, k]
+            nb_max[p, k] = best[e] if e >= 0 else -1
+            if e >= 0:
+                edge_depth[e] = min(edge_depth[e], depths[p])

@@ -1,0 +1,75 @@
+"""Bounding shells of patches from their one-ring control points, and distances to boxes.
+
+A face's limit surface depends only on the control points of the faces sharing a vertex
+with it (its one-ring), with non-negative weights, so it lies in their convex hull and in
+their axis-aligned box (design invariant 2). Per face, flat arrays: box min / max (n,3)
+float64, a length bound on its iso-curves (n,) and its largest corner valence (n,) int64.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from subtrace.runtime.jit import nb
+
+
+def box_distance(bmin, bmax, p):
+    """(n,) distance from point ``p`` (3,) to each box ``[bmin, bmax]`` (n,3) (0 inside)."""
+    q = np.maximum(np.maximum(bmin - p, 0.0), p - bmax)
+    return np.sqrt((q * q).sum(axis=1))
+
+
+def one_ring_shells(level, faces, pts):
+    """(box min (n,3), box max (n,3), length bound (n,), largest corner valence (n,)) of the
+    one-ring control points of ``faces`` of ``level`` at ``pts`` (see :func:`_shells`)."""
+    lo = np.empty((len(faces), 3))
+    hi = np.empty((len(faces), 3))
+    bound = np.empty(len(faces))
+    valence = np.empty(len(faces), dtype=np.int64)
+    _shells(faces, level.face_offsets, level.face_verts, level.vert_face_offsets,
+            level.vert_faces, pts, lo, hi, bound, valence)
+    return lo, hi, bound, valence
+
+
+@nb.njit(cache=True)
+def _shells(faces, face_offsets, face_verts, vert_face_offsets, vert_faces, pts, smin, smax,
+            ebound, valence):
+    """Box of the one-ring faces' points, longest edge among them, largest corner valence."""
+    for i in range(len(faces)):
+        f = faces[i]
+        lo0, lo1, lo2 = np.inf, np.inf, np.inf
+        hi0, hi1, hi2 = -np.inf, -np.inf, -np.inf
+        emax = 0.0
+        vmax = 0
+        # the patch's own edges
+        own = 0.0
+        n0 = face_offsets[f + 1] - face_offsets[f]
+        for b in range(n0):
+            p = face_verts[face_offsets[f] + b]
+            q = face_verts[face_offsets[f] + (b + 1) % n0]
+            dx, dy, dz = pts[q, 0] - pts[p, 0], pts[q, 1] - pts[p, 1], pts[q, 2] - pts[p, 2]
+            own = max(own, math.sqrt(dx * dx + dy * dy + dz * dz))
+        for c in range(face_offsets[f], face_offsets[f + 1]):
+            v = face_verts[c]
+            vmax = max(vmax, vert_face_offsets[v + 1] - vert_face_offsets[v])
+            for a in range(vert_face_offsets[v], vert_face_offsets[v + 1]):
+                g = vert_faces[a]
+                g0 = face_offsets[g]
+                ng = face_offsets[g + 1] - g0
+                for b in range(ng):
+                    p = face_verts[g0 + b]
+                    q = face_verts[g0 + (b + 1) % ng]
+                    x, y, z = pts[p, 0], pts[p, 1], pts[p, 2]
+                    lo0, lo1, lo2 = min(lo0, x), min(lo1, y), min(lo2, z)
+                    hi0, hi1, hi2 = max(hi0, x), max(hi1, y), max(hi2, z)
+                    dx, dy, dz = pts[q, 0] - x, pts[q, 1] - y, pts[q, 2] - z
+                    emax = max(emax, math.sqrt(dx * dx + dy * dy + dz * dz))
+        smin[i, 0], smin[i, 1], smin[i, 2] = lo0, lo1, lo2
+        smax[i, 0], smax[i, 1], smax[i, 2] = hi0, hi1, hi2
+        # an iso-curve over the patch is a cubic B-spline whose control polygon blends the
+        # patch's rows with weights >= 2/3 on its own two rows, and a B-spline span is no
+        # longer than e0/6 + 2 e1/3 + e2/6 of its control edges: hence this length bound
+        ebound[i] = (4.0 * own + 5.0 * emax) / 9.0
+        valence[i] = vmax
