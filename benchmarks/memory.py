@@ -1,7 +1,7 @@
 """Benchmark: the memory budget's estimate against the measured peak.
 
 For each scene, tolerance and budget, renders in a fresh process and prints the estimate
-the budget is checked against (``patches.table.memory_estimate`` of the depths after any
+the budget is checked against (``patches.criterion.memory_estimate`` of the depths after any
 cap, plus the bytes the threads' memos hold at the end, which the budget bounds by what the
 estimate leaves) and the render's measured peak: the growth of
 the resident set over the render (``sweep.PeakMemory``: VmHWM reset through
@@ -41,8 +41,8 @@ def spy(table, depths, n_pixels):
     value = orig(table, depths, n_pixels)
     seen["last"] = value
     return value
-import subtrace.render as R
-R.memory_estimate = spy
+import subtrace.trace.budget as B
+B.memory_estimate = spy
 probe = PeakMemory()
 probe.start()
 with warnings.catch_warnings(record=True) as caught:

@@ -25,17 +25,15 @@ from subtrace.accel.projection import no_tiles, project_shells, tiles_bytes
 from subtrace.camera import camera_frame
 from subtrace.errors import SceneError
 from subtrace.io.limits import check_coordinates, check_valences
-from subtrace.io.obj import DEFAULT_DIFFUSE
 from subtrace.mesh.cage import load_cage
-from subtrace.patches.grids import build_grids, node_boxes, snap_sides
-from subtrace.patches.isolate import build_isolated
-from subtrace.patches.criterion import choose_depths, depth_cap, edge_sampling, memory_estimate
+from subtrace.patches.criterion import edge_sampling
 from subtrace.patches.table import build_patch_table
 from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
-from subtrace.shade import CHANNELS, PatchShading, miss_values, shade
+from subtrace.shade import CHANNELS, miss_values, patch_shading, shade
 from subtrace.subdiv.limit import limit_points
-from subtrace.trace.budget import check_memory, warn_capped, warn_tiles
+from subtrace.trace.budget import check_memory, choose_within_budget, warn_tiles
+from subtrace.trace.build import build_requested
 from subtrace.trace.kernels import trace_round
 from subtrace.trace.pools import (LoopGrids, Memos, Pieces, candidate_lists, hit_arrays,
                                   leaf_tables)
@@ -84,83 +82,6 @@ class RenderResult:
     # object id of every refined patch (what was built, for tests and reports)
 
 
-# --------------------------------------------------------------------------------------
-# refinement of requested patches
-# --------------------------------------------------------------------------------------
-
-
-def _refine(table, requested, depths, edge_depth, grids, iso, round_no, stats, eye, tol_rad,
-            record):
-    """Build the requested patches: irregular Catmull-Clark patches into pieces (``iso``,
-    all of an object's in one isolation, taking what ``record[object id]`` kept of the
-    depth choice's isolation), Loop patches into grids (``grids``)."""
-    obj = table.object_id[requested]
-    dep = depths[requested]
-    quad = table.is_quad[requested]
-    order = np.lexsort((requested, np.where(quad, 0, dep), obj))
-    requested, obj, dep, quad = requested[order], obj[order], dep[order], quad[order]
-    keys = np.stack([obj, np.where(quad, -1, dep)], axis=1)
-    starts = np.r_[0, np.nonzero(np.any(np.diff(keys, axis=0) != 0, axis=1))[0] + 1]
-    ends = np.r_[starts[1:], len(requested)]
-    for s, e in zip(starts, ends):
-        ids = requested[s:e]
-        o = table.objects[int(obj[s])]
-        if quad[s]:
-            subs, cells = build_isolated(o, table.face[ids], dep[s:e], eye, tol_rad,
-                                         record.get(int(obj[s])))
-            n_sub, n_cell = iso.append(ids, dep[s:e], np.repeat(dep[s:e], 4), subs, cells,
-                                       round_no)
-            stats.pieces += n_sub + n_cell
-            stats.micro_triangles += 2 * n_cell
-            continue
-        d = int(dep[s])
-        P, N = build_grids(o.level, o.points, o.cage.options, table.face[ids], d)
-        side_depth = np.where(table.edges[ids, :3] >= 0, edge_depth[table.edges[ids, :3]], -1)
-        snap_sides(P, d, False, side_depth)
-        lo, hi = node_boxes(P, d, False)
-        grids.append(ids, d, False, P, N, lo, hi, round_no)
-        stats.micro_triangles += len(ids) * (1 << (2 * d))
-        stats.grid_points += P.shape[0] * P.shape[1]
-    stats.patches_refined += len(requested)
-
-
-
-
-@dataclass
-class _Depths:
-    """The depth choice of a render: per patch grid depth, what the choice's isolation made
-    (``record``, reused when the patches are built), the (tightened) shells, and the bytes
-    of the memory budget left for the tile lists and the memos (None: no budget)."""
-
-    depths: np.ndarray
-    record: dict
-    shell_min: np.ndarray
-    shell_max: np.ndarray
-    left: int | None
-
-
-def _choose_depths(table, eye, tol_rad, max_depth, max_memory, n_pixels, stats) -> _Depths:
-    """Each patch's grid depth (isolating irregular patches, which also tightens their
-    shells), capped with a warning where the memory budget ``max_memory`` asks."""
-
-    def choose(cap):
-        record = {}
-        shells = table.shell_min.copy(), table.shell_max.copy()
-        return choose_depths(table, eye, tol_rad, cap, record, shells), record, shells
-
-    depths, record, (shell_min, shell_max) = choose(max_depth)
-    left = None
-    if max_memory is not None:
-        left = max_memory - config.MEMORY_MEMO_MIN_BYTES * tasks.thread_count()
-        cap = depth_cap(table, depths, n_pixels, left)
-        if cap is not None:
-            warn_capped(max_memory, cap, depths, memory_estimate(table, depths, n_pixels))
-            depths, record, (shell_min, shell_max) = choose(max(cap, 0))
-            stats.depth_cap = max(cap, 0)
-        left = max(left - memory_estimate(table, depths, n_pixels), 0)
-    return _Depths(depths, record, shell_min, shell_max, left)
-
-
 def _shell_walk(chosen, frame, width, height, accel, max_memory, stats):
     """How rays find the shells they enter: (tiles, bvh), one of them empty. Projection
     tiles that would not fit the budget fall back to the BVH, with a warning."""
@@ -196,7 +117,8 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     W, H = camera.width, camera.height
     frame = camera_frame(camera)
     t0 = time.perf_counter()
-    chosen = _choose_depths(table, frame[0], tol_rad, max_depth, max_memory, W * H, stats)
+    chosen = choose_within_budget(table, frame[0], tol_rad, max_depth, max_memory, W * H,
+                                  stats)
     stats.time_refine += time.perf_counter() - t0
     t0 = time.perf_counter()
     tiles, bvh = _shell_walk(chosen, frame, W, H, accel, max_memory, stats)
@@ -252,8 +174,8 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
         flag = np.zeros(table.n_patches, bool)
         flag[req[asked]] = True
         new = np.nonzero(flag)[0]  # (np.unique, sorted: it hashes every request)
-        _refine(table, new, depths, edge_depth, grids, iso, round_no, stats, frame[0], tol_rad,
-                chosen.record)
+        build_requested(table, new, depths, edge_depth, grids, iso, round_no, stats, frame[0],
+                        tol_rad, chosen.record)
         stats.time_refine += time.perf_counter() - t0
         round_no += 1
     stats.rounds = round_no + 1
@@ -271,23 +193,6 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
 def load_objects(scene):
     """Cages of the scene's objects (scheme / boundary overrides applied)."""
     return [load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code) for o in scene.objects]
-
-
-def _patch_shading(table, scene) -> PatchShading:
-    """Per patch: its ids, ptex placement and colour (material or the object's override)."""
-    colors = np.empty((table.n_patches, 3))
-    for oid, o in enumerate(table.objects):
-        sl = slice(o.first_patch, o.first_patch + len(o.patch_faces))
-        override = scene.objects[oid].color
-        if override is not None:
-            colors[sl] = override
-            continue
-        mats = o.cage.materials
-        table_rgb = np.array([m.diffuse for m in mats] + [DEFAULT_DIFFUSE], dtype=np.float64)
-        mat = table.material[sl]
-        colors[sl] = table_rgb[np.where(mat >= 0, mat, len(mats))]
-    return PatchShading(table.object_id, table.ptex, table.ptex_uv0, table.ptex_scale,
-                        table.level0, colors)
 
 
 def _check_threads(threads):
@@ -362,7 +267,8 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
         dtype=np.float64,
     ).reshape(-1, 6)
     headlight = np.array([scene.render.headlight_intensity if scene.render.headlight else 0.0])
-    shade(camera_frame(camera), W, hits, grids, iso.view(), _patch_shading(table, scene), lights,
+    colors = [o.color for o in scene.objects]
+    shade(camera_frame(camera), W, hits, grids, iso.view(), patch_shading(table, colors), lights,
           headlight, miss_values(scene.render.background), planes, covered)
     stats.pixels_covered = int(covered.sum())
     channels = {name: planes[k].reshape(H, W) for k, name in enumerate(CHANNELS)}

@@ -15,6 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from subtrace.io.obj import DEFAULT_DIFFUSE
 from subtrace.patches.basis import bez_derivatives
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
@@ -226,3 +227,21 @@ def _cell_normal(pts, nrm, a, b):
     if ln > 0.0:
         return nx / ln, ny / ln, nz / ln
     return 0.0, 0.0, 0.0
+
+
+def patch_shading(table, overrides) -> PatchShading:
+    """Per patch of ``table``: its ids, ptex placement and colour: its object's colour
+    ``overrides[object id]`` where that is not None, else its material's diffuse colour."""
+    colors = np.empty((table.n_patches, 3))
+    for oid, o in enumerate(table.objects):
+        sl = slice(o.first_patch, o.first_patch + len(o.patch_faces))
+        override = overrides[oid]
+        if override is not None:
+            colors[sl] = override
+            continue
+        mats = o.cage.materials
+        table_rgb = np.array([m.diffuse for m in mats] + [DEFAULT_DIFFUSE], dtype=np.float64)
+        mat = table.material[sl]
+        colors[sl] = table_rgb[np.where(mat >= 0, mat, len(mats))]
+    return PatchShading(table.object_id, table.ptex, table.ptex_uv0, table.ptex_scale,
+                        table.level0, colors)

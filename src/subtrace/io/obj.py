@@ -464,23 +464,20 @@ class ObjReader:
                 )
             self.boundary = ints[0]
         elif name == "creasemethod":
-            if counts != (0, 0, 1) or strings[0] not in _CREASE_METHODS:
-                got = strings[0] if counts == (0, 0, 1) else header
-                self.fail(
-                    number,
-                    "tag 'creasemethod' expects 0/0/1 and the string 'normal' or 'chaikin', "
-                    f"got unknown '{got}'",
-                )
-            self.crease_method = _CREASE_METHODS[strings[0]]
+            got = self._tag_string(number, name, counts, strings, header, _CREASE_METHODS,
+                                   "'normal' or 'chaikin'")
+            self.crease_method = _CREASE_METHODS[got]
         else:  # smoothtriangles
-            if counts != (0, 0, 1) or strings[0] not in _SMOOTH_TRIANGLES:
-                got = strings[0] if counts == (0, 0, 1) else header
-                self.fail(
-                    number,
-                    "tag 'smoothtriangles' expects 0/0/1 and the string 'catmark' or "
-                    f"'smooth', got unknown '{got}'",
-                )
-            self.smooth_triangles = strings[0]
+            self.smooth_triangles = self._tag_string(number, name, counts, strings, header,
+                                                     _SMOOTH_TRIANGLES, "'catmark' or 'smooth'")
+
+    def _tag_string(self, number, name, counts, strings, header, choices, expected):
+        """The one string of an option tag (0/0/1) that must be one of ``choices``."""
+        if counts != (0, 0, 1) or strings[0] not in choices:
+            got = strings[0] if counts == (0, 0, 1) else header
+            self.fail(number, f"tag '{name}' expects 0/0/1 and the string {expected}, got "
+                              f"unknown '{got}'")
+        return strings[0]
 
     # -- material libraries --------------------------------------------------------------
 

@@ -52,13 +52,13 @@ import math
 import numpy as np
 
 from subtrace import config
-from subtrace.accel.bvh import box_entry, bvh_next_leaf, bvh_start, slab_entry, traversal_stack
+from subtrace.accel.bvh import box_entry, bvh_next_leaf, bvh_start, traversal_stack
 from subtrace.patches.basis import (
     N_TRI, TRI_MONO, bez_eval, copy_net as _copy_net, net_box, net_flatness,
     split_net as _split, tri_box, tri_flatness, tri_mono_eval, tri_monomials, tri_split,
 )
 from subtrace.runtime.jit import leaf_njit, nb
-from subtrace.trace.prims import ray_triangle, shear
+from subtrace.trace.prims import push_sorted, ray_triangle, shear
 
 # Deepest halving of an item: 2^-40 of its side is below what double parameters resolve.
 MAX_DEPTH = 40
@@ -482,16 +482,8 @@ def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, tnets, split_ptr, spl
                 for ch in range(4):
                     tk = _sub_entry(tri, w, wt, d_kids + ch, o0, o1, o2, i0, i1, i2,
                                     touch_tol, tlo, tcut)
-                    if tk == np.inf:
-                        continue
-                    j = m  # insertion, descending entry
-                    while j > 0 and kid_t[j - 1] < tk:
-                        kid_t[j] = kid_t[j - 1]
-                        kid_order[j] = kid_order[j - 1]
-                        j -= 1
-                    kid_t[j] = tk
-                    kid_order[j] = ch
-                    m += 1
+                    if tk < np.inf:  # kept in descending entry
+                        m = push_sorted(kid_t, kid_order, m, tk, ch)
                 for j in range(m):
                     ch = kid_order[j]
                     _copy_sub(tri, w, wt, sp, d_kids + ch)

@@ -147,6 +147,23 @@ def _corners(level: Level):
     return face_of, k, n, prev
 
 
+def _child_level(p: Level, n_verts, offsets, child_fv, ev, child_fe, child_fwd, edge_child,
+                 vert_child, face_hole) -> Level:
+    """The child level of either split: the child faces and edges given, the sharpness of
+    the parent edges' halves (``edge_child`` (E,2)) and of the parent vertices' children
+    (``vert_child`` (V,)), non-manifold flags carried to the halves, the face holes given."""
+    C = len(p.face_verts)
+    E = p.n_edges
+    esharp = np.zeros(C + 2 * E, dtype=np.float32)
+    esharp[C:] = edge_child.ravel()
+    enonman = np.zeros(C + 2 * E, dtype=bool)
+    enonman[C:] = np.repeat(p.edge_nonmanifold, 2)
+    vsharp = np.zeros(n_verts, dtype=np.float32)
+    vsharp[: p.n_verts] = vert_child
+    return build_level(n_verts, offsets, child_fv, ev, child_fe, child_fwd, esharp, vsharp,
+                       face_hole, edge_nonmanifold=enonman)
+
+
 def _split_quads(p: Level, edge_child: np.ndarray, vert_child: np.ndarray) -> Level:
     V, F, E = p.n_verts, p.n_faces, p.n_edges
     C = len(p.face_verts)
@@ -180,25 +197,9 @@ def _split_quads(p: Level, edge_child: np.ndarray, vert_child: np.ndarray) -> Le
     ev[C::2, 1] = p.edge_verts[:, 0]
     ev[C + 1 :: 2, 0] = V + F + eidx
     ev[C + 1 :: 2, 1] = p.edge_verts[:, 1]
-    esharp = np.zeros(C + 2 * E, dtype=np.float32)
-    esharp[C:] = edge_child.ravel()
-    enonman = np.zeros(C + 2 * E, dtype=bool)
-    enonman[C:] = np.repeat(p.edge_nonmanifold, 2)
-    vsharp = np.zeros(V + F + E, dtype=np.float32)
-    vsharp[:V] = vert_child
     offsets = np.arange(0, 4 * C + 1, 4, dtype=np.int64)
-    return build_level(
-        V + F + E,
-        offsets,
-        child_fv,
-        ev,
-        child_fe,
-        child_fwd,
-        esharp,
-        vsharp,
-        p.face_hole[face_of],
-        edge_nonmanifold=enonman,
-    )
+    return _child_level(p, V + F + E, offsets, child_fv, ev, child_fe, child_fwd, edge_child,
+                        vert_child, p.face_hole[face_of])
 
 
 def _split_triangles(p: Level, edge_child: np.ndarray, vert_child: np.ndarray) -> Level:
@@ -239,25 +240,9 @@ def _split_triangles(p: Level, edge_child: np.ndarray, vert_child: np.ndarray) -
     ev[C::2, 1] = p.edge_verts[:, 0]
     ev[C + 1 :: 2, 0] = V + eidx
     ev[C + 1 :: 2, 1] = p.edge_verts[:, 1]
-    esharp = np.zeros(C + 2 * E, dtype=np.float32)
-    esharp[C:] = edge_child.ravel()
-    enonman = np.zeros(C + 2 * E, dtype=bool)
-    enonman[C:] = np.repeat(p.edge_nonmanifold, 2)
-    vsharp = np.zeros(V + E, dtype=np.float32)
-    vsharp[:V] = vert_child
     offsets = np.arange(0, 12 * F + 1, 3, dtype=np.int64)
-    return build_level(
-        V + E,
-        offsets,
-        child_fv,
-        ev,
-        child_fe,
-        child_fwd,
-        esharp,
-        vsharp,
-        np.repeat(p.face_hole, 4),
-        edge_nonmanifold=enonman,
-    )
+    return _child_level(p, V + E, offsets, child_fv, ev, child_fe, child_fwd, edge_child,
+                        vert_child, np.repeat(p.face_hole, 4))
 
 
 # --------------------------------------------------------------------------------------

@@ -1,0 +1,47 @@
+"""Between rounds: the patches that rays asked for, built into the pools the kernels read
+(``trace/pools.py``). What is built is counted in the render's statistics."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from subtrace.patches.grids import build_grids, node_boxes, snap_sides
+from subtrace.patches.isolate import build_isolated
+
+
+def build_requested(table, requested, depths, edge_depth, grids, iso, round_no, stats, eye,
+                    tol_rad, record):
+    """Build the patches ``requested`` (sorted ids) in round ``round_no``: irregular
+    Catmull-Clark patches into pieces (``iso``, a :class:`~subtrace.trace.pools.Pieces`;
+    all of an object's in one isolation, taking what ``record[object id]`` kept of the depth
+    choice's isolation), Loop patches into grids (``grids``, a
+    :class:`~subtrace.trace.pools.LoopGrids`) whose sides shared with a coarser neighbour
+    are snapped onto its polyline (``edge_depth``). Counts go to ``stats``."""
+    obj = table.object_id[requested]
+    dep = depths[requested]
+    quad = table.is_quad[requested]
+    order = np.lexsort((requested, np.where(quad, 0, dep), obj))
+    requested, obj, dep, quad = requested[order], obj[order], dep[order], quad[order]
+    keys = np.stack([obj, np.where(quad, -1, dep)], axis=1)
+    starts = np.r_[0, np.nonzero(np.any(np.diff(keys, axis=0) != 0, axis=1))[0] + 1]
+    ends = np.r_[starts[1:], len(requested)]
+    for s, e in zip(starts, ends):
+        ids = requested[s:e]
+        o = table.objects[int(obj[s])]
+        if quad[s]:
+            subs, cells = build_isolated(o, table.face[ids], dep[s:e], eye, tol_rad,
+                                         record.get(int(obj[s])))
+            n_sub, n_cell = iso.append(ids, dep[s:e], np.repeat(dep[s:e], 4), subs, cells,
+                                       round_no)
+            stats.pieces += n_sub + n_cell
+            stats.micro_triangles += 2 * n_cell
+            continue
+        d = int(dep[s])
+        P, N = build_grids(o.level, o.points, o.cage.options, table.face[ids], d)
+        side_depth = np.where(table.edges[ids, :3] >= 0, edge_depth[table.edges[ids, :3]], -1)
+        snap_sides(P, d, False, side_depth)
+        lo, hi = node_boxes(P, d, False)
+        grids.append(ids, d, False, P, N, lo, hi, round_no)
+        stats.micro_triangles += len(ids) * (1 << (2 * d))
+        stats.grid_points += P.shape[0] * P.shape[1]
+    stats.patches_refined += len(requested)
