@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import naive
 import numpy as np
 import pytest
 
@@ -17,8 +18,6 @@ from subtrace.errors import SubtraceError
 from subtrace.lines.api import intersect_lines
 from subtrace.lines.items import items_for
 from subtrace.shapes import torus_cage
-
-import naive
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 

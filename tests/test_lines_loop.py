@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_lines import check_random_lines
 
 import subtrace
 from subtrace.lines.api import intersect_lines
@@ -19,8 +20,6 @@ from subtrace.patches.basis import CHILD_ORIGIN, CHILD_SCALE, TRI_SPLIT
 from subtrace.patches.basis import tri_bernstein as bernstein
 from subtrace.patches.table import build_patch_table
 from subtrace.shapes import torus_cage
-
-from test_lines import check_random_lines
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 MODELS = SHARED / "models"

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 
 from subtrace import config, load_cage
-from subtrace.runtime import threads as tasks
 from subtrace.errors import SubtraceWarning
 from subtrace.patches.basis import bezier_nets, net_bounds
 from subtrace.patches.bspline import control_grids, regular_mask
 from subtrace.patches.criterion import subdominant
 from subtrace.patches.shells import one_ring_shells
 from subtrace.patches.table import build_patch_table
+from subtrace.runtime import threads as tasks
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 SHAPES = SHARED / "oracle" / "shapes"

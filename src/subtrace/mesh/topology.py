@@ -28,10 +28,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from subtrace.runtime.jit import nb
 import numpy as np
 
 from subtrace import config
+from subtrace.runtime.jit import nb
 
 INF_SHARP = np.float32(config.SHARPNESS_INFINITE)
 

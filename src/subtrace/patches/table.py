@@ -28,7 +28,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from subtrace.runtime.jit import nb
 import numpy as np
 
 from subtrace import config
@@ -37,6 +36,7 @@ from subtrace.patches.bspline import control_grids, regular_mask
 from subtrace.patches.criterion import subdominant
 from subtrace.patches.evaluate import ptex_layout
 from subtrace.patches.shells import one_ring_shells
+from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
 
 # ptex offset of the child at corner j of a regular face (quads keep the parent's orientation)

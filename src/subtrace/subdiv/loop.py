@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import math
 
-from subtrace.runtime.jit import nb
 import numpy as np
+
+from subtrace.runtime.jit import nb
 
 REGULAR_VALENCE = 6
 

@@ -18,10 +18,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from subtrace.runtime.jit import nb
 import numpy as np
 
 from subtrace.mesh.topology import INF_SHARP, Level, Options, build_level
+from subtrace.runtime.jit import nb
 from subtrace.subdiv import catmark, loop
 from subtrace.subdiv.creases import (
     F0,
