@@ -99,9 +99,10 @@ def relations(n_verts, face_offsets, face_verts, edge_verts, face_edges, forward
 
 
 def ray_triangles(origin, direction, A, B, C):
-    """Moller-Trumbore in float64, one line against many triangles: ``(t, u, v)``, each (m,),
-    with the line ``origin + t * direction`` (origin, direction (3,)) meeting the plane of
-    triangle ``(A[i], B[i], C[i])`` (each (m,3)) at barycentrics ``(1 - u - v, u, v)``;
+    """Moller-Trumbore in float64, lines against triangles: ``(t, u, v)``, each (m,), with
+    the line ``origin + t * direction`` (origin, direction (3,), or (m,3): one line per
+    triangle) meeting the plane of triangle ``(A[i], B[i], C[i])`` (each (m,3)) at
+    barycentrics ``(1 - u - v, u, v)``;
     NaN or inf where the line is parallel to the plane. The line hits the triangle where
     ``u >= 0, v >= 0, u + v <= 1`` (:func:`ray_triangle_hits`)."""
     A, B, C = (np.asarray(X, dtype=np.float64) for X in (A, B, C))

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from naive import ray_triangles
 
 import subtrace
 from subtrace.compare import DEFAULT_THRESHOLDS, FAIL, GROUPS, compare_images
@@ -300,18 +301,11 @@ def ray_cast(triangles: np.ndarray, camera) -> tuple[np.ndarray, np.ndarray]:
         tri = np.repeat(np.arange(a, min(a + chunk, len(rel))), counts)
         k = np.arange(len(tri)) - np.repeat(np.cumsum(counts) - counts, counts)
         pix = (r0[tri] + k // nc[tri]) * W + c0[tri] + k % nc[tri]
-        v0, e1, e2 = rel[tri, 0], rel[tri, 1] - rel[tri, 0], rel[tri, 2] - rel[tri, 0]
-        d = dirs[pix]
-        p = np.cross(d, e2)
-        det = np.einsum("ij,ij->i", e1, p)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / det
-            u = -np.einsum("ij,ij->i", v0, p) * inv
-            q = np.cross(-v0, e1)
-            v = np.einsum("ij,ij->i", d, q) * inv
-            t = np.einsum("ij,ij->i", e2, q) * inv
+        # from the eye (the origin of ``rel``), one ray per (pixel, triangle) pair
+        t, u, v = ray_triangles(np.zeros(3), dirs[pix], rel[tri, 0], rel[tri, 1], rel[tri, 2])
         eps = 1e-9
-        hit = (det != 0) & (u >= -eps) & (v >= -eps) & (u + v <= 1 + eps) & (t > 0)
+        with np.errstate(invalid="ignore"):
+            hit = (u >= -eps) & (v >= -eps) & (u + v <= 1 + eps) & (t > 0) & np.isfinite(t)
         pix, t, tri = pix[hit], t[hit], tri[hit]
         order = np.lexsort((t, pix))
         pix, t, tri = pix[order], t[order], tri[order]

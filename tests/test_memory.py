@@ -1,6 +1,6 @@
 """The memory budget (issue 8): ``--max-memory`` / ``[render] max_memory``.
 
-Refinement whose estimate (``patches.table.memory_estimate``) exceeds the budget is capped
+Refinement whose estimate (``patches.criterion.memory_estimate``) exceeds the budget is capped
 at a coarser depth with one warning line; an image too large for the budget is one clear
 error; bad values are one clear error. The estimate against measured peaks:
 ``benchmarks/memory.py``.

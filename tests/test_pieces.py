@@ -22,7 +22,7 @@ def test_bicubic_grids_match_refinement(name):
     """A regular patch evaluated the way the renderer does (its Bezier net: points and
     derivatives) gives the limit points and normals of uniform refinement (to rounding),
     and the net's box contains them."""
-    from subtrace.patches import bspline
+    from subtrace.patches import basis, bspline
     from subtrace.patches.basis import bez_derivatives, bez_point as _bez_point
 
     cage = load_shape(name)
@@ -32,8 +32,8 @@ def test_bicubic_grids_match_refinement(name):
     reg = faces[bspline.regular_mask(lev, cage.options, faces)]
     if len(reg) == 0:
         pytest.skip("no regular patch")
-    nets = bspline.bezier_nets(pts[bspline.control_grids(lev, reg)])
-    lo, hi, _ = bspline.net_bounds(nets)
+    nets = basis.bezier_nets(pts[bspline.control_grids(lev, reg)])
+    lo, hi, _ = basis.net_bounds(nets)
     scale = float(np.abs(pts).max())
     for depth in (0, 3):
         n = (1 << depth) + 1

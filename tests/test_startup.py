@@ -1,4 +1,4 @@
-"""The command's short-process start-up (cli._start_numba): cached kernels load without
+"""The command's short-process start-up (runtime.jit.trim_loader): cached kernels load without
 Numba's full target set-up, kernels that must compile still compile, and the image does
 not change. Each case runs in a fresh interpreter, since the shortcut is process-wide."""
 

@@ -27,14 +27,14 @@ SHELL_CHAIKIN_MARGIN = 0.25
 # from this multiple of its bound (lines/items.py).
 IRREGULAR_MARGIN = 1.25
 
-# Largest coordinate magnitude a render accepts (io/obj.py: check_coordinates): the
+# Largest coordinate magnitude a render accepts (io/limits.py: check_coordinates): the
 # renderer squares distances and multiplies up to three coordinates (1e100^3 = 1e300 is
 # still below the largest double, 1.8e308); a cage at 1e100 renders (tested), one at 1e300
 # overflowed to inf and never finished.
 MAX_COORDINATE = 1e100
 
 # Largest vertex valence a render accepts (a Catmull-Clark face of more vertices gives its
-# centre that valence; io/obj.py: check_valences). Isolating an extraordinary vertex costs
+# centre that valence; io/limits.py: check_valences). Isolating an extraordinary vertex costs
 # time growing with its valence at every level: valence 1000 renders in about 35 s on 2
 # cores, a 10,000-vertex face had not finished after 60 s (in isolated_depths' refinement).
 MAX_VALENCE = 1024

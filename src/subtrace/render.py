@@ -108,7 +108,7 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     default ``config.PRIMARY_ACCEL``. Either structure is built here (preprocess time).
     ``progress(done, total, label)``: told after each round how many rays are final.
     ``max_memory``: a budget in bytes (None: none); depths whose estimate
-    (``patches.table.memory_estimate``) exceeds it are capped, with a warning, and the
+    (``patches.criterion.memory_estimate``) exceeds it are capped, with a warning, and the
     threads' memos are kept within what is left."""
     max_depth = config.MAX_GRID_DEPTH if max_depth is None else max_depth
     accel = config.PRIMARY_ACCEL if accel is None else accel

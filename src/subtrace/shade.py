@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from subtrace.io.obj import DEFAULT_DIFFUSE
-from subtrace.patches.basis import bez_derivatives
+from subtrace.patches.basis import bez_normal
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
 from subtrace.trace.prims import ray_setup
@@ -100,7 +100,7 @@ def _shade_task(task, n_tasks, frame, width, hits, grids, iso, patches, lights, 
                 if iso.kind[it] == 0:
                     # a Bezier piece over a dyadic square of the patch (the whole of a regular one)
                     sc = 1 << iso.level[it]
-                    nx, ny, nz = _bezier_normal(iso.nets[c], u * sc - iso.i0[it],
+                    nx, ny, nz = bez_normal(iso.nets[c], u * sc - iso.i0[it],
                                                 v * sc - iso.j0[it])
                 else:
                     nx, ny, nz = _cell_normal(iso.cells[4 * c:4 * c + 4], iso.cell_normals[c],
@@ -136,23 +136,6 @@ def _shade_task(task, n_tasks, frame, width, hits, grids, iso, patches, lights, 
             planes[C_R + 2, r] = patches.color[p, 2] * lb
             planes[C_A, r] = 1.0
     covered[task] = n_hit
-
-
-@nb.njit(cache=True)
-def _bezier_normal(net, u, v):
-    """Unit limit normal of a regular patch at (u, v); where the derivatives vanish (a
-    degenerate cage), the normal a little way towards the patch centre."""
-    for step in range(3):
-        pu, pv = bez_derivatives(net, u, v)
-        nx = pu[1] * pv[2] - pu[2] * pv[1]
-        ny = pu[2] * pv[0] - pu[0] * pv[2]
-        nz = pu[0] * pv[1] - pu[1] * pv[0]
-        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
-        if ln > 0.0:
-            return nx / ln, ny / ln, nz / ln
-        u += (0.5 - u) * 1e-6
-        v += (0.5 - v) * 1e-6
-    return 0.0, 0.0, 0.0
 
 
 @nb.njit(cache=True)

@@ -23,8 +23,6 @@ from __future__ import annotations
 import numpy as np
 
 from subtrace.patches.basis import B_CORNER, LEAD, TRAIL
-from subtrace.patches.basis import bezier_nets, net_bounds  # noqa: F401  (tests/test_render.py
-#   reads them here; they live in patches/basis.py)
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
 from subtrace.subdiv.limit import SMOOTH, classify
