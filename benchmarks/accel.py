@@ -85,10 +85,10 @@ def _walk(task, n_tasks, frame, width, height, t_hit, p_hit, progressive, shell_
                 t = (row // TILE) * tiles.per_row + col // TILE
                 j, end = tiles.off[t], tiles.off[t + 1]
             else:
-                sp = bvh_start(ox, oy, oz, ix, iy, iz, bvh, 0.0, 0.0, tmax, stack, stack_t)
+                sp = bvh_start(ox, oy, oz, ix, iy, iz, bvh, 0.0, tmax, stack, stack_t)
             while True:
                 if j == end:
-                    j, end, sp = bvh_next_leaf(ox, oy, oz, ix, iy, iz, bvh, 0.0, 0.0, tmax,
+                    j, end, sp = bvh_next_leaf(ox, oy, oz, ix, iy, iz, bvh, 0.0, tmax,
                                                stack, stack_t, sp)
                     if j == end:
                         break
@@ -101,7 +101,7 @@ def _walk(task, n_tasks, frame, width, height, t_hit, p_hit, progressive, shell_
                     p = bvh.prims[j]
                 j += 1
                 tests += 1
-                if box_entry(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, 0.0, 0.0,
+                if box_entry(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, 0.0,
                              tmax) < np.inf:
                     entered += 1
                     if p == p_hit[r]:

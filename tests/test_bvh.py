@@ -69,16 +69,18 @@ def test_empty():
 
 
 def _leaves_reached(bvh, o, d, pad, tlo, thi):
-    """Every primitive of the leaves the shared traversal returns, in order."""
-    from subtrace.accel.bvh import bvh_next_leaf, bvh_start, traversal_stack
+    """Every primitive of the leaves the shared traversal returns (node boxes grown by
+    ``pad``), in order."""
+    from subtrace.accel.bvh import bvh_next_leaf, bvh_start, padded, traversal_stack
 
+    bvh = padded(bvh, pad)
     with np.errstate(divide="ignore"):
         inv = 1.0 / d
     stack, stack_t = traversal_stack()
-    sp = bvh_start(*o, *inv, bvh, pad, tlo, thi, stack, stack_t)
+    sp = bvh_start(*o, *inv, bvh, tlo, thi, stack, stack_t)
     out = []
     while sp > 0:
-        a, b, sp = bvh_next_leaf(*o, *inv, bvh, pad, tlo, thi, stack, stack_t, sp)
+        a, b, sp = bvh_next_leaf(*o, *inv, bvh, tlo, thi, stack, stack_t, sp)
         out.extend(bvh.prims[a:b].tolist())
     return out
 
@@ -122,7 +124,7 @@ def test_traversal_finds_every_box_the_line_enters(seed):
         assert len(seen) == len(set(seen))
         for i in range(len(lo)):
             want = _brute_entry(lo[i], hi[i], o, d, pad, tlo, thi)
-            got = box_entry(*o, *inv, lo, hi, i, pad, tlo, thi)
+            got = box_entry(*o, *inv, lo - pad, hi + pad, i, tlo, thi)
             if want < np.inf:
                 assert i in seen
                 assert got <= want + 1e-12 * (1 + abs(want))

@@ -13,7 +13,8 @@ Built top-down by binned surface-area heuristic over centroids (16 bins), leaves
 ``config.BVH_LEAF_SIZE`` primitives; deterministic.
 
 Traversal (:func:`bvh_start`, :func:`bvh_next_leaf`): a ray or line ``o + t d`` (given by
-its origin and ``1/d``) walks the nodes whose boxes, padded by ``pad``, it enters within
+its origin and ``1/d``) walks the nodes whose boxes (grown by :func:`padded` where a margin
+is wanted) it enters within
 ``[tlo, thi]``, nearer child first, on a caller's stack of ``config.STACK_SIZE`` (node,
 entry distance) pairs; each call returns the next leaf's range of ``prims``. ``thi`` may
 shrink between calls (a closest-hit search): nodes entered beyond it are dropped as they
@@ -111,19 +112,27 @@ def slab_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tlo, thi):
 
 
 @leaf_njit
-def box_entry(ox, oy, oz, ix, iy, iz, lo, hi, k, pad, tlo, thi):
-    """Entry distance into box ``k`` of (lo, hi) (N,3) padded by ``pad`` (inf: a miss)."""
-    return slab_range(ox, oy, oz, ix, iy, iz, lo[k, 0] - pad, lo[k, 1] - pad, lo[k, 2] - pad,
-                      hi[k, 0] + pad, hi[k, 1] + pad, hi[k, 2] + pad, tlo, thi)[0]
+def box_entry(ox, oy, oz, ix, iy, iz, lo, hi, k, tlo, thi):
+    """Entry distance into box ``k`` of (lo, hi) (N,3) (inf: a miss). Boxes that need a
+    margin are grown beforehand (:func:`padded`): padding each box per test cost the
+    renderer about 4 % of its trace time (Spot, measured)."""
+    return slab_range(ox, oy, oz, ix, iy, iz, lo[k, 0], lo[k, 1], lo[k, 2], hi[k, 0], hi[k, 1],
+                      hi[k, 2], tlo, thi)[0]
+
+
+def padded(bvh: BVH, pad: float) -> BVH:
+    """``bvh`` with every node box grown by ``pad`` on each side (the line queries' touch
+    margin), the same arithmetic as padding each box as it is tested."""
+    return bvh._replace(node_min=bvh.node_min - pad, node_max=bvh.node_max + pad)
 
 
 @inline_njit
-def bvh_start(ox, oy, oz, ix, iy, iz, bvh, pad, tlo, thi, stack, stack_t):
+def bvh_start(ox, oy, oz, ix, iy, iz, bvh, tlo, thi, stack, stack_t):
     """Start a traversal: the root on the stack if the line enters it; returns the stack
     size."""
     if len(bvh.node_count) == 0:
         return 0
-    te = box_entry(ox, oy, oz, ix, iy, iz, bvh.node_min, bvh.node_max, 0, pad, tlo, thi)
+    te = box_entry(ox, oy, oz, ix, iy, iz, bvh.node_min, bvh.node_max, 0, tlo, thi)
     if te == np.inf:
         return 0
     stack[0] = 0
@@ -132,7 +141,7 @@ def bvh_start(ox, oy, oz, ix, iy, iz, bvh, pad, tlo, thi, stack, stack_t):
 
 
 @inline_njit
-def bvh_next_leaf(ox, oy, oz, ix, iy, iz, bvh, pad, tlo, thi, stack, stack_t, sp):
+def bvh_next_leaf(ox, oy, oz, ix, iy, iz, bvh, tlo, thi, stack, stack_t, sp):
     """Pop nodes (nearer child first) until a leaf the line enters within [tlo, thi];
     returns (first, end, sp): its range of ``bvh.prims`` and the new stack size, or
     (0, 0, 0) when no node is left."""
@@ -145,9 +154,8 @@ def bvh_next_leaf(ox, oy, oz, ix, iy, iz, bvh, pad, tlo, thi, stack, stack_t, sp
         cnt = bvh.node_count[node]
         if cnt > 0:
             return first, first + cnt, sp
-        ta = box_entry(ox, oy, oz, ix, iy, iz, bvh.node_min, bvh.node_max, first, pad, tlo, thi)
-        tb = box_entry(ox, oy, oz, ix, iy, iz, bvh.node_min, bvh.node_max, first + 1, pad,
-                       tlo, thi)
+        ta = box_entry(ox, oy, oz, ix, iy, iz, bvh.node_min, bvh.node_max, first, tlo, thi)
+        tb = box_entry(ox, oy, oz, ix, iy, iz, bvh.node_min, bvh.node_max, first + 1, tlo, thi)
         near, far, t_near, t_far = first, first + 1, ta, tb
         if tb < ta:
             near, far, t_near, t_far = first + 1, first, tb, ta

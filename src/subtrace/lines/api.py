@@ -43,6 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from subtrace.accel.bvh import padded
 from subtrace.errors import SubtraceError
 from subtrace.lines.items import items_for
 from subtrace.lines.kernels import (
@@ -165,7 +166,8 @@ def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf
                 stats = np.empty((len(sel), 2), np.int64)
                 run_tasks(lines_task, oo, dd, t_lo, t_hi, items.all_nets, items.all_tnets,
                           SPLIT_PTR, SPLIT_COL, SPLIT_W, items.all_exact,
-                          items.item_min, items.item_max, bv, tol_flat, touch_tol, res_tol,
+                          items.item_min - touch_tol, items.item_max + touch_tol,
+                          padded(bv, touch_tol), tol_flat, touch_tol, res_tol,
                           mode == "first", cap, cand, count, stats)
                 over = count > cap
                 done = ~over

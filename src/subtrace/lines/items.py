@@ -39,7 +39,7 @@ from __future__ import annotations
 import numpy as np
 
 from subtrace import config
-from subtrace.accel.bvh import build_bvh
+from subtrace.accel.bvh import build_bvh, padded
 from subtrace.lines.kernels import mark_shells
 from subtrace.mesh.topology import INF_SHARP
 from subtrace.patches.basis import (
@@ -141,8 +141,8 @@ class Items:
             self.shell_bvh = build_bvh(self.shell_min, self.shell_max)
         bv = self.shell_bvh
         hit = np.zeros(len(self.irregular), bool)
-        mark_shells(org, dirs, t_lo, t_hi, pad, self.shell_min, self.shell_max, bv, self.built,
-                    hit)
+        mark_shells(org, dirs, t_lo, t_hi, self.shell_min - pad, self.shell_max + pad,
+                    padded(bv, pad), self.built, hit)
         hit = hit[todo]
         sel = np.nonzero(todo)[0][hit]
         if not len(sel):

@@ -373,8 +373,8 @@ def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, tnets, split_ptr, spl
     ``nets`` (Q,4,4,3) quad items, ``tnets`` (T,15,3) triangle items (item ``Q + i``),
     ``split_ptr``, ``split_col``, ``split_w`` the triangle split (``lines_loop.SPLIT_*``),
     ``exact`` (Q+T,) bool
-    (False: a flat cell, no Newton), ``item_min/max`` (Q+T,3) boxes; ``bvh`` over them
-    (:class:`~subtrace.accel.bvh.BVH`); ``first``: stop as module doc step 4; ``cand`` (L,
+    (False: a flat cell, no Newton), ``item_min/max`` (Q+T,3) boxes and ``bvh`` over them
+    (:class:`~subtrace.accel.bvh.BVH`), both padded by ``touch_tol`` (``bvh.padded``); ``first``: stop as module doc step 4; ``cand`` (L,
     cap, N_FIELDS) out, ``count`` (L,) out; ``stats`` (L, 2) out: items entered, leaves reached."""
     slack = config.TRI_SLACK
     n_quad = len(nets)
@@ -416,8 +416,8 @@ def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, tnets, split_ptr, spl
             for k in range(3):
                 dk = dirs[line, k]
                 if dk != 0.0:
-                    a = (bvh.node_min[0, k] - touch_tol - org[line, k]) / dk
-                    b = (bvh.node_max[0, k] + touch_tol - org[line, k]) / dk
+                    a = (bvh.node_min[0, k] - org[line, k]) / dk  # (padded boxes)
+                    b = (bvh.node_max[0, k] - org[line, k]) / dk
                     tn = max(tn, min(a, b))
             if tn == -np.inf:
                 tn = 0.0
@@ -425,17 +425,17 @@ def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, tnets, split_ptr, spl
         ob0, ob1, ob2 = o0 + tbase * d0, o1 + tbase * d1, o2 + tbase * d2
         kx, ky, kz, sx, sy, sz = shear(d0, d1, d2)
         # BVH traversal over item boxes, nearer child first
-        top = bvh_start(o0, o1, o2, i0, i1, i2, bvh, touch_tol, tlo, thi, nodes, nodes_t)
+        top = bvh_start(o0, o1, o2, i0, i1, i2, bvh, tlo, thi, nodes, nodes_t)
         at = end = np.int64(0)  # the current leaf's range of bvh.prims
         while True:
             if at == end:
-                at, end, top = bvh_next_leaf(o0, o1, o2, i0, i1, i2, bvh, touch_tol, tlo, tcut,
-                                             nodes, nodes_t, top)
+                at, end, top = bvh_next_leaf(o0, o1, o2, i0, i1, i2, bvh, tlo, tcut, nodes,
+                                             nodes_t, top)
                 if at == end:
                     break
             it = bvh.prims[at]
             at += 1
-            te = box_entry(o0, o1, o2, i0, i1, i2, item_min, item_max, it, touch_tol, tlo, tcut)
+            te = box_entry(o0, o1, o2, i0, i1, i2, item_min, item_max, it, tlo, tcut)
             if te == np.inf:
                 continue
             entered += 1
@@ -589,21 +589,21 @@ def merge_candidates(cand, count, dlen, precision, keep, tangent):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def mark_shells(org, dirs, t_lo, t_hi, pad, box_min, box_max, bvh, done, hit):
+def mark_shells(org, dirs, t_lo, t_hi, box_min, box_max, bvh, done, hit):
     """``hit[i] = True`` for every box ``i`` (``box_min/max`` (B,3), under ``bvh``, a
-    :class:`~subtrace.accel.bvh.BVH` of them) that one of the lines meets within
-    [t_lo, t_hi], padded by ``pad``; boxes with ``done[i]`` are skipped."""
+    :class:`~subtrace.accel.bvh.BVH` of them, all padded by the caller) that one of the
+    lines meets within [t_lo, t_hi]; boxes with ``done[i]`` are skipped."""
     nodes, nodes_t = traversal_stack()
     for line in range(len(org)):
         o0, o1, o2 = org[line, 0], org[line, 1], org[line, 2]
         i0, i1, i2 = 1.0 / dirs[line, 0], 1.0 / dirs[line, 1], 1.0 / dirs[line, 2]
-        top = bvh_start(o0, o1, o2, i0, i1, i2, bvh, pad, t_lo, t_hi, nodes, nodes_t)
+        top = bvh_start(o0, o1, o2, i0, i1, i2, bvh, t_lo, t_hi, nodes, nodes_t)
         while top > 0:
-            at, end, top = bvh_next_leaf(o0, o1, o2, i0, i1, i2, bvh, pad, t_lo, t_hi, nodes,
+            at, end, top = bvh_next_leaf(o0, o1, o2, i0, i1, i2, bvh, t_lo, t_hi, nodes,
                                          nodes_t, top)
             for r in range(at, end):
                 b = bvh.prims[r]
                 if done[b] or hit[b]:
                     continue
-                hit[b] = box_entry(o0, o1, o2, i0, i1, i2, box_min, box_max, b, pad, t_lo,
+                hit[b] = box_entry(o0, o1, o2, i0, i1, i2, box_min, box_max, b, t_lo,
                                    t_hi) < np.inf

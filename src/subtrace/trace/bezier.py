@@ -379,10 +379,10 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch):
     for it in range(first, first + count):
         if count > 1 and (it == first or level[it] != level[it - 1]):
             # the pieces of a level and all finer ones: skipped together on a miss
-            if box_entry(ox, oy, oz, ix, iy, iz, rest_lo, rest_hi, it, 0.0, 0.0,
+            if box_entry(ox, oy, oz, ix, iy, iz, rest_lo, rest_hi, it, 0.0,
                          hit[H_T]) == np.inf:
                 break
-        if box_entry(ox, oy, oz, ix, iy, iz, lo, hi, it, 0.0, 0.0, hit[H_T]) == np.inf:
+        if box_entry(ox, oy, oz, ix, iy, iz, lo, hi, it, 0.0, hit[H_T]) == np.inf:
             continue
         depth = item_depth[it]  # its grid, in the patch's units
         inv = 1.0 / (1 << depth)

@@ -50,7 +50,7 @@ def _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, grids, sl
     lc0 = grids.lc_off[depth, 1 if quad else 0]
     vo = grids.slot_vert_off[s]
     no = grids.slot_node_off[s]
-    if box_entry(ox, oy, oz, ix, iy, iz, node_lo, node_hi, no, 0.0, 0.0, hit[H_T]) == np.inf:
+    if box_entry(ox, oy, oz, ix, iy, iz, node_lo, node_hi, no, 0.0, hit[H_T]) == np.inf:
         return
     o = (ox, oy, oz)
     px, py, pz = o[kx], o[ky], o[kz]  # origin in the shear's axis order
@@ -85,7 +85,7 @@ def _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, grids, sl
         n = 0
         for j in range(4):
             ci = 4 * idx + j
-            te = box_entry(ox, oy, oz, ix, iy, iz, node_lo, node_hi, lvl_off + ci, 0.0, 0.0,
+            te = box_entry(ox, oy, oz, ix, iy, iz, node_lo, node_hi, lvl_off + ci, 0.0,
                            hit[H_T])
             if te < np.inf:
                 n = push_sorted(ent_t, ent_i, n, te, ci)
@@ -249,13 +249,13 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh, tile
                 tile = (row // TILE) * tiles.per_row + col // TILE
                 j, j_end = tiles.off[tile], tiles.off[tile + 1]
             else:
-                sp = bvh_start(ox, oy, oz, ix, iy, iz, bvh, 0.0, 0.0, hit[H_T], stack, stack_t)
+                sp = bvh_start(ox, oy, oz, ix, iy, iz, bvh, 0.0, hit[H_T], stack, stack_t)
             req = -1
             req_t = np.inf
             n_c = 0
             while True:
                 if j == j_end:  # the next BVH leaf
-                    j, j_end, sp = bvh_next_leaf(ox, oy, oz, ix, iy, iz, bvh, 0.0, 0.0,
+                    j, j_end, sp = bvh_next_leaf(ox, oy, oz, ix, iy, iz, bvh, 0.0,
                                                  hit[H_T], stack, stack_t, sp)
                     if j == j_end:
                         break
@@ -271,7 +271,7 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh, tile
                             break
                     else:
                         p = bvh.prims[j]
-                    te = box_entry(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, 0.0, 0.0,
+                    te = box_entry(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, 0.0,
                                    hit[H_T])
                 j += 1
                 if te < np.inf and not visit(p, r, ray):
