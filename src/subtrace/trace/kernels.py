@@ -26,12 +26,13 @@ from __future__ import annotations
 import numpy as np
 
 from subtrace import config
-from subtrace.accel.bvh import box_entry, bvh_next_leaf, bvh_start, traversal_stack
-from subtrace.accel.projection import TILE
+from subtrace.accel.bvh import BVH, box_entry, bvh_next_leaf, bvh_start, traversal_stack
+from subtrace.accel.projection import TILE, Tiles
 from subtrace.runtime.jit import inline_njit, leaf_njit, nb
 from subtrace.runtime.threads import run_chunks
 from subtrace.trace.bezier import MAX_SIDE_SAMPLES, intersect_patch
-from subtrace.trace.pools import CANDIDATES
+from subtrace.trace.pools import (CANDIDATES, Candidates, GridArrays, Hits, Memo,
+                                  PieceArrays)
 from subtrace.trace.prims import (
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, push_sorted, ray_setup, ray_triangle,
     shear,
@@ -126,9 +127,13 @@ def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, 
     n_bands = -(-(int(rays[-1]) + 1) // band_rows) if len(rays) else 0
     bands = np.searchsorted(rays, np.arange(n_bands + 1) * band_rows).astype(np.int64)
     scratch = tuple(_scratch(max_d) for _ in mems)
+    # the bundles cross into the kernel as plain tuples and are named again inside: Numba's
+    # dispatcher types plain tuples of arrays in C but named tuples in Python (28 against
+    # 9 us a call, measured; a render of the sword makes about 320 calls)
     args = (float(frame[0, 0]), float(frame[0, 1]), float(frame[0, 2]), frame, int(width),
-            int(round_no), bvh, tiles, shell_min, shell_max, grids, iso, mems, scratch, cands,
-            float(slack), hits, request, tested)
+            int(round_no), tuple(bvh), tuple(tiles), shell_min, shell_max, tuple(grids),
+            tuple(iso), tuple(tuple(m) for m in mems), scratch, tuple(cands), float(slack),
+            tuple(hits), request, tested)
 
     def work(t, a, b):
         _trace_task(t, rays, bands[a:b + 1], *args)
@@ -194,33 +199,40 @@ def _sort_candidates(cands, r):
     return n
 
 
+@inline_njit
+def _visit(p, r, ray, round_no, iso, grids, mem, slack, hit, scratch, gstack, tested):
+    """Intersect patch ``p`` for ray ``r`` if it was built in the previous round; False if
+    it is unbuilt. (A function, not a closure of the kernel: a closure over the bundles
+    named inside the kernel lost its writes, with Numba 0.68.)"""
+    s = iso.patch_iso[p]
+    if s >= 0:
+        if iso.round[s] == round_no - 1:
+            iso.touched[s] = 1
+            tested[r] += intersect_patch(ray, p, s, iso, mem, slack, hit, scratch)
+        return True
+    s = grids.patch_slot[p]
+    if s < 0:
+        return False
+    if grids.slot_round[s] == round_no - 1:
+        ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz = ray
+        _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, grids, slack, hit,
+                        gstack, scratch[3], scratch[4])
+    return True
+
+
 @nb.njit(cache=True, nogil=True, _nrt=False, error_model="numpy")  # see jit.leaf_njit
-def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh, tiles, shell_min,
-                shell_max, grids, iso, mems, scratches, cands, slack, hits, request, tested):
+def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, tiles_t,
+                shell_min, shell_max, grids_t, iso_t, mems_t, scratches, cands_t, slack, hits_t,
+                request, tested):
     """The bands of rays ``bands`` (band k: rays[bands[k]:bands[k+1]]) on thread ``task``,
-    with its memo and scratch buffers."""
-    mem = mems[task]
+    with its memo and scratch buffers; the ``*_t`` are :func:`trace_round`'s bundles as
+    plain tuples, named again here."""
+    bvh, tiles, grids = BVH(*bvh_t), Tiles(*tiles_t), GridArrays(*grids_t)
+    iso, cands, hits = PieceArrays(*iso_t), Candidates(*cands_t), Hits(*hits_t)
+    mem = Memo(*mems_t[task])
     stack, stack_t, gstack, work, st, st_t, ent_t, ent_i, lv, lp, hit = scratches[task]
     scratch = (work, st, st_t, ent_t, ent_i, lv, lp)
     projected = len(tiles.off) > 1
-
-    def visit(p, r, ray):
-        """Intersect patch ``p`` if it was built in the previous round; False if unbuilt."""
-        s = iso.patch_iso[p]
-        if s >= 0:
-            if iso.round[s] == round_no - 1:
-                iso.touched[s] = 1
-                tested[r] += intersect_patch(ray, p, s, iso, mem, slack, hit, scratch)
-            return True
-        s = grids.patch_slot[p]
-        if s < 0:
-            return False
-        if grids.slot_round[s] == round_no - 1:
-            ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz = ray
-            _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, grids, slack,
-                            hit, gstack, ent_t, ent_i)
-        return True
-
     for band in range(len(bands) - 1):
         for q in range(bands[band], bands[band + 1]):
             r = rays[q]
@@ -274,7 +286,8 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh, tile
                     te = box_entry(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, 0.0,
                                    hit[H_T])
                 j += 1
-                if te < np.inf and not visit(p, r, ray):
+                if te < np.inf and not _visit(p, r, ray, round_no, iso, grids, mem, slack, hit,
+                                              scratch, gstack, tested):
                     # unbuilt: a candidate (rewritten in place when remembered: n_c < j), the
                     # nearest one the request
                     if n_c < CANDIDATES:
