@@ -559,7 +559,10 @@ def tri_monomials(w, q, mono_from_net, out):
 @leaf_njit
 def _mono_sums(c, ps, pt, a1, b1, a2, b2, a3, b3, out, row):
     """``out[row + r]``: the (ar, br)-th derivative (in s, t) of the quartic with monomial
-    coefficients ``c``, for r = 0, 1, 2, from the powers ``ps``, ``pt`` (scalar sums)."""
+    coefficients ``c``, for r = 0, 1, 2, from the powers ``ps``, ``pt`` (scalar sums).
+    (The same three running sums as :func:`bez_sums`, over another basis: a triangle's 15
+    monomials instead of a 4x4 tensor product; one generic sum would need the weights
+    gathered into arrays first, on Newton's innermost loop.)"""
     px = py = pz = ux = uy = uz = vx = vy = vz = 0.0
     m = 0
     for k in range(DEGREE + 1):
