@@ -130,15 +130,40 @@ def test_pixel_angle_scales_with_height_and_fov():
 
 
 def test_world_to_camera():
+    """OpenEXR's camera space: the eye at the origin, the target straight ahead at +z (its
+    distance), right and up along +x and +y."""
     cam = Camera((1.0, 2.0, 3.0), (-2.0, 0.5, 1.0), (0.0, 1.0, 0.0), 35.0, 10, 10)
     m = cam.world_to_camera()
     np.testing.assert_allclose(m @ [*cam.eye, 1.0], [0, 0, 0, 1], atol=1e-14)
     dist = float(np.linalg.norm(np.subtract(cam.target, cam.eye)))
-    np.testing.assert_allclose(m @ [*cam.target, 1.0], [0, 0, -dist, 1], atol=1e-14)
+    np.testing.assert_allclose(m @ [*cam.target, 1.0], [0, 0, dist, 1], atol=1e-14)
+    right, up, _ = cam.basis()
+    np.testing.assert_allclose(m @ [*(np.add(cam.eye, right)), 1.0], [1, 0, 0, 1], atol=1e-14)
+    np.testing.assert_allclose(m @ [*(np.add(cam.eye, up)), 1.0], [0, 1, 0, 1], atol=1e-14)
     attrs = cam.header_attributes()
     assert "fov 35 deg 10x10" in attrs["subtrace:camera"]
     # OpenEXR's worldToCamera is the row-vector form: the transpose
     np.testing.assert_array_equal(np.reshape(attrs["worldToCamera"], (4, 4)), m.T)
+
+
+@pytest.mark.parametrize("size", [(8, 6), (1280, 720), (3, 11)])
+def test_world_to_ndc_maps_pixel_rays_to_pixel_centres(size):
+    """A point on the ray through pixel (row, col), at any distance, lands at
+    ((col + 0.5) / width, (row + 0.5) / height) in NDC; the target at (0.5, 0.5)."""
+    w, h = size
+    cam = Camera((1.0, 2.0, 3.0), (-2.0, 0.5, 1.0), (0.0, 1.0, 0.0), 35.0, w, h)
+    m = cam.world_to_ndc()
+    X, Y, _, W = m @ [*cam.target, 1.0]
+    assert (X / W, Y / W) == pytest.approx((0.5, 0.5), abs=1e-12)
+    dirs = cam.ray_directions()
+    for row, col in [(0, 0), (h - 1, w - 1), (h // 2, 0), (0, w - 1)]:
+        for dist in (0.5, 7.0):
+            p = np.asarray(cam.eye) + dist * dirs[row, col]
+            X, Y, _, W = m @ [*p, 1.0]
+            assert (X / W, Y / W) == pytest.approx(((col + 0.5) / w, (row + 0.5) / h),
+                                                   abs=1e-12)
+    np.testing.assert_array_equal(np.reshape(cam.header_attributes()["worldToNDC"], (4, 4)),
+                                  m.T)
 
 
 def test_camera_is_frozen_and_normalises_types():

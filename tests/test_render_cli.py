@@ -89,3 +89,82 @@ def test_render_cli_bad_thread_count(tmp_path, capsys, threads):
     assert rc == 2
     assert err.count("\n") == 1 and "--threads" in err and "Traceback" not in err
     assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+CUBE_SCENE_ARGS = ["--width", "40", "--height", "30", "--quiet"]
+
+
+def _cube(tmp_path):
+    """A cube cage in ``tmp_path`` (the renders below need no shared data)."""
+    path = tmp_path / "cube.obj"
+    path.write_text("v -1 -1 -1\nv 1 -1 -1\nv 1 1 -1\nv -1 1 -1\nv -1 -1 1\nv 1 -1 1\n"
+                    "v 1 1 1\nv -1 1 1\nf 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\n"
+                    "f 3 4 8 7\nf 4 1 5 8\n")
+    return path
+
+
+@pytest.mark.parametrize("name,fmt,bits,channels", [
+    ("pic.png", "PNG", 8, "RGBA"), ("pic16.png", "PNG", 16, "RGBA"),
+    ("pic.jpg", "JPEG", 8, "RGB"), ("pic.tif", "TIFF", 16, "RGBA"),
+])
+def test_render_cli_output_format_follows_the_extension(tmp_path, name, fmt, bits, channels):
+    """``-o x.png`` (.jpg, .tif) writes that format, readable by another library (Pillow
+    for the 8-bit ones), with alpha where the format has it, sRGB-encoded: the same pixels
+    as the EXR's colour after the sRGB transfer function; ``--png`` never writes over it."""
+    import OpenImageIO as oiio
+    from PIL import Image
+
+    from subtrace.cli import main
+    from subtrace.io.exr import read_exr, srgb_encode
+
+    cage = _cube(tmp_path)
+    out = tmp_path / name
+    args = ["render", str(cage), *CUBE_SCENE_ARGS, "--eye", "3", "2.5", "4", "--target", "0", "0",
+            "0"]
+    assert main([*args, "-o", str(out), "--bit-depth", str(bits), "--png"]) == 0
+    assert main([*args, "-o", str(tmp_path / "ref.exr")]) == 0
+    spec = oiio.ImageInput.open(str(out)).spec()
+    assert spec.nchannels == len(channels) and spec.format.size() * 8 == bits
+    assert oiio.ImageInput.open(str(out)).format_name() == {"PNG": "png", "JPEG": "jpeg",
+                                                          "TIFF": "tiff"}[fmt]
+    if bits == 8:
+        img = Image.open(out)
+        assert img.format == fmt and img.mode == channels and img.size == (40, 30)
+    ref, _ = read_exr(tmp_path / "ref.exr")
+    got = oiio.ImageBuf(str(out)).get_pixels(oiio.FLOAT)
+    want = np.stack([srgb_encode(ref[c]) for c in "RGB"], axis=-1)
+    err = np.abs(got[..., :3] - want)
+    # quantisation (half a code) plus the reference's own rounding (the EXR stores colour as
+    # half floats: 2^-11 relative, up to 12.92x that after the sRGB curve's steepest part),
+    # and JPEG's lossy coding for the jpg
+    assert err.max() <= (0.5 / (2**bits - 1) + 12.92 * 2.0**-11 if fmt != "JPEG" else 0.25)
+    if "A" in channels:
+        np.testing.assert_allclose(got[..., 3], ref["A"], atol=0.5 / (2**bits - 1) + 1e-6)
+        assert 0 < ref["A"].sum() < ref["A"].size  # the cube covers part of the image
+
+
+def test_render_cli_sixteen_bits_only_where_the_format_has_them(tmp_path, capsys):
+    from subtrace.cli import main
+
+    out = tmp_path / "pic.jpg"
+    code = main(["render", str(_cube(tmp_path)), *CUBE_SCENE_ARGS, "-o", str(out),
+                 "--bit-depth", "16"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "--bit-depth" in err and not out.exists()
+
+
+def test_render_header_names_files_only_and_the_colour_space(tmp_path):
+    """The header records the meshes by file name (no folders of the user's), Rec.709
+    chromaticities, what Z holds, and worldToCamera / worldToNDC in OpenEXR's conventions."""
+    from subtrace.cli import main
+    from subtrace.io.exr import read_exr
+
+    out = tmp_path / "r.exr"
+    assert main(["render", str(_cube(tmp_path)), *CUBE_SCENE_ARGS, "-o", str(out)]) == 0
+    _, attrs = read_exr(out)
+    assert attrs["subtrace:meshes"] == "cube.obj"
+    assert str(tmp_path) not in " ".join(str(v) for v in attrs.values())
+    np.testing.assert_allclose(attrs["chromaticities"],
+                               (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290), atol=1e-7)
+    assert "along the pixel's ray" in attrs["subtrace:Z"]
+    assert len(attrs["worldToNDC"]) == 16 and len(attrs["worldToCamera"]) == 16

@@ -64,7 +64,7 @@ class Camera:
         """(right, up, forward): orthonormal (3,) float64 world-space vectors.
 
         ``up`` is the true up (the given up made orthogonal to the view direction);
-        right x up = -forward (camera space is right-handed, looking down -z).
+        right x up = -forward.
         """
         return _basis(self.eye, self.target, self.up)
 
@@ -98,29 +98,46 @@ class Camera:
     def world_to_camera(self) -> np.ndarray:
         """(4,4) float64 matrix, column-vector convention: p_cam = M @ [p_world, 1].
 
-        Camera space: x right, y up, z backwards (the camera looks down -z).
+        Camera space as OpenEXR's ``worldToCamera`` defines it: origin at the eye, x right,
+        y up, z along the viewing direction (left-handed; points in front have z > 0).
         """
         right, up, forward = self.basis()
         m = np.eye(4)
-        m[0, :3], m[1, :3], m[2, :3] = right, up, -forward
+        m[0, :3], m[1, :3], m[2, :3] = right, up, forward
         m[:3, 3] = -(m[:3, :3] @ np.asarray(self.eye))
         return m
+
+    def world_to_ndc(self) -> np.ndarray:
+        """(4,4) float64 matrix, column-vector convention: [X, Y, Z, W] = M @ [p_world, 1],
+        and (X / W, Y / W) the point's normalised device coordinates as OpenEXR's
+        ``worldToNDC`` defines them: (0, 0) the image's upper left corner, (1, 1) its lower
+        right (pixel (row, col) is centred at ((col + 0.5) / width, (row + 0.5) / height));
+        Z / W is 1 (the image plane at unit distance)."""
+        s = self.pixel_size()
+        proj = np.array([
+            [1.0 / (s * self.width), 0.0, 0.5, 0.0],
+            [0.0, -1.0 / (s * self.height), 0.5, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+        ])
+        return proj @ self.world_to_camera()
 
     def header_attributes(self) -> dict:
         """EXR header attributes describing the camera (see :func:`subtrace.io.exr.write_exr`).
 
-        ``subtrace:camera`` is a readable summary; ``worldToCamera`` is OpenEXR's standard
-        attribute (Imath row-vector convention, the transpose of :meth:`world_to_camera`).
+        ``subtrace:camera`` is a readable summary; ``worldToCamera`` and ``worldToNDC`` are
+        OpenEXR's standard attributes (Imath's row-vector convention: the transposes of
+        :meth:`world_to_camera` and :meth:`world_to_ndc`).
         """
         summary = (
             f"eye {_fmt(self.eye)} target {_fmt(self.target)} up {_fmt(self.up)} "
             f"fov {self.fov_deg:.9g} deg {self.width}x{self.height}"
         )
-        matrix = tuple(float(v) for v in self.world_to_camera().T.ravel())
         return {
             "subtrace:camera": summary,
             "subtrace:camera_fov_deg": float(self.fov_deg),
-            "worldToCamera": matrix,
+            "worldToCamera": tuple(float(v) for v in self.world_to_camera().T.ravel()),
+            "worldToNDC": tuple(float(v) for v in self.world_to_ndc().T.ravel()),
         }
 
 

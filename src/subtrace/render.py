@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -279,13 +280,22 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     return RenderResult(channels, stats, camera, tol_rad, schemes, table.object_id[built], used)
 
 
+# the colour channels are linear Rec.709 / sRGB primaries with a D65 white point
+REC709_CHROMATICITIES = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
+
+
 def result_attributes(result: RenderResult, scene) -> dict:
-    """EXR header attributes of a render: camera, tolerance, schemes, timings and counts."""
+    """EXR header attributes of a render: camera (``worldToCamera``, ``worldToNDC``),
+    ``chromaticities``, what ``Z`` holds, tolerance, schemes, the meshes' file names,
+    timings and counts."""
     attrs = dict(result.camera.header_attributes())
     attrs["subtrace:tolerance_rad"] = float(result.tolerance_rad)
     attrs["subtrace:tolerance_px"] = float(result.tolerance_rad / result.camera.pixel_angle())
     attrs["subtrace:scheme"] = ",".join(result.schemes)
-    attrs["subtrace:meshes"] = ";".join(o.mesh for o in scene.objects)
+    # file names only: a header travels with the image, the user's folders need not
+    attrs["subtrace:meshes"] = ";".join(Path(o.mesh).name for o in scene.objects)
+    attrs["chromaticities"] = REC709_CHROMATICITIES
+    attrs["subtrace:Z"] = "distance from the eye along the pixel's ray (not camera-space z)"
     attrs["subtrace:accel"] = result.accel
     for k, v in result.stats.__dict__.items():
         attrs[f"subtrace:{k}"] = float(v) if isinstance(v, float) else int(v)

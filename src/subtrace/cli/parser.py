@@ -106,7 +106,9 @@ def _add_render(sub) -> argparse.ArgumentParser:
     render.add_argument("inputs", nargs="*", metavar="SCENE.toml | CAGE.obj",
                         help="one TOML scene, or one or more OBJ cages")
     render.add_argument("-o", "--output", metavar="OUT.exr",
-                        help="output EXR (default: the scene's output, else render.exr)")
+                        help="output file (default: the scene's output, else render.exr): "
+                             "the multi-channel EXR, or by its extension an sRGB picture "
+                             "of the colour (.png, .tif with alpha; .jpg)")
     _add_camera_options(render)
     tol = render.add_mutually_exclusive_group()
     tol.add_argument("--tolerance", metavar="PIXELS",
@@ -114,7 +116,10 @@ def _add_render(sub) -> argparse.ArgumentParser:
     tol.add_argument("--tolerance-deg", metavar="DEG", help="angular tolerance in degrees")
     _add_render_options(render)
     render.add_argument("--png", action="store_true",
-                        help="also write an sRGB PNG preview next to the EXR")
+                        help="also write an sRGB PNG preview next to the output (never over "
+                             "it)")
+    render.add_argument("--bit-depth", choices=("8", "16"), default="8",
+                        help="bits per channel of a .png or .tif output (default 8)")
     render.add_argument("--quiet", action="store_true", help="print nothing on success")
     return render
 

@@ -9,10 +9,13 @@ import os
 import sys
 import time
 
+import numpy as np
+
 from subtrace.cli.common import trim_numba
 from subtrace.data import default_scene_path
 from subtrace.errors import SceneError
 from subtrace.io.atomic import check_writable
+from subtrace.io.formats import DEEP, picture_format
 from subtrace.io.scene import apply_overrides, load_scene, scene_for_meshes
 from subtrace.runtime.progress import ProgressBar
 
@@ -46,20 +49,33 @@ def execute(args) -> int:
     scene = scene_from_inputs(inputs, args, tolerance=args.tolerance,
                               tolerance_deg=args.tolerance_deg, output=args.output)
     out = scene.output or "render.exr"
+    picture = picture_format(out)
+    bits = int(getattr(args, "bit_depth", "8"))
+    if bits == 16 and picture not in DEEP:
+        raise SceneError(f"{out}: 16 bits per channel are for .png and .tif outputs",
+                         key="--bit-depth")
     png = os.path.splitext(out)[0] + ".png" if args.png else scene.preview
+    if png and os.path.abspath(png) == os.path.abspath(out):
+        png = None  # the output is that picture already: --png never writes over it
     check_writable(out)
     if png:
         check_writable(png)
     # imported once the inputs are checked: bad input fails before the renderer's kernels
     # and OpenImageIO load
-    from subtrace.io.exr import write_exr
+    from subtrace.io.exr import write_exr, write_picture, write_png
     from subtrace.render import render_scene, result_attributes
 
     trim_numba(args)
     progress = ProgressBar() if sys.stderr.isatty() and not args.quiet else None
     result = render_scene(scene, threads=args.threads, accel=args.accel, progress=progress)
     t0 = time.perf_counter()
-    write_exr(out, result.channels, result_attributes(result, scene), png_path=png)
+    if picture is None:
+        write_exr(out, result.channels, result_attributes(result, scene), png_path=png)
+    else:
+        write_picture(out, result.channels, bits)
+        if png:
+            ch = result.channels
+            write_png(png, np.stack([ch["R"], ch["G"], ch["B"]], axis=-1))
     if not args.quiet:
         print(_summary(out, png, result, time.perf_counter() - t0))
     return 0

@@ -28,6 +28,7 @@ import OpenImageIO as oiio
 
 from subtrace.errors import SubtraceError
 from subtrace.io.atomic import atomic_paths, check_writable, path_str
+from subtrace.io.formats import DEEP, PICTURE_FORMATS, WITH_ALPHA, picture_format
 from subtrace.version import VERSION
 
 CHANNEL_ORDER = ("R", "G", "B", "A", "Z", "N.X", "N.Y", "N.Z", "level", "patch_id", "object_id")
@@ -45,6 +46,7 @@ STANDARD_ATTRIBUTES = frozenset(
     (
         "worldToCamera",
         "worldToNDC",
+        "chromaticities",
         "Software",
         "ImageDescription",
         "Copyright",
@@ -57,12 +59,16 @@ STANDARD_ATTRIBUTES = frozenset(
     )
 )
 _INT32 = (-(2**31), 2**31 - 1)
+# header values given as float tuples, by length: a vector, chromaticities (x, y of the
+# red, green and blue primaries and the white point), a 4x4 matrix
+_FLOAT_TUPLES = {3: "vector", 8: "float[8]", 16: "matrix"}
 
 
 def write_exr(path, channels: dict, attributes: dict | None = None, png_path=None) -> None:
     """Write a multi-channel EXR (and optionally an sRGB PNG preview of R, G, B).
 
-    path: destination (any extension; the format is always OpenEXR).
+    path: destination (OpenEXR whatever the extension; :func:`write_picture` writes the
+      picture formats).
     channels: name -> (H,W) array, all the same shape; see the module comment for the names,
       the order and the pixel types. Values of the integer channels must be whole numbers of
       magnitude <= 2^24.
@@ -107,6 +113,39 @@ def write_png(path, rgb_linear) -> None:
     _write_all([(path, "png", _png_spec(pixels.shape[1], pixels.shape[0]), pixels)])
 
 
+def write_picture(path, channels: dict, bits: int = 8) -> None:
+    """Write the colour of ``channels`` (R, G, B, and A where the format has it: PNG, TIFF)
+    as an sRGB picture in the format of ``path``'s extension (:data:`PICTURE_FORMATS`),
+    ``bits`` (8, or 16 for PNG and TIFF) per channel. Same temporary-then-rename policy and
+    errors as :func:`write_exr`."""
+    fmt = picture_format(path)
+    if fmt is None:
+        raise ValueError(f"{path_str(path)}: not a picture format ({sorted(PICTURE_FORMATS)})")
+    if bits not in (8, 16) or (bits == 16 and fmt not in DEEP):
+        raise ValueError(f"{fmt} pictures take 8 bits per channel" if bits == 16 else
+                         f"expected 8 or 16 bits per channel, got {bits}")
+    planes = [np.asarray(channels[c], dtype=np.float64) for c in ("R", "G", "B")]
+    encoded = [srgb_encode(x) for x in planes]
+    if fmt in WITH_ALPHA and "A" in channels:
+        encoded.append(np.clip(np.nan_to_num(np.asarray(channels["A"], np.float64)), 0.0, 1.0))
+    top, dtype, kind = (255.0, np.uint8, oiio.UINT8) if bits == 8 else \
+        (65535.0, np.uint16, oiio.UINT16)
+    pixels = np.ascontiguousarray(np.rint(np.stack(encoded, axis=-1) * top).astype(dtype))
+    height, width, n = pixels.shape
+    spec = oiio.ImageSpec(width, height, n, kind)
+    spec.attribute("oiio:ColorSpace", "sRGB")
+    spec.alpha_channel = 3 if n == 4 else -1
+    _write_all([(path, fmt, spec, pixels)])
+
+
+def srgb_encode(linear) -> np.ndarray:
+    """Linear values -> sRGB-encoded values in [0, 1] (IEC 61966-2-1), float64; clipped to
+    [0, 1] first (NaN becomes 0, +inf 1)."""
+    x = np.clip(np.nan_to_num(np.asarray(linear, dtype=np.float64), nan=0.0, posinf=1.0,
+                              neginf=0.0), 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+
+
 def srgb8(rgb_linear) -> np.ndarray:
     """(H,W,3) linear RGB -> (H,W,3) uint8 with the sRGB transfer function (IEC 61966-2-1).
 
@@ -116,9 +155,7 @@ def srgb8(rgb_linear) -> np.ndarray:
     rgb = np.asarray(rgb_linear, dtype=np.float64)
     if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.shape[0] == 0 or rgb.shape[1] == 0:
         raise ValueError(f"expected an (H,W,3) RGB array, got shape {rgb.shape}")
-    x = np.clip(np.nan_to_num(rgb, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
-    encoded = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
-    return np.ascontiguousarray(np.rint(encoded * 255.0).astype(np.uint8))
+    return np.ascontiguousarray(np.rint(srgb_encode(rgb) * 255.0).astype(np.uint8))
 
 
 def read_exr(path) -> tuple[dict[str, np.ndarray], dict]:
@@ -221,14 +258,13 @@ def _set_attribute(spec, key: str, value) -> None:
         spec.attribute(key, float(value))
     elif isinstance(value, str):
         spec.attribute(key, value)
-    elif isinstance(value, (tuple, list, np.ndarray)) and len(value) in (3, 16):
+    elif isinstance(value, (tuple, list, np.ndarray)) and len(value) in _FLOAT_TUPLES:
         floats = tuple(float(v) for v in np.asarray(value, dtype=np.float64).ravel())
-        kind = "vector" if len(floats) == 3 else "matrix"
-        spec.attribute(key, oiio.TypeDesc(kind), floats)
+        spec.attribute(key, oiio.TypeDesc(_FLOAT_TUPLES[len(floats)]), floats)
     else:
         raise TypeError(
             f"attribute {key}: unsupported value {value!r} (use str, int, float, bool, "
-            "3 or 16 floats)"
+            "3, 8 or 16 floats)"
         )
 
 
