@@ -722,7 +722,7 @@ def markdown(summary, images=None) -> str:
                f"**{geo['wall']:.2f}** | | | **{geo['rss_mb']:.2f}** |")
     out += [""] + [f"<sup>{i + 1}</sup> {n}." for i, n in enumerate(notes)]
     out += ["", "Where the time goes (medians, s): subtrace's header timings; Cycles' status "
-            "phases (tessellate and BVH are parts of sync).", "",
+            "phases\n(tessellate and BVH are parts of sync).", "",
             "| scene | load | preprocess | refine | trace | shade | micro-tris | "
             "Cycles tessellate | BVH | sync | samples |",
             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
@@ -736,7 +736,7 @@ def markdown(summary, images=None) -> str:
             f"| {row['cycles_time_samples']:.3f} |")
     if images:
         out += ["", f"Image check ({IMAGE_SIZE[0]}x{IMAGE_SIZE[1]}): pixels covered by each "
-                "renderer and the intersection over union of the two coverage masks.", "",
+                "renderer and the intersection over union of\nthe two coverage masks.", "",
                 "| scene | subtrace px | Cycles px | differing px | IoU |",
                 "|---|---:|---:|---:|---:|"]
         for name, im in images.items():
@@ -810,7 +810,7 @@ def _main(args) -> int:
         print(f"subtrace ({args.subtrace}) vs Blender {blender} Cycles (adaptive subdivision, "
               f"CPU); {args.threads} threads each; {args.rounds} rounds after a warm-up; "
               f"{len(scenes)} scenes at {w0}x{h0}", file=sys.stderr, flush=True)
-        results = []
+        results, loads = [], [os.getloadavg()[0]]
         for scene in scenes:
             renderers.run_subtrace(scene)  # warm-up: Numba's cache, file caches
             renderers.run_cycles(scene)
@@ -822,6 +822,7 @@ def _main(args) -> int:
                     runs[which].append(run(scene))
             results.append({"scene": scene.name, "features": scene.features(),
                             "notes": scene.notes, **runs})
+            loads.append(os.getloadavg()[0])
             s, c = (statistics.median(x["render"] for x in runs[k]) for k in runs)
             print(f"  {scene.name}: subtrace {s:.3f} s, Cycles {c:.3f} s", file=sys.stderr,
                   flush=True)
@@ -832,12 +833,15 @@ def _main(args) -> int:
             images = {s.name: image_check(renderers, s, folder) for s in scenes}
         summary = summarize(results)
         print(f"\nsubtrace vs Blender {blender} Cycles, {w0}x{h0}, {args.threads} threads, "
-              f"medians of {args.rounds} rounds; ratio = subtrace / Cycles\n")
+              f"medians of {args.rounds} rounds; ratio = subtrace / Cycles; {os.cpu_count()} "
+              f"CPUs, 1-minute load average {min(loads):.1f}-{max(loads):.1f} during the "
+              "timings\n")
         print(markdown(summary, images))
         if args.json:
             Path(args.json).write_text(json.dumps(
                 {"blender": blender, "subtrace": args.subtrace, "threads": args.threads,
-                 "rounds": args.rounds, "size": [w0, h0], "runs": results,
+                 "rounds": args.rounds, "size": [w0, h0], "load_averages": loads,
+                 "runs": results,
                  "summary": summary, "images": images}, indent=1, default=str))
     return 0
 
