@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 import subtrace
 from subtrace.cli import main
-from subtrace.compare import (DEFAULT_THRESHOLDS, FAIL, PASS, WARN, ImageMismatchError,
+from subtrace.compare import (DEFAULT_THRESHOLDS, FAIL, GROUPS, PASS, WARN, ImageMismatchError,
                               Thresholds, UnreadableImageError, compare_images)
 from subtrace.io.exr import read_exr, write_exr
 
@@ -321,3 +321,50 @@ def test_cli_diff_images(files, capsys, tmp_path):
 def test_package_exports_compare_images():
     assert subtrace.compare_images is compare_images
     assert "compare_images" in subtrace.__all__
+
+
+def test_other_renderers_channels_by_alias(tmp_path):
+    """An image whose normals are Normal.X/Y/Z and depth 'depth' compares with subtrace's
+    once --channels names them; without the aliases its groups do not match."""
+    ours = image()
+    theirs = {("Normal" + k[1:] if k.startswith("N.") else "depth" if k == "Z" else k): v
+              for k, v in image().items()}
+    with pytest.raises(ImageMismatchError):
+        compare_images(ours, theirs)
+    res = compare_images(ours, theirs, aliases={"N": "Normal", "Z": "depth"})
+    assert res.verdict == PASS and {"normals", "depth"} <= set(res.groups)
+    write_exr(tmp_path / "a.exr", ours)
+    write_exr(tmp_path / "b.exr", theirs)
+    code, out, _ = run_cli_paths(tmp_path, "--channels", "N=Normal", "Z=depth")
+    assert code == 0 and "normals" in out
+
+
+def test_only_and_ignore_choose_the_groups(tmp_path, capsys):
+    """--ignore ids leaves a patch-id difference out of the verdict; --only depth compares
+    depth alone, so an image without normals still compares; unknown groups are refused."""
+    a, b = image(patch=3), image(patch=4)
+    assert compare_images(a, b).verdict == FAIL
+    res = compare_images(a, b, groups=[g for g in GROUPS if g != "ids"])
+    assert res.verdict == PASS and "ids" not in res.groups
+    no_normals = {k: v for k, v in image().items() if not k.startswith("N.")}
+    assert set(compare_images(a, no_normals, groups=["depth"]).groups) == {"depth"}
+    write_exr(tmp_path / "a.exr", a)
+    write_exr(tmp_path / "b.exr", b)
+    assert run_cli(capsys, tmp_path / "a.exr", tmp_path / "b.exr")[0] == 2
+    assert run_cli(capsys, tmp_path / "a.exr", tmp_path / "b.exr", "--ignore", "ids")[0] == 0
+    code, _, err = run_cli(capsys, tmp_path / "a.exr", tmp_path / "b.exr", "--only", "hair")
+    assert code == 2 and "--only hair" in err and err.count("\n") == 1
+    code, _, err = run_cli(capsys, tmp_path / "a.exr", tmp_path / "b.exr", "--channels", "N")
+    assert code == 2 and "OURS=THEIRS" in err
+
+
+def run_cli_paths(tmp_path, *extra):
+    """``subtrace compare a.exr b.exr`` in ``tmp_path`` with ``extra`` options, as
+    (code, stdout, stderr), run in a fresh process."""
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", "subtrace.cli", "compare",
+                           str(tmp_path / "a.exr"), str(tmp_path / "b.exr"), *extra],
+                          capture_output=True, text=True)
+    return proc.returncode, proc.stdout, proc.stderr

@@ -189,7 +189,8 @@ def heat_map(heat: np.ndarray) -> np.ndarray:
     return np.stack([np.interp(h, stops, colours[:, k]) for k in range(3)], axis=-1)
 
 
-def compare_images(a, b, thresholds: dict | None = None, flip: bool = True) -> Comparison:
+def compare_images(a, b, thresholds: dict | None = None, flip: bool = True,
+                   aliases: dict | None = None, groups=None) -> Comparison:
     """Compare two images group by group (see the module comment).
 
     a, b: EXR paths (str or PathLike) or channel dicts (name -> (H,W) array, as
@@ -198,12 +199,19 @@ def compare_images(a, b, thresholds: dict | None = None, flip: bool = True) -> C
     thresholds: group -> Thresholds, or group -> dict of some of THRESHOLD_FIELDS replacing
       the defaults (DEFAULT_THRESHOLDS).
     flip: compute the mean FLIP of the colour group (needs OpenImageIO >= 3.2; None else).
+    aliases: subtrace's channel name -> another renderer's (e.g. ``{"N": "Normal"}``: a
+      name or a prefix before '.'): either image's channels of the other name are read as
+      subtrace's.
+    groups: the groups compared (default: every group); the others are neither compared
+      nor required.
     Raises UnreadableImageError for a file that cannot be read, ImageMismatchError for
     different sizes or channel groups, SubtraceError for an unknown group or field.
     """
     limits = resolve_thresholds(thresholds)
+    wanted = check_groups(GROUPS if groups is None else groups)
     ca, name_a = _channels(a, "A")
     cb, name_b = _channels(b, "B")
+    ca, cb = rename_channels(ca, aliases or {}), rename_channels(cb, aliases or {})
     shape_a, shape_b = _shape(ca), _shape(cb)
     if shape_a != shape_b:
         raise ImageMismatchError(
@@ -211,6 +219,8 @@ def compare_images(a, b, thresholds: dict | None = None, flip: bool = True) -> C
         )
     present = []
     for group, names in GROUPS.items():
+        if group not in wanted:
+            continue
         has_a, has_b = _has_group(ca, names), _has_group(cb, names)
         if has_a != has_b:
             with_it, without = (name_a, name_b) if has_a else (name_b, name_a)
@@ -328,6 +338,33 @@ def _judge(group: str, err: np.ndarray, limits: Thresholds, metrics: dict) -> Gr
     else:
         verdict = PASS
     return GroupResult(group, n, n_warn, n_fail, max_error, limits, verdict, metrics)
+
+
+def check_groups(groups) -> tuple:
+    """``groups`` as a tuple of group names; SubtraceError naming an unknown one."""
+    groups = tuple(groups)
+    for g in groups:
+        if g not in GROUPS:
+            raise SubtraceError(f"unknown channel group {g!r}: use one of {', '.join(GROUPS)}")
+    return groups
+
+
+def rename_channels(channels: dict, aliases: dict) -> dict:
+    """``channels`` with each channel named (or prefixed ``name.``) as an alias's other name
+    renamed to subtrace's (``aliases``: subtrace's name -> the other's)."""
+    if not aliases:
+        return channels
+    out = {}
+    for name, plane in channels.items():
+        for ours, theirs in aliases.items():
+            if name == theirs:
+                name = ours
+                break
+            if name.startswith(theirs + "."):
+                name = ours + name[len(theirs):]
+                break
+        out[name] = plane
+    return out
 
 
 def _channels(image, label: str) -> tuple[dict, str]:

@@ -29,7 +29,8 @@ def execute(args) -> int:
         if png:
             check_writable(png)
     try:
-        result = compare_images(args.image_a, args.image_b, thresholds, flip=not args.no_flip)
+        result = compare_images(args.image_a, args.image_b, thresholds, flip=not args.no_flip,
+                                aliases=aliases_of(args), groups=groups_of(args))
     except (UnreadableImageError, ImageMismatchError) as exc:
         print(f"{PROG}: error: {one_line(str(exc))}", file=sys.stderr)
         return EXIT_UNREADABLE if isinstance(exc, UnreadableImageError) else EXIT_MISMATCH
@@ -46,6 +47,31 @@ def execute(args) -> int:
         if args.diff:
             print(f"difference: {args.diff}" + (f", heat map: {png}" if png else ""))
     return result.exit_code
+
+
+def aliases_of(args) -> dict:
+    """--channels OURS=THEIRS values as {ours: theirs}; SubtraceError naming a bad one."""
+    aliases = {}
+    for text in getattr(args, "channels", None) or []:
+        ours, eq, theirs = text.partition("=")
+        if not eq or not ours.strip() or not theirs.strip():
+            raise SubtraceError(f"--channels {text}: expected OURS=THEIRS, e.g. N=Normal")
+        aliases[ours.strip()] = theirs.strip()
+    return aliases
+
+
+def groups_of(args):
+    """The groups --only keeps (default all) less those --ignore names; SubtraceError
+    naming the option for an unknown group or when none is left."""
+    for option in ("only", "ignore"):
+        for g in getattr(args, option, None) or []:
+            if g not in GROUPS:
+                raise SubtraceError(f"--{option} {g}: unknown channel group: use one of "
+                                    f"{', '.join(GROUPS)}")
+    keep = [g for g in (args.only or GROUPS) if g not in (args.ignore or [])]
+    if not keep:
+        raise SubtraceError("--only / --ignore leave no channel group to compare")
+    return keep
 
 
 def thresholds_of(args) -> dict:

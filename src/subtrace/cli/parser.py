@@ -151,6 +151,13 @@ def _add_compare(sub) -> argparse.ArgumentParser:
     compare.add_argument("--png", action="store_true",
                          help="with --diff: also write a heat-map PNG next to it")
     compare.add_argument("--json", action="store_true", help="print the metrics as JSON")
+    compare.add_argument("--channels", nargs="+", metavar="OURS=THEIRS",
+                         help="read another renderer's channels as subtrace's, by name or "
+                              "prefix (e.g. N=Normal Z=depth)")
+    compare.add_argument("--only", action="append", metavar="GROUP",
+                         help="compare only this channel group (repeatable)")
+    compare.add_argument("--ignore", action="append", metavar="GROUP",
+                         help="leave this channel group out (repeatable)")
     compare.add_argument("--no-flip", action="store_true",
                          help="skip the FLIP metric (the slowest one on large images)")
     return compare
