@@ -310,3 +310,15 @@ def test_launcher_subprocess_render(tmp_path):
 
     channels, _ = read_exr(out)
     assert channels["R"].shape == (8, 16)
+
+
+def test_every_commands_help_reads_as_written():
+    """Every command's --help prints its text as written: no '%%' left over from argparse's
+    %-formatting of help strings (descriptions are not formatted), no '%(' placeholders."""
+    import subprocess
+    import sys
+
+    for command in ("render", "info", "compare", "sweep", "intersect"):
+        out = subprocess.run([sys.executable, "-m", "subtrace.cli", command, "--help"],
+                             capture_output=True, text=True, check=True).stdout
+        assert "%%" not in out and "%(" not in out, command

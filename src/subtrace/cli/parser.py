@@ -133,7 +133,7 @@ def _add_compare(sub) -> argparse.ArgumentParser:
             "mean FLIP), coverage (A: pixels with the surface in one image only), depth (Z: "
             "relative error), normals (N.X,N.Y,N.Z: angle in degrees) and ids (level, "
             "patch_id, object_id: pixels that differ). A group fails when more than "
-            "FAILPERCENT %% of its pixels have an error above FAIL, or one above HARDFAIL; it "
+            "FAILPERCENT % of its pixels have an error above FAIL, or one above HARDFAIL; it "
             "warns likewise with WARN and WARNPERCENT. Threshold options take GROUP=VALUE "
             "(repeatable) or a bare VALUE for the colour group. Exit codes as idiff's: 0 pass, "
             "1 warning, 2 failure (or bad options), 3 size or channel mismatch, 4 a file that "
