@@ -10,31 +10,73 @@ from shared_data import MODELS, load_shape, needs_shared
 
 import subtrace
 from subtrace.patches.grids import build_grids
+from subtrace.mesh.topology import INF_SHARP
 from subtrace.patches.table import build_patch_table
 
 PIECE_SHAPES = ["catmark_cube_creases1", "catmark_nonquads", "catmark_pole8",
                 "catmark_edgecorner", "catmark_chaikin1", "catmark_hole_test2"]
 
 
+# boundaries, sharp corners and infinitely sharp creases: regular patches with phantom points
+SHARP_SHAPES = ["catmark_edgeonly", "catmark_edgecorner", "catmark_inf_crease0", "catmark_fan",
+                "catmark_flap", "catmark_xord_boundary", "catmark_tent_creases0",
+                "catmark_quadstrips", "catmark_single_crease", "catmark_nonman_edges",
+                "catmark_val2_interior", "catmark_hole_test3", "catmark_gregory_test2"]
+# closed cages whose sharp corners and creases have regular quads from level 2 on
+SHARP_LEVEL2 = ["catmark_cube_corner4", "catmark_cube_creases1", "catmark_cubes_infsharp",
+                "catmark_edgeonly", "catmark_fan", "catmark_pyramid_creases0"]
+
+
 @needs_shared
-@pytest.mark.parametrize("name", PIECE_SHAPES)
+@pytest.mark.parametrize("name", SHARP_SHAPES)
+def test_sharp_sides_make_more_patches_regular(name):
+    """Quads at a boundary, a sharp corner or an infinitely sharp crease whose corners are
+    regular there are regular patches: more than the smooth ones alone."""
+    from subtrace.patches import bspline
+
+    cage = load_shape(name)
+    lev = cage.level_topology(1)
+    faces = np.nonzero(~lev.face_hole)[0]
+    reg = faces[bspline.regular_mask(lev, cage.options, faces)]
+    smooth = bspline.smooth_mask(lev, reg)
+    assert (~smooth).sum() > 0
+
+
+@needs_shared
+@pytest.mark.parametrize("name", PIECE_SHAPES + SHARP_SHAPES)
 def test_bicubic_grids_match_refinement(name):
     """A regular patch evaluated the way the renderer does (its Bezier net: points and
     derivatives) gives the limit points and normals of uniform refinement (to rounding),
     and the net's box contains them."""
+    _check_nets(load_shape(name), 1)
+
+
+@needs_shared
+@pytest.mark.parametrize("name", SHARP_LEVEL2)
+def test_sharp_sided_nets_match_refinement_at_level_2(name):
+    """The same at level 2, where the quads beside sharp corners and creases of closed
+    cages (and of boundaries at their extraordinary vertices) become regular."""
+    _check_nets(load_shape(name), 2, sharp_only=True)
+
+
+def _check_nets(cage, level, sharp_only=False):
     from subtrace.patches import basis, bspline
     from subtrace.patches.basis import bez_derivatives, bez_point as _bez_point
 
-    cage = load_shape(name)
-    lev = cage.level_topology(1)
-    pts = cage.refine(1).points
+    lev = cage.level_topology(level)
+    pts = cage.refine(level).points
     faces = np.nonzero(~lev.face_hole)[0]
     reg = faces[bspline.regular_mask(lev, cage.options, faces)]
+    if sharp_only:
+        reg = reg[~bspline.smooth_mask(lev, reg)]
     if len(reg) == 0:
         pytest.skip("no regular patch")
-    nets = basis.bezier_nets(pts[bspline.control_grids(lev, reg)])
+    nets = basis.bezier_nets(bspline.control_points(lev, reg, pts))
     lo, hi, _ = basis.net_bounds(nets)
     scale = float(np.abs(pts).max())
+    # sides on an infinitely sharp edge (0: v = 0, 1: u = 1, 2: v = 1, 3: u = 0): the
+    # reference normal there is one side's of a crease, so only points are compared
+    sharp = lev.edge_sharpness[lev.face_edges[lev.face_offsets[reg][:, None] + np.arange(4)]] >= INF_SHARP
     for depth in (0, 3):
         n = (1 << depth) + 1
         ref, nref = build_grids(lev, pts, cage.options, reg, depth)
@@ -45,6 +87,9 @@ def test_bicubic_grids_match_refinement(name):
                 p = np.array(_bez_point(nets, m, u, v))
                 assert np.abs(p - ref[m, g]).max() <= 1e-13 * scale
                 assert np.all(p >= lo[m] - 1e-12 * scale) and np.all(p <= hi[m] + 1e-12 * scale)
+                on = sharp[m] & (np.array([v, 1 - u, 1 - v, u]) == 0)
+                if on.any():
+                    continue
                 du, dv = bez_derivatives(net, u, v)
                 nrm = np.cross(du, dv)
                 assert np.abs(nrm / np.linalg.norm(nrm) - nref[m, g]).max() <= 1e-9

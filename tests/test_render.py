@@ -26,6 +26,54 @@ WATERTIGHT = [
 def test_watertight_from_inside(mesh, eye, tolerance, monkeypatch):
     """Invariant 4: from inside a closed surface every ray hits it (zero misses), whatever
     the tolerance and however differently neighbouring patches are refined."""
+    _check_watertight(mesh, eye, tolerance, monkeypatch)
+
+
+@pytest.mark.parametrize("tolerance", [4.0, 1.0, 0.25])
+def test_watertight_from_inside_creased_box(tmp_path, tolerance, monkeypatch):
+    """The same inside a box of 3x3 quads a side whose twelve edges are infinitely sharp
+    creases: regular crease patches (phantom points) beside irregular corner patches."""
+    mesh = tmp_path / "creased_box.obj"
+    n = 3
+    ids, lines = {}, []
+    for p in np.ndindex(n + 1, n + 1, n + 1):
+        if min(p) == 0 or max(p) == n:
+            ids[p] = len(ids)
+            lines.append("v {} {} {}".format(*p))
+    for a in range(3):
+        b, c = (a + 1) % 3, (a + 2) % 3
+        for side in (0, n):
+            for i in range(n):
+                for j in range(n):
+                    quad = []
+                    for di, dj in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                        q = [0, 0, 0]
+                        q[a], q[b], q[c] = side, i + di, j + dj
+                        quad.append(ids[tuple(q)] + 1)
+                    if side == 0:
+                        quad.reverse()
+                    lines.append("f " + " ".join(map(str, quad)))
+    for p, k in ids.items():
+        for a in range(3):
+            q = list(p)
+            q[a] += 1
+            on_edge = sum(x in (0, n) for x in p) >= 2 and sum(x in (0, n) for x in q) >= 2
+            if tuple(q) in ids and on_edge and p[a] + 1 <= n:
+                others = [x for i, x in enumerate(p) if i != a]
+                if all(x in (0, n) for x in others):
+                    lines.append(f"t crease 2/1/0 {k} {ids[tuple(q)]} 10.0")
+    mesh.write_text("\n".join(lines) + "\n")
+    cage = subtrace.load_cage(mesh)
+    # the crease patches are regular (not only the smooth ones in the middle of the sides)
+    from subtrace.patches.bspline import smooth_mask
+
+    table = build_patch_table([cage])
+    lev = table.objects[0].level
+    assert not smooth_mask(lev, table.face[table.regular]).all()
+    _check_watertight(mesh, (0.5 * n, 0.45 * n, 0.55 * n), tolerance, monkeypatch)
+
+
+def _check_watertight(mesh, eye, tolerance, monkeypatch):
     monkeypatch.setattr(config, "MAX_GRID_DEPTH", 5)  # the eye sits inside nearby shells
     cage = subtrace.load_cage(mesh)
     if eye is None:
@@ -96,6 +144,37 @@ def test_hidden_object_is_not_refined(tmp_path):
     # without the plane, Spot is refined (the test would notice a broken renderer)
     res = render_scene(small_scene([spot], (0.0, 0.0, 3.0), (0.0, 0.0, -1.0), fov=40.0),
                        cages=cages[1:])
+    assert np.count_nonzero(res.refined_objects == 0) > 0
+
+
+@needs_shared
+@pytest.mark.parametrize("name", ["catmark_edgecorner", "catmark_single_crease"])
+def test_hidden_sharp_patches_are_not_refined(tmp_path, name):
+    """Invariant 5 for regular boundary and crease patches (phantom points): a cage with
+    boundaries or infinitely sharp creases hidden behind a plane is never refined."""
+    plane = tmp_path / "plane.obj"
+    _write_plane(plane, 0.0, 6.0)
+    # the shape fitted in a unit box behind the plane (its tags kept: the OBJ's other lines)
+    text = (SHAPES / f"{name}.obj").read_text().splitlines()
+    v = np.array([[float(x) for x in ln.split()[1:4]] for ln in text if ln.startswith("v ")])
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    v = (v - 0.5 * (lo + hi)) / float((hi - lo).max()) - [0.0, 0.0, 2.0]
+    it = iter(v)
+    moved = tmp_path / f"{name}.obj"
+    moved.write_text("\n".join(
+        "v {} {} {}".format(*next(it)) if ln.startswith("v ") else ln for ln in text) + "\n")
+    hidden = subtrace.load_cage(moved)
+    # it has regular patches with a sharp side
+    table = build_patch_table([hidden])
+    assert table.regular.sum() > 0
+    scene = small_scene([plane, moved], (0.0, 0.0, 3.0), (0.0, 0.0, -1.0), fov=40.0)
+    res = render_scene(scene, cages=[subtrace.load_cage(plane), hidden])
+    assert np.all(res.channels["object_id"] == 0)
+    assert res.refined_objects.size > 0
+    assert np.count_nonzero(res.refined_objects == 1) == 0
+    # without the plane, the cage is refined
+    res = render_scene(small_scene([moved], (0.0, 0.0, 3.0), (0.0, 0.0, -1.0), fov=40.0),
+                       cages=[hidden])
     assert np.count_nonzero(res.refined_objects == 0) > 0
 
 

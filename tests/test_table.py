@@ -13,7 +13,7 @@ import pytest
 from subtrace import config, load_cage
 from subtrace.errors import SubtraceWarning
 from subtrace.patches.basis import bezier_nets, net_bounds
-from subtrace.patches.bspline import control_grids, regular_mask
+from subtrace.patches.bspline import control_grids, control_points, regular_mask
 from subtrace.patches.criterion import subdominant
 from subtrace.patches.shells import one_ring_shells
 from subtrace.patches.table import build_patch_table
@@ -42,7 +42,7 @@ def plain_shells(o):
         smax += margin
     rate = subdominant(valence, o.cage.scheme == "catmark")
     regular = regular_mask(lev, o.cage.options, faces)
-    nets = bezier_nets(pts[control_grids(lev, faces[regular])])
+    nets = bezier_nets(control_points(lev, faces[regular], pts))
     smin[regular], smax[regular], ebound[regular] = net_bounds(nets)
     rate[regular] = 0.5
     return smin, smax, ebound, rate, regular, nets

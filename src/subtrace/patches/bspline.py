@@ -25,11 +25,20 @@ import numpy as np
 from subtrace.patches.basis import B_CORNER, LEAD, TRAIL
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
-from subtrace.subdiv.limit import SMOOTH, classify
+from subtrace.mesh.topology import INF_SHARP
+from subtrace.subdiv.limit import CORNER, CREASE, SMOOTH, classify
 
 
 def regular_mask(level, options, faces) -> np.ndarray:
-    """(len(faces),) bool: the faces of ``level`` that are regular bicubic patches."""
+    """(len(faces),) bool: the faces of ``level`` that are regular bicubic patches.
+
+    A Catmull-Clark quad is one when each corner is regular: smooth of valence 4, a boundary
+    or infinitely sharp crease vertex that is regular there (2 faces and 3 edges, or 4 faces
+    with its two sharp edges opposite each other), or a sharp corner with one face (what
+    OpenSubdiv's Far takes as regular boundary patches). A valence-2 boundary vertex that is
+    not sharpened (boundary interpolation "edge only", no corner tag) takes the crease rule
+    and is not regular; semi-sharp features make the vertex hard and the patch irregular.
+    """
     faces = np.asarray(faces, dtype=np.int64)
     if options.scheme != "catmark" or len(faces) == 0:
         return np.zeros(len(faces), dtype=bool)
@@ -37,8 +46,140 @@ def regular_mask(level, options, faces) -> np.ndarray:
     quad = (fo[faces + 1] - fo[faces]) == 4
     corners = level.face_verts[np.minimum(fo[faces][:, None] + np.arange(4), len(level.face_verts) - 1)]
     cls = classify(level, options, corners)
-    ok = (cls[corners] == SMOOTH) & (np.diff(level.vert_edge_offsets)[corners] == 4)
+    ne = np.diff(level.vert_edge_offsets)[corners]
+    ok = (cls[corners] == SMOOTH) & (ne == 4)
+    # boundary and crease vertices, sharp corners
+    nf = np.diff(level.vert_face_offsets)[corners]
+    manifold = level.vert_manifold[corners]
+    crease = (cls[corners] == CREASE) & manifold
+    ok |= crease & (nf == 2) & (ne == 3)
+    four = crease & (nf == 4) & (ne == 4)
+    if four.any():
+        ring = level.vert_edges[level.vert_edge_offsets[corners[four]][:, None] + np.arange(4)]
+        sharp = level.edge_sharpness[ring] >= INF_SHARP
+        ok[four] |= (sharp[:, 0] == sharp[:, 2]) & (sharp[:, 1] == sharp[:, 3])
+    ok |= (cls[corners] == CORNER) & manifold & (nf == 1) & (ne == 2)
     return quad & ok.all(axis=1)
+
+
+def smooth_mask(level, faces) -> np.ndarray:
+    """(len(faces),) bool: which of the regular quads ``faces`` have no boundary or
+    infinitely sharp edge at a corner (their 16 control points are all points of ``level``)."""
+    faces = np.asarray(faces, dtype=np.int64)
+    fo = level.face_offsets
+    corners = level.face_verts[fo[faces][:, None] + np.arange(4)]
+    ring = level.vert_edge_offsets
+    out = np.ones(len(faces), dtype=bool)
+    for k in range(4):
+        c = corners[:, k]
+        out &= (ring[c + 1] - ring[c]) == 4
+        out &= np.diff(level.vert_face_offsets)[c] == 4
+        for j in range(4):
+            out &= level.edge_sharpness[level.vert_edges[np.minimum(ring[c] + j, len(level.vert_edges) - 1)]] <= 0
+    return out
+
+
+def control_points(level, faces, points) -> np.ndarray:
+    """(m, 4, 4, 3) float64 B-spline control points of the regular quads ``faces`` of
+    ``level`` with points ``points`` (phantom points where a side is a boundary or crease)."""
+    grids, ext = phantom_grids(level, faces, points)
+    return ext[grids]
+
+
+def phantom_grids(level, faces, points):
+    """Control grids of the regular quads ``faces``: ``(grids, ext)`` with ``grids``
+    (m, 4, 4) int64 ids into ``ext`` (V', 3), the points of the level followed by the
+    control points of the patches that have a boundary or infinitely sharp side.
+
+    Smooth patches gather their 16 points by id (:func:`control_grids`, ``ext`` is
+    ``points`` itself when every patch is smooth). A patch with a sharp side has the row
+    beyond that side replaced by phantom points mirrored through the side's row,
+    ``2 P_side - P_inner``; a grid corner beyond two sharp sides is mirrored twice,
+    ``4 P_c - 2 P_a - 2 P_b + P_d``. Uniform B-spline subdivision of those points gives
+    Catmull-Clark's boundary and crease rules (edge point the midpoint, vertex point
+    ``(e0 + 6 v + e1) / 8``, a sharp corner kept), so the bicubic is the limit surface.
+    """
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    smooth = smooth_mask(level, faces) if len(faces) else np.zeros(0, dtype=bool)
+    if smooth.all():
+        return control_grids(level, faces), points
+    grids = np.empty((len(faces), 4, 4), dtype=np.int64)
+    grids[smooth] = control_grids(level, faces[smooth])
+    rest = faces[~smooth]
+    ids = np.full((len(rest), 4, 4), -1, dtype=np.int64)
+    cut = np.zeros((len(rest), 4), dtype=np.bool_)
+    _sharp_side_grids(level.face_offsets, level.face_verts, level.face_edges,
+                      level.edge_face_offsets, level.edge_faces, level.edge_sharpness,
+                      level.vert_face_offsets, level.vert_faces, level.vert_face_corner,
+                      rest, B_CORNER, TRAIL, INF_SHARP, ids, cut)
+    cv = np.asarray(points, dtype=np.float64)[np.maximum(ids, 0)]
+    _mirror(cv, cut)
+    n = len(points)
+    grids[~smooth] = n + np.arange(16 * len(rest)).reshape(-1, 4, 4)
+    return grids, np.concatenate([np.asarray(points, dtype=np.float64), cv.reshape(-1, 3)])
+
+
+def _mirror(cv, cut):
+    """Phantom rows of control points ``cv`` (m,4,4,3) beyond sharp sides ``cut`` (m,4):
+    side 0 is the row v = 0, side 1 u = 3, side 2 v = 3, side 3 u = 0. The v rows first,
+    where the u side beside them is real, then whole u columns."""
+    for side, (row, inner) in ((0, (0, 2)), (2, (3, 1))):
+        m = cut[:, side]
+        for u in range(4):
+            keep = m.copy()
+            if u == 0:
+                keep &= ~cut[:, 3]
+            elif u == 3:
+                keep &= ~cut[:, 1]
+            cv[keep, u, row] = 2.0 * cv[keep, u, (row + inner) // 2] - cv[keep, u, inner]
+    for side, (row, inner) in ((3, (0, 2)), (1, (3, 1))):
+        m = cut[:, side]
+        cv[m, row, :] = 2.0 * cv[m, (row + inner) // 2, :] - cv[m, inner, :]
+
+
+@nb.njit(cache=True)
+def _sharp_side_grids(fo, fv, fe, efo, ef, es, vfo, vf, vfc, faces, bc, trail, inf, ids, cut):
+    """Real point ids of the grids of regular quads with sharp sides (-1 where a phantom
+    point goes) and which sides are sharp."""
+    for m in range(len(faces)):
+        f = faces[m]
+        for k in range(4):
+            c = fv[fo[f] + k]
+            ids[m, bc[k, 0], bc[k, 1]] = c
+            cut[m, k] = es[fe[fo[f] + k]] >= inf
+        for k in range(4):
+            if cut[m, k]:
+                continue
+            # the face across side k and its two points off the side
+            a, b = fv[fo[f] + k], fv[fo[f] + (k + 1) % 4]
+            e = fe[fo[f] + k]
+            g = ef[efo[e]] if ef[efo[e]] != f else ef[efo[e] + 1]
+            for end in range(2):
+                c = a if end == 0 else b
+                o = b if end == 0 else a
+                ia = 0
+                for i in range(4):
+                    if fv[fo[g] + i] == c:
+                        ia = i
+                nxt = fv[fo[g] + (ia + 1) % 4]
+                out = fv[fo[g] + (ia + 3) % 4] if nxt == o else nxt
+                kc = (k + end) % 4
+                ids[m, bc[kc, 0] - trail[k, 0], bc[kc, 1] - trail[k, 1]] = out
+        for k in range(4):
+            # the grid corner beyond corner k: real when neither side at k is sharp (the
+            # corner is then smooth of valence 4), the diagonal of the opposite face
+            if cut[m, k] or cut[m, (k + 3) % 4]:
+                continue
+            c = fv[fo[f] + k]
+            a = vfo[c]
+            pos = 0
+            for j in range(4):
+                if vf[a + j] == f:
+                    pos = j
+            g = vf[a + (pos + 2) % 4]
+            kk = vfc[a + (pos + 2) % 4]
+            d = fv[fo[g] + (kk + 2) % 4]
+            ids[m, 2 * bc[k, 0] - bc[(k + 2) % 4, 0], 2 * bc[k, 1] - bc[(k + 2) % 4, 1]] = d
 
 
 def control_grids(level, faces) -> np.ndarray:

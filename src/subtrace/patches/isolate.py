@@ -21,7 +21,7 @@ import numpy as np
 
 from subtrace.config import IRREGULAR_MARGIN
 from subtrace.patches.basis import bezier_nets, net_bounds
-from subtrace.patches.bspline import control_grids, regular_mask
+from subtrace.patches.bspline import control_points, regular_mask
 from subtrace.patches.grids import cut_around
 from subtrace.patches.shells import box_distance, one_ring_shells
 from subtrace.runtime.jit import nb
@@ -83,7 +83,7 @@ def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0, 
         kid_active = np.repeat(active, 4)
         bez, n = np.zeros((0, 4, 4, 3)), np.zeros(0)
         if reg.any():
-            bez = bezier_nets(cur_pts[control_grids(cur, kids[reg])])
+            bez = bezier_nets(control_points(cur, kids[reg], cur_pts))
             lo, hi, bound = net_bounds(bez)
             n = _levels_needed(bound, box_distance(lo, hi, eye), tol_rad)
             if boxes is not None:
@@ -212,7 +212,7 @@ def _next_level(subs, k, cur, cur_pts, kids, reg, root, i0, j0, depth, eye, tol_
         subs[2].append(ki[reg])
         subs[3].append(kj[reg])
         if bez is None:
-            bez = bezier_nets(cur_pts[control_grids(cur, kids[reg])])
+            bez = bezier_nets(control_points(cur, kids[reg], cur_pts))
         subs[4].append(bez)
         own = depth[kid_root[reg]]
         if eye is not None:

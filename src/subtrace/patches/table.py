@@ -32,7 +32,7 @@ import numpy as np
 
 from subtrace import config
 from subtrace.patches.basis import TO_BEZIER, net_summary, to_bezier
-from subtrace.patches.bspline import control_grids, regular_mask
+from subtrace.patches.bspline import phantom_grids, regular_mask
 from subtrace.patches.criterion import subdominant
 from subtrace.patches.evaluate import ptex_layout
 from subtrace.patches.shells import one_ring_shells
@@ -146,7 +146,8 @@ def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
     regular = regular_mask(lev, cage.options, faces)
     rows = np.nonzero(regular)[0]
     nets = np.empty((len(rows), 4, 4, 3))
-    run_tasks(_regular_shells, control_grids(lev, faces[rows]), pts, TO_BEZIER, rows,
+    grids, ext = phantom_grids(lev, faces[rows], pts)
+    run_tasks(_regular_shells, grids, ext, TO_BEZIER, rows,
               _NET_CHUNK, nets, smin, smax, ebound)
     rate[rows] = 0.5
     # the others: boxes of their one-ring control points
