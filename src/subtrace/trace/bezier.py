@@ -30,6 +30,7 @@ from subtrace.patches.basis import (
 from subtrace.trace.prims import (
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, push_sorted, ray_triangle,
 )
+from subtrace.trace.tris import TRI, intersect_tri
 
 MAX_SIDE_SAMPLES = 256  # samples per cell side at most (2^(side depth - depth))
 
@@ -386,6 +387,10 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch):
             continue
         depth = item_depth[it]  # its grid, in the patch's units
         inv = 1.0 / (1 << depth)
+        if kind[it] == TRI:  # a regular Loop patch: its triangular net (trace/tris.py)
+            tested += intersect_tri(ray, nets, ref[it], depth, item_side, it, slack, hit, code,
+                                    it, work, st, st_t, tmp_t, order, lv)
+            continue
         if kind[it] == 1:  # an irregular cell: its exact corners
             c = ref[it]
             _corner_params(lp, i0[it], j0[it], inv)
