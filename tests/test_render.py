@@ -16,6 +16,7 @@ WATERTIGHT = [
     (MODELS / "spot_control_mesh.obj", (0.0, 0.05, 0.2)),
     (MODELS / "blub_control_mesh.obj", None),
     (MODELS / "torus.obj", None),
+    (MODELS / "spot_low_resolution.obj", None),
     (SHAPES / "catmark_cube_creases1.obj", None),
 ]
 

@@ -44,7 +44,7 @@ MAX_GRID_DEPTH = 8
 
 # Regular Loop triangles traced per ray through their quartic Bezier nets (trace/tris.py)
 # instead of being built into whole grids of exact limit points (patches/grids.py).
-LOOP_PER_RAY = False
+LOOP_PER_RAY = True
 
 # How primary rays find the patch shells they enter: "projection" (shells binned into image
 # tiles, accel/projection.py; measured faster on Spot and the sword, BENCHMARKS.md) or "bvh".
