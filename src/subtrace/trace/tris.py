@@ -154,6 +154,25 @@ def grid_point(net, q, gi, gj, depth, sides, srow):
 
 
 @leaf_njit
+def _snapped_node(i, j, h, lev, depth, sides, srow):
+    """Whether the level-``lev`` node with corners (i, j), (i + h, j), (i, j + h) may hold
+    snapped grid vertices: it touches a side sampled at a depth ``de`` < ``lev``. Its
+    snapped points lie on the chords of its ancestor at level ``de`` (whose side on the edge
+    is one coarse segment, its ends that ancestor's corners), so in that ancestor's box,
+    which the ray entered, but maybe not in the node's own: the ray enters it untested."""
+    N = 1 << depth
+    for k in range(3):
+        de = sides[srow, k]
+        if 0 <= de < lev:
+            for c in range(3):
+                a = i + (h if c == 1 else 0)
+                b = j + (h if c == 2 else 0)
+                if _side_param(a, b, N, k)[0]:
+                    return True
+    return False
+
+
+@leaf_njit
 def _tri_entry(ox, oy, oz, ix, iy, iz, w, q, tmax):
     """Entry distance of the ray into the padded box of net ``w[q]``; inf on a miss."""
     lo0, lo1, lo2, hi0, hi1, hi2 = tri_box(w, q)
@@ -216,13 +235,19 @@ def intersect_tri(ray, nets, nk, depth, sides, srow, slack, hit, code, item, wor
             tested += 1
             continue
         tri_split(w, sp, SPLIT_PTR, SPLIT_COL, SPLIT_W, base)
-        # the children the ray enters, pushed far to near
+        # the children the ray enters, pushed far to near (one with snapped points: see
+        # _snapped_node)
         n = 0
+        hh = g * (1 << (depth - lev - 1))  # half the node's side, signed
         for q in range(4):
-            te = _tri_entry(ox, oy, oz, ix, iy, iz, w, base + q, hit[H_T])
+            ci = i + (hh if q == 1 or q == 3 else 0)
+            cj = j + (hh if q == 2 or q == 3 else 0)
+            if _snapped_node(ci, cj, -hh if q == 3 else hh, lev + 1, depth, sides, srow):
+                te = st_t[sp]
+            else:
+                te = _tri_entry(ox, oy, oz, ix, iy, iz, w, base + q, hit[H_T])
             if te < np.inf:
                 n = push_sorted(tmp_t, order, n, te, q)
-        hh = g * (1 << (depth - lev - 1))  # half the node's side, signed
         for e in range(n):
             q = order[e]
             for p in range(N_TRI):
