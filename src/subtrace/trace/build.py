@@ -42,7 +42,7 @@ def build_requested(table, requested, depths, edge_depth, grids, iso, round_no, 
         d = int(dep[s])
         if config.LOOP_PER_RAY:
             ids = _loop_nets(o, table, ids, d, edge_depth, iso, round_no)
-            stats.pieces += e - s - len(ids)
+            stats.pieces += int(e - s) - len(ids)
             if not len(ids):
                 continue
         P, N = build_grids(o.level, o.points, o.cage.options, table.face[ids], d)
