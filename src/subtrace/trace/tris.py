@@ -27,13 +27,17 @@ import numpy as np
 
 from subtrace.accel.bvh import slab_entry
 from subtrace.patches.basis import (
-    DEGREE, N_TRI, NORMAL_STEP, NORMAL_TRIES, SPLIT_COL, SPLIT_PTR, SPLIT_W, pad_box, tri_box,
+    DEGREE, N_TRI, NORMAL_STEP, copy_net, NORMAL_TRIES, SPLIT_COL, SPLIT_PTR, SPLIT_W, pad_box, tri_box,
     tri_split, unit_normal,
 )
-from subtrace.runtime.jit import leaf_njit
-from subtrace.trace.prims import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, push_sorted, ray_triangle
+from subtrace.runtime.jit import inline_njit, leaf_njit
+from subtrace.trace.prims import (
+    H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, M_CELLS, M_FULL, M_NETS, M_NODES, NOT_YET, push_sorted,
+    ray_triangle,
+)
 
 TRI = 2  # item kind of a regular Loop patch's net in ``trace.pools.Pieces``
+COUNTED = -3  # memo root of a one-cell patch whose triangle was counted (as bezier's)
 
 
 @leaf_njit
@@ -181,19 +185,26 @@ def _tri_entry(ox, oy, oz, ix, iy, iz, w, q, tmax):
 
 
 @leaf_njit
-def _tri_leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, net, q, gi, gj, g, depth, sides, srow,
-              slack, hit, code, item, lv):
-    """Intersect the micro-triangle (gi, gj), (gi + g, gj), (gi, gj + g) of the patch's
-    depth-``depth`` grid; update ``hit`` (H_SLOT = ``code``, H_LEAF = depth, H_TRI =
-    ``item``, (H_B1, H_B2) = patch parameter)."""
-    inv = 1.0 / (1 << depth)
+def _tri_points(net, q, gi, gj, g, depth, sides, srow, out, r0):
+    """The corners (gi, gj), (gi + g, gj), (gi, gj + g) of a micro-triangle of the patch's
+    depth-``depth`` grid (:func:`grid_point`) into ``out[r0:r0+3]``."""
     for c in range(3):
         a = gi + (g if c == 1 else 0)
         b = gj + (g if c == 2 else 0)
-        lv[c, 0], lv[c, 1], lv[c, 2] = grid_point(net, q, a, b, depth, sides, srow)
+        out[r0 + c, 0], out[r0 + c, 1], out[r0 + c, 2] = grid_point(net, q, a, b, depth, sides,
+                                                                    srow)
+
+
+@leaf_njit
+def _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, pts, r0, gi, gj, g, depth, slack, hit, code,
+             item):
+    """Intersect the micro-triangle ``pts[r0:r0+3]`` (corners as :func:`_tri_points`);
+    update ``hit`` (H_SLOT = ``code``, H_LEAF = depth, H_TRI = ``item``, (H_B1, H_B2) = patch
+    parameter)."""
+    inv = 1.0 / (1 << depth)
     o = (ox, oy, oz)
-    t, ba, bb, bc = ray_triangle(o[kx], o[ky], o[kz], kx, ky, kz, sx, sy, sz, 0, 1, 2, lv,
-                                 hit[H_T], slack)
+    t, ba, bb, bc = ray_triangle(o[kx], o[ky], o[kz], kx, ky, kz, sx, sy, sz, r0, r0 + 1,
+                                 r0 + 2, pts, hit[H_T], slack)
     if t < hit[H_T]:
         hit[H_T] = t
         hit[H_SLOT] = code
@@ -204,23 +215,160 @@ def _tri_leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, net, q, gi, gj, g, depth, side
 
 
 @leaf_njit
-def intersect_tri(ray, nets, nk, depth, sides, srow, slack, hit, code, item, work, st, st_t,
-                  tmp_t, order, lv):
-    """Closest hit on the regular Loop patch whose quartic net is ``nets[nk]`` ((.,4,4,3)
-    store: its first 15 points) refined down to its grid depth ``depth``, nearer than
-    hit[H_T]; updates ``hit``. ``sides[srow]``: the sampling depth of each side's edge (-1:
-    none). ``work`` (>= 3*depth+5 nets), the stack ``st`` (>= 3*depth+1, 5) with entry
+def _push_children(ox, oy, oz, ix, iy, iz, w, base, g, i, j, lev, t_parent, depth, sides, srow,
+                   tmax, tmp_t, order):
+    """The children (nets ``w[base:base+4]``) of node (g, i, j, lev) that the ray enters
+    before ``tmax``, sorted far to near into ``order`` / ``tmp_t``; returns their count. A
+    child that may hold snapped points (:func:`_snapped_node`) is entered untested, at its
+    parent's entry distance ``t_parent``."""
+    n = 0
+    hh = g * (1 << (depth - lev - 1))  # half the node's side, signed
+    for q in range(4):
+        ci = i + (hh if q == 1 or q == 3 else 0)
+        cj = j + (hh if q == 2 or q == 3 else 0)
+        if _snapped_node(ci, cj, -hh if q == 3 else hh, lev + 1, depth, sides, srow):
+            te = t_parent
+        else:
+            te = _tri_entry(ox, oy, oz, ix, iy, iz, w, base + q, tmax)
+        if te < np.inf:
+            n = push_sorted(tmp_t, order, n, te, q)
+    return n
+
+
+@leaf_njit
+def _child(g, i, j, lev, depth, q):
+    """Orientation and origin of child ``q`` of node (g, i, j, lev) (Loop's child order)."""
+    hh = g * (1 << (depth - lev - 1))
+    return (-g if q == 3 else g, i + (hh if q == 1 or q == 3 else 0),
+            j + (hh if q == 2 or q == 3 else 0))
+
+
+@leaf_njit
+def descend_tri(ray, src, s, g0, i0, j0, lev0, nets, nk, depth, sides, srow, slack, hit, code,
+                item, work, st, st_t, st0, tmp_t, order, lv):
+    """Closest hit on the node (g0, i0, j0, lev0) of the regular Loop patch whose quartic
+    net is ``nets[nk]`` ((.,4,4,3) stores: the first 15 points), its own net ``src[s]``,
+    refined per ray down to the grid depth ``depth``, storing nothing; updates ``hit``.
+    ``sides[srow]``: the sampling depth of each side's edge (-1: none). ``work`` (>=
+    3*depth+5 nets), rows ``st0 ..`` of the stack ``st`` (>= 3*depth+1 of them) with entry
     distances ``st_t``, ``tmp_t`` / ``order`` (4,) and ``lv`` (>= 3, 3) are scratch.
     Returns the number of micro-triangles tested."""
     ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz = ray
     root = nets.reshape((nets.shape[0], 16, 3))
     w = work.reshape((work.shape[0], 16, 3))
+    sw = src.reshape((src.shape[0], 16, 3))
     base = w.shape[0] - 4  # the last four rows receive children before sorting
     for p in range(N_TRI):
         for c in range(3):
-            w[0, p, c] = root[nk, p, c]
+            w[0, p, c] = sw[s, p, c]
     # stack rows: orientation g (+1 upright, -1 turned), -, i, j, level (nets in w[row])
-    st[0, 0], st[0, 2], st[0, 3], st[0, 4] = 1, 0, 0, 0
+    st[st0, 0], st[st0, 2], st[st0, 3], st[st0, 4] = g0, i0, j0, lev0
+    st_t[st0] = 0.0
+    sp = 1
+    tested = 0
+    while sp > 0:
+        sp -= 1
+        if st_t[st0 + sp] >= hit[H_T]:  # a nearer hit was found since it was pushed
+            continue
+        g, i, j, lev = st[st0 + sp, 0], st[st0 + sp, 2], st[st0 + sp, 3], st[st0 + sp, 4]
+        if lev == depth:
+            _tri_points(root, nk, i, j, g, depth, sides, srow, lv, 0)
+            _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, 0, i, j, g, depth, slack, hit, code,
+                     item)
+            tested += 1
+            continue
+        tri_split(w, sp, SPLIT_PTR, SPLIT_COL, SPLIT_W, base)
+        n = _push_children(ox, oy, oz, ix, iy, iz, w, base, g, i, j, lev, st_t[st0 + sp], depth,
+                           sides, srow, hit[H_T], tmp_t, order)
+        for e in range(n):
+            q = order[e]
+            for p in range(N_TRI):
+                for c in range(3):
+                    w[sp, p, c] = w[base + q, p, c]
+            cg, ci, cj = _child(g, i, j, lev, depth, q)
+            st[st0 + sp, 0], st[st0 + sp, 2], st[st0 + sp, 3] = cg, ci, cj
+            st[st0 + sp, 4] = lev + 1
+            st_t[st0 + sp] = tmp_t[e]
+            sp += 1
+    return tested
+
+
+@leaf_njit
+def _expand_tri(node, lev, depth, mem, work):
+    """Split memo node ``node`` (its net stored): its four children with their boxes, and
+    their nets unless they are cells. Returns the first child, or -1 when a store is full."""
+    root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
+    leaf = lev + 1 == depth
+    if cnt[M_NODES] + 4 > len(child) or (not leaf and cnt[M_NETS] + 4 > len(m_nets)):
+        cnt[M_FULL] = 1
+        return -1
+    w = work.reshape((work.shape[0], 16, 3))
+    mw = m_nets.reshape((m_nets.shape[0], 16, 3))
+    base = w.shape[0] - 4
+    for p in range(N_TRI):  # (tri_split splits within one array)
+        for c in range(3):
+            w[base - 1, p, c] = mw[data[node], p, c]
+    tri_split(w, base - 1, SPLIT_PTR, SPLIT_COL, SPLIT_W, base)
+    first = cnt[M_NODES]
+    for q in range(4):
+        lo0, lo1, lo2, hi0, hi1, hi2 = tri_box(w, base + q)
+        lo0, lo1, lo2, hi0, hi1, hi2 = pad_box(lo0, lo1, lo2, hi0, hi1, hi2)
+        row = NOT_YET
+        if not leaf:
+            row = cnt[M_NETS]
+            cnt[M_NETS] = row + 1
+            for p in range(16):
+                for c in range(3):
+                    mw[row, p, c] = w[base + q, p if p < N_TRI else N_TRI - 1, c]
+        m = cnt[M_NODES]
+        cnt[M_NODES] = m + 1
+        child[m] = -1
+        box[m, 0], box[m, 1], box[m, 2] = lo0, lo1, lo2
+        box[m, 3], box[m, 4], box[m, 5] = hi0, hi1, hi2
+        data[m] = row
+    child[node] = first
+    return first
+
+
+# intersect_tri (about 80 lines) is not split: it is inlined into the trace kernel (through
+# bezier.intersect_patch) and its descent keeps the ray, the stack and the memo in locals.
+@inline_njit
+def intersect_tri(ray, it, nets, nk, depth, sides, slack, hit, code, mem, scratch):
+    """Closest hit on the regular Loop patch of item ``it`` (its quartic net ``nets[nk]``,
+    grid depth ``depth``, side sampling ``sides[it]``) nearer than hit[H_T]; updates ``hit``.
+    The ray descends the patch's 1-to-4 splits nearest first into the nodes whose boxes it
+    enters; a node is split (its children's boxes and nets stored) once per thread, a cell's
+    corners evaluated once, in the thread's memo ``mem`` (``trace/bezier.py``; a cell keeps 3
+    of its 4 corner rows); when a store is full the ray goes on splitting per ray
+    (:func:`descend_tri`). Returns the micro-triangles built: cells this ray was the first of
+    its thread to evaluate, and those it evaluated per ray."""
+    ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz = ray
+    work, st, st_t, tmp_t, order, lv, lp = scratch
+    root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
+    root = nets.reshape((nets.shape[0], 16, 3))
+    node = root_m[it]
+    if node < 0:
+        if cnt[M_NODES] + 1 > len(child) or cnt[M_NETS] + 1 > len(m_nets) or depth == 0:
+            if depth > 0:
+                cnt[M_FULL] = 1
+            one, zero = np.int64(1), np.int64(0)
+            n_t = descend_tri(ray, nets, nk, one, zero, zero, zero, nets, nk, depth, sides, it,
+                              slack, hit, code, it, work, st, st_t, zero, tmp_t, order, lv)
+            if depth > 0 or node == NOT_YET:  # a one-cell patch counts once per thread
+                if depth == 0:
+                    root_m[it] = COUNTED
+                return n_t
+            return 0
+        row = cnt[M_NETS]
+        cnt[M_NETS] = row + 1
+        copy_net(m_nets, row, nets, nk)
+        node = cnt[M_NODES]
+        cnt[M_NODES] = node + 1
+        child[node] = -1
+        data[node] = row
+        root_m[it] = node
+    # stack rows: node, orientation, i, j, level; st_t: entry distance when pushed
+    st[0, 0], st[0, 1], st[0, 2], st[0, 3], st[0, 4] = node, 1, 0, 0, 0
     st_t[0] = 0.0
     sp = 1
     tested = 0
@@ -228,35 +376,51 @@ def intersect_tri(ray, nets, nk, depth, sides, srow, slack, hit, code, item, wor
         sp -= 1
         if st_t[sp] >= hit[H_T]:  # a nearer hit was found since it was pushed
             continue
-        g, i, j, lev = st[sp, 0], st[sp, 2], st[sp, 3], st[sp, 4]
+        node, g, i, j, lev = st[sp, 0], st[sp, 1], st[sp, 2], st[sp, 3], st[sp, 4]
         if lev == depth:
-            _tri_leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, root, nk, i, j, g, depth, sides,
-                      srow, slack, hit, code, item, lv)
-            tested += 1
+            r = data[node]
+            if r == NOT_YET:
+                if cnt[M_CELLS] < len(m_cells) // 4:
+                    r = data[node] = cnt[M_CELLS]
+                    cnt[M_CELLS] = r + 1
+                    _tri_points(root, nk, i, j, g, depth, sides, it, m_cells, 4 * r)
+                    tested += 1
+                else:
+                    cnt[M_FULL] = 1
+            if r >= 0:
+                _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, m_cells, 4 * r, i, j, g, depth,
+                         slack, hit, code, it)
+            else:  # no room: evaluated on the spot
+                _tri_points(root, nk, i, j, g, depth, sides, it, lv, 0)
+                _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, 0, i, j, g, depth, slack, hit,
+                         code, it)
+                tested += 1
             continue
-        tri_split(w, sp, SPLIT_PTR, SPLIT_COL, SPLIT_W, base)
-        # the children the ray enters, pushed far to near (one with snapped points: see
-        # _snapped_node)
+        c = child[node]
+        if c < 0:
+            c = _expand_tri(node, lev, depth, mem, work)
+            if c < 0:  # a store is full: split per ray below this node
+                tested += descend_tri(ray, m_nets, data[node], g, i, j, lev, nets, nk, depth,
+                                      sides, it, slack, hit, code, it, work, st, st_t, sp + 1,
+                                      tmp_t, order, lv)
+                continue
+        # the children the ray enters, pushed far to near
         n = 0
         hh = g * (1 << (depth - lev - 1))  # half the node's side, signed
         for q in range(4):
-            ci = i + (hh if q == 1 or q == 3 else 0)
-            cj = j + (hh if q == 2 or q == 3 else 0)
-            if _snapped_node(ci, cj, -hh if q == 3 else hh, lev + 1, depth, sides, srow):
-                te = st_t[sp]
+            cg, ci, cj = _child(g, i, j, lev, depth, q)
+            if _snapped_node(ci, cj, cg * abs(hh), lev + 1, depth, sides, it):
+                te = st_t[sp]  # (see _push_children)
             else:
-                te = _tri_entry(ox, oy, oz, ix, iy, iz, w, base + q, hit[H_T])
+                te = slab_entry(ox, oy, oz, ix, iy, iz, box[c + q, 0], box[c + q, 1],
+                                box[c + q, 2], box[c + q, 3], box[c + q, 4], box[c + q, 5],
+                                0.0, hit[H_T])
             if te < np.inf:
                 n = push_sorted(tmp_t, order, n, te, q)
         for e in range(n):
             q = order[e]
-            for p in range(N_TRI):
-                for c in range(3):
-                    w[sp, p, c] = w[base + q, p, c]
-            st[sp, 0] = -g if q == 3 else g
-            st[sp, 2] = i + (hh if q == 1 or q == 3 else 0)
-            st[sp, 3] = j + (hh if q == 2 or q == 3 else 0)
-            st[sp, 4] = lev + 1
+            cg, ci, cj = _child(g, i, j, lev, depth, q)
+            st[sp, 0], st[sp, 1], st[sp, 2], st[sp, 3], st[sp, 4] = c + q, cg, ci, cj, lev + 1
             st_t[sp] = tmp_t[e]
             sp += 1
     return tested
