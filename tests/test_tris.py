@@ -108,3 +108,24 @@ def test_threads_do_not_change_the_image(monkeypatch):
     two = render_scene(scene, cages=[cage], threads=n2)
     for name in one.channels:
         assert np.array_equal(one.channels[name], two.channels[name], equal_nan=True), name
+
+
+@needs_shared
+def test_a_hidden_loop_object_is_not_refined(tmp_path, monkeypatch):
+    """Invariant 5 for the per-ray nets: a Loop torus hidden behind a plane gets no net and
+    no grid; seen alone, it is refined (so the test can fail)."""
+    from test_render import _write_plane
+
+    monkeypatch.setattr(config, "LOOP_PER_RAY", True)
+    plane = tmp_path / "plane.obj"
+    _write_plane(plane, 3.0, 8.0)
+    torus = MODELS / "torus.obj"
+    cages = [subtrace.load_cage(plane), subtrace.load_cage(torus)]
+    scene = small_scene([plane, torus], (0.0, 0.0, 6.0), (0.0, 0.0, 0.0), fov=40.0)
+    res = render_scene(scene, cages=cages)
+    assert np.all(res.channels["object_id"] == 0)
+    assert np.count_nonzero(res.refined_objects == 1) == 0
+    res = render_scene(small_scene([torus], (0.0, 0.0, 6.0), (0.0, 0.0, 0.0), fov=40.0),
+                       cages=cages[1:])
+    assert res.stats.pixels_covered > 100
+    assert np.count_nonzero(res.refined_objects == 0) > 100

@@ -1,9 +1,10 @@
 """Shading: rebuild position, normal, ids and colour from the hits (pbrt habit: the
 intersection kernels return only t, the micro-face and its barycentrics).
 
-The normal at a hit interpolates the exact unit limit normals of the micro-face's corners
-(computed from the limit tangents of the subdivision core) with the hit's barycentrics, so
-it is within the tolerance's angle of the limit normal at that point; where the limit
+A hit on a Bezier piece or a regular Loop triangle's net takes the exact normal of its net
+at the hit's parameter. Elsewhere the normal at a hit interpolates the exact unit limit
+normals of the micro-face's corners (computed from the limit tangents of the subdivision
+core) with the hit's barycentrics, so it is within the tolerance's angle of the limit normal at that point; where the limit
 tangents leave a corner's normal undefined, the micro-triangle's own normal is used.
 Lighting is Lambertian, two-sided: a headlight at the eye plus directional lights.
 """

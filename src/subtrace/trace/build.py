@@ -17,7 +17,8 @@ def build_requested(table, requested, depths, edge_depth, grids, iso, round_no, 
     """Build the patches ``requested`` (sorted ids) in round ``round_no``: irregular
     Catmull-Clark patches into pieces (``iso``, a :class:`~subtrace.trace.pools.Pieces`;
     all of an object's in one isolation, taking what ``record[object id]`` kept of the depth
-    choice's isolation), Loop patches into grids (``grids``, a
+    choice's isolation), regular Loop triangles into triangular Bezier nets traced per ray
+    (also in ``iso``, with ``config.LOOP_PER_RAY``), other Loop patches into grids (``grids``, a
     :class:`~subtrace.trace.pools.LoopGrids`) whose sides shared with a coarser neighbour
     are snapped onto its polyline (``edge_depth``). Counts go to ``stats``."""
     obj = table.object_id[requested]

@@ -7,7 +7,10 @@ as the first 15 of a (4,4,3) net's 16 points (item kind ``TRI``). Its grid depth
 comes from the angular criterion. A ray that enters the net's box descends the patch's
 1-to-4 split in Loop's child order (corner children 0, 1, 2, then the middle child turned
 half a turn: ``basis.TRI_SPLIT``), entering the children whose net boxes it hits, nearest
-first, until level ``d`` (nothing is stored).
+first, until level ``d``. Each thread keeps what its rays split in its memo (the quads' memo,
+``trace/bezier.py``: node boxes, the nets of inner nodes, three corner rows per cell), so a
+node is split and a cell evaluated once per thread (:func:`intersect_tri`); a full store
+makes the ray split on the spot (:func:`descend_tri`), which changes no hit.
 
 A node at level ``l`` is the sub-triangle with corners ``A, A + g (h, 0), A + g (0, h)`` of
 the depth-``d`` grid (``h = 2^(d-l)``, ``g = +1`` upright, ``-1`` turned), grid vertex
@@ -27,13 +30,13 @@ import numpy as np
 
 from subtrace.accel.bvh import slab_entry
 from subtrace.patches.basis import (
-    DEGREE, N_TRI, NORMAL_STEP, copy_net, NORMAL_TRIES, SPLIT_COL, SPLIT_PTR, SPLIT_W, pad_box, tri_box,
-    tri_split, unit_normal,
+    DEGREE, N_TRI, NORMAL_STEP, NORMAL_TRIES, SPLIT_COL, SPLIT_PTR, SPLIT_W, copy_net, pad_box,
+    tri_box, tri_split, unit_normal,
 )
 from subtrace.runtime.jit import inline_njit, leaf_njit
 from subtrace.trace.prims import (
-    H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, M_CELLS, M_FULL, M_NETS, M_NODES, NOT_YET, push_sorted,
-    ray_triangle,
+    H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, M_CELLS, M_FULL, M_NETS, M_NODES, NOT_YET,
+    push_sorted, ray_triangle,
 )
 
 TRI = 2  # item kind of a regular Loop patch's net in ``trace.pools.Pieces``
