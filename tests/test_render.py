@@ -16,6 +16,7 @@ WATERTIGHT = [
     (MODELS / "spot_control_mesh.obj", (0.0, 0.05, 0.2)),
     (MODELS / "blub_control_mesh.obj", None),
     (MODELS / "torus.obj", None),
+    (MODELS / "spot_low_resolution.obj", None),
     (SHAPES / "catmark_cube_creases1.obj", None),
 ]
 
@@ -284,14 +285,16 @@ def test_render_reports_progress_up_to_every_ray():
 
 
 @needs_shared
-def test_memo_and_threads_do_not_change_the_image(monkeypatch):
-    """Rays share their Bezier splits through a per-thread memo; a memo that runs out makes
-    the rays split on the spot instead. Neither the memo's size nor the thread count may
-    change a single bit of the image (the same cells, boxes and order either way)."""
+@pytest.mark.parametrize("mesh", ["spot_control_mesh.obj", "spot_low_resolution.obj"])
+def test_memo_and_threads_do_not_change_the_image(mesh, monkeypatch):
+    """Rays share their Bezier splits (quads, and Loop triangles' nets) through a per-thread
+    memo; a memo that runs out makes the rays split on the spot instead. Neither the memo's
+    size nor the thread count may change a single bit of the image (the same cells, boxes
+    and order either way)."""
     from subtrace.runtime import threads as tasks
     from subtrace.trace import pools
 
-    mesh = MODELS / "spot_control_mesh.obj"
+    mesh = MODELS / mesh
     scene = small_scene([mesh], (1.2, 0.6, 2.2), (0.0, 0.3, 0.0), width=96, height=72,
                    tolerance=0.5)
     cage = subtrace.load_cage(mesh)

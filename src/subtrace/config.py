@@ -42,6 +42,10 @@ MAX_VALENCE = 1024
 # Deepest grid of one patch (2^n x 2^n cells): bounds memory when the eye is inside a shell.
 MAX_GRID_DEPTH = 8
 
+# Regular Loop triangles traced per ray through their quartic Bezier nets (trace/tris.py)
+# instead of being built into whole grids of exact limit points (patches/grids.py).
+LOOP_PER_RAY = True
+
 # How primary rays find the patch shells they enter: "projection" (shells binned into image
 # tiles, accel/projection.py; measured faster on Spot and the sword, BENCHMARKS.md) or "bvh".
 PRIMARY_ACCEL = "projection"

@@ -6,8 +6,9 @@ tolerance and makes neighbours sample their shared edges alike, then runs rounds
 ``trace.kernels.trace_round``. Regular Catmull-Clark patches are refined per ray inside the
 kernel, each thread keeping what its rays split (``trace.pools.Memos``). After each round
 the patches that rays asked for are built: irregular Catmull-Clark patches into Bezier
-pieces (each with its own depth) and cells (``trace.pools.Pieces``), Loop patches into
-grids with snapped sides and quadtree boxes (``trace.pools.LoopGrids``). The rays that
+pieces (each with its own depth) and cells (``trace.pools.Pieces``), regular Loop
+triangles into quartic Bezier nets split per ray like the quads' (``trace/tris.py``), other
+Loop patches into grids with snapped sides and quadtree boxes (``trace.pools.LoopGrids``). The rays that
 asked are then traced again. Patches no ray reaches before a closer hit are never refined.
 Finally ``shade.py`` turns hits into image channels.
 """

@@ -1,9 +1,10 @@
 """Shading: rebuild position, normal, ids and colour from the hits (pbrt habit: the
 intersection kernels return only t, the micro-face and its barycentrics).
 
-The normal at a hit interpolates the exact unit limit normals of the micro-face's corners
-(computed from the limit tangents of the subdivision core) with the hit's barycentrics, so
-it is within the tolerance's angle of the limit normal at that point; where the limit
+A hit on a Bezier piece or a regular Loop triangle's net takes the exact normal of its net
+at the hit's parameter. Elsewhere the normal at a hit interpolates the exact unit limit
+normals of the micro-face's corners (computed from the limit tangents of the subdivision
+core) with the hit's barycentrics, so it is within the tolerance's angle of the limit normal at that point; where the limit
 tangents leave a corner's normal undefined, the micro-triangle's own normal is used.
 Lighting is Lambertian, two-sided: a headlight at the eye plus directional lights.
 """
@@ -20,6 +21,7 @@ from subtrace.patches.basis import bez_normal
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
 from subtrace.trace.prims import ray_setup
+from subtrace.trace.tris import TRI, tri_normal
 
 
 # the planes the shading fills, in this order, and what a pixel whose ray missed holds
@@ -97,7 +99,10 @@ def _shade_task(task, n_tasks, frame, width, hits, grids, iso, patches, lights, 
                 depth = hits.leaf[r]
                 it = hits.item[r]
                 c = iso.ref[it]
-                if iso.kind[it] == 0:
+                if iso.kind[it] == TRI:
+                    # a regular Loop patch: the normal of its triangular net at (u, v)
+                    nx, ny, nz = tri_normal(iso.nets.reshape((len(iso.nets), 16, 3)), c, u, v)
+                elif iso.kind[it] == 0:
                     # a Bezier piece over a dyadic square of the patch (the whole of a regular one)
                     sc = 1 << iso.level[it]
                     nx, ny, nz = bez_normal(iso.nets[c], u * sc - iso.i0[it],

@@ -28,8 +28,10 @@ from subtrace.patches.basis import (
     split_net as _split,
 )
 from subtrace.trace.prims import (
-    H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, push_sorted, ray_triangle,
+    H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, M_CELLS, M_FULL, M_NETS, M_NODES, NOT_YET,
+    push_sorted, ray_triangle,
 )
+from subtrace.trace.tris import TRI, intersect_tri
 
 MAX_SIDE_SAMPLES = 256  # samples per cell side at most (2^(side depth - depth))
 
@@ -275,8 +277,7 @@ def _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, src, s, lev0, ci0, 
 # its parent is split, its net when it is split itself, a cell's corners when a ray first
 # reaches it; so what is stored is what the thread's rays needed.
 
-M_NODES, M_NETS, M_CELLS, M_FULL = range(4)
-NOT_YET, FAN = -1, -2
+FAN = -2
 COUNTED = -3  # an item root: a one-cell piece (evaluated per ray) whose triangles counted
 
 
@@ -386,6 +387,10 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch):
             continue
         depth = item_depth[it]  # its grid, in the patch's units
         inv = 1.0 / (1 << depth)
+        if kind[it] == TRI:  # a regular Loop patch: its triangular net (trace/tris.py)
+            tested += intersect_tri(ray, it, nets, ref[it], depth, item_side, slack, hit, code,
+                                    mem, scratch)
+            continue
         if kind[it] == 1:  # an irregular cell: its exact corners
             c = ref[it]
             _corner_params(lp, i0[it], j0[it], inv)

@@ -5,8 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from subtrace import config
+from subtrace.lines.items import box_nets, loop_regular
 from subtrace.patches.grids import build_grids, node_boxes, snap_sides
 from subtrace.patches.isolate import build_isolated
+from subtrace.trace.tris import tri_nets_as_pieces
 
 
 def build_requested(table, requested, depths, edge_depth, grids, iso, round_no, stats, eye,
@@ -14,7 +17,8 @@ def build_requested(table, requested, depths, edge_depth, grids, iso, round_no, 
     """Build the patches ``requested`` (sorted ids) in round ``round_no``: irregular
     Catmull-Clark patches into pieces (``iso``, a :class:`~subtrace.trace.pools.Pieces`;
     all of an object's in one isolation, taking what ``record[object id]`` kept of the depth
-    choice's isolation), Loop patches into grids (``grids``, a
+    choice's isolation), regular Loop triangles into triangular Bezier nets traced per ray
+    (also in ``iso``, with ``config.LOOP_PER_RAY``), other Loop patches into grids (``grids``, a
     :class:`~subtrace.trace.pools.LoopGrids`) whose sides shared with a coarser neighbour
     are snapped onto its polyline (``edge_depth``). Counts go to ``stats``."""
     obj = table.object_id[requested]
@@ -37,6 +41,11 @@ def build_requested(table, requested, depths, edge_depth, grids, iso, round_no, 
             stats.micro_triangles += 2 * n_cell
             continue
         d = int(dep[s])
+        if config.LOOP_PER_RAY:
+            ids = _loop_nets(o, table, ids, d, edge_depth, iso, round_no)
+            stats.pieces += int(e - s) - len(ids)
+            if not len(ids):
+                continue
         P, N = build_grids(o.level, o.points, o.cage.options, table.face[ids], d)
         side_depth = np.where(table.edges[ids, :3] >= 0, edge_depth[table.edges[ids, :3]], -1)
         snap_sides(P, d, False, side_depth)
@@ -45,3 +54,18 @@ def build_requested(table, requested, depths, edge_depth, grids, iso, round_no, 
         stats.micro_triangles += len(ids) * (1 << (2 * d))
         stats.grid_points += P.shape[0] * P.shape[1]
     stats.patches_refined += len(requested)
+
+
+def _loop_nets(o, table, ids, depth, edge_depth, iso, round_no):
+    """Put the regular triangles among the Loop patches ``ids`` (object ``o``, grid depth
+    ``depth``) into ``iso`` as triangular Bezier nets traced per ray (``trace/tris.py``),
+    each side sampled at its edge's depth; returns the other patches (built as grids)."""
+    faces = table.face[ids]
+    reg = loop_regular(o.level, o.cage.options, faces)
+    r = ids[reg]
+    if len(r):
+        nets = tri_nets_as_pieces(box_nets(o.level, o.points, faces[reg]))
+        side = np.full((len(r), 4), -1, np.int64)
+        side[:, :3] = np.where(table.edges[r, :3] >= 0, edge_depth[table.edges[r, :3]], -1)
+        iso.append_tris(r, np.full(len(r), depth, np.int64), side, nets, round_no)
+    return ids[~reg]

@@ -26,10 +26,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from subtrace.patches.basis import net_bounds
+from subtrace.patches.basis import BOX_PAD, net_bounds
 from subtrace.patches.grids import grid_params, leaf_corners
 from subtrace.patches.isolate import item_sides, rest_boxes
 from subtrace.trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
+from subtrace.trace.tris import TRI
 
 CANDIDATES = 8  # unbuilt shells a ray remembers between rounds (more: it traverses again)
 
@@ -43,7 +44,7 @@ class PieceArrays(NamedTuple):
     round: np.ndarray  # (S,) int64: round it was built in (-1: from the start)
     depth_i: np.ndarray  # (I,) int64: grid depth, in the patch's units
     side: np.ndarray  # (I,4) int64: sampling depth of each side, in the patch's units
-    kind: np.ndarray  # (I,) int8: 0 Bezier piece, 1 cell
+    kind: np.ndarray  # (I,) int8: 0 Bezier piece, 1 cell, 2 (TRI) Loop triangular net
     ref: np.ndarray  # (I,) int64: row in nets (piece) or cells (cell, 4 rows each)
     level: np.ndarray  # (I,) int64: the item's level
     i0: np.ndarray  # (I,) int64: origin in units of 2^-level
@@ -310,6 +311,25 @@ class Pieces(Growable):
                            rest_hi=hi)
         s0 = self.put("slots", patch=patches, first=i_start + ar, count=np.ones(m, np.int64),
                       round=np.full(m, -1))
+        self.patch_iso[patches] = s0 + ar
+
+    def append_tris(self, patches, depth, side, nets, round_no):
+        """Slots for regular Loop patches built in round ``round_no``, one triangular net
+        each (item kind ``trace.tris.TRI``; ``nets`` (m,4,4,3) from
+        :func:`~subtrace.trace.tris.tri_nets_as_pieces`), grid depths ``depth`` (m,) and
+        the sampling depth of each side's edge ``side`` (m,4) (-1: none)."""
+        m = len(patches)
+        z = np.zeros(m, np.int64)
+        ar = np.arange(m, dtype=np.int64)
+        lo, hi = nets.min(axis=(1, 2)), nets.max(axis=(1, 2))
+        pad = BOX_PAD * np.maximum(np.abs(lo), np.abs(hi)).max(axis=1, keepdims=True)
+        lo, hi = lo - pad, hi + pad  # (widened for rounding, as basis.net_box)
+        n0 = self.put("nets", nets=nets)
+        i_start = self.put("items", kind=np.full(m, TRI, np.int8), ref=n0 + ar, level=z, i0=z,
+                           j0=z, depth_i=depth, side=side, lo=lo, hi=hi, rest_lo=lo,
+                           rest_hi=hi)
+        s0 = self.put("slots", patch=patches, first=i_start + ar, count=np.ones(m, np.int64),
+                      round=np.full(m, round_no))
         self.patch_iso[patches] = s0 + ar
 
     def view(self) -> PieceArrays:

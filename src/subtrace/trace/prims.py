@@ -16,6 +16,11 @@ from subtrace.runtime.jit import leaf_njit
 H_T, H_SLOT, H_LEAF, H_TRI, H_B1, H_B2 = range(6)
 HIT_FIELDS = 6
 
+# a thread's memo of split nets (``trace/bezier.py`` says what it holds): the rows of its
+# counts, and the state of a node not yet evaluated
+M_NODES, M_NETS, M_CELLS, M_FULL = range(4)
+NOT_YET = -1
+
 
 @leaf_njit
 def push_sorted(ent_t, ent_i, n, te, item):
