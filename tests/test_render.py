@@ -26,7 +26,6 @@ WATERTIGHT = [
 def test_watertight_from_inside(mesh, eye, tolerance, monkeypatch):
     """Invariant 4: from inside a closed surface every ray hits it (zero misses), whatever
     the tolerance and however differently neighbouring patches are refined."""
-    monkeypatch.setattr(config, "MAX_GRID_DEPTH", 5)  # the eye sits inside nearby shells
     cage = subtrace.load_cage(mesh)
     if eye is None:
         # a point inside: the middle of the limit surface along a ray through the centre
