@@ -157,7 +157,7 @@ def test_tile_lists_over_the_budget_fall_back_to_the_bvh(capsys, tmp_path):
     frame = camera_frame(camera)
     shells = table.shell_min.copy(), table.shell_max.copy()
     depths = choose_depths(table, frame[0], scene.render.tolerance_rad(camera),
-                           config.MAX_GRID_DEPTH, {}, shells)
+                           8, {}, shells)
     tiles = project_shells(*shells, frame, 160, 120)
     lists = tiles_bytes(len(tiles.items), len(tiles.off) - 1)
     need = (memory_estimate(table, depths, 160 * 120)

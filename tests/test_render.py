@@ -75,7 +75,6 @@ def test_watertight_from_inside_creased_box(tmp_path, tolerance, monkeypatch):
 
 
 def _check_watertight(mesh, eye, tolerance, monkeypatch):
-    monkeypatch.setattr(config, "MAX_GRID_DEPTH", 5)  # the eye sits inside nearby shells
     cage = subtrace.load_cage(mesh)
     if eye is None:
         # a point inside: the middle of the limit surface along a ray through the centre

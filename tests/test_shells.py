@@ -92,7 +92,7 @@ def _isolated_shells(cage, tol_rad):
     lo, hi = table.shell_min.copy(), table.shell_max.copy()
     centre = 0.5 * (lo.min(axis=0) + hi.max(axis=0))
     eye = centre + np.array([0.0, 0.0, 3.0 * np.linalg.norm(hi.max(axis=0) - lo.min(axis=0))])
-    choose_depths(table, eye, tol_rad, config.MAX_GRID_DEPTH, {}, (lo, hi))
+    choose_depths(table, eye, tol_rad, 8, {}, (lo, hi))
     changed = np.any(lo != table.shell_min, axis=1) | np.any(hi != table.shell_max, axis=1)
     return table, lo, hi, changed
 

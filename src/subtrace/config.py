@@ -39,8 +39,31 @@ MAX_COORDINATE = 1e100
 # cores, a 10,000-vertex face had not finished after 60 s (in isolated_depths' refinement).
 MAX_VALENCE = 1024
 
-# Deepest grid of one patch (2^n x 2^n cells): bounds memory when the eye is inside a shell.
-MAX_GRID_DEPTH = 8
+# Refinement depth is limited by floating point, not by a constant: a patch stops refining
+# where its cells would be smaller than 2^-PRECISION_BITS of the largest coordinate
+# magnitude the ray test works at (the patch's shell and the eye):
+# patches/criterion.py: precision_depths. Below that the descent resolves nothing more: net
+# boxes are padded by BOX_PAD = 1e-12 (about 2^-40) and cell slabs by 1e-11 of that
+# magnitude (patches/basis.py, trace/bezier.py), so a finer cell's box is mostly padding,
+# while a cell of 2^-40 still spans 4096 ulps (2^-52), far above the few ulps of rounding
+# in its corners and the ray / triangle test. Since a patch's extent is at most 2*sqrt(3)
+# times that magnitude, no depth exceeds PRECISION_BITS + 2 = 42: dyadic parameters
+# (i / 2^n) stay exact in doubles (52 bits) and shifts 1 << n fit int64. A patch whose
+# tolerance asks for more is capped there, and the render says so (one warning, the EXR
+# header's subtrace:depth_cap and depth_cap_reason = "precision").
+PRECISION_BITS = 40
+
+# Loop grids index their quadtree nodes in 40 bits (trace/kernels.py packs a node's level
+# and index in one int64), so a grid is at most 2^20 x 2^20 cells; the memory budget caps
+# them far earlier (4^20 points of 640 bytes: 700 TB a patch), but a larger budget is capped here, with
+# the warning (reason "size").
+LOOP_MAX_GRID_DEPTH = 20
+
+# A cell side carries at most 2^FAN_LEVELS samples (a regular patch or piece beside a finer
+# one fans its cells, trace/bezier.py): a coarser neighbour is raised to within FAN_LEVELS
+# of the finer one (patches/criterion.py: edge_sampling; trace/pools.py: Pieces), which
+# only adds refinement where rays descend, never a cap.
+FAN_LEVELS = 8
 
 # Regular Loop triangles traced per ray through their quartic Bezier nets (trace/tris.py)
 # instead of being built into whole grids of exact limit points (patches/grids.py).

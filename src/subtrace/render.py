@@ -32,7 +32,7 @@ from subtrace.patches.criterion import edge_sampling
 from subtrace.patches.table import build_patch_table
 from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
-from subtrace.shade import CHANNELS, miss_values, patch_shading, shade
+from subtrace.shade import CHANNELS, deepest_level, miss_values, patch_shading, shade
 from subtrace.subdiv.limit import limit_points
 from subtrace.trace.budget import check_memory, choose_within_budget, warn_tiles
 from subtrace.trace.build import build_requested
@@ -61,8 +61,13 @@ class RenderStats:
     memo_full: int = 0  # times a thread's memo ran out during a round (rays split on the spot)
     memo_bytes: int = 0  # bytes of the memos' stores in use at the end
     rounds: int = 0
-    max_depth: int = 0
-    depth_cap: int = -1  # the grid depth the memory budget capped refinement at (-1: none)
+    max_depth: int = 0  # the deepest grid built (in its patch's units)
+    max_level: int = -1  # the deepest level hit: the level channel's maximum (-1: none)
+    # the deepest grid depth a cap held a patch to, below what its tolerance asked (-1: no
+    # cap), and why: "memory" (the budget), "precision" (what doubles resolve, config:
+    # PRECISION_BITS), "size" (Loop grids' quadtree index), comma-separated ("": none)
+    depth_cap: int = -1
+    depth_cap_reason: str = ""
     # 1: the projection's tile lists did not fit the memory budget, so rays walked the BVH
     accel_fallback: int = 0
     pixels_covered: int = 0
@@ -111,8 +116,9 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     ``progress(done, total, label)``: told after each round how many rays are final.
     ``max_memory``: a budget in bytes (None: none); depths whose estimate
     (``patches.criterion.memory_estimate``) exceeds it are capped, with a warning, and the
-    threads' memos are kept within what is left."""
-    max_depth = config.MAX_GRID_DEPTH if max_depth is None else max_depth
+    threads' memos are kept within what is left. ``max_depth``: an explicit cap on every
+    patch's depth (None: only what floating point resolves, ``config.PRECISION_BITS``);
+    any cap that holds a patch below its tolerance is warned of and recorded in ``stats``."""
     accel = config.PRIMARY_ACCEL if accel is None else accel
     if accel not in ("projection", "bvh"):
         raise ValueError(f"unknown acceleration {accel!r}")
@@ -273,6 +279,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     shade(camera_frame(camera), W, hits, grids, iso.view(), patch_shading(table, colors), lights,
           headlight, miss_values(scene.render.background), planes, covered)
     stats.pixels_covered = int(covered.sum())
+    stats.max_level = deepest_level(planes)
     channels = {name: planes[k].reshape(H, W) for k, name in enumerate(CHANNELS)}
     stats.time_shade = time.perf_counter() - t0
     stats.time_total = time.perf_counter() - t_start
@@ -299,5 +306,6 @@ def result_attributes(result: RenderResult, scene) -> dict:
     attrs["subtrace:Z"] = "distance from the eye along the pixel's ray (not camera-space z)"
     attrs["subtrace:accel"] = result.accel
     for k, v in result.stats.__dict__.items():
-        attrs[f"subtrace:{k}"] = float(v) if isinstance(v, float) else int(v)
+        attrs[f"subtrace:{k}"] = (v if isinstance(v, str) else float(v) if isinstance(v, float)
+                                  else int(v))
     return attrs

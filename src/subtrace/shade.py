@@ -64,6 +64,13 @@ def miss_values(background) -> np.ndarray:
     return miss
 
 
+def deepest_level(planes) -> int:
+    """The level channel's maximum over the pixels hit (the planes of :func:`shade`); -1
+    when no ray hit."""
+    level = planes[C_LEVEL]
+    return int(level.max(initial=-1.0))
+
+
 SHADE_BLOCK = 1024  # consecutive pixels shaded together
 
 

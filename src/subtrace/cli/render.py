@@ -89,7 +89,7 @@ def _summary(out, png, result, time_write: float) -> str:
         f"{out}: {cam.width}x{cam.height}, tolerance "
         f"{result.tolerance_rad / cam.pixel_angle():.3g} px, {st.pixels_covered} pixels "
         f"covered; {st.patches_refined} of {st.patches} patches refined, "
-        f"{st.micro_triangles} micro-triangles, deepest level {st.max_depth}; "
+        f"{st.micro_triangles} micro-triangles, deepest level {st.max_level}; "
         f"total {st.time_total:.3f} s (load {st.time_load:.3f}, preprocess "
         f"{st.time_preprocess:.3f}, refine {st.time_refine:.3f}, trace {st.time_trace:.3f}, "
         f"shade {st.time_shade:.3f}, write {time_write:.3f})"

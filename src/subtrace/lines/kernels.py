@@ -60,8 +60,9 @@ from subtrace.patches.basis import (
 from subtrace.runtime.jit import leaf_njit, nb
 from subtrace.trace.prims import push_sorted, ray_triangle, shear
 
-# Deepest halving of an item: 2^-40 of its side is below what double parameters resolve.
-MAX_DEPTH = 40
+# Deepest halving of an item: the renderer's floating-point limit (config.PRECISION_BITS:
+# 2^-40 of its side is below what the descent's padded boxes resolve).
+MAX_DEPTH = config.PRECISION_BITS
 # Work nets on the descent stack: each level keeps at most 3 siblings, plus 10 for splitting.
 STACK_NETS = 3 * MAX_DEPTH + 16
 # Newton iterations for a crossing / for a touch.

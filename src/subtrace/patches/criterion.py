@@ -26,20 +26,46 @@ def subdominant(valence: np.ndarray, quad: bool) -> np.ndarray:
     return np.maximum(scheme.subdominant_eigenvalue(np.maximum(valence, 3)), 0.5)
 
 
-def choose_depths(table, eye: np.ndarray, tol_rad: float, max_depth: int,
-                  record=None, shells=None):
-    """Grid depth of every patch: the smallest n with ``edge_bound * rate^n`` at most
-    ``tol_rad`` times the distance from the eye to the patch's shell (capped); irregular
-    quads needing more than depth 0 are then isolated (:mod:`subtrace.patches.isolate`).
-    With a dict ``record``, ``record[object id]`` keeps what the isolation made (see
-    :func:`~subtrace.patches.isolate.isolated_depths`). ``shells`` = (lo, hi), each (P,3),
-    the shells to tighten: an isolated patch's shell becomes the box of what its isolation
-    ended in (intersected with its own shell); the others' are left as they are."""
+def wanted_depths(table, eye: np.ndarray, tol_rad: float) -> np.ndarray:
+    """(P,) float64: the conservative depth each patch's tolerance asks for, uncapped (the
+    smallest n with ``edge_bound * rate^n`` at most ``tol_rad`` times the distance from
+    the eye to the shell); inf where the eye is inside the shell."""
     d = box_distance(table.shell_min, table.shell_max, eye)
     allowed = d * tol_rad
     with np.errstate(divide="ignore", invalid="ignore"):
         n = np.log(allowed / table.edge_bound) / np.log(table.rate)
     n = np.where(allowed >= table.edge_bound, 0.0, np.ceil(n - 1e-9))
+    return np.where(np.isnan(n), np.inf, n)
+
+
+def precision_depths(table, eye: np.ndarray) -> np.ndarray:
+    """(P,) int32: the deepest grid each patch can be refined to before its cells fall below
+    what double precision resolves at its coordinates (``config.PRECISION_BITS``): cells of
+    a patch of extent ``e`` (its shell's diagonal) are about ``e * 2^-n`` at depth ``n``,
+    kept at least ``2^-PRECISION_BITS`` of the largest coordinate magnitude of its shell and
+    the eye. At most ``PRECISION_BITS + 2`` (the extent is at most ``2 sqrt(3)`` times that
+    magnitude); 0 for a patch of no extent."""
+    lo, hi = table.shell_min, table.shell_max
+    extent = np.linalg.norm(hi - lo, axis=1)
+    scale = np.maximum(np.maximum(np.abs(lo), np.abs(hi)).max(axis=1, initial=0.0),
+                       np.abs(np.asarray(eye, dtype=np.float64)).max())
+    with np.errstate(divide="ignore", invalid="ignore"):
+        n = config.PRECISION_BITS + np.floor(np.log2(extent / scale))
+    n = np.where(np.isfinite(n), n, 0.0)
+    return np.clip(n, 0, config.PRECISION_BITS + 2).astype(np.int32)
+
+
+def choose_depths(table, eye: np.ndarray, tol_rad: float, max_depth,
+                  record=None, shells=None):
+    """Grid depth of every patch: the smallest n with ``edge_bound * rate^n`` at most
+    ``tol_rad`` times the distance from the eye to the patch's shell (:func:`wanted_depths`),
+    capped at ``max_depth`` (an int, or (P,) per patch: :func:`precision_depths`); irregular
+    quads needing more than depth 0 are then isolated (:mod:`subtrace.patches.isolate`).
+    With a dict ``record``, ``record[object id]`` keeps what the isolation made (see
+    :func:`~subtrace.patches.isolate.isolated_depths`). ``shells`` = (lo, hi), each (P,3),
+    the shells to tighten: an isolated patch's shell becomes the box of what its isolation
+    ended in (intersected with its own shell); the others' are left as they are."""
+    n = wanted_depths(table, eye, tol_rad)
     n = np.where(np.isfinite(n), n, max_depth)
     depths = np.clip(n, 0, max_depth).astype(np.int32)
     for oid, o in enumerate(table.objects):
@@ -70,14 +96,16 @@ def memory_estimate(table, depths, n_pixels: int) -> int:
     them all (the per-thread memos of split nets are kept within what is left:
     ``render._Memos``). The constants are ``config.MEMORY_*``."""
     loop = ~table.is_quad
-    N = (1 << depths[loop].astype(np.int64)) if loop.any() else np.zeros(0, np.int64)
-    grid_points = int(((N + 1) * (N + 2) // 2).sum())
+    # in floating point: grids of depth 40 would overflow int64 (the result is clamped)
+    N = np.exp2(depths[loop].astype(np.float64))
+    grid_points = float(((N + 1) * (N + 2) / 2).sum())
     iso = table.is_quad & ~table.regular
     iso_levels = int((depths[iso].astype(np.int64) + 1).sum())
-    return (config.MEMORY_BYTES_PER_PIXEL * int(n_pixels)
-            + config.MEMORY_BYTES_PER_PATCH * table.n_patches
-            + config.MEMORY_BYTES_PER_GRID_POINT * grid_points
-            + config.MEMORY_BYTES_PER_ISOLATED_LEVEL * iso_levels)
+    total = (config.MEMORY_BYTES_PER_PIXEL * float(n_pixels)
+             + config.MEMORY_BYTES_PER_PATCH * float(table.n_patches)
+             + config.MEMORY_BYTES_PER_GRID_POINT * grid_points
+             + config.MEMORY_BYTES_PER_ISOLATED_LEVEL * float(iso_levels))
+    return int(min(total, 2.0**62))
 
 
 def depth_cap(table, depths, n_pixels: int, budget: int):
@@ -100,22 +128,26 @@ def edge_sampling(table, depths):
       to the depth of every neighbour, repeatedly, so it is never coarser than a neighbour
       and equal to its irregular neighbours: its sides need no extra samples.
     * A regular patch (intersected directly) samples a side shared with a finer neighbour at
-      the neighbour's depth (``reg_side`` (R,4)), fanning its cells there.
+      the neighbour's depth (``reg_side`` (R,4)), fanning its cells there; it is raised to
+      within ``config.FAN_LEVELS`` of its finest neighbour, so a cell side carries at most
+      ``2^FAN_LEVELS`` samples.
     * Loop grids snap a side to the coarsest depth on its edge (``edge_depth``, per edge).
     """
     n_e = max(table.n_edges, 1)
     iso = table.is_quad & ~table.regular
     nb_max = np.empty(table.edges.shape, dtype=np.int64)
     edge_depth = np.empty(n_e, dtype=np.int64)
-    _sample_edges(table.edges, depths, iso, nb_max, edge_depth)
+    _sample_edges(table.edges, depths, iso, table.regular, config.FAN_LEVELS, nb_max,
+                  edge_depth)
     reg_side = np.maximum(depths[table.regular][:, None], nb_max[table.regular])
     return edge_depth, np.ascontiguousarray(reg_side, dtype=np.int64)
 
 
 @nb.njit(cache=True)
-def _sample_edges(edges, depths, iso, nb_max, edge_depth):
-    """Raise the ``iso`` patches to their neighbours' depths until none changes (in place);
-    fill the deepest patch on each side's edge (``nb_max``) and the shallowest per edge."""
+def _sample_edges(edges, depths, iso, regular, fan_levels, nb_max, edge_depth):
+    """Raise the ``iso`` patches to their neighbours' depths and the ``regular`` ones to
+    within ``fan_levels`` of them until none changes (in place); fill the deepest patch on
+    each side's edge (``nb_max``) and the shallowest per edge."""
     best = np.full(len(edge_depth), -1, np.int64)
     for p in range(len(depths)):
         for k in range(4):
@@ -126,13 +158,13 @@ def _sample_edges(edges, depths, iso, nb_max, edge_depth):
     while changed:
         changed = False
         for p in range(len(depths)):
-            if not iso[p]:
+            if not (iso[p] or regular[p]):
                 continue
             m = depths[p]
             for k in range(4):
                 e = edges[p, k]
                 if e >= 0:
-                    m = max(m, best[e])
+                    m = max(m, best[e] if iso[p] else best[e] - fan_levels)
             if m > depths[p]:
                 depths[p] = m
                 changed = True

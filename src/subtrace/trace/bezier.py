@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from subtrace import config
 from subtrace.accel.bvh import box_entry, slab_entry, slab_range
 from subtrace.runtime.jit import inline_njit, leaf_njit
 from subtrace.patches.basis import (
@@ -33,7 +34,9 @@ from subtrace.trace.prims import (
 )
 from subtrace.trace.tris import TRI, intersect_tri
 
-MAX_SIDE_SAMPLES = 256  # samples per cell side at most (2^(side depth - depth))
+# samples per cell side at most (2^(side depth - depth)): neighbours are kept within
+# config.FAN_LEVELS of each other (patches/criterion.py: edge_sampling, trace/pools.py)
+MAX_SIDE_SAMPLES = 1 << config.FAN_LEVELS
 
 
 @leaf_njit

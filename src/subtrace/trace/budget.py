@@ -11,7 +11,8 @@ import numpy as np
 
 from subtrace import config
 from subtrace.errors import SceneError, SubtraceWarning
-from subtrace.patches.criterion import choose_depths, depth_cap, memory_estimate
+from subtrace.patches.criterion import (choose_depths, depth_cap, memory_estimate,
+                                        precision_depths, wanted_depths)
 from subtrace.runtime import threads as tasks
 
 
@@ -21,12 +22,34 @@ def mib(n: int) -> str:
 
 
 def warn_capped(budget, cap, depths, estimate):
-    """The one warning of a render whose refinement the memory budget capped."""
-    warnings.warn(SubtraceWarning(
-        f"memory budget {mib(budget)}: refinement capped at depth {max(cap, 0)} below the "
-        f"patches (the tolerance needs depth {int(depths.max(initial=0))}, an estimated "
-        f"{mib(estimate)}), so the image is coarser than the tolerance; raise --max-memory "
-        "(or [render] max_memory in the scene) to refine fully"), stacklevel=3)
+    """The one warning of a render whose refinement the memory budget capped (and nothing
+    else: :func:`warn_depth_cap` says it with the other caps)."""
+    warn_depth_cap(("memory",), cap, depths.max(initial=0), budget, estimate, stacklevel=4)
+
+
+def warn_depth_cap(reasons, cap, wanted, budget=None, estimate=None, stacklevel=3):
+    """The one warning of a render whose refinement depth was capped: ``reasons`` among
+    "memory" (the budget ``budget``, the uncapped depths' estimate ``estimate`` bytes),
+    "size" (Loop grids, ``config.LOOP_MAX_GRID_DEPTH``) and "precision"
+    (``config.PRECISION_BITS``); ``cap`` the deepest depth a capped patch was held to,
+    ``wanted`` the deepest the tolerance asked for (inf: unbounded, the eye in a shell)."""
+    need = "no finite depth (the eye is inside a shell)" if not np.isfinite(wanted) else (
+        f"depth {int(wanted)}")
+    parts = []
+    if "memory" in reasons:
+        parts.append(f"memory budget {mib(budget)}: refinement capped at depth {max(cap, 0)} "
+                     f"below the patches (the tolerance needs {need}, an estimated "
+                     f"{mib(estimate)}), so the image is coarser than the tolerance; raise "
+                     "--max-memory (or [render] max_memory in the scene) to refine fully")
+    if "size" in reasons:
+        parts.append(f"Loop grids capped at depth {config.LOOP_MAX_GRID_DEPTH} (the most "
+                     "their quadtree indexes), so the image is coarser than the tolerance")
+    if "precision" in reasons:
+        parts.append(f"refinement capped at depth {max(cap, 0)} where cells would fall "
+                     f"below 2^-{config.PRECISION_BITS} of the coordinates, what double "
+                     f"precision resolves (the tolerance needs {need}), so the image is "
+                     "coarser there than the tolerance; raise the tolerance")
+    warnings.warn(SubtraceWarning("; ".join(parts)), stacklevel=stacklevel)
 
 
 def warn_tiles(budget):
@@ -64,24 +87,61 @@ class DepthChoice:
     left: int | None
 
 
+def depth_limits(table, eye, max_depth=None):
+    """(P,) int32 deepest depth of each patch and (P,) the reason code of each limit: 0
+    floating point (:func:`~subtrace.patches.criterion.precision_depths`), 1 a Loop grid's
+    size (``config.LOOP_MAX_GRID_DEPTH``), 2 the caller's ``max_depth`` (None: none)."""
+    limit = precision_depths(table, eye)
+    why = np.zeros(table.n_patches, np.int8)
+    loop = ~table.is_quad & (limit > config.LOOP_MAX_GRID_DEPTH)
+    limit[loop] = config.LOOP_MAX_GRID_DEPTH
+    why[loop] = 1
+    if max_depth is not None:
+        low = limit > max_depth
+        limit[low] = max_depth
+        why[low] = 2
+    return limit, why
+
+
+LIMIT_REASONS = ("precision", "size", "depth")
+
+
 def choose_within_budget(table, eye, tol_rad, max_depth, max_memory, n_pixels,
                          stats) -> DepthChoice:
     """Each patch's grid depth (isolating irregular patches, which also tightens their
-    shells), capped with a warning where the memory budget ``max_memory`` asks."""
+    shells), within what floating point resolves (:func:`depth_limits`; ``max_depth``: an
+    explicit cap, None for none) and capped where the memory budget ``max_memory`` asks.
+    Any cap that holds a patch below what its tolerance asks is recorded in ``stats``
+    (``depth_cap``: the deepest depth a capped patch was held to, ``depth_cap_reason``) and
+    said in one warning."""
 
     def choose(cap):
         record = {}
         shells = table.shell_min.copy(), table.shell_max.copy()
         return choose_depths(table, eye, tol_rad, cap, record, shells), record, shells
 
-    depths, record, (shell_min, shell_max) = choose(max_depth)
+    limit, why = depth_limits(table, eye, max_depth)
+    wanted = wanted_depths(table, eye, tol_rad)
+    depths, record, (shell_min, shell_max) = choose(limit)
+    # held below the tolerance's depth (an isolated patch at its limit counts as held)
+    held = (wanted > limit) & (depths >= limit)
+    reasons = [LIMIT_REASONS[k] for k in np.unique(why[held])]
     left = None
+    budget_cap = estimate = None
     if max_memory is not None:
         left = max_memory - config.MEMORY_MEMO_MIN_BYTES * tasks.thread_count()
-        cap = depth_cap(table, depths, n_pixels, left)
-        if cap is not None:
-            warn_capped(max_memory, cap, depths, memory_estimate(table, depths, n_pixels))
-            depths, record, (shell_min, shell_max) = choose(max(cap, 0))
-            stats.depth_cap = max(cap, 0)
+        budget_cap = depth_cap(table, depths, n_pixels, left)
+        if budget_cap is not None:
+            estimate = memory_estimate(table, depths, n_pixels)
+            by_memory = limit > max(budget_cap, 0)
+            limit = np.minimum(limit, max(budget_cap, 0))
+            depths, record, (shell_min, shell_max) = choose(limit)
+            held = (wanted > limit) & (depths >= limit)
+            reasons = ((["memory"] if (held & by_memory).any() else [])
+                       + [LIMIT_REASONS[k] for k in np.unique(why[held & ~by_memory])])
         left = max(left - memory_estimate(table, depths, n_pixels), 0)
+    if held.any():
+        stats.depth_cap = int(depths[held].max())
+        stats.depth_cap_reason = ",".join(reasons)
+        warn_depth_cap(reasons, stats.depth_cap, wanted[held].max(), max_memory, estimate)
     return DepthChoice(depths, record, shell_min, shell_max, left)

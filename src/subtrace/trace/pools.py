@@ -26,6 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from subtrace import config
 from subtrace.patches.basis import BOX_PAD, net_bounds
 from subtrace.patches.grids import grid_params, leaf_corners
 from subtrace.patches.isolate import item_sides, rest_boxes
@@ -277,9 +278,18 @@ class Pieces(Growable):
         count = np.bincount(root, minlength=len(patches))
         first = np.cumsum(count) - count
         item_side = np.empty((len(root), 4), np.int64)
-        item_sides(first, count, level, i0, j0, depth_i,
-                   np.ascontiguousarray(np.asarray(side).reshape(-1, 4), dtype=np.int64),
-                   item_side)
+        patch_side = np.ascontiguousarray(np.asarray(side).reshape(-1, 4), dtype=np.int64)
+        item_sides(first, count, level, i0, j0, depth_i, patch_side, item_side)
+        # a Bezier piece is raised to within FAN_LEVELS of the pieces beside it, so its
+        # fans keep within MAX_SIDE_SAMPLES (a raised piece may raise its neighbours' sides)
+        piece = np.r_[np.ones(len(sr), bool), np.zeros(len(cr), bool)][order]
+        while True:
+            low = item_side.max(axis=1, initial=0) - config.FAN_LEVELS
+            up = piece & (depth_i < low)
+            if not up.any():
+                break
+            depth_i[up] = low[up]
+            item_sides(first, count, level, i0, j0, depth_i, patch_side, item_side)
         n0 = self.put("nets", nets=nets)
         c0 = self.put("cells", cells=cp, normals=cn)
         lo = np.concatenate([lo_s, cp.min(axis=1)])[order]

@@ -1,0 +1,129 @@
+"""Refinement depth: limited by floating point (config.PRECISION_BITS), not by a constant,
+and every cap (precision, memory) recorded in the statistics / EXR header and said in
+exactly one warning; the summary's deepest level is the level channel's maximum."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+from shared_data import MODELS, needs_shared, small_scene
+
+from subtrace import config
+from subtrace.errors import SubtraceWarning
+from subtrace.io.scene import apply_overrides
+from subtrace.render import render_scene, result_attributes
+
+SPOT = MODELS / "spot_control_mesh.obj"
+TORUS = MODELS / "torus.obj"
+
+
+def _render(scene):
+    """Render ``scene``; returns (result, the subtrace warnings' messages)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = render_scene(scene, threads=1)
+    return res, [str(w.message) for w in caught if issubclass(w.category, SubtraceWarning)]
+
+
+def _spot(tolerance, width=160, height=90):
+    return small_scene([SPOT], (2.393, 1.306, -3.637), (0.0, 0.1091, 0.1916), width=width,
+                       height=height, fov=30.0, tolerance=tolerance)
+
+
+def _level_max(res):
+    level = res.channels["level"]
+    return int(level[res.channels["A"] > 0].max())
+
+
+@needs_shared
+def test_finer_tolerance_refines_deeper_without_a_cap():
+    """0.01 px asks for finer cells than 0.1 px: it is refined deeper (both were held at
+    depth 8 by a constant, silently), and neither is capped nor warned about."""
+    coarse, w_coarse = _render(_spot(0.1))
+    fine, w_fine = _render(_spot(0.01))
+    assert w_coarse == [] and w_fine == []
+    for res in (coarse, fine):
+        assert res.stats.depth_cap == -1 and res.stats.depth_cap_reason == ""
+        # the statistic and the header agree with the level channel
+        assert res.stats.max_level == _level_max(res)
+    assert fine.stats.max_depth > max(coarse.stats.max_depth, 8)
+    assert _level_max(fine) > _level_max(coarse)
+
+
+@needs_shared
+def test_summary_deepest_level_is_the_level_channel_maximum():
+    """The line ``subtrace render`` prints names the deepest level of the image (the level
+    channel counts the patch level L0 too, which the grid depth does not)."""
+    from subtrace.cli.render import _summary
+
+    res, _ = _render(_spot(1.0, 96, 54))
+    deepest = _level_max(res)
+    assert f"deepest level {deepest};" in _summary("x.exr", None, res, 0.0)
+    # Spot's split n-gons sit at level 1: the channel is the grid depth plus L0
+    assert res.stats.max_level == deepest
+
+
+@needs_shared
+def test_precision_cap_on_an_absurd_tolerance_is_reported_once():
+    """At 1e-12 px the tolerance asks for cells below what doubles resolve: refinement stops
+    at the precision limit (at most PRECISION_BITS + 2), the render completes, and the cap
+    is in the header with its reason and said in exactly one warning."""
+    res, said = _render(_spot(1e-12, 96, 54))
+    assert len(said) == 1 and "precision" in said[0], said
+    st = res.stats
+    assert st.depth_cap_reason == "precision"
+    assert 20 < st.depth_cap <= config.PRECISION_BITS + 2
+    assert st.pixels_covered > 0
+    # the image's levels agree with the cap: grid depth (level - L0, L0 <= 1) never above it,
+    # and reached
+    level = _level_max(res)
+    assert st.depth_cap <= level <= st.depth_cap + 1
+    attrs = result_attributes(res, _spot(1e-12, 96, 54))
+    assert attrs["subtrace:depth_cap"] == st.depth_cap
+    assert attrs["subtrace:depth_cap_reason"] == "precision"
+
+
+@needs_shared
+def test_loop_scene_at_a_tiny_tolerance_is_capped_by_the_memory_budget():
+    """Loop patches are whole grids of 4^depth cells: a tiny tolerance is held by the memory
+    budget (one warning, reason "memory"), never by a silent constant, and the image's levels
+    are the cap's."""
+    scene = small_scene([TORUS], (1.226, 4.085, 4.902), (0.0, 0.0, 0.0), width=96, height=54,
+                        fov=30.0, tolerance=0.001)
+    scene = apply_overrides(scene, max_memory="256M")
+    res, said = _render(scene)
+    assert len(said) == 1 and "memory budget" in said[0], said
+    assert res.stats.depth_cap_reason == "memory"
+    assert 0 <= res.stats.depth_cap < 8
+    # Loop patches are the cage's triangles (L0 = 0): the deepest level is the cap
+    assert _level_max(res) == res.stats.depth_cap == res.stats.max_level
+
+
+def test_precision_depths_follow_the_coordinates():
+    """A patch's precision limit is PRECISION_BITS plus log2(extent / magnitude), bounded."""
+    from types import SimpleNamespace
+
+    from subtrace.patches.criterion import precision_depths
+
+    lo = np.array([[0.0, 0.0, 0.0], [1e6, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    hi = np.array([[1.0, 1.0, 1.0], [1e6 + 1.0, 1.0, 1.0], [0.0, 0.0, 0.0]])
+    table = SimpleNamespace(shell_min=lo, shell_max=hi)
+    d = precision_depths(table, np.zeros(3))
+    assert d[0] == config.PRECISION_BITS  # extent sqrt(3), magnitude 1
+    assert d[1] == config.PRECISION_BITS - 20  # a unit patch at 1e6 ~ 2^20
+    assert d[2] == 0  # no extent
+    assert d.max() <= config.PRECISION_BITS + 2
+
+
+def test_memory_estimate_of_deep_loop_grids_does_not_overflow():
+    """Deep Loop grids' estimates grow with depth and stay huge at the precision limit
+    (in int64, 4^40 grid points wrapped around), so the budget caps them."""
+    from types import SimpleNamespace
+
+    from subtrace.patches.criterion import memory_estimate
+
+    table = SimpleNamespace(is_quad=np.zeros(3, bool), regular=np.zeros(3, bool), n_patches=3)
+    est = [memory_estimate(table, np.full(3, d, np.int32), 100) for d in (20, 24, 33, 40)]
+    assert 0 < est[0] < est[1] <= est[2] <= est[3]
+    assert est[3] >= 2**60
