@@ -23,8 +23,8 @@ SHARP_SHAPES = ["catmark_edgeonly", "catmark_edgecorner", "catmark_inf_crease0",
                 "catmark_quadstrips", "catmark_single_crease", "catmark_nonman_edges",
                 "catmark_val2_interior", "catmark_hole_test3", "catmark_gregory_test2"]
 # closed cages whose sharp corners and creases have regular quads from level 2 on
-SHARP_LEVEL2 = ["catmark_cube_corner4", "catmark_cube_creases1", "catmark_cubes_infsharp",
-                "catmark_edgeonly", "catmark_fan", "catmark_pyramid_creases0"]
+# (the semi-sharp cubes and pyramids have none yet at level 2)
+SHARP_LEVEL2 = ["catmark_cubes_infsharp", "catmark_edgeonly", "catmark_fan"]
 
 
 @needs_shared
@@ -69,6 +69,7 @@ def _check_nets(cage, level, sharp_only=False):
     reg = faces[bspline.regular_mask(lev, cage.options, faces)]
     if sharp_only:
         reg = reg[~bspline.smooth_mask(lev, reg)]
+        assert len(reg) > 0
     if len(reg) == 0:
         pytest.skip("no regular patch")
     nets = basis.bezier_nets(bspline.control_points(lev, reg, pts))
