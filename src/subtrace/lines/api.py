@@ -16,10 +16,9 @@ descends, so nothing is stored per level and memory does not grow with the preci
   box has a diagonal of at most ``precision / 2`` (proven: the cell's surface and its flat
   stand-in both lie in that hull; Chaikin creases above sharpness 1, which can leave it, are
   given ``config.SHELL_CHAIKIN_MARGIN`` as the shells are); for Loop, triangles along
-  boundaries and infinitely sharp creases are regular pieces too (phantom points). (For
-  Catmull-Clark, cells touching the mesh's boundary keep a measured bound: see
-  ``subtrace.lines.items.Items._isolate``.) Only lines' candidates are kept, never a refined
-  mesh.
+  boundaries and infinitely sharp creases are regular pieces too (phantom points), and
+  so are Catmull-Clark quads there (:mod:`subtrace.patches.bspline`). Only lines'
+  candidates are kept, never a refined mesh.
 * Depth is set per sub-net by its flatness bound (``tol_flat = precision / 2``, see
   :mod:`subtrace.lines.kernels`); hits are found by Newton on the exact net from the flat
   leaf's triangles (a point within rounding of the surface), or kept from the triangle

@@ -2,9 +2,13 @@
 
 A quad of the patch level whose four corners are smooth, valence 4 and crease-free is a
 uniform bicubic B-spline patch of the 16 points around it (the same test and the same
-control grid as the exact evaluator, :mod:`subtrace.patches.evaluate`). For such a patch:
+control grid as the exact evaluator, :mod:`subtrace.patches.evaluate`). So is a quad whose
+corners are regular boundary, infinitely sharp crease or sharp corner vertices
+(:func:`regular_mask`), with phantom points beyond its sharp sides (:func:`phantom_grids`;
+the exact evaluator keeps its own path for those, and agrees). For such a patch:
 
-* :func:`control_grids` gathers the 16 point ids, ``[u index][v index]``, with ``u`` running
+* :func:`control_grids` gathers the 16 point ids of a smooth patch (:func:`phantom_grids`
+  those of any regular patch, phantom points appended to the level's points), ``[u index][v index]``, with ``u`` running
   from corner 0 to corner 1 and ``v`` from corner 0 to corner 3 (the grid layout of
   :mod:`subtrace.patches.grids`);
 * :func:`subtrace.patches.basis.bezier_nets` converts them to the patch's bicubic Bezier

@@ -18,7 +18,8 @@ Loop patches into grids of exact limit points (:mod:`subtrace.patches.grids`), o
   subdominant eigenvalue near extraordinary ones); together they bound the size of a grid
   cell at depth n by ``edge_bound * rate^n`` (the refinement criterion);
 * ``regular`` (P,) bool and ``nets`` (R,4,4,3): the Bezier nets of the regular bicubic
-  patches (:mod:`subtrace.patches.bspline`, :mod:`subtrace.patches.basis`), in patch order. For those, the shell is the
+  patches, smooth or along boundaries and infinitely sharp creases (phantom points; see
+  :mod:`subtrace.patches.bspline`, :mod:`subtrace.patches.basis`), in patch order. For those, the shell is the
   net's box, ``edge_bound`` the exact bound on the derivatives and ``rate`` 1/2;
 * ``edges`` (P,4) int64 (-1 pads triangles): global id of the L0 edge on each side (side k joins corners k, k+1),
   used to give both patches of an edge the same sampling.
