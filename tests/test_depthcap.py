@@ -44,7 +44,10 @@ def test_finer_tolerance_refines_deeper_without_a_cap():
     fine, w_fine = _render(_spot(0.01))
     assert w_coarse == [] and w_fine == []
     for res in (coarse, fine):
-        assert res.stats.depth_cap == -1 and res.stats.depth_cap_reason == ""
+        assert res.stats.depth_cap == -1 and res.stats.depth_cap_reason == "none"
+        attrs = result_attributes(res, _spot(0.1))
+        assert attrs["subtrace:depth_cap"] == -1
+        assert attrs["subtrace:max_level"] == res.stats.max_level
         # the statistic and the header agree with the level channel
         assert res.stats.max_level == _level_max(res)
     assert fine.stats.max_depth > max(coarse.stats.max_depth, 8)

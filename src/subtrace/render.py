@@ -65,9 +65,9 @@ class RenderStats:
     max_level: int = -1  # the deepest level hit: the level channel's maximum (-1: none)
     # the deepest grid depth a cap held a patch to, below what its tolerance asked (-1: no
     # cap), and why: "memory" (the budget), "precision" (what doubles resolve, config:
-    # PRECISION_BITS), "size" (Loop grids' quadtree index), comma-separated ("": none)
+    # PRECISION_BITS), "size" (Loop grids' quadtree index), comma-separated, or "none"
     depth_cap: int = -1
-    depth_cap_reason: str = ""
+    depth_cap_reason: str = "none"
     # 1: the projection's tile lists did not fit the memory budget, so rays walked the BVH
     accel_fallback: int = 0
     pixels_covered: int = 0
