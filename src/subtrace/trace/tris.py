@@ -335,6 +335,10 @@ def _expand_tri(node, lev, depth, mem, work):
 
 # intersect_tri (about 80 lines) is not split: it is inlined into the trace kernel (through
 # bezier.intersect_patch) and its descent keeps the ray, the stack and the memo in locals.
+# Its stack loop has the shape of intersect_patch's quadtree descent; they stay two loops
+# because the nodes differ (a triangle's children and their orientation, cells of three
+# corners snapped to coarser sides, no fans), and a shared loop would need the node kind
+# tested at every step of the per-ray path.
 @inline_njit
 def intersect_tri(ray, it, nets, nk, depth, sides, slack, hit, code, mem, scratch):
     """Closest hit on the regular Loop patch of item ``it`` (its quartic net ``nets[nk]``,
