@@ -4,7 +4,8 @@
 
 Owns the error policy (design invariant 7): every :class:`subtrace.errors.SubtraceError`
 becomes one line ``subtrace: error: <message>`` on stderr and exit code 2, with no
-traceback; argparse usage errors exit 2 as well (:mod:`subtrace.cli.parser`). ``compare``
+traceback; argparse usage errors exit 2 as well (:mod:`subtrace.cli.parser`); an interrupt
+is one line ``subtrace: interrupted`` and exit code 130 (SIGINT) or 143 (SIGTERM). ``compare``
 follows idiff's exit codes instead: 3 for a size or channel mismatch, 4 for an image that
 cannot be read (and 0 / 1 / 2 for pass / warning / failure). A SubtraceWarning is shown as
 one line ``subtrace: warning: <message>``.
@@ -30,7 +31,12 @@ from subtrace.errors import SubtraceError, SubtraceWarning
 
 
 def run(argv=None):
-    """Run the command line as the whole process: :func:`main`, then exit with its code."""
+    """Run the command line as the whole process: :func:`main`, then exit with its code.
+    SIGINT and SIGTERM end it at once with one line and exit code 130 / 143, leaving no
+    temporary file (:mod:`subtrace.runtime.signals`)."""
+    from subtrace.runtime import signals  # standard library only: start-up stays fast
+
+    signals.install()
     _exit_now(main(argv, own_process=True))
 
 

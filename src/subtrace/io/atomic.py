@@ -6,6 +6,15 @@ and leaves an existing destination untouched, so no half-written file is ever se
 :func:`atomic_paths` hands out temporary *paths* (for writers that open files by name, such
 as OpenImageIO) and moves them all into place at the end; :func:`write_text` writes a string.
 Failures raise :class:`subtrace.errors.SubtraceError` naming the destination.
+
+Every temporary is registered with :mod:`subtrace.runtime.signals` while it exists, and is
+created, moved and removed under its lock: an interrupted command removes what is left and
+never sees a temporary appear or move after that.
+
+Two processes writing one destination at once each write their own temporary (the names
+carry the process id and a random part) and each moves it into place; the rename is
+atomic, so the destination is always one complete file, the one renamed last, and both
+commands succeed.
 """
 
 from __future__ import annotations
@@ -15,6 +24,7 @@ import secrets
 from contextlib import contextmanager
 
 from subtrace.errors import SubtraceError
+from subtrace.runtime.signals import forget_temp, register_temp, temp_lock
 
 TEMP_ATTEMPTS = 100  # names tried before giving up on a free temporary name
 
@@ -48,7 +58,9 @@ def make_temp(path) -> str:
     for _ in range(TEMP_ATTEMPTS):
         temp = os.path.join(folder, f".{name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
         try:
-            fd = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+            with temp_lock():
+                fd = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+                register_temp(temp)
         except FileExistsError:
             continue
         except OSError as err:
@@ -58,10 +70,20 @@ def make_temp(path) -> str:
     raise SubtraceError(f"{target}: cannot create a temporary file in {folder}")
 
 
+def remove_temp(temp: str) -> None:
+    """Remove the temporary ``temp`` (from :func:`make_temp`), if it is still there."""
+    with temp_lock():
+        try:
+            os.unlink(temp)
+        except OSError:
+            pass
+        forget_temp(temp)
+
+
 def check_writable(path) -> None:
     """Raise SubtraceError now if ``path`` cannot be written (missing folder, a directory,
     no permission), so that a long job fails before it starts. Leaves nothing behind."""
-    os.unlink(make_temp(path))
+    remove_temp(make_temp(path))
 
 
 @contextmanager
@@ -76,7 +98,9 @@ def atomic_paths(paths):
         yield list(temps)
         for k, path in enumerate(paths):
             try:
-                os.replace(temps[k], path_str(path))
+                with temp_lock():
+                    os.replace(temps[k], path_str(path))
+                    forget_temp(temps[k])
             except OSError as err:
                 raise SubtraceError(
                     f"{path_str(path)}: cannot write the file: {reason(err)}"
@@ -85,10 +109,7 @@ def atomic_paths(paths):
     finally:
         for temp in temps:
             if temp is not None:
-                try:
-                    os.unlink(temp)
-                except OSError:
-                    pass
+                remove_temp(temp)
 
 
 def write_text(path, text: str) -> None:
@@ -102,4 +123,4 @@ def write_text(path, text: str) -> None:
                 f"{path_str(path)}: cannot write the file: {reason(err)}") from None
 
 
-__all__ = ["atomic_paths", "write_text", "check_writable", "make_temp", "path_str", "reason"]
+__all__ = ["atomic_paths", "write_text", "check_writable", "make_temp", "remove_temp", "path_str", "reason"]

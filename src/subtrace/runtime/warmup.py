@@ -18,6 +18,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from subtrace.runtime import signals
+
 
 def _cached(name: str) -> bool:
     """Whether Numba's cache (this package version's folder) holds the kernel ``name``."""
@@ -31,11 +33,14 @@ def start(threads: int):
     if _cached("_trace_task") and _cached("_shade_task"):
         return None
     try:
-        return subprocess.Popen([sys.executable, "-m", "subtrace.runtime.warmup", str(int(threads))],
+        proc = subprocess.Popen([sys.executable, "-m", "subtrace.runtime.warmup",
+                                 str(int(threads))],
                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL)
     except OSError:  # no second process: the kernels compile when first called
         return None
+    signals.register_child(proc)  # ended with this process if it is interrupted
+    return proc
 
 
 def wait(proc) -> None:
@@ -43,6 +48,7 @@ def wait(proc) -> None:
     store is compiled by the caller when first called)."""
     if proc is not None:
         proc.wait()
+        signals.forget_child(proc)
 
 
 def stop(proc) -> None:
@@ -50,6 +56,7 @@ def stop(proc) -> None:
     if proc is not None:
         proc.kill()
         proc.wait()
+        signals.forget_child(proc)
 
 
 def compile_kernels(threads: int) -> None:
@@ -88,4 +95,5 @@ def compile_kernels(threads: int) -> None:
 
 
 if __name__ == "__main__":
+    signals.unblock()  # the mask of a parent that hands its signals to a watcher thread
     compile_kernels(int(sys.argv[1]))

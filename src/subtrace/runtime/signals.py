@@ -1,0 +1,110 @@
+"""Interrupts: SIGINT and SIGTERM end a ``subtrace`` command at once, with one line, exit code
+130 / 143, and no temporary or partial file left behind, whatever phase they land in.
+
+A Python signal handler runs only on the main thread and only between bytecodes: while the
+main thread is inside a Numba kernel, an OpenImageIO write or a thread join, it waits until
+that returns (seconds, for a large trace chunk or image). So a process of its own
+(:func:`install`, called first by :func:`subtrace.cli.main.run`) blocks both signals in
+every thread and leaves them to one watcher thread that waits for them with ``sigwait``.
+On a signal the watcher takes the lock that guards the temporaries, removes every
+temporary file still registered (:mod:`subtrace.io.atomic` registers each one when it
+creates it and forgets it when it moves it into place or removes it), ends the child
+processes registered here (the kernel compiler of :mod:`subtrace.runtime.warmup`), prints
+``subtrace: interrupted`` and ends the process with ``os._exit``. Holding the lock to the
+end means no temporary can be created or moved into place after the clean-up: a
+destination is either the complete earlier file or the complete new one.
+
+A signal that lands while the interpreter itself starts, before any subtrace code runs
+(tens of milliseconds), gets Python's own behaviour; nothing has been written by then.
+
+In-process callers (tests, other programs calling :func:`subtrace.cli.main.main` or the
+API) keep Python's usual KeyboardInterrupt; nothing here is installed for them, and
+:mod:`subtrace.io.atomic` then removes its temporaries on the way out of its ``with``.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+
+EXIT_CODES = {signal.SIGINT: 130, signal.SIGTERM: 143}  # 128 + the signal's number
+MESSAGE = b"subtrace: interrupted\n"
+
+_lock = threading.RLock()  # held by the watcher from a signal to the process's end
+_temps: set[str] = set()
+_children: list = []
+_state = {"installed": False}
+
+
+def temp_lock() -> threading.RLock:
+    """The lock to hold while creating, moving or removing a temporary file (and registering
+    or forgetting it), so the watcher never races a writer."""
+    return _lock
+
+
+def register_temp(path: str) -> None:
+    """A temporary file now exists at ``path``: remove it if the process is interrupted.
+    Call with :func:`temp_lock` held, around the file's creation."""
+    _temps.add(path)
+
+
+def forget_temp(path: str) -> None:
+    """``path`` was moved into place or removed: nothing to clean up for it."""
+    _temps.discard(path)
+
+
+def register_child(proc) -> None:
+    """End the child process ``proc`` (a ``subprocess.Popen``) if this one is interrupted."""
+    with _lock:
+        _children.append(proc)
+
+
+def forget_child(proc) -> None:
+    with _lock:
+        if proc in _children:
+            _children.remove(proc)
+
+
+def install() -> None:
+    """Hand SIGINT and SIGTERM to the watcher thread (module comment). Call before any other
+    thread starts: threads inherit the blocked mask from the thread that starts them."""
+    if _state["installed"]:
+        return
+    # a signal the parent set to be ignored (a background job of a script, nohup) stays so
+    taken = {sig for sig in EXIT_CODES if signal.getsignal(sig) is not signal.SIG_IGN}
+    if not taken:
+        return
+    signal.pthread_sigmask(signal.SIG_BLOCK, taken)
+    threading.Thread(target=_watch, args=(taken,), name="subtrace-signals", daemon=True).start()
+    _state["installed"] = True
+
+
+def unblock() -> None:
+    """Undo an inherited mask (a child process started by an installed one inherits it
+    across ``exec``)."""
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, set(EXIT_CODES))
+
+
+def _watch(taken) -> None:
+    sig = signal.sigwait(taken)
+    _lock.acquire()  # never released: the process ends here
+    for path in list(_temps):
+        try:
+            os.unlink(path)
+        except OSError:
+            pass
+    for proc in _children:
+        try:
+            proc.kill()
+        except OSError:
+            pass
+    try:
+        os.write(2, MESSAGE)
+    except OSError:
+        pass
+    os._exit(EXIT_CODES.get(sig, 128 + int(sig)))
+
+
+__all__ = ["install", "unblock", "temp_lock", "register_temp", "forget_temp",
+           "register_child", "forget_child", "EXIT_CODES"]
