@@ -99,7 +99,7 @@ def test_compare_bad_options(capsys, tmp_path, images, flags, words, monkeypatch
     (["--tolerances", "2", "--repeat", "two"], "--repeat"),
     (["--tolerances", "2", "--width", "0"], "--width"),
     (["--tolerances", "2", "--max-memory", "0"], "--max-memory"),
-    (["--tolerances", "2", "--threads", "999"], "--threads"),
+    (["--tolerances", "2", "--threads", "0"], "--threads"),
 ])
 def test_sweep_bad_options(capsys, tmp_path, flags, words):
     out = tmp_path / "sw"

@@ -327,3 +327,29 @@ def test_random_cameras(eye, target, up, fov, width, height):
     # the frame is orthonormal and right-handed (x right, y up, z backwards)
     right, true_up, forward = cam.basis()
     np.testing.assert_allclose(np.cross(right, true_up), -forward, atol=1e-14)
+
+
+def test_parallel_up_suggests_an_up_that_works():
+    """Looking straight down with the default up: the message's suggestion is not [0, 1, 0]
+    (parallel too) but a vector with which the same view is accepted."""
+    import re
+
+    from subtrace.camera import check_view
+    from subtrace.errors import SceneError
+
+    eye, target = (0.0, 5.0, 0.0), (0.0, 0.0, 0.0)
+    with pytest.raises(SceneError) as err:
+        check_view(eye, target, (0.0, 1.0, 0.0))
+    suggested = re.search(r"e\.g\. \[([^\]]*)\]", str(err.value)).group(1)
+    up = tuple(float(x) for x in suggested.split(","))
+    assert up != (0.0, 1.0, 0.0)
+    check_view(eye, target, up)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.tuples(*[st.floats(-1e3, 1e3)] * 3).filter(lambda v: np.linalg.norm(v) > 1e-3))
+def test_across_view_is_never_parallel(view):
+    from subtrace.camera import across_view, check_view
+
+    d = np.asarray(view) / np.linalg.norm(view)
+    check_view((0.0, 0.0, 0.0), tuple(d), across_view(d))

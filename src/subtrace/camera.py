@@ -289,10 +289,17 @@ def check_view(eye, target, up) -> None:
     if not sin_angle > math.sin(_MIN_UP_ANGLE):
         raise SceneError(
             f"up {_fmt(up)} is parallel to the view direction {_fmt(tuple(d / dist))} "
-            "(target - eye); choose an up vector that is not along the view, e.g. [0, 1, 0] "
-            "or [0, 0, 1]",
+            f"(target - eye); choose an up vector that is not along the view, e.g. "
+            f"{_fmt(across_view(d / dist))}",
             key="up",
         )
+
+
+def across_view(view) -> tuple:
+    """The coordinate axis most nearly perpendicular to the unit direction ``view`` (at least
+    54.7 degrees from it): an up vector that works for that view."""
+    k = int(np.argmin(np.abs(view)))
+    return tuple(1.0 if i == k else 0.0 for i in range(3))
 
 
 def _y_up_to(up) -> np.ndarray:

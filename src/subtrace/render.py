@@ -203,14 +203,6 @@ def load_objects(scene):
     return [load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code) for o in scene.objects]
 
 
-def _check_threads(threads):
-    if threads is not None:
-        n_max = tasks.max_threads()
-        if not 1 <= int(threads) <= n_max:
-            raise SceneError(f"expected a thread count from 1 to {n_max}, got {threads}",
-                             key="--threads")
-
-
 def _prepare(scene, cages, stats):
     """Load and check the cages, build the patch table, frame the camera, check the budget:
     (cages, table, camera, tolerance in radians, budget in bytes)."""
@@ -248,7 +240,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     out of all (e.g. :class:`subtrace.runtime.progress.ProgressBar`); it reaches
     done == total."""
     t_start = time.perf_counter()
-    _check_threads(threads)
+    threads = tasks.usable_threads(threads)
     accel = config.PRIMARY_ACCEL if accel is None else accel
     if accel not in ("projection", "bvh"):
         raise SceneError(f"expected projection or bvh, got {accel!r}", key="--accel")

@@ -51,7 +51,7 @@ from subtrace.lines.kernels import (
 from subtrace.patches.basis import (
     SPLIT_COL, SPLIT_PTR, SPLIT_W, TRI_MONO, bez_normals, tri_normals,
 )
-from subtrace.runtime.threads import run_tasks, set_threads, thread_count
+from subtrace.runtime.threads import run_tasks, set_threads, thread_count, usable_threads
 
 # Lines per kernel call: bounds the candidate buffer (CHUNK x cap x 8 doubles).
 CHUNK = 4096
@@ -145,6 +145,7 @@ def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf
     dlen = np.linalg.norm(dirs, axis=1)
     out_rows, out_tan, out_line = [], [], []
     entered = leaves = 0
+    threads = usable_threads(threads)
     old = thread_count() if threads is not None else None
     if threads is not None:
         set_threads(threads)

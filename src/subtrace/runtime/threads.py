@@ -24,6 +24,33 @@ def max_threads() -> int:
         return os.cpu_count() or 1
 
 
+def usable_threads(n, key: str = "--threads") -> int | None:
+    """``n`` threads as asked, or every core this process may use where ``n`` is more (a
+    scene or script written on a larger machine), with one warning per process; None stays
+    None (every core). A count below 1 is an error naming ``key``."""
+    from subtrace.errors import SceneError, SubtraceWarning
+
+    if n is None:
+        return None
+    n = int(n)
+    if n < 1:
+        raise SceneError(f"expected a thread count of at least 1, got {n}", key=key)
+    n_max = max_threads()
+    if n > n_max:
+        if n not in _warned:
+            _warned.add(n)
+            import warnings
+
+            warnings.warn(SubtraceWarning(
+                f"{key} {n}: this machine has {n_max} core{'s' if n_max != 1 else ''} for "
+                f"this process; using {n_max}"), stacklevel=2)
+        return n_max
+    return n
+
+
+_warned: set[int] = set()
+
+
 def set_threads(n: int | None) -> None:
     """Use ``n`` threads for the kernels (None: every core)."""
     _state["threads"] = None if n is None else int(n)
