@@ -189,3 +189,43 @@ def test_render_header_names_files_only_and_the_colour_space(tmp_path):
                                (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290), atol=1e-7)
     assert "along the pixel's ray" in attrs["subtrace:Z"]
     assert len(attrs["worldToNDC"]) == 16 and len(attrs["worldToCamera"]) == 16
+
+
+def test_boundary_option_single_quad(tmp_path, capsys):
+    """A single quad is a rounded blob with OpenSubdiv's OBJ default (edge-only: corners
+    smooth) and the whole square with ``--boundary edge-and-corner``; ``info`` and
+    ``intersect`` take the same option. Independent check: the square's limit with sharp
+    corners is the bilinear quad itself, so a line through a point near its corner hits."""
+    from subtrace.cli import main
+    from subtrace.io.exr import read_exr
+
+    quad = tmp_path / "quad.obj"
+    quad.write_text("v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nf 1 2 3 4\n")
+    view = ["--eye", "0", "0", "5", "--target", "0", "0", "0", "--fov", "30", "--width", "64",
+            "--height", "64", "--quiet"]
+    covered = {}
+    for mode in (None, "edge-only", "edge-and-corner"):
+        out = tmp_path / f"q_{mode}.exr"
+        extra = [] if mode is None else ["--boundary", mode]
+        assert main(["render", str(quad), "-o", str(out), *view, *extra]) == 0
+        covered[mode] = int(np.count_nonzero(read_exr(out)[0]["A"] > 0))
+    assert covered[None] == covered["edge-only"]
+    # the square at distance 5 with a 30 degree fov: 2 / (2 * 5 * tan 15deg) of 64 pixels a side
+    side = 64 * 2.0 / (2 * 5 * np.tan(np.radians(15.0)))
+    assert abs(covered["edge-and-corner"] - side * side) < 4 * side
+    assert covered["edge-only"] < 0.9 * covered["edge-and-corner"]
+    lines = tmp_path / "lines.csv"
+    lines.write_text("ox,oy,oz,dx,dy,dz\n0.95,0.95,1,0,0,-1\n")
+    hits = {}
+    for mode in ("edge-only", "edge-and-corner"):
+        out = tmp_path / f"hits_{mode}.csv"
+        assert main(["intersect", str(quad), "--lines", str(lines), "--precision", "1e-6",
+                     "-o", str(out), "--boundary", mode]) == 0
+        hits[mode] = len(out.read_text().strip().splitlines()) - 1
+    assert hits == {"edge-only": 0, "edge-and-corner": 1}
+    capsys.readouterr()
+    assert main(["info", str(quad), "--boundary", "edge-and-corner"]) == 0
+    assert "edge-and-corner" in capsys.readouterr().out
+    assert main(["render", str(quad), "--boundary", "corners", "-o", str(tmp_path / "x.exr")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--boundary" in err

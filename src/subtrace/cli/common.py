@@ -14,6 +14,17 @@ def one_line(text: str) -> str:
     return " ".join(part.strip() for part in text.splitlines() if part.strip())
 
 
+def boundary_code(args):
+    """The ``--boundary`` option as OpenSubdiv's code (``subtrace.io.obj.BOUNDARY_*``), or
+    None when not given (the OBJ's tag applies)."""
+    name = getattr(args, "boundary", None)
+    if name is None:
+        return None
+    from subtrace.io.scene import BOUNDARIES
+
+    return BOUNDARIES[name]
+
+
 def trim_numba(args) -> None:
     """Trim Numba's set-up (:func:`subtrace.runtime.jit.trim_loader`) in a process of its
     own (:func:`subtrace.cli.main.run`); in-process callers (tests) keep Numba as it is."""

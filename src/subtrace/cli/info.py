@@ -14,6 +14,7 @@ from subtrace.cli.common import trim_numba
 from subtrace.config import SHARPNESS_INFINITE
 from subtrace.data import sample_cage_path
 from subtrace.io.scene import BOUNDARIES
+from subtrace.cli.common import boundary_code
 from subtrace.mesh.cage import load_cage
 
 BOUNDARY_NAMES = {code: name for name, code in BOUNDARIES.items()}  # Sdc code -> scene name
@@ -29,7 +30,7 @@ def execute(args) -> int:
     else:
         path = args.cage
         label = str(path)
-    cage = load_cage(path, scheme=args.scheme)
+    cage = load_cage(path, scheme=args.scheme, boundary=boundary_code(args))
     rows = [("file", label)] + cage_report(cage, args.level)
     width = max(len(k) for k, _ in rows) + 1
     for key, value in rows:

@@ -18,6 +18,7 @@ from subtrace.io.atomic import write_text
 from subtrace.io.limits import check_coordinates, check_valences
 from subtrace.io.lines_csv import read_lines_csv
 from subtrace.lines.api import intersect_lines
+from subtrace.cli.common import boundary_code
 from subtrace.mesh.cage import load_cage
 
 HIT_COLUMNS = "line,t,x,y,z,ptex,u,v,nx,ny,nz,tangent"
@@ -27,7 +28,7 @@ def execute(args) -> int:
     """Check the options and inputs, intersect, write the hits."""
     precision, t_range = _check_options(args)
     data = read_lines_csv(args.lines)
-    cage = load_cage(args.cage, scheme=args.scheme)
+    cage = load_cage(args.cage, scheme=args.scheme, boundary=boundary_code(args))
     check_coordinates(cage.path, cage.points, config.MAX_COORDINATE)
     check_valences(cage.path, cage.face_sizes, np.diff(cage.base.vert_edge_offsets),
                    config.MAX_VALENCE, cage.scheme == "catmark")

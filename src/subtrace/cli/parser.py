@@ -82,6 +82,7 @@ def _add_info(sub) -> argparse.ArgumentParser:
         help="catmark (Catmull-Clark) or loop; default: loop for all-triangle cages, "
         "catmark otherwise",
     )
+    _add_boundary_option(info)
     info.add_argument(
         "--level",
         type=level_arg,
@@ -213,6 +214,7 @@ def _add_intersect(sub) -> argparse.ArgumentParser:
     intersect.add_argument("--scheme", metavar="S",
                            help="catmark or loop (default: loop for an all-triangle cage, "
                                 "else catmark)")
+    _add_boundary_option(intersect)
     intersect.add_argument("--lines", required=True, metavar="LINES.csv",
                            help="CSV with columns ox,oy,oz,dx,dy,dz")
     intersect.add_argument("--precision", required=True, metavar="D",
@@ -230,9 +232,24 @@ def _add_intersect(sub) -> argparse.ArgumentParser:
     return intersect
 
 
+BOUNDARY_CHOICES = ("none", "edge-only", "edge-and-corner")
+
+
+def _add_boundary_option(parser) -> None:
+    """``--boundary``: how the limit surface ends at the cage's open edges, for every object
+    (replaces the OBJ's ``interpolateboundary`` tag and a scene's ``boundary`` keys)."""
+    parser.add_argument(
+        "--boundary", choices=BOUNDARY_CHOICES, default=None,
+        help="boundary interpolation for every object: edge-and-corner (a single quad stays "
+             "a square, corners kept sharp), edge-only (boundary curves are smooth B-splines "
+             "and corners round off) or none (boundary faces are left out); default: the "
+             "OBJ's interpolateboundary tag, else edge-only (OpenSubdiv's OBJ default)")
+
+
 def _add_render_options(parser) -> None:
     """The options of how objects are rendered, shared by ``render`` and ``sweep``."""
     parser.add_argument("--scheme", metavar="S", help="catmark or loop, for every object")
+    _add_boundary_option(parser)
     parser.add_argument("--threads", type=level_arg, metavar="N",
                         help="worker threads (default: all cores)")
     parser.add_argument("--accel", choices=("projection", "bvh"), default=None,

@@ -36,6 +36,7 @@ def scene_from_inputs(inputs, args, **overrides):
     return apply_overrides(
         scene, width=args.width, height=args.height, fov=args.fov, eye=vec(args.eye),
         target=vec(args.target), up=vec(args.up), scheme=args.scheme,
+        boundary=getattr(args, "boundary", None),
         max_memory=getattr(args, "max_memory", None), **overrides,
     )
 

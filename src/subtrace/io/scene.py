@@ -685,6 +685,7 @@ _OPTION = {
     "tolerance": "--tolerance",
     "tolerance_deg": "--tolerance-deg",
     "scheme": "--scheme",
+    "boundary": "--boundary",
     "output": "--output",
     "preview": "--preview",
     "max_memory": "--max-memory",
@@ -703,6 +704,7 @@ def apply_overrides(
     tolerance=None,
     tolerance_deg=None,
     scheme=None,
+    boundary=None,
     output=None,
     preview=None,
     max_memory=None,
@@ -765,6 +767,9 @@ def apply_overrides(
     if scheme is not None:
         value = _option("scheme", _parse_choice, scheme, SCHEMES)
         objects = tuple(replace(o, scheme=value) for o in objects)
+    if boundary is not None:
+        value = _option("boundary", _parse_choice, boundary, BOUNDARIES)
+        objects = tuple(replace(o, boundary=value) for o in objects)
 
     paths = {}
     for name, value in (("output", output), ("preview", preview)):
