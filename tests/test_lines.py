@@ -241,6 +241,9 @@ def test_cli_intersect(tmp_path, torus, capsys):
     rows = out.read_text().splitlines()
     assert rows[0] == "line,t,x,y,z,ptex,u,v,nx,ny,nz,tangent"
     assert len(rows) == 5 and all(r.startswith("0,") for r in rows[1:])
+    # with -o, one line says what was written
+    said = capsys.readouterr().out
+    assert said == f"{out}: 4 hits on 1 of 2 lines (precision 0.001)\n"
     js = tmp_path / "hits.json"
     assert main(["intersect", str(cage), "--lines", str(lines), "--precision", "0.001",
                  "--json", "-o", str(js)]) == 0
@@ -304,3 +307,31 @@ def test_cells_lie_within_half_the_precision_of_the_surface(name, precision):
     assert n > 0
     assert 0.0 < bound <= 0.5 * precision
     assert err.max() <= 0.5 * precision
+
+
+@pytest.mark.parametrize("scheme", ["catmark", "loop"])
+def test_shared_edge_hit_depends_on_the_line_alone(torus, scheme):
+    """A line through patch corners and edges (shared by several ptex faces) reports the same
+    hits, ptex faces included, whether it is asked alone or among other lines (which change
+    which items get built, and in what order): of duplicates the lowest ptex face is kept."""
+    cage = torus if scheme == "catmark" else subtrace.make_cage(
+        torus.points, [3] * (2 * len(torus.face_sizes)),
+        np.ravel([[q[0], q[1], q[2], q[0], q[2], q[3]]
+                  for q in torus.face_verts.reshape(-1, 4)]), scheme="loop")
+    # lines along the axes and diagonals through the torus's vertices and edge midpoints
+    lines = [([-3.0, 0, 0], [1.0, 0, 0]), ([0, -3.0, 0], [0, 1.0, 0]),
+             ([-3.0, -3.0, 0], [1.0, 1.0, 0]), ([-3.0, 0, 0.2], [1.0, 0, 0])]
+    rng = np.random.default_rng(7)
+    lo, hi = cage.bounds()
+    others_o = rng.uniform(lo, hi, (300, 3))
+    others_d = rng.normal(size=(300, 3))
+    for o, d in lines:
+        alone = intersect_lines(cage, [o], [d], PREC)
+        at = 137
+        org = np.insert(others_o, at, o, axis=0)
+        dirs = np.insert(others_d, at, d, axis=0)
+        among = intersect_lines(cage, org, dirs, PREC)
+        idx = among.of_line(at)
+        assert len(alone) == len(idx) and len(alone) > 0
+        np.testing.assert_array_equal(alone.ptex, among.ptex[idx])
+        np.testing.assert_allclose(alone.t, among.t[idx], atol=PREC)

@@ -10,11 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from subtrace.cli.common import trim_numba
+from subtrace.cli.common import boundary_code, trim_numba
 from subtrace.config import SHARPNESS_INFINITE
 from subtrace.data import sample_cage_path
 from subtrace.io.scene import BOUNDARIES
-from subtrace.cli.common import boundary_code
 from subtrace.mesh.cage import load_cage
 
 BOUNDARY_NAMES = {code: name for name, code in BOUNDARIES.items()}  # Sdc code -> scene name

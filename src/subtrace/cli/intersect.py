@@ -12,13 +12,12 @@ import sys
 import numpy as np
 
 from subtrace import config
-from subtrace.cli.common import trim_numba
+from subtrace.cli.common import boundary_code, trim_numba
 from subtrace.errors import SubtraceError
 from subtrace.io.atomic import write_text
 from subtrace.io.limits import check_coordinates, check_valences
 from subtrace.io.lines_csv import read_lines_csv
 from subtrace.lines.api import intersect_lines
-from subtrace.cli.common import boundary_code
 from subtrace.mesh.cage import load_cage
 
 HIT_COLUMNS = "line,t,x,y,z,ptex,u,v,nx,ny,nz,tangent"
@@ -45,6 +44,9 @@ def execute(args) -> int:
         sys.stdout.write(text)
     else:
         write_text(out, text)
+        n_hit = len(np.unique(hits.line))
+        print(f"{out}: {len(hits)} hit{'s' if len(hits) != 1 else ''} on {n_hit} of "
+              f"{len(data)} line{'s' if len(data) != 1 else ''} (precision {precision:g})")
     return 0
 
 

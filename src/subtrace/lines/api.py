@@ -173,7 +173,8 @@ def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf
                 done = ~over
                 keep = np.zeros((len(sel), cap), bool)
                 tan = np.zeros((len(sel), cap), bool)
-                merge_candidates(cand, count, dlen[a:b][sel], precision, keep, tan)
+                merge_candidates(cand, count, dlen[a:b][sel], precision, keep, tan,
+                                 items.all_ptex)
                 rows_valid = np.arange(cap)[None, :] < np.minimum(count, cap)[:, None]
                 k = keep & rows_valid & done[:, None]
                 li, ci = np.nonzero(k)

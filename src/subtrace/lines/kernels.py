@@ -484,14 +484,26 @@ def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, tnets, split_ptr, spl
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def merge_candidates(cand, count, dlen, precision, keep, tangent):
+def _preferred(c, i, j, ptex):
+    """Whether duplicate crossing ``c[i]`` is kept rather than ``c[j]`` (the nearer one):
+    an exact root over a triangle's hit; of two of the same kind, the lower ptex face."""
+    if c[i, C_DIST] != c[j, C_DIST]:
+        return c[i, C_DIST] < c[j, C_DIST]
+    return ptex[int(c[i, C_ITEM])] < ptex[int(c[j, C_ITEM])]
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def merge_candidates(cand, count, dlen, precision, keep, tangent, ptex):
     """Turn each line's candidates into hits, in place: sort by t; then
 
     * crossings (C_DIST 0: Newton's exact root, 1: a triangle's hit, kept only where no
       root is) whose points lie within ``precision`` of each other are one hit (a hit on a
       side or corner shared by leaves or patches is found from each of them): with the same
       orientation (sign of normal . direction) they are duplicates; with opposite ones the
-      line enters and leaves within ``precision``: one hit, tangent;
+      line enters and leaves within ``precision``: one hit, tangent. Of duplicates the
+      exact root is kept, and of two exact roots the one on the lower ptex face
+      (``ptex[item]``), then the nearer: the choice depends on the line alone, not on
+      which other lines were asked with it (they change which items exist and their order);
     * a touch whose point lies within ``precision`` of the tangent plane of a crossing is
       part of that crossing (the line runs that close to the surface there) and is dropped;
     * touches in a run (each within the two leaves' sizes of the next) are one contact: the
@@ -529,7 +541,7 @@ def merge_candidates(cand, count, dlen, precision, keep, tangent):
                     # opposite orientations, the line enters and leaves within precision
                     if not same:
                         tangent[line, last] = True
-                    if c[last, C_DIST] > 0.0 and c[i, C_DIST] == 0.0:
+                    if _preferred(c, i, last, ptex):
                         # keep the exact root (Newton's) rather than a triangle's hit
                         keep[line, last] = False
                         tangent[line, i] = tangent[line, last]
