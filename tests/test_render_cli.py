@@ -229,3 +229,17 @@ def test_boundary_option_single_quad(tmp_path, capsys):
     assert main(["render", str(quad), "--boundary", "corners", "-o", str(tmp_path / "x.exr")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--boundary" in err
+
+
+def test_summary_total_includes_the_write(tmp_path, capsys):
+    """The summary's total is the render time plus the write it lists."""
+    import re
+
+    from subtrace.cli import main
+
+    out = tmp_path / "s.exr"
+    assert main(["render", "-o", str(out), "--width", "32", "--height", "24"]) == 0
+    line = capsys.readouterr().out
+    render, write, total = (float(x) for x in re.search(
+        r"render ([\d.]+) s \(.*\) \+ write ([\d.]+) s = total ([\d.]+) s", line).groups())
+    assert abs(render + write - total) <= 0.0015 and write > 0

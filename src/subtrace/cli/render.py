@@ -83,7 +83,9 @@ def execute(args) -> int:
 
 
 def _summary(out, png, result, time_write: float) -> str:
-    """The line ``subtrace render`` prints: size, tolerance, coverage, refinement, times."""
+    """The line ``subtrace render`` prints: size, tolerance, coverage, refinement, times.
+    The render time is the header's ``subtrace:time_total`` (load to shade; the header is
+    written before the write ends); the total adds the write."""
     st = result.stats
     cam = result.camera
     return (
@@ -91,8 +93,9 @@ def _summary(out, png, result, time_write: float) -> str:
         f"{result.tolerance_rad / cam.pixel_angle():.3g} px, {st.pixels_covered} pixels "
         f"covered; {st.patches_refined} of {st.patches} patches refined, "
         f"{st.micro_triangles} micro-triangles, deepest level {st.max_level}; "
-        f"total {st.time_total:.3f} s (load {st.time_load:.3f}, preprocess "
+        f"render {st.time_total:.3f} s (load {st.time_load:.3f}, preprocess "
         f"{st.time_preprocess:.3f}, refine {st.time_refine:.3f}, trace {st.time_trace:.3f}, "
-        f"shade {st.time_shade:.3f}, write {time_write:.3f})"
+        f"shade {st.time_shade:.3f}) + write {time_write:.3f} s = total "
+        f"{st.time_total + time_write:.3f} s"
         + (f"; preview {png}" if png else "")
     )
