@@ -8,7 +8,11 @@ result to the OBJ reader (``subtrace.io.obj.read_obj``), the scene reader
 (exit 0 with an image, or exit 2 with one error line and nothing left behind). An input passes when it reads or
 raises a SubtraceError; anything else (another exception, a hang past ``--timeout``, a
 multi-line or traceback-bearing ``info`` error) is a crash and the input is saved under
-``--out``. Prints inputs tried, outcomes by kind, and crashes.
+``--out``. Command lines of ``render``, ``info`` and ``intersect`` with random valid and
+junk option values (as often as renders) must end with exit 0, or exit 2 and one error
+line, with no temporary left. Free-form (NURBS) OBJ statements are in the corpus's ff_*
+files, so their mutations are read and rendered too. Prints inputs tried, outcomes by kind,
+and crashes.
 
     python benchmarks/fuzz.py --seconds 3600 [--seed N] [--out fuzz_crashes] [--timeout 10]
 """
@@ -169,6 +173,90 @@ def check_render(path: Path, timeout: float) -> str:
     raise AssertionError(f"render exit {proc.returncode}, files {left}, stderr {text[-2000:]!r}")
 
 
+# command-line options and the values tried for them: valid ones and junk (sizes stay small
+# or are refused, so no trial renders a large image)
+OPTION_VALUES = {
+    "--width": ["16", "33", "1", "0", "-4", "abc", "1e9", "40000", "2.5", ""],
+    "--height": ["12", "24", "1", "0", "-1", "x", "99999999999"],
+    "--fov": ["30", "90", "179.9", "0", "180", "-5", "nan", "inf", "1e-12"],
+    "--eye": ["0 0 5", "0 5 0", "1e300 0 0", "nan 0 0", "1 2", "a b c", "0,0,5"],
+    "--target": ["0 0 0", "0 0 5", "1 1", "inf 0 0"],
+    "--up": ["0 1 0", "0 0 1", "0 0 0", "1e-320 0 0", "x"],
+    "--tolerance": ["1", "4", "0.5", "0", "-1", "nan", "1e-300", "1e300"],
+    "--tolerance-deg": ["0.1", "0", "x"],
+    "--scheme": ["catmark", "loop", "bilinear", ""],
+    "--boundary": ["none", "edge-only", "edge-and-corner", "corners"],
+    "--threads": ["1", "2", "64", "0", "-1", "two"],
+    "--accel": ["bvh", "projection", "kd"],
+    "--max-memory": ["500M", "1G", "1", "0", "-5M", "lots", "1e30"],
+    "--bit-depth": ["8", "16", "32"],
+}
+OUTPUTS = ["r.exr", "r.png", "r.tif", "r.jpg", "r.txt", "missing/r.exr", ".", "r"]
+INTERSECT_VALUES = {
+    "--precision": ["1e-3", "0.1", "0", "-1", "nan", "inf", "x"],
+    "--t-min": ["0", "-inf", "nan", "5", "x"],
+    "--t-max": ["inf", "0", "1", "nan"],
+    "--threads": ["1", "2", "64", "0"],
+    "--boundary": ["none", "edge-and-corner", "x"],
+    "--scheme": ["loop", "catmark", "z"],
+}
+
+
+def option_args(rng: random.Random, work: Path) -> tuple[list[str], str]:
+    """A random command line for ``render``, ``info`` or ``intersect`` on the cube: a few
+    options with valid or junk values (and the output's extension)."""
+    command = rng.choice(["render", "render", "info", "intersect"])
+    cube = str(work / "cube.obj")
+    if command == "info":
+        args = ["info", cube] + rng.choice([[], ["--level", rng.choice(["1", "0", "-1", "x"])],
+                                            ["--boundary", rng.choice(["none", "y"])],
+                                            ["--scheme", rng.choice(["loop", "q"])]])
+    elif command == "intersect":
+        lines = work / "lines.csv"
+        lines.write_text("ox,oy,oz,dx,dy,dz\n0,0,5,0,0,-1\n0.3,0.2,-5,0,0,1\n")
+        args = ["intersect", cube, "--lines", str(lines), "--precision", "1e-3",
+                "-o", str(work / "opt_out" / "hits.csv")]
+        for key in rng.sample(sorted(INTERSECT_VALUES), rng.randint(0, 3)):
+            args += [key, rng.choice(INTERSECT_VALUES[key])]
+    else:
+        args = ["render", cube, "--width", "24", "--height", "18", "--quiet",
+                "-o", str(work / "opt_out" / rng.choice(OUTPUTS))]
+        for key in rng.sample(sorted(OPTION_VALUES), rng.randint(1, 4)):
+            value = rng.choice(OPTION_VALUES[key])
+            args += [key, *value.split()] if key in ("--eye", "--target", "--up") else [key, value]
+        if rng.random() < 0.2:
+            args.append("--png")
+    return args, " ".join(args[2:])
+
+
+def check_options(args: list[str], work: Path, timeout: float) -> str:
+    """Run a command line from :func:`option_args` in a process of its own: "ok" (exit 0)
+    or "option-error" (exit 2 and one error line), with nothing half-written left in the
+    output folder either way; raise otherwise (``Hang`` past ``timeout`` seconds)."""
+    import subprocess
+
+    out_dir = work / "opt_out"
+    out_dir.mkdir(exist_ok=True)
+    for old in out_dir.iterdir():
+        if old.is_file():
+            old.unlink()
+    try:
+        proc = subprocess.run([sys.executable, "-m", "subtrace.cli", *args],
+                              capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        raise Hang() from None
+    text = proc.stderr
+    temps = [p.name for p in out_dir.iterdir() if p.name.endswith(".tmp")]
+    errors = [line for line in text.splitlines() if not line.startswith("subtrace: warning:")]
+    if "Traceback" in text or temps:
+        raise AssertionError(f"exit {proc.returncode}, temporaries {temps}, {text[-2000:]!r}")
+    if proc.returncode == 0 and not errors:
+        return "ok"
+    if proc.returncode == 2 and len(errors) == 1 and errors[0].startswith("subtrace: "):
+        return "option-error"
+    raise AssertionError(f"exit {proc.returncode}, stderr {text[-2000:]!r}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=60.0, help="how long to run (default 60)")
@@ -197,7 +285,26 @@ def main(argv=None) -> int:
     tried = 0
     t_end = time.monotonic() + args.seconds
     while time.monotonic() < t_end:
-        target = rng.choice(["obj", "obj", "info", "scene"])
+        target = rng.choice(["obj", "obj", "info", "scene", "options"])
+        if target == "options":
+            if rng.random() >= args.render_fraction:
+                continue  # (command lines run processes: as often as renders)
+            argv_, how = option_args(rng, work)
+            tried += 1
+            try:
+                kind = check_options(argv_, work, args.render_timeout)
+            except Hang:
+                kind = "CRASH:hang"
+            except Exception:  # noqa: BLE001 - a crash is what we look for
+                kind = "CRASH:options"
+            outcomes[(target, kind)] += 1
+            if kind.startswith("CRASH"):
+                name = Path(args.out) / f"crash_{len(crashes):04d}_options.txt"
+                name.write_text(f"seed {seed}\nsubtrace {' '.join(argv_)}\n"
+                                f"{traceback.format_exc()}\n")
+                crashes.append((name, kind))
+                print(f"crash: {kind} on options -> {name}", file=sys.stderr)
+            continue
         base = rng.choice(tomls if target == "scene" else objs)
         data, how = mutate(rng, base)
         path = work / ("input.toml" if target == "scene" else "input.obj")
@@ -234,7 +341,7 @@ def main(argv=None) -> int:
             print(f"crash: {kind} on {target} -> {name}", file=sys.stderr)
     print(f"seed {seed}: {tried} inputs in {args.seconds:.0f} s, {len(crashes)} crashes")
     for (target, kind), n in sorted(outcomes.items()):
-        print(f"  {target:6s} {kind:28s} {n}")
+        print(f"  {target:7s} {kind:28s} {n}")
     for name, kind in crashes[:20]:
         print(f"  crash {kind}: {name}")
     return 1 if crashes else 0
