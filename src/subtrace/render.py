@@ -35,7 +35,7 @@ from subtrace.runtime import warmup
 from subtrace.shade import CHANNELS, deepest_level, miss_values, patch_shading, shade
 from subtrace.subdiv.limit import limit_points
 from subtrace.trace.budget import check_memory, choose_within_budget, warn_tiles
-from subtrace.trace.build import build_requested
+from subtrace.trace.build import build_loop_regular, build_requested
 from subtrace.trace.kernels import trace_round
 from subtrace.trace.pools import (LoopGrids, Memos, Pieces, candidate_lists, hit_arrays,
                                   leaf_tables)
@@ -158,6 +158,8 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
     iso.reserve("nets", len(reg) + 16 * n_irr)
     iso.append_regular(reg, depths[reg], reg_side, table.nets, table.shell_min[reg],
                        table.shell_max[reg])
+    if config.LOOP_PER_RAY:
+        build_loop_regular(table, depths, edge_depth, iso)
     hits = hit_arrays(n_rays)
     request = np.empty(n_rays, dtype=np.int64)
     tested = np.empty(n_rays, dtype=np.int64)  # (round 0 writes every ray's entries)

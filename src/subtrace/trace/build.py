@@ -69,3 +69,22 @@ def _loop_nets(o, table, ids, depth, edge_depth, iso, round_no):
         side[:, :3] = np.where(table.edges[r, :3] >= 0, edge_depth[table.edges[r, :3]], -1)
         iso.append_tris(r, np.full(len(r), depth, np.int64), side, nets, round_no)
     return ids[~reg]
+
+
+def build_loop_regular(table, depths, edge_depth, iso):
+    """Before the first round: the regular Loop triangles of the table as triangular Bezier
+    nets (round -1), as the regular Catmull-Clark patches' nets are. Their refinement is per
+    ray, so this is a few hundred bytes per patch and no subdivision; without it each ray
+    would ask for the next patch it reaches, one round each (a torus seen through its hole
+    took 14 rounds, each tracing its rays again). A patch counts as refined once a ray
+    descends into it. Returns the number of nets built."""
+    ids = np.nonzero(~table.is_quad)[0]
+    built = 0
+    obj = table.object_id[ids]
+    for k in np.unique(obj):
+        sel = ids[obj == k]
+        for d in np.unique(depths[sel]):
+            part = sel[depths[sel] == d]
+            rest = _loop_nets(table.objects[int(k)], table, part, int(d), edge_depth, iso, -1)
+            built += len(part) - len(rest)
+    return built
