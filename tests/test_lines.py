@@ -335,3 +335,22 @@ def test_shared_edge_hit_depends_on_the_line_alone(torus, scheme):
         assert len(alone) == len(idx) and len(alone) > 0
         np.testing.assert_array_equal(alone.ptex, among.ptex[idx])
         np.testing.assert_allclose(alone.t, among.t[idx], atol=PREC)
+
+
+def test_precision_below_floating_point_is_said(torus):
+    """A precision finer than double precision resolves at the cage's scale is not silently
+    ignored: one warning says what the hits are within instead."""
+    import warnings
+
+    from subtrace.errors import SubtraceWarning
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        h = intersect_lines(torus, [[-3.0, 0.1, 0.05]], [[1.0, 0, 0]], 1e-17)
+    said = [w for w in caught if issubclass(w.category, SubtraceWarning)]
+    assert len(said) == 1 and "double precision" in str(said[0].message)
+    assert len(h) > 0
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        intersect_lines(torus, [[-3.0, 0.1, 0.05]], [[1.0, 0, 0]], 1e-6)
+    assert not [w for w in caught if issubclass(w.category, SubtraceWarning)]

@@ -38,13 +38,14 @@ descends, so nothing is stored per level and memory does not grow with the preci
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from subtrace.accel.bvh import padded
-from subtrace.errors import SubtraceError
-from subtrace.lines.items import items_for
+from subtrace.errors import SubtraceError, SubtraceWarning
+from subtrace.lines.items import MAX_ISOLATION, items_for
 from subtrace.lines.kernels import (
     C_A, C_B, C_ITEM, C_T, N_FIELDS, lines_task, merge_candidates,
 )
@@ -140,7 +141,13 @@ def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf
     touch_tol = precision
     scale = float(np.abs(items.table.shell_max).max(initial=1.0)
                   + np.abs(items.table.shell_min).max(initial=0.0))
-    res_tol = max(1e-3 * precision, 64 * np.finfo(float).eps * scale)
+    floor = 64 * np.finfo(float).eps * scale
+    res_tol = max(1e-3 * precision, floor)
+    if precision < floor:
+        warnings.warn(SubtraceWarning(
+            f"precision {precision:g} is below what double precision resolves for this cage "
+            f"(about {floor:.3g} at its scale {scale:.3g}): hits are as exact as floating "
+            "point allows, not within the precision asked"), stacklevel=2)
     n_lines = len(org)
     dlen = np.linalg.norm(dirs, axis=1)
     out_rows, out_tan, out_line = [], [], []
@@ -188,6 +195,11 @@ def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf
     finally:
         if threads is not None:
             set_threads(old)
+    if items.capped:
+        warnings.warn(SubtraceWarning(
+            f"precision {precision:g}: some irregular patches stopped at {MAX_ISOLATION} "
+            "levels of isolation, where their cells are still coarser than the precision; "
+            "hits there are within the cells' bound, not the precision"), stacklevel=2)
     return _hits(items, org, dirs, out_rows, out_tan, out_line, mode, n_lines, precision,
                  dict(items=len(items.all_exact), items_entered=entered, leaves=leaves))
 

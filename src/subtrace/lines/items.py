@@ -96,6 +96,7 @@ class Items:
         self.built = np.zeros(len(self.irregular), bool)
         self.shell_bvh = None  # over the irregular patches' shells, made at first need
         self.precision = precision
+        self.capped = False  # isolation stopped at MAX_ISOLATION above the precision
         # the largest proven bound (one-ring box diagonal) of an interior Catmull-Clark cell
         self.cell_bound = 0.0
         self._finish()
@@ -193,6 +194,8 @@ class Items:
                 build_isolated(obj, tb.face[rows[todo]], d[todo], ring=True)
             again = np.zeros(len(todo), bool)
             again[croot[grow * diag > allowed]] = True
+            if np.any(again & (d[todo] >= MAX_ISOLATION)):
+                self.capped = True  # (said by intersect_lines: a limit is never silent)
             again &= d[todo] < MAX_ISOLATION
             # what the patches done now were built into
             keep_s, keep_c = ~again[root], ~again[croot]
