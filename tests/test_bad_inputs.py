@@ -68,8 +68,15 @@ def test_bad_input_is_one_clean_line(capsys, tmp_path, name):
     assert code == 2, err
     assert_one_line_error(err, named, words)
     assert list(out.parent.iterdir()) == []  # no output, no temporary file
-    if name.endswith(".obj"):
+    if not name.endswith(".toml"):  # every command reads what render reads
         code, stdout, err = run(capsys, ["info", CORPUS / name])
+        assert code == 2 and stdout == ""
+        assert_one_line_error(err, named, words)
+    if name.startswith("foreign_"):
+        lines = tmp_path / "lines.csv"
+        lines.write_text("ox,oy,oz,dx,dy,dz\n0,0,5,0,0,-1\n")
+        code, stdout, err = run(capsys, ["intersect", CORPUS / name, "--lines", lines,
+                                         "--precision", "0.01"])
         assert code == 2 and stdout == ""
         assert_one_line_error(err, named, words)
 

@@ -101,6 +101,10 @@ def read_obj(path) -> ObjData:
     if isinstance(path, bytes):
         path = os.fsdecode(path)
     raw = read_obj_bytes(path)
+    foreign = foreign_format(path, raw)
+    if foreign is not None:
+        raise ObjError(path, None, f"{foreign} files are not read: subtrace reads Wavefront OBJ "
+                                   "cages (.obj, with OpenSubdiv tags and free-form surfaces)")
     # ASCII is valid UTF-8 without a byte-order mark: only other files need checking first
     text = None if raw.isascii() else decode_obj(path, raw)
     data = ObjReader(path).read_fast(raw) or ObjReader(path).read(
@@ -108,6 +112,38 @@ def read_obj(path) -> ObjData:
     for message in data.warnings:
         warnings.warn(message, SubtraceWarning, stacklevel=2)
     return data
+
+
+# mesh and scene formats subtrace does not read, by extension, and the magic bytes of those
+# whose files are also met under other names
+FOREIGN_EXTENSIONS = {
+    ".ply": "PLY", ".stl": "STL", ".off": "OFF", ".gltf": "glTF", ".glb": "glTF (binary)",
+    ".fbx": "FBX", ".abc": "Alembic", ".usd": "USD", ".usda": "USD", ".usdc": "USD",
+    ".usdz": "USD", ".dae": "COLLADA", ".3ds": "3DS", ".blend": "Blender", ".x3d": "X3D",
+    ".wrl": "VRML", ".vtk": "VTK", ".xyz": "point cloud (XYZ)", ".pts": "point cloud (PTS)",
+    ".las": "point cloud (LAS)", ".e57": "point cloud (E57)", ".step": "STEP",
+    ".stp": "STEP", ".iges": "IGES", ".igs": "IGES", ".3dm": "Rhino",
+}
+FOREIGN_MAGIC = (
+    (b"ply\n", "PLY"), (b"ply\r\n", "PLY"), (b"glTF", "glTF (binary)"), (b"OFF\n", "OFF"),
+    (b"solid ", "STL"), (b"PXR-USDC", "USD"), (b"#usda", "USD"), (b"BLENDER", "Blender"),
+    (b"Ogawa", "Alembic"), (b"ISO-10303-21", "STEP"),
+)
+
+
+def foreign_format(path: str, raw: bytes) -> str | None:
+    """The name of the other format ``path`` is in (by its extension, or by its first bytes
+    whatever its name), or None for a file to read as OBJ."""
+    name = FOREIGN_EXTENSIONS.get(os.path.splitext(path)[1].lower())
+    if name is not None:
+        return name
+    for magic, name in FOREIGN_MAGIC:
+        if raw.startswith(magic):
+            return name
+    if raw[:80].count(b"\0") and raw[80:84] and len(raw) == 84 + 50 * int.from_bytes(
+            raw[80:84], "little"):
+        return "STL (binary)"
+    return None
 
 
 def _error(path: str):
