@@ -14,12 +14,16 @@ from subtrace.render import render_scene
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 
 
-def channels(scene, threads):
+def render(scene, threads):
     import warnings
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # (creases.toml's cage warns about an unused tag)
-        return render_scene(scene, threads=threads).channels
+        return render_scene(scene, threads=threads)
+
+
+def channels(scene, threads):
+    return render(scene, threads).channels
 
 
 def assert_identical(a, b):
@@ -38,3 +42,20 @@ def test_same_image_whatever_the_threads_and_the_run(name):
     assert np.count_nonzero(one["A"]) > 500  # the object is in the picture
     assert_identical(one, two)
     assert_identical(two, again)
+
+
+@pytest.mark.parametrize("name", ["spot", "creases", "torus_loop"])
+def test_counts_whatever_the_threads_and_the_run(name):
+    """Micro-triangles and the other counts of the header are the same with 1 and 2 threads
+    and across runs: a cell evaluated by both threads' memos counts once
+    (trace/counts.py). Full resolution, so that rays of one patch land in several bands
+    and the threads share patches (the memos must not run out: the count would then
+    include cells evaluated per ray)."""
+    scene = load_scene(SCENES / f"{name}.toml")
+    runs = [render(scene, t).stats for t in (1, 2, 2)]
+    assert all(st.memo_full == 0 for st in runs)
+    keys = ("micro_triangles", "patches_refined", "pieces", "pixels_covered", "max_level")
+    first = {k: getattr(runs[0], k) for k in keys}
+    assert first["micro_triangles"] > 0
+    for st in runs[1:]:
+        assert {k: getattr(st, k) for k in keys} == first

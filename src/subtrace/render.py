@@ -36,6 +36,7 @@ from subtrace.shade import CHANNELS, deepest_level, miss_values, patch_shading, 
 from subtrace.subdiv.limit import limit_points
 from subtrace.trace.budget import check_memory, choose_within_budget, warn_tiles
 from subtrace.trace.build import build_loop_regular, build_requested
+from subtrace.trace.counts import thread_correction
 from subtrace.trace.kernels import trace_round
 from subtrace.trace.pools import (LoopGrids, Memos, Pieces, candidate_lists, hit_arrays,
                                   leaf_tables)
@@ -190,7 +191,8 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
         round_no += 1
     stats.rounds = round_no + 1
     memos.finish(stats)
-    stats.micro_triangles += int(tested.sum())
+    # (each cell once, however the threads shared the rays: trace/counts.py)
+    stats.micro_triangles += int(tested.sum()) + thread_correction(memos, iso.view())
     # regular patches count as refined once a ray has descended into them
     direct = iso.a["patch"][(iso.a["round"] < 0) & (iso.a["touched"] > 0)]
     stats.patches_refined += len(direct)
