@@ -204,7 +204,8 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
 
 def load_objects(scene):
     """Cages of the scene's objects (scheme / boundary overrides applied)."""
-    return [load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code) for o in scene.objects]
+    return [load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code, prim=o.prim)
+            for o in scene.objects]
 
 
 def _prepare(scene, cages, stats):

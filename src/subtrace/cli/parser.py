@@ -75,7 +75,8 @@ def _add_info(sub) -> argparse.ArgumentParser:
             "surface's bounds); the cage's bounds contain the whole limit surface."
         ),
     )
-    info.add_argument("cage", nargs="?", metavar="CAGE.obj", help="OBJ control cage")
+    info.add_argument("cage", nargs="?", metavar="CAGE.obj",
+                      help="OBJ control cage or USD stage (all its meshes as one cage)")
     info.add_argument(
         "--scheme",
         metavar="S",
@@ -97,15 +98,16 @@ def _add_render(sub) -> argparse.ArgumentParser:
         "render",
         help="ray trace the exact limit surface of a scene or of OBJ cages to EXR",
         description=(
-            "Render a TOML scene, or OBJ cages with an automatic camera, as the exact "
+            "Render a TOML scene, or OBJ cages or USD stages (with the stage's camera and "
+            "distant lights, else an automatic camera), as the exact "
             "Catmull-Clark / Loop limit surface: one ray per pixel, patches refined only "
             "where a ray reaches them and only until they are below the angular tolerance. "
             "Without inputs the built-in default scene (Spot) is rendered. Writes a "
             "multi-channel EXR (R,G,B,A, Z, N.X/N.Y/N.Z, level, patch_id, object_id, u, v)."
         ),
     )
-    render.add_argument("inputs", nargs="*", metavar="SCENE.toml | CAGE.obj",
-                        help="one TOML scene, or one or more OBJ cages")
+    render.add_argument("inputs", nargs="*", metavar="SCENE.toml | CAGE.obj | STAGE.usd",
+                        help="one TOML scene, or one or more OBJ cages or USD stages")
     render.add_argument("-o", "--output", metavar="OUT.exr",
                         help="output file (default: the scene's output, else render.exr): "
                              "the multi-channel EXR, or by its extension an sRGB picture "
@@ -210,7 +212,7 @@ def _add_intersect(sub) -> argparse.ArgumentParser:
             "then t), or JSON with --json; to stdout without -o."
         ),
     )
-    intersect.add_argument("cage", metavar="CAGE.obj", help="OBJ cage")
+    intersect.add_argument("cage", metavar="CAGE.obj", help="OBJ cage or USD stage")
     intersect.add_argument("--scheme", metavar="S",
                            help="catmark or loop (default: loop for an all-triangle cage, "
                                 "else catmark)")
@@ -250,6 +252,9 @@ def _add_render_options(parser) -> None:
     """The options of how objects are rendered, shared by ``render`` and ``sweep``."""
     parser.add_argument("--scheme", metavar="S", help="catmark or loop, for every object")
     _add_boundary_option(parser)
+    parser.add_argument("--camera", metavar="PRIM",
+                        help="a USD stage's camera prim to render through, e.g. /World/Cam "
+                             "(default: the stage's first camera, else an automatic one)")
     parser.add_argument("--threads", type=level_arg, metavar="N",
                         help="worker threads (default: all cores)")
     parser.add_argument("--accel", choices=("projection", "bvh"), default=None,

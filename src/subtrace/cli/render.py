@@ -29,7 +29,8 @@ def scene_from_inputs(inputs, args, **overrides):
     elif len(inputs) == 1 and inputs[0].lower().endswith(".toml"):
         scene = load_scene(inputs[0])
     elif all(not p.lower().endswith(".toml") for p in inputs):
-        scene = scene_for_meshes(inputs, scheme=args.scheme)
+        scene = scene_for_meshes(inputs, scheme=args.scheme,
+                                 camera=getattr(args, "camera", None))
     else:
         raise SceneError("give one TOML scene, or OBJ cages, not both")
     vec = lambda v: None if v is None else " ".join(v)  # noqa: E731

@@ -13,7 +13,9 @@ Schema (every table and key optional unless marked *required*)::
     preview = "renders/spot.png"    # 8-bit sRGB PNG preview; relative to this file's folder
 
     [[object]]                      # *required*, one or more (a single [object] also works)
-    mesh     = "spot.obj"           # *required*: OBJ cage, relative to this file's folder
+    mesh     = "spot.obj"           # *required*: OBJ cage or USD stage (.usd, .usda, .usdc,
+                                    #   .usdz), relative to this file's folder
+    prim     = "/World/Body"        # a USD stage's mesh prim; default: all its meshes
     scheme   = "catmark"            # "catmark" | "catmull-clark" | "loop";
                                     #   default: loop for all-triangle cages, else catmark
     boundary = "edge-only"          # "none" | "edge-only" | "edge-and-corner";
@@ -63,6 +65,7 @@ from pathlib import Path
 from subtrace.errors import SceneError, show_value
 from subtrace.io.text import decode, read_bytes
 from subtrace.io.obj import BOUNDARY_EDGE_AND_CORNER, BOUNDARY_EDGE_ONLY, BOUNDARY_NONE
+from subtrace.io.usd import is_usd, usd_scene_table
 from subtrace.camera import (
     Camera,
     auto_camera,
@@ -89,7 +92,7 @@ BOUNDARIES = {
 }
 
 _TOP_KEYS = ("object", "camera", "render", "light", "output", "preview")
-_OBJECT_KEYS = ("mesh", "scheme", "boundary", "color")
+_OBJECT_KEYS = ("mesh", "prim", "scheme", "boundary", "color")
 _CAMERA_KEYS = ("eye", "target", "up", "fov", "width", "height")
 _RENDER_KEYS = ("tolerance", "tolerance_deg", "background", "headlight", "headlight_intensity",
                 "max_memory")
@@ -118,6 +121,7 @@ class SceneObject:
     scheme: str | None = None  # "catmark" | "loop"; None: by the cage's faces
     boundary: str | None = None  # "none" | "edge-only" | "edge-and-corner"; None: OBJ tag
     color: tuple[float, float, float] | None = None  # linear RGB 0..1; None: OBJ materials
+    prim: str | None = None  # a USD stage's mesh prim ("/World/Body"); None: all its meshes
 
     @property
     def boundary_code(self) -> int | None:
@@ -252,8 +256,10 @@ def scene_from_dict(d: dict, path=None, base_dir=None, *, text: str | None = Non
     )
 
 
-def scene_for_meshes(meshes, scheme: str | None = None) -> Scene:
-    """A default scene (automatic camera, headlight) for OBJ files named on the command line.
+def scene_for_meshes(meshes, scheme: str | None = None, camera: str | None = None) -> Scene:
+    """A default scene (automatic camera, headlight) for OBJ files named on the command line;
+    a USD stage brings its meshes, its camera (``camera``: the prim path of one, default its
+    first) and its distant lights (:func:`subtrace.io.usd.usd_scene_table`).
 
     Relative paths are relative to the working directory.
     """
@@ -263,11 +269,17 @@ def scene_for_meshes(meshes, scheme: str | None = None) -> Scene:
             raise SceneError("is a directory, expected an OBJ file", path=obj["mesh"])
         if not os.path.isfile(obj["mesh"]):
             raise SceneError("no such mesh file", path=obj["mesh"])
+    table = {"object": objects}
+    if any(is_usd(o["mesh"]) for o in objects):
+        table = usd_scene_table(objects, camera)
+    elif camera is not None:
+        raise SceneError("--camera names a USD camera prim: give a USD stage",
+                         key="--camera")
     if scheme is not None:
-        for obj in objects:
+        for obj in table["object"]:
             obj["scheme"] = scheme
     try:
-        return scene_from_dict({"object": objects})
+        return scene_from_dict(table)
     except SceneError as err:
         key = "--scheme" if err.key and err.key.endswith(".scheme") else None
         raise SceneError(err.problem, key=key) from None
@@ -322,15 +334,26 @@ def _objects(ctx, d: dict, base_dir: str) -> tuple[SceneObject, ...]:
     objects = []
     for where, table in tables:
         mesh = _mesh_path(ctx, where + ("mesh",), table["mesh"], base_dir)
-        scheme = boundary = color = None
+        scheme = boundary = color = prim = None
+        if "prim" in table:
+            prim = ctx.call(where + ("prim",), _prim_path, table["prim"], "prim")
         if "scheme" in table:
             scheme = _choice(ctx, where + ("scheme",), table["scheme"], SCHEMES)
         if "boundary" in table:
             boundary = _choice(ctx, where + ("boundary",), table["boundary"], BOUNDARIES)
         if "color" in table:
             color = ctx.color(where + ("color",), table["color"])
-        objects.append(SceneObject(mesh=mesh, scheme=scheme, boundary=boundary, color=color))
+        objects.append(SceneObject(mesh=mesh, scheme=scheme, boundary=boundary, color=color,
+                                   prim=prim))
     return tuple(objects)
+
+
+def _prim_path(value, key):
+    """A USD prim path: a string starting with '/'."""
+    if not isinstance(value, str) or not value.startswith("/"):
+        raise SceneError(f"expected a USD prim path such as \"/World/Body\", got "
+                         f"{show_value(value)}")
+    return value
 
 
 def _camera(ctx, table) -> CameraSettings:

@@ -234,11 +234,23 @@ def make_cage(
     )
 
 
-def load_cage(path, scheme: str | None = None, boundary: int | None = None) -> Cage:
-    """Read an OBJ control cage (with OpenSubdiv ``t`` tags) and prepare it for subdivision.
+def load_cage(path, scheme: str | None = None, boundary: int | None = None,
+              prim: str | None = None) -> Cage:
+    """Read an OBJ control cage (with OpenSubdiv ``t`` tags), or a mesh of a USD stage
+    (``subtrace.io.usd``: the mesh ``prim``, or all its meshes as one), and prepare it for
+    subdivision. ``boundary`` (0 none, 1 edge-and-corner, 2 edge-only) overrides the file's
+    ``interpolateboundary`` tag or attribute."""
+    from subtrace.io.usd import is_usd
 
-    ``boundary`` (0 none, 1 edge-and-corner, 2 edge-only) overrides the file's
-    ``interpolateboundary`` tag."""
+    if is_usd(path):
+        from subtrace.io.usd import combined_mesh, read_stage
+
+        arrays = combined_mesh(read_stage(path), prim).cage_arrays()
+        if scheme is not None:
+            arrays["scheme"] = scheme
+        if boundary is not None:
+            arrays["boundary"] = boundary
+        return make_cage(path=Path(path), **arrays)
     data = read_obj(path)
     return make_cage(
         data.points,

@@ -1,0 +1,366 @@
+"""USD stages (``.usd``, ``.usda``, ``.usdc``, ``.usdz``) as subtrace cages, camera and lights.
+
+Reads through Pixar's ``usd-core`` (``pip install subtrace[usd]``), imported only when a
+stage is opened. What is read, at the stage's default time (or ``time``):
+
+* every ``UsdGeomMesh`` that is visible and of purpose ``default`` or ``render``, its points
+  in world space (the prim's local-to-world transform), faces (``faceVertexCounts`` /
+  ``faceVertexIndices``; ``orientation = "leftHanded"`` faces are turned to the
+  right-handed order OBJ and OpenSubdiv use), and its subdivision attributes:
+  ``subdivisionScheme`` (``catmullClark``, ``loop``; ``bilinear`` and ``none`` as flat
+  polygons: every edge and vertex infinitely sharp, so each planar face renders as itself),
+  ``interpolateBoundary`` (``none``, ``edgeOnly``, ``edgeAndCorner``: USD's default is
+  ``edgeAndCorner``, unlike OpenSubdiv's OBJ loaders' ``edgeOnly``),
+  ``triangleSubdivisionRule`` (``catmullClark`` or ``smooth``), creases
+  (``creaseIndices`` in chains of ``creaseLengths`` vertices, ``creaseSharpnesses`` one per
+  chain or one per edge), corners (``cornerIndices`` / ``cornerSharpnesses``) and holes
+  (``holeIndices``); a constant ``primvars:displayColor`` as the object's colour;
+* ``UsdGeomCamera`` prims (focal length and vertical aperture as the vertical field of
+  view, the transform as eye, target and up); :func:`read_stage` returns them by path;
+* ``UsdLuxDistantLight`` as a directional light (its -Z axis in world space, colour, and
+  intensity times 2^exposure relative to the brightest: USD's units are physical, a sun's
+  default is 50,000, subtrace's are relative, 1 for a full light); other lights are
+  reported as ignored.
+
+USD's sharpness scale is OpenSubdiv's (10 and above: infinitely sharp), as the OBJ tags'.
+Every problem is a :class:`subtrace.errors.SubtraceError` naming the file (and prim).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from subtrace.config import SHARPNESS_INFINITE
+from subtrace.errors import SubtraceError
+from subtrace.io.obj import BOUNDARY_EDGE_AND_CORNER, BOUNDARY_EDGE_ONLY, BOUNDARY_NONE
+
+USD_EXTENSIONS = (".usd", ".usda", ".usdc", ".usdz")
+BOUNDARY_TOKENS = {"none": BOUNDARY_NONE, "edgeOnly": BOUNDARY_EDGE_ONLY,
+                   "edgeAndCorner": BOUNDARY_EDGE_AND_CORNER}
+SCHEME_TOKENS = {"catmullClark": "catmark", "loop": "loop", "bilinear": None, "none": None}
+
+
+def is_usd(path) -> bool:
+    """Whether ``path`` names a USD stage (by its extension)."""
+    return os.path.splitext(os.fspath(path))[1].lower() in USD_EXTENSIONS
+
+
+@dataclass
+class UsdMesh:
+    """One mesh prim, ready for :func:`subtrace.mesh.cage.make_cage`."""
+
+    prim: str
+    points: np.ndarray
+    face_sizes: np.ndarray
+    face_verts: np.ndarray
+    scheme: str | None  # "catmark" | "loop"; None: flat polygons (bilinear / none)
+    boundary: int
+    smooth_triangles: bool
+    crease_edges: np.ndarray  # (e, 2) int32
+    crease_sharpness: np.ndarray  # (e,) float32
+    corner_verts: np.ndarray
+    corner_sharpness: np.ndarray
+    hole_faces: np.ndarray
+    color: tuple[float, float, float] | None = None
+
+    def cage_arrays(self) -> dict:
+        """Keyword arguments of ``make_cage`` (flat polygons as every edge and vertex
+        infinitely sharp: a planar face's limit surface is the face)."""
+        edges, sharp = self.crease_edges, self.crease_sharpness
+        corners, corner_sharp = self.corner_verts, self.corner_sharpness
+        if self.scheme is None:
+            a = self.face_verts
+            b = np.concatenate([np.roll(f, -1) for f in np.split(a, np.cumsum(self.face_sizes)[:-1])])
+            edges = np.unique(np.sort(np.stack([a, b], axis=1), axis=1), axis=0).astype(np.int32)
+            sharp = np.full(len(edges), SHARPNESS_INFINITE, np.float32)
+            corners = np.arange(len(self.points), dtype=np.int32)
+            corner_sharp = np.full(len(corners), SHARPNESS_INFINITE, np.float32)
+        return dict(points=self.points, face_sizes=self.face_sizes, face_verts=self.face_verts,
+                    scheme="catmark" if self.scheme is None else self.scheme,
+                    boundary=self.boundary, smooth_triangles=self.smooth_triangles,
+                    crease_edges=edges, crease_sharpness=sharp, corner_verts=corners,
+                    corner_sharpness=corner_sharp, hole_faces=self.hole_faces)
+
+
+@dataclass
+class UsdCamera:
+    prim: str
+    eye: tuple
+    target: tuple
+    up: tuple
+    fov_deg: float
+
+
+@dataclass
+class UsdStageContent:
+    path: str
+    meshes: list[UsdMesh] = field(default_factory=list)
+    cameras: list[UsdCamera] = field(default_factory=list)
+    lights: list[tuple] = field(default_factory=list)  # (direction, color, intensity)
+    ignored: list[str] = field(default_factory=list)  # prims read but not rendered, said why
+
+
+def _pxr(path):
+    try:
+        from pxr import Usd, UsdGeom, UsdLux  # noqa: F401
+    except ImportError:
+        raise SubtraceError(f"{path}: reading USD needs Pixar's usd-core: "
+                            "pip install 'subtrace[usd]' (or pip install usd-core)") from None
+    import pxr
+
+    return pxr
+
+
+def open_stage(path):
+    """The ``Usd.Stage`` of ``path``; SubtraceError naming the file when it cannot be read."""
+    path = os.fsdecode(os.fspath(path))
+    pxr = _pxr(path)
+    if not os.path.exists(path):
+        raise SubtraceError(f"{path}: no such file")
+    if os.path.isdir(path):
+        raise SubtraceError(f"{path}: is a directory, expected a USD stage")
+    try:
+        stage = pxr.Usd.Stage.Open(path)
+    except Exception as exc:  # noqa: BLE001 - USD raises its own Tf errors
+        text = " ".join(str(exc).split())
+        raise SubtraceError(f"{path}: not a readable USD stage: {text[:300]}") from None
+    if stage is None:
+        raise SubtraceError(f"{path}: not a readable USD stage")
+    return stage
+
+
+_CACHE: dict = {}  # the last stage read: (path, size, mtime, time) -> its content
+
+
+def read_stage(path, time=None) -> UsdStageContent:
+    """Meshes, cameras and lights of the stage ``path`` (module comment). The last stage
+    read is kept (a scene reads it for its objects, camera and lights, then per object)."""
+    path = os.fsdecode(os.fspath(path))
+    try:
+        st = os.stat(path)
+        key = (os.path.abspath(path), st.st_size, st.st_mtime_ns, time)
+    except OSError:
+        key = None
+    if key is not None and key in _CACHE:
+        return _CACHE[key]
+    content = _read_stage(path, time)
+    _CACHE.clear()
+    if key is not None:
+        _CACHE[key] = content
+    return content
+
+
+def _read_stage(path, time) -> UsdStageContent:
+    stage = open_stage(path)
+    pxr = _pxr(path)
+    Usd, UsdGeom, UsdLux = pxr.Usd, pxr.UsdGeom, pxr.UsdLux
+    t = Usd.TimeCode.Default() if time is None else Usd.TimeCode(float(time))
+    out = UsdStageContent(path)
+    cache = UsdGeom.XformCache(t)
+    for prim in stage.Traverse():
+        where = f"{path}: {prim.GetPath()}"
+        if prim.IsA(UsdGeom.Imageable):
+            img = UsdGeom.Imageable(prim)
+            if img.ComputeVisibility(t) == UsdGeom.Tokens.invisible:
+                continue
+            if img.ComputePurpose() not in (UsdGeom.Tokens.default_, UsdGeom.Tokens.render):
+                continue
+        matrix = np.array(cache.GetLocalToWorldTransform(prim), dtype=np.float64)
+        if prim.IsA(UsdGeom.Mesh):
+            out.meshes.append(_mesh(UsdGeom.Mesh(prim), matrix, t, where))
+        elif prim.IsA(UsdGeom.Camera):
+            out.cameras.append(_camera(UsdGeom.Camera(prim), matrix, t, where))
+        elif prim.IsA(UsdLux.DistantLight):
+            out.lights.append(_distant_light(UsdLux.DistantLight(prim), matrix, t))
+        elif prim.HasAPI(UsdLux.LightAPI) or prim.GetTypeName().endswith("Light"):
+            out.ignored.append(f"{prim.GetPath()} ({prim.GetTypeName()}: subtrace's lights "
+                               "are directional)")
+        elif prim.IsA(UsdGeom.Gprim):
+            out.ignored.append(f"{prim.GetPath()} ({prim.GetTypeName()}: not a mesh)")
+    if not out.meshes:
+        raise SubtraceError(f"{path}: no visible UsdGeomMesh prims to render (subtrace renders "
+                            "subdivision meshes)")
+    top = max((i for _, _, i in out.lights), default=0.0)
+    if top > 1.0:
+        out.lights = [(d, c, i / top) for d, c, i in out.lights]
+    return out
+
+
+def combined_mesh(content: UsdStageContent, prim: str | None) -> UsdMesh:
+    """The mesh ``prim`` of the stage, or with None its only mesh, or all its meshes as one
+    (their points and faces side by side) when they share scheme, boundary and rules."""
+    where = content.path
+    if prim is not None:
+        for m in content.meshes:
+            if m.prim == prim:
+                return m
+        names = ", ".join(m.prim for m in content.meshes[:8])
+        raise SubtraceError(f"{where}: no visible mesh prim {prim}; its meshes: {names}")
+    ms = content.meshes
+    if len(ms) == 1:
+        return ms[0]
+    if len({(m.scheme, m.boundary, m.smooth_triangles) for m in ms}) > 1:
+        raise SubtraceError(f"{where}: its {len(ms)} meshes differ in subdivision scheme or "
+                            "rules; name one prim (a scene's object prim = \"/path\")")
+    off = np.cumsum([0] + [len(m.points) for m in ms])[:-1]
+    foff = np.cumsum([0] + [len(m.face_sizes) for m in ms])[:-1]
+    cat = lambda f, shift=None: np.concatenate(  # noqa: E731
+        [getattr(m, f) + (0 if shift is None else shift[k]) for k, m in enumerate(ms)])
+    return UsdMesh("", cat("points"), cat("face_sizes"), cat("face_verts", off), ms[0].scheme,
+                   ms[0].boundary, ms[0].smooth_triangles, cat("crease_edges", off),
+                   cat("crease_sharpness"), cat("corner_verts", off), cat("corner_sharpness"),
+                   cat("hole_faces", foff), ms[0].color)
+
+
+def _get(attr, t, default=None):
+    value = attr.Get(t) if attr and attr.HasAuthoredValue() else None
+    return default if value is None else value
+
+
+def _transform_points(points, matrix):
+    """Points (n,3) through a USD matrix (row vectors: p' = [p 1] M)."""
+    h = np.concatenate([points, np.ones((len(points), 1))], axis=1) @ matrix
+    return h[:, :3] / h[:, 3:4]
+
+
+def _mesh(mesh, matrix, t, where) -> UsdMesh:
+    pts = np.asarray(_get(mesh.GetPointsAttr(), t, []), dtype=np.float64).reshape(-1, 3)
+    counts = np.asarray(_get(mesh.GetFaceVertexCountsAttr(), t, []), dtype=np.int32)
+    idx = np.asarray(_get(mesh.GetFaceVertexIndicesAttr(), t, []), dtype=np.int32)
+    if not len(counts):
+        raise SubtraceError(f"{where}: the mesh has no faces")
+    if counts.min() < 3:
+        raise SubtraceError(f"{where}: a face has {int(counts.min())} vertices; a face needs "
+                            "at least 3")
+    if counts.sum() != len(idx):
+        raise SubtraceError(f"{where}: faceVertexCounts add up to {int(counts.sum())} but "
+                            f"faceVertexIndices has {len(idx)} entries")
+    if len(idx) and (idx.min() < 0 or idx.max() >= len(pts)):
+        raise SubtraceError(f"{where}: a face vertex index is outside the {len(pts)} points")
+    if not np.all(np.isfinite(pts)):
+        raise SubtraceError(f"{where}: a point coordinate is not finite")
+    if _get(mesh.GetOrientationAttr(), t, "rightHanded") == "leftHanded":
+        starts = np.r_[0, np.cumsum(counts)[:-1]]
+        idx = np.concatenate([idx[s:s + n][::-1] for s, n in zip(starts, counts)])
+    scheme_token = str(_get(mesh.GetSubdivisionSchemeAttr(), t, "catmullClark"))
+    if scheme_token not in SCHEME_TOKENS:
+        raise SubtraceError(f"{where}: subdivisionScheme {scheme_token!r}: subtrace renders "
+                            "catmullClark, loop, bilinear and none")
+    boundary_token = str(_get(mesh.GetInterpolateBoundaryAttr(), t, "edgeAndCorner"))
+    if boundary_token not in BOUNDARY_TOKENS:
+        raise SubtraceError(f"{where}: interpolateBoundary {boundary_token!r}: expected one of "
+                            + ", ".join(BOUNDARY_TOKENS))
+    rule = str(_get(mesh.GetTriangleSubdivisionRuleAttr(), t, "catmullClark"))
+    edges, sharp = _creases(mesh, t, len(pts), where)
+    corners = np.asarray(_get(mesh.GetCornerIndicesAttr(), t, []), dtype=np.int32)
+    corner_sharp = np.asarray(_get(mesh.GetCornerSharpnessesAttr(), t, []), dtype=np.float32)
+    if len(corners) != len(corner_sharp):
+        raise SubtraceError(f"{where}: {len(corners)} cornerIndices but {len(corner_sharp)} "
+                            "cornerSharpnesses")
+    if len(corners) and (corners.min() < 0 or corners.max() >= len(pts)):
+        raise SubtraceError(f"{where}: a corner index is outside the {len(pts)} points")
+    holes = np.asarray(_get(mesh.GetHoleIndicesAttr(), t, []), dtype=np.int32)
+    if len(holes) and (holes.min() < 0 or holes.max() >= len(counts)):
+        raise SubtraceError(f"{where}: a hole index is outside the {len(counts)} faces")
+    color = None
+    colors = _get(mesh.GetDisplayColorAttr(), t)
+    if colors is not None and len(colors) >= 1:
+        color = tuple(float(min(max(c, 0.0), 1.0)) for c in colors[0])
+    return UsdMesh(str(mesh.GetPath()), _transform_points(pts, matrix), counts, idx,
+                   SCHEME_TOKENS[scheme_token], BOUNDARY_TOKENS[boundary_token],
+                   rule == "smooth", edges, sharp, corners, corner_sharp, holes, color)
+
+
+def _creases(mesh, t, n_points, where):
+    """Crease chains as edges (e,2) and a sharpness per edge: ``creaseSharpnesses`` holds one
+    value per chain, or one per edge of the chains."""
+    idx = np.asarray(_get(mesh.GetCreaseIndicesAttr(), t, []), dtype=np.int32)
+    lengths = np.asarray(_get(mesh.GetCreaseLengthsAttr(), t, []), dtype=np.int64)
+    sharp = np.asarray(_get(mesh.GetCreaseSharpnessesAttr(), t, []), dtype=np.float32)
+    if not len(idx) and not len(lengths):
+        return np.zeros((0, 2), np.int32), np.zeros(0, np.float32)
+    if np.any(lengths < 2) or lengths.sum() != len(idx):
+        raise SubtraceError(f"{where}: creaseLengths (each at least 2) must add up to the "
+                            f"{len(idx)} creaseIndices")
+    if idx.min() < 0 or idx.max() >= n_points:
+        raise SubtraceError(f"{where}: a crease index is outside the {n_points} points")
+    starts = np.r_[0, np.cumsum(lengths)[:-1]]
+    edges = np.concatenate([np.stack([idx[s:s + n - 1], idx[s + 1:s + n]], axis=1)
+                            for s, n in zip(starts, lengths)])
+    if len(sharp) == len(lengths):
+        per_edge = np.repeat(sharp, lengths - 1)
+    elif len(sharp) == len(edges):
+        per_edge = sharp
+    else:
+        raise SubtraceError(f"{where}: {len(sharp)} creaseSharpnesses for {len(lengths)} "
+                            f"creases of {len(edges)} edges: give one per crease or one per "
+                            "edge")
+    return edges.astype(np.int32), per_edge.astype(np.float32)
+
+
+def _camera(cam, matrix, t, where) -> UsdCamera:
+    focal = float(_get(cam.GetFocalLengthAttr(), t, 50.0))
+    aperture = float(_get(cam.GetVerticalApertureAttr(), t, 15.2908))
+    if not (focal > 0 and aperture > 0):
+        raise SubtraceError(f"{where}: focalLength and verticalAperture must be > 0")
+    fov = math.degrees(2.0 * math.atan(0.5 * aperture / focal))
+    eye = _transform_points(np.zeros((1, 3)), matrix)[0]
+    ahead = _transform_points(np.array([[0.0, 0.0, -1.0]]), matrix)[0]
+    up = np.array([0.0, 1.0, 0.0, 0.0]) @ matrix
+    return UsdCamera(str(cam.GetPath()), tuple(float(x) for x in eye),
+                     tuple(float(x) for x in ahead), tuple(float(x) for x in up[:3]), fov)
+
+
+def _distant_light(light, matrix, t):
+    direction = (np.array([0.0, 0.0, -1.0, 0.0]) @ matrix)[:3]
+    intensity = float(_get(light.GetIntensityAttr(), t, 1.0))
+    exposure = float(_get(light.GetExposureAttr(), t, 0.0))
+    color = tuple(float(c) for c in _get(light.GetColorAttr(), t, (1.0, 1.0, 1.0)))
+    return tuple(direction / np.linalg.norm(direction)), color, intensity * 2.0 ** exposure
+
+
+__all__ = ["read_stage", "open_stage", "is_usd", "combined_mesh", "UsdMesh", "UsdCamera", "UsdStageContent",
+           "USD_EXTENSIONS"]
+
+
+def usd_scene_table(objects: list[dict], camera: str | None) -> dict:
+    """A scene table (as a TOML scene parses) for ``objects`` (``{"mesh": path}`` each)
+    where the USD stages are replaced by one object per mesh prim (its displayColor as the
+    object's colour) and the first stage's camera (``camera``: a prim path; default its
+    first camera, if it has one) and distant lights are the scene's."""
+    out: list[dict] = []
+    table: dict = {"object": out}
+    first = True
+    for obj in objects:
+        if not is_usd(obj["mesh"]):
+            out.append(obj)
+            continue
+        content = read_stage(obj["mesh"])
+        for m in content.meshes:
+            item = {"mesh": obj["mesh"], "prim": m.prim}
+            if m.color is not None:
+                item["color"] = list(m.color)
+            out.append(item)
+        if first:
+            first = False
+            cams = content.cameras
+            if camera is not None:
+                cams = [c for c in cams if c.prim == camera]
+                if not cams:
+                    names = ", ".join(c.prim for c in content.cameras) or "none"
+                    raise SubtraceError(f"{content.path}: no camera prim {camera} (its "
+                                        f"cameras: {names})")
+            if cams:
+                c = cams[0]
+                table["camera"] = {"eye": [float(x) for x in c.eye],
+                                   "target": [float(x) for x in c.target],
+                                   "up": [float(x) for x in c.up], "fov": float(c.fov_deg)}
+            if content.lights:
+                table["light"] = [{"direction": [float(x) for x in d],
+                                   "color": [min(max(float(x), 0.0), 1.0) for x in col],
+                                   "intensity": float(i)} for d, col, i in content.lights]
+    return table

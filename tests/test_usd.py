@@ -1,0 +1,221 @@
+"""USD stages as input (io/usd.py): UsdGeomMesh subdivision attributes, transforms, cameras,
+lights; the OpenSubdiv oracle shapes round-trip through USD with the same limit surface, and
+a stage renders the same image as the equivalent OBJ with the same flags."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from shared_data import SHARED, SHAPES
+
+pxr = pytest.importorskip("pxr", reason="usd-core (subtrace[usd]) is not installed")
+from pxr import Gf, Usd, UsdGeom, UsdLux  # noqa: E402
+
+import subtrace  # noqa: E402
+from subtrace.cli import main  # noqa: E402
+from subtrace.io.exr import read_exr  # noqa: E402
+from subtrace.io.obj import BOUNDARY_EDGE_AND_CORNER, BOUNDARY_EDGE_ONLY, read_obj  # noqa: E402
+
+ORACLE = SHARED / "oracle"
+BOUNDARY_TOKEN = {0: "none", BOUNDARY_EDGE_AND_CORNER: "edgeAndCorner",
+                  BOUNDARY_EDGE_ONLY: "edgeOnly"}
+CUBE_PTS = [(-1, -1, -1), (1, -1, -1), (1, 1, -1), (-1, 1, -1), (-1, -1, 1), (1, -1, 1),
+            (1, 1, 1), (-1, 1, 1)]
+CUBE_FACES = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [2, 3, 7, 6], [1, 2, 6, 5], [0, 4, 7, 3]]
+
+
+def write_usd_from_obj(obj_path, usd_path, scheme, leaf="/Shape"):
+    """The OBJ cage (with its OpenSubdiv tags) as a UsdGeomMesh: creases as chains of one
+    edge each, with a sharpness per chain (or per edge), corners, holes, the boundary mode
+    (the OBJ default edge-only written out: USD's own default is edge-and-corner)."""
+    d = read_obj(obj_path)
+    stage = Usd.Stage.CreateNew(str(usd_path))
+    mesh = UsdGeom.Mesh.Define(stage, leaf)
+    mesh.CreatePointsAttr([Gf.Vec3f(*map(float, p)) for p in d.points])
+    mesh.CreateFaceVertexCountsAttr([int(n) for n in d.face_sizes])
+    mesh.CreateFaceVertexIndicesAttr([int(i) for i in d.face_verts])
+    mesh.CreateSubdivisionSchemeAttr("loop" if scheme == "loop" else "catmullClark")
+    boundary = BOUNDARY_EDGE_ONLY if d.boundary is None else d.boundary
+    mesh.CreateInterpolateBoundaryAttr(BOUNDARY_TOKEN[boundary])
+    if d.smooth_triangles == "smooth":
+        mesh.CreateTriangleSubdivisionRuleAttr("smooth")
+    if len(d.crease_edges):
+        mesh.CreateCreaseIndicesAttr([int(i) for i in np.ravel(d.crease_edges)])
+        mesh.CreateCreaseLengthsAttr([2] * len(d.crease_edges))
+        mesh.CreateCreaseSharpnessesAttr([float(s) for s in d.crease_sharpness])
+    if len(d.corner_verts):
+        mesh.CreateCornerIndicesAttr([int(i) for i in d.corner_verts])
+        mesh.CreateCornerSharpnessesAttr([float(s) for s in d.corner_sharpness])
+    if len(d.hole_faces):
+        mesh.CreateHoleIndicesAttr([int(i) for i in d.hole_faces])
+    stage.Save()
+    return d
+
+
+def _shapes():
+    names = sorted(p.stem for p in ORACLE.glob("*.npz")) if ORACLE.is_dir() else []
+    return [n for n in names if (SHAPES / f"{n}.obj").exists()
+            and not n.startswith("catmark_fvar") and "chaikin" not in n]
+
+
+@pytest.mark.parametrize("name", _shapes())
+def test_oracle_shapes_round_trip_through_usd(tmp_path, name):
+    """Each OpenSubdiv shape written as a USD mesh loads to the same cage (options and
+    limit surface, bit for bit) as its OBJ, and so matches OpenSubdiv's samples."""
+    obj = SHAPES / f"{name}.obj"
+    usd = tmp_path / f"{name}.usda"
+    scheme = name.split("_")[0]
+    d = write_usd_from_obj(obj, usd, scheme)
+    # USD's points are single precision (point3f[]): the OBJ's cage with its points rounded so
+    a = subtrace.make_cage(
+        d.points.astype(np.float32).astype(np.float64), d.face_sizes, d.face_verts, scheme,
+        boundary=d.boundary, chaikin=d.crease_method == "chaikin",
+        smooth_triangles=d.smooth_triangles == "smooth", crease_edges=d.crease_edges,
+        crease_sharpness=d.crease_sharpness, corner_verts=d.corner_verts,
+        corner_sharpness=d.corner_sharpness, hole_faces=d.hole_faces)
+    b = subtrace.load_cage(usd)
+    assert a.scheme == b.scheme and a.options == b.options
+    z = np.load(ORACLE / f"{name}.npz")
+    Pa, da, _ = a.evaluate(z["sample_ptex_face"], z["sample_uv"])
+    Pb, db, _ = b.evaluate(z["sample_ptex_face"], z["sample_uv"])
+    np.testing.assert_array_equal(Pa, Pb)
+    np.testing.assert_array_equal(da, db)
+    exact = z["sample_exact_P"].astype(bool)
+    diag = float(np.linalg.norm(np.ptp(z["control_points"], axis=0)))
+    # (plus what rounding the points to single precision moves the surface: the limit is
+    # an affine combination of the points)
+    rounding = 2 * np.finfo(np.float32).eps * float(np.abs(z["control_points"]).max())
+    err = np.linalg.norm(Pb - z["sample_P"], axis=1)[exact].max(initial=0)
+    assert err < 1e-7 * diag + rounding
+
+
+def _cube_stage(path, **attrs):
+    stage = Usd.Stage.CreateNew(str(path))
+    world = UsdGeom.Xform.Define(stage, "/World")
+    mesh = UsdGeom.Mesh.Define(stage, "/World/Cube")
+    mesh.CreatePointsAttr(CUBE_PTS)
+    mesh.CreateFaceVertexCountsAttr([4] * 6)
+    mesh.CreateFaceVertexIndicesAttr(sum(CUBE_FACES, []))
+    for key, value in attrs.items():
+        getattr(mesh, f"Create{key}Attr")(value)
+    return stage, world, mesh
+
+
+def test_stage_renders_as_the_equivalent_obj(tmp_path, capsys):
+    """A stage (a cube with a semi-sharp crease chain, a corner, a camera) renders the same
+    pixels as the OBJ with the same tags, rendered through the same camera."""
+    usd = tmp_path / "cube.usda"
+    stage, world, mesh = _cube_stage(usd, CreaseIndices=[0, 1, 2, 6], CreaseLengths=[4],
+                                     CreaseSharpnesses=[2.0], CornerIndices=[7],
+                                     CornerSharpnesses=[3.0])
+    cam = UsdGeom.Camera.Define(stage, "/World/Cam")
+    cam.AddRotateXYZOp().Set((-25.0, 35.0, 0.0))  # (the first op is the outermost: an
+    cam.AddTranslateOp().Set((0.0, 0.0, 7.0))     # orbit about the origin)
+    stage.Save()
+    obj = tmp_path / "cube.obj"
+    obj.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in CUBE_PTS)
+                   + "".join("f " + " ".join(str(i + 1) for i in f) + "\n" for f in CUBE_FACES)
+                   + "t crease 2/1/0 0 1 2.0\nt crease 2/1/0 1 2 2.0\nt crease 2/1/0 2 6 2.0\n"
+                   + "t corner 1/1/0 7 3.0\nt interpolateboundary 1/0/0 1\n")
+    from subtrace.io.usd import read_stage
+
+    c = read_stage(usd).cameras[0]
+    size = ["--width", "96", "--height", "72", "--quiet"]
+    assert main(["render", str(usd), "-o", str(tmp_path / "u.exr"), *size]) == 0
+    assert main(["render", str(obj), "-o", str(tmp_path / "o.exr"), *size,
+                 "--eye", *map(str, c.eye), "--target", *map(str, c.target),
+                 "--up", *map(str, c.up), "--fov", repr(c.fov_deg)]) == 0
+    u, _ = read_exr(tmp_path / "u.exr")
+    o, _ = read_exr(tmp_path / "o.exr")
+    assert np.count_nonzero(u["A"]) > 500
+    for name in ("A", "Z", "N.X", "N.Y", "N.Z", "u", "v", "patch_id"):
+        np.testing.assert_array_equal(u[name], o[name], err_msg=name)
+
+
+def test_transform_orientation_visibility_and_purpose(tmp_path):
+    """World transforms move the points; a left-handed mesh's faces are turned to the
+    right-handed order; invisible and guide meshes are left out; displayColor is the
+    object's colour; per-edge and per-chain crease sharpnesses read alike."""
+    from subtrace.io.usd import read_stage
+
+    usd = tmp_path / "t.usda"
+    stage, world, mesh = _cube_stage(usd, CreaseIndices=[0, 1, 2], CreaseLengths=[3],
+                                     CreaseSharpnesses=[1.5, 2.5],
+                                     DisplayColor=[(0.1, 0.2, 0.3)])
+    world.AddTranslateOp().Set((10.0, 0.0, 0.0))
+    left = UsdGeom.Mesh.Define(stage, "/World/Left")
+    left.CreatePointsAttr(CUBE_PTS)
+    left.CreateFaceVertexCountsAttr([4] * 6)
+    left.CreateFaceVertexIndicesAttr(sum(CUBE_FACES, []))
+    left.CreateOrientationAttr("leftHanded")
+    hidden = UsdGeom.Mesh.Define(stage, "/World/Hidden")
+    hidden.CreatePointsAttr(CUBE_PTS)
+    hidden.CreateFaceVertexCountsAttr([4] * 6)
+    hidden.CreateFaceVertexIndicesAttr(sum(CUBE_FACES, []))
+    hidden.CreateVisibilityAttr("invisible")
+    guide = UsdGeom.Mesh.Define(stage, "/World/Guide")
+    guide.CreatePointsAttr(CUBE_PTS)
+    guide.CreateFaceVertexCountsAttr([4] * 6)
+    guide.CreateFaceVertexIndicesAttr(sum(CUBE_FACES, []))
+    guide.CreatePurposeAttr("guide")
+    light = UsdLux.DistantLight.Define(stage, "/World/Sun")
+    light.AddRotateXOp().Set(-90.0)  # pointing down: its -Z axis becomes -Y
+    stage.Save()
+    content = read_stage(usd)
+    assert [m.prim for m in content.meshes] == ["/World/Cube", "/World/Left"]
+    cube, lefty = content.meshes
+    np.testing.assert_allclose(cube.points, np.asarray(CUBE_PTS) + [10.0, 0.0, 0.0])
+    np.testing.assert_allclose(cube.crease_sharpness, [1.5, 2.5])
+    assert cube.color == pytest.approx((0.1, 0.2, 0.3))
+    first = lefty.face_verts[:4]
+    assert list(first) == CUBE_FACES[0][::-1]
+    (direction, _, intensity), = content.lights
+    np.testing.assert_allclose(direction, (0.0, -1.0, 0.0), atol=1e-12)
+    assert intensity == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("attrs, words", [
+    ({"CreaseIndices": [0, 1, 2], "CreaseLengths": [2], "CreaseSharpnesses": [1.0]},
+     "creaseLengths"),
+    ({"CreaseIndices": [0, 1], "CreaseLengths": [2], "CreaseSharpnesses": [1.0, 2.0, 3.0]},
+     "creaseSharpnesses"),
+    ({"CornerIndices": [0, 1], "CornerSharpnesses": [1.0]}, "cornerSharpnesses"),
+    ({"HoleIndices": [9]}, "hole index"),
+    ({"SubdivisionScheme": "sqrt3"}, "subdivisionScheme"),
+    ({"FaceVertexCounts": [4] * 5}, "faceVertexCounts"),
+])
+def test_bad_stages_are_one_line(tmp_path, capsys, attrs, words):
+    usd = tmp_path / "bad.usda"
+    stage, _, _ = _cube_stage(usd, **attrs)
+    stage.Save()
+    for command in (["render", str(usd), "-o", str(tmp_path / "x.exr")], ["info", str(usd)]):
+        assert main(command) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and words in err and "bad.usda" in err and \
+            "/World/Cube" in err, err
+    assert not (tmp_path / "x.exr").exists()
+
+
+def test_stage_without_meshes_and_missing_camera(tmp_path, capsys):
+    empty = tmp_path / "empty.usda"
+    Usd.Stage.CreateNew(str(empty)).Save()
+    assert main(["render", str(empty), "-o", str(tmp_path / "x.exr")]) == 2
+    assert "no visible UsdGeomMesh" in capsys.readouterr().err
+    usd = tmp_path / "c.usda"
+    stage, _, _ = _cube_stage(usd)
+    stage.Save()
+    assert main(["render", str(usd), "-o", str(tmp_path / "x.exr"), "--camera", "/Cam"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no camera prim /Cam" in err
+
+
+def test_bilinear_scheme_is_flat(tmp_path):
+    """subdivisionScheme none: each face is itself (a point at a face's centre is on it)."""
+    usd = tmp_path / "flat.usda"
+    stage, _, _ = _cube_stage(usd, SubdivisionScheme="none")
+    stage.Save()
+    cage = subtrace.load_cage(usd)
+    P, _, _ = cage.evaluate(np.arange(6), np.full((6, 2), 0.5))
+    # the face centres of the cube: one coordinate is +-1, the others 0
+    np.testing.assert_allclose(np.sort(np.abs(P), axis=1), [[0, 0, 1]] * 6, atol=1e-12)
