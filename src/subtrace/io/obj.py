@@ -103,8 +103,12 @@ def read_obj(path) -> ObjData:
     raw = read_obj_bytes(path)
     foreign = foreign_format(path, raw)
     if foreign is not None:
-        raise ObjError(path, None, f"{foreign} files are not read: subtrace reads Wavefront OBJ "
-                                   "cages (.obj, with OpenSubdiv tags and free-form surfaces)")
+        ext = os.path.splitext(path)[1].lower()
+        if foreign in READ_ELSEWHERE and FOREIGN_EXTENSIONS.get(ext) != foreign:
+            raise ObjError(path, None, f"a {foreign} file, not OBJ: give it the "
+                                       f"{READ_ELSEWHERE[foreign]} extension to read it as "
+                                       f"{foreign}")
+        raise ObjError(path, None, f"{foreign} files are not read: subtrace reads {READABLE}")
     # ASCII is valid UTF-8 without a byte-order mark: only other files need checking first
     text = None if raw.isascii() else decode_obj(path, raw)
     data = ObjReader(path).read_fast(raw) or ObjReader(path).read(
@@ -129,6 +133,13 @@ FOREIGN_MAGIC = (
     (b"solid ", "STL"), (b"PXR-USDC", "USD"), (b"#usda", "USD"), (b"BLENDER", "Blender"),
     (b"Ogawa", "Alembic"), (b"ISO-10303-21", "STEP"),
 )
+
+
+# formats read by other modules (io/meshes.py, io/usd.py), by extension
+READ_ELSEWHERE = {"PLY": ".ply", "STL": ".stl", "STL (binary)": ".stl", "OFF": ".off",
+                  "glTF": ".gltf", "glTF (binary)": ".glb", "USD": ".usda"}
+READABLE = ("Wavefront OBJ cages (.obj, with OpenSubdiv tags and free-form surfaces), USD "
+            "stages (.usd, .usda, .usdc, .usdz) and PLY, STL, OFF and glTF meshes")
 
 
 def foreign_format(path: str, raw: bytes) -> str | None:

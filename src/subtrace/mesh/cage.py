@@ -236,12 +236,18 @@ def make_cage(
 
 def load_cage(path, scheme: str | None = None, boundary: int | None = None,
               prim: str | None = None) -> Cage:
-    """Read an OBJ control cage (with OpenSubdiv ``t`` tags), or a mesh of a USD stage
-    (``subtrace.io.usd``: the mesh ``prim``, or all its meshes as one), and prepare it for
-    subdivision. ``boundary`` (0 none, 1 edge-and-corner, 2 edge-only) overrides the file's
+    """Read an OBJ control cage (with OpenSubdiv ``t`` tags), a mesh of a USD stage
+    (``subtrace.io.usd``: the mesh ``prim``, or all its meshes as one), or a PLY, STL, OFF or
+    glTF mesh (``subtrace.io.meshes``), and prepare it for subdivision. ``boundary`` (0 none, 1 edge-and-corner, 2 edge-only) overrides the file's
     ``interpolateboundary`` tag or attribute."""
+    from subtrace.io.meshes import is_mesh_file
     from subtrace.io.usd import is_usd
 
+    if is_mesh_file(path):
+        from subtrace.io.meshes import read_mesh
+
+        points, sizes, verts = read_mesh(path)
+        return make_cage(points, sizes, verts, scheme, boundary=boundary, path=Path(path))
     if is_usd(path):
         from subtrace.io.usd import combined_mesh, read_stage
 
