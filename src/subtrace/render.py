@@ -208,6 +208,13 @@ def load_objects(scene):
             for o in scene.objects]
 
 
+def scene_bounds(cages):
+    """(lo, hi) that the automatic camera frames: the bounds of the level-1 limit points of
+    every object (the limit surface, not the cage)."""
+    bounds = [c.bounds() for c in cages]
+    return np.min([b[0] for b in bounds], axis=0), np.max([b[1] for b in bounds], axis=0)
+
+
 def _prepare(scene, cages, stats):
     """Load and check the cages, build the patch table, frame the camera, check the budget:
     (cages, table, camera, tolerance in radians, budget in bytes)."""
@@ -224,10 +231,7 @@ def _prepare(scene, cages, stats):
     lo = table.shell_min.min(axis=0)
     hi = table.shell_max.max(axis=0)
     if scene.camera.is_auto:
-        # frame the limit surface: the bounds of the level-1 limit points of every object
-        bounds = [c.bounds() for c in cages]
-        lo = np.min([b[0] for b in bounds], axis=0)
-        hi = np.max([b[1] for b in bounds], axis=0)
+        lo, hi = scene_bounds(cages)
     camera = scene.make_camera(lo, hi)
     budget = scene.render.max_memory
     budget = config.default_max_memory() if budget is None else budget

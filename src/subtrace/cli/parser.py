@@ -123,6 +123,12 @@ def _add_render(sub) -> argparse.ArgumentParser:
                              "it)")
     render.add_argument("--bit-depth", choices=("8", "16"), default="8",
                         help="bits per channel of a .png or .tif output (default 8)")
+    render.add_argument("--turntable", metavar="N",
+                        help="render N frames whose eyes orbit the target about the up axis, "
+                             "one full turn, to numbered outputs (a run of # in -o is the "
+                             "frame number, e.g. spin.####.exr; else .#### is added)")
+    render.add_argument("--frames", metavar="A:B[:STEP]",
+                        help="only these frames of --turntable (Python's range; default all)")
     render.add_argument("--quiet", action="store_true", help="print nothing on success")
     return render
 

@@ -14,6 +14,7 @@ import numpy as np
 from subtrace.cli.common import trim_numba
 from subtrace.data import default_scene_path
 from subtrace.errors import SceneError
+from subtrace.frames import check_turntable, frame_path, parse_frames, turntable_eye
 from subtrace.io.atomic import check_writable
 from subtrace.io.formats import DEEP, picture_format
 from subtrace.io.scene import apply_overrides, load_scene, scene_for_meshes
@@ -59,17 +60,47 @@ def execute(args) -> int:
     png = os.path.splitext(out)[0] + ".png" if args.png else scene.preview
     if png and os.path.abspath(png) == os.path.abspath(out):
         png = None  # the output is that picture already: --png never writes over it
-    check_writable(out)
-    if png:
-        check_writable(png)
+    turntable = getattr(args, "turntable", None)
+    frames = None
+    if turntable is not None:
+        n = check_turntable(turntable)
+        frames = [(k, frame_path(out, k), png and frame_path(png, k))
+                  for k in parse_frames(args.frames, n)]
+    elif getattr(args, "frames", None) is not None:
+        raise SceneError("--frames picks frames of a camera path: give --turntable N",
+                         key="--frames")
+    for path in [out, png] if frames is None else [p for _, o, g in frames for p in (o, g)]:
+        if path:
+            check_writable(path)
     # imported once the inputs are checked: bad input fails before the renderer's kernels
     # and OpenImageIO load
-    from subtrace.io.exr import write_exr, write_picture, write_png
-    from subtrace.render import render_scene, result_attributes
+    from subtrace.render import render_scene
 
     trim_numba(args)
     progress = ProgressBar() if sys.stderr.isatty() and not args.quiet else None
-    result = render_scene(scene, threads=args.threads, accel=args.accel, progress=progress)
+    if frames is None:
+        result = render_scene(scene, threads=args.threads, accel=args.accel, progress=progress)
+        _write(args, scene, result, out, png, picture, bits)
+        return 0
+    from subtrace.render import load_objects, scene_bounds
+
+    cages = load_objects(scene)  # once for every frame
+    camera = scene.make_camera(*scene_bounds(cages))
+    for k, out_k, png_k in frames:
+        eye = turntable_eye(camera.eye, camera.target, camera.up, k, n)
+        scene_k = apply_overrides(scene, eye=eye, target=tuple(camera.target),
+                                  up=tuple(camera.up), fov=camera.fov_deg)
+        result = render_scene(scene_k, cages=cages, threads=args.threads, accel=args.accel,
+                              progress=progress)
+        _write(args, scene_k, result, out_k, png_k, picture, bits)
+    return 0
+
+
+def _write(args, scene, result, out, png, picture, bits) -> None:
+    """Write one render's EXR (or picture) and preview; print its summary line."""
+    from subtrace.io.exr import write_exr, write_picture, write_png
+    from subtrace.render import result_attributes
+
     t0 = time.perf_counter()
     if picture is None:
         write_exr(out, result.channels, result_attributes(result, scene), png_path=png)
@@ -80,7 +111,6 @@ def execute(args) -> int:
             write_png(png, np.stack([ch["R"], ch["G"], ch["B"]], axis=-1))
     if not args.quiet:
         print(_summary(out, png, result, time.perf_counter() - t0))
-    return 0
 
 
 def _summary(out, png, result, time_write: float) -> str:
