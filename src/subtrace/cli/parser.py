@@ -129,6 +129,10 @@ def _add_render(sub) -> argparse.ArgumentParser:
                              "frame number, e.g. spin.####.exr; else .#### is added)")
     render.add_argument("--frames", metavar="A:B[:STEP]",
                         help="only these frames of --turntable (Python's range; default all)")
+    render.add_argument("--dask", nargs="?", const="", metavar="ADDRESS",
+                        help="render the frames as tasks on a Dask cluster: the scheduler at "
+                             "ADDRESS (tcp://host:8786), or without one a local cluster of "
+                             "worker processes (pip install 'subtrace[dask]')")
     render.add_argument("--quiet", action="store_true", help="print nothing on success")
     return render
 

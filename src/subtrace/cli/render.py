@@ -69,6 +69,8 @@ def execute(args) -> int:
     elif getattr(args, "frames", None) is not None:
         raise SceneError("--frames picks frames of a camera path: give --turntable N",
                          key="--frames")
+    elif getattr(args, "dask", None) is not None:
+        raise SceneError("--dask renders frames on a cluster: give --turntable N", key="--dask")
     for path in [out, png] if frames is None else [p for _, o, g in frames for p in (o, g)]:
         if path:
             check_writable(path)
@@ -86,10 +88,23 @@ def execute(args) -> int:
 
     cages = load_objects(scene)  # once for every frame
     camera = scene.make_camera(*scene_bounds(cages))
-    for k, out_k, png_k in frames:
-        eye = turntable_eye(camera.eye, camera.target, camera.up, k, n)
-        scene_k = apply_overrides(scene, eye=eye, target=tuple(camera.target),
-                                  up=tuple(camera.up), fov=camera.fov_deg)
+    scenes = [apply_overrides(scene, target=tuple(camera.target), up=tuple(camera.up),
+                              fov=camera.fov_deg, eye=turntable_eye(camera.eye, camera.target,
+                                                                    camera.up, k, n))
+              for k, _, _ in frames]
+    if getattr(args, "dask", None) is not None:
+        from subtrace.cluster import run_frames
+
+        def report(out_k, png_k, stats):
+            if not args.quiet:
+                print(f"{out_k}: {stats['pixels_covered']} pixels covered, render "
+                      f"{stats['time_total']:.3f} s" + (f"; preview {png_k}" if png_k else ""))
+
+        run_frames(args.dask or None, [(sc, o, g, picture, bits)
+                                       for sc, (_, o, g) in zip(scenes, frames)],
+                   args.accel, report)
+        return 0
+    for scene_k, (_, out_k, png_k) in zip(scenes, frames):
         result = render_scene(scene_k, cages=cages, threads=args.threads, accel=args.accel,
                               progress=progress)
         _write(args, scene_k, result, out_k, png_k, picture, bits)

@@ -86,6 +86,30 @@ def unblock() -> None:
     signal.pthread_sigmask(signal.SIG_UNBLOCK, set(EXIT_CODES))
 
 
+def _descendants(root: int) -> list[int]:
+    """Process ids of every descendant of ``root`` (Linux's /proc; elsewhere none)."""
+    try:
+        names = os.listdir("/proc")
+    except OSError:
+        return []
+    parent = {}
+    for name in names:
+        if name.isdigit():
+            try:
+                with open(f"/proc/{name}/stat", "rb") as fh:
+                    stat = fh.read()
+                parent[int(name)] = int(stat[stat.rindex(b")") + 2:].split()[1])
+            except (OSError, ValueError, IndexError):
+                pass
+    out, todo = [], [root]
+    while todo:
+        p = todo.pop()
+        kids = [c for c, pp in parent.items() if pp == p]
+        out += kids
+        todo += kids
+    return out
+
+
 def _watch(taken) -> None:
     sig = signal.sigwait(taken)
     _lock.acquire()  # never released: the process ends here
@@ -97,6 +121,11 @@ def _watch(taken) -> None:
     for proc in _children:
         try:
             proc.kill()
+        except OSError:
+            pass
+    for pid in _descendants(os.getpid()):  # (a local Dask cluster's worker processes)
+        try:
+            os.kill(pid, signal.SIGKILL)
         except OSError:
             pass
     try:
