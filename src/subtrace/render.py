@@ -23,13 +23,14 @@ import numpy as np
 
 from subtrace import config
 from subtrace.accel.bvh import build_bvh, no_bvh
-from subtrace.accel.projection import no_tiles, project_shells, tiles_bytes
+from subtrace.accel.projection import (boxes_in_view, no_tiles, project_shells,
+                                      tiles_bytes)
 from subtrace.camera import camera_frame
 from subtrace.errors import SceneError
 from subtrace.io.limits import check_coordinates, check_valences
 from subtrace.mesh.cage import load_cage
 from subtrace.patches.criterion import edge_sampling
-from subtrace.patches.table import build_patch_table
+from subtrace.patches.table import build_patch_table, cage_face_shells
 from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
 from subtrace.shade import CHANNELS, deepest_level, miss_values, patch_shading, shade
@@ -49,7 +50,8 @@ class RenderStats:
     time_trace: float = 0.0
     time_shade: float = 0.0
     time_total: float = 0.0
-    patches: int = 0
+    patches: int = 0  # patches built into the table (those of cage faces in view)
+    faces_culled: int = 0  # cage faces outside the view, whose patches were never built
     patches_refined: int = 0
     # built: 2 per cell a thread evaluated first (kept, or a fan counted once) or isolated
     # (threads take bands as they are free, so with several threads the count may differ
@@ -211,9 +213,20 @@ def _check_threads(threads):
                              key="--threads")
 
 
+def _faces_in_view(cages, camera):
+    """Per cage, a (F,) bool mask of the faces whose limit surface a primary ray may reach:
+    the box that holds it (``patches.table.cage_face_shells``) projects into the image
+    (``accel.projection.boxes_in_view``, the test the tile lists make). The patches of the
+    other faces are never built (design invariant 5)."""
+    frame = camera_frame(camera)
+    return [boxes_in_view(*cage_face_shells(c), frame, camera.width, camera.height)
+            for c in cages]
+
+
 def _prepare(scene, cages, stats):
-    """Load and check the cages, build the patch table, frame the camera, check the budget:
-    (cages, table, camera, tolerance in radians, budget in bytes)."""
+    """Load and check the cages, frame the camera, build the patch table of the cage faces
+    in view, check the budget: (cages, table, camera, tolerance in radians, budget in
+    bytes)."""
     t_start = time.perf_counter()
     if cages is None:
         cages = load_objects(scene)
@@ -223,15 +236,17 @@ def _prepare(scene, cages, stats):
                        config.MAX_VALENCE, c.scheme == "catmark")
     stats.time_load = time.perf_counter() - t_start
     t0 = time.perf_counter()
-    table = build_patch_table(cages)
-    lo = table.shell_min.min(axis=0)
-    hi = table.shell_max.max(axis=0)
+    lo = hi = None
     if scene.camera.is_auto:
         # frame the limit surface: the bounds of the level-1 limit points of every object
         bounds = [c.bounds() for c in cages]
         lo = np.min([b[0] for b in bounds], axis=0)
         hi = np.max([b[1] for b in bounds], axis=0)
     camera = scene.make_camera(lo, hi)
+    keep = _faces_in_view(cages, camera) if config.CULL_TO_VIEW else None
+    table = build_patch_table(cages, keep)
+    if keep is not None:
+        stats.faces_culled = int(sum(np.count_nonzero(~k) for k in keep))
     budget = scene.render.max_memory
     budget = config.default_max_memory() if budget is None else budget
     check_memory(table, camera.width * camera.height, budget, camera.width, camera.height)

@@ -32,13 +32,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from subtrace import config
+from subtrace.mesh.topology import gather
 from subtrace.patches.basis import TO_BEZIER, net_summary, to_bezier
 from subtrace.patches.bspline import phantom_grids, regular_mask
 from subtrace.patches.criterion import subdominant
 from subtrace.patches.evaluate import ptex_layout
-from subtrace.patches.shells import one_ring_shells
+from subtrace.patches.shells import face_ring_boxes, one_ring_shells
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
+from subtrace.subdiv.limit import extract
+from subtrace.subdiv.refine import refine_level, refine_points
 
 # ptex offset of the child at corner j of a regular face (quads keep the parent's orientation)
 _QUAD_CHILD_UV0 = np.array([[0.0, 0.0], [0.5, 0.0], [0.5, 0.5], [0.0, 0.5]])
@@ -87,18 +90,25 @@ def patch_level(cage) -> int:
     return 1 if cage.scheme == "catmark" else 0
 
 
-def build_patch_table(cages) -> PatchTable:
-    """Patch table of several objects (Catmull-Clark and Loop cages may be mixed)."""
+def build_patch_table(cages, keep=None) -> PatchTable:
+    """Patch table of several objects (Catmull-Clark and Loop cages may be mixed).
+
+    ``keep``: None (every patch), or per object None or a (F,) bool mask of its cage faces
+    whose patches are wanted (e.g. those a ray may see: :func:`cage_face_shells`). The
+    others' patches are never made: only the neighbourhood of the kept faces is refined to
+    the patch level (:func:`_patch_level`), so the cost follows what is kept, and the kept
+    patches are exactly those of the whole cage (their shells, nets and isolation read the
+    same points)."""
     objs, parts = [], []
     first_patch = first_edge = 0
     for oid, cage in enumerate(cages):
         L0 = patch_level(cage)
-        lev = cage.level_topology(L0)
-        pts = cage.refine(L0).points
-        faces = np.nonzero(~lev.face_hole)[0].astype(np.int64)
+        lev, pts, faces, base_face, corner = _patch_level(
+            cage, L0, None if keep is None else keep[oid])
         objs.append(ObjectPatches(cage, L0, lev, pts, faces, first_patch, first_edge))
         quad = cage.scheme == "catmark"
-        parts.append(_object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad))
+        parts.append(_object_arrays(cage, L0, lev, pts, faces, base_face, corner, oid,
+                                    first_edge, quad))
         first_patch += len(faces)
         first_edge += lev.n_edges
     if len(parts) == 1:
@@ -108,30 +118,92 @@ def build_patch_table(cages) -> PatchTable:
     return PatchTable(objects=tuple(objs), n_edges=first_edge, **cat)
 
 
+def cage_face_shells(cage):
+    """(lo, hi), each (F,3) float64: per face of the cage, a box that holds the limit
+    surface over it (the box of its one-ring's control points, widened for Chaikin creases
+    as the patches' shells are). Cheap: no refinement."""
+    lo, hi = face_ring_boxes(cage.base, cage.points)
+    _chaikin_margin(cage.base, cage.options, lo, hi)
+    return lo, hi
+
+
+def _chaikin_margin(level, options, lo, hi):
+    """Widen the one-ring boxes ``lo``, ``hi`` in place where Chaikin creases of sharpness
+    above 1 may carry the limit surface out of them (``config.SHELL_CHAIKIN_MARGIN``)."""
+    if options.chaikin and np.any(level.edge_sharpness > 1.0):
+        margin = config.SHELL_CHAIKIN_MARGIN * (hi - lo).max(axis=1, keepdims=True)
+        lo -= margin
+        hi += margin
+
+
+# cage rings cut around the kept faces: their children's neighbourhoods out to
+# config.GRID_RINGS rings of the patch level (what isolation and grids cut) must be refined
+# exactly, and a face is refined exactly when every face around its vertices is in the cut
+_CUT_RINGS = config.GRID_RINGS + 1
+
+
+def _patch_level(cage, L0, keep):
+    """The patch level of ``cage`` where the faces ``keep`` (a (F,) bool mask of cage faces,
+    or None for all) are: (level, points, patch faces in it, the cage face of each patch,
+    its corner there (-1: the face itself is the patch)). With some faces left out, the
+    level is that of a cut of the cage around the kept faces (``_CUT_RINGS`` rings, the
+    faces' relative order kept), refined to L0."""
+    base = cage.base
+    if keep is None or np.all(keep):
+        lev = cage.level_topology(L0)
+        pts = cage.refine(L0).points
+        cut_face = None
+        kept = np.arange(base.n_faces, dtype=np.int64)
+    elif not np.any(keep):
+        return base, cage.points, *(np.zeros(0, np.int64),) * 3
+    else:
+        kept = np.nonzero(keep)[0].astype(np.int64)
+        verts = np.unique(gather(base.face_offsets, base.face_verts, kept))
+        lev, sub_to_base, _, cut_face = extract(base, verts, rings=_CUT_RINGS)
+        pts = cage.points[sub_to_base]
+        for _ in range(L0):
+            ref = refine_level(lev, cage.options)
+            pts = refine_points(ref, pts)
+            lev = ref.child
+        kept = np.searchsorted(cut_face, kept)  # in the cut
+    if L0 == 1:
+        # the level-1 children of face c of the cut (or cage) are its corners, in order
+        fo = (base.face_offsets if cut_face is None else
+              np.r_[0, np.cumsum(np.diff(base.face_offsets)[cut_face])].astype(np.int64))
+        sizes = np.diff(fo)[kept]
+        parent = np.repeat(kept, sizes)
+        corner = np.arange(len(parent), dtype=np.int64) - np.repeat(
+            np.cumsum(sizes) - sizes, sizes)
+        faces = fo[parent] + corner
+    else:
+        parent, corner, faces = kept, np.full(len(kept), -1, np.int64), kept
+    base_face = parent if cut_face is None else cut_face[parent]
+    live = ~lev.face_hole[faces]
+    return lev, pts, faces[live], base_face[live], corner[live]
+
+
 # regular patches converted to Bezier nets per call of _regular_shells' inner kernels: their
 # B-spline points stay in cache
 _NET_CHUNK = 64
 
 
-def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
+def _object_arrays(cage, L0, lev, pts, faces, F, j, oid, first_edge, quad):
+    """The table's per-patch arrays of one object (its patches ``faces`` of level ``lev``,
+    each the child at corner ``j`` of cage face ``F``; see :func:`_patch_level`)."""
     k = 4 if quad else 3
     n = len(faces)
     # ptex mapping of each patch
     base, sub, first = ptex_layout(cage)
     if L0 == 1:
         # level-1 face c is the child of base face F at corner j, numbered by base corner
-        fo = cage.base.face_offsets
-        sizes = np.diff(fo)
-        F = np.repeat(np.arange(len(sizes)), sizes)[faces]
-        j = faces - fo[F]
+        sizes = np.diff(cage.base.face_offsets)
         regular = sizes[F] == 4
         ptex = np.where(regular, first[F], first[F] + j).astype(np.int32)
         uv0 = _QUAD_CHILD_UV0.take(j % 4, axis=0)
         uv0[~regular] = 0.0
         scale = np.where(regular, 0.5, 1.0)
     else:
-        F = faces
-        ptex = first[faces].astype(np.int32)
+        ptex = first[F].astype(np.int32)
         uv0 = np.zeros((n, 2))
         scale = np.ones(n)
     material = (
@@ -154,10 +226,7 @@ def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
     # the others: boxes of their one-ring control points
     rows = np.nonzero(~regular)[0]
     lo, hi, bound, valence = one_ring_shells(lev, faces[rows], pts)
-    if cage.options.chaikin and np.any(lev.edge_sharpness > 1.0):
-        margin = config.SHELL_CHAIKIN_MARGIN * (hi - lo).max(axis=1, keepdims=True)
-        lo -= margin
-        hi += margin
+    _chaikin_margin(lev, cage.options, lo, hi)
     smin[rows], smax[rows], ebound[rows] = lo, hi, bound
     rate[rows] = subdominant(valence, quad)
     # global ids of the sides' edges, a column at a time (-1 pads a triangle's 4th side)
