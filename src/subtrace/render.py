@@ -213,7 +213,7 @@ def _check_threads(threads):
                              key="--threads")
 
 
-def _faces_in_view(cages, camera):
+def faces_in_view(cages, camera):
     """Per cage, a (F,) bool mask of the faces whose limit surface a primary ray may reach:
     the box that holds it (``patches.table.cage_face_shells``) projects into the image
     (``accel.projection.boxes_in_view``, the test the tile lists make). The patches of the
@@ -243,7 +243,7 @@ def _prepare(scene, cages, stats):
         lo = np.min([b[0] for b in bounds], axis=0)
         hi = np.max([b[1] for b in bounds], axis=0)
     camera = scene.make_camera(lo, hi)
-    keep = _faces_in_view(cages, camera) if config.CULL_TO_VIEW else None
+    keep = faces_in_view(cages, camera) if config.CULL_TO_VIEW else None
     table = build_patch_table(cages, keep)
     if keep is not None:
         stats.faces_culled = int(sum(np.count_nonzero(~k) for k in keep))
