@@ -10,8 +10,9 @@ field of view (about a tenth of the cage faces reach the image). Each process fi
 a tiny scene of the original sword (kernels loaded), then measures from that baseline:
 loading the OBJ and rendering it, the time split (``subtrace:time_*``), the patches built and
 the cage faces culled, and the peak of the resident set above the baseline
-(``sweep.PeakMemory``: VmHWM reset through /proc/self/clear_refs). The figures are medians
-over the rounds; the last rows give tip / whole.
+(``sweep.PeakMemory``: VmHWM reset through /proc/self/clear_refs), of which ``cage MiB`` is
+the loaded cage's resident set. The figures are medians over the rounds; the last row
+gives tip / whole.
 """
 
 from __future__ import annotations
@@ -68,15 +69,24 @@ def worker(obj: str, view: str, width: int, height: int) -> dict:
     render_scene(scene(SWORD, 32, 18))  # kernels loaded (or compiled) before the baseline
     probe = PeakMemory()
     probe.start()
+    base_kb = _rss_kb()
     t0 = time.perf_counter()
     cage = load_cage(obj)
+    t_load = time.perf_counter() - t0
+    cage_mib = (_rss_kb() - base_kb) / 1024.0
     res = render_scene(scene(obj, width, height), cages=[cage])
     wall = time.perf_counter() - t0
     st = res.stats
-    return dict(load=time.perf_counter() - t0 - wall + st.time_load, prep=st.time_preprocess,
-                refine=st.time_refine, trace=st.time_trace, wall=wall, patches=st.patches,
-                culled=st.faces_culled, faces=cage.n_faces, px=st.pixels_covered,
-                refined=st.patches_refined, peak_mib=(probe.peak() or 0) / 2**20)
+    return dict(load=t_load, prep=st.time_preprocess, refine=st.time_refine,
+                trace=st.time_trace, wall=wall, patches=st.patches, culled=st.faces_culled,
+                faces=cage.n_faces, px=st.pixels_covered, refined=st.patches_refined,
+                peak_mib=(probe.peak() or 0) / 2**20, cage_mib=cage_mib)
+
+
+def _rss_kb() -> int:
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith("VmRSS:"))
+
 
 
 def main(argv=None) -> int:
@@ -104,7 +114,7 @@ def main(argv=None) -> int:
                                      check=True, capture_output=True, text=True).stdout
                 runs[view].append(json.loads(out.strip().splitlines()[-1]))
     cols = ("view", "load s", "prep s", "refine s", "prep+ref s", "trace s", "wall s",
-            "patches", "faces culled", "refined", "px", "peak MiB")
+            "patches", "faces culled", "refined", "px", "cage MiB", "peak MiB")
     print(" ".join(f"{c:>12}" for c in cols))
     med = {}
     for view, rs in runs.items():
@@ -115,12 +125,13 @@ def main(argv=None) -> int:
             view, f"{m['load']:.3f}", f"{m['prep']:.3f}", f"{m['refine']:.3f}",
             f"{m['prep_refine']:.3f}", f"{m['trace']:.3f}", f"{m['wall']:.2f}",
             f"{int(m['patches'])}", f"{int(m['culled'])}", f"{int(m['refined'])}",
-            f"{int(m['px'])}", f"{m['peak_mib']:.0f}")))
+            f"{int(m['px'])}", f"{m['cage_mib']:.0f}", f"{m['peak_mib']:.0f}")))
     tip, whole = med["tip"], med["whole"]
     print(f"tip / whole: faces kept {1 - tip['culled'] / tip['faces']:.3f}, "
           f"patches {tip['patches'] / whole['patches']:.3f}, "
           f"preprocess + refine {tip['prep_refine'] / whole['prep_refine']:.3f}, "
-          f"peak memory {tip['peak_mib'] / whole['peak_mib']:.3f}")
+          f"peak memory {tip['peak_mib'] / whole['peak_mib']:.3f} (less the loaded cage: "
+          f"{(tip['peak_mib'] - tip['cage_mib']) / (whole['peak_mib'] - whole['cage_mib']):.3f})")
     return 0
 
 

@@ -120,7 +120,9 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     (``patches.criterion.memory_estimate``) exceeds it are capped, with a warning, and the
     threads' memos are kept within what is left. ``max_depth``: an explicit cap on every
     patch's depth (None: only what floating point resolves, ``config.PRECISION_BITS``);
-    any cap that holds a patch below its tolerance is warned of and recorded in ``stats``."""
+    any cap that holds a patch below its tolerance is warned of and recorded in ``stats``.
+    The pieces take over the table's net store (``patches.table.net_room``) and append to
+    it past the table's nets: a table serves one call at a time."""
     accel = config.PRIMARY_ACCEL if accel is None else accel
     if accel not in ("projection", "bvh"):
         raise ValueError(f"unknown acceleration {accel!r}")
@@ -151,14 +153,17 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
     for, until no ray asks."""
     depths = chosen.depths
     edge_depth, reg_side = edge_sampling(table, depths)
-    tables = leaf_tables(int(depths[~table.is_quad].max(initial=0)))  # (Loop grids only)
+    tables = leaf_tables(int(depths[chosen.grids].max(initial=0)))  # (Loop grids only)
     grids = LoopGrids(table.n_patches)
     iso = Pieces(table.n_patches)
     reg = np.nonzero(table.regular)[0]
     n_irr = int(np.count_nonzero(table.is_quad & ~table.regular))
     iso.reserve("items", len(reg) + 16 * n_irr)
+    # the pieces' net store is the table's: its nets, then room for the rest (no copy)
+    store = table.nets if table.nets.base is None else table.nets.base
+    iso.adopt("nets", len(table.nets), nets=store)
     iso.reserve("nets", len(reg) + 16 * n_irr)
-    iso.append_regular(reg, depths[reg], reg_side, table.nets, table.shell_min[reg],
+    iso.append_regular(reg, depths[reg], reg_side, None, table.shell_min[reg],
                        table.shell_max[reg])
     hits = hit_arrays(n_rays)
     request = np.empty(n_rays, dtype=np.int64)

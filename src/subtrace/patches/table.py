@@ -19,7 +19,9 @@ Loop patches into grids of exact limit points (:mod:`subtrace.patches.grids`), o
   cell at depth n by ``edge_bound * rate^n`` (the refinement criterion);
 * ``regular`` (P,) bool and ``nets`` (R,4,4,3): the Bezier nets of the regular bicubic
   patches, smooth or along boundaries and infinitely sharp creases (phantom points; see
-  :mod:`subtrace.patches.bspline`, :mod:`subtrace.patches.basis`), in patch order. For those, the shell is the
+  :mod:`subtrace.patches.bspline`, :mod:`subtrace.patches.basis`), in patch order. They are
+  the first rows of a larger store (``nets.base``, :func:`net_room`) that the renderer's
+  pieces take over instead of copying them (``trace.pools.Pieces.adopt``). For those, the shell is the
   net's box, ``edge_bound`` the exact bound on the derivatives and ``rate`` 1/2;
 * ``edges`` (P,4) int64 (-1 pads triangles): global id of the L0 edge on each side (side k joins corners k, k+1),
   used to give both patches of an edge the same sampling.
@@ -114,8 +116,31 @@ def build_patch_table(cages, keep=None) -> PatchTable:
     if len(parts) == 1:
         cat = parts[0]  # already contiguous: no copy of the nets
     else:
-        cat = {k: np.ascontiguousarray(np.concatenate([p[k] for p in parts])) for k in parts[0]}
+        cat = {k: np.ascontiguousarray(np.concatenate([p[k] for p in parts])) for k in parts[0]
+               if k != "nets"}
+        cat["nets"] = _with_room([p["nets"] for p in parts], cat["is_quad"], cat["regular"])
     return PatchTable(objects=tuple(objs), n_edges=first_edge, **cat)
+
+
+# rows of room the nets' storage keeps after them (np.empty: no memory until written) for
+# what the renderer appends to the same store (trace.pools.Pieces adopts it): the pieces
+# of each irregular quad, the net of each Loop triangle
+NET_ROOM_PER_IRREGULAR = 16
+
+
+def net_room(is_quad, regular) -> int:
+    """Rows of room after the nets of a table with these patches (``NET_ROOM_PER_IRREGULAR``
+    per irregular quad, one per Loop triangle)."""
+    return int(NET_ROOM_PER_IRREGULAR * np.count_nonzero(is_quad & ~regular)
+               + np.count_nonzero(~is_quad))
+
+
+def _with_room(nets_list, is_quad, regular):
+    """The nets concatenated, as the first rows of a store with :func:`net_room` rows more."""
+    n = sum(len(n) for n in nets_list)
+    store = np.empty((n + net_room(is_quad, regular), 4, 4, 3))
+    np.concatenate(nets_list, out=store[:n])
+    return store[:n]
 
 
 def cage_face_shells(cage):
@@ -218,7 +243,8 @@ def _object_arrays(cage, L0, lev, pts, faces, F, j, oid, first_edge, quad):
     # regular quads: bicubic patches with a tight hull and an exact derivative bound
     regular = regular_mask(lev, cage.options, faces)
     rows = np.nonzero(regular)[0]
-    nets = np.empty((len(rows), 4, 4, 3))
+    room = net_room(np.full(n, quad), regular)
+    nets = np.empty((len(rows) + room, 4, 4, 3))[: len(rows)]  # (see _with_room)
     grids, ext = phantom_grids(lev, faces[rows], pts)
     run_tasks(_regular_shells, grids, ext, TO_BEZIER, rows,
               _NET_CHUNK, nets, smin, smax, ebound)

@@ -91,14 +91,16 @@ def check_memory(table, n_pixels: int, budget: int, width: int, height: int):
 @dataclass
 class DepthChoice:
     """The depth choice of a render: per patch grid depth, what the choice's isolation made
-    (``record``, reused when the patches are built), the (tightened) shells, and the bytes
-    of the memory budget left for the tile lists and the memos (None: no budget)."""
+    (``record``, reused when the patches are built), the (tightened) shells, the bytes
+    of the memory budget left for the tile lists and the memos (None: no budget), and which
+    patches are built as grids (:func:`grid_patches`)."""
 
     depths: np.ndarray
     record: dict
     shell_min: np.ndarray
     shell_max: np.ndarray
     left: int | None
+    grids: np.ndarray
 
 
 def depth_limits(table, eye, max_depth=None):
@@ -142,9 +144,9 @@ def choose_within_budget(table, eye, tol_rad, max_depth, max_memory, n_pixels,
     reasons = [LIMIT_REASONS[k] for k in np.unique(why[held])]
     left = None
     budget_cap = estimate = None
+    grids = grid_patches(table)
     if max_memory is not None:
         left = max_memory - config.MEMORY_MEMO_MIN_BYTES * tasks.thread_count()
-        grids = grid_patches(table)
         budget_cap = depth_cap(table, depths, n_pixels, left, grids)
         if budget_cap is not None:
             estimate = memory_estimate(table, depths, n_pixels, grids)
@@ -159,4 +161,4 @@ def choose_within_budget(table, eye, tol_rad, max_depth, max_memory, n_pixels,
         stats.depth_cap = int(depths[held].max())
         stats.depth_cap_reason = ",".join(reasons)
         warn_depth_cap(reasons, stats.depth_cap, wanted[held].max(), max_memory, estimate)
-    return DepthChoice(depths, record, shell_min, shell_max, left)
+    return DepthChoice(depths, record, shell_min, shell_max, left, grids)
