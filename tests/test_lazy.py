@@ -1,5 +1,5 @@
-"""The lazy patch table (``render.faces_in_view``, ``patches.table.build_patch_table``
-with ``keep``): only the patches of cage faces a primary ray may reach are built, they are
+"""The lazy patch table (``render.table_in_view``, ``patches.table.build_patch_table``
+with ``keep`` and ``in_view``): only the patches of cage faces a primary ray may reach are built, they are
 exactly the whole cage's patches, and the image does not change."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from subtrace import config
 from subtrace.camera import Camera, camera_frame
 from subtrace.patches.shells import face_ring_boxes, one_ring_shells
 from subtrace.patches.table import build_patch_table, cage_face_shells
-from subtrace.render import faces_in_view, render_scene
+from subtrace.render import faces_in_view, render_scene, table_in_view
 
 SWORD = MODELS / "sword_quad_dominant.obj"
 # looking at the sword's tip: about a tenth of its cage faces reach the image
@@ -92,8 +92,7 @@ def test_only_patches_in_view_are_built():
     assert np.count_nonzero(needed) <= st.patches <= 1.5 * np.count_nonzero(needed)
     # the culled table: a subset of the whole table holding the needed patches, each with
     # the same shell and net
-    keep = faces_in_view([cage], cam)
-    lazy = build_patch_table([cage], keep)
+    lazy, _ = table_in_view([cage], cam)
     assert lazy.n_patches == st.patches
     keys_full = list(zip(full.ptex.tolist(), map(tuple, full.ptex_uv0.tolist())))
     row = {k: i for i, k in enumerate(keys_full)}
@@ -189,3 +188,19 @@ def test_nothing_in_view_renders_the_background(tmp_path):
     res = render_scene(scene, cages=[cage])
     assert res.stats.patches == 0 and res.stats.faces_culled == 1
     assert np.all(res.channels["object_id"] < 0) or np.all(res.channels["A"] == 0)
+
+
+@needs_shared
+def test_level_one_patches_out_of_view_are_left_out():
+    """On a coarse cage seen close, a kept face's level-1 quads whose own one-ring box
+    misses the image are not built either; the image is unchanged."""
+    mesh = MODELS / "spot_control_mesh.obj"
+    cage = subtrace.load_cage(mesh)
+    scene = small_scene([mesh], (0.3, 0.45, 1.0), (0.0, 0.3, 0.2), fov=12.0)
+    res = render_scene(scene, cages=[cage])
+    kept = cage.n_faces - res.stats.faces_culled
+    quads_kept = int(np.sum(np.diff(cage.base.face_offsets)[
+        faces_in_view([cage], scene.make_camera())[0]]))
+    assert 0 < kept < cage.n_faces
+    assert 0 < res.stats.patches < quads_kept  # (a kept face has one patch per corner)
+    _same_image_without_cull(scene, [cage], res)

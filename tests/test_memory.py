@@ -145,8 +145,7 @@ def test_tile_lists_over_the_budget_fall_back_to_the_bvh(capsys, tmp_path):
     from subtrace.accel.projection import project_shells, tiles_bytes
     from subtrace.io.scene import scene_from_dict
     from subtrace.patches.criterion import choose_depths, memory_estimate
-    from subtrace.patches.table import build_patch_table
-    from subtrace.render import faces_in_view, load_objects
+    from subtrace.render import load_objects, table_in_view
     from subtrace.camera import camera_frame
 
     spot = ROOT.parent / "shared" / "models" / "spot_control_mesh.obj"
@@ -162,7 +161,7 @@ def test_tile_lists_over_the_budget_fall_back_to_the_bvh(capsys, tmp_path):
                                         "fov": 120, "width": 160, "height": 120}})
     cages = load_objects(scene)
     camera = scene.make_camera()
-    table = build_patch_table(cages, faces_in_view(cages, camera))  # as the render's
+    table, _ = table_in_view(cages, camera)  # as the render's
     frame = camera_frame(camera)
     shells = table.shell_min.copy(), table.shell_max.copy()
     depths = choose_depths(table, frame[0], scene.render.tolerance_rad(camera),

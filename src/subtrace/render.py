@@ -1,7 +1,8 @@
 """Rendering: orchestration only (the maths lives in patches/, accel/, trace/, shade.py).
 
-``render_scene(scene)`` loads the cages, builds the patch table, bins the patch shells into
-image tiles (or builds their BVH), chooses each patch's grid depth from the angular
+``render_scene(scene)`` loads the cages, builds the patch table of the cage faces that can
+reach the image (the others' patches are never made: ``faces_in_view``), bins the patch
+shells into image tiles (or builds their BVH), chooses each patch's grid depth from the angular
 tolerance and makes neighbours sample their shared edges alike, then runs rounds of
 ``trace.kernels.trace_round``. Regular Catmull-Clark patches are refined per ray inside the
 kernel, each thread keeping what its rays split (``trace.pools.Memos``). After each round
@@ -50,7 +51,7 @@ class RenderStats:
     time_trace: float = 0.0
     time_shade: float = 0.0
     time_total: float = 0.0
-    patches: int = 0  # patches built into the table (those of cage faces in view)
+    patches: int = 0  # patches built into the table (those in view, of cage faces in view)
     faces_culled: int = 0  # cage faces outside the view, whose patches were never built
     patches_refined: int = 0
     # built: 2 per cell a thread evaluated first (kept, or a fan counted once) or isolated
@@ -228,6 +229,19 @@ def faces_in_view(cages, camera):
             for c in cages]
 
 
+def table_in_view(cages, camera):
+    """The patch table of what a primary ray of ``camera`` may reach: the patches of the
+    cage faces in view (:func:`faces_in_view`) whose own one-ring box is in view too.
+    Returns (table, the per-cage masks of the faces kept)."""
+    keep = faces_in_view(cages, camera)
+    frame = camera_frame(camera)
+
+    def in_view(lo, hi):
+        return boxes_in_view(lo, hi, frame, camera.width, camera.height)
+
+    return build_patch_table(cages, keep, in_view), keep
+
+
 def _prepare(scene, cages, stats):
     """Load and check the cages, frame the camera, build the patch table of the cage faces
     in view, check the budget: (cages, table, camera, tolerance in radians, budget in
@@ -248,10 +262,11 @@ def _prepare(scene, cages, stats):
         lo = np.min([b[0] for b in bounds], axis=0)
         hi = np.max([b[1] for b in bounds], axis=0)
     camera = scene.make_camera(lo, hi)
-    keep = faces_in_view(cages, camera) if config.CULL_TO_VIEW else None
-    table = build_patch_table(cages, keep)
-    if keep is not None:
+    if config.CULL_TO_VIEW:
+        table, keep = table_in_view(cages, camera)
         stats.faces_culled = int(sum(np.count_nonzero(~k) for k in keep))
+    else:
+        table = build_patch_table(cages)
     budget = scene.render.max_memory
     budget = config.default_max_memory() if budget is None else budget
     check_memory(table, camera.width * camera.height, budget, camera.width, camera.height)

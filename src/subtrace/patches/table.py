@@ -1,4 +1,8 @@
-"""The patch table: every face of the patch level L0 of every object, with its bounding shell.
+"""The patch table: the faces of the patch level L0 of every object, with their bounding shells.
+
+Only the patches of the cage faces asked for are made (``build_patch_table(cages, keep)``:
+the renderer keeps the faces whose one-ring box reaches the image, ``render.faces_in_view``):
+only they and three rings of faces around them are refined to L0.
 
 A patch is a face of level ``L0`` (Catmull-Clark: level 1, where all faces are quads; Loop:
 the cage). The renderer intersects regular patches through their Bezier nets, splits
@@ -19,10 +23,11 @@ Loop patches into grids of exact limit points (:mod:`subtrace.patches.grids`), o
   cell at depth n by ``edge_bound * rate^n`` (the refinement criterion);
 * ``regular`` (P,) bool and ``nets`` (R,4,4,3): the Bezier nets of the regular bicubic
   patches, smooth or along boundaries and infinitely sharp creases (phantom points; see
-  :mod:`subtrace.patches.bspline`, :mod:`subtrace.patches.basis`), in patch order. They are
-  the first rows of a larger store (``nets.base``, :func:`net_room`) that the renderer's
-  pieces take over instead of copying them (``trace.pools.Pieces.adopt``). For those, the shell is the
-  net's box, ``edge_bound`` the exact bound on the derivatives and ``rate`` 1/2;
+  :mod:`subtrace.patches.bspline`, :mod:`subtrace.patches.basis`), in patch order. For
+  those, the shell is the net's box, ``edge_bound`` the exact bound on the derivatives and
+  ``rate`` 1/2. The nets are the first rows of a larger store (``nets.base``,
+  :func:`net_room`) that the renderer's pieces take over instead of copying them
+  (``trace.pools.Growable.adopt``);
 * ``edges`` (P,4) int64 (-1 pads triangles): global id of the L0 edge on each side (side k joins corners k, k+1),
   used to give both patches of an edge the same sampling.
 """
@@ -92,7 +97,7 @@ def patch_level(cage) -> int:
     return 1 if cage.scheme == "catmark" else 0
 
 
-def build_patch_table(cages, keep=None) -> PatchTable:
+def build_patch_table(cages, keep=None, in_view=None) -> PatchTable:
     """Patch table of several objects (Catmull-Clark and Loop cages may be mixed).
 
     ``keep``: None (every patch), or per object None or a (F,) bool mask of its cage faces
@@ -100,13 +105,20 @@ def build_patch_table(cages, keep=None) -> PatchTable:
     others' patches are never made: only the neighbourhood of the kept faces is refined to
     the patch level (:func:`_patch_level`), so the cost follows what is kept, and the kept
     patches are exactly those of the whole cage (their shells, nets and isolation read the
-    same points)."""
+    same points). ``in_view``: None, or ``in_view(lo, hi)`` -> (n,) bool for boxes (n,3):
+    then a patch of a Catmull-Clark cage's kept face is left out too when the box of its own
+    one-ring is not in view (a face of level 1 is a quarter of a quad)."""
     objs, parts = [], []
     first_patch = first_edge = 0
     for oid, cage in enumerate(cages):
         L0 = patch_level(cage)
         lev, pts, faces, base_face, corner = _patch_level(
             cage, L0, None if keep is None else keep[oid])
+        if in_view is not None and L0 > 0 and len(faces):
+            lo, hi, _, _ = one_ring_shells(lev, faces, pts)
+            _chaikin_margin(lev, cage.options, lo, hi)
+            seen = in_view(lo, hi)
+            faces, base_face, corner = faces[seen], base_face[seen], corner[seen]
         objs.append(ObjectPatches(cage, L0, lev, pts, faces, first_patch, first_edge))
         quad = cage.scheme == "catmark"
         parts.append(_object_arrays(cage, L0, lev, pts, faces, base_face, corner, oid,
