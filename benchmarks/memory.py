@@ -37,8 +37,8 @@ scene = apply_overrides(load_scene(path), tolerance=tol, width=w, height=h,
 render_scene(apply_overrides(scene, width="16", height="12", max_memory="4G"))  # warm
 seen = {}
 orig = pt.memory_estimate
-def spy(table, depths, n_pixels):
-    value = orig(table, depths, n_pixels)
+def spy(table, depths, n_pixels, grids=None):
+    value = orig(table, depths, n_pixels, grids)
     seen["last"] = value
     return value
 import subtrace.trace.budget as B

@@ -7,7 +7,7 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-from shared_data import MODELS, needs_shared, small_scene
+from shared_data import MODELS, SHAPES, needs_shared, small_scene
 
 from subtrace import config
 from subtrace.errors import SubtraceWarning
@@ -16,6 +16,7 @@ from subtrace.render import render_scene, result_attributes
 
 SPOT = MODELS / "spot_control_mesh.obj"
 TORUS = MODELS / "torus.obj"
+ICOSA = SHAPES / "loop_icosahedron.obj"
 
 
 def _render(scene):
@@ -89,10 +90,10 @@ def test_precision_cap_on_an_absurd_tolerance_is_reported_once():
 
 @needs_shared
 def test_loop_scene_at_a_tiny_tolerance_is_capped_by_the_memory_budget():
-    """Loop patches are whole grids of 4^depth cells: a tiny tolerance is held by the memory
-    budget (one warning, reason "memory"), never by a silent constant, and the image's levels
-    are the cap's."""
-    scene = small_scene([TORUS], (1.226, 4.085, 4.902), (0.0, 0.0, 0.0), width=96, height=54,
+    """Irregular Loop patches are whole grids of 4^depth cells: a tiny tolerance is held by
+    the memory budget (one warning, reason "memory"), never by a silent constant, and the
+    image's levels are the cap's. (The icosahedron's corners all have valence 5.)"""
+    scene = small_scene([ICOSA], (1.226, 4.085, 4.902), (0.0, 0.0, 0.0), width=96, height=54,
                         fov=30.0, tolerance=0.001)
     scene = apply_overrides(scene, max_memory="256M")
     res, said = _render(scene)
@@ -101,6 +102,19 @@ def test_loop_scene_at_a_tiny_tolerance_is_capped_by_the_memory_budget():
     assert 0 <= res.stats.depth_cap < 8
     # Loop patches are the cage's triangles (L0 = 0): the deepest level is the cap
     assert _level_max(res) == res.stats.depth_cap == res.stats.max_level
+
+
+@needs_shared
+def test_regular_loop_patches_are_not_priced_as_grids():
+    """Regular Loop triangles are Bezier nets split per ray, their splits kept within the
+    threads' memos: the budget that holds the grids above does not cap the torus (every
+    corner of valence 6), which refines deeper at the same tolerance."""
+    scene = small_scene([TORUS], (1.226, 4.085, 4.902), (0.0, 0.0, 0.0), width=96, height=54,
+                        fov=30.0, tolerance=0.001)
+    res, said = _render(apply_overrides(scene, max_memory="256M"))
+    assert not any("memory budget" in m for m in said), said
+    assert "memory" not in res.stats.depth_cap_reason
+    assert _level_max(res) >= 8
 
 
 def test_precision_depths_follow_the_coordinates():

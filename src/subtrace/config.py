@@ -73,6 +73,11 @@ LOOP_PER_RAY = True
 # tiles, accel/projection.py; measured faster on Spot and the sword, BENCHMARKS.md) or "bvh".
 PRIMARY_ACCEL = "projection"
 
+# Build patches only for the cage faces whose limit surface a primary ray may reach (the box
+# of each face's one-ring projected into the image, render.py): off-screen parts of a cage
+# cost nothing. Rays that leave the view (shadows, reflections) need it off.
+CULL_TO_VIEW = True
+
 # Patches per BVH leaf, and the traversal stack size (enough for any tree this builds).
 BVH_LEAF_SIZE = 2
 STACK_SIZE = 128

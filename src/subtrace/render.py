@@ -1,7 +1,8 @@
 """Rendering: orchestration only (the maths lives in patches/, accel/, trace/, shade.py).
 
-``render_scene(scene)`` loads the cages, builds the patch table, bins the patch shells into
-image tiles (or builds their BVH), chooses each patch's grid depth from the angular
+``render_scene(scene)`` loads the cages, builds the patch table of the cage faces that can
+reach the image (the others' patches are never made: ``faces_in_view``), bins the patch
+shells into image tiles (or builds their BVH), chooses each patch's grid depth from the angular
 tolerance and makes neighbours sample their shared edges alike, then runs rounds of
 ``trace.kernels.trace_round``. Regular Catmull-Clark patches are refined per ray inside the
 kernel, each thread keeping what its rays split (``trace.pools.Memos``). After each round
@@ -23,13 +24,14 @@ import numpy as np
 
 from subtrace import config
 from subtrace.accel.bvh import build_bvh, no_bvh
-from subtrace.accel.projection import no_tiles, project_shells, tiles_bytes
+from subtrace.accel.projection import (boxes_in_view, no_tiles, project_shells,
+                                      tiles_bytes)
 from subtrace.camera import camera_frame
 from subtrace.errors import SceneError
 from subtrace.io.limits import check_coordinates, check_valences
 from subtrace.mesh.cage import load_cage
 from subtrace.patches.criterion import edge_sampling
-from subtrace.patches.table import build_patch_table
+from subtrace.patches.table import build_patch_table, cage_face_shells
 from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
 from subtrace.shade import CHANNELS, deepest_level, miss_values, patch_shading, shade
@@ -50,7 +52,8 @@ class RenderStats:
     time_trace: float = 0.0
     time_shade: float = 0.0
     time_total: float = 0.0
-    patches: int = 0
+    patches: int = 0  # patches built into the table (those in view, of cage faces in view)
+    faces_culled: int = 0  # cage faces outside the view, whose patches were never built
     patches_refined: int = 0
     # built: 2 per cell a thread evaluated first (kept, or a fan counted once) or isolated
     # (threads take bands as they are free, so with several threads the count may differ
@@ -119,7 +122,9 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     (``patches.criterion.memory_estimate``) exceeds it are capped, with a warning, and the
     threads' memos are kept within what is left. ``max_depth``: an explicit cap on every
     patch's depth (None: only what floating point resolves, ``config.PRECISION_BITS``);
-    any cap that holds a patch below its tolerance is warned of and recorded in ``stats``."""
+    any cap that holds a patch below its tolerance is warned of and recorded in ``stats``.
+    The pieces take over the table's net store (``patches.table.net_room``) and append to
+    it past the table's nets: a table serves one call at a time."""
     accel = config.PRIMARY_ACCEL if accel is None else accel
     if accel not in ("projection", "bvh"):
         raise ValueError(f"unknown acceleration {accel!r}")
@@ -150,14 +155,17 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
     for, until no ray asks."""
     depths = chosen.depths
     edge_depth, reg_side = edge_sampling(table, depths)
-    tables = leaf_tables(int(depths[~table.is_quad].max(initial=0)))  # (Loop grids only)
+    tables = leaf_tables(int(depths[chosen.grids].max(initial=0)))  # (Loop grids only)
     grids = LoopGrids(table.n_patches)
     iso = Pieces(table.n_patches)
     reg = np.nonzero(table.regular)[0]
     n_irr = int(np.count_nonzero(table.is_quad & ~table.regular))
     iso.reserve("items", len(reg) + 16 * n_irr)
+    # the pieces' net store is the table's: its nets, then room for the rest (no copy)
+    store = table.nets if table.nets.base is None else table.nets.base
+    iso.adopt("nets", len(table.nets), nets=store)
     iso.reserve("nets", len(reg) + 16 * n_irr)
-    iso.append_regular(reg, depths[reg], reg_side, table.nets, table.shell_min[reg],
+    iso.append_regular(reg, depths[reg], reg_side, None, table.shell_min[reg],
                        table.shell_max[reg])
     if config.LOOP_PER_RAY:
         build_loop_regular(table, depths, edge_depth, iso)
@@ -215,9 +223,33 @@ def scene_bounds(cages):
     return np.min([b[0] for b in bounds], axis=0), np.max([b[1] for b in bounds], axis=0)
 
 
+def faces_in_view(cages, camera):
+    """Per cage, a (F,) bool mask of the faces whose limit surface a primary ray may reach:
+    the box that holds it (``patches.table.cage_face_shells``) projects into the image
+    (``accel.projection.boxes_in_view``, the test the tile lists make). The patches of the
+    other faces are never built (design invariant 5)."""
+    frame = camera_frame(camera)
+    return [boxes_in_view(*cage_face_shells(c), frame, camera.width, camera.height)
+            for c in cages]
+
+
+def table_in_view(cages, camera):
+    """The patch table of what a primary ray of ``camera`` may reach: the patches of the
+    cage faces in view (:func:`faces_in_view`) whose own one-ring box is in view too.
+    Returns (table, the per-cage masks of the faces kept)."""
+    keep = faces_in_view(cages, camera)
+    frame = camera_frame(camera)
+
+    def in_view(lo, hi):
+        return boxes_in_view(lo, hi, frame, camera.width, camera.height)
+
+    return build_patch_table(cages, keep, in_view), keep
+
+
 def _prepare(scene, cages, stats):
-    """Load and check the cages, build the patch table, frame the camera, check the budget:
-    (cages, table, camera, tolerance in radians, budget in bytes)."""
+    """Load and check the cages, frame the camera, build the patch table of the cage faces
+    in view, check the budget: (cages, table, camera, tolerance in radians, budget in
+    bytes)."""
     t_start = time.perf_counter()
     if cages is None:
         cages = load_objects(scene)
@@ -227,12 +259,15 @@ def _prepare(scene, cages, stats):
                        config.MAX_VALENCE, c.scheme == "catmark")
     stats.time_load = time.perf_counter() - t_start
     t0 = time.perf_counter()
-    table = build_patch_table(cages)
-    lo = table.shell_min.min(axis=0)
-    hi = table.shell_max.max(axis=0)
+    lo = hi = None
     if scene.camera.is_auto:
         lo, hi = scene_bounds(cages)
     camera = scene.make_camera(lo, hi)
+    if config.CULL_TO_VIEW:
+        table, keep = table_in_view(cages, camera)
+        stats.faces_culled = int(sum(np.count_nonzero(~k) for k in keep))
+    else:
+        table = build_patch_table(cages)
     budget = scene.render.max_memory
     budget = config.default_max_memory() if budget is None else budget
     check_memory(table, camera.width * camera.height, budget, camera.width, camera.height)

@@ -10,6 +10,9 @@ entry distance). A ray walks its tile's list and stops at the first shell whose 
 below its best hit: no later shell can hold a nearer one. A box that reaches the eye plane
 (or the eye) is listed in every tile; one wholly behind it in none.
 
+``boxes_in_view`` asks the same question of boxes without listing them: whether any
+primary ray can enter each (the renderer's view cull of cage faces, ``render.py``).
+
 ``project_shells(bmin, bmax, frame, width, height)`` returns :class:`Tiles`:
 
 * ``off`` (T+1,) int64 and ``items`` (E,) int32: tile ``t``'s shells are
@@ -21,10 +24,10 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from subtrace.runtime.jit import nb
 import numpy as np
 
 from subtrace.runtime import threads as tasks
+from subtrace.runtime.jit import inline_njit, nb
 
 TILE = 2  # pixels per tile side
 
@@ -54,9 +57,7 @@ def project_shells(bmin, bmax, frame, width: int, height: int,
     bmin = np.ascontiguousarray(bmin, dtype=np.float64)
     bmax = np.ascontiguousarray(bmax, dtype=np.float64)
     eye = frame[0]
-    # pixel coordinates of a point X: (X - eye) = a0 * p00 + a1 * dx + a2 * dy, col = a1 / a0
-    basis = np.stack([frame[3], frame[1], frame[2]], axis=1)
-    inv = np.ascontiguousarray(np.linalg.inv(basis))
+    inv = _pixel_map(frame)
     key = np.empty(len(bmin))
     tx = -(-int(width) // TILE)
     ty = -(-int(height) // TILE)
@@ -76,6 +77,27 @@ def project_shells(bmin, bmax, frame, width: int, height: int,
     return Tiles(off, items, key, np.int64(tx))
 
 
+def boxes_in_view(bmin, bmax, frame, width: int, height: int) -> np.ndarray:
+    """(N,) bool: whether any primary ray of a ``width`` x ``height`` image seen through
+    ``frame`` can enter the box ``[bmin[i], bmax[i]]``: the box's pixel rectangle, as the
+    tiles list it (a pixel wider on each side), is not empty. A box for which this is False
+    is in no tile's list, so a surface inside it is never seen by a primary ray."""
+    bmin = np.ascontiguousarray(bmin, dtype=np.float64)
+    bmax = np.ascontiguousarray(bmax, dtype=np.float64)
+    seen = np.empty(len(bmin), np.bool_)
+    n_tasks = tasks.thread_count() if len(bmin) >= _PARALLEL_MIN else 1
+    tasks.run_tasks(_in_view, bmin, bmax, np.ascontiguousarray(frame[0]), _pixel_map(frame),
+                    int(width), int(height), seen, n=n_tasks)
+    return seen
+
+
+def _pixel_map(frame) -> np.ndarray:
+    """(3,3) inverse of the basis [p00, dx, dy]: a point X maps to (a0, a1, a2) with
+    X - eye = a0 * p00 + a1 * dx + a2 * dy, at pixel (col, row) = (a1 / a0, a2 / a0)."""
+    basis = np.stack([frame[3], frame[1], frame[2]], axis=1)
+    return np.ascontiguousarray(np.linalg.inv(basis))
+
+
 def tiles_bytes(n_items: int, n_tiles: int) -> int:
     """Bytes of the tile lists of ``n_items`` entries over ``n_tiles`` tiles."""
     return 4 * n_items + 8 * (n_tiles + 1)
@@ -83,6 +105,46 @@ def tiles_bytes(n_items: int, n_tiles: int) -> int:
 
 _BLOCK = 256  # boxes a task projects at a time
 _PARALLEL_MIN = 16 * _BLOCK  # fewer boxes than this: projected on one thread
+
+
+@inline_njit
+def _box_rect(i, bmin, bmax, eye, inv, width, height):
+    """Pixel rectangle (x0, y0, x1, y1), inclusive, of box ``i`` seen from ``eye``: the
+    bounding rectangle of its corners' projections widened by a pixel for rounding, the
+    whole image when the box reaches the eye plane, empty (x0 > x1) when it lies behind the
+    eye plane or outside the image."""
+    c0 = r0 = np.inf
+    c1 = r1 = -np.inf
+    front = 0
+    behind = 0
+    for k in range(8):
+        x = (bmax[i, 0] if k & 1 else bmin[i, 0]) - eye[0]
+        y = (bmax[i, 1] if k & 2 else bmin[i, 1]) - eye[1]
+        z = (bmax[i, 2] if k & 4 else bmin[i, 2]) - eye[2]
+        a0 = inv[0, 0] * x + inv[0, 1] * y + inv[0, 2] * z
+        a1 = inv[1, 0] * x + inv[1, 1] * y + inv[1, 2] * z
+        a2 = inv[2, 0] * x + inv[2, 1] * y + inv[2, 2] * z
+        scale = abs(x) + abs(y) + abs(z)
+        if a0 > 1e-9 * scale:
+            front += 1
+            c0 = min(c0, a1 / a0)
+            c1 = max(c1, a1 / a0)
+            r0 = min(r0, a2 / a0)
+            r1 = max(r1, a2 / a0)
+        elif a0 <= 0.0:
+            behind += 1
+    if behind == 8:
+        return 0, 0, -1, -1
+    if front < 8:  # reaches the eye plane: every pixel
+        c0, r0, c1, r1 = 0.0, 0.0, width - 1.0, height - 1.0
+    # pixel centres are at integer (col, row); one pixel more on each side for rounding
+    x0 = max(int(np.floor(max(c0, -2.0))) - 1, 0)
+    y0 = max(int(np.floor(max(r0, -2.0))) - 1, 0)
+    x1 = min(int(np.ceil(min(c1, width + 1.0))) + 1, width - 1)
+    y1 = min(int(np.ceil(min(r1, height + 1.0))) + 1, height - 1)
+    if x0 > x1 or y0 > y1:
+        return 0, 0, -1, -1
+    return x0, y0, x1, y1
 
 
 @nb.njit(cache=True, nogil=True)
@@ -98,37 +160,8 @@ def _rectangles(task, n_tasks, bmin, bmax, eye, inv, width, height, tx, ty, rect
                 g = max(max(bmin[i, k] - eye[k], 0.0), eye[k] - bmax[i, k])
                 d2 += g * g
             key[i] = np.sqrt(d2)
-            c0 = r0 = np.inf
-            c1 = r1 = -np.inf
-            front = 0
-            behind = 0
-            for k in range(8):
-                x = (bmax[i, 0] if k & 1 else bmin[i, 0]) - eye[0]
-                y = (bmax[i, 1] if k & 2 else bmin[i, 1]) - eye[1]
-                z = (bmax[i, 2] if k & 4 else bmin[i, 2]) - eye[2]
-                a0 = inv[0, 0] * x + inv[0, 1] * y + inv[0, 2] * z
-                a1 = inv[1, 0] * x + inv[1, 1] * y + inv[1, 2] * z
-                a2 = inv[2, 0] * x + inv[2, 1] * y + inv[2, 2] * z
-                scale = abs(x) + abs(y) + abs(z)
-                if a0 > 1e-9 * scale:
-                    front += 1
-                    c0 = min(c0, a1 / a0)
-                    c1 = max(c1, a1 / a0)
-                    r0 = min(r0, a2 / a0)
-                    r1 = max(r1, a2 / a0)
-                elif a0 <= 0.0:
-                    behind += 1
-            if behind == 8:
-                rect[i, 0], rect[i, 1], rect[i, 2], rect[i, 3] = 0, 0, -1, -1
-                continue
-            if front < 8:  # reaches the eye plane: every pixel
-                c0, r0, c1, r1 = 0.0, 0.0, width - 1.0, height - 1.0
-            # pixel centres are at integer (col, row); one pixel more on each side for rounding
-            x0 = max(int(np.floor(max(c0, -2.0))) - 1, 0)
-            y0 = max(int(np.floor(max(r0, -2.0))) - 1, 0)
-            x1 = min(int(np.ceil(min(c1, width + 1.0))) + 1, width - 1)
-            y1 = min(int(np.ceil(min(r1, height + 1.0))) + 1, height - 1)
-            if x0 > x1 or y0 > y1:
+            x0, y0, x1, y1 = _box_rect(i, bmin, bmax, eye, inv, width, height)
+            if x0 > x1:
                 rect[i, 0], rect[i, 1], rect[i, 2], rect[i, 3] = 0, 0, -1, -1
                 continue
             rect[i, 0], rect[i, 1] = x0 // TILE, y0 // TILE
@@ -136,6 +169,16 @@ def _rectangles(task, n_tasks, bmin, bmax, eye, inv, width, height, tx, ty, rect
             for b in range(rect[i, 1], rect[i, 3] + 1):
                 for a in range(rect[i, 0], rect[i, 2] + 1):
                     count[task, b * tx + a] += 1
+
+
+@nb.njit(cache=True, nogil=True)
+def _in_view(task, n_tasks, bmin, bmax, eye, inv, width, height, seen):
+    """``seen[i]``: whether box ``i``'s pixel rectangle (:func:`_box_rect`) is not empty.
+    Task ``task`` of ``n_tasks`` takes every n_tasks-th block of ``_BLOCK`` boxes."""
+    for b0 in range(task * _BLOCK, len(bmin), n_tasks * _BLOCK):
+        for i in range(b0, min(b0 + _BLOCK, len(bmin))):
+            x0, _, x1, _ = _box_rect(i, bmin, bmax, eye, inv, width, height)
+            seen[i] = x0 <= x1
 
 
 @nb.njit(cache=True)

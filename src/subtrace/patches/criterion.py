@@ -89,13 +89,16 @@ def choose_depths(table, eye: np.ndarray, tol_rad: float, max_depth,
     return depths
 
 
-def memory_estimate(table, depths, n_pixels: int) -> int:
+def memory_estimate(table, depths, n_pixels: int, grids=None) -> int:
     """A conservative estimate (bytes) of a render's memory with grid depths ``depths``:
     the image's per-pixel buffers, the patch table, every Loop patch built as a grid at its
     depth and every irregular Catmull-Clark patch isolated to its depth, as if rays reached
-    them all (the per-thread memos of split nets are kept within what is left:
-    ``render._Memos``). The constants are ``config.MEMORY_*``."""
-    loop = ~table.is_quad
+    them all. ``grids`` (P,) bool: the Loop patches built as grids of exact limit points
+    (None: all); the others are Bezier nets split per ray (``trace/tris.py``), one net and
+    item each (in the per-patch figure): what rays split of them lives in the per-thread
+    memos, which are kept within what is left (``trace.pools.Memos``), so their depth costs
+    nothing here. The constants are ``config.MEMORY_*``."""
+    loop = ~table.is_quad if grids is None else grids
     # in floating point: grids of depth 40 would overflow int64 (the result is clamped)
     N = np.exp2(depths[loop].astype(np.float64))
     grid_points = float(((N + 1) * (N + 2) / 2).sum())
@@ -108,14 +111,14 @@ def memory_estimate(table, depths, n_pixels: int) -> int:
     return int(min(total, 2.0**62))
 
 
-def depth_cap(table, depths, n_pixels: int, budget: int):
+def depth_cap(table, depths, n_pixels: int, budget: int, grids=None):
     """The deepest grid depth ``cap`` at which ``np.minimum(depths, cap)`` fits ``budget``
-    bytes (:func:`memory_estimate`), or None when ``depths`` fit as they are; -1 when
-    nothing fits (not even depth 0)."""
-    if memory_estimate(table, depths, n_pixels) <= budget:
+    bytes (:func:`memory_estimate`, ``grids`` as there), or None when ``depths`` fit as
+    they are; -1 when nothing fits (not even depth 0)."""
+    if memory_estimate(table, depths, n_pixels, grids) <= budget:
         return None
     for cap in range(int(depths.max(initial=0)) - 1, -1, -1):
-        if memory_estimate(table, np.minimum(depths, cap), n_pixels) <= budget:
+        if memory_estimate(table, np.minimum(depths, cap), n_pixels, grids) <= budget:
             return cap
     return -1
 

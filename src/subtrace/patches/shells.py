@@ -4,6 +4,8 @@ A face's limit surface depends only on the control points of the faces sharing a
 with it (its one-ring), with non-negative weights, so it lies in their convex hull and in
 their axis-aligned box (design invariant 2). Per face, flat arrays: box min / max (n,3)
 float64, a length bound on its iso-curves (n,) and its largest corner valence (n,) int64.
+:func:`face_ring_boxes` makes the boxes alone for every face of a level at once (the view
+cull of cage faces, ``patches/table.py``).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import math
 import numpy as np
 
 from subtrace.runtime.jit import nb
+from subtrace.runtime.threads import run_tasks
 
 
 def box_distance(bmin, bmax, p):
@@ -31,6 +34,54 @@ def one_ring_shells(level, faces, pts):
     _shells(faces, level.face_offsets, level.face_verts, level.vert_face_offsets,
             level.vert_faces, pts, lo, hi, bound, valence)
     return lo, hi, bound, valence
+
+
+def face_ring_boxes(level, pts):
+    """(box min (F,3), box max (F,3)): per face of ``level``, the box of its one-ring's
+    control points at ``pts`` (the box :func:`one_ring_shells` makes), for every face at
+    once: the union of its corners' vertex-ring boxes, each made once."""
+    vlo = np.empty((level.n_verts, 3))
+    vhi = np.empty((level.n_verts, 3))
+    lo = np.empty((level.n_faces, 3))
+    hi = np.empty((level.n_faces, 3))
+    run_tasks(_vertex_ring_boxes, level.vert_face_offsets, level.vert_faces,
+              level.face_offsets, level.face_verts, pts, vlo, vhi)
+    run_tasks(_face_boxes, level.face_offsets, level.face_verts, vlo, vhi, lo, hi)
+    return lo, hi
+
+
+@nb.njit(cache=True, nogil=True)
+def _vertex_ring_boxes(task, n_tasks, vert_face_offsets, vert_faces, face_offsets, face_verts,
+                       pts, vlo, vhi):
+    """Per vertex, the box of the points of the faces around it (``run_tasks``: task
+    ``task`` of ``n_tasks`` takes a contiguous share of the vertices)."""
+    n = len(vlo)
+    for v in range(task * n // n_tasks, (task + 1) * n // n_tasks):
+        lo0, lo1, lo2 = np.inf, np.inf, np.inf
+        hi0, hi1, hi2 = -np.inf, -np.inf, -np.inf
+        for a in range(vert_face_offsets[v], vert_face_offsets[v + 1]):
+            g = vert_faces[a]
+            for c in range(face_offsets[g], face_offsets[g + 1]):
+                p = face_verts[c]
+                x, y, z = pts[p, 0], pts[p, 1], pts[p, 2]
+                lo0, lo1, lo2 = min(lo0, x), min(lo1, y), min(lo2, z)
+                hi0, hi1, hi2 = max(hi0, x), max(hi1, y), max(hi2, z)
+        vlo[v, 0], vlo[v, 1], vlo[v, 2] = lo0, lo1, lo2
+        vhi[v, 0], vhi[v, 1], vhi[v, 2] = hi0, hi1, hi2
+
+
+@nb.njit(cache=True, nogil=True)
+def _face_boxes(task, n_tasks, face_offsets, face_verts, vlo, vhi, lo, hi):
+    """Per face, the union of its corners' vertex-ring boxes (tasks as above)."""
+    n = len(lo)
+    for f in range(task * n // n_tasks, (task + 1) * n // n_tasks):
+        for k in range(3):
+            lo[f, k], hi[f, k] = np.inf, -np.inf
+        for c in range(face_offsets[f], face_offsets[f + 1]):
+            v = face_verts[c]
+            for k in range(3):
+                lo[f, k] = min(lo[f, k], vlo[v, k])
+                hi[f, k] = max(hi[f, k], vhi[v, k])
 
 
 @nb.njit(cache=True)

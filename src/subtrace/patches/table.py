@@ -1,4 +1,8 @@
-"""The patch table: every face of the patch level L0 of every object, with its bounding shell.
+"""The patch table: the faces of the patch level L0 of every object, with their bounding shells.
+
+Only the patches of the cage faces asked for are made (``build_patch_table(cages, keep)``:
+the renderer keeps the faces whose one-ring box reaches the image, ``render.faces_in_view``):
+only they and three rings of faces around them are refined to L0.
 
 A patch is a face of level ``L0`` (Catmull-Clark: level 1, where all faces are quads; Loop:
 the cage). The renderer intersects regular patches through their Bezier nets, splits
@@ -19,8 +23,11 @@ Loop patches into grids of exact limit points (:mod:`subtrace.patches.grids`), o
   cell at depth n by ``edge_bound * rate^n`` (the refinement criterion);
 * ``regular`` (P,) bool and ``nets`` (R,4,4,3): the Bezier nets of the regular bicubic
   patches, smooth or along boundaries and infinitely sharp creases (phantom points; see
-  :mod:`subtrace.patches.bspline`, :mod:`subtrace.patches.basis`), in patch order. For those, the shell is the
-  net's box, ``edge_bound`` the exact bound on the derivatives and ``rate`` 1/2;
+  :mod:`subtrace.patches.bspline`, :mod:`subtrace.patches.basis`), in patch order. For
+  those, the shell is the net's box, ``edge_bound`` the exact bound on the derivatives and
+  ``rate`` 1/2. The nets are the first rows of a larger store (``nets.base``,
+  :func:`net_room`) that the renderer's pieces take over instead of copying them
+  (``trace.pools.Growable.adopt``);
 * ``edges`` (P,4) int64 (-1 pads triangles): global id of the L0 edge on each side (side k joins corners k, k+1),
   used to give both patches of an edge the same sampling.
 """
@@ -32,13 +39,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from subtrace import config
+from subtrace.mesh.topology import gather
 from subtrace.patches.basis import TO_BEZIER, net_summary, to_bezier
 from subtrace.patches.bspline import phantom_grids, regular_mask
 from subtrace.patches.criterion import subdominant
 from subtrace.patches.evaluate import ptex_layout
-from subtrace.patches.shells import one_ring_shells
+from subtrace.patches.shells import face_ring_boxes, one_ring_shells
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
+from subtrace.subdiv.limit import extract
+from subtrace.subdiv.refine import refine_level, refine_points
 
 # ptex offset of the child at corner j of a regular face (quads keep the parent's orientation)
 _QUAD_CHILD_UV0 = np.array([[0.0, 0.0], [0.5, 0.0], [0.5, 0.5], [0.0, 0.5]])
@@ -87,25 +97,126 @@ def patch_level(cage) -> int:
     return 1 if cage.scheme == "catmark" else 0
 
 
-def build_patch_table(cages) -> PatchTable:
-    """Patch table of several objects (Catmull-Clark and Loop cages may be mixed)."""
+def build_patch_table(cages, keep=None, in_view=None) -> PatchTable:
+    """Patch table of several objects (Catmull-Clark and Loop cages may be mixed).
+
+    ``keep``: None (every patch), or per object None or a (F,) bool mask of its cage faces
+    whose patches are wanted (e.g. those a ray may see: :func:`cage_face_shells`). The
+    others' patches are never made: only the neighbourhood of the kept faces is refined to
+    the patch level (:func:`_patch_level`), so the cost follows what is kept, and the kept
+    patches are exactly those of the whole cage (their shells, nets and isolation read the
+    same points). ``in_view``: None, or ``in_view(lo, hi)`` -> (n,) bool for boxes (n,3):
+    then a patch of a Catmull-Clark cage's kept face is left out too when the box of its own
+    one-ring is not in view (a face of level 1 is a quarter of a quad)."""
     objs, parts = [], []
     first_patch = first_edge = 0
     for oid, cage in enumerate(cages):
         L0 = patch_level(cage)
-        lev = cage.level_topology(L0)
-        pts = cage.refine(L0).points
-        faces = np.nonzero(~lev.face_hole)[0].astype(np.int64)
+        lev, pts, faces, base_face, corner = _patch_level(
+            cage, L0, None if keep is None else keep[oid])
+        if in_view is not None and L0 > 0 and len(faces):
+            lo, hi, _, _ = one_ring_shells(lev, faces, pts)
+            _chaikin_margin(lev, cage.options, lo, hi)
+            seen = in_view(lo, hi)
+            faces, base_face, corner = faces[seen], base_face[seen], corner[seen]
         objs.append(ObjectPatches(cage, L0, lev, pts, faces, first_patch, first_edge))
         quad = cage.scheme == "catmark"
-        parts.append(_object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad))
+        parts.append(_object_arrays(cage, L0, lev, pts, faces, base_face, corner, oid,
+                                    first_edge, quad))
         first_patch += len(faces)
         first_edge += lev.n_edges
     if len(parts) == 1:
         cat = parts[0]  # already contiguous: no copy of the nets
     else:
-        cat = {k: np.ascontiguousarray(np.concatenate([p[k] for p in parts])) for k in parts[0]}
+        cat = {k: np.ascontiguousarray(np.concatenate([p[k] for p in parts])) for k in parts[0]
+               if k != "nets"}
+        cat["nets"] = _with_room([p["nets"] for p in parts], cat["is_quad"], cat["regular"])
     return PatchTable(objects=tuple(objs), n_edges=first_edge, **cat)
+
+
+# rows of room the nets' storage keeps after them (np.empty: no memory until written) for
+# what the renderer appends to the same store (trace.pools.Pieces adopts it): the pieces
+# of each irregular quad, the net of each Loop triangle
+NET_ROOM_PER_IRREGULAR = 16
+
+
+def net_room(is_quad, regular) -> int:
+    """Rows of room after the nets of a table with these patches (``NET_ROOM_PER_IRREGULAR``
+    per irregular quad, one per Loop triangle)."""
+    return int(NET_ROOM_PER_IRREGULAR * np.count_nonzero(is_quad & ~regular)
+               + np.count_nonzero(~is_quad))
+
+
+def _with_room(nets_list, is_quad, regular):
+    """The nets concatenated, as the first rows of a store with :func:`net_room` rows more."""
+    n = sum(len(n) for n in nets_list)
+    store = np.empty((n + net_room(is_quad, regular), 4, 4, 3))
+    np.concatenate(nets_list, out=store[:n])
+    return store[:n]
+
+
+def cage_face_shells(cage):
+    """(lo, hi), each (F,3) float64: per face of the cage, a box that holds the limit
+    surface over it (the box of its one-ring's control points, widened for Chaikin creases
+    as the patches' shells are). Cheap: no refinement."""
+    lo, hi = face_ring_boxes(cage.base, cage.points)
+    _chaikin_margin(cage.base, cage.options, lo, hi)
+    return lo, hi
+
+
+def _chaikin_margin(level, options, lo, hi):
+    """Widen the one-ring boxes ``lo``, ``hi`` in place where Chaikin creases of sharpness
+    above 1 may carry the limit surface out of them (``config.SHELL_CHAIKIN_MARGIN``)."""
+    if options.chaikin and np.any(level.edge_sharpness > 1.0):
+        margin = config.SHELL_CHAIKIN_MARGIN * (hi - lo).max(axis=1, keepdims=True)
+        lo -= margin
+        hi += margin
+
+
+# cage rings cut around the kept faces: their children's neighbourhoods out to
+# config.GRID_RINGS rings of the patch level (what isolation and grids cut) must be refined
+# exactly, and a face is refined exactly when every face around its vertices is in the cut
+_CUT_RINGS = config.GRID_RINGS + 1
+
+
+def _patch_level(cage, L0, keep):
+    """The patch level of ``cage`` where the faces ``keep`` (a (F,) bool mask of cage faces,
+    or None for all) are: (level, points, patch faces in it, the cage face of each patch,
+    its corner there (-1: the face itself is the patch)). With some faces left out, the
+    level is that of a cut of the cage around the kept faces (``_CUT_RINGS`` rings, the
+    faces' relative order kept), refined to L0."""
+    base = cage.base
+    if keep is None or np.all(keep):
+        lev = cage.level_topology(L0)
+        pts = cage.refine(L0).points
+        cut_face = None
+        kept = np.arange(base.n_faces, dtype=np.int64)
+    elif not np.any(keep):
+        return base, cage.points, *(np.zeros(0, np.int64),) * 3
+    else:
+        kept = np.nonzero(keep)[0].astype(np.int64)
+        verts = np.unique(gather(base.face_offsets, base.face_verts, kept))
+        lev, sub_to_base, _, cut_face = extract(base, verts, rings=_CUT_RINGS)
+        pts = cage.points[sub_to_base]
+        for _ in range(L0):
+            ref = refine_level(lev, cage.options)
+            pts = refine_points(ref, pts)
+            lev = ref.child
+        kept = np.searchsorted(cut_face, kept)  # in the cut
+    if L0 == 1:
+        # the level-1 children of face c of the cut (or cage) are its corners, in order
+        fo = (base.face_offsets if cut_face is None else
+              np.r_[0, np.cumsum(np.diff(base.face_offsets)[cut_face])].astype(np.int64))
+        sizes = np.diff(fo)[kept]
+        parent = np.repeat(kept, sizes)
+        corner = np.arange(len(parent), dtype=np.int64) - np.repeat(
+            np.cumsum(sizes) - sizes, sizes)
+        faces = fo[parent] + corner
+    else:
+        parent, corner, faces = kept, np.full(len(kept), -1, np.int64), kept
+    base_face = parent if cut_face is None else cut_face[parent]
+    live = ~lev.face_hole[faces]
+    return lev, pts, faces[live], base_face[live], corner[live]
 
 
 # regular patches converted to Bezier nets per call of _regular_shells' inner kernels: their
@@ -113,25 +224,23 @@ def build_patch_table(cages) -> PatchTable:
 _NET_CHUNK = 64
 
 
-def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
+def _object_arrays(cage, L0, lev, pts, faces, F, j, oid, first_edge, quad):
+    """The table's per-patch arrays of one object (its patches ``faces`` of level ``lev``,
+    each the child at corner ``j`` of cage face ``F``; see :func:`_patch_level`)."""
     k = 4 if quad else 3
     n = len(faces)
     # ptex mapping of each patch
     base, sub, first = ptex_layout(cage)
     if L0 == 1:
         # level-1 face c is the child of base face F at corner j, numbered by base corner
-        fo = cage.base.face_offsets
-        sizes = np.diff(fo)
-        F = np.repeat(np.arange(len(sizes)), sizes)[faces]
-        j = faces - fo[F]
+        sizes = np.diff(cage.base.face_offsets)
         regular = sizes[F] == 4
         ptex = np.where(regular, first[F], first[F] + j).astype(np.int32)
         uv0 = _QUAD_CHILD_UV0.take(j % 4, axis=0)
         uv0[~regular] = 0.0
         scale = np.where(regular, 0.5, 1.0)
     else:
-        F = faces
-        ptex = first[faces].astype(np.int32)
+        ptex = first[F].astype(np.int32)
         uv0 = np.zeros((n, 2))
         scale = np.ones(n)
     material = (
@@ -146,7 +255,8 @@ def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
     # regular quads: bicubic patches with a tight hull and an exact derivative bound
     regular = regular_mask(lev, cage.options, faces)
     rows = np.nonzero(regular)[0]
-    nets = np.empty((len(rows), 4, 4, 3))
+    room = net_room(np.full(n, quad), regular)
+    nets = np.empty((len(rows) + room, 4, 4, 3))[: len(rows)]  # (see _with_room)
     grids, ext = phantom_grids(lev, faces[rows], pts)
     run_tasks(_regular_shells, grids, ext, TO_BEZIER, rows,
               _NET_CHUNK, nets, smin, smax, ebound)
@@ -154,10 +264,7 @@ def _object_arrays(cage, L0, lev, pts, faces, oid, first_edge, quad):
     # the others: boxes of their one-ring control points
     rows = np.nonzero(~regular)[0]
     lo, hi, bound, valence = one_ring_shells(lev, faces[rows], pts)
-    if cage.options.chaikin and np.any(lev.edge_sharpness > 1.0):
-        margin = config.SHELL_CHAIKIN_MARGIN * (hi - lo).max(axis=1, keepdims=True)
-        lo -= margin
-        hi += margin
+    _chaikin_margin(lev, cage.options, lo, hi)
     smin[rows], smax[rows], ebound[rows] = lo, hi, bound
     rate[rows] = subdominant(valence, quad)
     # global ids of the sides' edges, a column at a time (-1 pads a triangle's 4th side)

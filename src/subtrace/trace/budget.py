@@ -11,6 +11,7 @@ import numpy as np
 
 from subtrace import config
 from subtrace.errors import SceneError, SubtraceWarning
+from subtrace.lines.items import loop_regular
 from subtrace.patches.criterion import (choose_depths, depth_cap, memory_estimate,
                                         precision_depths, wanted_depths)
 from subtrace.runtime import threads as tasks
@@ -61,6 +62,19 @@ def warn_tiles(budget):
         stacklevel=3)
 
 
+def grid_patches(table) -> np.ndarray:
+    """(P,) bool: the patches built as grids of exact limit points, what the memory
+    estimate prices by depth: the Loop patches other than the regular triangles, which are
+    Bezier nets split per ray (``config.LOOP_PER_RAY``, ``trace/build.py``)."""
+    grids = ~table.is_quad
+    if config.LOOP_PER_RAY:
+        for oid, o in enumerate(table.objects):
+            if o.cage.scheme == "loop":
+                rows = np.nonzero(table.object_id == oid)[0]
+                grids[rows] = ~loop_regular(o.level, o.cage.options, table.face[rows])
+    return grids
+
+
 def check_memory(table, n_pixels: int, budget: int, width: int, height: int):
     """Raise SceneError when even unrefined patches (depth 0) would not fit ``budget``."""
     need = (memory_estimate(table, np.zeros(table.n_patches, np.int32), n_pixels)
@@ -77,14 +91,16 @@ def check_memory(table, n_pixels: int, budget: int, width: int, height: int):
 @dataclass
 class DepthChoice:
     """The depth choice of a render: per patch grid depth, what the choice's isolation made
-    (``record``, reused when the patches are built), the (tightened) shells, and the bytes
-    of the memory budget left for the tile lists and the memos (None: no budget)."""
+    (``record``, reused when the patches are built), the (tightened) shells, the bytes
+    of the memory budget left for the tile lists and the memos (None: no budget), and which
+    patches are built as grids (:func:`grid_patches`)."""
 
     depths: np.ndarray
     record: dict
     shell_min: np.ndarray
     shell_max: np.ndarray
     left: int | None
+    grids: np.ndarray
 
 
 def depth_limits(table, eye, max_depth=None):
@@ -128,20 +144,21 @@ def choose_within_budget(table, eye, tol_rad, max_depth, max_memory, n_pixels,
     reasons = [LIMIT_REASONS[k] for k in np.unique(why[held])]
     left = None
     budget_cap = estimate = None
+    grids = grid_patches(table)
     if max_memory is not None:
         left = max_memory - config.MEMORY_MEMO_MIN_BYTES * tasks.thread_count()
-        budget_cap = depth_cap(table, depths, n_pixels, left)
+        budget_cap = depth_cap(table, depths, n_pixels, left, grids)
         if budget_cap is not None:
-            estimate = memory_estimate(table, depths, n_pixels)
+            estimate = memory_estimate(table, depths, n_pixels, grids)
             by_memory = limit > max(budget_cap, 0)
             limit = np.minimum(limit, max(budget_cap, 0))
             depths, record, (shell_min, shell_max) = choose(limit)
             held = (wanted > limit) & (depths >= limit)
             reasons = ((["memory"] if (held & by_memory).any() else [])
                        + [LIMIT_REASONS[k] for k in np.unique(why[held & ~by_memory])])
-        left = max(left - memory_estimate(table, depths, n_pixels), 0)
+        left = max(left - memory_estimate(table, depths, n_pixels, grids), 0)
     if held.any():
         stats.depth_cap = int(depths[held].max())
         stats.depth_cap_reason = ",".join(reasons)
         warn_depth_cap(reasons, stats.depth_cap, wanted[held].max(), max_memory, estimate)
-    return DepthChoice(depths, record, shell_min, shell_max, left)
+    return DepthChoice(depths, record, shell_min, shell_max, left, grids)

@@ -189,6 +189,16 @@ class Growable:
         """Make room for ``n`` rows of ``group`` in all (no copy later until they are used)."""
         self._grow(group, n)
 
+    def adopt(self, group, used, **stores):
+        """Take ``stores`` (name -> array, one per name of ``group``, which must be empty)
+        as the group's storage, their first ``used`` rows already filled: no copy (e.g. the
+        patch table's nets, made with room after them for what is appended later)."""
+        assert self._used[group] == 0 and set(stores) == set(self.GROUPS[group])
+        for name, store in stores.items():
+            self._store[name] = store
+        self._used[group] = int(used)
+        self._refresh()
+
     def _grow(self, group, end):
         start = self._used[group]
         for name in self.GROUPS[group]:
@@ -311,11 +321,12 @@ class Pieces(Growable):
     def append_regular(self, patches, depth, side, nets, lo, hi):
         """Slots for regular patches, one Bezier piece each (the whole patch): what
         :meth:`append` makes of them, without its general work. ``lo``, ``hi``: their nets'
-        boxes (the patch table's shells)."""
+        boxes (the patch table's shells). ``nets``: their nets, or None when they are the
+        first rows of the net store already (:meth:`adopt`)."""
         m = len(patches)
         z = np.zeros(m, np.int64)
         ar = np.arange(m, dtype=np.int64)
-        n0 = self.put("nets", nets=nets)
+        n0 = 0 if nets is None else self.put("nets", nets=nets)
         i_start = self.put("items", kind=np.zeros(m, np.int8), ref=n0 + ar, level=z, i0=z,
                            j0=z, depth_i=depth, side=side, lo=lo, hi=hi, rest_lo=lo,
                            rest_hi=hi)

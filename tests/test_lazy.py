@@ -1,0 +1,206 @@
+"""The lazy patch table (``render.table_in_view``, ``patches.table.build_patch_table``
+with ``keep`` and ``in_view``): only the patches of cage faces a primary ray may reach are built, they are
+exactly the whole cage's patches, and the image does not change."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from shared_data import MODELS, SHAPES, needs_shared, small_scene
+
+import subtrace
+from subtrace import config
+from subtrace.camera import Camera, camera_frame
+from subtrace.patches.shells import face_ring_boxes, one_ring_shells
+from subtrace.patches.table import build_patch_table, cage_face_shells
+from subtrace.render import faces_in_view, render_scene, table_in_view
+
+SWORD = MODELS / "sword_quad_dominant.obj"
+# looking at the sword's tip: about a tenth of its cage faces reach the image
+TIP_EYE, TIP_TARGET, TIP_FOV = (1.543, 0.6184, 0.4523), (0.0, 0.0, -0.4), 2.6
+
+
+def _keys(table):
+    """One key per patch of a table: (object, ptex face, ptex origin)."""
+    return {(int(o), int(p), float(u), float(v)) for o, p, (u, v) in
+            zip(table.object_id, table.ptex, table.ptex_uv0)}
+
+
+def _in_view_naive(lo, hi, camera):
+    """(N,) bool: whether a box reaches the image, in plain numpy: any of its corners is
+    not in front of the eye plane (then it may reach every pixel), or the rectangle of its
+    corners' projections meets the image widened by 1.5 pixels (the cull keeps a pixel of
+    rounding margin around each box's rectangle)."""
+    frame = camera_frame(camera)
+    bits = [np.array([(k >> a) & 1 for a in range(3)], bool) for k in range(8)]
+    corners = np.stack([np.where(b, hi, lo) for b in bits], axis=1) - frame[0]
+    basis = np.stack([frame[3], frame[1], frame[2]], axis=1)
+    a = corners @ np.linalg.inv(basis).T  # (N, 8, 3): depth, column * depth, row * depth
+    front = (a[..., 0] > 0).all(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        col, row = a[..., 1] / a[..., 0], a[..., 2] / a[..., 0]
+    meets = ((col.min(axis=1) <= camera.width - 0.5 + 1.5) & (col.max(axis=1) >= -0.5 - 1.5)
+             & (row.min(axis=1) <= camera.height - 0.5 + 1.5)
+             & (row.max(axis=1) >= -0.5 - 1.5))
+    return ~front | meets
+
+
+def _tip_scene(width=96, height=54):
+    return small_scene([SWORD], TIP_EYE, TIP_TARGET, width=width, height=height, fov=TIP_FOV)
+
+
+@needs_shared
+def test_face_ring_boxes_are_the_one_ring_shells():
+    """The per-vertex construction of the cage faces' boxes gives the one-ring boxes."""
+    for path in (SWORD, MODELS / "hole_capsule.obj", SHAPES / "catmark_edgecorner.obj"):
+        cage = subtrace.load_cage(path)
+        lo, hi = face_ring_boxes(cage.base, cage.points)
+        lo2, hi2, _, _ = one_ring_shells(cage.base, np.arange(cage.n_faces), cage.points)
+        assert np.array_equal(lo, lo2) and np.array_equal(hi, hi2)
+
+
+@needs_shared
+def test_cage_face_boxes_hold_their_patches_shells():
+    """A cage face's box holds the one-ring boxes of its level-1 patches (their points are
+    convex combinations of its one-ring's), so culling by it never drops a visible patch."""
+    cage = subtrace.load_cage(SWORD)
+    lo, hi = cage_face_shells(cage)
+    table = build_patch_table([cage])
+    lev = cage.level_topology(1)
+    l1, h1, _, _ = one_ring_shells(lev, table.face, cage.refine(1).points)
+    parent = np.repeat(np.arange(cage.n_faces), np.diff(cage.base.face_offsets))[table.face]
+    scale = np.abs(cage.points).max()
+    assert np.all(l1 >= lo[parent] - 1e-15 * scale)
+    assert np.all(h1 <= hi[parent] + 1e-15 * scale)
+
+
+@needs_shared
+def test_only_patches_in_view_are_built():
+    """Looking at the sword's tip: the table holds every patch whose shell reaches the
+    image (a plain-numpy projection of the whole cage's shells), few more, the same shells
+    and nets as the whole cage's table, and the image is the one without the cull."""
+    cage = subtrace.load_cage(SWORD)
+    full = build_patch_table([cage])
+    scene = _tip_scene()
+    cam = scene.make_camera()
+    needed = _in_view_naive(full.shell_min, full.shell_max, cam)
+    assert 0.02 < needed.mean() < 0.2  # the frame shows a small part of the sword
+    res = render_scene(scene, cages=[cage])
+    st = res.stats
+    assert st.faces_culled > 0.8 * cage.n_faces
+    assert st.patches < 0.25 * full.n_patches
+    assert np.count_nonzero(needed) <= st.patches <= 1.5 * np.count_nonzero(needed)
+    # the culled table: a subset of the whole table holding the needed patches, each with
+    # the same shell and net
+    lazy, _ = table_in_view([cage], cam)
+    assert lazy.n_patches == st.patches
+    keys_full = list(zip(full.ptex.tolist(), map(tuple, full.ptex_uv0.tolist())))
+    row = {k: i for i, k in enumerate(keys_full)}
+    rows = np.array([row[k] for k in zip(lazy.ptex.tolist(), map(tuple, lazy.ptex_uv0.tolist()))])
+    assert set(np.nonzero(needed)[0]) <= set(rows.tolist())
+    for name in ("shell_min", "shell_max", "edge_bound", "rate", "regular", "material"):
+        assert np.array_equal(getattr(lazy, name), getattr(full, name)[rows]), name
+    reg_rank = np.cumsum(full.regular) - 1
+    assert np.array_equal(lazy.nets, full.nets[reg_rank[rows[lazy.regular]]])
+    _same_image_without_cull(scene, [cage], res)
+
+
+def _same_image_without_cull(scene, cages, res):
+    """The image of ``scene`` rendered with every patch built equals ``res``'s."""
+    saved = config.CULL_TO_VIEW
+    config.CULL_TO_VIEW = False
+    try:
+        ref = render_scene(scene, cages=cages)
+    finally:
+        config.CULL_TO_VIEW = saved
+    assert ref.stats.faces_culled == 0
+    for name, plane in ref.channels.items():
+        np.testing.assert_array_equal(res.channels[name], plane, err_msg=name)
+
+
+def _feature_grid(path, n, tris, chaikin):
+    """An n x n bumpy grid (quads, or each split into two triangles) with boundaries, a
+    semi-sharp crease line across it (sharpness 2.5, Chaikin or uniform decay), an
+    infinitely sharp one, a sharp corner and a hole, as an OBJ with OpenSubdiv tags."""
+    rng = np.random.default_rng(n)
+    lines = []
+    idx = lambda i, j: i * (n + 1) + j  # noqa: E731
+    for i in range(n + 1):
+        for j in range(n + 1):
+            lines.append(f"v {j / n} {i / n} {0.05 * rng.standard_normal()}")
+    faces = []
+    for i in range(n):
+        for j in range(n):
+            a, b, c, d = idx(i, j), idx(i, j + 1), idx(i + 1, j + 1), idx(i + 1, j)
+            faces += [(a, b, c), (a, c, d)] if tris else [(a, b, c, d)]
+    lines += ["f " + " ".join(str(v + 1) for v in f) for f in faces]
+    row = n // 3
+    lines += [f"t crease 2/1/0 {idx(row, j)} {idx(row, j + 1)} 2.5" for j in range(n)]
+    lines += [f"t crease 2/1/0 {idx(i, row)} {idx(i + 1, row)} 10" for i in range(n)]
+    lines += [f"t corner 1/1/0 {idx(n // 2, n // 2)} 3", f"t hole 1/0/0 {len(faces) // 2 + 3}",
+              "t interpolateboundary 1/0/0 1"]
+    if chaikin:
+        lines.append("t creasemethod 0/0/1 chaikin")
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("tris", [False, True], ids=["catmark", "loop"])
+@pytest.mark.parametrize("chaikin", [False, True], ids=["uniform", "chaikin"])
+@pytest.mark.parametrize("target", [(0.33, 0.33), (0.5, 0.5), (0.0, 0.0), (0.95, 0.6)])
+def test_partial_views_of_feature_cages_are_unchanged(tmp_path, tris, chaikin, target):
+    """Creases (semi-sharp, Chaikin or not, and infinitely sharp), a corner, boundaries and
+    a hole, in Catmull-Clark and Loop cages seen in part: some faces are culled and the
+    image is the one of the whole table."""
+    mesh = _feature_grid(tmp_path / "grid.obj", 24, tris, chaikin)
+    cage = subtrace.load_cage(mesh)
+    assert cage.scheme == ("loop" if tris else "catmark")
+    eye = (target[0] + 0.3, target[1] - 0.4, 1.2)
+    scene = small_scene([mesh], eye, (*target, 0.0), fov=20.0)
+    res = render_scene(scene, cages=[cage])
+    assert 0 < res.stats.faces_culled < cage.n_faces
+    assert res.stats.pixels_covered > 0
+    _same_image_without_cull(scene, [cage], res)
+
+
+@needs_shared
+def test_object_out_of_view_builds_nothing(tmp_path):
+    """Invariant 5: a second sword beside the view, or behind the eye, adds no patch."""
+    cage = subtrace.load_cage(SWORD)
+    scene = _tip_scene(48, 27)
+    alone = render_scene(scene, cages=[cage]).stats
+    for shift in ((0.0, 1.0, 0.0), (3.0, 1.2, 0.9)):  # (beside; behind the eye)
+        other = subtrace.make_cage(cage.points + shift, cage.face_sizes, cage.face_verts)
+        both = small_scene([SWORD, SWORD], TIP_EYE, TIP_TARGET, width=48, height=27,
+                           fov=TIP_FOV)
+        res = render_scene(both, cages=[cage, other])
+        assert res.stats.patches == alone.patches
+        assert res.stats.faces_culled == alone.faces_culled + other.n_faces
+        assert np.all(res.refined_objects == 0)
+
+
+def test_nothing_in_view_renders_the_background(tmp_path):
+    """A cage wholly behind the eye: no patch, every pixel a miss."""
+    cage = subtrace.make_cage([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [4], [0, 1, 2, 3])
+    obj = tmp_path / "quad.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n")
+    scene = small_scene([obj], (2.0, 0.5, 0.0), (5.0, 0.5, 0.0), width=16, height=12)
+    res = render_scene(scene, cages=[cage])
+    assert res.stats.patches == 0 and res.stats.faces_culled == 1
+    assert np.all(res.channels["object_id"] < 0) or np.all(res.channels["A"] == 0)
+
+
+@needs_shared
+def test_level_one_patches_out_of_view_are_left_out():
+    """On a coarse cage seen close, a kept face's level-1 quads whose own one-ring box
+    misses the image are not built either; the image is unchanged."""
+    mesh = MODELS / "spot_control_mesh.obj"
+    cage = subtrace.load_cage(mesh)
+    scene = small_scene([mesh], (0.3, 0.45, 1.0), (0.0, 0.3, 0.2), fov=12.0)
+    res = render_scene(scene, cages=[cage])
+    kept = cage.n_faces - res.stats.faces_culled
+    quads_kept = int(np.sum(np.diff(cage.base.face_offsets)[
+        faces_in_view([cage], scene.make_camera())[0]]))
+    assert 0 < kept < cage.n_faces
+    assert 0 < res.stats.patches < quads_kept  # (a kept face has one patch per corner)
+    _same_image_without_cull(scene, [cage], res)
