@@ -21,7 +21,7 @@ from subtrace.patches.basis import bez_normal
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
 from subtrace.trace.prims import ray_setup
-from subtrace.trace.tris import TRI, tri_normal
+from subtrace.trace.tris import LOOP_CELL, TRI, tri_normal
 
 
 # the planes the shading fills, in this order, and what a pixel whose ray missed holds
@@ -107,8 +107,18 @@ def _shade_task(task, n_tasks, frame, width, hits, grids, iso, patches, lights, 
                 it = hits.item[r]
                 c = iso.ref[it]
                 if iso.kind[it] == TRI:
-                    # a regular Loop patch: the normal of its triangular net at (u, v)
-                    nx, ny, nz = tri_normal(iso.nets.reshape((len(iso.nets), 16, 3)), c, u, v)
+                    # a Loop patch or piece: the normal of its triangular net at its own
+                    # (s, t) (trace/tris.py: the patch's (u, v) = (A + g (s, t)) 2^-level)
+                    sc = 1 << iso.level[it]
+                    g = np.float64(iso.orient[it])
+                    nx, ny, nz = tri_normal(iso.nets.reshape((len(iso.nets), 16, 3)), c,
+                                            g * (u * sc - iso.i0[it]), g * (v * sc - iso.j0[it]))
+                elif iso.kind[it] == LOOP_CELL:
+                    g = np.float64(iso.orient[it])
+                    nx, ny, nz = _tri_cell_normal(iso.cells[4 * c:4 * c + 3],
+                                                  iso.cell_normals[c],
+                                                  g * (u * (1 << depth) - iso.i0[it]),
+                                                  g * (v * (1 << depth) - iso.j0[it]))
                 elif iso.kind[it] == 0:
                     # a Bezier piece over a dyadic square of the patch (the whole of a regular one)
                     sc = 1 << iso.level[it]
@@ -217,6 +227,25 @@ def _cell_normal(pts, nrm, a, b):
         # diagonals' cross product
         ax, ay, az = pts[2, 0] - pts[0, 0], pts[2, 1] - pts[0, 1], pts[2, 2] - pts[0, 2]
         bx, by, bz = pts[3, 0] - pts[1, 0], pts[3, 1] - pts[1, 1], pts[3, 2] - pts[1, 2]
+        nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if ln > 0.0:
+        return nx / ln, ny / ln, nz / ln
+    return 0.0, 0.0, 0.0
+
+
+@nb.njit(cache=True)
+def _tri_cell_normal(pts, nrm, b, c):
+    """Blend of a Loop cell's exact corner normals at barycentrics (1 - b - c, b, c); the
+    cell's own normal where a corner's is undefined."""
+    a = 1.0 - b - c
+    nx = a * nrm[0, 0] + b * nrm[1, 0] + c * nrm[2, 0]
+    ny = a * nrm[0, 1] + b * nrm[1, 1] + c * nrm[2, 1]
+    nz = a * nrm[0, 2] + b * nrm[1, 2] + c * nrm[2, 2]
+    ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if not (ln > 0.0):
+        ax, ay, az = pts[1, 0] - pts[0, 0], pts[1, 1] - pts[0, 1], pts[1, 2] - pts[0, 2]
+        bx, by, bz = pts[2, 0] - pts[0, 0], pts[2, 1] - pts[0, 1], pts[2, 2] - pts[0, 2]
         nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
         ln = math.sqrt(nx * nx + ny * ny + nz * nz)
     if ln > 0.0:

@@ -9,6 +9,7 @@ from subtrace import config
 from subtrace.lines.items import box_nets, loop_regular
 from subtrace.patches.grids import build_grids, node_boxes, snap_sides
 from subtrace.patches.isolate import build_isolated
+from subtrace.patches.isolate_loop import build_loop_isolated
 from subtrace.trace.tris import tri_nets_as_pieces
 
 
@@ -44,8 +45,13 @@ def build_requested(table, requested, depths, edge_depth, grids, iso, round_no, 
         if config.LOOP_PER_RAY:
             ids = _loop_nets(o, table, ids, d, edge_depth, iso, round_no)
             stats.pieces += int(e - s) - len(ids)
-            if not len(ids):
-                continue
+            if len(ids):
+                subs, cells = build_loop_isolated(o, table.face[ids], d)
+                n_sub, n_cell = iso.append_loop(ids, d, _sides(table, ids, edge_depth), subs,
+                                                cells, round_no)
+                stats.pieces += n_sub + n_cell
+                stats.micro_triangles += n_cell
+            continue
         P, N = build_grids(o.level, o.points, o.cage.options, table.face[ids], d)
         side_depth = np.where(table.edges[ids, :3] >= 0, edge_depth[table.edges[ids, :3]], -1)
         snap_sides(P, d, False, side_depth)
@@ -66,6 +72,13 @@ def _loop_nets(o, table, ids, depth, edge_depth, iso, round_no):
     if len(r):
         nets = tri_nets_as_pieces(box_nets(o.level, o.points, faces[reg]))
         side = np.full((len(r), 4), -1, np.int64)
-        side[:, :3] = np.where(table.edges[r, :3] >= 0, edge_depth[table.edges[r, :3]], -1)
+        side[:, :3] = _sides(table, r, edge_depth)
         iso.append_tris(r, np.full(len(r), depth, np.int64), side, nets, round_no)
     return ids[~reg]
+
+
+def _sides(table, ids, edge_depth):
+    """(len(ids),3) the sampling depth of each side's edge of the Loop patches ``ids``
+    (-1: no edge)."""
+    e = table.edges[ids, :3]
+    return np.where(e >= 0, edge_depth[np.maximum(e, 0)], -1)

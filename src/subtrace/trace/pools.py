@@ -31,7 +31,8 @@ from subtrace.patches.basis import BOX_PAD, net_bounds
 from subtrace.patches.grids import grid_params, leaf_corners
 from subtrace.patches.isolate import item_sides, rest_boxes
 from subtrace.trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
-from subtrace.trace.tris import TRI
+from subtrace.patches.isolate_loop import sample_ranges, side_samples
+from subtrace.trace.tris import LOOP_CELL, TRI, tri_nets_as_pieces
 
 CANDIDATES = 8  # unbuilt shells a ray remembers between rounds (more: it traverses again)
 
@@ -45,7 +46,8 @@ class PieceArrays(NamedTuple):
     round: np.ndarray  # (S,) int64: round it was built in (-1: from the start)
     depth_i: np.ndarray  # (I,) int64: grid depth, in the patch's units
     side: np.ndarray  # (I,4) int64: sampling depth of each side, in the patch's units
-    kind: np.ndarray  # (I,) int8: 0 Bezier piece, 1 cell, 2 (TRI) Loop triangular net
+    # (I,) int8: 0 Bezier piece, 1 cell, 2 (TRI) Loop triangular net, 3 (LOOP_CELL) Loop cell
+    kind: np.ndarray
     ref: np.ndarray  # (I,) int64: row in nets (piece) or cells (cell, 4 rows each)
     level: np.ndarray  # (I,) int64: the item's level
     i0: np.ndarray  # (I,) int64: origin in units of 2^-level
@@ -58,6 +60,8 @@ class PieceArrays(NamedTuple):
     cells: np.ndarray  # (., 3) float64: cell corners, 4 rows per cell
     cell_normals: np.ndarray  # (., 4, 3) float64: exact limit normals at the corners
     touched: np.ndarray  # (S,) uint8: set when a ray tests the slot
+    orient: np.ndarray  # (I,) int8: a Loop item's orientation, +1 upright, -1 turned
+    samples: np.ndarray  # (., 3) float64: exact samples of isolated Loop patches' sides
 
 
 class GridArrays(NamedTuple):
@@ -254,9 +258,10 @@ class Pieces(Growable):
                   "i0": ((), np.int64), "j0": ((), np.int64), "depth_i": ((), np.int64),
                   "side": ((4,), np.int64), "lo": ((3,), np.float64),
                   "hi": ((3,), np.float64), "rest_lo": ((3,), np.float64),
-                  "rest_hi": ((3,), np.float64)},
+                  "rest_hi": ((3,), np.float64), "orient": ((), np.int8)},
         "nets": {"nets": ((4, 4, 3), np.float64)},
         "cells": {"cells": ((4, 3), np.float64), "normals": ((4, 3), np.float64)},
+        "samples": {"samples": ((3,), np.float64)},
     }
 
     def __init__(self, n_patches):
@@ -337,17 +342,68 @@ class Pieces(Growable):
         n0 = self.put("nets", nets=nets)
         i_start = self.put("items", kind=np.full(m, TRI, np.int8), ref=n0 + ar, level=z, i0=z,
                            j0=z, depth_i=depth, side=side, lo=lo, hi=hi, rest_lo=lo,
-                           rest_hi=hi)
+                           rest_hi=hi, orient=np.ones(m, np.int8))
         s0 = self.put("slots", patch=patches, first=i_start + ar, count=np.ones(m, np.int64),
                       round=np.full(m, round_no))
         self.patch_iso[patches] = s0 + ar
+
+    def append_loop(self, patches, depth, side, subs, cells, round_no):
+        """Slots for irregular Loop patches isolated to grid depth ``depth`` (an int) in round
+        ``round_no``: ``subs`` and ``cells`` from
+        :func:`~subtrace.patches.isolate_loop.build_loop_isolated` (pieces: item kind
+        ``TRI``, traced per ray; cells: ``LOOP_CELL``), ``side`` (m,3) the sampling depth
+        of each side's edge (-1: none). A side sampled more coarsely than ``depth`` is
+        snapped onto the coarse polyline through its exact samples
+        (:func:`~subtrace.patches.isolate_loop.side_samples`, kept in ``samples``). Items
+        go coarse levels first, so a ray skips a level and all finer ones on one box test.
+        Returns the numbers of pieces and cells."""
+        (sr, sl, si, sj, sg, nets15), (cr, ci, cj, cg, cp, cn) = subs, cells
+        side = np.asarray(side, dtype=np.int64).reshape(-1, 3)
+        samples, offset = side_samples(depth, side, subs, cells)  # (moves cp's corners)
+        s_lo, s_hi = sample_ranges(subs, cells, depth, side, offset, samples)
+        nets = tri_nets_as_pieces(nets15)
+        cp4 = np.concatenate([cp, cp[:, 2:3]], axis=1)  # (4 rows a cell; the 4th repeats)
+        cn4 = np.concatenate([cn, cn[:, 2:3]], axis=1)
+        lo = np.concatenate([nets.min(axis=(1, 2)), cp.min(axis=1)])
+        hi = np.concatenate([nets.max(axis=(1, 2)), cp.max(axis=1)])
+        lo, hi = np.minimum(lo, s_lo), np.maximum(hi, s_hi)
+        pad = BOX_PAD * np.maximum(np.abs(lo), np.abs(hi)).max(axis=1, keepdims=True)
+        lo, hi = lo - pad, hi + pad  # (widened for rounding, as basis.net_box)
+        root = np.r_[sr, cr]
+        level = np.r_[sl, np.full(len(cr), depth)]
+        order = np.lexsort((level, root))
+        count = np.bincount(root, minlength=len(patches))
+        first = np.cumsum(count) - count
+        lo, hi = np.ascontiguousarray(lo[order]), np.ascontiguousarray(hi[order])
+        rest_lo, rest_hi = np.empty_like(lo), np.empty_like(hi)
+        rest_boxes(first, count, lo, hi, rest_lo, rest_hi)
+        s0 = self.put("samples", samples=samples) if len(samples) else 0
+        item_side = np.empty((len(root), 4), np.int64)
+        item_side[:, :3] = side[root[order]]
+        item_side[:, 3] = np.where(offset >= 0, s0 + offset, -1)[root[order]]
+        n0 = self.put("nets", nets=nets)
+        c0 = self.put("cells", cells=cp4, normals=cn4)
+        i_start = self.put(
+            "items",
+            kind=np.r_[np.full(len(sr), TRI, np.int8), np.full(len(cr), LOOP_CELL,
+                                                               np.int8)][order],
+            ref=np.r_[n0 + np.arange(len(sr)), c0 + np.arange(len(cr))][order],
+            level=level[order], i0=np.r_[si, ci][order], j0=np.r_[sj, cj][order],
+            depth_i=np.full(len(root), depth, np.int64), side=item_side, lo=lo, hi=hi,
+            rest_lo=rest_lo, rest_hi=rest_hi, orient=np.r_[sg, cg].astype(np.int8)[order],
+        )
+        s0 = self.put("slots", patch=patches, first=i_start + first, count=count,
+                      round=np.full(len(patches), round_no))
+        self.patch_iso[patches] = s0 + np.arange(len(patches))
+        return len(sr), len(cr)
 
     def view(self) -> PieceArrays:
         a = self.a
         return PieceArrays(self.patch_iso, a["first"], a["count"], a["round"], a["depth_i"],
                            a["side"], a["kind"], a["ref"], a["level"], a["i0"], a["j0"],
                            a["lo"], a["hi"], a["rest_lo"], a["rest_hi"], a["nets"],
-                           a["cells"].reshape(-1, 3), a["normals"], a["touched"])
+                           a["cells"].reshape(-1, 3), a["normals"], a["touched"], a["orient"],
+                           a["samples"])
 
 
 class Memos:
