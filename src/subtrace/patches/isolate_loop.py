@@ -138,89 +138,80 @@ def _side_vertex(t, N, k):
 
 
 def side_samples(depth, side_depth, subs, cells):
-    """Exact samples of the snapped sides of patches isolated to grid depth ``depth`` (an
-    int): patch ``r``'s side ``k`` is snapped when ``0 <= side_depth[r, k] < depth``; its
+    """Exact samples of the snapped sides of patches isolated to grid depths ``depth`` (m,):
+    patch ``r``'s side ``k`` is snapped when ``0 <= side_depth[r, k] < depth[r]``; its
     ``2^de + 1`` samples (positions ``0, 2^(depth-de), ..., 2^depth`` along it) come from the
     piece or cell with an edge on the side there (a piece's net, a cell's corner).
 
     Returns ``(samples (n,3), offset (m,))``: patch r's samples start at ``offset[r]``
     (-1: none), side after side (snapped ones only). The cells' corners on snapped sides are
-    moved onto the polylines in place (``cells[4]``)."""
-    m = len(side_depth)
-    N = 1 << depth
+    moved onto the polylines in place (``cells[4]``; a corner on two snapped sides by the
+    first, as ``trace.tris.grid_point``)."""
+    depth = np.asarray(depth, dtype=np.int64)
     croot, ci, cj, cg, cP = cells[0], cells[1], cells[2], cells[3], cells[4]
     sroot, slev, si, sj, sg, nets = subs
-    lev = np.r_[slev, np.full(len(croot), depth)]
-    ccell = corner_coords(np.full(len(croot), depth), ci, cj, cg, depth)
-    cpiece = corner_coords(slev, si, sj, sg, depth)
-    corners = np.concatenate([cpiece, ccell])  # (items, 3, 2)
     iroot = np.r_[sroot, croot]
+    idep = depth[iroot]
+    lev = np.r_[slev, idep[len(sroot):]]
+    corners = corner_coords(lev, np.r_[si, ci], np.r_[sj, cj], np.r_[sg, cg], idep)
+    ccell = corners[len(sroot):]
+    N = np.left_shift(1, idep)[:, None]  # per item, against its corners
     upright = np.r_[sg, cg] > 0
-    snapped = (side_depth >= 0) & (side_depth < depth)
-    count = np.where(snapped, (1 << np.clip(side_depth, 0, depth)) + 1, 0)
+    snapped = (side_depth >= 0) & (side_depth < depth[:, None])
+    count = np.where(snapped, np.left_shift(1, np.clip(side_depth, 0, None)) + 1, 0)
     per_patch = count.sum(axis=1)
     offset = np.where(per_patch > 0, np.cumsum(per_patch) - per_patch, -1)
+    before = np.cumsum(count, axis=1) - count  # (m,3) first sample of each side
     samples = np.empty((int(per_patch.sum()), 3))
+    span = int(np.left_shift(1, depth.max(initial=0))) + 1
     for k in range(3):
         rows = np.nonzero(snapped[:, k])[0]
         if not len(rows):
             continue
         # the items with an edge on side k: upright, corners k and k+1 on it
-        on0, t0 = _side_position(corners[:, k], N, k)
-        on1, t1 = _side_position(corners[:, (k + 1) % 3], N, k)
-        edge = np.nonzero(upright & on0 & on1)[0]
-        key = iroot[edge] * (N + 1) + t0[edge]
+        on, t = _side_position(corners, N, k)
+        edge = np.nonzero(upright & on[:, k] & on[:, (k + 1) % 3])[0]
+        key = iroot[edge] * span + t[edge, k]
         order = np.argsort(key, kind="stable")
         edge, key = edge[order], key[order]
         # the queries: every sample of the side of every patch snapped there
         de = side_depth[rows, k]
-        n_q = (1 << de) + 1
+        n_q = np.left_shift(1, de) + 1
         qrow = np.repeat(rows, n_q)
         qm = np.arange(int(n_q.sum())) - np.repeat(np.cumsum(n_q) - n_q, n_q)
-        qt = qm << (depth - np.repeat(de, n_q))
-        at = edge[np.searchsorted(key, qrow * (N + 1) + qt, side="right") - 1]
-        at = np.where(qt == N, edge[np.searchsorted(key, qrow * (N + 1) + qt, "left") - 1],
-                      at)
-        vert = _side_vertex(qt, N, k)
+        qt = qm << (depth[qrow] - np.repeat(de, n_q))
+        at = edge[np.searchsorted(key, qrow * span + qt, side="right") - 1]
+        vert = _side_vertex(qt, np.left_shift(1, depth[qrow]), k)
         pts = np.empty((len(qt), 3))
         piece = at < len(sroot)
         if piece.any():
             a = at[piece]
-            h = (1 << (depth - lev[a])).astype(np.float64)
+            h = np.left_shift(1, idep[a] - lev[a]).astype(np.float64)
             st = (vert[piece] - corners[a, 0]) / h[:, None]  # (upright: g = 1)
             pts[piece] = np.einsum("nb,nbc->nc", tri_bernstein(st), nets[a])
         if (~piece).any():
-            a = at[~piece]
-            c = a - len(sroot)
+            c = at[~piece] - len(sroot)
             which = np.argmax(np.all(ccell[c] == vert[~piece][:, None], axis=2), axis=1)
             pts[~piece] = cP[c, which]
-        before = np.where(snapped[:, :k], count[:, :k], 0).sum(axis=1)
-        dest = offset[qrow] + before[qrow] + qm
-        samples[dest] = pts
-    _snap_cells(cP, ccell, croot, depth, side_depth, count, offset, samples)
-    return samples, offset
-
-
-def _snap_cells(cP, ccell, croot, depth, side_depth, count, offset, samples):
-    """Move the cells' corners on snapped sides onto the sides' polylines (in place): the
-    linear interpolation of the two samples around them (a sample itself where one is)."""
-    N = 1 << depth
+        samples[offset[qrow] + before[qrow, k] + qm] = pts
+    # the cells' corners on snapped sides, onto the polylines (the first side that has one)
+    moved = np.zeros(ccell.shape[:2], bool)
+    Nc = N[len(sroot):]
     for k in range(3):
         de = side_depth[croot, k]
-        on, t = _side_position(ccell, N, k)
-        move = on & ((de >= 0) & (de < depth))[:, None]
+        on, t = _side_position(ccell, Nc, k)
+        move = on & ~moved & ((de >= 0) & (de < depth[croot]))[:, None]
         c, v = np.nonzero(move)
         if not len(c):
             continue
-        r = 1 << (depth - de[c])
-        tt = t[c, v]
-        m0 = tt // r
-        m1 = np.minimum(m0 + 1, N // r)
-        w = ((tt - m0 * r) / r)[:, None]
-        before = np.where((side_depth[:, :k] >= 0) & (side_depth[:, :k] < depth),
-                          count[:, :k], 0).sum(axis=1)[croot[c]]
-        base = offset[croot[c]] + before
+        moved |= move
+        r = np.left_shift(1, depth[croot[c]] - de[c])
+        m0 = t[c, v] // r
+        w = ((t[c, v] - m0 * r) / r)[:, None]
+        m1 = np.where(w[:, 0] > 0, m0 + 1, m0)
+        base = offset[croot[c]] + before[croot[c], k]
         cP[c, v] = (1.0 - w) * samples[base + m0] + w * samples[base + m1]
+    return samples, offset
 
 
 def sample_ranges(subs, cells, depth, side_depth, offset, samples):
@@ -228,27 +219,36 @@ def sample_ranges(subs, cells, depth, side_depth, offset, samples):
     whose polyline segments its vertices on snapped sides may be moved onto (+inf / -inf
     where it has none): its box must contain them, since the descent enters the nodes
     touching a snapped side without testing their own boxes (``trace/tris.py``)."""
+    depth = np.asarray(depth, dtype=np.int64)
     sroot, slev, si, sj, sg, _ = subs
     croot, ci, cj, cg = cells[:4]
-    N = 1 << depth
-    corners = np.concatenate([corner_coords(slev, si, sj, sg, depth),
-                              corner_coords(np.full(len(croot), depth), ci, cj, cg, depth)])
     iroot = np.r_[sroot, croot]
+    idep = depth[iroot]
+    corners = corner_coords(np.r_[slev, idep[len(sroot):]], np.r_[si, ci], np.r_[sj, cj],
+                            np.r_[sg, cg], idep)
+    N = np.left_shift(1, idep)[:, None]
     lo = np.full((len(iroot), 3), np.inf)
     hi = np.full((len(iroot), 3), -np.inf)
-    snapped = (side_depth >= 0) & (side_depth < depth)
-    count = np.where(snapped, (1 << np.clip(side_depth, 0, depth)) + 1, 0)
+    snapped = (side_depth >= 0) & (side_depth < depth[:, None])
+    count = np.where(snapped, np.left_shift(1, np.clip(side_depth, 0, None)) + 1, 0)
+    before = np.cumsum(count, axis=1) - count
     for k in range(3):
         de = side_depth[iroot, k]
         on, t = _side_position(corners, N, k)
-        use = on.any(axis=1) & (de >= 0) & (de < depth)
-        for it in np.nonzero(use)[0]:
-            r = 1 << (depth - de[it])
-            ts = t[it][on[it]]
-            m0, m1 = ts.min() // r, -(-ts.max() // r)
-            p = iroot[it]
-            base = offset[p] + count[p, :k].sum()
-            seg = samples[base + m0:base + m1 + 1]
-            lo[it] = np.minimum(lo[it], seg.min(axis=0))
-            hi[it] = np.maximum(hi[it], seg.max(axis=0))
+        use = np.nonzero(on.any(axis=1) & (de >= 0) & (de < idep))[0]
+        if not len(use):
+            continue
+        r = np.left_shift(1, idep[use] - de[use])
+        tu = np.where(on[use], t[use], -1)
+        t_hi = tu.max(axis=1)
+        t_lo = np.where(on[use], t[use], t_hi[:, None]).min(axis=1)
+        m0, m1 = t_lo // r, -(-t_hi // r)
+        base = offset[iroot[use]] + before[iroot[use], k]
+        # the samples m0 .. m1 of each: min / max over their (contiguous) runs
+        # the samples m0 .. m1 of each (runs padded with their last sample)
+        idx = np.minimum((base + m0)[:, None] + np.arange(int((m1 - m0).max()) + 1),
+                         (base + m1)[:, None])
+        run = samples[idx]
+        lo[use] = np.minimum(lo[use], run.min(axis=1))
+        hi[use] = np.maximum(hi[use], run.max(axis=1))
     return lo, hi

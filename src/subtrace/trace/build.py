@@ -25,9 +25,12 @@ def build_requested(table, requested, depths, edge_depth, grids, iso, round_no, 
     obj = table.object_id[requested]
     dep = depths[requested]
     quad = table.is_quad[requested]
-    order = np.lexsort((requested, np.where(quad, 0, dep), obj))
+    # an object's patches built per ray in one group (an isolation of all of them), Loop
+    # grids one group per depth
+    per_ray = quad | config.LOOP_PER_RAY
+    order = np.lexsort((requested, np.where(per_ray, 0, dep), obj))
     requested, obj, dep, quad = requested[order], obj[order], dep[order], quad[order]
-    keys = np.stack([obj, np.where(quad, -1, dep)], axis=1)
+    keys = np.stack([obj, np.where(per_ray[order], -1, dep)], axis=1)
     starts = np.r_[0, np.nonzero(np.any(np.diff(keys, axis=0) != 0, axis=1))[0] + 1]
     ends = np.r_[starts[1:], len(requested)]
     for s, e in zip(starts, ends):
@@ -41,10 +44,11 @@ def build_requested(table, requested, depths, edge_depth, grids, iso, round_no, 
             stats.pieces += n_sub + n_cell
             stats.micro_triangles += 2 * n_cell
             continue
-        d = int(dep[s])
         if config.LOOP_PER_RAY:
-            ids = _loop_nets(o, table, ids, d, edge_depth, iso, round_no)
-            stats.pieces += int(e - s) - len(ids)
+            reg = loop_regular(o.level, o.cage.options, table.face[ids])
+            _loop_nets(o, table, ids[reg], dep[s:e][reg], edge_depth, iso, round_no)
+            stats.pieces += int(np.count_nonzero(reg))
+            ids, d = ids[~reg], dep[s:e][~reg]
             if len(ids):
                 subs, cells = build_loop_isolated(o, table.face[ids], d)
                 n_sub, n_cell = iso.append_loop(ids, d, _sides(table, ids, edge_depth), subs,
@@ -52,6 +56,7 @@ def build_requested(table, requested, depths, edge_depth, grids, iso, round_no, 
                 stats.pieces += n_sub + n_cell
                 stats.micro_triangles += n_cell
             continue
+        d = int(dep[s])
         P, N = build_grids(o.level, o.points, o.cage.options, table.face[ids], d)
         side_depth = np.where(table.edges[ids, :3] >= 0, edge_depth[table.edges[ids, :3]], -1)
         snap_sides(P, d, False, side_depth)
@@ -63,18 +68,14 @@ def build_requested(table, requested, depths, edge_depth, grids, iso, round_no, 
 
 
 def _loop_nets(o, table, ids, depth, edge_depth, iso, round_no):
-    """Put the regular triangles among the Loop patches ``ids`` (object ``o``, grid depth
-    ``depth``) into ``iso`` as triangular Bezier nets traced per ray (``trace/tris.py``),
-    each side sampled at its edge's depth; returns the other patches (built as grids)."""
-    faces = table.face[ids]
-    reg = loop_regular(o.level, o.cage.options, faces)
-    r = ids[reg]
-    if len(r):
-        nets = tri_nets_as_pieces(box_nets(o.level, o.points, faces[reg]))
-        side = np.full((len(r), 4), -1, np.int64)
-        side[:, :3] = _sides(table, r, edge_depth)
-        iso.append_tris(r, np.full(len(r), depth, np.int64), side, nets, round_no)
-    return ids[~reg]
+    """Put the regular Loop triangles ``ids`` (object ``o``, grid depths ``depth``) into
+    ``iso`` as triangular Bezier nets traced per ray (``trace/tris.py``), each side sampled
+    at its edge's depth."""
+    if len(ids):
+        nets = tri_nets_as_pieces(box_nets(o.level, o.points, table.face[ids]))
+        side = np.full((len(ids), 4), -1, np.int64)
+        side[:, :3] = _sides(table, ids, edge_depth)
+        iso.append_tris(ids, np.asarray(depth, np.int64), side, nets, round_no)
 
 
 def _sides(table, ids, edge_depth):

@@ -348,7 +348,7 @@ class Pieces(Growable):
         self.patch_iso[patches] = s0 + ar
 
     def append_loop(self, patches, depth, side, subs, cells, round_no):
-        """Slots for irregular Loop patches isolated to grid depth ``depth`` (an int) in round
+        """Slots for irregular Loop patches isolated to grid depths ``depth`` (m,) in round
         ``round_no``: ``subs`` and ``cells`` from
         :func:`~subtrace.patches.isolate_loop.build_loop_isolated` (pieces: item kind
         ``TRI``, traced per ray; cells: ``LOOP_CELL``), ``side`` (m,3) the sampling depth
@@ -359,6 +359,7 @@ class Pieces(Growable):
         Returns the numbers of pieces and cells."""
         (sr, sl, si, sj, sg, nets15), (cr, ci, cj, cg, cp, cn) = subs, cells
         side = np.asarray(side, dtype=np.int64).reshape(-1, 3)
+        depth = np.asarray(depth, dtype=np.int64)
         samples, offset = side_samples(depth, side, subs, cells)  # (moves cp's corners)
         s_lo, s_hi = sample_ranges(subs, cells, depth, side, offset, samples)
         nets = tri_nets_as_pieces(nets15)
@@ -370,7 +371,7 @@ class Pieces(Growable):
         pad = BOX_PAD * np.maximum(np.abs(lo), np.abs(hi)).max(axis=1, keepdims=True)
         lo, hi = lo - pad, hi + pad  # (widened for rounding, as basis.net_box)
         root = np.r_[sr, cr]
-        level = np.r_[sl, np.full(len(cr), depth)]
+        level = np.r_[sl, depth[cr]]
         order = np.lexsort((level, root))
         count = np.bincount(root, minlength=len(patches))
         first = np.cumsum(count) - count
@@ -389,7 +390,7 @@ class Pieces(Growable):
                                                                np.int8)][order],
             ref=np.r_[n0 + np.arange(len(sr)), c0 + np.arange(len(cr))][order],
             level=level[order], i0=np.r_[si, ci][order], j0=np.r_[sj, cj][order],
-            depth_i=np.full(len(root), depth, np.int64), side=item_side, lo=lo, hi=hi,
+            depth_i=depth[root][order], side=item_side, lo=lo, hi=hi,
             rest_lo=rest_lo, rest_hi=rest_hi, orient=np.r_[sg, cg].astype(np.int8)[order],
         )
         s0 = self.put("slots", patch=patches, first=i_start + first, count=count,
