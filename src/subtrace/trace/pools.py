@@ -1,15 +1,14 @@
 """What the trace kernels read and grow between rounds: growable stores with named kernel views.
 
-* :class:`Pieces`: every Catmull-Clark patch built so far, as the kernels intersect it per
-  ray. A *slot* per patch (its first item, item count, the round it was built in, whether a
-  ray has tested it) and its *items* (contiguous): regular Bezier pieces over dyadic squares
-  of the patch, and cells of exact limit points, each with its grid depth and how its four
-  sides are sampled. A regular patch is one item, ready from the start (round -1); an
-  irregular patch is built on request into pieces (``patches/isolate.py``). Kernel view:
-  :class:`PieceArrays`.
-* :class:`LoopGrids`: grid points, normals and quadtree boxes of built Loop patches, and
-  their slots; with the read-only :class:`LeafTables` (leaf corners and grid parameters of
-  every depth) the kernel view :class:`GridArrays`.
+* :class:`Pieces`: every patch built so far, as the kernels intersect it per ray. A *slot*
+  per patch (its first item, item count, the round it was built in, whether a ray has
+  tested it) and its *items* (contiguous): regular Bezier pieces over dyadic squares of the
+  patch, and cells of exact limit points, each with its grid depth and how its four sides
+  are sampled; for Loop patches, quartic triangular nets over dyadic sub-triangles and
+  triangular cells (``trace/tris.py``). A regular Catmull-Clark patch is one item, ready
+  from the start (round -1); a regular Loop patch is one net, an irregular patch of either
+  scheme several items (``patches/isolate.py``, ``patches/isolate_loop.py``), built on
+  request. Kernel view: :class:`PieceArrays`.
 * :class:`Memos`: each thread's memo of the Bezier nets its rays split
   (``trace/bezier.py``); kernel view: one :class:`Memo` per thread.
 * :class:`Candidates`: per ray, the unbuilt shells it entered before its best hit.
@@ -21,14 +20,12 @@ fields by name at no cost, so no kernel reads a bundle by position.
 
 from __future__ import annotations
 
-import functools
 from typing import NamedTuple
 
 import numpy as np
 
 from subtrace import config
 from subtrace.patches.basis import BOX_PAD, net_bounds
-from subtrace.patches.grids import grid_params, leaf_corners
 from subtrace.patches.isolate import item_sides, rest_boxes
 from subtrace.trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
 from subtrace.patches.isolate_loop import sample_ranges, side_samples
@@ -64,26 +61,6 @@ class PieceArrays(NamedTuple):
     samples: np.ndarray  # (., 3) float64: exact samples of isolated Loop patches' sides
 
 
-class GridArrays(NamedTuple):
-    """The kernels' view of :class:`LoopGrids` and :class:`LeafTables` (G slots)."""
-
-    patch_slot: np.ndarray  # (P,) int64: slot of each patch, -1 while unbuilt
-    slot_patch: np.ndarray  # (G,) int64
-    slot_depth: np.ndarray  # (G,) int64: the grid's depth
-    slot_quad: np.ndarray  # (G,) bool
-    slot_vert_off: np.ndarray  # (G,) int64: first grid point in verts
-    slot_node_off: np.ndarray  # (G,) int64: first quadtree box in node_lo / node_hi
-    slot_round: np.ndarray  # (G,) int64: round it was built in
-    verts: np.ndarray  # (., 3) float64: grid points
-    normals: np.ndarray  # (., 3) float32: exact limit normals at the grid points
-    node_lo: np.ndarray  # (., 3) float64: quadtree boxes (level l at (4^l - 1) / 3)
-    node_hi: np.ndarray  # (., 3) float64
-    lc_off: np.ndarray  # (D+1, 2) int64: first leaf of (depth, quad) in lc_data
-    lc_data: np.ndarray  # (., 4) int32: leaf corners (a triangle's 4th is -1)
-    uv_off: np.ndarray  # (D+1, 2) int64: first point of (depth, quad) in uv_data
-    uv_data: np.ndarray  # (., 2) float64: grid parameters
-
-
 class Memo(NamedTuple):
     """One thread's memo of split Bezier nets (``trace/bezier.py`` says what it holds)."""
 
@@ -111,12 +88,11 @@ class Hits(NamedTuple):
     written for it)."""
 
     t: np.ndarray  # (R,) float64: distance from the eye along the unit direction
-    # (R,) int64: a Loop grid's slot (>= 0), or -2 - the Catmull-Clark patch (<= -2)
-    prim: np.ndarray
-    leaf: np.ndarray  # (R,) int64: the grid's micro-face; Catmull-Clark: the grid depth
-    item: np.ndarray  # (R,) int64: the micro-face's triangle (0, 1); Catmull-Clark: the item
-    a: np.ndarray  # (R,) float64: barycentric of the second corner; Catmull-Clark: u
-    b: np.ndarray  # (R,) float64: barycentric of the third corner; Catmull-Clark: v
+    prim: np.ndarray  # (R,) int64: -2 - the patch hit (-1: none)
+    leaf: np.ndarray  # (R,) int64: the grid depth of the item hit (in its patch's units)
+    item: np.ndarray  # (R,) int64: the item hit
+    a: np.ndarray  # (R,) float64: the patch parameter u
+    b: np.ndarray  # (R,) float64: the patch parameter v
 
 
 def candidate_lists(n_rays: int) -> Candidates:
@@ -129,36 +105,6 @@ def hit_arrays(n_rays: int) -> Hits:
     """Hit records for ``n_rays`` rays (round 0 sets every ray's)."""
     return Hits(np.empty(n_rays), np.empty(n_rays, np.int64), np.empty(n_rays, np.int64),
                 np.empty(n_rays, np.int64), np.empty(n_rays), np.empty(n_rays))
-
-
-class LeafTables:
-    """Leaf corners and grid parameters of every (depth, quad), concatenated for kernels."""
-
-    def __init__(self, max_depth: int):
-        D = max_depth + 1
-        self.lc_off = np.zeros((D, 2), dtype=np.int64)
-        self.uv_off = np.zeros((D, 2), dtype=np.int64)
-        lcs, uvs = [], []
-        n_lc = n_uv = 0
-        for d in range(D):
-            for q in (0, 1):
-                lc = leaf_corners(d, bool(q))
-                pad = np.full((len(lc), 4), -1, dtype=np.int32)
-                pad[:, : lc.shape[1]] = lc
-                self.lc_off[d, q] = n_lc
-                self.uv_off[d, q] = n_uv
-                lcs.append(pad)
-                uvs.append(grid_params(d, bool(q)))
-                n_lc += len(pad)
-                n_uv += len(uvs[-1])
-        self.lc_data = np.ascontiguousarray(np.concatenate(lcs))
-        self.uv_data = np.ascontiguousarray(np.concatenate(uvs))
-
-
-@functools.lru_cache(maxsize=4)
-def leaf_tables(max_depth: int) -> LeafTables:
-    """The (read-only) tables up to ``max_depth``, made once per process."""
-    return LeafTables(max_depth)
 
 
 def grown(a, n_used, size):
@@ -213,43 +159,8 @@ class Growable:
         return start
 
 
-class LoopGrids(Growable):
-    """Grid points, normals and quadtree boxes of built Loop patches, and their slots."""
-
-    GROUPS = {
-        "rows": {"verts": ((3,), np.float64), "normals": ((3,), np.float32)},
-        "nodes": {"node_lo": ((3,), np.float64), "node_hi": ((3,), np.float64)},
-        "slots": {"slot_patch": ((), np.int64), "slot_depth": ((), np.int64),
-                  "slot_quad": ((), np.bool_), "slot_vert_off": ((), np.int64),
-                  "slot_node_off": ((), np.int64), "slot_round": ((), np.int64)},
-    }
-
-    def __init__(self, n_patches):
-        super().__init__()
-        self.patch_slot = np.full(n_patches, -1, dtype=np.int64)
-
-    def append(self, patches, depth, quad, P, N, lo, hi, round_no):
-        m = len(patches)
-        G = P.shape[1]
-        K = lo.shape[1]
-        v0 = self.put("rows", verts=P.reshape(-1, 3), normals=N.reshape(-1, 3))
-        n0 = self.put("nodes", node_lo=lo.reshape(-1, 3), node_hi=hi.reshape(-1, 3))
-        ar = np.arange(m, dtype=np.int64)
-        s0 = self.put("slots", slot_patch=patches, slot_depth=np.full(m, depth),
-                      slot_quad=np.full(m, quad), slot_vert_off=v0 + G * ar,
-                      slot_node_off=n0 + K * ar, slot_round=np.full(m, round_no))
-        self.patch_slot[patches] = s0 + ar
-
-    def view(self, tables: LeafTables) -> GridArrays:
-        a = self.a
-        return GridArrays(self.patch_slot, a["slot_patch"], a["slot_depth"], a["slot_quad"],
-                          a["slot_vert_off"], a["slot_node_off"], a["slot_round"], a["verts"],
-                          a["normals"], a["node_lo"], a["node_hi"], tables.lc_off,
-                          tables.lc_data, tables.uv_off, tables.uv_data)
-
-
 class Pieces(Growable):
-    """Every Catmull-Clark patch built so far, in slots of items (module doc)."""
+    """Every patch built so far, in slots of items (module doc)."""
 
     GROUPS = {
         "slots": {"patch": ((), np.int64), "first": ((), np.int64), "count": ((), np.int64),

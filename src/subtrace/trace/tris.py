@@ -1,4 +1,4 @@
-"""Ray / regular-Loop-patch intersection by per-ray refinement of its quartic Bezier net.
+"""Ray / Loop-patch intersection by per-ray refinement of quartic triangular Bezier nets.
 
 A regular Loop triangle (three smooth valence-6 corners, or a regular boundary: see
 ``lines.items.loop_regular``) is one quartic triangular Bezier net of 15 points
@@ -15,13 +15,25 @@ makes the ray split on the spot (:func:`descend_tri`), which changes no hit.
 A node at level ``l`` is the sub-triangle with corners ``A, A + g (h, 0), A + g (0, h)`` of
 the depth-``d`` grid (``h = 2^(d-l)``, ``g = +1`` upright, ``-1`` turned), grid vertex
 ``(i, j)`` at patch parameter ``(i/N, j/N)``, ``N = 2^d`` (as ``patches/grids.py``). A leaf
-is the micro-triangle of its three grid vertices, each evaluated exactly from the patch's
-own root net by one function (:func:`grid_point`), so every cell computes a shared corner
-bit-identically. Watertight against neighbours of other depths as the Loop grids are: a
-grid vertex on a side whose edge is sampled more coarsely (``side`` depth < d, the
-shallowest patch on the edge) is snapped onto the coarse polyline (linear interpolation of
-the two coarse samples around it), so the finer side's boundary lies on the coarser side's
-triangles' edges.
+is the micro-triangle of its three grid vertices, each evaluated exactly from the item's
+own net by one function (:func:`grid_point`), so every cell of the item computes a shared
+corner bit-identically.
+
+An irregular Loop triangle is isolated when a ray first asks for it
+(``patches/isolate_loop.py``): its regular descendants are *pieces*, each one such net over
+a dyadic sub-triangle of the patch (level ``l``, corner ``A``, orientation ``g``: the item's
+*frame*), descended exactly as above from that node down to the patch's grid depth (every
+item of a patch has the same depth, so the patch's inner edges are sampled alike from both
+sides); what stays irregular at that depth is *cells* (kind ``LOOP_CELL``), micro-triangles
+of exact limit points (:func:`intersect_tri_cell`).
+
+Watertight against neighbours of other depths: a grid vertex on a patch side whose edge is
+sampled more coarsely (``side`` depth < d, the shallowest patch on the edge) is snapped
+onto the coarse polyline (linear interpolation of the two coarse samples around it), so the
+finer side's boundary lies on the coarser side's triangles' edges. A regular patch
+evaluates the coarse samples from its own net; a piece's side may be shorter than a coarse
+segment, so an isolated patch keeps its snapped sides' exact samples (``samples``) and
+its pieces and cells take them from there.
 """
 
 from __future__ import annotations
