@@ -167,12 +167,11 @@ def worker(scene_path: str, sizes: list[tuple[int, int]], repeat: int) -> list[d
                                         bvh.node_count, bvh.prims)) / 2**20
         mb_proj = sum(a.nbytes for a in (tiles.off, tiles.items, tiles.key)) / 2**20
         # the walk alone, up to each ray's final hit (the same for both methods)
-        hits, grids = trace_hits(table, camera, scene.render.tolerance_rad(camera),
-                                 RenderStats(), accel="bvh")[:2]
+        hits = trace_hits(table, camera, scene.render.tolerance_rad(camera), RenderStats(),
+                          accel="bvh")[0]
         t_hit = np.ascontiguousarray(hits.t)
-        prim = hits.prim  # -1: no hit; <= -2: a Catmull-Clark patch; >= 0: a Loop grid slot
+        prim = hits.prim  # -1: no hit; <= -2: the patch -2 - prim
         p_hit = np.where(prim < -1, -prim - 2, -1).astype(np.int64)
-        p_hit[prim >= 0] = grids.slot_patch[prim[prim >= 0]]
         walk = {}
         for m in ("bvh", "projection"):
             tl, b = (no_tiles(), bvh) if m == "bvh" else (tiles, no_bvh())

@@ -355,8 +355,8 @@ def test_patches_are_built_only_for_rays_that_reach_them_first(accel):
     scene = small_scene([mesh], (1.2, 0.6, 2.2), (0.0, 0.3, 0.0), width=96, height=72)
     table = build_patch_table([subtrace.load_cage(mesh)])
     camera = scene.make_camera(table.shell_min.min(0), table.shell_max.max(0))
-    hits, _, iso, _ = trace_hits(table, camera, scene.render.tolerance_rad(camera),
-                                 RenderStats(), accel=accel)
+    hits, iso, _ = trace_hits(table, camera, scene.render.tolerance_rad(camera), RenderStats(),
+                              accel=accel)
     asked = iso.a["patch"][iso.a["round"] >= 0]
     assert len(asked) > 20
     frame = camera_frame(camera)

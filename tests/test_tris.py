@@ -1,7 +1,7 @@
-"""Regular Loop patches traced per ray through their quartic Bezier nets (trace/tris.py):
-the net's points and normals are the exact limit surface's, the per-ray descent finds the
-same micro-triangles as the whole grids it replaces, builds a few per covered pixel, and the
-image does not depend on the thread count."""
+"""Loop patches traced per ray through quartic Bezier nets (trace/tris.py): the net's
+points and normals are the exact limit surface's, the per-ray descent meets the
+micro-triangles of the exact whole grids, builds a few per covered pixel, and the image does
+not depend on the thread count."""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ import pytest
 from shared_data import MODELS, needs_shared, small_scene
 
 import subtrace
-from subtrace import config
 from subtrace.lines.items import box_nets, loop_regular
 from subtrace.patches.table import build_patch_table
 from subtrace.render import render_scene
@@ -56,47 +55,69 @@ def _torus(tolerance, width=160, height=90, threads=None):
 
 @needs_shared
 @pytest.mark.parametrize("tolerance", [4.0, 1.0, 0.25])
-def test_per_ray_nets_hit_the_grids_micro_triangles(tolerance, monkeypatch):
-    """The per-ray descent meets the same micro-triangles as the whole grids of exact limit
-    points (same depths, same corners up to rounding): the same pixels are covered, at
-    the same distances (stored as float32: the corners' rounding, 1e-16 relative, is far
-    below it), with the same ptex (u, v) and level; and it builds a few micro-triangles
-    per covered pixel where the grids build hundreds at 0.25 px."""
-    monkeypatch.setattr(config, "LOOP_PER_RAY", False)
-    old = _torus(tolerance)
-    monkeypatch.setattr(config, "LOOP_PER_RAY", True)
-    new = _torus(tolerance)
-    a, b = old.channels, new.channels
-    assert np.array_equal(a["A"], b["A"])
-    hit = a["A"] > 0
-    assert np.count_nonzero(hit) > 1500
-    for name in ("Z", "u", "v", "level"):
-        assert np.allclose(a[name][hit], b[name][hit], rtol=1e-6, atol=1e-6), name
-    per_px = new.stats.micro_triangles / new.stats.pixels_covered
-    assert per_px <= 4.0, per_px
-    # the shading normal is the net's exact one: close to the grid's interpolated normal
-    na = np.stack([a["N.X"], a["N.Y"], a["N.Z"]], axis=-1)[hit]
-    nb = np.stack([b["N.X"], b["N.Y"], b["N.Z"]], axis=-1)[hit]
-    assert np.median(np.sum(na * nb, axis=1)) > np.cos(np.radians(1.0))
+@pytest.mark.parametrize("mesh,view", [("torus.obj", TORUS_VIEW),
+                                       ("spot_low_resolution.obj", SPOT_VIEW)],
+                         ids=["torus", "spot"])
+def test_hits_are_the_exact_grids_micro_triangles(mesh, view, tolerance):
+    """Every hit lies on a micro-triangle of the exact limit-point grid of its patch at its
+    depth (``patches.grids.build_grids``: the subdivision core's own refinement, the whole
+    grid), found by a brute-force ray test (``naive.ray_triangle_hits``): the per-ray nets
+    and the isolated patches' pieces and cells meet the same micro-triangles. The distances
+    agree to float32 rounding where no side is snapped (the grid is not snapped: near a
+    coarser neighbour the two may differ by less than the pixel's footprint)."""
+    from naive import ray_triangle_hits
+
+    from subtrace.camera import camera_frame
+    from subtrace.patches.grids import build_grids, leaf_corners
+
+    cage = subtrace.load_cage(MODELS / mesh)
+    scene = small_scene([MODELS / mesh], *view, width=80, height=60, fov=30.0,
+                        tolerance=tolerance)
+    res = render_scene(scene, cages=[cage])
+    ch = res.channels
+    hit = np.nonzero(ch["A"].ravel() > 0)[0]
+    assert len(hit) > 400
+    table = build_patch_table([cage])
+    o = table.objects[0]
+    patch_of = np.empty(table.ptex.max() + 1, np.int64)
+    patch_of[table.ptex] = np.arange(table.n_patches)
+    patch = patch_of[ch["patch_id"].ravel()[hit].astype(np.int64)]
+    depth = ch["level"].ravel()[hit].astype(np.int64)
+    frame = camera_frame(res.camera)
+    row, col = np.divmod(hit, res.camera.width)
+    d = frame[3] + col[:, None] * frame[1] + row[:, None] * frame[2]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    z = ch["Z"].ravel()[hit].astype(np.float64)
+    ref = np.full(len(hit), np.inf)
+    for p, n in set(zip(patch.tolist(), depth.tolist())):
+        P = build_grids(o.level, o.points, cage.options, table.face[[p]], n)[0][0]
+        tri = P[leaf_corners(n, False)]
+        for k in np.nonzero((patch == p) & (depth == n))[0]:
+            t, _ = ray_triangle_hits(frame[0], d[k], tri[:, 0], tri[:, 1], tri[:, 2], 1e-9)
+            t = t[t > 0]
+            ref[k] = t[0] if len(t) else np.inf
+    rel = np.abs(ref - z) / z
+    assert np.mean(rel <= 1e-6) > 0.9, np.mean(rel <= 1e-6)
+    found = np.isfinite(ref)
+    assert np.mean(found) > 0.98
+    assert np.all(rel[found] <= 2 * res.tolerance_rad), rel[found].max()
 
 
 @needs_shared
 @pytest.mark.parametrize("tolerance", [4.0, 1.0, 0.25])
-def test_micro_triangles_per_covered_pixel_stay_bounded(tolerance, monkeypatch):
+def test_micro_triangles_per_covered_pixel_stay_bounded(tolerance):
     """RenderStats: at most 4 micro-triangles per covered pixel at every tolerance on the
     regular Loop torus (the grids need 4^depth per patch a ray reaches)."""
-    monkeypatch.setattr(config, "LOOP_PER_RAY", True)
     st = _torus(tolerance, width=320, height=180).stats
     assert st.micro_triangles <= 4 * st.pixels_covered, st.micro_triangles / st.pixels_covered
 
 
 @needs_shared
-def test_threads_do_not_change_the_image(monkeypatch):
-    """Bit-identical channels with 1 and 2 threads (and on the mixed spot cage, whose
-    irregular triangles stay grids beside the per-ray nets)."""
+def test_threads_do_not_change_the_image():
+    """Bit-identical channels with 1 and 2 threads (and on Spot's Loop cage, whose irregular
+    triangles are isolated into pieces and cells beside the regular nets)."""
     from subtrace.runtime import threads as tasks
 
-    monkeypatch.setattr(config, "LOOP_PER_RAY", True)
     n2 = min(2, tasks.max_threads())
     one, two = _torus(1.0, threads=1), _torus(1.0, threads=n2)
     for name in one.channels:
@@ -111,12 +132,11 @@ def test_threads_do_not_change_the_image(monkeypatch):
 
 
 @needs_shared
-def test_a_hidden_loop_object_is_not_refined(tmp_path, monkeypatch):
+def test_a_hidden_loop_object_is_not_refined(tmp_path):
     """Invariant 5 for the per-ray nets: a Loop torus hidden behind a plane gets no net and
-    no grid; seen alone, it is refined (so the test can fail)."""
+    no piece; seen alone, it is refined (so the test can fail)."""
     from test_render import _write_plane
 
-    monkeypatch.setattr(config, "LOOP_PER_RAY", True)
     plane = tmp_path / "plane.obj"
     _write_plane(plane, 3.0, 8.0)
     torus = MODELS / "torus.obj"

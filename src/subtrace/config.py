@@ -65,10 +65,6 @@ LOOP_MAX_GRID_DEPTH = 20
 # only adds refinement where rays descend, never a cap.
 FAN_LEVELS = 8
 
-# Regular Loop triangles traced per ray through their quartic Bezier nets (trace/tris.py)
-# instead of being built into whole grids of exact limit points (patches/grids.py).
-LOOP_PER_RAY = True
-
 # How primary rays find the patch shells they enter: "projection" (shells binned into image
 # tiles, accel/projection.py; measured faster on Spot and the sword, BENCHMARKS.md) or "bvh".
 PRIMARY_ACCEL = "projection"

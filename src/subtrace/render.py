@@ -6,11 +6,11 @@ shells into image tiles (or builds their BVH), chooses each patch's grid depth f
 tolerance and makes neighbours sample their shared edges alike, then runs rounds of
 ``trace.kernels.trace_round``. Regular Catmull-Clark patches are refined per ray inside the
 kernel, each thread keeping what its rays split (``trace.pools.Memos``). After each round
-the patches that rays asked for are built: irregular Catmull-Clark patches into Bezier
-pieces (each with its own depth) and cells (``trace.pools.Pieces``), regular Loop
-triangles into quartic Bezier nets split per ray like the quads' (``trace/tris.py``), other
-Loop patches into grids with snapped sides and quadtree boxes (``trace.pools.LoopGrids``). The rays that
-asked are then traced again. Patches no ray reaches before a closer hit are never refined.
+the patches that rays asked for are built (``trace.pools.Pieces``): irregular
+Catmull-Clark patches into Bezier pieces (each with its own depth) and cells, regular Loop
+triangles into quartic Bezier nets split per ray like the quads' (``trace/tris.py``),
+irregular Loop triangles into such nets and cells (``patches/isolate_loop.py``). The rays
+that asked are then traced again. Patches no ray reaches before a closer hit are never refined.
 Finally ``shade.py`` turns hits into image channels.
 """
 
@@ -40,8 +40,7 @@ from subtrace.trace.budget import check_memory, choose_within_budget, warn_tiles
 from subtrace.trace.build import build_loop_regular, build_requested
 from subtrace.trace.counts import thread_correction
 from subtrace.trace.kernels import trace_round
-from subtrace.trace.pools import (LoopGrids, Memos, Pieces, candidate_lists, hit_arrays,
-                                  leaf_tables)
+from subtrace.trace.pools import Memos, Pieces, candidate_lists, hit_arrays
 
 
 @dataclass
@@ -59,7 +58,6 @@ class RenderStats:
     # (threads take bands as they are free, so with several threads the count may differ
     # slightly between runs)
     micro_triangles: int = 0
-    grid_points: int = 0
     pieces: int = 0  # regular sub-patches and cells of the isolated irregular patches
     memo_nodes: int = 0  # quadtree nodes of Bezier pieces split and kept by the threads
     memo_full: int = 0  # times a thread's memo ran out during a round (rays split on the spot)
@@ -111,8 +109,7 @@ def _shell_walk(chosen, frame, width, height, accel, max_memory, stats):
 def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, accel=None,
                progress=None, max_memory=None):
     """Run the refinement rounds; returns (hits (:class:`~subtrace.trace.pools.Hits`), the
-    Loop grids (:class:`~subtrace.trace.pools.GridArrays`), the Catmull-Clark pieces
-    (:class:`~subtrace.trace.pools.Pieces`), every patch refined). ``compiling``: the
+    built patches (:class:`~subtrace.trace.pools.Pieces`), every patch refined). ``compiling``: the
     process compiling the trace kernels (``warmup.start``), waited for before the first
     round. ``accel``: how a ray finds the shells it enters, ``"projection"`` (the shells
     binned into image tiles, ``accel/projection.py``) or ``"bvh"`` (``accel/bvh.py``);
@@ -155,8 +152,6 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
     for, until no ray asks."""
     depths = chosen.depths
     edge_depth, reg_side = edge_sampling(table, depths)
-    tables = leaf_tables(int(depths[chosen.grids].max(initial=0)))  # (Loop grids only)
-    grids = LoopGrids(table.n_patches)
     iso = Pieces(table.n_patches)
     reg = np.nonzero(table.regular)[0]
     n_irr = int(np.count_nonzero(table.is_quad & ~table.regular))
@@ -178,9 +173,8 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
     while len(rays):
         t0 = time.perf_counter()
         trace_round(rays, frame, width, round_no, bvh, tiles, chosen.shell_min,
-                    chosen.shell_max, grids.view(tables), iso.view(),
-                    memos.views(len(iso.a["kind"])), cands, config.TRI_SLACK, hits, request,
-                    tested)
+                    chosen.shell_max, iso.view(), memos.views(len(iso.a["kind"])), cands,
+                    config.TRI_SLACK, hits, request, tested)
         stats.time_trace += time.perf_counter() - t0
         req = request[rays]
         asked = req >= 0
@@ -193,8 +187,8 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
         flag = np.zeros(table.n_patches, bool)
         flag[req[asked]] = True
         new = np.nonzero(flag)[0]  # (np.unique, sorted: it hashes every request)
-        build_requested(table, new, depths, edge_depth, grids, iso, round_no, stats, frame[0],
-                        tol_rad, chosen.record)
+        build_requested(table, new, depths, edge_depth, iso, round_no, stats, frame[0], tol_rad,
+                        chosen.record)
         stats.time_refine += time.perf_counter() - t0
         round_no += 1
     stats.rounds = round_no + 1
@@ -204,10 +198,9 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
     # regular patches count as refined once a ray has descended into them
     direct = iso.a["patch"][(iso.a["round"] < 0) & (iso.a["touched"] > 0)]
     stats.patches_refined += len(direct)
-    stats.max_depth = int(max(grids.a["slot_depth"].max(initial=0),
-                              iso.a["depth_i"].max(initial=0)))
-    built = np.concatenate([grids.a["slot_patch"], iso.a["patch"][iso.a["round"] >= 0], direct])
-    return hits, grids.view(tables), iso, built
+    stats.max_depth = int(iso.a["depth_i"].max(initial=0))
+    built = np.concatenate([iso.a["patch"][iso.a["round"] >= 0], direct])
+    return hits, iso, built
 
 
 def load_objects(scene):
@@ -295,7 +288,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
         cages, table, camera, tol_rad, budget = _prepare(scene, cages, stats)
         if progress is not None:
             progress(0, stats.rays, "tracing")
-        hits, grids, iso, built = trace_hits(table, camera, tol_rad, stats, compiling=compiling,
+        hits, iso, built = trace_hits(table, camera, tol_rad, stats, compiling=compiling,
                                              accel=accel, progress=progress,
                                              max_memory=budget)
     except BaseException:
@@ -312,7 +305,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     ).reshape(-1, 6)
     headlight = np.array([scene.render.headlight_intensity if scene.render.headlight else 0.0])
     colors = [o.color for o in scene.objects]
-    shade(camera_frame(camera), W, hits, grids, iso.view(), patch_shading(table, colors), lights,
+    shade(camera_frame(camera), W, hits, iso.view(), patch_shading(table, colors), lights,
           headlight, miss_values(scene.render.background), planes, covered)
     stats.pixels_covered = int(covered.sum())
     stats.max_level = deepest_level(planes)

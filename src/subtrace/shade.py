@@ -1,9 +1,9 @@
 """Shading: rebuild position, normal, ids and colour from the hits (pbrt habit: the
 intersection kernels return only t, the micro-face and its barycentrics).
 
-A hit on a Bezier piece or a regular Loop triangle's net takes the exact normal of its net
-at the hit's parameter. Elsewhere the normal at a hit interpolates the exact unit limit
-normals of the micro-face's corners (computed from the limit tangents of the subdivision
+A hit on a Bezier piece or a Loop triangular net takes the exact normal of its net at the
+hit's parameter. On a cell (of an irregular patch) the normal interpolates the exact unit
+limit normals of the cell's corners (computed from the limit tangents of the subdivision
 core) with the hit's barycentrics, so it is within the tolerance's angle of the limit normal at that point; where the limit
 tangents leave a corner's normal undefined, the micro-triangle's own normal is used.
 Lighting is Lambertian, two-sided: a headlight at the eye plus directional lights.
@@ -21,7 +21,7 @@ from subtrace.patches.basis import bez_normal
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
 from subtrace.trace.prims import ray_setup
-from subtrace.trace.tris import TRI, tri_normal
+from subtrace.trace.tris import LOOP_CELL, TRI, tri_normal
 
 
 # the planes the shading fills, in this order, and what a pixel whose ray missed holds
@@ -32,18 +32,17 @@ C_R, C_A, C_Z, C_N, C_LEVEL, C_PATCH, C_OBJECT, C_U = 0, 3, 4, 5, 8, 9, 10, 11
 MISS = (0.0, 0.0, 0.0, 0.0, np.inf, 0.0, 0.0, 0.0, -1.0, -1.0, -1.0, 0.0, 0.0)
 
 
-def shade(frame, width, hits, grids, iso, patches, lights, headlight, miss, planes, covered):
+def shade(frame, width, hits, iso, patches, lights, headlight, miss, planes, covered):
     """Fill ``planes`` (len(CHANNELS), n_pixels) float32 from ``hits``
     (:class:`~subtrace.trace.pools.Hits`) on every thread (blocks of pixels in turn).
 
-    ``grids``, ``iso``: the built Loop grids and Catmull-Clark pieces
-    (:class:`~subtrace.trace.pools.GridArrays`, :class:`~subtrace.trace.pools.PieceArrays`);
+    ``iso``: the built patches' items (:class:`~subtrace.trace.pools.PieceArrays`);
     ``patches``: per patch, its ids and colour (:class:`PatchShading`); ``lights`` (L,6):
     direction the light travels (unit) and its colour times intensity; ``headlight`` (1,);
     ``miss`` (:func:`miss_values`); ``covered`` (threads,) int64 receives the hits each
     thread shaded."""
-    run_tasks(_shade_task, frame, width, hits, grids, iso, patches, lights, headlight, miss,
-              planes, covered)
+    run_tasks(_shade_task, frame, width, hits, iso, patches, lights, headlight, miss, planes,
+              covered)
 
 
 class PatchShading(NamedTuple):
@@ -75,8 +74,8 @@ SHADE_BLOCK = 1024  # consecutive pixels shaded together
 
 
 @nb.njit(cache=True, nogil=True)
-def _shade_task(task, n_tasks, frame, width, hits, grids, iso, patches, lights, headlight, miss,
-                planes, covered):
+def _shade_task(task, n_tasks, frame, width, hits, iso, patches, lights, headlight, miss, planes,
+                covered):
     """Shade the blocks of pixels ``task, task + n_tasks, ...`` into ``planes`` (see
     :func:`shade`): each block is first filled with ``miss`` (contiguous stores), then its
     hits are shaded over it."""
@@ -97,29 +96,34 @@ def _shade_task(task, n_tasks, frame, width, hits, grids, iso, patches, lights, 
             row = r // width
             col = r - row * width
             dx, dy, dz = ray_setup(frame, row, col)
-            s = hits.prim[r]
-            if s < 0:
-                # a Catmull-Clark patch: the item hit, (a, b) the patch parameter
-                p = -s - 2
-                u = hits.a[r]
-                v = hits.b[r]
-                depth = hits.leaf[r]
-                it = hits.item[r]
-                c = iso.ref[it]
-                if iso.kind[it] == TRI:
-                    # a regular Loop patch: the normal of its triangular net at (u, v)
-                    nx, ny, nz = tri_normal(iso.nets.reshape((len(iso.nets), 16, 3)), c, u, v)
-                elif iso.kind[it] == 0:
-                    # a Bezier piece over a dyadic square of the patch (the whole of a regular one)
-                    sc = 1 << iso.level[it]
-                    nx, ny, nz = bez_normal(iso.nets[c], u * sc - iso.i0[it],
-                                                v * sc - iso.j0[it])
-                else:
-                    nx, ny, nz = _cell_normal(iso.cells[4 * c:4 * c + 4], iso.cell_normals[c],
-                                              u * (1 << depth) - iso.i0[it],
-                                              v * (1 << depth) - iso.j0[it])
+            # the patch and item hit, (a, b) the patch parameter
+            p = -hits.prim[r] - 2
+            u = hits.a[r]
+            v = hits.b[r]
+            depth = hits.leaf[r]
+            it = hits.item[r]
+            c = iso.ref[it]
+            if iso.kind[it] == TRI:
+                # a Loop patch or piece: the normal of its triangular net at its own
+                # (s, t) (trace/tris.py: the patch's (u, v) = (A + g (s, t)) 2^-level)
+                sc = 1 << iso.level[it]
+                g = np.float64(iso.orient[it])
+                nx, ny, nz = tri_normal(iso.nets.reshape((len(iso.nets), 16, 3)), c,
+                                        g * (u * sc - iso.i0[it]), g * (v * sc - iso.j0[it]))
+            elif iso.kind[it] == LOOP_CELL:
+                g = np.float64(iso.orient[it])
+                nx, ny, nz = _tri_cell_normal(iso.cells[4 * c:4 * c + 3],
+                                              iso.cell_normals[c],
+                                              g * (u * (1 << depth) - iso.i0[it]),
+                                              g * (v * (1 << depth) - iso.j0[it]))
+            elif iso.kind[it] == 0:
+                # a Bezier piece over a dyadic square of the patch (the whole of a regular one)
+                sc = 1 << iso.level[it]
+                nx, ny, nz = bez_normal(iso.nets[c], u * sc - iso.i0[it], v * sc - iso.j0[it])
             else:
-                nx, ny, nz, u, v, depth, p = _grid_normal(hits, r, s, grids)
+                nx, ny, nz = _cell_normal(iso.cells[4 * c:4 * c + 4], iso.cell_normals[c],
+                                          u * (1 << depth) - iso.i0[it],
+                                          v * (1 << depth) - iso.j0[it])
             planes[C_N, r] = nx
             planes[C_N + 1, r] = ny
             planes[C_N + 2, r] = nz
@@ -151,60 +155,6 @@ def _shade_task(task, n_tasks, frame, width, hits, grids, iso, patches, lights, 
 
 
 @nb.njit(cache=True)
-def _grid_normal(hits, r, s, grids):
-    """Normal, patch parameter, depth and patch of a hit on a stored grid: the exact limit
-    normals of the micro-face's corners interpolated (the micro-triangle's own normal where
-    they are undefined)."""
-    verts, normals, lc_data, uv_data = grids.verts, grids.normals, grids.lc_data, grids.uv_data
-    leaf = hits.leaf[r]
-    b1 = hits.a[r]
-    b2 = hits.b[r]
-    b0 = 1.0 - b1 - b2
-    depth = grids.slot_depth[s]
-    quad = grids.slot_quad[s]
-    q = 1 if quad else 0
-    base = grids.lc_off[depth, q] + leaf
-    ca = lc_data[base, 0]
-    if hits.item[r] == 0:
-        cb = lc_data[base, 1]
-        cc = lc_data[base, 2]
-    else:
-        cb = lc_data[base, 2]
-        cc = lc_data[base, 3]
-    vo = grids.slot_vert_off[s]
-    nx = ny = nz = 0.0
-    ok = True
-    for a in range(3):
-        na = normals[vo + ca, a]
-        nb_ = normals[vo + cb, a]
-        nc = normals[vo + cc, a]
-        if not (np.isfinite(na) and np.isfinite(nb_) and np.isfinite(nc)):
-            ok = False
-    if ok:
-        nx = b0 * normals[vo + ca, 0] + b1 * normals[vo + cb, 0] + b2 * normals[vo + cc, 0]
-        ny = b0 * normals[vo + ca, 1] + b1 * normals[vo + cb, 1] + b2 * normals[vo + cc, 1]
-        nz = b0 * normals[vo + ca, 2] + b1 * normals[vo + cb, 2] + b2 * normals[vo + cc, 2]
-    ln = math.sqrt(nx * nx + ny * ny + nz * nz)
-    if not ok or ln == 0.0:
-        e1x = verts[vo + cb, 0] - verts[vo + ca, 0]
-        e1y = verts[vo + cb, 1] - verts[vo + ca, 1]
-        e1z = verts[vo + cb, 2] - verts[vo + ca, 2]
-        e2x = verts[vo + cc, 0] - verts[vo + ca, 0]
-        e2y = verts[vo + cc, 1] - verts[vo + ca, 1]
-        e2z = verts[vo + cc, 2] - verts[vo + ca, 2]
-        nx = e1y * e2z - e1z * e2y
-        ny = e1z * e2x - e1x * e2z
-        nz = e1x * e2y - e1y * e2x
-        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
-    if ln > 0.0:
-        nx, ny, nz = nx / ln, ny / ln, nz / ln
-    uo = grids.uv_off[depth, q]
-    u = b0 * uv_data[uo + ca, 0] + b1 * uv_data[uo + cb, 0] + b2 * uv_data[uo + cc, 0]
-    v = b0 * uv_data[uo + ca, 1] + b1 * uv_data[uo + cb, 1] + b2 * uv_data[uo + cc, 1]
-    return nx, ny, nz, u, v, depth, grids.slot_patch[s]
-
-
-@nb.njit(cache=True)
 def _cell_normal(pts, nrm, a, b):
     """Bilinear blend of a cell's exact corner normals at (a, b) in [0,1]^2 (corner order
     (0,0), (1,0), (1,1), (0,1)); the cell's own normal where a corner's is undefined."""
@@ -217,6 +167,25 @@ def _cell_normal(pts, nrm, a, b):
         # diagonals' cross product
         ax, ay, az = pts[2, 0] - pts[0, 0], pts[2, 1] - pts[0, 1], pts[2, 2] - pts[0, 2]
         bx, by, bz = pts[3, 0] - pts[1, 0], pts[3, 1] - pts[1, 1], pts[3, 2] - pts[1, 2]
+        nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if ln > 0.0:
+        return nx / ln, ny / ln, nz / ln
+    return 0.0, 0.0, 0.0
+
+
+@nb.njit(cache=True)
+def _tri_cell_normal(pts, nrm, b, c):
+    """Blend of a Loop cell's exact corner normals at barycentrics (1 - b - c, b, c); the
+    cell's own normal where a corner's is undefined."""
+    a = 1.0 - b - c
+    nx = a * nrm[0, 0] + b * nrm[1, 0] + c * nrm[2, 0]
+    ny = a * nrm[0, 1] + b * nrm[1, 1] + c * nrm[2, 1]
+    nz = a * nrm[0, 2] + b * nrm[1, 2] + c * nrm[2, 2]
+    ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if not (ln > 0.0):
+        ax, ay, az = pts[1, 0] - pts[0, 0], pts[1, 1] - pts[0, 1], pts[1, 2] - pts[0, 2]
+        bx, by, bz = pts[2, 0] - pts[0, 0], pts[2, 1] - pts[0, 1], pts[2, 2] - pts[0, 2]
         nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
         ln = math.sqrt(nx * nx + ny * ny + nz * nz)
     if ln > 0.0:

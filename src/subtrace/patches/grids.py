@@ -1,4 +1,7 @@
-"""Grids of exact limit points over patches, by sparse local refinement.
+"""Grids of exact limit points over patches, by sparse local refinement: the exact reference
+of what the renderer's per-ray refinement samples (tests compare against it; nothing in the
+render path builds whole grids), and the cut-and-refine step the isolations share
+(:func:`cut_around`).
 
 A *patch* is one face of the patch level ``L0`` (Catmull-Clark: level 1, where every face is a
 quad; Loop: the cage itself). Its *grid at depth n* holds the exact limit points (and limit
@@ -77,17 +80,6 @@ def _split_corners(c: np.ndarray, quad: bool) -> np.ndarray:
     return out.reshape(-1, c.shape[1], 2)
 
 
-def grid_params(n: int, quad: bool) -> np.ndarray:
-    """(G,2) float64 patch parameters of the grid points of a depth-``n`` patch."""
-    N = 1 << n
-    if quad:
-        j, i = np.divmod(np.arange((N + 1) * (N + 1)), N + 1)
-    else:
-        i = np.concatenate([np.arange(N + 1 - jj) for jj in range(N + 1)])
-        j = np.concatenate([np.full(N + 1 - jj, jj) for jj in range(N + 1)])
-    return np.stack([i, j], axis=1).astype(np.float64) / N
-
-
 def build_grids(level: Level, points: np.ndarray, options: Options, faces, depth: int):
     """Exact limit points and unit limit normals on the depth-``depth`` grids of ``faces``.
 
@@ -145,49 +137,3 @@ def cut_around(level: Level, points: np.ndarray, start: np.ndarray, m: int):
     verts = _compact(_gather(level.face_offsets, level.face_verts, blocks), level.n_verts)[0]
     sub, sub_to_cur, _, sub_faces = extract(level, verts, rings=config.GRID_RINGS)
     return sub, points[sub_to_cur], np.searchsorted(sub_faces, start)
-
-
-def side_indices(depth: int, quad: bool) -> np.ndarray:
-    """(k, N+1) grid indices along each side, from corner k to corner k+1."""
-    N = 1 << depth
-    t = np.arange(N + 1)
-    if quad:
-        W = N + 1
-        return np.stack([t, N + t * W, (N - t) + N * W, (N - t) * W])
-    row = lambda j: j * (N + 1) - j * (j - 1) // 2  # noqa: E731
-    return np.stack([t, row(t) + (N - t), row(N - t)])
-
-
-def node_boxes(P: np.ndarray, depth: int, quad: bool):
-    """Quadtree boxes (m, K, 3) of grids P (m, G, 3): leaves from their corners, then up
-    (level ``l``'s 4^l boxes at ``(4^l - 1) / 3``)."""
-    lc = leaf_corners(depth, quad)
-    corners = P[:, lc]  # (m, 4^n, k, 3)
-    lo = [corners.min(axis=2)]
-    hi = [corners.max(axis=2)]
-    while lo[0].shape[1] > 1:
-        m, n = lo[0].shape[:2]
-        lo.insert(0, lo[0].reshape(m, n // 4, 4, 3).min(axis=2))
-        hi.insert(0, hi[0].reshape(m, n // 4, 4, 3).max(axis=2))
-    return np.concatenate(lo, axis=1), np.concatenate(hi, axis=1)
-
-
-def snap_sides(P: np.ndarray, depth: int, quad: bool, side_depth: np.ndarray):
-    """Move boundary points of sides shared with a coarser patch (``side_depth`` (m, k): the
-    depth each side is sampled at, -1 for none) onto the coarser patch's polyline (linear
-    interpolation of the points it shares), in place."""
-    sides = side_indices(depth, quad)
-    N = 1 << depth
-    for k in range(sides.shape[0]):
-        for de in np.unique(side_depth[:, k]):
-            if de >= depth or de < 0:
-                continue
-            rows = np.nonzero(side_depth[:, k] == de)[0]
-            r = 1 << (depth - de)
-            t = np.arange(N + 1)
-            t0 = (t // r) * r
-            t1 = np.minimum(t0 + r, N)
-            w = ((t - t0) / r)[None, :, None]
-            idx = sides[k]
-            Q = P[rows][:, idx]
-            P[rows[:, None], idx[None, :]] = (1.0 - w) * Q[:, t0] + w * Q[:, t1]

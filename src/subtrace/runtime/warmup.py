@@ -71,23 +71,21 @@ def compile_kernels(threads: int) -> None:
     from subtrace.runtime import threads as tasks
     from subtrace.shade import CHANNELS, PatchShading, miss_values, shade
     from subtrace.trace.kernels import trace_round
-    from subtrace.trace.pools import (LeafTables, LoopGrids, Memos, Pieces, candidate_lists,
-                                      hit_arrays)
+    from subtrace.trace.pools import Memos, Pieces, candidate_lists, hit_arrays
 
     i64 = np.zeros(0, np.int64)
     frame = np.zeros((4, 3))
-    grids = LoopGrids(0).view(LeafTables(0))
     iso = Pieces(0).view()
     tasks.set_threads(threads)
     try:
         trace_round(i64, frame, 1, 0, no_bvh(), no_tiles(), np.zeros((0, 3)), np.zeros((0, 3)),
-                    grids, iso, Memos(threads).views(0), candidate_lists(0), config.TRI_SLACK,
+                    iso, Memos(threads).views(0), candidate_lists(0), config.TRI_SLACK,
                     hit_arrays(0), i64, i64)
         misses = hit_arrays(2)  # two pixels, both missed: the output planes' layout
         misses.t[:] = np.inf
         patches = PatchShading(np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros((0, 2)),
                                np.zeros(0), np.zeros(0, np.int8), np.zeros((0, 3)))
-        shade(frame, 1, misses, grids, iso, patches, np.zeros((0, 6)), np.zeros(1),
+        shade(frame, 1, misses, iso, patches, np.zeros((0, 6)), np.zeros(1),
               miss_values((0.0, 0.0, 0.0)), np.zeros((len(CHANNELS), 2), np.float32),
               np.zeros(threads, np.int64))
     finally:

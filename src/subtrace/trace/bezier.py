@@ -32,7 +32,7 @@ from subtrace.trace.prims import (
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, M_CELLS, M_FULL, M_NETS, M_NODES, NOT_YET,
     push_sorted, ray_triangle,
 )
-from subtrace.trace.tris import TRI, intersect_tri
+from subtrace.trace.tris import LOOP_CELL, TRI, intersect_tri, intersect_tri_cell
 
 # samples per cell side at most (2^(side depth - depth)): neighbours are kept within
 # config.FAN_LEVELS of each other (patches/criterion.py: edge_sampling, trace/pools.py)
@@ -390,9 +390,15 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch):
             continue
         depth = item_depth[it]  # its grid, in the patch's units
         inv = 1.0 / (1 << depth)
-        if kind[it] == TRI:  # a regular Loop patch: its triangular net (trace/tris.py)
-            tested += intersect_tri(ray, it, nets, ref[it], depth, item_side, slack, hit, code,
-                                    mem, scratch)
+        if kind[it] == TRI:  # a Loop patch or piece: its triangular net (trace/tris.py)
+            sh = depth - level[it]
+            fr = (np.int64(iso.orient[it]), i0[it] << sh, j0[it] << sh, sh)
+            tested += intersect_tri(ray, it, nets, ref[it], depth, fr, item_side, iso.samples,
+                                    slack, hit, code, mem, scratch)
+            continue
+        if kind[it] == LOOP_CELL:  # an isolated Loop patch's cell (counted when built)
+            intersect_tri_cell(ray, cells, ref[it], i0[it], j0[it], np.int64(iso.orient[it]),
+                               depth, slack, hit, code, it)
             continue
         if kind[it] == 1:  # an irregular cell: its exact corners
             c = ref[it]

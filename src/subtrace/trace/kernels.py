@@ -1,14 +1,10 @@
-"""Ray kernels: the rounds of primary rays through the patch shells, and patch-grid traversal.
+"""Ray kernels: the rounds of primary rays through the patch shells.
 
 One ray per pixel from a pinhole camera ``frame`` = [eye, dx, dy, p00] (see
 ``trace.camera.camera_frame``); ``t`` is the distance from the eye along the unit direction.
 
-Built patches live in pools (``trace/pools.py``): Loop slot ``s`` holds a grid of depth
-``slot_depth[s]`` whose points start at ``slot_vert_off[s]`` in ``verts`` and whose quadtree
-node boxes start at ``slot_node_off[s]`` in ``node_lo``/``node_hi``: level ``l`` (4^l nodes)
-at ``(4^l - 1) / 3``, node ``i``'s children are ``4i .. 4i+3`` of level ``l+1`` (the multi-level
-1-to-4 segmentation of the patch grid), the leaves at level ``depth`` are the micro-faces
-whose grid corners are ``lc_data[lc_off[depth, quad] + i]`` (a triangle's 4th is -1).
+Built patches live in the pieces' pool (``trace/pools.py``), Catmull-Clark and Loop alike:
+a slot per patch, its items intersected per ray (``trace/bezier.py``, ``trace/tris.py``).
 
 A round (:func:`trace_round`) takes each active ray through the patch shells it enters,
 from its image tile's list (``accel/projection.py``, nearest box first) or the BVH of the
@@ -25,82 +21,23 @@ from __future__ import annotations
 
 import numpy as np
 
-from subtrace import config
 from subtrace.accel.bvh import BVH, box_entry, bvh_next_leaf, bvh_start, traversal_stack
 from subtrace.accel.projection import TILE, Tiles
-from subtrace.runtime.jit import inline_njit, leaf_njit, nb
+from subtrace.runtime.jit import inline_njit, nb
 from subtrace.runtime.threads import run_chunks
 from subtrace.trace.bezier import MAX_SIDE_SAMPLES, intersect_patch
-from subtrace.trace.pools import (CANDIDATES, Candidates, GridArrays, Hits, Memo,
-                                  PieceArrays)
+from subtrace.trace.pools import CANDIDATES, Candidates, Hits, Memo, PieceArrays
 from subtrace.trace.prims import (
-    H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, push_sorted, ray_setup, ray_triangle,
-    shear,
+    H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, ray_setup, shear,
 )
-
-
-@leaf_njit
-def _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, grids, slack, hit,
-                    stack, ent_t, ent_i):
-    """Closest hit in the Loop grid of slot ``s`` (``grids``: a
-    :class:`~subtrace.trace.pools.GridArrays`) nearer than hit[H_T]; updates ``hit``.
-    ``stack``, ``ent_t`` (4,) and ``ent_i`` (4,) are the caller's scratch buffers."""
-    node_lo, node_hi, verts, lc_data = grids.node_lo, grids.node_hi, grids.verts, grids.lc_data
-    depth = grids.slot_depth[s]
-    quad = grids.slot_quad[s]
-    lc0 = grids.lc_off[depth, 1 if quad else 0]
-    vo = grids.slot_vert_off[s]
-    no = grids.slot_node_off[s]
-    if box_entry(ox, oy, oz, ix, iy, iz, node_lo, node_hi, no, 0.0, hit[H_T]) == np.inf:
-        return
-    o = (ox, oy, oz)
-    px, py, pz = o[kx], o[ky], o[kz]  # origin in the shear's axis order
-    # stack entries: level * 2^40 + index; deeper-first order gives near children first
-    stack[0] = 0
-    sp = 1
-    while sp > 0:
-        sp -= 1
-        code = stack[sp]
-        level = code >> 40
-        idx = code & ((1 << 40) - 1)
-        if level == depth:
-            # the micro-face: one triangle, or a quad's two triangles (a, b, c), (a, c, d)
-            base = lc0 + idx
-            a = vo + lc_data[base, 0]
-            for tri in range(2 if quad else 1):
-                b = vo + lc_data[base, 1 + tri]
-                c = vo + lc_data[base, 2 + tri]
-                t, ba, bb, bc = ray_triangle(px, py, pz, kx, ky, kz, sx, sy, sz, a, b, c, verts,
-                                             hit[H_T], slack)
-                if t < hit[H_T]:
-                    hit[H_T] = t
-                    hit[H_SLOT] = s
-                    hit[H_LEAF] = idx
-                    hit[H_TRI] = tri
-                    hit[H_B1] = bb
-                    hit[H_B2] = bc
-            continue
-        # children: test boxes, push the hit ones far to near
-        child_level = level + 1
-        lvl_off = no + ((1 << (2 * child_level)) - 1) // 3
-        n = 0
-        for j in range(4):
-            ci = 4 * idx + j
-            te = box_entry(ox, oy, oz, ix, iy, iz, node_lo, node_hi, lvl_off + ci, 0.0,
-                           hit[H_T])
-            if te < np.inf:
-                n = push_sorted(ent_t, ent_i, n, te, ci)
-        for j in range(n):
-            stack[sp] = (child_level << 40) | ent_i[j]
-            sp += 1
 
 
 BAND_ROWS = 8  # image rows per band of rays
 BAND_CHUNK = 2  # bands a thread takes at a time (the next free ones, as it finishes)
 
 
-def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, grids, iso,
-                mems, cands, slack, hits, request, tested):
+def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, iso, mems,
+                cands, slack, hits, request, tested):
     """One round for the rays ``rays`` (sorted pixel indices): update ``hits`` (a
     :class:`~subtrace.trace.pools.Hits` over all pixels) and set ``request[r]`` to the
     nearest unbuilt patch the ray reaches first (or -1). Round 0 starts every ray afresh: it
@@ -109,10 +46,9 @@ def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, 
 
     The ray finds the shells ``[shell_min, shell_max]`` (P,3) it enters in its tile of
     ``tiles`` (:class:`~subtrace.accel.projection.Tiles`, nearest box first) or, when the
-    tiles are empty, by walking ``bvh`` (:class:`~subtrace.accel.bvh.BVH`). Catmull-Clark
-    patches are intersected per ray through their pieces, ``iso``
-    (:class:`~subtrace.trace.pools.PieceArrays`); Loop patches are grids in ``grids``
-    (:class:`~subtrace.trace.pools.GridArrays`). ``tested[r]`` counts the micro-triangles
+    tiles are empty, by walking ``bvh`` (:class:`~subtrace.accel.bvh.BVH`). Patches are
+    intersected per ray through their items, ``iso``
+    (:class:`~subtrace.trace.pools.PieceArrays`). ``tested[r]`` counts the micro-triangles
     built for ray r. The rays are cut into bands of ``BAND_ROWS`` image rows; each of n
     threads (n = len(mems)) takes the next ``BAND_CHUNK`` bands whenever it is free
     (``runtime.threads.run_chunks``), with its own memo of split Bezier nets ``mems[t]`` (a
@@ -131,8 +67,7 @@ def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, 
     # dispatcher types plain tuples of arrays in C but named tuples in Python (28 against
     # 9 us a call, measured; a render of the sword makes about 320 calls)
     args = (float(frame[0, 0]), float(frame[0, 1]), float(frame[0, 2]), frame, int(width),
-            int(round_no), tuple(bvh), tuple(tiles), shell_min, shell_max, tuple(grids),
-            tuple(iso), tuple(tuple(m) for m in mems), scratch, tuple(cands), float(slack),
+            int(round_no), tuple(bvh), tuple(tiles), shell_min, shell_max, tuple(iso), tuple(tuple(m) for m in mems), scratch, tuple(cands), float(slack),
             tuple(hits), request, tested)
 
     def work(t, a, b):
@@ -143,14 +78,13 @@ def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, 
 
 
 def _scratch(max_d):
-    """A thread's scratch buffers for grids up to depth ``max_d``: BVH stack and its entry
-    distances, grid stack, Bezier nets being split, the quadtree stack and its entry
+    """A thread's scratch buffers for items up to depth ``max_d``: BVH stack and its entry
+    distances, Bezier nets being split, the quadtree stack and its entry
     distances, child order, a cell's points and parameters (fans included), the ray's hit
     record."""
     n = 6 * max_d + 8
     stack, stack_t = traversal_stack()
-    return (stack, stack_t, np.empty(config.STACK_SIZE, np.int64),
-            np.empty((3 * max_d + 10, 4, 4, 3)),
+    return (stack, stack_t, np.empty((3 * max_d + 10, 4, 4, 3)),
             np.empty((n, 5), np.int64), np.empty(n), np.empty(4), np.empty(4, np.int64),
             np.empty((4 * MAX_SIDE_SAMPLES + 8, 3)), np.empty((4 * MAX_SIDE_SAMPLES + 8, 2)),
             np.empty(HIT_FIELDS))
@@ -200,7 +134,7 @@ def _sort_candidates(cands, r):
 
 
 @inline_njit
-def _visit(p, r, ray, round_no, iso, grids, mem, slack, hit, scratch, gstack, tested):
+def _visit(p, r, ray, round_no, iso, mem, slack, hit, scratch, tested):
     """Intersect patch ``p`` for ray ``r`` if it was built in the previous round; False if
     it is unbuilt. (A function, not a closure of the kernel: a closure over the bundles
     named inside the kernel lost its writes, with Numba 0.68.)"""
@@ -210,27 +144,20 @@ def _visit(p, r, ray, round_no, iso, grids, mem, slack, hit, scratch, gstack, te
             iso.touched[s] = 1
             tested[r] += intersect_patch(ray, p, s, iso, mem, slack, hit, scratch)
         return True
-    s = grids.patch_slot[p]
-    if s < 0:
-        return False
-    if grids.slot_round[s] == round_no - 1:
-        ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz = ray
-        _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, grids, slack, hit,
-                        gstack, scratch[3], scratch[4])
-    return True
+    return False
 
 
 @nb.njit(cache=True, nogil=True, _nrt=False, error_model="numpy")  # see jit.leaf_njit
 def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, tiles_t,
-                shell_min, shell_max, grids_t, iso_t, mems_t, scratches, cands_t, slack, hits_t,
+                shell_min, shell_max, iso_t, mems_t, scratches, cands_t, slack, hits_t,
                 request, tested):
     """The bands of rays ``bands`` (band k: rays[bands[k]:bands[k+1]]) on thread ``task``,
     with its memo and scratch buffers; the ``*_t`` are :func:`trace_round`'s bundles as
     plain tuples, named again here."""
-    bvh, tiles, grids = BVH(*bvh_t), Tiles(*tiles_t), GridArrays(*grids_t)
+    bvh, tiles = BVH(*bvh_t), Tiles(*tiles_t)
     iso, cands, hits = PieceArrays(*iso_t), Candidates(*cands_t), Hits(*hits_t)
     mem = Memo(*mems_t[task])
-    stack, stack_t, gstack, work, st, st_t, ent_t, ent_i, lv, lp, hit = scratches[task]
+    stack, stack_t, work, st, st_t, ent_t, ent_i, lv, lp, hit = scratches[task]
     scratch = (work, st, st_t, ent_t, ent_i, lv, lp)
     projected = len(tiles.off) > 1
     for band in range(len(bands) - 1):
@@ -286,8 +213,8 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
                     te = box_entry(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, 0.0,
                                    hit[H_T])
                 j += 1
-                if te < np.inf and not _visit(p, r, ray, round_no, iso, grids, mem, slack, hit,
-                                              scratch, gstack, tested):
+                if te < np.inf and not _visit(p, r, ray, round_no, iso, mem, slack, hit, scratch,
+                                              tested):
                     # unbuilt: a candidate (rewritten in place when remembered: n_c < j), the
                     # nearest one the request
                     if n_c < CANDIDATES:

@@ -1,15 +1,14 @@
 """What the trace kernels read and grow between rounds: growable stores with named kernel views.
 
-* :class:`Pieces`: every Catmull-Clark patch built so far, as the kernels intersect it per
-  ray. A *slot* per patch (its first item, item count, the round it was built in, whether a
-  ray has tested it) and its *items* (contiguous): regular Bezier pieces over dyadic squares
-  of the patch, and cells of exact limit points, each with its grid depth and how its four
-  sides are sampled. A regular patch is one item, ready from the start (round -1); an
-  irregular patch is built on request into pieces (``patches/isolate.py``). Kernel view:
-  :class:`PieceArrays`.
-* :class:`LoopGrids`: grid points, normals and quadtree boxes of built Loop patches, and
-  their slots; with the read-only :class:`LeafTables` (leaf corners and grid parameters of
-  every depth) the kernel view :class:`GridArrays`.
+* :class:`Pieces`: every patch built so far, as the kernels intersect it per ray. A *slot*
+  per patch (its first item, item count, the round it was built in, whether a ray has
+  tested it) and its *items* (contiguous): regular Bezier pieces over dyadic squares of the
+  patch, and cells of exact limit points, each with its grid depth and how its four sides
+  are sampled; for Loop patches, quartic triangular nets over dyadic sub-triangles and
+  triangular cells (``trace/tris.py``). A regular Catmull-Clark patch is one item, ready
+  from the start (round -1); a regular Loop patch is one net, an irregular patch of either
+  scheme several items (``patches/isolate.py``, ``patches/isolate_loop.py``), built on
+  request. Kernel view: :class:`PieceArrays`.
 * :class:`Memos`: each thread's memo of the Bezier nets its rays split
   (``trace/bezier.py``); kernel view: one :class:`Memo` per thread.
 * :class:`Candidates`: per ray, the unbuilt shells it entered before its best hit.
@@ -21,17 +20,16 @@ fields by name at no cost, so no kernel reads a bundle by position.
 
 from __future__ import annotations
 
-import functools
 from typing import NamedTuple
 
 import numpy as np
 
 from subtrace import config
 from subtrace.patches.basis import BOX_PAD, net_bounds
-from subtrace.patches.grids import grid_params, leaf_corners
 from subtrace.patches.isolate import item_sides, rest_boxes
 from subtrace.trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
-from subtrace.trace.tris import TRI
+from subtrace.patches.isolate_loop import sample_ranges, side_samples
+from subtrace.trace.tris import LOOP_CELL, TRI, tri_nets_as_pieces
 
 CANDIDATES = 8  # unbuilt shells a ray remembers between rounds (more: it traverses again)
 
@@ -45,7 +43,8 @@ class PieceArrays(NamedTuple):
     round: np.ndarray  # (S,) int64: round it was built in (-1: from the start)
     depth_i: np.ndarray  # (I,) int64: grid depth, in the patch's units
     side: np.ndarray  # (I,4) int64: sampling depth of each side, in the patch's units
-    kind: np.ndarray  # (I,) int8: 0 Bezier piece, 1 cell, 2 (TRI) Loop triangular net
+    # (I,) int8: 0 Bezier piece, 1 cell, 2 (TRI) Loop triangular net, 3 (LOOP_CELL) Loop cell
+    kind: np.ndarray
     ref: np.ndarray  # (I,) int64: row in nets (piece) or cells (cell, 4 rows each)
     level: np.ndarray  # (I,) int64: the item's level
     i0: np.ndarray  # (I,) int64: origin in units of 2^-level
@@ -58,26 +57,8 @@ class PieceArrays(NamedTuple):
     cells: np.ndarray  # (., 3) float64: cell corners, 4 rows per cell
     cell_normals: np.ndarray  # (., 4, 3) float64: exact limit normals at the corners
     touched: np.ndarray  # (S,) uint8: set when a ray tests the slot
-
-
-class GridArrays(NamedTuple):
-    """The kernels' view of :class:`LoopGrids` and :class:`LeafTables` (G slots)."""
-
-    patch_slot: np.ndarray  # (P,) int64: slot of each patch, -1 while unbuilt
-    slot_patch: np.ndarray  # (G,) int64
-    slot_depth: np.ndarray  # (G,) int64: the grid's depth
-    slot_quad: np.ndarray  # (G,) bool
-    slot_vert_off: np.ndarray  # (G,) int64: first grid point in verts
-    slot_node_off: np.ndarray  # (G,) int64: first quadtree box in node_lo / node_hi
-    slot_round: np.ndarray  # (G,) int64: round it was built in
-    verts: np.ndarray  # (., 3) float64: grid points
-    normals: np.ndarray  # (., 3) float32: exact limit normals at the grid points
-    node_lo: np.ndarray  # (., 3) float64: quadtree boxes (level l at (4^l - 1) / 3)
-    node_hi: np.ndarray  # (., 3) float64
-    lc_off: np.ndarray  # (D+1, 2) int64: first leaf of (depth, quad) in lc_data
-    lc_data: np.ndarray  # (., 4) int32: leaf corners (a triangle's 4th is -1)
-    uv_off: np.ndarray  # (D+1, 2) int64: first point of (depth, quad) in uv_data
-    uv_data: np.ndarray  # (., 2) float64: grid parameters
+    orient: np.ndarray  # (I,) int8: a Loop item's orientation, +1 upright, -1 turned
+    samples: np.ndarray  # (., 3) float64: exact samples of isolated Loop patches' sides
 
 
 class Memo(NamedTuple):
@@ -107,12 +88,11 @@ class Hits(NamedTuple):
     written for it)."""
 
     t: np.ndarray  # (R,) float64: distance from the eye along the unit direction
-    # (R,) int64: a Loop grid's slot (>= 0), or -2 - the Catmull-Clark patch (<= -2)
-    prim: np.ndarray
-    leaf: np.ndarray  # (R,) int64: the grid's micro-face; Catmull-Clark: the grid depth
-    item: np.ndarray  # (R,) int64: the micro-face's triangle (0, 1); Catmull-Clark: the item
-    a: np.ndarray  # (R,) float64: barycentric of the second corner; Catmull-Clark: u
-    b: np.ndarray  # (R,) float64: barycentric of the third corner; Catmull-Clark: v
+    prim: np.ndarray  # (R,) int64: -2 - the patch hit (-1: none)
+    leaf: np.ndarray  # (R,) int64: the grid depth of the item hit (in its patch's units)
+    item: np.ndarray  # (R,) int64: the item hit
+    a: np.ndarray  # (R,) float64: the patch parameter u
+    b: np.ndarray  # (R,) float64: the patch parameter v
 
 
 def candidate_lists(n_rays: int) -> Candidates:
@@ -125,36 +105,6 @@ def hit_arrays(n_rays: int) -> Hits:
     """Hit records for ``n_rays`` rays (round 0 sets every ray's)."""
     return Hits(np.empty(n_rays), np.empty(n_rays, np.int64), np.empty(n_rays, np.int64),
                 np.empty(n_rays, np.int64), np.empty(n_rays), np.empty(n_rays))
-
-
-class LeafTables:
-    """Leaf corners and grid parameters of every (depth, quad), concatenated for kernels."""
-
-    def __init__(self, max_depth: int):
-        D = max_depth + 1
-        self.lc_off = np.zeros((D, 2), dtype=np.int64)
-        self.uv_off = np.zeros((D, 2), dtype=np.int64)
-        lcs, uvs = [], []
-        n_lc = n_uv = 0
-        for d in range(D):
-            for q in (0, 1):
-                lc = leaf_corners(d, bool(q))
-                pad = np.full((len(lc), 4), -1, dtype=np.int32)
-                pad[:, : lc.shape[1]] = lc
-                self.lc_off[d, q] = n_lc
-                self.uv_off[d, q] = n_uv
-                lcs.append(pad)
-                uvs.append(grid_params(d, bool(q)))
-                n_lc += len(pad)
-                n_uv += len(uvs[-1])
-        self.lc_data = np.ascontiguousarray(np.concatenate(lcs))
-        self.uv_data = np.ascontiguousarray(np.concatenate(uvs))
-
-
-@functools.lru_cache(maxsize=4)
-def leaf_tables(max_depth: int) -> LeafTables:
-    """The (read-only) tables up to ``max_depth``, made once per process."""
-    return LeafTables(max_depth)
 
 
 def grown(a, n_used, size):
@@ -219,43 +169,8 @@ class Growable:
         return start
 
 
-class LoopGrids(Growable):
-    """Grid points, normals and quadtree boxes of built Loop patches, and their slots."""
-
-    GROUPS = {
-        "rows": {"verts": ((3,), np.float64), "normals": ((3,), np.float32)},
-        "nodes": {"node_lo": ((3,), np.float64), "node_hi": ((3,), np.float64)},
-        "slots": {"slot_patch": ((), np.int64), "slot_depth": ((), np.int64),
-                  "slot_quad": ((), np.bool_), "slot_vert_off": ((), np.int64),
-                  "slot_node_off": ((), np.int64), "slot_round": ((), np.int64)},
-    }
-
-    def __init__(self, n_patches):
-        super().__init__()
-        self.patch_slot = np.full(n_patches, -1, dtype=np.int64)
-
-    def append(self, patches, depth, quad, P, N, lo, hi, round_no):
-        m = len(patches)
-        G = P.shape[1]
-        K = lo.shape[1]
-        v0 = self.put("rows", verts=P.reshape(-1, 3), normals=N.reshape(-1, 3))
-        n0 = self.put("nodes", node_lo=lo.reshape(-1, 3), node_hi=hi.reshape(-1, 3))
-        ar = np.arange(m, dtype=np.int64)
-        s0 = self.put("slots", slot_patch=patches, slot_depth=np.full(m, depth),
-                      slot_quad=np.full(m, quad), slot_vert_off=v0 + G * ar,
-                      slot_node_off=n0 + K * ar, slot_round=np.full(m, round_no))
-        self.patch_slot[patches] = s0 + ar
-
-    def view(self, tables: LeafTables) -> GridArrays:
-        a = self.a
-        return GridArrays(self.patch_slot, a["slot_patch"], a["slot_depth"], a["slot_quad"],
-                          a["slot_vert_off"], a["slot_node_off"], a["slot_round"], a["verts"],
-                          a["normals"], a["node_lo"], a["node_hi"], tables.lc_off,
-                          tables.lc_data, tables.uv_off, tables.uv_data)
-
-
 class Pieces(Growable):
-    """Every Catmull-Clark patch built so far, in slots of items (module doc)."""
+    """Every patch built so far, in slots of items (module doc)."""
 
     GROUPS = {
         "slots": {"patch": ((), np.int64), "first": ((), np.int64), "count": ((), np.int64),
@@ -264,9 +179,10 @@ class Pieces(Growable):
                   "i0": ((), np.int64), "j0": ((), np.int64), "depth_i": ((), np.int64),
                   "side": ((4,), np.int64), "lo": ((3,), np.float64),
                   "hi": ((3,), np.float64), "rest_lo": ((3,), np.float64),
-                  "rest_hi": ((3,), np.float64)},
+                  "rest_hi": ((3,), np.float64), "orient": ((), np.int8)},
         "nets": {"nets": ((4, 4, 3), np.float64)},
         "cells": {"cells": ((4, 3), np.float64), "normals": ((4, 3), np.float64)},
+        "samples": {"samples": ((3,), np.float64)},
     }
 
     def __init__(self, n_patches):
@@ -348,17 +264,69 @@ class Pieces(Growable):
         n0 = self.put("nets", nets=nets)
         i_start = self.put("items", kind=np.full(m, TRI, np.int8), ref=n0 + ar, level=z, i0=z,
                            j0=z, depth_i=depth, side=side, lo=lo, hi=hi, rest_lo=lo,
-                           rest_hi=hi)
+                           rest_hi=hi, orient=np.ones(m, np.int8))
         s0 = self.put("slots", patch=patches, first=i_start + ar, count=np.ones(m, np.int64),
                       round=np.full(m, round_no))
         self.patch_iso[patches] = s0 + ar
+
+    def append_loop(self, patches, depth, side, subs, cells, round_no):
+        """Slots for irregular Loop patches isolated to grid depths ``depth`` (m,) in round
+        ``round_no``: ``subs`` and ``cells`` from
+        :func:`~subtrace.patches.isolate_loop.build_loop_isolated` (pieces: item kind
+        ``TRI``, traced per ray; cells: ``LOOP_CELL``), ``side`` (m,3) the sampling depth
+        of each side's edge (-1: none). A side sampled more coarsely than ``depth`` is
+        snapped onto the coarse polyline through its exact samples
+        (:func:`~subtrace.patches.isolate_loop.side_samples`, kept in ``samples``). Items
+        go coarse levels first, so a ray skips a level and all finer ones on one box test.
+        Returns the numbers of pieces and cells."""
+        (sr, sl, si, sj, sg, nets15), (cr, ci, cj, cg, cp, cn) = subs, cells
+        side = np.asarray(side, dtype=np.int64).reshape(-1, 3)
+        depth = np.asarray(depth, dtype=np.int64)
+        samples, offset = side_samples(depth, side, subs, cells)  # (moves cp's corners)
+        s_lo, s_hi = sample_ranges(subs, cells, depth, side, offset, samples)
+        nets = tri_nets_as_pieces(nets15)
+        cp4 = np.concatenate([cp, cp[:, 2:3]], axis=1)  # (4 rows a cell; the 4th repeats)
+        cn4 = np.concatenate([cn, cn[:, 2:3]], axis=1)
+        lo = np.concatenate([nets.min(axis=(1, 2)), cp.min(axis=1)])
+        hi = np.concatenate([nets.max(axis=(1, 2)), cp.max(axis=1)])
+        lo, hi = np.minimum(lo, s_lo), np.maximum(hi, s_hi)
+        pad = BOX_PAD * np.maximum(np.abs(lo), np.abs(hi)).max(axis=1, keepdims=True)
+        lo, hi = lo - pad, hi + pad  # (widened for rounding, as basis.net_box)
+        root = np.r_[sr, cr]
+        level = np.r_[sl, depth[cr]]
+        order = np.lexsort((level, root))
+        count = np.bincount(root, minlength=len(patches))
+        first = np.cumsum(count) - count
+        lo, hi = np.ascontiguousarray(lo[order]), np.ascontiguousarray(hi[order])
+        rest_lo, rest_hi = np.empty_like(lo), np.empty_like(hi)
+        rest_boxes(first, count, lo, hi, rest_lo, rest_hi)
+        s0 = self.put("samples", samples=samples) if len(samples) else 0
+        item_side = np.empty((len(root), 4), np.int64)
+        item_side[:, :3] = side[root[order]]
+        item_side[:, 3] = np.where(offset >= 0, s0 + offset, -1)[root[order]]
+        n0 = self.put("nets", nets=nets)
+        c0 = self.put("cells", cells=cp4, normals=cn4)
+        i_start = self.put(
+            "items",
+            kind=np.r_[np.full(len(sr), TRI, np.int8), np.full(len(cr), LOOP_CELL,
+                                                               np.int8)][order],
+            ref=np.r_[n0 + np.arange(len(sr)), c0 + np.arange(len(cr))][order],
+            level=level[order], i0=np.r_[si, ci][order], j0=np.r_[sj, cj][order],
+            depth_i=depth[root][order], side=item_side, lo=lo, hi=hi,
+            rest_lo=rest_lo, rest_hi=rest_hi, orient=np.r_[sg, cg].astype(np.int8)[order],
+        )
+        s0 = self.put("slots", patch=patches, first=i_start + first, count=count,
+                      round=np.full(len(patches), round_no))
+        self.patch_iso[patches] = s0 + np.arange(len(patches))
+        return len(sr), len(cr)
 
     def view(self) -> PieceArrays:
         a = self.a
         return PieceArrays(self.patch_iso, a["first"], a["count"], a["round"], a["depth_i"],
                            a["side"], a["kind"], a["ref"], a["level"], a["i0"], a["j0"],
                            a["lo"], a["hi"], a["rest_lo"], a["rest_hi"], a["nets"],
-                           a["cells"].reshape(-1, 3), a["normals"], a["touched"])
+                           a["cells"].reshape(-1, 3), a["normals"], a["touched"], a["orient"],
+                           a["samples"])
 
 
 class Memos:

@@ -1,4 +1,4 @@
-"""Ray / regular-Loop-patch intersection by per-ray refinement of its quartic Bezier net.
+"""Ray / Loop-patch intersection by per-ray refinement of quartic triangular Bezier nets.
 
 A regular Loop triangle (three smooth valence-6 corners, or a regular boundary: see
 ``lines.items.loop_regular``) is one quartic triangular Bezier net of 15 points
@@ -15,13 +15,25 @@ makes the ray split on the spot (:func:`descend_tri`), which changes no hit.
 A node at level ``l`` is the sub-triangle with corners ``A, A + g (h, 0), A + g (0, h)`` of
 the depth-``d`` grid (``h = 2^(d-l)``, ``g = +1`` upright, ``-1`` turned), grid vertex
 ``(i, j)`` at patch parameter ``(i/N, j/N)``, ``N = 2^d`` (as ``patches/grids.py``). A leaf
-is the micro-triangle of its three grid vertices, each evaluated exactly from the patch's
-own root net by one function (:func:`grid_point`), so every cell computes a shared corner
-bit-identically. Watertight against neighbours of other depths as the Loop grids are: a
-grid vertex on a side whose edge is sampled more coarsely (``side`` depth < d, the
-shallowest patch on the edge) is snapped onto the coarse polyline (linear interpolation of
-the two coarse samples around it), so the finer side's boundary lies on the coarser side's
-triangles' edges.
+is the micro-triangle of its three grid vertices, each evaluated exactly from the item's
+own net by one function (:func:`grid_point`), so every cell of the item computes a shared
+corner bit-identically.
+
+An irregular Loop triangle is isolated when a ray first asks for it
+(``patches/isolate_loop.py``): its regular descendants are *pieces*, each one such net over
+a dyadic sub-triangle of the patch (level ``l``, corner ``A``, orientation ``g``: the item's
+*frame*), descended exactly as above from that node down to the patch's grid depth (every
+item of a patch has the same depth, so the patch's inner edges are sampled alike from both
+sides); what stays irregular at that depth is *cells* (kind ``LOOP_CELL``), micro-triangles
+of exact limit points (:func:`intersect_tri_cell`).
+
+Watertight against neighbours of other depths: a grid vertex on a patch side whose edge is
+sampled more coarsely (``side`` depth < d, the shallowest patch on the edge) is snapped
+onto the coarse polyline (linear interpolation of the two coarse samples around it), so the
+finer side's boundary lies on the coarser side's triangles' edges. A regular patch
+evaluates the coarse samples from its own net; a piece's side may be shorter than a coarse
+segment, so an isolated patch keeps its snapped sides' exact samples (``samples``) and
+its pieces and cells take them from there.
 """
 
 from __future__ import annotations
@@ -39,7 +51,8 @@ from subtrace.trace.prims import (
     push_sorted, ray_triangle,
 )
 
-TRI = 2  # item kind of a regular Loop patch's net in ``trace.pools.Pieces``
+TRI = 2  # item kind of a Loop net (a regular patch, or a piece) in ``trace.pools.Pieces``
+LOOP_CELL = 3  # item kind of a cell of exact limit points of an isolated Loop patch
 COUNTED = -3  # memo root of a one-cell patch whose triangle was counted (as bezier's)
 
 
@@ -135,29 +148,60 @@ def _side_vertex(t, N, k):
 
 
 @leaf_njit
-def grid_point(net, q, gi, gj, depth, sides, srow):
-    """Grid vertex (gi, gj) of the depth-``depth`` grid of the Loop patch with net
-    ``net[q]``: its exact limit point, or, on a side sampled more coarsely
-    (``0 <= sides[srow, k] < depth``), the point of the coarse polyline there."""
+def _side_base(sides, srow, depth, k):
+    """First row in the side samples of side ``k``'s: row ``sides[srow, 3]`` and on, side
+    after side, ``2^de + 1`` for each snapped side (``0 <= de < depth``)."""
+    base = sides[srow, 3]
+    for m in range(k):
+        de = sides[srow, m]
+        if 0 <= de < depth:
+            base += (1 << de) + 1
+    return base
+
+
+@leaf_njit
+def grid_point(net, q, gi, gj, depth, fr, sides, srow, samples):
+    """Grid vertex (gi, gj) of the depth-``depth`` grid of the Loop patch of the item whose
+    net is ``net[q]`` (its frame ``fr`` = (g, oi, oj, sh): the item's corner A = (oi, oj) in
+    grid units, its orientation g and its own grid depth sh: the net's (s, t) are
+    ``g (gi - oi, gj - oj) 2^-sh``): its exact limit point, or, on a patch side sampled more
+    coarsely (``0 <= sides[srow, k] < depth``), the point of the coarse polyline there, from
+    the side's exact samples ``samples`` when the item has them (``sides[srow, 3] >= 0``:
+    a piece of an isolated patch, ``patches/isolate_loop.py``), else from its own net."""
     N = 1 << depth
-    inv = 1.0 / N
     for k in range(3):
         on, t = _side_param(gi, gj, N, k)
         de = sides[srow, k]
         if on and 0 <= de < depth:
             r = 1 << (depth - de)
             t0 = (t // r) * r
+            if sides[srow, 3] >= 0:
+                b = _side_base(sides, srow, depth, k) + t // r
+                if t0 == t:
+                    return samples[b, 0], samples[b, 1], samples[b, 2]
+                w = (t - t0) / r
+                return ((1.0 - w) * samples[b, 0] + w * samples[b + 1, 0],
+                        (1.0 - w) * samples[b, 1] + w * samples[b + 1, 1],
+                        (1.0 - w) * samples[b, 2] + w * samples[b + 1, 2])
             if t0 == t:
                 break  # a coarse sample itself
             t1 = min(t0 + r, N)
             w = (t - t0) / r
             a0, b0 = _side_vertex(t0, N, k)
             a1, b1 = _side_vertex(t1, N, k)
-            x0, y0, z0 = tri_point(net, q, a0 * inv, b0 * inv)
-            x1, y1, z1 = tri_point(net, q, a1 * inv, b1 * inv)
+            x0, y0, z0 = _frame_point(net, q, a0, b0, fr)
+            x1, y1, z1 = _frame_point(net, q, a1, b1, fr)
             return ((1.0 - w) * x0 + w * x1, (1.0 - w) * y0 + w * y1,
                     (1.0 - w) * z0 + w * z1)
-    return tri_point(net, q, gi * inv, gj * inv)
+    return _frame_point(net, q, gi, gj, fr)
+
+
+@leaf_njit
+def _frame_point(net, q, gi, gj, fr):
+    """Point of net ``net[q]`` at grid vertex (gi, gj) in its item's frame ``fr``."""
+    g, oi, oj, sh = fr
+    inv = 1.0 / (1 << sh)
+    return tri_point(net, q, g * (gi - oi) * inv, g * (gj - oj) * inv)
 
 
 @leaf_njit
@@ -188,14 +232,14 @@ def _tri_entry(ox, oy, oz, ix, iy, iz, w, q, tmax):
 
 
 @leaf_njit
-def _tri_points(net, q, gi, gj, g, depth, sides, srow, out, r0):
+def _tri_points(net, q, gi, gj, g, depth, fr, sides, srow, samples, out, r0):
     """The corners (gi, gj), (gi + g, gj), (gi, gj + g) of a micro-triangle of the patch's
     depth-``depth`` grid (:func:`grid_point`) into ``out[r0:r0+3]``."""
     for c in range(3):
         a = gi + (g if c == 1 else 0)
         b = gj + (g if c == 2 else 0)
-        out[r0 + c, 0], out[r0 + c, 1], out[r0 + c, 2] = grid_point(net, q, a, b, depth, sides,
-                                                                    srow)
+        out[r0 + c, 0], out[r0 + c, 1], out[r0 + c, 2] = grid_point(net, q, a, b, depth, fr,
+                                                                    sides, srow, samples)
 
 
 @leaf_njit
@@ -247,12 +291,14 @@ def _child(g, i, j, lev, depth, q):
 
 
 @leaf_njit
-def descend_tri(ray, src, s, g0, i0, j0, lev0, nets, nk, depth, sides, srow, slack, hit, code,
-                item, work, st, st_t, st0, tmp_t, order, lv):
-    """Closest hit on the node (g0, i0, j0, lev0) of the regular Loop patch whose quartic
-    net is ``nets[nk]`` ((.,4,4,3) stores: the first 15 points), its own net ``src[s]``,
+def descend_tri(ray, src, s, g0, i0, j0, lev0, nets, nk, depth, fr, sides, srow, samples,
+                slack, hit, code, item, work, st, st_t, st0, tmp_t, order, lv):
+    """Closest hit on the node (g0, i0, j0, lev0) of the Loop item (a regular patch, or a
+    piece of an isolated one: frame ``fr``, :func:`grid_point`) whose quartic net is
+    ``nets[nk]`` ((.,4,4,3) stores: the first 15 points), its own net ``src[s]``,
     refined per ray down to the grid depth ``depth``, storing nothing; updates ``hit``.
-    ``sides[srow]``: the sampling depth of each side's edge (-1: none). ``work`` (>=
+    ``sides[srow]``: the sampling depth of each patch side's edge (-1: none) and the first
+    of its side samples in ``samples`` (-1: none). ``work`` (>=
     3*depth+5 nets), rows ``st0 ..`` of the stack ``st`` (>= 3*depth+1 of them) with entry
     distances ``st_t``, ``tmp_t`` / ``order`` (4,) and ``lv`` (>= 3, 3) are scratch.
     Returns the number of micro-triangles tested."""
@@ -275,7 +321,7 @@ def descend_tri(ray, src, s, g0, i0, j0, lev0, nets, nk, depth, sides, srow, sla
             continue
         g, i, j, lev = st[st0 + sp, 0], st[st0 + sp, 2], st[st0 + sp, 3], st[st0 + sp, 4]
         if lev == depth:
-            _tri_points(root, nk, i, j, g, depth, sides, srow, lv, 0)
+            _tri_points(root, nk, i, j, g, depth, fr, sides, srow, samples, lv, 0)
             _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, 0, i, j, g, depth, slack, hit, code,
                      item)
             tested += 1
@@ -340,9 +386,12 @@ def _expand_tri(node, lev, depth, mem, work):
 # corners snapped to coarser sides, no fans), and a shared loop would need the node kind
 # tested at every step of the per-ray path.
 @inline_njit
-def intersect_tri(ray, it, nets, nk, depth, sides, slack, hit, code, mem, scratch):
-    """Closest hit on the regular Loop patch of item ``it`` (its quartic net ``nets[nk]``,
-    grid depth ``depth``, side sampling ``sides[it]``) nearer than hit[H_T]; updates ``hit``.
+def intersect_tri(ray, it, nets, nk, depth, fr, sides, samples, slack, hit, code, mem,
+                  scratch):
+    """Closest hit on the Loop item ``it`` (its quartic net ``nets[nk]``, grid depth
+    ``depth``, frame ``fr`` = (g, oi, oj, sh), :func:`grid_point`: a regular patch is
+    (1, 0, 0, depth); side sampling ``sides[it]`` and side samples ``samples``) nearer than
+    hit[H_T]; updates ``hit``.
     The ray descends the patch's 1-to-4 splits nearest first into the nodes whose boxes it
     enters; a node is split (its children's boxes and nets stored) once per thread, a cell's
     corners evaluated once, in the thread's memo ``mem`` (``trace/bezier.py``; a cell keeps 3
@@ -355,14 +404,15 @@ def intersect_tri(ray, it, nets, nk, depth, sides, slack, hit, code, mem, scratc
     root = nets.reshape((nets.shape[0], 16, 3))
     node = root_m[it]
     if node < 0:
-        if cnt[M_NODES] + 1 > len(child) or cnt[M_NETS] + 1 > len(m_nets) or depth == 0:
-            if depth > 0:
+        if cnt[M_NODES] + 1 > len(child) or cnt[M_NETS] + 1 > len(m_nets) or fr[3] == 0:
+            if fr[3] > 0:
                 cnt[M_FULL] = 1
-            one, zero = np.int64(1), np.int64(0)
-            n_t = descend_tri(ray, nets, nk, one, zero, zero, zero, nets, nk, depth, sides, it,
-                              slack, hit, code, it, work, st, st_t, zero, tmp_t, order, lv)
-            if depth > 0 or node == NOT_YET:  # a one-cell patch counts once per thread
-                if depth == 0:
+            zero = np.int64(0)
+            n_t = descend_tri(ray, nets, nk, fr[0], fr[1], fr[2], depth - fr[3], nets, nk,
+                              depth, fr, sides, it, samples, slack, hit, code, it, work, st,
+                              st_t, zero, tmp_t, order, lv)
+            if fr[3] > 0 or node == NOT_YET:  # a one-cell item counts once per thread
+                if fr[3] == 0:
                     root_m[it] = COUNTED
                 return n_t
             return 0
@@ -375,7 +425,7 @@ def intersect_tri(ray, it, nets, nk, depth, sides, slack, hit, code, mem, scratc
         data[node] = row
         root_m[it] = node
     # stack rows: node, orientation, i, j, level; st_t: entry distance when pushed
-    st[0, 0], st[0, 1], st[0, 2], st[0, 3], st[0, 4] = node, 1, 0, 0, 0
+    st[0, 0], st[0, 1], st[0, 2], st[0, 3], st[0, 4] = node, fr[0], fr[1], fr[2], depth - fr[3]
     st_t[0] = 0.0
     sp = 1
     tested = 0
@@ -390,7 +440,8 @@ def intersect_tri(ray, it, nets, nk, depth, sides, slack, hit, code, mem, scratc
                 if cnt[M_CELLS] < len(m_cells) // 4:
                     r = data[node] = cnt[M_CELLS]
                     cnt[M_CELLS] = r + 1
-                    _tri_points(root, nk, i, j, g, depth, sides, it, m_cells, 4 * r)
+                    _tri_points(root, nk, i, j, g, depth, fr, sides, it, samples, m_cells,
+                                4 * r)
                     tested += 1
                 else:
                     cnt[M_FULL] = 1
@@ -398,7 +449,7 @@ def intersect_tri(ray, it, nets, nk, depth, sides, slack, hit, code, mem, scratc
                 _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, m_cells, 4 * r, i, j, g, depth,
                          slack, hit, code, it)
             else:  # no room: evaluated on the spot
-                _tri_points(root, nk, i, j, g, depth, sides, it, lv, 0)
+                _tri_points(root, nk, i, j, g, depth, fr, sides, it, samples, lv, 0)
                 _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, 0, i, j, g, depth, slack, hit,
                          code, it)
                 tested += 1
@@ -408,8 +459,8 @@ def intersect_tri(ray, it, nets, nk, depth, sides, slack, hit, code, mem, scratc
             c = _expand_tri(node, lev, depth, mem, work)
             if c < 0:  # a store is full: split per ray below this node
                 tested += descend_tri(ray, m_nets, data[node], g, i, j, lev, nets, nk, depth,
-                                      sides, it, slack, hit, code, it, work, st, st_t, sp + 1,
-                                      tmp_t, order, lv)
+                                      fr, sides, it, samples, slack, hit, code, it, work, st,
+                                      st_t, sp + 1, tmp_t, order, lv)
                 continue
         # the children the ray enters, pushed far to near
         n = 0
@@ -431,6 +482,17 @@ def intersect_tri(ray, it, nets, nk, depth, sides, slack, hit, code, mem, scratc
             st_t[sp] = tmp_t[e]
             sp += 1
     return tested
+
+
+@leaf_njit
+def intersect_tri_cell(ray, cells, c, gi, gj, g, depth, slack, hit, code, item):
+    """Intersect the Loop cell ``cells[4c : 4c+3]`` (corners (gi, gj), (gi + g, gj),
+    (gi, gj + g) of its patch's depth-``depth`` grid: exact limit points, moved onto a
+    coarser neighbour's polyline on a snapped side when the patch was built); update
+    ``hit`` as :func:`_tri_hit`."""
+    ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz = ray
+    _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, cells, 4 * c, gi, gj, g, depth, slack, hit,
+             code, item)
 
 
 def tri_nets_as_pieces(nets15: np.ndarray) -> np.ndarray:
