@@ -109,8 +109,9 @@ def distinct_cells(roots, childs, datas, kind, depth_i, level, sides):
             total += _walk(roots, childs, datas, it, depth_i[it] - level[it], False,
                            depth_i[it], sides, st_node, st_pos, par)
         elif kind[it] == TRI:
-            total += _walk(roots, childs, datas, it, depth_i[it], True, depth_i[it], sides,
-                           st_node, st_pos, par)
+            # (a Loop piece's tree starts at its level: depth - level levels to its cells)
+            total += _walk(roots, childs, datas, it, depth_i[it] - level[it], True,
+                           depth_i[it], sides, st_node, st_pos, par)
     return total
 
 
