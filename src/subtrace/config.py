@@ -83,6 +83,29 @@ STACK_SIZE = 128
 # triangle is far below anything visible) without letting rays through.
 TRI_SLACK = 1e-12
 
+# Free-form surfaces (nurbs/). Trim loops are closed when consecutive curves meet within
+# TRIM_CLOSURE_TOL of the surface's parameter range (the larger side of its rectangle), and lie
+# in its domain when they leave it by no more than that: CAD exporters write about 6 to 15
+# significant digits, so loops closed in the modeller meet to about 1e-6 of the range in the
+# file; the reader then closes the gap exactly (moves the next curve's first point).
+TRIM_CLOSURE_TOL = 1e-5
+# Largest degree of a free-form surface or curve (the exporters write 1 to 9; Bezier
+# extraction and the kernels' fixed-size buffers are sized by it).
+NURBS_MAX_DEGREE = 15
+# The trim kd-tree (nurbs/trimtree.py): a node with at most TRIM_LEAF_UNITS monotone curve
+# units is a leaf; empty space of more than TRIM_EMPTY_FRACTION of a node's side is cut off
+# first as an empty leaf (classified once, inside or outside); no node is deeper than
+# TRIM_MAX_DEPTH (the traversal's fixed stack holds TRIM_STACK_SIZE nodes, more than enough).
+# The patent's leaf-size stops (relative area 0.0006, relative side 0.025) are not used: at
+# 10,000 units they leave about 80 units in each leaf along the loop (BENCHMARKS.md).
+TRIM_LEAF_UNITS = 4
+TRIM_EMPTY_FRACTION = 0.25
+TRIM_MAX_DEPTH = 48
+TRIM_STACK_SIZE = 128
+# Halvings of the exact crossing test of a monotone unit whose box straddles the query
+# point: each halves the parameter interval; 64 reach the last bit of a double parameter.
+TRIM_BISECT_STEPS = 64
+
 # Memory budget of a render (``--max-memory``, ``[render] max_memory``). The default is this
 # fraction of the memory the kernel says is available when the render starts (MemAvailable:
 # free memory plus what the page cache can give back), or of the physical memory where that
