@@ -67,9 +67,10 @@ class TrimTree:
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
         out = np.empty(len(points), dtype=np.bool_)
         u = self.units
-        _classify_tree(self.node_box, self.node_axis, self.node_split, self.node_child,
-                       self.node_count, self.node_inside, u.ctrl, u.degree, u.p0, u.p1,
-                       points, out)
+        roots = np.zeros(len(points), dtype=np.int64)
+        classify_kernel(self.node_box, self.node_axis, self.node_split, self.node_child,
+                        self.node_count, self.node_inside, u.ctrl, u.degree, u.p0, u.p1,
+                        roots, points, out)
         return out
 
     @property
@@ -114,12 +115,12 @@ def crosses(ctrl, degree, p0, p1, px, py):
 
 
 @leaf_njit
-def _ray_parity(node_box, node_axis, node_child, node_count, ctrl, degree, p0, p1, px, py,
-                stack):
-    """Parity of the units of the tree crossing the ray from (px, py) towards +u."""
+def _ray_parity(node_box, node_axis, node_child, node_count, ctrl, degree, p0, p1, root, px,
+                py, stack):
+    """Parity of the units of the tree at ``root`` crossing the ray from (px, py) towards
+    +u; stack: int64 scratch of TRIM_STACK_SIZE."""
     inside = False
-    top = 0
-    stack[0] = 0
+    stack[0] = root
     top = 1
     while top > 0:
         top -= 1
@@ -139,25 +140,36 @@ def _ray_parity(node_box, node_axis, node_child, node_count, ctrl, degree, p0, p
     return inside
 
 
+@leaf_njit
+def trim_inside(node_box, node_axis, node_split, node_child, node_count, node_inside, ctrl,
+                degree, p0, p1, root, px, py, stack):
+    """True when (px, py) is inside the loops of the tree at node ``root`` (the per-point
+    test a trace kernel calls; arrays as :class:`TrimTree` lays them out, node and unit
+    indices absolute so several trees can share them); stack: TRIM_STACK_SIZE int64."""
+    # outside the units' box (half-open in v, as the unit test): no loop around the point
+    if not (node_box[root, 0] <= px <= node_box[root, 2]
+            and node_box[root, 1] <= py < node_box[root, 3]):
+        return False
+    # descend to the leaf holding the point: an empty leaf knows its answer
+    k = root
+    while node_axis[k] >= 0:
+        coordinate = px if node_axis[k] == 0 else py
+        k = node_child[k] + (0 if coordinate < node_split[k] else 1)
+    if node_count[k] == 0:
+        return node_inside[k]
+    return _ray_parity(node_box, node_axis, node_child, node_count, ctrl, degree, p0, p1,
+                       root, px, py, stack)
+
+
 @nb.njit(cache=True)
-def _classify_tree(node_box, node_axis, node_split, node_child, node_count, node_inside,
-                   ctrl, degree, p0, p1, points, out):
+def classify_kernel(node_box, node_axis, node_split, node_child, node_count, node_inside,
+                    ctrl, degree, p0, p1, roots, points, out):
+    """out[q] = :func:`trim_inside` of points[q] in the tree at roots[q]."""
     stack = np.empty(TRIM_STACK_SIZE, dtype=np.int64)
     for q in range(len(points)):
-        px, py = points[q, 0], points[q, 1]
-        # outside the units' box (half-open in v, as the unit test): no loop around it
-        if not (node_box[0, 0] <= px <= node_box[0, 2] and node_box[0, 1] <= py < node_box[0, 3]):
-            out[q] = False
-            continue
-        # descend to the leaf holding the point: an empty leaf knows its answer
-        k = 0
-        while node_axis[k] >= 0:
-            k = node_child[k] + (0 if points[q, node_axis[k]] < node_split[k] else 1)
-        if node_count[k] == 0:
-            out[q] = node_inside[k]
-        else:
-            out[q] = _ray_parity(node_box, node_axis, node_child, node_count, ctrl, degree,
-                                 p0, p1, px, py, stack)
+        out[q] = trim_inside(node_box, node_axis, node_split, node_child, node_count,
+                             node_inside, ctrl, degree, p0, p1, roots[q], points[q, 0],
+                             points[q, 1], stack)
 
 
 @nb.njit(cache=True)
@@ -360,4 +372,4 @@ def _ray_parities(node_box, node_axis, node_child, node_count, ctrl, degree, p0,
                   stack, out):
     for q in range(len(points)):
         out[q] = _ray_parity(node_box, node_axis, node_child, node_count, ctrl, degree, p0,
-                             p1, points[q, 0], points[q, 1], stack)
+                             p1, 0, points[q, 0], points[q, 1], stack)
