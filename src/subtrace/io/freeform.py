@@ -29,7 +29,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from subtrace.errors import NurbsError
-from subtrace.nurbs.knots import bezier_knots, check_bezier_params, check_degree, check_knots
+from subtrace.nurbs.knots import (
+    bezier_knots,
+    check_bezier_params,
+    check_degree,
+    check_knots,
+    check_nondecreasing,
+)
 from subtrace.nurbs.surface import NurbsSurface, make_surface
 from subtrace.nurbs.trim import TrimCurve, make_curve, make_loop
 
@@ -307,11 +313,7 @@ class FreeFormReader:
         try:
             if element.basis == "bezier" or len(values) < 2:
                 check_bezier_params(values, direction)
-            down = np.nonzero(np.diff(values) < 0)[0]
-            if len(down):
-                k = int(down[0])
-                raise NurbsError(f"parm {direction}: knot {k + 2} ({values[k + 1]:g}) is below "
-                                 f"knot {k + 1} ({values[k]:g}); knots must not decrease")
+            check_nondecreasing(values, direction)
         except NurbsError as err:
             self.fail(line, f"{element.kind}: {err}")
         return line, values

@@ -32,13 +32,7 @@ def check_knots(knots, degree: int, n_ctrl: int, direction: str = "u") -> None:
     than ``degree + 1`` times, and a domain of positive length."""
     knots = np.asarray(knots, dtype=np.float64)
     name = f"parm {direction}"
-    if not np.all(np.isfinite(knots)):
-        raise NurbsError(f"{name}: knots must be finite numbers")
-    down = np.nonzero(np.diff(knots) < 0)[0]
-    if len(down):
-        k = int(down[0])
-        raise NurbsError(f"{name}: knot {k + 2} ({knots[k + 1]:g}) is below knot {k + 1} "
-                         f"({knots[k]:g}); knots must not decrease")
+    check_nondecreasing(knots, direction)
     need = n_ctrl + degree + 1
     if len(knots) != need:
         raise NurbsError(f"{name} has {len(knots)} knots; a degree-{degree} B-spline with "
@@ -50,6 +44,19 @@ def check_knots(knots, degree: int, n_ctrl: int, direction: str = "u") -> None:
     if not knots[n_ctrl] > knots[degree]:
         raise NurbsError(f"{name}: the domain [knot {degree + 1}, knot {n_ctrl + 1}] = "
                          f"[{knots[degree]:g}, {knots[n_ctrl]:g}] is empty")
+
+
+def check_nondecreasing(knots, direction: str = "u") -> None:
+    """NurbsError unless the knots are finite and never decrease."""
+    knots = np.asarray(knots, dtype=np.float64)
+    name = f"parm {direction}"
+    if not np.all(np.isfinite(knots)):
+        raise NurbsError(f"{name}: knots must be finite numbers")
+    down = np.nonzero(np.diff(knots) < 0)[0]
+    if len(down):
+        k = int(down[0])
+        raise NurbsError(f"{name}: knot {k + 2} ({knots[k + 1]:g}) is below knot {k + 1} "
+                         f"({knots[k]:g}); knots must not decrease")
 
 
 def bezier_knots(params, degree: int) -> np.ndarray:

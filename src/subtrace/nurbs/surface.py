@@ -26,6 +26,7 @@ from subtrace.nurbs.knots import (
     check_bezier_params,
     check_degree,
     check_knots,
+    check_nondecreasing,
     control_count,
 )
 
@@ -66,7 +67,9 @@ def make_surface(degree, params_u, params_v, points, weights=None, domain=None,
         params = np.asarray(params, dtype=np.float64)
         if bezier:
             check_bezier_params(params, direction)
-        elif len(params) < 2 * d + 2:
+        else:
+            check_nondecreasing(params, direction)
+        if not bezier and len(params) < 2 * d + 2:
             raise NurbsError(f"parm {direction} has {len(params)} knots; a degree-{d} "
                              f"B-spline needs at least {2 * d + 2}")
         knots.append(params)
