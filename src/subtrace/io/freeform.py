@@ -258,11 +258,12 @@ class FreeFormReader:
 
     # -- the end of the file -------------------------------------------------------------
 
-    def finish(self, points, weight_tokens, material_ids) -> FreeForm | None:
+    def finish(self, points, point_lines, weight_tokens, material_ids) -> FreeForm | None:
         """Validate and convert everything read; None for a file without elements.
 
-        points (V, 3): the v coordinates; weight_tokens: v index (0-based) -> the w token of
-        v lines with one; material_ids: usemtl name -> material index."""
+        points (V, 3): the v coordinates, point_lines their lines; weight_tokens: v index
+        (0-based) -> the w token of v lines with one; material_ids: usemtl name -> material
+        index."""
         if self.open is not None and self.open.kind != "curv":
             self.fail(self.open.line, f"{self.open.kind} has no `end`")
         if not self.elements:
@@ -278,7 +279,8 @@ class FreeFormReader:
         surfaces, lines = [], []
         for element in self.elements:
             if element.kind == "surf":
-                surfaces.append(self._surface(element, points, weight_tokens, material_ids,
+                surfaces.append(self._surface(element, points, point_lines, weight_tokens,
+                                              material_ids,
                                               [curves[k] for k in range(len(order))]))
                 lines.append(element.line)
         return FreeForm(tuple(surfaces), tuple(lines), tuple(curves[k] for k in
@@ -336,13 +338,24 @@ class FreeFormReader:
                 check_knots(knots, degree, len(idx), "u")
             except NurbsError as err:
                 self.fail(line, f"curv2: {err}")
+        if element.rational:
+            self._check_weights(element, vp[idx, 2], idx, self.vp_lines, "vp", "curve")
         try:
             return make_curve(degree, knots, vp[idx, :2], vp[idx, 2] if element.rational
                               else None)
         except NurbsError as err:
             self.fail(element.line, f"curv2: {err}")
 
-    def _surface(self, element, points, weight_tokens, material_ids, curves):
+    def _check_weights(self, element, weights, idx, lines, keyword, what):
+        """ObjError at the element for the first weight that is not a positive number."""
+        bad = np.nonzero(~(weights > 0) | ~np.isfinite(weights))[0]
+        if len(bad):
+            k = int(bad[0])
+            self.fail(element.line, f"{element.kind}: control point {k + 1} (the {keyword} of "
+                                    f"line {lines[idx[k]]}) has weight {weights[k]:g}; weights "
+                                    f"of a rational {what} must be positive")
+
+    def _surface(self, element, points, point_lines, weight_tokens, material_ids, curves):
         idx = self._resolve(element, len(points), "vertex", "v")
         _, params_u = self._parm_values(element, "u")
         _, params_v = self._parm_values(element, "v")
@@ -356,11 +369,13 @@ class FreeFormReader:
                         weights[k] = float(token)
                     except ValueError:
                         weights[k] = math.nan
+            self._check_weights(element, weights, idx, point_lines, "v", "surface")
         try:
             surface = make_surface(element.degree, params_u, params_v, points[idx], weights,
                                    element.domain, bezier=element.basis == "bezier")
         except NurbsError as err:
-            self.fail(element.line, f"surf: {err}")
+            self.fail(element.line, str(err) if str(err).startswith("surf ")
+                      else f"surf: {err}")
         loops = []
         for line, hole, pieces, known in element.loops:
             keyword = "hole" if hole else "trim"

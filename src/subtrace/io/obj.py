@@ -706,7 +706,7 @@ class ObjReader:
         materials = tuple(Material(name, tuple(float(c) for c in rgb))
                           for name, rgb in diffuse.items())
         material_ids = {name: k for k, name in enumerate(diffuse)}
-        freeform = self.freeform.finish(points, self.point_w, material_ids)
+        freeform = self.freeform.finish(points, self.point_lines, self.point_w, material_ids)
         if local_ids:
             remap = np.array([material_ids[name] for name in local_ids], dtype=np.int32)
             face_material = np.where(face_material >= 0, remap[face_material], -1)
