@@ -24,7 +24,6 @@ from subtrace.nurbs.trim import (
     make_loop,
     monotone_units,
     project,
-    rectangle_loop,
     signed_area,
 )
 from subtrace.nurbs.trimtree import build_tree, classify_naive
@@ -447,6 +446,7 @@ def test_model_tables_and_trims():
     assert model.surface_trim.tolist()[0] == -1 and model.surface_trim[1] >= 0
     assert model.surface_trim[2] == -1 and model.surface_material.tolist() == [-1, 3, -1]
     assert model.surface_loops.tolist() == [[0, 0], [0, 1], [0, 0]]
+    assert model.surface_trim_invert.tolist() == [False, True, False]
     # the padding does not change the cylinder's patch
     P, _, _ = evaluate(model.nets, model.patch_degree, model.patch_rect, [8], [[0.3, 0.4]])
     assert abs(math.hypot(P[0, 0], P[0, 1]) - 1.0) <= 8 * EPS
@@ -455,6 +455,25 @@ def test_model_tables_and_trims():
     assert got.tolist() == [False, True, True, True]  # the hole, the rest, untrimmed
 
 
-def test_rectangle_loop_is_counter_clockwise():
-    loop = rectangle_loop((0.0, 2.0, 0.0, 1.0))
-    assert math.isclose(signed_area(loop), 2.0)
+def test_the_rectangle_and_its_sides_are_always_kept():
+    # an outer loop along the rectangle's sides is dropped; holes alone invert the tree:
+    # points on the sides (where the patches of a closed surface meet) stay inside
+    surface = quarter_cylinder()
+    domain = surface.domain
+    hole = make_loop([(0, 4, circle_curve(0.5, 0.5, 0.2))], True, domain)
+    edges = [make_curve(1, [0, 0, 1, 1], [a, b]) for a, b in
+             (([0, 0], [1, 0]), ([1, 0], [1, 1]), ([1, 1], [0, 1]), ([0, 1], [0, 0]))]
+    outer = make_loop([(0, 1, c) for c in edges], False, domain)
+    inner = make_loop([(0, 4, circle_curve(0.5, 0.5, 0.45))], False, domain)
+    variants = {"holes": (hole,), "rect + hole": (outer, hole),
+                "rect + loop + hole": (outer, inner, hole)}
+    sides = np.array([[0.0, 0.3], [1.0, 0.3], [0.3, 0.0], [0.3, 1.0], [1.0, 1.0], [0.0, 0.0],
+                      [0.5, 0.5], [0.5, 0.8]])
+    for name, loops in variants.items():
+        s = NurbsSurface(surface.degree, surface.knots_u, surface.knots_v, surface.control,
+                         domain, True, loops)
+        got = build_model([s]).inside(np.zeros(len(sides), np.int64), sides).tolist()
+        if name == "rect + loop + hole":  # the circle of radius 0.45 is the outline now
+            assert got == [False] * 6 + [False, True], name
+        else:
+            assert got == [True] * 6 + [False, True], name

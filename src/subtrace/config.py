@@ -96,9 +96,13 @@ NURBS_MAX_DEGREE = 15
 # units is a leaf; empty space of more than TRIM_EMPTY_FRACTION of a node's side is cut off
 # first as an empty leaf (classified once, inside or outside); no node is deeper than
 # TRIM_MAX_DEPTH (the traversal's fixed stack holds TRIM_STACK_SIZE nodes, more than enough).
-# The patent's leaf-size stops (relative area 0.0006, relative side 0.025) are not used: at
-# 10,000 units they leave about 80 units in each leaf along the loop (BENCHMARKS.md).
+# The patent's leaf-size stops (a leaf's area below TRIM_MIN_AREA of the tree's box, or its
+# longer side below TRIM_MIN_SIDE of the box's diagonal: 0.0006 and 0.025 there) are off by
+# default: they bound the depth, so long loops keep many units per leaf (benchmarks/trim.py
+# --patent-stops measures them; BENCHMARKS.md).
 TRIM_LEAF_UNITS = 4
+TRIM_MIN_AREA = 0.0
+TRIM_MIN_SIDE = 0.0
 TRIM_EMPTY_FRACTION = 0.25
 TRIM_MAX_DEPTH = 48
 TRIM_STACK_SIZE = 128

@@ -3,9 +3,15 @@
 :func:`build_model` converts every surface to rational Bezier patches
 (:func:`subtrace.nurbs.surface.bezier_patches`) and every surface's trim loops to one trim
 kd-tree (:func:`subtrace.nurbs.trimtree.build_tree`), then concatenates them (layout in
-:class:`NurbsModel` and the package comment of :mod:`subtrace.nurbs`). A surface with holes
-but no outer loop gets its parameter rectangle as the outer loop; one without loops has no
-tree (``surface_trim`` -1: all of its rectangle is kept).
+:class:`NurbsModel` and the package comment of :mod:`subtrace.nurbs`).
+
+The rectangle of a surface is never a loop of its tree: an outer loop that runs along the
+rectangle's sides only (CAD exporters write one for untrimmed faces) is dropped, and a
+surface with holes but no other outer loop gets a tree of its holes whose answer is
+inverted (``surface_trim_invert``): inside a hole means cut away. So points on the
+rectangle's sides, where patches of a closed surface meet, are always kept (a point on a
+loop could go either way under the parity rule). A surface without loops has no tree
+(``surface_trim`` -1: all of its rectangle is kept).
 """
 
 from __future__ import annotations
@@ -15,7 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from subtrace.nurbs.surface import bezier_patches
-from subtrace.nurbs.trim import Units, monotone_units, rectangle_loop
+from subtrace.config import TRIM_CLOSURE_TOL
+from subtrace.nurbs.trim import Units, monotone_units, project
 from subtrace.nurbs.trimtree import TrimTree, build_tree, classify_kernel
 
 
@@ -31,6 +38,7 @@ class NurbsModel:
     surface_domain: np.ndarray  # (S, 4) f8 (u0, u1, v0, v1): the surf's parameter range
     surface_material: np.ndarray  # (S,) i4, -1: none
     surface_trim: np.ndarray  # (S,) i4 root node of the surface's trim tree, -1: untrimmed
+    surface_trim_invert: np.ndarray  # (S,) bool: kept where the tree says outside (holes only)
     surface_loops: np.ndarray  # (S, 2) i4 outer loops, holes (as in the file)
     trim: TrimTree  # all surfaces' trees in one: node and unit indices absolute
 
@@ -57,24 +65,37 @@ class NurbsModel:
                             t.node_inside, t.units.ctrl, t.units.degree, t.units.p0,
                             t.units.p1, roots[trimmed], np.ascontiguousarray(uv[trimmed]),
                             answer)
-            out[trimmed] = answer
+            out[trimmed] = answer ^ self.surface_trim_invert[surface_ids[trimmed]]
         return out
 
 
+def on_rectangle(loop, domain) -> bool:
+    """The loop runs along the sides of the rectangle (u0, u1, v0, v1) only: every segment's
+    control points lie on one side (to TRIM_CLOSURE_TOL of the rectangle's larger side)."""
+    u0, u1, v0, v1 = domain
+    tol = TRIM_CLOSURE_TOL * max(u1 - u0, v1 - v0)
+    for seg in loop.segments:
+        p = project(seg)
+        if not any(np.all(np.abs(p[:, axis] - side) <= tol)
+                   for axis, side in ((0, u0), (0, u1), (1, v0), (1, v1))):
+            return False
+    return True
+
+
 def surface_units(surface):
-    """The monotone units of a surface's trim loops (None without loops); holes alone get
-    the surface's rectangle as their outer loop."""
-    loops = list(surface.loops)
-    if not loops:
-        return None
-    if all(loop.hole for loop in loops):
-        loops.insert(0, rectangle_loop(surface.domain))
-    return monotone_units(loops)
+    """(units, invert) of a surface's trim test (see the module comment): the monotone
+    units of its loops, and whether the answer is inverted; (None, False) without loops."""
+    holes = [loop for loop in surface.loops if loop.hole]
+    outer = [loop for loop in surface.loops
+             if not loop.hole and not on_rectangle(loop, surface.domain)]
+    if not outer and not holes:
+        return None, False
+    return monotone_units(outer + holes), not outer
 
 
 def build_model(surfaces) -> NurbsModel:
     """Patches and trim trees of ``surfaces`` (NurbsSurface sequence) in flat tables."""
-    nets, degrees, rects, owner, trees, roots = [], [], [], [], [], []
+    nets, degrees, rects, owner, trees, roots, invert = [], [], [], [], [], [], []
     nodes = 0
     for s, surface in enumerate(surfaces):
         n, r = bezier_patches(surface)
@@ -82,7 +103,8 @@ def build_model(surfaces) -> NurbsModel:
         degrees.append(np.tile(np.array(surface.degree, dtype=np.int32), (len(n), 1)))
         rects.append(r)
         owner.append(np.full(len(n), s, dtype=np.int32))
-        units = surface_units(surface)
+        units, flip = surface_units(surface)
+        invert.append(flip)
         if units is None:
             roots.append(-1)
             continue
@@ -110,6 +132,7 @@ def build_model(surfaces) -> NurbsModel:
         surface_domain=np.array([s.domain for s in surfaces], dtype=np.float64).reshape(-1, 4),
         surface_material=np.array([s.material for s in surfaces], dtype=np.int32),
         surface_trim=np.array(roots, dtype=np.int32),
+        surface_trim_invert=np.array(invert, dtype=np.bool_),
         surface_loops=np.array([(sum(not lp.hole for lp in s.loops),
                                  sum(lp.hole for lp in s.loops)) for s in surfaces],
                                dtype=np.int32).reshape(-1, 2),

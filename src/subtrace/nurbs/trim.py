@@ -182,16 +182,6 @@ def reverse_loop(loop: TrimLoop) -> TrimLoop:
     return TrimLoop(loop.hole, segments, joints)
 
 
-def rectangle_loop(domain) -> TrimLoop:
-    """The counter-clockwise boundary of the rectangle (u0, u1, v0, v1) as 4 linear segments
-    (the outer loop of a surface that has holes but no ``trim``)."""
-    u0, u1, v0, v1 = domain
-    corners = np.array([[u0, v0], [u1, v0], [u1, v1], [u0, v1]], dtype=np.float64)
-    segments = tuple(
-        np.array([[*corners[k], 1.0], [*corners[(k + 1) % 4], 1.0]]) for k in range(4))
-    return TrimLoop(False, segments, corners)
-
-
 def bezier_points(ctrl: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Homogeneous points (len(t), k) of the Bezier curve ``ctrl (d+1, k)`` at parameters t
     (de Casteljau, vectorised over t)."""

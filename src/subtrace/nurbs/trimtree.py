@@ -42,6 +42,8 @@ from subtrace.config import (
     TRIM_EMPTY_FRACTION,
     TRIM_LEAF_UNITS,
     TRIM_MAX_DEPTH,
+    TRIM_MIN_AREA,
+    TRIM_MIN_SIDE,
     TRIM_STACK_SIZE,
 )
 from subtrace.nurbs.bezier import curve_point
@@ -223,9 +225,11 @@ def coordinate_param(ctrl, degree, axis, value):
 class _Builder:
     """Top-down build into growing lists; units are (ctrl (d+1,3), p0 (2,), p1 (2,), loop)."""
 
-    def __init__(self):
+    def __init__(self, min_area=0.0, min_side=0.0):
         self.box, self.axis, self.split, self.child, self.count = [], [], [], [], []
         self.leaf_units: list = []  # (node, units) of full leaves, in node order
+        self.min_area = min_area  # absolute leaf stops (the patent's; 0: off)
+        self.min_side = min_side
 
     def node(self) -> int:
         self.box.append((np.inf, np.inf, -np.inf, -np.inf))
@@ -246,7 +250,10 @@ class _Builder:
             hi = np.maximum(ends[:, :2], ends[:, 2:]).max(axis=0)
             self.box[k] = (lo[0], lo[1], hi[0], hi[1])
             cut = self._empty_cut(cell, lo, hi) if depth < TRIM_MAX_DEPTH else None
-            if cut is None and (len(units) <= TRIM_LEAF_UNITS or depth >= TRIM_MAX_DEPTH):
+            small = ((hi[0] - lo[0]) * (hi[1] - lo[1]) < self.min_area
+                     or max(hi - lo) < self.min_side)
+            if cut is None and (len(units) <= TRIM_LEAF_UNITS or depth >= TRIM_MAX_DEPTH
+                                or small):
                 self.leaf_units.append((k, units))
                 continue
             if cut is not None:
@@ -306,14 +313,18 @@ def _partition(units, axis, value):
     return left, right
 
 
-def build_tree(units: Units) -> TrimTree:
-    """The trim kd-tree over ``units`` (see the module comment)."""
+def build_tree(units: Units, min_area: float = TRIM_MIN_AREA,
+               min_side: float = TRIM_MIN_SIDE) -> TrimTree:
+    """The trim kd-tree over ``units`` (see the module comment). min_area / min_side: a
+    node whose units' box has less area than this fraction of the whole box's, or a longer
+    side below this fraction of its diagonal, is a leaf (the patent's stops; 0: off)."""
     items = [(units.ctrl[i, : units.degree[i] + 1].copy(), units.p0[i].copy(),
               units.p1[i].copy(), int(units.loop[i])) for i in range(len(units))]
-    builder = _Builder()
+    lo = np.minimum(units.p0, units.p1).min(axis=0) if items else np.zeros(2)
+    hi = np.maximum(units.p0, units.p1).max(axis=0) if items else np.zeros(2)
+    size = hi - lo
+    builder = _Builder(min_area * size[0] * size[1], min_side * float(np.hypot(*size)))
     if items:
-        lo = np.minimum(units.p0, units.p1).min(axis=0)
-        hi = np.maximum(units.p0, units.p1).max(axis=0)
         builder.build(items, (lo[0], lo[1], hi[0], hi[1]))
     else:
         builder.node()
