@@ -271,3 +271,64 @@ def test_random_surfaces_read_back_and_evaluate(tmp_path_factory, seed, rational
         want, _, _ = naive.nurbs_surface_eval(ku.tolist(), kv.tolist(), du, dv,
                                               control.tolist(), *uv[k])
         assert np.allclose(P[k], want, rtol=0, atol=1e-10 * np.abs(points).max())
+
+
+# -- the command line ------------------------------------------------------------------------
+
+MODELS = __import__("pathlib").Path(__file__).resolve().parents[1] / "models" / "nurbs"
+
+
+@pytest.mark.parametrize("name, rows", [
+    ("plate_holes.obj", {"free-form surfaces": "1 (0 rational, 1 polynomial)",
+                         "surface degrees": "3x3: 1",
+                         "Bezier patches": "9 (knot insertion; 9..9 per surface)",
+                         "trim loops": "1 outer, 2 holes (1 of 1 surfaces trimmed)",
+                         "trim curves": "4 curv2, 14 Bezier segments in loops, 16 monotone "
+                                        "curve units"}),
+    ("cylinder_window.obj", {"surface degrees": "2x1: 1", "Bezier patches": "4 (knot "
+                             "insertion; 4..4 per surface)",
+                             "trim loops": "0 outer, 1 holes (1 of 1 surfaces trimmed)"}),
+    ("torus_patches.obj", {"free-form surfaces": "16 (16 rational, 0 polynomial)",
+                           "Bezier patches": "16 (knot insertion; 1..1 per surface)"}),
+])
+def test_info_reports_free_form_content(capsys, name, rows):
+    from subtrace.cli import main
+
+    assert main(["info", str(MODELS / name)]) == 0
+    out, err = capsys.readouterr()
+    assert err == ""
+    got = dict(line.split(":", 1) for line in out.splitlines())
+    assert got["faces"].strip() == "0 (free-form surfaces only)"
+    for key, value in rows.items():
+        assert got[key].strip() == value, key
+
+
+def test_sample_models_are_what_the_generator_writes(tmp_path):
+    import shutil
+    import subprocess
+    import sys
+
+    for f in ("make_models.py",):
+        shutil.copy(MODELS / f, tmp_path / f)
+    # the generator writes beside itself; it finds subtrace through the repository's src/
+    script = (tmp_path / "make_models.py").read_text().replace(
+        'HERE.parents[1] / "src"', repr(str(MODELS.parents[1] / "src")))
+    (tmp_path / "make_models.py").write_text(script)
+    subprocess.run([sys.executable, str(tmp_path / "make_models.py")], check=True,
+                   capture_output=True)
+    for name in ("plate_holes.obj", "cylinder_window.obj", "torus_patches.obj"):
+        assert (tmp_path / name).read_text() == (MODELS / name).read_text(), name
+
+
+def test_torus_patches_close_up():
+    # the 16 Bezier patches share their edge control points (one v line each), and every
+    # point lies on the torus (radii 1 and 0.35) to rounding
+    data = read_quiet(MODELS / "torus_patches.obj")
+    assert len(data.points) == 64  # 8 x 8 distinct control points of a closed net
+    model = build_model(data.freeform.surfaces)
+    rng = np.random.default_rng(2)
+    ids = np.repeat(np.arange(16), 50)
+    P, _, _ = evaluate(model.nets, model.patch_degree, model.patch_rect, ids,
+                       rng.random((len(ids), 2)))
+    ring = np.hypot(P[:, 0], P[:, 1]) - 1.0
+    assert np.abs(np.hypot(ring, P[:, 2]) - 0.35).max() <= 1e-14
