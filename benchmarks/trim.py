@@ -114,7 +114,8 @@ def bench(target, queries, repeat, rng, stops):
         out[name] = (statistics.median(kd), statistics.median(nv))
     leaves = tree.node_axis < 0
     stats = dict(units=len(units), segments=len(loop.segments), tree_units=len(tree.units),
-                 nodes=len(tree.node_axis), empty=int(np.count_nonzero(leaves & (tree.node_count == 0))),
+                 nodes=len(tree.node_axis),
+                 empty=int(np.count_nonzero(leaves & (tree.node_count == 0))),
                  full=int(np.count_nonzero(leaves & (tree.node_count > 0))), depth=tree.depth,
                  max_leaf=int(tree.node_count.max()), build=build)
     return stats, out

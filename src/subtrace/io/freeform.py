@@ -272,19 +272,13 @@ class FreeFormReader:
                     self.ignored(keyword, line)
             return None
         vp = self._param_points()
-        curves: dict[int, TrimCurve] = {}
-        order = [e for e in self.elements if e.kind == "curv2"]
-        for k, element in enumerate(order):
-            curves[k] = self._curve(element, vp)
-        surfaces, lines = [], []
-        for element in self.elements:
-            if element.kind == "surf":
-                surfaces.append(self._surface(element, points, point_lines, weight_tokens,
-                                              material_ids,
-                                              [curves[k] for k in range(len(order))]))
-                lines.append(element.line)
-        return FreeForm(tuple(surfaces), tuple(lines), tuple(curves[k] for k in
-                                                             range(len(order))), vp)
+        # every curv2 first (trim loops may name later ones), then the surfaces
+        curves = [self._curve(e, vp) for e in self.elements if e.kind == "curv2"]
+        surfaces = [e for e in self.elements if e.kind == "surf"]
+        return FreeForm(
+            tuple(self._surface(e, points, point_lines, weight_tokens, material_ids, curves)
+                  for e in surfaces),
+            tuple(e.line for e in surfaces), tuple(curves), vp)
 
     def _param_points(self) -> np.ndarray:
         vp = np.zeros((len(self.vp_tokens), 3))

@@ -15,7 +15,9 @@ Tags follow OpenSubdiv's regression reader (regression/common/shape_utils.cpp pa
 Speed: a jitted byte scanner (:mod:`subtrace.io.obj_scan`) reads the v / vt / vn / f lines
 and lists the other statements for Python; anything it cannot read exactly as the statement
 reader does (continuation lines, malformed or out-of-range values) sends the file to the
-statement reader (ObjReader.read), which is also the tests' oracle. That reader splits
+statement reader (ObjReader.read), which is also the tests' oracle. Files with free-form
+geometry (:mod:`subtrace.io.freeform`: ``surf``, ``curv2``, ``vp`` ...) are read by the
+statement reader too: it keeps the weights of ``v x y z w`` lines for rational surfaces. That reader splits
 statements in one Python pass keeping number tokens as strings; numpy converts each block in
 bulk, and only a failed conversion walks the rows again to name the first bad line.
 """

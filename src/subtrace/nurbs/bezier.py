@@ -5,8 +5,9 @@ into a table ``nets (m, Du+1, Dv+1, 4)`` with ``degrees (m, 2)`` int32 (entries 
 patch's degrees are unused). The point and both first derivatives come from one tensor
 de Casteljau pass in homogeneous coordinates (:func:`patch_eval`, a ``leaf_njit`` helper
 that takes its scratch buffer from :func:`patch_work`, so a kernel allocates it once), then
-the quotient rule: ``P = H / w``, ``P_s = (H_s - P w_s) / w``. :func:`evaluate` is the batch wrapper in the
-surface's own parameters (patch rectangle ``rects (m, 4)``, chain rule ``1 / (u1 - u0)``).
+the quotient rule: ``P = H / w``, ``P_s = (H_s - P w_s) / w``. :func:`evaluate` is the
+batch wrapper in the surface's own parameters (patch rectangle ``rects (m, 4)``, chain rule
+``1 / (u1 - u0)``).
 
 Curves are ``(d+1, 3)`` homogeneous 2-D points (u w, v w, w); :func:`curve_point` evaluates
 one (the trim test's exact crossing search).
