@@ -333,7 +333,7 @@ def random_loop(rng, segments, degree_max=3):
 @given(seed=st.integers(0, 2**32 - 1))
 def test_units_are_monotone(seed):
     rng = np.random.default_rng(seed)
-    loop = random_loop(rng, int(rng.integers(1, 6)), degree_max=5)
+    loop = random_loop(rng, int(rng.integers(1, 6)), degree_max=9)
     units = monotone_units([loop])
     t = np.linspace(0.0, 1.0, 201)
     for k in range(len(units)):
@@ -343,9 +343,9 @@ def test_units_are_monotone(seed):
         assert np.allclose(pts[-1], units.p1[k], atol=1e-12)
         for axis in (0, 1):
             steps = np.diff(pts[:, axis])
-            # monotone up to rounding at an extremum found by root finding (~1e-12)
-            assert np.all(steps >= -1e-9) or np.all(steps <= 1e-9), (axis, steps.min(),
-                                                                      steps.max())
+            # monotone up to the rounding of the cut at an extremum (found to ~1e-15 in t)
+            assert np.all(steps >= -1e-12) or np.all(steps <= 1e-12), (axis, steps.min(),
+                                                                        steps.max())
     # consecutive units join exactly
     nxt = np.roll(np.arange(len(units)), -1)
     assert np.array_equal(units.p1, units.p0[nxt])

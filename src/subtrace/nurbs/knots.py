@@ -11,8 +11,6 @@ the bare problem text (the OBJ reader adds the file and line).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from subtrace.config import NURBS_MAX_DEGREE
@@ -171,14 +169,3 @@ def split_bezier(ctrl: np.ndarray, t: float):
         left[r] = work[0]
         right[d - r] = work[d - r]
     return left, right
-
-
-def bernstein_to_power(coef: np.ndarray) -> np.ndarray:
-    """Bernstein coefficients (d+1,) on [0,1] -> power-basis coefficients (lowest first)."""
-    d = len(coef) - 1
-    out = np.zeros(d + 1)
-    for i in range(d + 1):
-        # C(d,i) t^i (1-t)^(d-i) = C(d,i) sum_k C(d-i,k) (-1)^k t^(i+k)
-        for k in range(d - i + 1):
-            out[i + k] += coef[i] * math.comb(d, i) * math.comb(d - i, k) * (-1) ** k
-    return out

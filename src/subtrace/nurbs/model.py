@@ -20,8 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from subtrace.nurbs.surface import bezier_patches
 from subtrace.config import TRIM_CLOSURE_TOL
+from subtrace.nurbs.surface import bezier_patches
 from subtrace.nurbs.trim import Units, monotone_units, project
 from subtrace.nurbs.trimtree import TrimTree, build_tree, classify_kernel
 

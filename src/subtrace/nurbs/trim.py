@@ -16,15 +16,14 @@ returned as flat arrays (:class:`Units`) for the trim kd-tree (:mod:`subtrace.nu
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.polynomial import polynomial as P
 
 from subtrace.config import TRIM_CLOSURE_TOL
 from subtrace.errors import NurbsError
 from subtrace.nurbs.knots import (
-    bernstein_to_power,
     bezier_segments,
     check_degree,
     check_knots,
@@ -32,7 +31,7 @@ from subtrace.nurbs.knots import (
 )
 
 _ROOT_EDGE = 1e-9  # extrema closer than this to a segment's end (in its [0,1]) are its end
-_ROOT_IMAG = 1e-7  # a root with a larger imaginary part is not real
+_ROOT_DEPTH = 40  # halvings of the root search before a tangency is taken as one root
 _AREA_SAMPLES = 16  # points per segment of the polygon whose area gives a loop's orientation
 
 
@@ -192,40 +191,73 @@ def bezier_points(ctrl: np.ndarray, t: np.ndarray) -> np.ndarray:
     return work[:, 0]
 
 
+def derivative_numerator(ctrl: np.ndarray, axis: int) -> np.ndarray:
+    """Bernstein coefficients (degree 2d - 1) of A'(t) W(t) - A(t) W'(t), the numerator of
+    the derivative of coordinate ``axis`` of the rational Bezier ``ctrl (d+1, 3)``: the
+    product rule B_i,m B_j,n = C(m,i) C(n,j) / C(m+n,i+j) B_i+j,m+n."""
+    d = len(ctrl) - 1
+    a, w = ctrl[:, axis], ctrl[:, 2]
+    da, dw = d * np.diff(a), d * np.diff(w)
+    out = np.zeros(2 * d)
+    for i in range(d):
+        for j in range(d + 1):
+            c = math.comb(d - 1, i) * math.comb(d, j) / math.comb(2 * d - 1, i + j)
+            out[i + j] += c * (da[i] * w[j] - dw[i] * a[j])
+    return out
+
+
+def bernstein_roots(coef: np.ndarray, lo: float = 0.0, hi: float = 1.0, depth: int = 0,
+                    zero: float | None = None) -> list:
+    """Roots in [lo, hi] of the polynomial with Bernstein coefficients ``coef`` over that
+    interval, by subdivision: no sign change among the coefficients means no root (the
+    curve of the polynomial lies in their hull); one sign change and ends of opposite signs
+    mean one root, found by bisection; anything else is halved (de Casteljau)."""
+    if zero is None:  # coefficients this small are zero (rounding of the products)
+        zero = 1e-14 * float(np.abs(coef).max())
+        if zero == 0.0:
+            return []  # identically zero: a constant coordinate, no extremum to split at
+    c = np.where(np.abs(coef) <= zero, 0.0, coef)
+    if np.all(c >= 0) or np.all(c <= 0):
+        # no sign change: a root only where the polynomial touches zero at an end
+        return []
+    changes = int(np.count_nonzero(np.diff(np.sign(c[c != 0])) != 0))
+    if (changes == 1 and c[0] * c[-1] < 0) or depth >= _ROOT_DEPTH:
+        return [_bisect_root(coef, lo, hi) if c[0] * c[-1] < 0 else 0.5 * (lo + hi)]
+    left, right = split_bezier(coef[:, None], 0.5)
+    mid = 0.5 * (lo + hi)
+    return (bernstein_roots(left[:, 0], lo, mid, depth + 1, zero)
+            + bernstein_roots(right[:, 0], mid, hi, depth + 1, zero))
+
+
+def _bisect_root(coef, lo, hi) -> float:
+    """The root in [lo, hi] of the Bernstein polynomial ``coef`` (over [lo, hi]) whose end
+    values differ in sign: bisection to the last bit of the parameter."""
+    a, b = 0.0, 1.0
+    fa = coef[0]
+    for _ in range(80):
+        m = 0.5 * (a + b)
+        if m <= a or m >= b:
+            break
+        fm = split_bezier(coef[:, None], m)[0][-1, 0]
+        if (fm < 0) == (fa < 0):
+            a, fa = m, fm
+        else:
+            b = m
+    return lo + 0.5 * (a + b) * (hi - lo)
+
+
 def extrema(ctrl: np.ndarray) -> np.ndarray:
     """Sorted parameters in (0, 1) where u'(t) or v'(t) of the rational Bezier ``ctrl
-    (d+1, 3)`` vanishes: real roots of the numerator A'W - AW' (degree <= 2d - 2)."""
-    w = bernstein_to_power(ctrl[:, 2])
-    dw = P.polyder(w)
-    roots = []
-    for axis in (0, 1):
-        a = bernstein_to_power(ctrl[:, axis])
-        num = P.polysub(P.polymul(P.polyder(a), w), P.polymul(a, dw))
-        scale = max(np.abs(a).max() * np.abs(w).max(), 1e-300)
-        num = np.trim_zeros(np.where(np.abs(num) <= 1e-14 * scale, 0.0, num), "b")
-        if len(num) < 2:
-            continue
-        for r in P.polyroots(num):
-            if abs(r.imag) <= _ROOT_IMAG and _ROOT_EDGE < r.real < 1.0 - _ROOT_EDGE:
-                roots.append(_polish(num, r.real))
-    roots = np.unique(np.clip(roots, _ROOT_EDGE, 1.0 - _ROOT_EDGE))
+    (d+1, 3)`` vanishes (:func:`bernstein_roots` of :func:`derivative_numerator`), those
+    within _ROOT_EDGE of an end left out."""
+    if len(ctrl) < 3 and np.all(ctrl[:, 2] == ctrl[0, 2]):
+        return np.zeros(0)  # a line segment is monotone
+    roots = [t for axis in (0, 1) for t in bernstein_roots(derivative_numerator(ctrl, axis))
+             if _ROOT_EDGE < t < 1.0 - _ROOT_EDGE]
+    roots = np.unique(roots)
     if len(roots) > 1:
         roots = roots[np.concatenate(([True], np.diff(roots) > _ROOT_EDGE))]
     return roots
-
-
-def _polish(coef, t: float) -> float:
-    """A few Newton steps on the polynomial ``coef`` (power basis) from ``t``."""
-    der = P.polyder(coef)
-    for _ in range(3):
-        d = P.polyval(t, der)
-        if d == 0.0:
-            break
-        step = P.polyval(t, coef) / d
-        if not abs(step) < 1e-3:
-            break
-        t -= step
-    return t
 
 
 def monotone_units(loops) -> Units:
