@@ -250,9 +250,12 @@ def extrema(ctrl: np.ndarray) -> np.ndarray:
     """Sorted parameters in (0, 1) where u'(t) or v'(t) of the rational Bezier ``ctrl
     (d+1, 3)`` vanishes (:func:`bernstein_roots` of :func:`derivative_numerator`), those
     within _ROOT_EDGE of an end left out."""
-    if len(ctrl) < 3 and np.all(ctrl[:, 2] == ctrl[0, 2]):
-        return np.zeros(0)  # a line segment is monotone
-    roots = [t for axis in (0, 1) for t in bernstein_roots(derivative_numerator(ctrl, axis))
+    # a coordinate whose projected control points are monotone is monotone on the curve
+    # (positive weights: the curve crosses a line no more often than its control polygon)
+    steps = np.diff(project(ctrl), axis=0)
+    axes = [axis for axis in (0, 1)
+            if not (np.all(steps[:, axis] >= 0) or np.all(steps[:, axis] <= 0))]
+    roots = [t for axis in axes for t in bernstein_roots(derivative_numerator(ctrl, axis))
              if _ROOT_EDGE < t < 1.0 - _ROOT_EDGE]
     roots = np.unique(roots)
     if len(roots) > 1:
