@@ -52,7 +52,7 @@ import math
 import numpy as np
 
 from subtrace import config
-from subtrace.accel.bvh import box_entry, bvh_next_leaf, bvh_start, traversal_stack
+from subtrace.accel.bvh import box_entry, bvh_next_leaf, bvh_start, slab_entry, traversal_stack
 from subtrace.patches.basis import (
     N_TRI, TRI_MONO, bez_eval, copy_net as _copy_net, net_box, net_flatness,
     split_net as _split, tri_box, tri_flatness, tri_mono_eval, tri_monomials, tri_split,
@@ -81,29 +81,6 @@ N_FIELDS = 8
 C_T, C_ITEM, C_A, C_B, C_KIND, C_COS, C_DIST, C_SIZE = range(N_FIELDS)
 KIND_CROSS = 1.0
 KIND_TOUCH = 2.0
-
-
-@leaf_njit
-def _slab_t(o0, o1, o2, i0, i1, i2, lo0, lo1, lo2, hi0, hi1, hi2, pad, tlo, thi):
-    """Where the line o + t d (``i`` = 1/d) enters the box [lo - pad, hi + pad] for t in
-    [tlo, thi], or inf if it misses. IEEE infinities handle zero direction components."""
-    a = (lo0 - pad - o0) * i0
-    b = (hi0 + pad - o0) * i0
-    tn = min(a, b)
-    tf = max(a, b)
-    a = (lo1 - pad - o1) * i1
-    b = (hi1 + pad - o1) * i1
-    tn = max(tn, min(a, b))
-    tf = min(tf, max(a, b))
-    a = (lo2 - pad - o2) * i2
-    b = (hi2 + pad - o2) * i2
-    tn = max(tn, min(a, b))
-    tf = min(tf, max(a, b))
-    if tn != tn or tf != tf:  # NaN: origin on a slab plane of a zero component
-        return tlo
-    tf = tf + 1e-15 * abs(tf) + 1e-300
-    tn = max(tn, tlo)
-    return tn if tn <= min(tf, thi) else np.inf
 
 
 @leaf_njit
@@ -348,7 +325,8 @@ def _sub_entry(tri, w, wt, q, o0, o1, o2, i0, i1, i2, pad, tlo, thi):
         lo0, lo1, lo2, hi0, hi1, hi2 = tri_box(wt, q)
     else:
         lo0, lo1, lo2, hi0, hi1, hi2 = net_box(w, q)
-    return _slab_t(o0, o1, o2, i0, i1, i2, lo0, lo1, lo2, hi0, hi1, hi2, pad, tlo, thi)
+    return slab_entry(o0, o1, o2, i0, i1, i2, lo0 - pad, lo1 - pad, lo2 - pad, hi0 + pad,
+                      hi1 + pad, hi2 + pad, tlo, thi)
 
 
 @leaf_njit
