@@ -92,6 +92,21 @@ TRIM_CLOSURE_TOL = 1e-5
 # Largest degree of a free-form surface or curve (the exporters write 1 to 9; Bezier
 # extraction and the kernels' fixed-size buffers are sized by it).
 NURBS_MAX_DEGREE = 15
+# Ray tracing NURBS patches (nurbs/trace.py): a sub-patch is halved at most NURBS_MAX_LEVEL
+# times per ray (2^-30 of a patch is far below what a pixel of any sensible view resolves;
+# a leaf held there above the tolerance is counted and reported); Newton's method takes at
+# most NURBS_NEWTON_STEPS steps and has converged when a step moves the patch parameters by
+# at most NURBS_NEWTON_TOL (quadratic convergence: the next step would be far below a double's
+# resolution; rounding of the residual keeps the last steps of grazing rays near 1e-12);
+# a converged root lies on the ray when its distance to it is at most NURBS_ON_RAY of the
+# point's coordinates and distance (rounding is about 1e-16 of them).
+NURBS_MAX_LEVEL = 30
+NURBS_NEWTON_STEPS = 24
+NURBS_NEWTON_TOL = 1e-10
+NURBS_ON_RAY = 1e-9
+# A normal dP/du x dP/dv shorter than this fraction of |dP/du|^2 + |dP/dv|^2 is taken as
+# degenerate (a side shrunk to a point): the normal is taken a short step inside the patch.
+NURBS_DEGENERATE = 1e-10
 # The trim kd-tree (nurbs/trimtree.py): a node with at most TRIM_LEAF_UNITS monotone curve
 # units is a leaf; empty space of more than TRIM_EMPTY_FRACTION of a node's side is cut off
 # first as an empty leaf (classified once, inside or outside); no node is deeper than

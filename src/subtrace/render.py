@@ -16,6 +16,7 @@ Finally ``shade.py`` turns hits into image channels.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -25,14 +26,16 @@ from subtrace import config
 from subtrace.accel.bvh import build_bvh, no_bvh
 from subtrace.accel.projection import no_tiles, project_shells, tiles_bytes
 from subtrace.camera import camera_frame
-from subtrace.errors import SceneError
+from subtrace.errors import SceneError, SubtraceWarning
 from subtrace.io.limits import check_coordinates, check_valences
 from subtrace.mesh.cage import load_cage
+from subtrace.nurbs.scene import has_faces, has_surfaces, load_nurbs, render_nurbs
 from subtrace.patches.criterion import edge_sampling
 from subtrace.patches.table import build_patch_table
 from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
-from subtrace.shade import CHANNELS, deepest_level, miss_values, patch_shading, shade
+from subtrace.shade import (C_A, C_OBJECT, CHANNELS, deepest_level, miss_values,
+                            patch_shading, shade)
 from subtrace.subdiv.limit import limit_points
 from subtrace.trace.budget import check_memory, choose_within_budget, warn_tiles
 from subtrace.trace.build import build_requested
@@ -198,9 +201,18 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
     return hits, grids.view(tables), iso, built
 
 
+def cage_objects(scene) -> list[int]:
+    """Indices of the scene's objects that have a cage: all but OBJ files of free-form
+    surfaces only (those render through ``nurbs/scene.py`` alone)."""
+    return [k for k, o in enumerate(scene.objects)
+            if not has_surfaces(o.mesh) or has_faces(o.mesh)]
+
+
 def load_objects(scene):
-    """Cages of the scene's objects (scheme / boundary overrides applied)."""
-    return [load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code) for o in scene.objects]
+    """Cages of the scene's objects (scheme / boundary overrides applied), in the order of
+    :func:`cage_objects`."""
+    return [load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code)
+            for o in (scene.objects[k] for k in cage_objects(scene))]
 
 
 def _check_threads(threads):
@@ -211,12 +223,19 @@ def _check_threads(threads):
                              key="--threads")
 
 
-def _prepare(scene, cages, stats):
-    """Load and check the cages, build the patch table, frame the camera, check the budget:
-    (cages, table, camera, tolerance in radians, budget in bytes)."""
+def _prepare(scene, cages, stats, nurbs=None):
+    """Load and check the cages, build the patch table, frame the camera (around the free-form
+    surfaces ``nurbs`` too), check the budget: (cages, table (None without cages), camera,
+    tolerance in radians, budget in bytes)."""
     t_start = time.perf_counter()
     if cages is None:
         cages = load_objects(scene)
+    if not cages:
+        lo, hi = nurbs.bounds()
+        camera = scene.make_camera(lo, hi)
+        stats.rays = camera.width * camera.height
+        stats.time_load = time.perf_counter() - t_start
+        return cages, None, camera, scene.render.tolerance_rad(camera), None
     for c in cages:
         check_coordinates(c.path, c.points, config.MAX_COORDINATE)
         check_valences(c.path, c.face_sizes, np.diff(c.base.vert_edge_offsets),
@@ -229,6 +248,8 @@ def _prepare(scene, cages, stats):
     if scene.camera.is_auto:
         # frame the limit surface: the bounds of the level-1 limit points of every object
         bounds = [c.bounds() for c in cages]
+        if nurbs is not None:
+            bounds.append(nurbs.bounds())
         lo = np.min([b[0] for b in bounds], axis=0)
         hi = np.max([b[1] for b in bounds], axis=0)
     camera = scene.make_camera(lo, hi)
@@ -256,12 +277,17 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     stats = RenderStats()
     compiling = warmup.start(tasks.thread_count())  # on a cold cache only
     try:
-        cages, table, camera, tol_rad, budget = _prepare(scene, cages, stats)
+        owners = cage_objects(scene) if cages is None else list(range(len(cages)))
+        nurbs = load_nurbs(scene) if cages is None else None  # free-form surfaces
+        cages, table, camera, tol_rad, budget = _prepare(scene, cages, stats, nurbs)
         if progress is not None:
             progress(0, stats.rays, "tracing")
-        hits, grids, iso, built = trace_hits(table, camera, tol_rad, stats, compiling=compiling,
-                                             accel=accel, progress=progress,
-                                             max_memory=budget)
+        if table is None:
+            warmup.stop(compiling)  # no cage: the subdivision kernels are not needed
+        else:
+            hits, grids, iso, built = trace_hits(table, camera, tol_rad, stats,
+                                                 compiling=compiling, accel=accel,
+                                                 progress=progress, max_memory=budget)
     except BaseException:
         warmup.stop(compiling)
         raise
@@ -275,17 +301,49 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
         dtype=np.float64,
     ).reshape(-1, 6)
     headlight = np.array([scene.render.headlight_intensity if scene.render.headlight else 0.0])
-    colors = [o.color for o in scene.objects]
-    shade(camera_frame(camera), W, hits, grids, iso.view(), patch_shading(table, colors), lights,
-          headlight, miss_values(scene.render.background), planes, covered)
-    stats.pixels_covered = int(covered.sum())
+    miss = miss_values(scene.render.background)
+    if table is None:
+        planes[:] = miss[:, None]
+        built = np.zeros(0, np.int64)
+    else:
+        colors = [scene.objects[k].color for k in owners]
+        shade(camera_frame(camera), W, hits, grids, iso.view(), patch_shading(table, colors),
+              lights, headlight, miss, planes, covered)
+        if owners != list(range(len(owners))):  # objects without a cage: scene indices
+            hit = planes[C_OBJECT] >= 0
+            planes[C_OBJECT][hit] = np.array(owners, np.float32)[planes[C_OBJECT][hit].astype(int)]
+    stats.time_shade = time.perf_counter() - t0
+    if nurbs is not None:
+        nurbs_pass(nurbs, camera, tol_rad, None if table is None else hits.t, lights,
+                   headlight, planes, stats)
+    stats.pixels_covered = int(np.count_nonzero(planes[C_A] > 0)) if nurbs else int(covered.sum())
     stats.max_level = deepest_level(planes)
     channels = {name: planes[k].reshape(H, W) for k, name in enumerate(CHANNELS)}
-    stats.time_shade = time.perf_counter() - t0
     stats.time_total = time.perf_counter() - t_start
     schemes = tuple(c.scheme for c in cages)
     used = "bvh" if stats.accel_fallback else accel
-    return RenderResult(channels, stats, camera, tol_rad, schemes, table.object_id[built], used)
+    refined = np.zeros(0, np.int32) if table is None else table.object_id[built]
+    return RenderResult(channels, stats, camera, tol_rad, schemes, refined, used)
+
+
+def nurbs_pass(nurbs, camera, tol_rad, other_t, lights, headlight, planes, stats) -> None:
+    """Trace the scene's free-form surfaces and shade their hits nearer than ``other_t``
+    (the subdivision hits' distances; None: none) into ``planes``; a leaf held at the depth
+    limit above the tolerance is warned of and recorded as the ``precision`` cap."""
+    t0 = time.perf_counter()
+    n = camera.width * camera.height
+    other_t = np.full(n, np.inf) if other_t is None else other_t
+    hits = render_nurbs(nurbs, camera_frame(camera), camera.width, camera.height, tol_rad,
+                        other_t, lights, headlight, planes)
+    stats.patches += nurbs.model.n_patches
+    stats.patches_refined += len(np.unique(hits.patch[hits.patch >= 0]))  # (per ray)
+    if hits.capped:
+        warnings.warn(f"{hits.capped} NURBS sub-patches held at {config.NURBS_MAX_LEVEL} "
+                      "halvings above the tolerance", SubtraceWarning, stacklevel=3)
+        stats.depth_cap = max(stats.depth_cap, config.NURBS_MAX_LEVEL)
+        stats.depth_cap_reason = ("precision" if stats.depth_cap_reason == "none"
+                                  else stats.depth_cap_reason + ",precision")
+    stats.time_trace += time.perf_counter() - t0
 
 
 # the colour channels are linear Rec.709 / sRGB primaries with a D65 white point

@@ -6,16 +6,14 @@ the scene the render and sweep commands build from their inputs and options
 from __future__ import annotations
 
 import os
-import re
 import sys
 import time
-import warnings
 
 import numpy as np
 
 from subtrace.cli.common import trim_numba
 from subtrace.data import default_scene_path
-from subtrace.errors import ObjError, SceneError, SubtraceWarning
+from subtrace.errors import SceneError
 from subtrace.io.atomic import check_writable
 from subtrace.io.formats import DEEP, picture_format
 from subtrace.io.scene import apply_overrides, load_scene, scene_for_meshes
@@ -34,7 +32,7 @@ def scene_from_inputs(inputs, args, **overrides):
         scene = scene_for_meshes(inputs, scheme=args.scheme)
     else:
         raise SceneError("give one TOML scene, or OBJ cages, not both")
-    vec = lambda v: None if v is None else " ".join(v)  # noqa: E731
+    vec = lambda v: None if v is None else " ".join(v)
     return apply_overrides(
         scene, width=args.width, height=args.height, fov=args.fov, eye=vec(args.eye),
         target=vec(args.target), up=vec(args.up), scheme=args.scheme,
@@ -62,7 +60,6 @@ def execute(args) -> int:
     check_writable(out)
     if png:
         check_writable(png)
-    check_freeform(scene)
     # imported once the inputs are checked: bad input fails before the renderer's kernels
     # and OpenImageIO load
     from subtrace.io.exr import write_exr, write_picture, write_png
@@ -82,34 +79,6 @@ def execute(args) -> int:
     if not args.quiet:
         print(_summary(out, png, result, time.perf_counter() - t0))
     return 0
-
-
-_SURF = re.compile(rb"^[ \t]*surf[ \t]", re.MULTILINE)  # a free-form surface statement
-
-
-def check_freeform(scene) -> None:
-    """Free-form surfaces are read but not rendered yet: an object whose OBJ file has them
-    and no polygon faces is refused (ObjError at its first ``surf``), one that has both
-    renders its faces with a warning. Files without a ``surf`` line are not read here."""
-    from subtrace.io.obj import read_obj, read_obj_bytes
-
-    for obj in scene.objects:
-        if not _SURF.search(read_obj_bytes(obj.mesh)):
-            continue
-        with warnings.catch_warnings():  # the render reads the file again and warns then
-            warnings.simplefilter("ignore", SubtraceWarning)
-            data = read_obj(obj.mesh)
-        if data.freeform is None or not data.freeform.surfaces:
-            continue
-        count = len(data.freeform.surfaces)
-        line = data.freeform.surface_lines[0]
-        what = f"{count} free-form surface{'s' if count > 1 else ''} (surf)"
-        if not len(data.face_sizes):
-            raise ObjError(data.path, line, f"{what} read but not rendered yet: subtrace "
-                           "renders polygon and subdivision cages so far (`subtrace info` "
-                           "reports the surfaces)")
-        warnings.warn(f"{data.path}:{line}: {what} read but not rendered yet; rendering the "
-                      "polygon faces only", SubtraceWarning, stacklevel=2)
 
 
 def _summary(out, png, result, time_write: float) -> str:
