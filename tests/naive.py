@@ -248,3 +248,51 @@ def trim_parity(segments, px, py):
                 if x > px:
                     crossings += 1
     return crossings % 2 == 1
+
+
+def loop_polygon(segments, samples=64):
+    """(k, 2) points of a closed loop of rational Bezier segments ``(d+1, 3)``, each segment
+    sampled at ``samples`` equal parameter steps (plain de Casteljau)."""
+    pts = []
+    for seg in segments:
+        for k in range(samples):
+            pts.append(bezier_curve_point(seg, k / samples))
+    return np.array(pts)
+
+
+def polygon_parity(polygons, points):
+    """(n,) bool: even-odd rule of ``points (n, 2)`` against the closed ``polygons`` (each
+    (k, 2)): the brute-force crossing count of a ray towards +u with every polygon edge,
+    in numpy."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    inside = np.zeros(len(points), dtype=bool)
+    px, py = points[:, :1], points[:, 1:]
+    for poly in polygons:
+        a = np.asarray(poly, dtype=np.float64)
+        b = np.roll(a, -1, axis=0)
+        ax, ay, bx, by = a[:, 0], a[:, 1], b[:, 0], b[:, 1]
+        for lo in range(0, len(points), 2048):
+            qx, qy = px[lo:lo + 2048], py[lo:lo + 2048]
+            spans = (ay <= qy) != (by <= qy)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                x = ax + (qy - ay) * (bx - ax) / (by - ay)
+            inside[lo:lo + 2048] ^= (np.count_nonzero(spans & (x > qx), axis=1) % 2) == 1
+    return inside
+
+
+def nurbs_grid(surface, n):
+    """(points (n+1, n+1, 3), uv (n+1, n+1, 2)): the surface (a subtrace NurbsSurface) at a
+    uniform (n+1) x (n+1) grid of its parameter rectangle: the Cox-de Boor basis functions
+    of each grid u and v (:func:`bspline_basis`), their tensor product with the homogeneous
+    control points, then the division by the weight."""
+    u0, u1, v0, v1 = surface.domain
+    du, dv = surface.degree
+    nv, nu, _ = surface.control.shape
+    ku, kv = surface.knots_u.tolist(), surface.knots_v.tolist()
+    us = [u0 + (u1 - u0) * a / n for a in range(n + 1)]
+    vs = [v0 + (v1 - v0) * b / n for b in range(n + 1)]
+    Nu = np.array([bspline_basis(ku, du, nu, u)[0] for u in us])  # (n+1, nu)
+    Nv = np.array([bspline_basis(kv, dv, nv, v)[0] for v in vs])  # (n+1, nv)
+    H = np.einsum("ai,bj,jic->abc", Nu, Nv, surface.control)
+    uv = np.stack(np.meshgrid(us, vs, indexing="ij"), axis=-1)
+    return H[..., :3] / H[..., 3:], uv

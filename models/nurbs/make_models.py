@@ -1,7 +1,7 @@
 """Write the trimmed NURBS sample models of this folder (subtrace's own work, MIT like the
 rest of subtrace):
 
-    python models/nurbs/make_models.py          # rewrites the three .obj files here
+    python models/nurbs/make_models.py          # rewrites the five .obj files here
 
 * ``plate_holes.obj``: a gently curved bicubic B-spline plate (6 x 6 control points, two
   inner knots each way: 9 Bezier patches) trimmed by a rounded rectangle (one rational
@@ -15,9 +15,16 @@ rest of subtrace):
   Bezier surfaces (``cstype rat bezier``), sharing their control vertices along common
   edges: the Bezier extraction of the 9 x 9 tensor product of two rational circles.
 
+* ``sphere.obj``: the unit sphere as one rational biquadratic NURBS surface (a 9-point
+  circle swept along a 5-point half circle: 8 Bezier patches), with its poles where a side of
+  the patches shrinks to a point (the normal there is the limit normal).
+* ``blob_bezier.obj``: a closed wobbly torus as 96 bicubic Bezier surfaces (``cstype
+  bezier``, deg 3 3), the Bezier extraction of a uniform cubic B-spline periodic in both
+  directions; neighbouring surfaces share their boundary control vertices.
+
 Every rational control point is written as ``v x y z w`` (Euclidean x y z, weight w), trim
-curve points as ``vp u v w``. ``subtrace info <file>`` reports them; rendering free-form
-surfaces is the next step.
+curve points as ``vp u v w``. ``subtrace info <file>`` reports them and ``subtrace render`` draws them
+(scenes/nurbs_*.toml).
 """
 
 from __future__ import annotations
@@ -169,7 +176,58 @@ def torus():
     obj.write("torus_patches.obj")
 
 
+def sphere():
+    obj = Obj("sphere: the unit sphere as one rational biquadratic NURBS surface (poles at z = +-1)")
+    circle = [(1, 0, 1), (1, 1, W45), (0, 1, 1), (-1, 1, W45), (-1, 0, 1), (-1, -1, W45),
+              (0, -1, 1), (1, -1, W45), (1, 0, 1)]
+    meridian = [(0, -1, 1), (1, -1, W45), (1, 0, 1), (1, 1, W45), (0, 1, 1)]  # (r, z, w)
+    ids = [obj.v(r * x, r * y, z, wa * wb) for (r, z, wa) in meridian for (x, y, wb) in circle]
+    obj.lines += ["cstype rat bspline", "deg 2 2",
+                  "surf 0 4 0 2 " + " ".join(map(str, ids)),
+                  "parm u 0 0 0 1 1 2 2 3 3 4 4 4", "parm v 0 0 0 1 1 2 2 2", "end"]
+    obj.write("sphere.obj")
+
+
+def blob_point(i, j, nu, nv):
+    """Control point (i, j) of the closed cubic B-spline blob: a torus whose tube radius and
+    centre circle wobble."""
+    a = 2 * math.pi * i / nu  # around the axis
+    b = 2 * math.pi * j / nv  # around the tube
+    big = 1.0 + 0.18 * math.sin(3 * a)
+    small = 0.42 + 0.12 * math.cos(2 * a) * math.cos(b)
+    r = big + small * math.cos(b)
+    return r * math.cos(a), r * math.sin(a), small * math.sin(b) + 0.1 * math.sin(2 * a)
+
+
+def blob():
+    from subtrace.nurbs.surface import bezier_patches, make_surface
+
+    obj = Obj("blob_bezier: a closed wobbly torus as 96 bicubic Bezier patches")
+    nu, nv = 12, 8
+    # a uniform cubic B-spline periodic in both directions: 3 control rows and columns wrap
+    points = [blob_point(i % nu, j % nv, nu, nv) for j in range(nv + 3) for i in range(nu + 3)]
+    knots_u = list(range(nu + 3 + 4))
+    knots_v = list(range(nv + 3 + 4))
+    surface = make_surface((3, 3), knots_u, knots_v, points)
+    nets, _ = bezier_patches(surface)
+    index = {}
+    obj.lines += ["cstype bezier", "deg 3 3"]
+    for net in nets:
+        refs = []
+        for j in range(4):  # u fastest within each row of v
+            for i in range(4):
+                key = tuple(np.round(net[i, j, :3], 12))
+                if key not in index:
+                    index[key] = obj.v(*net[i, j, :3])
+                refs.append(index[key])
+        obj.lines += ["surf 0 1 0 1 " + " ".join(map(str, refs)), "parm u 0 1", "parm v 0 1",
+                      "end"]
+    obj.write("blob_bezier.obj")
+
+
 if __name__ == "__main__":
     plate()
     cylinder()
     torus()
+    sphere()
+    blob()

@@ -320,7 +320,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     stats.max_level = deepest_level(planes)
     channels = {name: planes[k].reshape(H, W) for k, name in enumerate(CHANNELS)}
     stats.time_total = time.perf_counter() - t_start
-    schemes = tuple(c.scheme for c in cages)
+    schemes = tuple(c.scheme for c in cages) + (("nurbs",) if nurbs is not None else ())
     used = "bvh" if stats.accel_fallback else accel
     refined = np.zeros(0, np.int32) if table is None else table.object_id[built]
     return RenderResult(channels, stats, camera, tol_rad, schemes, refined, used)
