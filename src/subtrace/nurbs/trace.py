@@ -43,7 +43,7 @@ from subtrace.nurbs.bezier import patch_eval
 from subtrace.nurbs.trimtree import trim_inside
 from subtrace.patches.basis import BOX_PAD, pad_box
 from subtrace.runtime.jit import leaf_njit, nb
-from subtrace.runtime.threads import run_tasks
+from subtrace.runtime.threads import run_tasks, thread_count
 from subtrace.trace.prims import ray_setup
 
 MAX_LEVEL = config.NURBS_MAX_LEVEL
@@ -228,10 +228,25 @@ def _newton(net, du, dv, ox, oy, oz, dx, dy, dz, s, t, work, out):
         j21 = n2x * out[1, 0] + n2y * out[1, 1] + n2z * out[1, 2]
         j22 = n2x * out[2, 0] + n2y * out[2, 1] + n2z * out[2, 2]
         det = j11 * j22 - j12 * j21
-        if det == 0.0 or math.isnan(det):
-            break
-        ds = (j22 * f1 - j12 * f2) / det
-        dt = (j11 * f2 - j21 * f1) / det
+        a11 = j11 * j11 + j21 * j21
+        a12 = j11 * j12 + j21 * j22
+        a22 = j12 * j12 + j22 * j22
+        if abs(det) > 1e-8 * (a11 + a22):
+            ds = (j22 * f1 - j12 * f2) / det
+            dt = (j11 * f2 - j21 * f1) / det
+        else:
+            # J (nearly) singular, as at a pole: the least-squares step (J^T J + mu I) d =
+            # J^T F, mu a rounding of J^T J, moves along the direction that changes P
+            mu = 1e-14 * (a11 + a22)
+            a11 += mu
+            a22 += mu
+            g1 = j11 * f1 + j21 * f2
+            g2 = j12 * f1 + j22 * f2
+            det = a11 * a22 - a12 * a12
+            if not det > 0.0:
+                break
+            ds = (a22 * g1 - a12 * g2) / det
+            dt = (a11 * g2 - a12 * g1) / det
         s -= ds
         t -= dt
         step = abs(ds) + abs(dt)
@@ -461,8 +476,6 @@ def trace_nurbs(model, bvh, frame, width: int, height: int, tol_rad: float) -> N
     """Trace one ray per pixel (camera ``frame``, :func:`subtrace.camera.camera_frame`)
     against the patches of ``model`` (BVH ``bvh``: :func:`patch_bvh`) on every thread; each
     thread writes whole rows, so the hits do not depend on the thread count."""
-    from subtrace.runtime.threads import thread_count
-
     hits = NurbsHits(width * height)
     if model.n_patches == 0:
         return hits
@@ -527,3 +540,39 @@ def hit_geometry(model, patch, st):
         _geometry(model.nets, model.patch_degree, model.patch_rect, patch, st, points,
                   normals, uv)
     return points, normals, uv
+
+
+@nb.njit(cache=True, nogil=True)
+def _trace_list(task, n_tasks, origins, directions, tlo, thi, bvh, nets, degrees, rects, owner,
+                tol, tables, out_t, out_patch, out_st, out_level):
+    """Rays ``task, task + n_tasks, ...`` of the list (origins, unit directions (n, 3))."""
+    buffers = _scratch(nets.shape[1] - 1, nets.shape[2] - 1)
+    stack = np.empty(config.STACK_SIZE, np.int64)
+    stack_t = np.empty(config.STACK_SIZE)
+    for r in range(task, len(origins), n_tasks):
+        ray = (origins[r, 0], origins[r, 1], origins[r, 2], directions[r, 0],
+               directions[r, 1], directions[r, 2])
+        p, d, s, t, level, _ = _trace_ray(ray, tlo, thi, bvh, nets, degrees, rects, owner, tol,
+                                          tables, buffers, stack, stack_t)
+        out_t[r] = d
+        out_patch[r] = p
+        out_st[r, 0] = s
+        out_st[r, 1] = t
+        out_level[r] = level
+
+
+def trace_rays(model, bvh, origins, directions, tol_rad: float, tlo: float = 0.0,
+               thi: float = np.inf) -> NurbsHits:
+    """Nearest kept hits within [tlo, thi] of rays ``origins + t directions`` ((n, 3) each,
+    directions of unit length; the angular criterion measured from each ray's origin), on
+    every thread."""
+    origins = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
+    directions = np.ascontiguousarray(directions, dtype=np.float64).reshape(-1, 3)
+    hits = NurbsHits(len(origins))
+    if model.n_patches == 0 or not len(origins):
+        return hits
+    tables = (model.surface_trim, model.surface_trim_invert, trim_arrays(model))
+    run_tasks(_trace_list, origins, directions, float(tlo), float(thi), bvh, model.nets,
+              model.patch_degree, model.patch_rect, model.patch_surface, float(tol_rad), tables,
+              hits.t, hits.patch, hits.st, hits.level, n=thread_count())
+    return hits

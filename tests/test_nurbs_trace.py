@@ -1,0 +1,255 @@
+"""Ray tracing trimmed NURBS patches (subtrace.nurbs.trace, nurbs.scene and the render hook).
+
+Independent checks: the analytic sphere and torus (the sample models are exact rational
+quadrics), plain de Boor points and the even-odd rule over densely sampled loops
+(tests/naive.py), circles for the circular hole, and renders from inside closed models.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import naive
+import numpy as np
+import pytest
+
+from subtrace.camera import Camera, camera_frame
+from subtrace.io.obj import read_obj
+from subtrace.io.scene import apply_overrides, load_scene
+from subtrace.nurbs.model import build_model
+from subtrace.nurbs.trace import hit_geometry, patch_bvh, trace_nurbs, trace_rays
+
+ROOT = Path(__file__).resolve().parents[1]
+MODELS = ROOT / "models" / "nurbs"
+
+
+def load(name):
+    surfaces = read_obj(MODELS / f"{name}.obj").freeform.surfaces
+    model = build_model(surfaces)
+    return surfaces, model, patch_bvh(model)
+
+
+def render_hits(name, eye, target, width=64, height=48, px=1.0, up=(0, 0, 1), fov=40.0):
+    """(camera, hits) of one ray per pixel at ``px`` pixels of tolerance."""
+    _, model, bvh = load(name)
+    cam = Camera(tuple(map(float, eye)), tuple(map(float, target)), up, fov, width, height)
+    hits = trace_nurbs(model, bvh, camera_frame(cam), width, height, px * cam.pixel_angle())
+    return cam, model, hits
+
+
+# ------------------------------------------------------------------------------------------
+# hits on the exact quadrics
+# ------------------------------------------------------------------------------------------
+
+def test_sphere_hits_are_on_the_sphere_and_nearest():
+    """Every hit lies on the unit sphere (the rational surface is exact and Newton's root is
+    found to rounding: 1e-12 is a few thousand ulps), at the analytic nearest root; every ray
+    that clearly meets the sphere hits it and every one that clearly misses it misses."""
+    cam, model, hits = render_hits("sphere", (2.2, -2.8, 1.6), (0, 0, 0))
+    eye = np.array(cam.eye)
+    d = cam.ray_directions().reshape(-1, 3)
+    b = d @ eye
+    disc = b * b - (eye @ eye - 1.0)
+    hit = hits.patch >= 0
+    clear = np.abs(disc) > 1e-3  # away from the silhouette
+    assert np.array_equal(hit[clear], disc[clear] > 0)
+    assert hit.sum() > 500
+    P, N, _ = hit_geometry(model, hits.patch[hit], hits.st[hit])
+    assert np.abs(np.linalg.norm(P, axis=1) - 1.0).max() < 1e-12
+    t_exact = -b[hit] - np.sqrt(disc[hit])
+    assert np.abs(hits.t[hit] - t_exact).max() < 1e-9
+    # exact normals: the radius direction (up to the parametrisation's orientation)
+    cos = np.abs(np.einsum("ij,ij->i", N, P))
+    assert np.all(cos > 1 - 1e-12)
+
+
+def test_sphere_poles_get_the_limit_normal():
+    """At the poles a side of the patches shrinks to a point (dP/du = 0): the normal is the
+    limit normal (0, 0, +-1), not NaN, for rays through the pole and next to it."""
+    _, model, bvh = load("sphere")
+    offsets = np.array([[0, 0], [1e-9, 0], [0, 1e-7], [-1e-5, 2e-5], [1e-3, 1e-3]])
+    for z in (3.0, -3.0):
+        origins = np.column_stack([offsets, np.full(len(offsets), z)])
+        dirs = np.tile([0.0, 0.0, -np.sign(z)], (len(offsets), 1))
+        hits = trace_rays(model, bvh, origins, dirs, 1e-3)
+        assert np.all(hits.patch >= 0)
+        P, N, _ = hit_geometry(model, hits.patch, hits.st)
+        assert np.all(np.isfinite(N))
+        # the normal of the sphere at P is P; the nudge inside the patch costs ~1e-7 rad
+        assert np.all(np.abs(np.einsum("ij,ij->i", N, P)) > 1 - 1e-9), N
+
+
+def torus_distance(P, big=1.0, small=0.35):
+    return np.hypot(np.hypot(P[:, 0], P[:, 1]) - big, P[:, 2]) - small
+
+
+def test_torus_hits_are_on_the_torus_and_first():
+    """Every hit on the 16-surface rational torus lies on the analytic torus (to 1e-12) and
+    no point of the ray before it is inside the torus (sampled every 1e-3 of the way)."""
+    cam, model, hits = render_hits("torus_patches", (2.4, -2.0, 1.5), (0, 0, 0))
+    hit = hits.patch >= 0
+    assert hit.sum() > 400
+    P, _, _ = hit_geometry(model, hits.patch[hit], hits.st[hit])
+    assert np.abs(torus_distance(P)).max() < 1e-12
+    eye = np.array(cam.eye)
+    d = cam.ray_directions().reshape(-1, 3)[hit]
+    steps = np.linspace(0.0, 1.0 - 1e-3, 1000)
+    for k in range(0, len(P), 7):
+        before = eye + (steps * hits.t[hit][k])[:, None] * d[k]
+        assert torus_distance(before).min() > -1e-9
+
+
+def test_channels_are_the_surface_parameters():
+    """The hit's (u, v) are its surface's parameters: the rational sphere's point there (by
+    plain de Boor) is the hit point."""
+    surfaces = load("sphere")[0]
+    _, model, hits = render_hits("sphere", (0.4, -3.0, 1.0), (0, 0, 0), 32, 24)
+    hit = np.nonzero(hits.patch >= 0)[0]
+    P, _, uv = hit_geometry(model, hits.patch[hit], hits.st[hit])
+    s = surfaces[0]
+    for k in range(0, len(hit), 11):
+        ref = naive.nurbs_surface_eval(s.knots_u, s.knots_v, 2, 2, s.control.tolist(),
+                                       uv[k, 0], uv[k, 1])[0]
+        assert np.allclose(ref, P[k], atol=1e-12)
+
+
+# ------------------------------------------------------------------------------------------
+# trims: holes, the kernel's classification, the next hit behind a trimmed one
+# ------------------------------------------------------------------------------------------
+
+def aim_at(surface, uv, height=0.5):
+    """Rays from ``height`` above the surface points at ``uv`` (plain de Boor) towards them."""
+    origins, dirs = [], []
+    for u, v in uv:
+        P, Pu, Pv = naive.nurbs_surface_eval(surface.knots_u, surface.knots_v, *surface.degree,
+                                             surface.control.tolist(), u, v)
+        n = np.cross(Pu, Pv)
+        n /= np.linalg.norm(n)
+        origins.append(np.array(P) + height * n)
+        dirs.append(-n)
+    return np.array(origins), np.array(dirs)
+
+
+def test_rays_through_the_circular_hole_miss_and_next_to_it_hit():
+    """The plate's round hole (two rational half circles, centre (0.42, 0.42), radius
+    0.16 in parameters): rays aimed at points 1e-4 inside the circle miss, rays aimed
+    1e-4 outside it hit the aimed point (distance 0.5, parameters to 1e-9)."""
+    surfaces, model, bvh = load("plate_holes")
+    angles = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    for radius, kept in ((0.16 - 1e-4, False), (0.16 + 1e-4, True), (0.08, False)):
+        uv = np.column_stack([0.42 + radius * np.cos(angles), 0.42 + radius * np.sin(angles)])
+        origins, dirs = aim_at(surfaces[0], uv)
+        hits = trace_rays(model, bvh, origins, dirs, 1e-3)
+        assert np.all((hits.patch >= 0) == kept), radius
+        if kept:
+            assert np.abs(hits.t - 0.5).max() < 1e-9
+            _, _, got = hit_geometry(model, hits.patch, hits.st)
+            assert np.abs(got - uv).max() < 1e-9
+
+
+def test_kernel_trim_agrees_with_the_tree_and_brute_force_parity():
+    """Rays aimed at 3000 seeded random parameter points of the plate hit exactly where the
+    trim keeps the point, by the Python-called kd-tree (model.inside) and by the even-odd
+    rule over the loops sampled densely (points within 2e-3 of a loop, where the sampled
+    polygon's chords differ from the curves, left out of the brute-force comparison)."""
+    surfaces, model, bvh = load("plate_holes")
+    rng = np.random.default_rng(18)
+    uv = rng.uniform(0.0, 1.0, size=(3000, 2))
+    origins, dirs = aim_at(surfaces[0], uv)
+    hits = trace_rays(model, bvh, origins, dirs, 1e-3)
+    hit = hits.patch >= 0
+    tree = model.inside(np.zeros(len(uv), np.int64), uv)
+    loops = surfaces[0].loops
+    polys = [naive.loop_polygon(lp.segments, 400) for lp in loops]
+    outer = naive.polygon_parity([p for p, lp in zip(polys, loops) if not lp.hole], uv)
+    holes = naive.polygon_parity([p for p, lp in zip(polys, loops) if lp.hole], uv)
+    brute = outer & ~holes
+    near = np.min([np.linalg.norm(uv[:, None] - p[None], axis=-1).min(axis=1) for p in polys],
+                  axis=0) < 2e-3
+    assert np.array_equal(hit, tree)
+    assert np.array_equal(hit[~near], brute[~near])
+    assert 0.2 < hit.mean() < 0.9
+    assert np.abs(hits.t[hit] - 0.5).max() < 1e-9
+
+
+def test_a_trimmed_first_hit_goes_on_to_the_next():
+    """Through the cylinder's window (u in [0.4, 1.6], v in [0.25, 0.75]: around (0, 1, 1))
+    the ray's first root is cut away and it hits the far wall at y = -1; below the window it
+    hits the near wall."""
+    _, model, bvh = load("cylinder_window")
+    origins = np.array([[0.0, 3.0, 1.0], [0.05, 3.0, 0.9], [0.0, 3.0, 0.2], [0.0, 3.0, 1.8]])
+    dirs = np.tile([0.0, -1.0, 0.0], (4, 1))
+    hits = trace_rays(model, bvh, origins, dirs, 1e-3)
+    far = 3.0 + np.sqrt(1 - 0.05**2)
+    near = 3.0 - np.sqrt(1 - 0.05**2)
+    np.testing.assert_allclose(hits.t, [4.0, far, 2.0, 2.0], atol=1e-9)
+    assert near < far
+
+
+# ------------------------------------------------------------------------------------------
+# watertight, deterministic, merged with subdivision surfaces
+# ------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("px", [4.0, 1.0, 0.25])
+@pytest.mark.parametrize("name, eye", [("torus_patches", (1.0, 0.0, 0.05)),
+                                       ("blob_bezier", (1.0, 0.0, 0.0))])
+def test_watertight_from_inside(name, eye, px):
+    """A camera inside a closed model of many patches: every ray hits, at every tolerance
+    (patches of different depths and neighbouring surfaces leave no gap)."""
+    for target in ((0.0, 1.0, 0.2), (1.0, 1.0, -0.4), (2.0, 0.3, 0.0), (1.0, 0.0, 1.0)):
+        up = (1.0, 0.0, 0.0) if target == (1.0, 0.0, 1.0) else (0.0, 0.0, 1.0)
+        _, _, hits = render_hits(name, eye, target, 48, 36, px=px, up=up, fov=100.0)
+        assert np.all(hits.patch >= 0), (target, np.count_nonzero(hits.patch < 0))
+
+
+def small_scene(name, **overrides):
+    return apply_overrides(load_scene(ROOT / "scenes" / f"{name}.toml"), width=80, height=60,
+                           **overrides)
+
+
+def test_same_image_with_one_and_two_threads():
+    """The NURBS pass writes whole rows per thread: the image is bit-identical."""
+    from subtrace.render import render_scene
+
+    scene = small_scene("nurbs_plate")
+    one = render_scene(scene, threads=1).channels
+    two = render_scene(scene, threads=2).channels
+    for name in one:
+        assert np.array_equal(one[name], two[name], equal_nan=True), name
+
+
+def test_mixed_scene_merges_by_depth():
+    """NURBS beside a Loop cage: each pixel shows the nearer of the two objects rendered
+    alone, with its scene object index and its own ids."""
+    from subtrace.render import render_scene
+
+    scene = small_scene("nurbs_mixed")
+    both = render_scene(scene).channels
+    alone = [render_scene(dataclasses.replace(scene, objects=(o,))).channels
+             for o in scene.objects]
+    z = np.minimum(alone[0]["Z"], alone[1]["Z"])
+    np.testing.assert_array_equal(both["Z"], z)
+    first = alone[0]["Z"] < alone[1]["Z"]
+    second = np.isfinite(alone[1]["Z"]) & ~first
+    assert np.all(both["object_id"][first] == 0) and np.all(both["object_id"][second] == 1)
+    np.testing.assert_array_equal(both["patch_id"][first], alone[0]["patch_id"][first])
+    assert set(np.unique(both["patch_id"][first])) <= set(range(16))
+    assert first.sum() > 200 and second.sum() > 200
+
+
+def test_render_reports_nurbs_patches_and_levels():
+    """A free-form scene's stats count its patches and the level channel holds split depths
+    (0 at most for a surface seen whole within the tolerance)."""
+    from subtrace.render import render_scene
+
+    result = render_scene(small_scene("nurbs_torus"))
+    assert result.stats.patches == 16 + 8
+    level = result.channels["level"]
+    assert level.max() == result.stats.max_level and level.max() >= 3
+    assert set(np.unique(level[result.channels["A"] == 0])) == {-1.0}
+    assert "nurbs" in result.schemes
+    n = result.channels["N.X"] ** 2 + result.channels["N.Y"] ** 2 + result.channels["N.Z"] ** 2
+    assert np.allclose(n[result.channels["A"] > 0], 1.0, atol=1e-5)
+    assert math.isfinite(float(result.channels["Z"][result.channels["A"] > 0].max()))
