@@ -253,3 +253,101 @@ def test_render_reports_nurbs_patches_and_levels():
     n = result.channels["N.X"] ** 2 + result.channels["N.Y"] ** 2 + result.channels["N.Z"] ** 2
     assert np.allclose(n[result.channels["A"] > 0], 1.0, atol=1e-5)
     assert math.isfinite(float(result.channels["Z"][result.channels["A"] > 0].max()))
+
+
+# ------------------------------------------------------------------------------------------
+# line queries (subtrace.lines.nurbs through intersect_lines and subtrace intersect)
+# ------------------------------------------------------------------------------------------
+
+def test_lines_meet_the_sphere_at_both_analytic_roots():
+    """2000 seeded random lines, infinite both ways: every line that clearly crosses the
+    sphere has exactly its two analytic roots (t to 1e-12 of the line's scale), the others
+    none; mode "first" keeps the nearest root at t >= 0."""
+    from subtrace.lines.api import intersect_lines
+
+    _, model, _ = load("sphere")
+    rng = np.random.default_rng(4)
+    o = rng.uniform(-3, 3, (2000, 3))
+    d = rng.normal(size=(2000, 3))
+    hits = intersect_lines(model, o, d, 1e-6, t_range=(-np.inf, np.inf))
+    a, b, c = (d * d).sum(1), 2 * (o * d).sum(1), (o * o).sum(1) - 1
+    disc = b * b - 4 * a * c
+    clear = np.abs(disc) > 1e-6
+    count = np.bincount(hits.line, minlength=len(o))
+    assert np.array_equal(count[clear], np.where(disc[clear] > 0, 2, 0))
+    r = np.sqrt(np.maximum(disc, 0))
+    roots = np.stack([(-b - r) / (2 * a), (-b + r) / (2 * a)], axis=1)
+    first_of_line = np.r_[True, hits.line[1:] != hits.line[:-1]]
+    want = roots[hits.line, np.where(first_of_line, 0, 1)]
+    assert np.abs(hits.t - want).max() < 1e-12 * 10
+    assert np.abs(np.linalg.norm(hits.point, axis=1) - 1).max() < 1e-12
+    assert hits.ptex.max() == 0 and np.all(np.abs(np.einsum("ij,ij->i", hits.normal,
+                                                             hits.point)) > 1 - 1e-9)
+    first = intersect_lines(model, o, d, 1e-6, mode="first")
+    ahead = np.where(roots[:, 0] >= 0, roots[:, 0], roots[:, 1])
+    expect = clear & (disc > 0) & (roots[:, 1] >= 0)
+    assert np.array_equal(np.isin(np.arange(len(o)), first.line)[clear], expect[clear])
+    assert np.abs(first.t - ahead[first.line]).max() < 1e-11
+
+
+def test_lines_meet_the_torus_at_its_quartic_roots():
+    """Random lines through the torus: the hits are the real roots of the torus's quartic
+    along the line (numpy's polynomial roots), for lines not close to a tangency."""
+    from subtrace.lines.api import intersect_lines
+
+    _, model, _ = load("torus_patches")
+    rng = np.random.default_rng(7)
+    o = rng.uniform(-2, 2, (300, 3))
+    d = rng.normal(size=(300, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    hits = intersect_lines(model, o, d, 1e-7, t_range=(-np.inf, np.inf))
+    R, r = 1.0, 0.35
+    checked = 0
+    for k in range(len(o)):
+        # ((|p|^2 + R^2 - r^2)^2 - 4 R^2 (x^2 + y^2)) along p = o + t d, a quartic in t
+        po, pd = o[k], d[k]
+        q2 = np.array([1.0, 2 * po @ pd, po @ po + R * R - r * r])
+        xy = np.array([pd[0] ** 2 + pd[1] ** 2, 2 * (po[0] * pd[0] + po[1] * pd[1]),
+                       po[0] ** 2 + po[1] ** 2])
+        quartic = np.polysub(np.polymul(q2, q2), 4 * R * R * np.r_[0, 0, xy])
+        roots = np.roots(quartic)
+        real = np.sort(roots[np.abs(roots.imag) < 1e-6].real)
+        if np.any(np.abs(roots.imag[np.abs(roots.imag) >= 1e-6]) < 1e-2) or (
+                len(real) > 1 and np.diff(real).min() < 1e-3):
+            continue  # near a tangency: roots about to merge
+        got = hits.t[hits.of_line(k)]
+        assert len(got) == len(real), (k, got, real)
+        assert np.allclose(got, real, atol=1e-8)
+        checked += 1
+    assert checked > 250 and len(hits) > 100
+
+
+def test_lines_skip_trimmed_parts():
+    """A line through the plate's round hole has no hit; one beside it has one."""
+    from subtrace.lines.api import intersect_lines
+
+    surfaces, model, _ = load("plate_holes")
+    uv = np.array([[0.42, 0.42], [0.42 + 0.16 - 1e-4, 0.42], [0.42 + 0.16 + 1e-4, 0.42]])
+    origins, dirs = aim_at(surfaces[0], uv)
+    hits = intersect_lines(model, origins, dirs, 1e-8, t_range=(-np.inf, np.inf))
+    assert hits.line.tolist() == [2]
+    assert abs(hits.t[0] - 0.5) < 1e-9 and np.abs(hits.uv[0] - uv[2]).max() < 1e-9
+
+
+def test_intersect_command_on_a_free_form_file(tmp_path, capsys):
+    """subtrace intersect takes an OBJ file of free-form surfaces: ptex is the surface
+    index; a line through the torus's tube meets it 4 times, merged across patch sides."""
+    from subtrace.cli.main import main
+
+    lines = tmp_path / "l.csv"
+    lines.write_text("ox,oy,oz,dx,dy,dz\n-3,0,0.1,1,0,0\n-3,5,0,1,0,0\n")
+    rc = main(["intersect", str(MODELS / "torus_patches.obj"), "--lines", str(lines),
+               "--precision", "1e-6"])
+    out = capsys.readouterr().out.strip().splitlines()
+    assert rc == 0 and out[0].startswith("line,t,")
+    rows = [row.split(",") for row in out[1:]]
+    assert [r[0] for r in rows] == ["0"] * 4
+    xs = sorted(float(r[2]) for r in rows)
+    rho = math.sqrt(0.35**2 - 0.1**2)
+    np.testing.assert_allclose(xs, [-1 - rho, -1 + rho, 1 - rho, 1 + rho], atol=1e-9)
+    assert {int(r[5]) for r in rows} <= set(range(16))

@@ -21,6 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from subtrace.config import TRIM_CLOSURE_TOL
+from subtrace.errors import ObjError
+from subtrace.io.obj import read_obj
 from subtrace.nurbs.surface import bezier_patches
 from subtrace.nurbs.trim import Units, monotone_units, project
 from subtrace.nurbs.trimtree import TrimTree, build_tree, classify_kernel
@@ -67,6 +69,15 @@ class NurbsModel:
                             answer)
             out[trimmed] = answer ^ self.surface_trim_invert[surface_ids[trimmed]]
         return out
+
+
+def load_model(path) -> NurbsModel:
+    """The :class:`NurbsModel` of the free-form surfaces of the OBJ file ``path`` (ObjError
+    when it has none)."""
+    data = read_obj(path)
+    if data.freeform is None or not data.freeform.surfaces:
+        raise ObjError(data.path, None, "no free-form surfaces (surf ... end) in the file")
+    return build_model(data.freeform.surfaces)
 
 
 def on_rectangle(loop, domain) -> bool:

@@ -335,10 +335,10 @@ def _push_children(kids, du, dv, r, level, ray, inv, tlo, thi, sn, sr, sl, st, s
     for _ in range(4):
         # the farthest child not pushed yet (lowest index first among equals)
         c = -1
-        far = -1.0
+        far = -np.inf
         for k in range(4):
             tk = te0 if k == 0 else te1 if k == 1 else te2 if k == 2 else te3
-            if not (done >> k) & 1 and tk < np.inf and tk > far:
+            if not (done >> k) & 1 and tk < np.inf and (c < 0 or tk > far):
                 c, far = k, tk
         if c < 0:
             break
@@ -576,3 +576,104 @@ def trace_rays(model, bvh, origins, directions, tol_rad: float, tlo: float = 0.0
               model.patch_degree, model.patch_rect, model.patch_surface, float(tol_rad), tables,
               hits.t, hits.patch, hits.st, hits.level, n=thread_count())
     return hits
+
+
+# ------------------------------------------------------------------------------------------
+# every root along a line (subtrace.lines.nurbs)
+# ------------------------------------------------------------------------------------------
+
+@leaf_njit
+def _net_flatness(net, du, dv):
+    """How far the projected control points of ``net`` lie from the bilinear interpolant of
+    its corners at their Greville parameters, plus the twist's bound on the corner
+    triangles' distance from that interpolant (the line kernels' flatness, on the projected
+    points): a leaf for Newton once below the precision."""
+    c00, c10 = _point(net, 0, 0), _point(net, du, 0)
+    c11, c01 = _point(net, du, dv), _point(net, 0, dv)
+    e = 0.0
+    for i in range(du + 1):
+        s = i / du if du > 0 else 0.0
+        for j in range(dv + 1):
+            t = j / dv if dv > 0 else 0.0
+            p = _point(net, i, j)
+            d2 = 0.0
+            for k in range(3):
+                lin = ((1 - s) * (1 - t) * c00[k] + s * (1 - t) * c10[k] + (1 - s) * t * c01[k]
+                       + s * t * c11[k])
+                d2 += (p[k] - lin) ** 2
+            e = max(e, math.sqrt(d2))
+    tw = 0.0
+    for k in range(3):
+        tw += (c00[k] - c10[k] - c01[k] + c11[k]) ** 2
+    return e + 0.25 * math.sqrt(tw)
+
+
+@leaf_njit
+def _inverse(dx, dy, dz):
+    """(1/dx, 1/dy, 1/dz) with IEEE division (1/0 = inf: the slab test's axis-parallel case)."""
+    return 1.0 / dx, 1.0 / dy, 1.0 / dz
+
+
+@leaf_njit
+def _line_roots(net0, du, dv, rect, surface, ray, inv, tlo, thi, tol_flat, tables, scratch,
+                p, out, n):
+    """Append every kept root of the line ``ray`` on patch ``p`` within [tlo, thi] to
+    ``out[n:]`` (rows t, patch, s, t; rows past ``len(out)`` only counted): sub-patches the
+    line enters are split until flat within ``tol_flat`` (or MAX_LEVEL), then Newton's root
+    of each leaf is taken as for rays. Returns the new count."""
+    surface_trim, surface_invert, trim = tables
+    sn, sr, sl, st, kids, work, out3, tstack = scratch
+    ox, oy, oz = ray[0], ray[1], ray[2]
+    ix, iy, iz = inv
+    lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(net0, du, dv)
+    te = slab_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tlo, thi)
+    if te == np.inf:
+        return n
+    _copy(net0, sn[0], du, dv)
+    sr[0, 0], sr[0, 1], sr[0, 2], sr[0, 3] = 0.0, 1.0, 0.0, 1.0
+    sl[0] = 0
+    st[0] = te
+    sp = 1
+    while sp > 0:
+        sp -= 1
+        sub = sn[sp]
+        level = sl[sp]
+        if level >= MAX_LEVEL or _net_flatness(sub, du, dv) <= tol_flat:
+            ok, s, t, d = _leaf_root(net0, du, dv, sub, sr[sp], ray, work, out3)
+            if (ok and tlo <= d <= thi
+                    and _kept(trim, surface_trim, surface_invert, rect, surface, s, t, tstack)):
+                if n < len(out):
+                    out[n, 0], out[n, 1], out[n, 2], out[n, 3] = d, p, s, t
+                n += 1
+            continue
+        r = (sr[sp, 0], sr[sp, 1], sr[sp, 2], sr[sp, 3])
+        _split(sub, du, dv, kids)
+        sp = _push_children(kids, du, dv, r, level, ray, inv, tlo, thi, sn, sr, sl, st, sp)
+    return n
+
+
+@nb.njit(cache=True, nogil=True)
+def line_roots_task(task, n_tasks, origins, directions, tlo, thi, bvh, nets, degrees, rects,
+                    owner, tol_flat, tables, out, count):
+    """Every kept root of lines ``task, task + n_tasks, ...`` (origins, unit directions
+    (n, 3); parameter range [tlo, thi] along the unit direction) into ``out (n, cap, 4)``
+    (t, patch, s, t) and ``count (n,)`` (above cap: run the line again with more room). A
+    root found from two leaves or patches appears once per leaf (the caller merges)."""
+    buffers = _scratch(nets.shape[1] - 1, nets.shape[2] - 1)
+    stack = np.empty(config.STACK_SIZE, np.int64)
+    stack_t = np.empty(config.STACK_SIZE)
+    for r in range(task, len(origins), n_tasks):
+        ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
+        dx, dy, dz = directions[r, 0], directions[r, 1], directions[r, 2]
+        ray = (ox, oy, oz, dx, dy, dz)
+        inv = _inverse(dx, dy, dz)
+        n = 0
+        sp = bvh_start(ox, oy, oz, inv[0], inv[1], inv[2], bvh, tlo, thi, stack, stack_t)
+        while sp > 0:
+            first, end, sp = bvh_next_leaf(ox, oy, oz, inv[0], inv[1], inv[2], bvh, tlo, thi,
+                                           stack, stack_t, sp)
+            for k in range(first, end):
+                p = bvh.prims[k]
+                n = _line_roots(nets[p], degrees[p, 0], degrees[p, 1], rects[p], owner[p], ray,
+                                inv, tlo, thi, tol_flat, tables, buffers, p, out[r], n)
+        count[r] = n
