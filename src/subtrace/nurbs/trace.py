@@ -42,7 +42,7 @@ from subtrace.accel.bvh import BVH, build_bvh, bvh_next_leaf, bvh_start, slab_en
 from subtrace.nurbs.bezier import patch_eval
 from subtrace.nurbs.trimtree import trim_inside
 from subtrace.patches.basis import BOX_PAD, pad_box
-from subtrace.runtime.jit import leaf_njit, nb
+from subtrace.runtime.jit import inline_njit, leaf_njit, nb
 from subtrace.runtime.threads import run_tasks, thread_count
 from subtrace.trace.prims import ray_setup
 
@@ -81,48 +81,45 @@ def patch_bvh(model) -> BVH:
 # sub-patch nets
 # ------------------------------------------------------------------------------------------
 
-@leaf_njit
-def _net_box(net, du, dv):
-    """Padded box of the projected control points of ``net`` (its sub-patch's shell)."""
+@inline_njit
+def _net_bound(net, du, dv, proj):
+    """(lo0, lo1, lo2, hi0, hi1, hi2, size) of ``net`` in one pass: the box of its
+    projected control points ``H / w`` (padded by BOX_PAD for rounding: it contains the
+    sub-patch), and the longest row or column of that control polygon (it bounds the
+    lengths of the sub-patch's curves); ``proj`` (>= du+1, >= dv+1, >= 3) receives the
+    projected points."""
     lo0 = lo1 = lo2 = np.inf
     hi0 = hi1 = hi2 = -np.inf
     for i in range(du + 1):
         for j in range(dv + 1):
-            w = net[i, j, 3]
-            x, y, z = net[i, j, 0] / w, net[i, j, 1] / w, net[i, j, 2] / w
+            inv = 1.0 / net[i, j, 3]
+            x, y, z = net[i, j, 0] * inv, net[i, j, 1] * inv, net[i, j, 2] * inv
+            proj[i, j, 0], proj[i, j, 1], proj[i, j, 2] = x, y, z
             lo0, hi0 = min(lo0, x), max(hi0, x)
             lo1, hi1 = min(lo1, y), max(hi1, y)
             lo2, hi2 = min(lo2, z), max(hi2, z)
-    return pad_box(lo0, lo1, lo2, hi0, hi1, hi2)
-
-
-@leaf_njit
-def _polygon_size(net, du, dv):
-    """Longest row or column of the projected control polygon (bounds the sub-patch's
-    curve lengths)."""
     size = 0.0
     for j in range(dv + 1):
         length = 0.0
         for i in range(du):
-            a, b = net[i, j, 3], net[i + 1, j, 3]
-            dx = net[i + 1, j, 0] / b - net[i, j, 0] / a
-            dy = net[i + 1, j, 1] / b - net[i, j, 1] / a
-            dz = net[i + 1, j, 2] / b - net[i, j, 2] / a
+            dx = proj[i + 1, j, 0] - proj[i, j, 0]
+            dy = proj[i + 1, j, 1] - proj[i, j, 1]
+            dz = proj[i + 1, j, 2] - proj[i, j, 2]
             length += math.sqrt(dx * dx + dy * dy + dz * dz)
         size = max(size, length)
     for i in range(du + 1):
         length = 0.0
         for j in range(dv):
-            a, b = net[i, j, 3], net[i, j + 1, 3]
-            dx = net[i, j + 1, 0] / b - net[i, j, 0] / a
-            dy = net[i, j + 1, 1] / b - net[i, j, 1] / a
-            dz = net[i, j + 1, 2] / b - net[i, j, 2] / a
+            dx = proj[i, j + 1, 0] - proj[i, j, 0]
+            dy = proj[i, j + 1, 1] - proj[i, j, 1]
+            dz = proj[i, j + 1, 2] - proj[i, j, 2]
             length += math.sqrt(dx * dx + dy * dy + dz * dz)
         size = max(size, length)
-    return size
+    lo0, lo1, lo2, hi0, hi1, hi2 = pad_box(lo0, lo1, lo2, hi0, hi1, hi2)
+    return lo0, lo1, lo2, hi0, hi1, hi2, size
 
 
-@leaf_njit
+@inline_njit
 def _copy(src, dst, du, dv):
     """dst[:du+1, :dv+1] = src[:du+1, :dv+1] (element by element: no temporary)."""
     for i in range(du + 1):
@@ -131,7 +128,7 @@ def _copy(src, dst, du, dv):
                 dst[i, j, c] = src[i, j, c]
 
 
-@leaf_njit
+@inline_njit
 def _split(net, du, dv, out):
     """The four quarters of ``net`` (homogeneous de Casteljau at 1/2 in u, then v) into
     ``out[c]``, child ``c = cu + 2 cv`` covering half cu of u and half cv of v; ``out``
@@ -165,14 +162,14 @@ def _split(net, du, dv, out):
 # the exact hit at a leaf
 # ------------------------------------------------------------------------------------------
 
-@leaf_njit
+@inline_njit
 def _point(net, i, j):
     """The projected control point ``net[i, j]``."""
     w = net[i, j, 3]
     return net[i, j, 0] / w, net[i, j, 1] / w, net[i, j, 2] / w
 
 
-@leaf_njit
+@inline_njit
 def _triangle(a, b, c, ox, oy, oz, dx, dy, dz):
     """Barycentrics (b1, b2) of the ray's meet with the plane of triangle (a, b, c), and
     whether it lies in the triangle (Moller-Trumbore)."""
@@ -189,7 +186,7 @@ def _triangle(a, b, c, ox, oy, oz, dx, dy, dz):
     return b1 >= 0.0 and b2 >= 0.0 and b1 + b2 <= 1.0, b1, b2
 
 
-@leaf_njit
+@inline_njit
 def _start_guess(net, du, dv, ox, oy, oz, dx, dy, dz):
     """(s, t) in [0, 1]^2 of the leaf where the ray meets the two triangles of its corner
     points (bilinear parameters of the hit), or (0.5, 0.5) when it meets neither."""
@@ -312,24 +309,22 @@ def _leaf_root(net0, du, dv, sub, r, ray, work, out):
     return ok, s, t, dist
 
 
-@leaf_njit
-def _push_children(kids, du, dv, r, level, ray, inv, tlo, thi, sn, sr, sl, st, sp):
+@inline_njit
+def _push_children(kids, cb, du, dv, r, level, ray, inv, tlo, thi, sn, sr, sl, st, sp):
     """Push the children of a split sub-patch (``kids[:4]``, rectangle ``r``) whose boxes the
-    ray enters within [tlo, thi] onto the stack, farthest first; returns the stack size."""
+    ray enters within [tlo, thi] onto the stack, farthest first, each with its rectangle,
+    box and polygon size (``sr`` row: s0, s1, t0, t1, box (6), size); returns the stack
+    size. ``cb`` (8, 4) holds the children's bounds and entries meanwhile, ``kids[5]`` their
+    projected points."""
     ox, oy, oz = ray[0], ray[1], ray[2]
     ix, iy, iz = inv
-    te0 = te1 = te2 = te3 = np.inf
+    bounds = cb
     for c in range(4):
-        lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(kids[c], du, dv)
-        te = slab_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tlo, thi)
-        if c == 0:
-            te0 = te
-        elif c == 1:
-            te1 = te
-        elif c == 2:
-            te2 = te
-        else:
-            te3 = te
+        b = _net_bound(kids[c], du, dv, kids[5])
+        for k in range(7):
+            bounds[k, c] = b[k]
+        bounds[7, c] = slab_entry(ox, oy, oz, ix, iy, iz, b[0], b[1], b[2], b[3], b[4], b[5],
+                                  tlo, thi)
     ms, mt = 0.5 * (r[0] + r[1]), 0.5 * (r[2] + r[3])
     done = 0
     for _ in range(4):
@@ -337,7 +332,7 @@ def _push_children(kids, du, dv, r, level, ray, inv, tlo, thi, sn, sr, sl, st, s
         c = -1
         far = -np.inf
         for k in range(4):
-            tk = te0 if k == 0 else te1 if k == 1 else te2 if k == 2 else te3
+            tk = bounds[7, k]
             if not (done >> k) & 1 and tk < np.inf and (c < 0 or tk > far):
                 c, far = k, tk
         if c < 0:
@@ -346,6 +341,8 @@ def _push_children(kids, du, dv, r, level, ray, inv, tlo, thi, sn, sr, sl, st, s
         _copy(kids[c], sn[sp], du, dv)
         sr[sp, 0], sr[sp, 1] = (r[0], ms) if c % 2 == 0 else (ms, r[1])
         sr[sp, 2], sr[sp, 3] = (r[2], mt) if c < 2 else (mt, r[3])
+        for k in range(7):
+            sr[sp, 4 + k] = bounds[k, c]
         sl[sp] = level + 1
         st[sp] = far
         sp += 1
@@ -359,16 +356,18 @@ def _descend(net0, du, dv, p, rect, surface, ray, inv, tlo, thi, tol, tables, sc
     leaves held at MAX_LEVEL above the tolerance. ``tables``: (surface_trim,
     surface_invert, trim arrays); ``scratch``: :func:`_scratch`'s buffers."""
     surface_trim, surface_invert, trim = tables
-    sn, sr, sl, st, kids, work, out, tstack = scratch
+    sn, sr, sl, st, kids, work, out, tstack, cb = scratch
     ox, oy, oz = ray[0], ray[1], ray[2]
     ix, iy, iz = inv
     best, fs, ft, flev, capped = thi, 0.0, 0.0, -1, 0
-    lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(net0, du, dv)
-    te = slab_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tlo, best)
+    b = _net_bound(net0, du, dv, kids[5])
+    te = slab_entry(ox, oy, oz, ix, iy, iz, b[0], b[1], b[2], b[3], b[4], b[5], tlo, best)
     if te == np.inf:
         return False, best, fs, ft, flev, capped
     _copy(net0, sn[0], du, dv)
     sr[0, 0], sr[0, 1], sr[0, 2], sr[0, 3] = 0.0, 1.0, 0.0, 1.0
+    for k in range(7):
+        sr[0, 4 + k] = b[k]
     sl[0] = 0
     st[0] = te
     sp = 1
@@ -379,12 +378,11 @@ def _descend(net0, du, dv, p, rect, surface, ray, inv, tlo, thi, tol, tables, sc
         sub = sn[sp]
         level = sl[sp]
         # angular size: the control polygon over the distance from the eye to the box
-        lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(sub, du, dv)
-        ex = max(lo0 - ox, 0.0, ox - hi0)
-        ey = max(lo1 - oy, 0.0, oy - hi1)
-        ez = max(lo2 - oz, 0.0, oz - hi2)
+        ex = max(sr[sp, 4] - ox, 0.0, ox - sr[sp, 7])
+        ey = max(sr[sp, 5] - oy, 0.0, oy - sr[sp, 8])
+        ez = max(sr[sp, 6] - oz, 0.0, oz - sr[sp, 9])
         dist = math.sqrt(ex * ex + ey * ey + ez * ez)
-        small = _polygon_size(sub, du, dv) <= tol * dist
+        small = sr[sp, 10] <= tol * dist
         if small or level >= MAX_LEVEL:
             # a leaf: the exact root, kept when the trim keeps it
             capped += 0 if small else 1
@@ -395,20 +393,21 @@ def _descend(net0, du, dv, p, rect, surface, ray, inv, tlo, thi, tol, tables, sc
             continue
         r = (sr[sp, 0], sr[sp, 1], sr[sp, 2], sr[sp, 3])
         _split(sub, du, dv, kids)
-        sp = _push_children(kids, du, dv, r, level, ray, inv, tlo, best, sn, sr, sl, st, sp)
+        sp = _push_children(kids, cb, du, dv, r, level, ray, inv, tlo, best, sn, sr, sl, st, sp)
     return flev >= 0, best, fs, ft, flev, capped
 
 
 @nb.njit(cache=True)
 def _scratch(max_du, max_dv):
     """Per-thread buffers of :func:`_descend` (each thread its own): the descent stack
-    (nets, rectangles, levels, entry distances), the split's children, the work and output
-    of :func:`~subtrace.nurbs.bezier.patch_eval`, the trim test's stack."""
-    return (np.zeros((DESCENT_STACK, max_du + 1, max_dv + 1, 4)), np.zeros((DESCENT_STACK, 4)),
+    (nets, rectangles with boxes and sizes, levels, entry distances), the split's children, the work and output
+    of :func:`~subtrace.nurbs.bezier.patch_eval`, the trim test's stack, the children's
+    bounds."""
+    return (np.zeros((DESCENT_STACK, max_du + 1, max_dv + 1, 4)), np.zeros((DESCENT_STACK, 11)),
             np.zeros(DESCENT_STACK, np.int64), np.zeros(DESCENT_STACK),
             np.zeros((6, max_du + 1, max_dv + 1, 4)),
             np.zeros((4, config.NURBS_MAX_DEGREE + 1, 4)), np.zeros((3, 3)),
-            np.zeros(TRIM_STACK, np.int64))
+            np.zeros(TRIM_STACK, np.int64), np.zeros((8, 4)))
 
 
 @leaf_njit
@@ -622,11 +621,11 @@ def _line_roots(net0, du, dv, rect, surface, ray, inv, tlo, thi, tol_flat, table
     line enters are split until flat within ``tol_flat`` (or MAX_LEVEL), then Newton's root
     of each leaf is taken as for rays. Returns the new count."""
     surface_trim, surface_invert, trim = tables
-    sn, sr, sl, st, kids, work, out3, tstack = scratch
+    sn, sr, sl, st, kids, work, out3, tstack, cb = scratch
     ox, oy, oz = ray[0], ray[1], ray[2]
     ix, iy, iz = inv
-    lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(net0, du, dv)
-    te = slab_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tlo, thi)
+    b = _net_bound(net0, du, dv, kids[5])
+    te = slab_entry(ox, oy, oz, ix, iy, iz, b[0], b[1], b[2], b[3], b[4], b[5], tlo, thi)
     if te == np.inf:
         return n
     _copy(net0, sn[0], du, dv)
@@ -648,7 +647,7 @@ def _line_roots(net0, du, dv, rect, surface, ray, inv, tlo, thi, tol_flat, table
             continue
         r = (sr[sp, 0], sr[sp, 1], sr[sp, 2], sr[sp, 3])
         _split(sub, du, dv, kids)
-        sp = _push_children(kids, du, dv, r, level, ray, inv, tlo, thi, sn, sr, sl, st, sp)
+        sp = _push_children(kids, cb, du, dv, r, level, ray, inv, tlo, thi, sn, sr, sl, st, sp)
     return n
 
 
