@@ -2,7 +2,7 @@
 over all curve units, for trim loops of 10, 100, 1,000 and 10,000 monotone units.
 
     python benchmarks/trim.py [--units 10 100 1000 10000] [--queries 100000] [--repeat 5]
-                              [--patent-stops]
+                              [--patent-stops] [--renders [--only-renders]]
 
 The loop: a wavy closed curve (a "flower" r = 0.35 (1 + 0.25 sin(k theta)) around (0.5, 0.5),
 k lobes) made of Hermite cubic segments, their number chosen so that the loop has exactly
@@ -16,6 +16,12 @@ over ``repeat`` rounds of the time per query (the naive test gets fewer points o
 loops to keep rounds short). One warm-up call of each kernel comes first (compilation and
 Numba's cache are outside the timings). ``--patent-stops`` adds rows with the patent's leaf
 stops (relative area 0.0006, relative side 0.025) in place of the leaf size alone.
+
+``--renders`` adds the render times of the NURBS sample scenes (``scenes/nurbs_*.toml``) at
+1280x720 and 1 px (their own settings): one warm-up render of each at 160x90 first (kernels
+compiled or loaded), then ``repeat`` renders per scene on all threads, scenes in turn; the
+medians of the total and trace times, the rays per second of the trace, the pixels covered
+and the deepest level. ``--only-renders`` skips the trim table.
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ import time
 
 import numpy as np
 
-from _common import import_subtrace
+from _common import REPO, import_subtrace
 
 
 def flower(n: int, lobes: int, amp: float = 0.25):
@@ -121,14 +127,49 @@ def bench(target, queries, repeat, rng, stops):
     return stats, out
 
 
+def render_rows(repeat: int) -> None:
+    """Print the render-time table of the NURBS sample scenes (module comment)."""
+    from subtrace.io.scene import apply_overrides, load_scene
+    from subtrace.render import render_scene
+    from subtrace.runtime.threads import thread_count
+
+    scenes = sorted((REPO / "scenes").glob("nurbs_*.toml"))
+    for path in scenes:
+        render_scene(apply_overrides(load_scene(path), width=160, height=90))
+    times = {p.stem: [] for p in scenes}
+    for _ in range(repeat):
+        for path in scenes:
+            scene = apply_overrides(load_scene(path), width=1280, height=720)
+            t0 = time.perf_counter()
+            result = render_scene(scene)
+            times[path.stem].append((time.perf_counter() - t0, result.stats))
+    print(f"\nNURBS sample scenes at 1280x720, 1 px, {thread_count()} threads "
+          f"(medians of {repeat} renders)")
+    header = ("| scene | patches | total s | trace s | rays/s (trace) | pixels covered | "
+              "deepest level |")
+    print(header)
+    print("|---" * (header.count("|") - 1) + "|")
+    for name, runs in times.items():
+        total = statistics.median(t for t, _ in runs)
+        trace = statistics.median(st.time_trace for _, st in runs)
+        st = runs[0][1]
+        print(f"| {name} | {st.patches:,} | {total:.2f} | {trace:.2f} | "
+              f"{st.rays / trace:,.0f} | {st.pixels_covered:,} | {st.max_level} |", flush=True)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--units", type=int, nargs="+", default=[10, 100, 1000, 10000])
     parser.add_argument("--queries", type=int, default=100000)
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--patent-stops", action="store_true")
+    parser.add_argument("--renders", action="store_true")
+    parser.add_argument("--only-renders", action="store_true")
     args = parser.parse_args(argv)
     import_subtrace()
+    if args.only_renders:
+        render_rows(args.repeat)
+        return 0
     from subtrace.config import TRIM_LEAF_UNITS, TRIM_MIN_AREA, TRIM_MIN_SIDE
 
     variants = [("leaf size", (TRIM_MIN_AREA, TRIM_MIN_SIDE))]
@@ -157,6 +198,8 @@ def main(argv=None) -> int:
                   f"{st['max_leaf']} | {st['build']:.3f} | {uk * 1e9:.0f} | {un * 1e9:,.0f} | "
                   f"{un / uk:,.0f}x | {nk * 1e9:.0f} | {nn * 1e9:,.0f} | {nn / nk:,.0f}x |",
                   flush=True)
+    if args.renders:
+        render_rows(args.repeat)
     return 0
 
 

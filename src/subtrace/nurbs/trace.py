@@ -38,7 +38,7 @@ import math
 import numpy as np
 
 from subtrace import config
-from subtrace.accel.bvh import BVH, build_bvh, bvh_next_leaf, bvh_start, slab_entry
+from subtrace.accel.bvh import BVH, build_bvh, bvh_next_leaf, bvh_start, slab_range
 from subtrace.nurbs.bezier import patch_eval
 from subtrace.nurbs.trimtree import trim_inside
 from subtrace.patches.basis import BOX_PAD, pad_box
@@ -52,7 +52,9 @@ NEWTON_TOL = config.NURBS_NEWTON_TOL
 # the descent's stack: each level pops one sub-patch and pushes at most four
 DESCENT_STACK = 3 * MAX_LEVEL + 8
 TRIM_STACK = config.TRIM_STACK_SIZE
-_NUDGES = (1e-7, 1e-5, 1e-3)  # steps towards the patch centre for a degenerate normal
+_NUDGES = (1e-7, 1e-5, 1e-3)
+# a sub-patch's slab is widened by this much of its largest |n_k P_k| sum (rounding of n . P)
+SLAB_PAD = 1e-12  # steps towards the patch centre for a degenerate normal
 
 
 def patch_boxes(nets, degrees):
@@ -82,41 +84,84 @@ def patch_bvh(model) -> BVH:
 # ------------------------------------------------------------------------------------------
 
 @inline_njit
-def _net_bound(net, du, dv, proj):
-    """(lo0, lo1, lo2, hi0, hi1, hi2, size) of ``net`` in one pass: the box of its
-    projected control points ``H / w`` (padded by BOX_PAD for rounding: it contains the
-    sub-patch), and the longest row or column of that control polygon (it bounds the
-    lengths of the sub-patch's curves); ``proj`` (>= du+1, >= dv+1, >= 3) receives the
-    projected points."""
+def _net_shell(net, du, dv, proj, ray, inv, tlo, thi):
+    """(entry, lo0, lo1, lo2, hi0, hi1, hi2) of the ray into the shell of the sub-patch
+    ``net``: the box of its projected control points ``H / w`` (padded by BOX_PAD for
+    rounding) cut by the slab between the planes, normal to its corners' diagonals'
+    cross product, through its extreme control points (padded likewise). The sub-patch lies
+    in the convex hull of its projected control points (positive weights), so in both.
+    entry is inf where the ray misses the shell within [tlo, thi]; ``proj`` (>= du+1,
+    >= dv+1, >= 3) receives the projected points."""
     lo0 = lo1 = lo2 = np.inf
     hi0 = hi1 = hi2 = -np.inf
     for i in range(du + 1):
         for j in range(dv + 1):
-            inv = 1.0 / net[i, j, 3]
-            x, y, z = net[i, j, 0] * inv, net[i, j, 1] * inv, net[i, j, 2] * inv
+            w = 1.0 / net[i, j, 3]
+            x, y, z = net[i, j, 0] * w, net[i, j, 1] * w, net[i, j, 2] * w
             proj[i, j, 0], proj[i, j, 1], proj[i, j, 2] = x, y, z
             lo0, hi0 = min(lo0, x), max(hi0, x)
             lo1, hi1 = min(lo1, y), max(hi1, y)
             lo2, hi2 = min(lo2, z), max(hi2, z)
+    lo0, lo1, lo2, hi0, hi1, hi2 = pad_box(lo0, lo1, lo2, hi0, hi1, hi2)
+    ox, oy, oz, dx, dy, dz = ray
+    tn, tf = slab_range(ox, oy, oz, inv[0], inv[1], inv[2], lo0, lo1, lo2, hi0, hi1, hi2, tlo,
+                        thi)
+    if tn == np.inf:
+        return np.inf, lo0, lo1, lo2, hi0, hi1, hi2
+    # the slab: n = (P_dd - P_00) x (P_0d - P_d0), range of n . P over the control points
+    ax, ay, az = (proj[du, dv, 0] - proj[0, 0, 0], proj[du, dv, 1] - proj[0, 0, 1],
+                  proj[du, dv, 2] - proj[0, 0, 2])
+    bx, by, bz = (proj[0, dv, 0] - proj[du, 0, 0], proj[0, dv, 1] - proj[du, 0, 1],
+                  proj[0, dv, 2] - proj[du, 0, 2])
+    nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+    lo, hi, big = np.inf, -np.inf, 0.0
+    for i in range(du + 1):
+        for j in range(dv + 1):
+            x, y, z = proj[i, j, 0], proj[i, j, 1], proj[i, j, 2]
+            h = nx * x + ny * y + nz * z
+            lo, hi = min(lo, h), max(hi, h)
+            big = max(big, abs(nx * x) + abs(ny * y) + abs(nz * z))
+    pad = SLAB_PAD * big
+    lo -= pad
+    hi += pad
+    h0 = nx * ox + ny * oy + nz * oz
+    hd = nx * dx + ny * dy + nz * dz
+    if hd != 0.0:
+        t1, t2 = (lo - h0) / hd, (hi - h0) / hd
+        tn = max(tn, min(t1, t2))
+        tf = min(tf, max(t1, t2))
+        if not tn <= tf:
+            return np.inf, lo0, lo1, lo2, hi0, hi1, hi2
+    elif not lo <= h0 <= hi:
+        return np.inf, lo0, lo1, lo2, hi0, hi1, hi2
+    return tn, lo0, lo1, lo2, hi0, hi1, hi2
+
+
+@inline_njit
+def _net_size(net, du, dv):
+    """The longest row or column of the projected control polygon of ``net`` (it bounds
+    the lengths of the sub-patch's curves: with positive weights each rational de
+    Casteljau step cuts corners)."""
     size = 0.0
     for j in range(dv + 1):
         length = 0.0
         for i in range(du):
-            dx = proj[i + 1, j, 0] - proj[i, j, 0]
-            dy = proj[i + 1, j, 1] - proj[i, j, 1]
-            dz = proj[i + 1, j, 2] - proj[i, j, 2]
+            a, b = 1.0 / net[i, j, 3], 1.0 / net[i + 1, j, 3]
+            dx = net[i + 1, j, 0] * b - net[i, j, 0] * a
+            dy = net[i + 1, j, 1] * b - net[i, j, 1] * a
+            dz = net[i + 1, j, 2] * b - net[i, j, 2] * a
             length += math.sqrt(dx * dx + dy * dy + dz * dz)
         size = max(size, length)
     for i in range(du + 1):
         length = 0.0
         for j in range(dv):
-            dx = proj[i, j + 1, 0] - proj[i, j, 0]
-            dy = proj[i, j + 1, 1] - proj[i, j, 1]
-            dz = proj[i, j + 1, 2] - proj[i, j, 2]
+            a, b = 1.0 / net[i, j, 3], 1.0 / net[i, j + 1, 3]
+            dx = net[i, j + 1, 0] * b - net[i, j, 0] * a
+            dy = net[i, j + 1, 1] * b - net[i, j, 1] * a
+            dz = net[i, j + 1, 2] * b - net[i, j, 2] * a
             length += math.sqrt(dx * dx + dy * dy + dz * dz)
         size = max(size, length)
-    lo0, lo1, lo2, hi0, hi1, hi2 = pad_box(lo0, lo1, lo2, hi0, hi1, hi2)
-    return lo0, lo1, lo2, hi0, hi1, hi2, size
+    return size
 
 
 @inline_njit
@@ -312,19 +357,14 @@ def _leaf_root(net0, du, dv, sub, r, ray, work, out):
 @inline_njit
 def _push_children(kids, cb, du, dv, r, level, ray, inv, tlo, thi, sn, sr, sl, st, sp):
     """Push the children of a split sub-patch (``kids[:4]``, rectangle ``r``) whose boxes the
-    ray enters within [tlo, thi] onto the stack, farthest first, each with its rectangle,
-    box and polygon size (``sr`` row: s0, s1, t0, t1, box (6), size); returns the stack
-    size. ``cb`` (8, 4) holds the children's bounds and entries meanwhile, ``kids[5]`` their
-    projected points."""
-    ox, oy, oz = ray[0], ray[1], ray[2]
-    ix, iy, iz = inv
+    ray enters within [tlo, thi] onto the stack, farthest first, each with its rectangle and
+    box (``sr`` row: s0, s1, t0, t1, box (6)); returns the stack size. ``cb`` (8, 4) holds
+    the children's entries and boxes meanwhile, ``kids[5]`` their projected points."""
     bounds = cb
     for c in range(4):
-        b = _net_bound(kids[c], du, dv, kids[5])
+        b = _net_shell(kids[c], du, dv, kids[5], ray, inv, tlo, thi)
         for k in range(7):
             bounds[k, c] = b[k]
-        bounds[7, c] = slab_entry(ox, oy, oz, ix, iy, iz, b[0], b[1], b[2], b[3], b[4], b[5],
-                                  tlo, thi)
     ms, mt = 0.5 * (r[0] + r[1]), 0.5 * (r[2] + r[3])
     done = 0
     for _ in range(4):
@@ -332,7 +372,7 @@ def _push_children(kids, cb, du, dv, r, level, ray, inv, tlo, thi, sn, sr, sl, s
         c = -1
         far = -np.inf
         for k in range(4):
-            tk = bounds[7, k]
+            tk = bounds[0, k]
             if not (done >> k) & 1 and tk < np.inf and (c < 0 or tk > far):
                 c, far = k, tk
         if c < 0:
@@ -341,8 +381,8 @@ def _push_children(kids, cb, du, dv, r, level, ray, inv, tlo, thi, sn, sr, sl, s
         _copy(kids[c], sn[sp], du, dv)
         sr[sp, 0], sr[sp, 1] = (r[0], ms) if c % 2 == 0 else (ms, r[1])
         sr[sp, 2], sr[sp, 3] = (r[2], mt) if c < 2 else (mt, r[3])
-        for k in range(7):
-            sr[sp, 4 + k] = bounds[k, c]
+        for k in range(6):
+            sr[sp, 4 + k] = bounds[1 + k, c]
         sl[sp] = level + 1
         st[sp] = far
         sp += 1
@@ -358,16 +398,15 @@ def _descend(net0, du, dv, p, rect, surface, ray, inv, tlo, thi, tol, tables, sc
     surface_trim, surface_invert, trim = tables
     sn, sr, sl, st, kids, work, out, tstack, cb = scratch
     ox, oy, oz = ray[0], ray[1], ray[2]
-    ix, iy, iz = inv
     best, fs, ft, flev, capped = thi, 0.0, 0.0, -1, 0
-    b = _net_bound(net0, du, dv, kids[5])
-    te = slab_entry(ox, oy, oz, ix, iy, iz, b[0], b[1], b[2], b[3], b[4], b[5], tlo, best)
+    b = _net_shell(net0, du, dv, kids[5], ray, inv, tlo, best)
+    te = b[0]
     if te == np.inf:
         return False, best, fs, ft, flev, capped
     _copy(net0, sn[0], du, dv)
     sr[0, 0], sr[0, 1], sr[0, 2], sr[0, 3] = 0.0, 1.0, 0.0, 1.0
-    for k in range(7):
-        sr[0, 4 + k] = b[k]
+    for k in range(6):
+        sr[0, 4 + k] = b[1 + k]
     sl[0] = 0
     st[0] = te
     sp = 1
@@ -382,7 +421,7 @@ def _descend(net0, du, dv, p, rect, surface, ray, inv, tlo, thi, tol, tables, sc
         ey = max(sr[sp, 5] - oy, 0.0, oy - sr[sp, 8])
         ez = max(sr[sp, 6] - oz, 0.0, oz - sr[sp, 9])
         dist = math.sqrt(ex * ex + ey * ey + ez * ez)
-        small = sr[sp, 10] <= tol * dist
+        small = _net_size(sub, du, dv) <= tol * dist
         if small or level >= MAX_LEVEL:
             # a leaf: the exact root, kept when the trim keeps it
             capped += 0 if small else 1
@@ -403,7 +442,7 @@ def _scratch(max_du, max_dv):
     (nets, rectangles with boxes and sizes, levels, entry distances), the split's children, the work and output
     of :func:`~subtrace.nurbs.bezier.patch_eval`, the trim test's stack, the children's
     bounds."""
-    return (np.zeros((DESCENT_STACK, max_du + 1, max_dv + 1, 4)), np.zeros((DESCENT_STACK, 11)),
+    return (np.zeros((DESCENT_STACK, max_du + 1, max_dv + 1, 4)), np.zeros((DESCENT_STACK, 10)),
             np.zeros(DESCENT_STACK, np.int64), np.zeros(DESCENT_STACK),
             np.zeros((6, max_du + 1, max_dv + 1, 4)),
             np.zeros((4, config.NURBS_MAX_DEGREE + 1, 4)), np.zeros((3, 3)),
@@ -622,10 +661,7 @@ def _line_roots(net0, du, dv, rect, surface, ray, inv, tlo, thi, tol_flat, table
     of each leaf is taken as for rays. Returns the new count."""
     surface_trim, surface_invert, trim = tables
     sn, sr, sl, st, kids, work, out3, tstack, cb = scratch
-    ox, oy, oz = ray[0], ray[1], ray[2]
-    ix, iy, iz = inv
-    b = _net_bound(net0, du, dv, kids[5])
-    te = slab_entry(ox, oy, oz, ix, iy, iz, b[0], b[1], b[2], b[3], b[4], b[5], tlo, thi)
+    te = _net_shell(net0, du, dv, kids[5], ray, inv, tlo, thi)[0]
     if te == np.inf:
         return n
     _copy(net0, sn[0], du, dv)
