@@ -20,7 +20,8 @@ stops (relative area 0.0006, relative side 0.025) in place of the leaf size alon
 ``--renders`` adds the render times of the NURBS sample scenes (``scenes/nurbs_*.toml``) at
 1280x720 and 1 px (their own settings): one warm-up render of each at 160x90 first (kernels
 compiled or loaded), then ``repeat`` renders per scene on all threads, scenes in turn; the
-medians of the total and trace times, the rays per second of the trace, the pixels covered
+medians of the total, CPU (all threads; on a shared machine steadier than the wall time)
+and trace times (``--threads``: how many threads render), the rays per second of the trace, the pixels covered
 and the deepest level. ``--only-renders`` skips the trim table.
 """
 
@@ -127,33 +128,36 @@ def bench(target, queries, repeat, rng, stops):
     return stats, out
 
 
-def render_rows(repeat: int) -> None:
-    """Print the render-time table of the NURBS sample scenes (module comment)."""
+def render_rows(repeat: int, threads=None) -> None:
+    """Print the render-time table of the NURBS sample scenes (module comment) on
+    ``threads`` threads (None: all cores)."""
     from subtrace.io.scene import apply_overrides, load_scene
     from subtrace.render import render_scene
     from subtrace.runtime.threads import thread_count
 
     scenes = sorted((REPO / "scenes").glob("nurbs_*.toml"))
     for path in scenes:
-        render_scene(apply_overrides(load_scene(path), width=160, height=90))
+        render_scene(apply_overrides(load_scene(path), width=160, height=90), threads=threads)
     times = {p.stem: [] for p in scenes}
     for _ in range(repeat):
         for path in scenes:
             scene = apply_overrides(load_scene(path), width=1280, height=720)
-            t0 = time.perf_counter()
-            result = render_scene(scene)
-            times[path.stem].append((time.perf_counter() - t0, result.stats))
+            t0, c0 = time.perf_counter(), time.process_time()
+            result = render_scene(scene, threads=threads)
+            times[path.stem].append((time.perf_counter() - t0, time.process_time() - c0,
+                                     result.stats))
     print(f"\nNURBS sample scenes at 1280x720, 1 px, {thread_count()} threads "
           f"(medians of {repeat} renders)")
-    header = ("| scene | patches | total s | trace s | rays/s (trace) | pixels covered | "
+    header = ("| scene | patches | total s | CPU s | trace s | rays/s (trace) | pixels covered | "
               "deepest level |")
     print(header)
     print("|---" * (header.count("|") - 1) + "|")
     for name, runs in times.items():
-        total = statistics.median(t for t, _ in runs)
-        trace = statistics.median(st.time_trace for _, st in runs)
-        st = runs[0][1]
-        print(f"| {name} | {st.patches:,} | {total:.2f} | {trace:.2f} | "
+        total = statistics.median(t for t, _, _ in runs)
+        cpu = statistics.median(c for _, c, _ in runs)
+        trace = statistics.median(st.time_trace for _, _, st in runs)
+        st = runs[0][2]
+        print(f"| {name} | {st.patches:,} | {total:.2f} | {cpu:.2f} | {trace:.2f} | "
               f"{st.rays / trace:,.0f} | {st.pixels_covered:,} | {st.max_level} |", flush=True)
 
 
@@ -165,10 +169,11 @@ def main(argv=None) -> int:
     parser.add_argument("--patent-stops", action="store_true")
     parser.add_argument("--renders", action="store_true")
     parser.add_argument("--only-renders", action="store_true")
+    parser.add_argument("--threads", type=int, default=None, help="render threads")
     args = parser.parse_args(argv)
     import_subtrace()
     if args.only_renders:
-        render_rows(args.repeat)
+        render_rows(args.repeat, args.threads)
         return 0
     from subtrace.config import TRIM_LEAF_UNITS, TRIM_MIN_AREA, TRIM_MIN_SIDE
 
@@ -199,7 +204,7 @@ def main(argv=None) -> int:
                   f"{un / uk:,.0f}x | {nk * 1e9:.0f} | {nn * 1e9:,.0f} | {nn / nk:,.0f}x |",
                   flush=True)
     if args.renders:
-        render_rows(args.repeat)
+        render_rows(args.repeat, args.threads)
     return 0
 
 

@@ -23,8 +23,8 @@ rest of subtrace):
   directions; neighbouring surfaces share their boundary control vertices.
 
 Every rational control point is written as ``v x y z w`` (Euclidean x y z, weight w), trim
-curve points as ``vp u v w``. ``subtrace info <file>`` reports them and ``subtrace render`` draws them
-(scenes/nurbs_*.toml).
+curve points as ``vp u v w``. ``subtrace info <file>`` reports them and ``subtrace render``
+draws them (scenes/nurbs_*.toml).
 """
 
 from __future__ import annotations
@@ -177,7 +177,8 @@ def torus():
 
 
 def sphere():
-    obj = Obj("sphere: the unit sphere as one rational biquadratic NURBS surface (poles at z = +-1)")
+    obj = Obj("sphere: the unit sphere as one rational biquadratic NURBS surface "
+              "(poles at z = +-1)")
     circle = [(1, 0, 1), (1, 1, W45), (0, 1, 1), (-1, 1, W45), (-1, 0, 1), (-1, -1, W45),
               (0, -1, 1), (1, -1, W45), (1, 0, 1)]
     meridian = [(0, -1, 1), (1, -1, W45), (1, 0, 1), (1, 1, W45), (0, 1, 1)]  # (r, z, w)

@@ -1,5 +1,5 @@
 """Free-form surfaces: trimmed (rational) NURBS as OBJ files carry them (docs/seeds.md,
-section 4), read by :mod:`subtrace.io.freeform`, not rendered yet.
+section 4), read by :mod:`subtrace.io.freeform`, ray traced by :mod:`~subtrace.nurbs.trace`.
 
 Modules (importing this package imports none of them, and nothing here imports Numba
 until a kernel module is imported):
@@ -11,9 +11,12 @@ until a kernel module is imported):
   patches (homogeneous de Casteljau + quotient rule) and curves (Numba);
 * :mod:`~subtrace.nurbs.trim`: trimming curves, closed oriented loops, monotone units;
 * :mod:`~subtrace.nurbs.trimtree`: the trim kd-tree and its crossing-parity test (Numba);
-* :mod:`~subtrace.nurbs.model`: all of a file's surfaces in the flat tables below.
+* :mod:`~subtrace.nurbs.model`: all of a file's surfaces in the flat tables below;
+* :mod:`~subtrace.nurbs.trace`: the kernels: per-ray refinement of the patches, Newton's
+  root, the trim test, every root along a line (Numba);
+* :mod:`~subtrace.nurbs.scene`: a scene's surfaces and the render's NURBS pass.
 
-The interface a trace kernel will consume (:func:`subtrace.nurbs.model.build_model` ->
+The interface the kernels consume (:func:`subtrace.nurbs.model.build_model` ->
 :class:`~subtrace.nurbs.model.NurbsModel`; m patches, S surfaces, k trim-tree nodes, n curve
 units; float64 / int32, C-contiguous):
 
@@ -36,19 +39,16 @@ units; float64 / int32, C-contiguous):
                              node and unit indices absolute
 ==========================  ==================================================================
 
-Per ray the kernel treats a patch like the renderer's other Bezier pieces: bound it by its
-projected control points (positive weights keep the patch in their convex hull, tested),
-split by de Casteljau in homogeneous coordinates (a split net is again a rational Bezier
-net, with the rectangle halved), evaluate with :func:`subtrace.nurbs.bezier.patch_eval`
-(point, dP/ds, dP/dt; divide by the rectangle's sides for d/du, d/dv). A hit at local
-(s, t) maps to (u, v) through ``patch_rect``; it is kept when the surface is untrimmed, or
-when :func:`subtrace.nurbs.trimtree.trim_inside` (a ``leaf_njit`` helper: the tree arrays,
-the root, (u, v) and a TRIM_STACK_SIZE int64 scratch stack) answers True, XOR
-``surface_trim_invert``; else the ray goes on to the next hit. The angular criterion applies
-unchanged: the projected control polygon's edges bound the lengths of the patch's curves
-(with positive weights each rational de Casteljau step cuts corners of the projected
-polygon, as in the polynomial case). Patches of a surface share their
-sides exactly (they come from the same knot insertion), so a kernel sampling shared sides
-identically keeps a surface watertight; sides shared between surfaces are only as close as
-the file's numbers.
+Per ray (:mod:`subtrace.nurbs.trace`) a patch is treated like the renderer's other Bezier
+pieces: bounded by its projected control points (positive weights keep the patch in their
+convex hull, tested), split by de Casteljau in homogeneous coordinates (a split net is
+again a rational Bezier net, with the rectangle halved) while its angular size is above
+the tolerance, its hit solved by Newton's method with
+:func:`subtrace.nurbs.bezier.patch_eval` (point, dP/ds, dP/dt; divide by the rectangle's
+sides for d/du, d/dv). A hit at local (s, t) maps to (u, v) through ``patch_rect``; it is
+kept when the surface is untrimmed, or when :func:`subtrace.nurbs.trimtree.trim_inside`
+answers True, XOR ``surface_trim_invert``; else the ray goes on to the next hit. Patches of
+a surface share their sides exactly (they come from the same knot insertion), and a root
+near a side is found from either side, so a surface is watertight; sides shared between
+surfaces are only as close as the file's numbers.
 """

@@ -8,11 +8,13 @@ renderer traces its other Bezier pieces, after docs/seeds.md sections 3 and 4:
   its patch for positive weights (convex hull), so it is the patch's shell;
 * inside a patch the ray descends a quadtree of sub-patches: a net is halved in u and v by
   de Casteljau in homogeneous coordinates (a half of a rational Bezier net is again one),
-  and a child is split further while the ray enters its box and its angular size is above
-  the tolerance: the longest of its projected control polygon's rows and columns (with
-  positive weights each rational de Casteljau step cuts corners, so the polygon bounds the
-  lengths of the patch's curves) over the distance from the eye to its box. Children are
-  visited nearest first; boxes beyond the nearest kept hit are dropped;
+  and a child is split further while the ray enters its shell (its box cut by the slab of
+  its projected control points along the normal of its corners' diagonals: the convex
+  hull lies in both) and its angular size is above the tolerance: the longest of its
+  projected control polygon's rows and columns (with positive weights each rational de
+  Casteljau step cuts corners, so the polygon bounds the lengths of the patch's curves)
+  over the distance from the eye to its box. Children are visited nearest first; shells
+  beyond the nearest kept hit are dropped;
 * at a leaf the hit is found exactly: Newton's method on the rational surface itself (the
   patch's own net at patch parameters, so every leaf computes a point bit for bit alike),
   the ray written as the meet of two planes (Kajiya), starting from where the ray meets the
@@ -20,15 +22,21 @@ renderer traces its other Bezier pieces, after docs/seeds.md sections 3 and 4:
   it converged, lies in the patch and within half a leaf of this leaf (the hit of a ray
   near a leaf's side is found from either side: no ray passes between neighbouring leaves
   or patches, whatever their depths), is in front of the eye and nearer than the best so
-  far, and the trim test keeps its surface parameters (:func:`subtrace.nurbs.trimtree.trim_inside`,
-  XOR the surface's inversion). A trimmed-away root is dropped and the search goes on, so
-  the ray finds the next hit, on this patch or another.
+  far, and the trim test keeps its surface parameters
+  (:func:`subtrace.nurbs.trimtree.trim_inside`, XOR the surface's inversion). Where the
+  Jacobian is singular (a ray through a sphere's pole) Newton takes the least-squares
+  step. A trimmed-away root is dropped and the search goes on, so the ray finds the next
+  hit, on this patch or another.
 
 Hit record per ray (:func:`trace_nurbs`): ``t`` (distance, inf: no hit), ``patch``
 (-1: none), ``st (n, 2)`` the patch parameters, ``level`` the leaf's depth in the patch's
 quadtree. :func:`hit_geometry` turns a hit into position, exact unit normal (where the
 patch's parametrisation degenerates, a sphere's pole, the limit of the normal from inside
-the patch) and surface parameters (u, v).
+the patch) and surface parameters (u, v). :func:`trace_rays` traces any rays;
+:func:`line_roots_task` finds every root along lines (:mod:`subtrace.lines.nurbs`).
+
+Every sub-patch's work is inlined into the descent (``inline_njit``): a call per child
+passing the stack's arrays cost more than the box and slab it computes.
 """
 
 from __future__ import annotations
@@ -439,9 +447,9 @@ def _descend(net0, du, dv, p, rect, surface, ray, inv, tlo, thi, tol, tables, sc
 @nb.njit(cache=True)
 def _scratch(max_du, max_dv):
     """Per-thread buffers of :func:`_descend` (each thread its own): the descent stack
-    (nets, rectangles with boxes and sizes, levels, entry distances), the split's children, the work and output
-    of :func:`~subtrace.nurbs.bezier.patch_eval`, the trim test's stack, the children's
-    bounds."""
+    (nets, rectangles with boxes, levels, entry distances), the split's children, the work
+    and output of :func:`~subtrace.nurbs.bezier.patch_eval`, the trim test's stack, the
+    children's bounds."""
     return (np.zeros((DESCENT_STACK, max_du + 1, max_dv + 1, 4)), np.zeros((DESCENT_STACK, 10)),
             np.zeros(DESCENT_STACK, np.int64), np.zeros(DESCENT_STACK),
             np.zeros((6, max_du + 1, max_dv + 1, 4)),
