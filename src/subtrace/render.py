@@ -316,6 +316,8 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     if nurbs is not None:
         nurbs_pass(nurbs, camera, tol_rad, None if table is None else hits.t, lights,
                    headlight, planes, stats)
+        if progress is not None and table is None:
+            progress(stats.rays, stats.rays, "NURBS")
     stats.pixels_covered = int(np.count_nonzero(planes[C_A] > 0)) if nurbs else int(covered.sum())
     stats.max_level = deepest_level(planes)
     channels = {name: planes[k].reshape(H, W) for k, name in enumerate(CHANNELS)}
@@ -336,6 +338,7 @@ def nurbs_pass(nurbs, camera, tol_rad, other_t, lights, headlight, planes, stats
     hits = render_nurbs(nurbs, camera_frame(camera), camera.width, camera.height, tol_rad,
                         other_t, lights, headlight, planes)
     stats.patches += nurbs.model.n_patches
+    stats.max_depth = max(stats.max_depth, int(hits.level.max(initial=0)))
     stats.patches_refined += len(np.unique(hits.patch[hits.patch >= 0]))  # (per ray)
     if hits.capped:
         warnings.warn(f"{hits.capped} NURBS sub-patches held at {config.NURBS_MAX_LEVEL} "
