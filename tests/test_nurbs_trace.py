@@ -351,3 +351,29 @@ def test_intersect_command_on_a_free_form_file(tmp_path, capsys):
     rho = math.sqrt(0.35**2 - 0.1**2)
     np.testing.assert_allclose(xs, [-1 - rho, -1 + rho, 1 - rho, 1 + rho], atol=1e-9)
     assert {int(r[5]) for r in rows} <= set(range(16))
+
+
+def test_free_form_file_with_the_automatic_camera():
+    """An OBJ file of free-form surfaces alone renders with the automatic camera (framing
+    the patches' control boxes): the surface fills a good part of the image."""
+    from subtrace.io.scene import scene_for_meshes
+    from subtrace.render import render_scene
+
+    scene = apply_overrides(scene_for_meshes([str(MODELS / "cylinder_window.obj")]), width=64,
+                            height=48)
+    result = render_scene(scene)
+    covered = result.channels["A"] > 0
+    assert 0.1 < covered.mean() < 0.9
+    assert set(np.unique(result.channels["object_id"][covered])) == {0.0}
+    assert result.schemes == ("nurbs",) and result.stats.patches == 4
+
+
+def test_load_model_without_surfaces_is_one_clear_error(tmp_path):
+    """load_model on an OBJ file without free-form surfaces names the file."""
+    from subtrace.errors import ObjError
+    from subtrace.nurbs.model import load_model
+
+    path = tmp_path / "quad.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n")
+    with pytest.raises(ObjError, match="quad.obj: no free-form surfaces"):
+        load_model(path)

@@ -10,7 +10,9 @@ pieces (each with its own depth) and cells (``trace.pools.Pieces``), regular Loo
 triangles into quartic Bezier nets split per ray like the quads' (``trace/tris.py``), other
 Loop patches into grids with snapped sides and quadtree boxes (``trace.pools.LoopGrids``). The rays that
 asked are then traced again. Patches no ray reaches before a closer hit are never refined.
-Finally ``shade.py`` turns hits into image channels.
+Finally ``shade.py`` turns hits into image channels. The scene's free-form (trimmed NURBS)
+surfaces are traced after that in a pass of their own (:func:`nurbs_pass`,
+``nurbs/scene.py``), which overwrites a pixel's channels where its hit is nearer.
 """
 
 from __future__ import annotations
@@ -267,7 +269,8 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     ``accel``: how rays find the shells they enter (see :func:`trace_hits`). ``progress``:
     None, or called as ``progress(done, total, label)`` with the rays whose hits are final
     out of all (e.g. :class:`subtrace.runtime.progress.ProgressBar`); it reaches
-    done == total."""
+    done == total. ``cages``: the scene's cages already loaded (its free-form surfaces are
+    then not rendered); None: loaded here, with the free-form surfaces of its OBJ files."""
     t_start = time.perf_counter()
     _check_threads(threads)
     accel = config.PRIMARY_ACCEL if accel is None else accel
@@ -311,14 +314,16 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
               lights, headlight, miss, planes, covered)
         if owners != list(range(len(owners))):  # objects without a cage: scene indices
             hit = planes[C_OBJECT] >= 0
-            planes[C_OBJECT][hit] = np.array(owners, np.float32)[planes[C_OBJECT][hit].astype(int)]
+            index = planes[C_OBJECT][hit].astype(np.int64)
+            planes[C_OBJECT][hit] = np.array(owners, np.float32)[index]
     stats.time_shade = time.perf_counter() - t0
     if nurbs is not None:
         nurbs_pass(nurbs, camera, tol_rad, None if table is None else hits.t, lights,
                    headlight, planes, stats)
         if progress is not None and table is None:
             progress(stats.rays, stats.rays, "NURBS")
-    stats.pixels_covered = int(np.count_nonzero(planes[C_A] > 0)) if nurbs else int(covered.sum())
+    stats.pixels_covered = (int(covered.sum()) if nurbs is None
+                            else int(np.count_nonzero(planes[C_A] > 0)))
     stats.max_level = deepest_level(planes)
     channels = {name: planes[k].reshape(H, W) for k, name in enumerate(CHANNELS)}
     stats.time_total = time.perf_counter() - t_start
