@@ -14,6 +14,8 @@ from pathlib import Path
 import naive
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from subtrace.camera import Camera, camera_frame
 from subtrace.io.obj import read_obj
@@ -186,6 +188,44 @@ def test_a_trimmed_first_hit_goes_on_to_the_next():
     near = 3.0 - np.sqrt(1 - 0.05**2)
     np.testing.assert_allclose(hits.t, [4.0, far, 2.0, 2.0], atol=1e-9)
     assert near < far
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_kernel_trim_with_random_loops(seed):
+    """A flat square (z = 0, u = x, v = y) trimmed by random rational loops (hypothesis
+    seeds; possibly self-intersecting): a ray down onto (u, v) hits exactly where the
+    kd-tree classifies the point inside, and where the plain parity over the loops' exact
+    segment crossings (naive.trim_parity, polynomial roots) says so."""
+    from subtrace.nurbs.surface import make_surface
+    from subtrace.nurbs.trim import TrimLoop
+
+    def random_loop(rng, segments):
+        joints = rng.random((segments, 2))
+        segs = []
+        for k in range(segments):
+            d = int(rng.integers(1, 4))
+            pts = np.vstack([joints[k], rng.random((d - 1, 2)), joints[(k + 1) % segments]])
+            w = rng.uniform(0.3, 3.0, d + 1)
+            segs.append(np.column_stack([pts * w[:, None], w]))
+        return TrimLoop(False, tuple(segs), joints)
+
+    rng = np.random.default_rng(seed)
+    loops = tuple(random_loop(rng, int(rng.integers(1, 8)))
+                  for _ in range(int(rng.integers(1, 3))))
+    plane = make_surface((1, 1), [0, 0, 1, 1], [0, 0, 1, 1],
+                         [(0, 0, 0), (1, 0, 0), (0, 1, 0), (1, 1, 0)])
+    model = build_model([dataclasses.replace(plane, loops=loops)])
+    uv = rng.random((200, 2))
+    origins = np.column_stack([uv, np.ones(len(uv))])
+    hits = trace_rays(model, patch_bvh(model), origins, np.tile([0.0, 0.0, -1.0], (200, 1)),
+                      1e-3)
+    hit = hits.patch >= 0
+    assert np.array_equal(hit, model.inside(np.zeros(len(uv), np.int64), uv))
+    segments = [seg for loop in loops for seg in loop.segments]
+    slow = np.array([naive.trim_parity(segments, *p) for p in uv[:40]])
+    assert np.array_equal(hit[:40], slow)
+    assert np.all(hits.t[hit] == 1.0)
 
 
 # ------------------------------------------------------------------------------------------
