@@ -3,9 +3,15 @@
 Topology: the numpy / plain-Python relations of ``subtrace.mesh.topology`` as they were
 before the jitted kernels (``base_edges`` with lexsort + unique, CSR lists by stable sorts,
 vertex rings ordered by a plain loop).
+
+NURBS: de Boor evaluation of (rational) B-spline curves and surfaces with their derivatives
+(Cox-de Boor basis functions), and the trim test's parity by polynomial roots over whole
+Bezier segments (no monotone units, no tree).
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -129,3 +135,164 @@ def ray_triangle_hits(origin, direction, A, B, C, slack=0.0):
     idx = np.nonzero(hit)[0]
     order = np.argsort(t[idx], kind="stable")
     return t[idx][order], idx[order]
+
+
+# --------------------------------------------------------------------------------------
+# NURBS: plain-Python de Boor evaluation and trim parity (oracles of subtrace.nurbs)
+# --------------------------------------------------------------------------------------
+
+
+def bspline_span(knots, degree, n_ctrl, t):
+    """The span k with knots[k] <= t < knots[k+1] (the last non-empty one at the end)."""
+    k = degree
+    while k < n_ctrl - 1 and not (knots[k] <= t < knots[k + 1]):
+        k += 1
+    return k
+
+
+def bspline_basis(knots, degree, n_ctrl, t):
+    """(N, dN): the n_ctrl basis functions of degree ``degree`` at t and their derivatives,
+    by the Cox-de Boor recursion over the span holding t (plain Python lists)."""
+    k = bspline_span(knots, degree, n_ctrl, t)
+    # degree 0: 1 on the span
+    N = [[0.0] * (len(knots) - 1)]
+    N[0][k] = 1.0
+    for p in range(1, degree + 1):
+        row = [0.0] * (len(knots) - 1 - p)
+        for i in range(len(row)):
+            a = knots[i + p] - knots[i]
+            b = knots[i + p + 1] - knots[i + 1]
+            left = (t - knots[i]) / a * N[p - 1][i] if a > 0 else 0.0
+            right = (knots[i + p + 1] - t) / b * N[p - 1][i + 1] if b > 0 else 0.0
+            row[i] = left + right
+        N.append(row)
+    values = N[degree][:n_ctrl]
+    if degree == 0:
+        return values, [0.0] * n_ctrl
+    lower = N[degree - 1]
+    deriv = []
+    for i in range(n_ctrl):
+        a = knots[i + degree] - knots[i]
+        b = knots[i + degree + 1] - knots[i + 1]
+        d = (degree / a * lower[i] if a > 0 else 0.0)
+        d -= (degree / b * lower[i + 1] if b > 0 else 0.0)
+        deriv.append(d)
+    return values, deriv
+
+
+def deboor_curve(knots, degree, ctrl, t):
+    """Homogeneous point (list) of the B-spline curve (knots, ctrl (n, k)) at t: de Boor's
+    algorithm, plain Python."""
+    ctrl = [list(map(float, row)) for row in ctrl]
+    n = len(ctrl)
+    k = bspline_span(knots, degree, n, t)
+    d = [ctrl[j + k - degree][:] for j in range(degree + 1)]
+    for r in range(1, degree + 1):
+        for j in range(degree, r - 1, -1):
+            i = j + k - degree
+            a = (t - knots[i]) / (knots[i + degree + 1 - r] - knots[i])
+            d[j] = [(1.0 - a) * x + a * y for x, y in zip(d[j - 1], d[j])]
+    return d[degree]
+
+
+def nurbs_surface_eval(knots_u, knots_v, du, dv, control, u, v):
+    """(P, P_u, P_v) of the rational surface ``control (nv, nu, 4)`` homogeneous (row j
+    along v) at (u, v): basis functions by Cox-de Boor, then the quotient rule (lists)."""
+    nv, nu = len(control), len(control[0])
+    Nu, dNu = bspline_basis(list(knots_u), du, nu, u)
+    Nv, dNv = bspline_basis(list(knots_v), dv, nv, v)
+    H, Hu, Hv = [0.0] * 4, [0.0] * 4, [0.0] * 4
+    for j in range(nv):
+        for i in range(nu):
+            for c in range(4):
+                x = float(control[j][i][c])
+                H[c] += Nu[i] * Nv[j] * x
+                Hu[c] += dNu[i] * Nv[j] * x
+                Hv[c] += Nu[i] * dNv[j] * x
+    P = [H[c] / H[3] for c in range(3)]
+    Pu = [(Hu[c] - P[c] * Hu[3]) / H[3] for c in range(3)]
+    Pv = [(Hv[c] - P[c] * Hv[3]) / H[3] for c in range(3)]
+    return P, Pu, Pv
+
+
+def bezier_curve_point(ctrl, t):
+    """Projected point (u, v) of the rational Bezier curve ``ctrl (d+1, 3)`` at t."""
+    pts = [list(map(float, row)) for row in ctrl]
+    while len(pts) > 1:
+        pts = [[(1.0 - t) * a + t * b for a, b in zip(p, q)] for p, q in zip(pts, pts[1:])]
+    return pts[0][0] / pts[0][2], pts[0][1] / pts[0][2]
+
+
+def trim_parity(segments, px, py):
+    """Inside (odd crossings) of the point (px, py) for closed loops given as rational
+    Bezier segments ``(d+1, 3)`` homogeneous, NOT split into monotone units: every real
+    root t in [0, 1) of v(t) = py (the polynomial Y(t) - py W(t) in the power basis) whose
+    u(t) > px is a crossing. For points in general position (random ones): a crossing at a
+    segment's end, a tangency or a horizontal segment at height py has probability 0."""
+    crossings = 0
+    for seg in segments:
+        seg = np.asarray(seg, dtype=np.float64)
+        d = len(seg) - 1
+        coef = np.zeros(d + 1)
+        for i in range(d + 1):
+            # C(d,i) t^i (1-t)^(d-i) in powers of t
+            for k in range(d - i + 1):
+                coef[i + k] += (math.comb(d, i) * math.comb(d - i, k) * (-1) ** k
+                                * (seg[i, 1] - py * seg[i, 2]))
+        poly = np.trim_zeros(coef, "b")
+        if len(poly) < 2:
+            continue
+        for r in np.polynomial.polynomial.polyroots(poly):
+            if abs(r.imag) < 1e-9 and 0.0 <= r.real < 1.0:
+                x, _ = bezier_curve_point(seg, r.real)
+                if x > px:
+                    crossings += 1
+    return crossings % 2 == 1
+
+
+def loop_polygon(segments, samples=64):
+    """(k, 2) points of a closed loop of rational Bezier segments ``(d+1, 3)``, each segment
+    sampled at ``samples`` equal parameter steps (plain de Casteljau)."""
+    pts = []
+    for seg in segments:
+        for k in range(samples):
+            pts.append(bezier_curve_point(seg, k / samples))
+    return np.array(pts)
+
+
+def polygon_parity(polygons, points):
+    """(n,) bool: even-odd rule of ``points (n, 2)`` against the closed ``polygons`` (each
+    (k, 2)): the brute-force crossing count of a ray towards +u with every polygon edge,
+    in numpy."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    inside = np.zeros(len(points), dtype=bool)
+    px, py = points[:, :1], points[:, 1:]
+    for poly in polygons:
+        a = np.asarray(poly, dtype=np.float64)
+        b = np.roll(a, -1, axis=0)
+        ax, ay, bx, by = a[:, 0], a[:, 1], b[:, 0], b[:, 1]
+        for lo in range(0, len(points), 2048):
+            qx, qy = px[lo:lo + 2048], py[lo:lo + 2048]
+            spans = (ay <= qy) != (by <= qy)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                x = ax + (qy - ay) * (bx - ax) / (by - ay)
+            inside[lo:lo + 2048] ^= (np.count_nonzero(spans & (x > qx), axis=1) % 2) == 1
+    return inside
+
+
+def nurbs_grid(surface, n):
+    """(points (n+1, n+1, 3), uv (n+1, n+1, 2)): the surface (a subtrace NurbsSurface) at a
+    uniform (n+1) x (n+1) grid of its parameter rectangle: the Cox-de Boor basis functions
+    of each grid u and v (:func:`bspline_basis`), their tensor product with the homogeneous
+    control points, then the division by the weight."""
+    u0, u1, v0, v1 = surface.domain
+    du, dv = surface.degree
+    nv, nu, _ = surface.control.shape
+    ku, kv = surface.knots_u.tolist(), surface.knots_v.tolist()
+    us = [u0 + (u1 - u0) * a / n for a in range(n + 1)]
+    vs = [v0 + (v1 - v0) * b / n for b in range(n + 1)]
+    Nu = np.array([bspline_basis(ku, du, nu, u)[0] for u in us])  # (n+1, nu)
+    Nv = np.array([bspline_basis(kv, dv, nv, v)[0] for v in vs])  # (n+1, nv)
+    H = np.einsum("ai,bj,jic->abc", Nu, Nv, surface.control)
+    uv = np.stack(np.meshgrid(us, vs, indexing="ij"), axis=-1)
+    return H[..., :3] / H[..., 3:], uv

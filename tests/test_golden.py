@@ -18,6 +18,7 @@ import json
 import shutil
 from pathlib import Path
 
+import naive
 import numpy as np
 import pytest
 from naive import ray_triangles
@@ -26,6 +27,7 @@ import subtrace
 from subtrace.compare import DEFAULT_THRESHOLDS, FAIL, GROUPS, compare_images
 from subtrace.io.exr import HALF_CHANNELS, read_exr, write_exr, write_png
 from subtrace.io.scene import apply_overrides, load_scene
+from subtrace.nurbs.scene import has_faces, has_surfaces
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES_DIR = ROOT / "scenes"
@@ -177,7 +179,7 @@ def test_golden_header_and_size(name):
     assert tuple(channels) == GOLDEN_CHANNELS
     assert channels["R"].shape == (GOLDEN_HEIGHT, GOLDEN_WIDTH)
     assert attrs["subtrace:version"] == subtrace.__version__
-    assert attrs["subtrace:scheme"] in ("catmark", "loop")
+    assert set(attrs["subtrace:scheme"].split(",")) <= {"catmark", "loop", "nurbs"}
     assert attrs["subtrace:tolerance_px"] == pytest.approx(1.0, rel=1e-6)
     assert attrs["subtrace:golden_command"] == update_command(name)
     assert attrs["subtrace:scene"] == f"scenes/{name}.toml"
@@ -266,6 +268,48 @@ def reference_mesh(cage, camera) -> tuple[np.ndarray, np.ndarray]:
     return P, faces
 
 
+REF_NURBS_EDGE_PX = 2.0  # as REF_EDGE_PX; a triangle kept or dropped whole moves a trim edge by
+# less than its size, which the coverage check's band of one pixel around the reference's
+# silhouettes absorbs (the test passes at 1 px too, five times slower)
+REF_NURBS_MAX_N = 512
+
+
+def reference_nurbs_mesh(path, camera) -> tuple[np.ndarray, np.ndarray]:
+    """(points, triangles) of the free-form surfaces of the OBJ file ``path``: each surface
+    at a uniform grid of its parameter rectangle fine enough that every edge projects to at
+    most REF_NURBS_EDGE_PX pixels (points by plain de Boor, naive.nurbs_grid), cells split
+    into two triangles, a triangle dropped where its centroid's (u, v) is trimmed away by the
+    brute-force even-odd rule over the loops sampled densely (naive.polygon_parity):
+    kept inside the outer loops (all of the rectangle without them) and outside the holes."""
+    from subtrace.io.obj import read_obj
+
+    eye = np.asarray(camera.eye)
+    points, faces = [], []
+    for surface in read_obj(path).freeform.surfaces:
+        n = 8
+        while True:
+            P, uv = naive.nurbs_grid(surface, n)
+            along = np.concatenate([np.linalg.norm(np.diff(P, axis=a), axis=-1).ravel()
+                                    for a in (0, 1)])
+            dist = np.linalg.norm(P - eye, axis=-1).min()
+            need = along.max() / dist / (REF_NURBS_EDGE_PX * camera.pixel_angle())
+            if need <= 1.0 or n >= REF_NURBS_MAX_N:
+                break
+            n = min(REF_NURBS_MAX_N, int(np.ceil(n * need * 1.1)))
+        idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+        a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+        tri = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
+                              np.stack([a, c, d], -1).reshape(-1, 3)])
+        centre = uv.reshape(-1, 2)[tri].mean(axis=1)
+        outer = [naive.loop_polygon(lp.segments) for lp in surface.loops if not lp.hole]
+        holes = [naive.loop_polygon(lp.segments) for lp in surface.loops if lp.hole]
+        keep = naive.polygon_parity(outer, centre) if outer else np.ones(len(tri), bool)
+        keep &= ~naive.polygon_parity(holes, centre)
+        faces.append(tri[keep] + sum(len(p) for p in points))
+        points.append(P.reshape(-1, 3))
+    return np.concatenate(points), np.concatenate(faces)
+
+
 def ray_cast(triangles: np.ndarray, camera) -> tuple[np.ndarray, np.ndarray]:
     """Nearest hit of every pixel's ray with ``triangles``: (t (H,W), triangle (H,W)), t the
     distance from the eye (inf, -1 on a miss). Plain numpy: each triangle is tested against
@@ -349,6 +393,8 @@ def reference_check(channels: dict, scene, tol_rad: float) -> dict:
 
     * coverage: a pixel covered in one and not the other that is not an edge pixel (a
       tolerance of one pixel moves a silhouette by less than a pixel);
+    * (free-form surfaces: :func:`reference_nurbs_mesh`, plain de Boor points and the
+      even-odd rule over densely sampled trim loops);
     * depth: |Z - Z_ref| cos(theta) > tol_rad * Z_ref off the edges (theta: between the ray
       and the reference normal): the two surfaces further apart, along the normal, than the
       tolerance angle at that distance. Both lie much closer to the limit surface than that
@@ -364,10 +410,15 @@ def reference_check(channels: dict, scene, tol_rad: float) -> dict:
     camera = scene.make_camera()
     points, faces = [], []
     for o in scene.objects:
-        cage = subtrace.load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code)
-        P, F = reference_mesh(cage, camera)
-        faces.append(F + sum(len(p) for p in points))
-        points.append(P)
+        meshes = []
+        if has_surfaces(o.mesh):  # free-form surfaces
+            meshes.append(reference_nurbs_mesh(o.mesh, camera))
+        if not has_surfaces(o.mesh) or has_faces(o.mesh):  # a subdivision cage
+            cage = subtrace.load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code)
+            meshes.append(reference_mesh(cage, camera))
+        for P, F in meshes:
+            faces.append(F + sum(len(p) for p in points))
+            points.append(P)
     points, faces = np.concatenate(points), np.concatenate(faces)
     tris = points[faces]
     normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])

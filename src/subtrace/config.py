@@ -84,6 +84,48 @@ STACK_SIZE = 128
 # triangle is far below anything visible) without letting rays through.
 TRI_SLACK = 1e-12
 
+# Free-form surfaces (nurbs/). Trim loops are closed when consecutive curves meet within
+# TRIM_CLOSURE_TOL of the surface's parameter range (the larger side of its rectangle), and lie
+# in its domain when they leave it by no more than that: CAD exporters write about 6 to 15
+# significant digits, so loops closed in the modeller meet to about 1e-6 of the range in the
+# file; the reader then closes the gap exactly (moves the next curve's first point).
+TRIM_CLOSURE_TOL = 1e-5
+# Largest degree of a free-form surface or curve (the exporters write 1 to 9; Bezier
+# extraction and the kernels' fixed-size buffers are sized by it).
+NURBS_MAX_DEGREE = 15
+# Ray tracing NURBS patches (nurbs/trace.py): a sub-patch is halved at most NURBS_MAX_LEVEL
+# times per ray (2^-30 of a patch is far below what a pixel of any sensible view resolves;
+# a leaf held there above the tolerance is counted and reported); Newton's method takes at
+# most NURBS_NEWTON_STEPS steps and has converged when a step moves the patch parameters by
+# at most NURBS_NEWTON_TOL (quadratic convergence: the next step would be far below a double's
+# resolution; rounding of the residual keeps the last steps of grazing rays near 1e-12);
+# a converged root lies on the ray when its distance to it is at most NURBS_ON_RAY of the
+# point's coordinates and distance (rounding is about 1e-16 of them).
+NURBS_MAX_LEVEL = 30
+NURBS_NEWTON_STEPS = 24
+NURBS_NEWTON_TOL = 1e-10
+NURBS_ON_RAY = 1e-9
+# A normal dP/du x dP/dv shorter than this fraction of |dP/du|^2 + |dP/dv|^2 is taken as
+# degenerate (a side shrunk to a point): the normal is taken a short step inside the patch.
+NURBS_DEGENERATE = 1e-10
+# The trim kd-tree (nurbs/trimtree.py): a node with at most TRIM_LEAF_UNITS monotone curve
+# units is a leaf; empty space of more than TRIM_EMPTY_FRACTION of a node's side is cut off
+# first as an empty leaf (classified once, inside or outside); no node is deeper than
+# TRIM_MAX_DEPTH (the traversal's fixed stack holds TRIM_STACK_SIZE nodes, more than enough).
+# The patent's leaf-size stops (a leaf's area below TRIM_MIN_AREA of the tree's box, or its
+# longer side below TRIM_MIN_SIDE of the box's diagonal: 0.0006 and 0.025 there) are off by
+# default: they bound the depth, so long loops keep many units per leaf (benchmarks/trim.py
+# --patent-stops measures them; BENCHMARKS.md).
+TRIM_LEAF_UNITS = 4
+TRIM_MIN_AREA = 0.0
+TRIM_MIN_SIDE = 0.0
+TRIM_EMPTY_FRACTION = 0.25
+TRIM_MAX_DEPTH = 48
+TRIM_STACK_SIZE = 128
+# Halvings of the exact crossing test of a monotone unit whose box straddles the query
+# point: each halves the parameter interval; 64 reach the last bit of a double parameter.
+TRIM_BISECT_STEPS = 64
+
 # Memory budget of a render (``--max-memory``, ``[render] max_memory``). The default is this
 # fraction of the memory the kernel says is available when the render starts (MemAvailable:
 # free memory plus what the page cache can give back), or of the physical memory where that

@@ -25,6 +25,12 @@ class ObjError(SubtraceError):
         super().__init__(f"{where}: {problem}")
 
 
+class NurbsError(SubtraceError):
+    """A free-form surface or trimming curve that cannot be used (a bad knot vector, a
+    non-positive weight, an open trim loop). The message is the bare problem; the OBJ reader,
+    which knows the statement's line, re-raises it as an :class:`ObjError`."""
+
+
 class TopologyKind(str, Enum):
     """What is wrong with a cage's topology (:attr:`TopologyError.kind`). A str enum, so a
     kind also equals its name as text (``err.kind == "scheme"``)."""

@@ -11,12 +11,15 @@ Catmull-Clark patches into Bezier pieces (each with its own depth) and cells, re
 triangles into quartic Bezier nets split per ray like the quads' (``trace/tris.py``),
 irregular Loop triangles into such nets and cells (``patches/isolate_loop.py``). The rays
 that asked are then traced again. Patches no ray reaches before a closer hit are never refined.
-Finally ``shade.py`` turns hits into image channels.
+Finally ``shade.py`` turns hits into image channels. The scene's free-form (trimmed NURBS)
+surfaces are traced after that in a pass of their own (:func:`nurbs_pass`,
+``nurbs/scene.py``), which overwrites a pixel's channels where its hit is nearer.
 """
 
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,14 +30,16 @@ from subtrace.accel.bvh import build_bvh, no_bvh
 from subtrace.accel.projection import (boxes_in_view, no_tiles, project_shells,
                                       tiles_bytes)
 from subtrace.camera import camera_frame
-from subtrace.errors import SceneError
+from subtrace.errors import SceneError, SubtraceWarning
 from subtrace.io.limits import check_coordinates, check_valences
 from subtrace.mesh.cage import load_cage
+from subtrace.nurbs.scene import has_faces, has_surfaces, load_nurbs, render_nurbs
 from subtrace.patches.criterion import edge_sampling
 from subtrace.patches.table import build_patch_table, cage_face_shells
 from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
-from subtrace.shade import CHANNELS, deepest_level, miss_values, patch_shading, shade
+from subtrace.shade import (C_A, C_OBJECT, CHANNELS, deepest_level, miss_values,
+                            patch_shading, shade)
 from subtrace.subdiv.limit import limit_points
 from subtrace.trace.budget import check_memory, choose_within_budget, warn_tiles
 from subtrace.trace.build import build_loop_regular, build_requested
@@ -203,16 +208,27 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
     return hits, iso, built
 
 
+def cage_objects(scene) -> list[int]:
+    """Indices of the scene's objects that have a cage: all but OBJ files of free-form
+    surfaces only (those render through ``nurbs/scene.py`` alone)."""
+    return [k for k, o in enumerate(scene.objects)
+            if not has_surfaces(o.mesh) or has_faces(o.mesh)]
+
+
 def load_objects(scene):
-    """Cages of the scene's objects (scheme / boundary overrides applied)."""
+    """Cages of the scene's objects (scheme / boundary overrides applied), in the order of
+    :func:`cage_objects`."""
     return [load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code, prim=o.prim)
-            for o in scene.objects]
+            for o in (scene.objects[k] for k in cage_objects(scene))]
 
 
-def scene_bounds(cages):
+def scene_bounds(cages, nurbs=None):
     """(lo, hi) that the automatic camera frames: the bounds of the level-1 limit points of
-    every object (the limit surface, not the cage)."""
+    every object (the limit surface, not the cage), and of the free-form surfaces ``nurbs``
+    (their patches' control points)."""
     bounds = [c.bounds() for c in cages]
+    if nurbs is not None:
+        bounds.append(nurbs.bounds())
     return np.min([b[0] for b in bounds], axis=0), np.max([b[1] for b in bounds], axis=0)
 
 
@@ -239,13 +255,19 @@ def table_in_view(cages, camera):
     return build_patch_table(cages, keep, in_view), keep
 
 
-def _prepare(scene, cages, stats):
-    """Load and check the cages, frame the camera, build the patch table of the cage faces
-    in view, check the budget: (cages, table, camera, tolerance in radians, budget in
-    bytes)."""
+def _prepare(scene, cages, stats, nurbs=None):
+    """Load and check the cages, frame the camera (around the free-form surfaces ``nurbs``
+    too), build the patch table of the cage faces in view, check the budget: (cages, table
+    (None without cages), camera, tolerance in radians, budget in bytes)."""
     t_start = time.perf_counter()
     if cages is None:
         cages = load_objects(scene)
+    if not cages:
+        lo, hi = nurbs.bounds()
+        camera = scene.make_camera(lo, hi)
+        stats.rays = camera.width * camera.height
+        stats.time_load = time.perf_counter() - t_start
+        return cages, None, camera, scene.render.tolerance_rad(camera), None
     for c in cages:
         check_coordinates(c.path, c.points, config.MAX_COORDINATE)
         check_valences(c.path, c.face_sizes, np.diff(c.base.vert_edge_offsets),
@@ -254,7 +276,7 @@ def _prepare(scene, cages, stats):
     t0 = time.perf_counter()
     lo = hi = None
     if scene.camera.is_auto:
-        lo, hi = scene_bounds(cages)
+        lo, hi = scene_bounds(cages, nurbs)
     camera = scene.make_camera(lo, hi)
     if config.CULL_TO_VIEW:
         table, keep = table_in_view(cages, camera)
@@ -275,7 +297,8 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     ``accel``: how rays find the shells they enter (see :func:`trace_hits`). ``progress``:
     None, or called as ``progress(done, total, label)`` with the rays whose hits are final
     out of all (e.g. :class:`subtrace.runtime.progress.ProgressBar`); it reaches
-    done == total."""
+    done == total. ``cages``: the scene's cages already loaded (its free-form surfaces are
+    then not rendered); None: loaded here, with the free-form surfaces of its OBJ files."""
     t_start = time.perf_counter()
     threads = tasks.usable_threads(threads)
     accel = config.PRIMARY_ACCEL if accel is None else accel
@@ -285,12 +308,16 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     stats = RenderStats()
     compiling = warmup.start(tasks.thread_count())  # on a cold cache only
     try:
-        cages, table, camera, tol_rad, budget = _prepare(scene, cages, stats)
+        owners = cage_objects(scene) if cages is None else list(range(len(cages)))
+        nurbs = load_nurbs(scene) if cages is None else None  # free-form surfaces
+        cages, table, camera, tol_rad, budget = _prepare(scene, cages, stats, nurbs)
         if progress is not None:
             progress(0, stats.rays, "tracing")
-        hits, iso, built = trace_hits(table, camera, tol_rad, stats, compiling=compiling,
-                                             accel=accel, progress=progress,
-                                             max_memory=budget)
+        if table is None:
+            warmup.stop(compiling)  # no cage: the subdivision kernels are not needed
+        else:
+            hits, iso, built = trace_hits(table, camera, tol_rad, stats, compiling=compiling,
+                                          accel=accel, progress=progress, max_memory=budget)
     except BaseException:
         warmup.stop(compiling)
         raise
@@ -304,17 +331,54 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
         dtype=np.float64,
     ).reshape(-1, 6)
     headlight = np.array([scene.render.headlight_intensity if scene.render.headlight else 0.0])
-    colors = [o.color for o in scene.objects]
-    shade(camera_frame(camera), W, hits, iso.view(), patch_shading(table, colors), lights,
-          headlight, miss_values(scene.render.background), planes, covered)
-    stats.pixels_covered = int(covered.sum())
+    miss = miss_values(scene.render.background)
+    if table is None:
+        planes[:] = miss[:, None]
+        built = np.zeros(0, np.int64)
+    else:
+        colors = [scene.objects[k].color for k in owners]
+        shade(camera_frame(camera), W, hits, iso.view(), patch_shading(table, colors),
+              lights, headlight, miss, planes, covered)
+        if owners != list(range(len(owners))):  # objects without a cage: scene indices
+            hit = planes[C_OBJECT] >= 0
+            index = planes[C_OBJECT][hit].astype(np.int64)
+            planes[C_OBJECT][hit] = np.array(owners, np.float32)[index]
+    stats.time_shade = time.perf_counter() - t0
+    if nurbs is not None:
+        nurbs_pass(nurbs, camera, tol_rad, None if table is None else hits.t, lights,
+                   headlight, planes, stats)
+        if progress is not None and table is None:
+            progress(stats.rays, stats.rays, "NURBS")
+    stats.pixels_covered = (int(covered.sum()) if nurbs is None
+                            else int(np.count_nonzero(planes[C_A] > 0)))
     stats.max_level = deepest_level(planes)
     channels = {name: planes[k].reshape(H, W) for k, name in enumerate(CHANNELS)}
-    stats.time_shade = time.perf_counter() - t0
     stats.time_total = time.perf_counter() - t_start
-    schemes = tuple(c.scheme for c in cages)
+    schemes = tuple(c.scheme for c in cages) + (("nurbs",) if nurbs is not None else ())
     used = "bvh" if stats.accel_fallback else accel
-    return RenderResult(channels, stats, camera, tol_rad, schemes, table.object_id[built], used)
+    refined = np.zeros(0, np.int32) if table is None else table.object_id[built]
+    return RenderResult(channels, stats, camera, tol_rad, schemes, refined, used)
+
+
+def nurbs_pass(nurbs, camera, tol_rad, other_t, lights, headlight, planes, stats) -> None:
+    """Trace the scene's free-form surfaces and shade their hits nearer than ``other_t``
+    (the subdivision hits' distances; None: none) into ``planes``; a leaf held at the depth
+    limit above the tolerance is warned of and recorded as the ``precision`` cap."""
+    t0 = time.perf_counter()
+    n = camera.width * camera.height
+    other_t = np.full(n, np.inf) if other_t is None else other_t
+    hits = render_nurbs(nurbs, camera_frame(camera), camera.width, camera.height, tol_rad,
+                        other_t, lights, headlight, planes)
+    stats.patches += nurbs.model.n_patches
+    stats.max_depth = max(stats.max_depth, int(hits.level.max(initial=0)))
+    stats.patches_refined += len(np.unique(hits.patch[hits.patch >= 0]))  # (per ray)
+    if hits.capped:
+        warnings.warn(f"{hits.capped} NURBS sub-patches held at {config.NURBS_MAX_LEVEL} "
+                      "halvings above the tolerance", SubtraceWarning, stacklevel=3)
+        stats.depth_cap = max(stats.depth_cap, config.NURBS_MAX_LEVEL)
+        stats.depth_cap_reason = ("precision" if stats.depth_cap_reason == "none"
+                                  else stats.depth_cap_reason + ",precision")
+    stats.time_trace += time.perf_counter() - t0
 
 
 # the colour channels are linear Rec.709 / sRGB primaries with a D65 white point

@@ -3,7 +3,10 @@
 Owns the cage report (:func:`cage_report`): scheme and options, counts, face sizes,
 boundary / non-manifold / isolated elements, creases and sharp vertices, holes, valences,
 extraordinary vertices, Euler characteristic, the cage's bounds and the bounds of the
-level-1 limit points, and optionally the counts after N uniform refinements.
+level-1 limit points, and optionally the counts after N uniform refinements; and the
+free-form report (:func:`freeform_report`) of a file's trimmed NURBS surfaces: surfaces and
+degrees, Bezier patches after knot insertion, trim loops, trimming curves, Bezier segments
+and monotone curve units. A file of free-form surfaces only gets that report alone.
 """
 
 from __future__ import annotations
@@ -13,8 +16,11 @@ import numpy as np
 from subtrace.cli.common import boundary_code, trim_numba
 from subtrace.config import SHARPNESS_INFINITE
 from subtrace.data import sample_cage_path
+from subtrace.io.obj import read_obj
 from subtrace.io.scene import BOUNDARIES
-from subtrace.mesh.cage import load_cage
+from subtrace.io.meshes import is_mesh_file
+from subtrace.io.usd import is_usd
+from subtrace.mesh.cage import cage_from_obj, load_cage
 
 BOUNDARY_NAMES = {code: name for name, code in BOUNDARIES.items()}  # Sdc code -> scene name
 SIZE_NAMES = {3: "triangles", 4: "quads", 5: "pentagons", 6: "hexagons"}
@@ -29,8 +35,19 @@ def execute(args) -> int:
     else:
         path = args.cage
         label = str(path)
-    cage = load_cage(path, scheme=args.scheme, boundary=boundary_code(args))
-    rows = [("file", label)] + cage_report(cage, args.level)
+    if is_usd(path) or is_mesh_file(path):
+        cage = load_cage(path, scheme=args.scheme, boundary=boundary_code(args))
+        rows = [("file", label)] + cage_report(cage, args.level)
+    else:
+        data = read_obj(path)
+        rows = [("file", label)]
+        if len(data.face_sizes):
+            rows += cage_report(cage_from_obj(data, scheme=args.scheme,
+                                              boundary=boundary_code(args)), args.level)
+        else:
+            rows.append(("faces", "0 (free-form surfaces only)"))
+        if data.freeform is not None:
+            rows += freeform_report(data.freeform)
     width = max(len(k) for k, _ in rows) + 1
     for key, value in rows:
         print(f"{key + ':':<{width}} {value}")
@@ -188,3 +205,38 @@ def _surface_vertices(lev):
     keep = np.zeros(lev.n_verts, dtype=bool)
     keep[lev.face_verts[~corner_in_hole]] = True
     return keep
+
+
+def freeform_report(freeform) -> list[tuple[str, str]]:
+    """The rows ``subtrace info`` prints for a file's free-form content
+    (:class:`subtrace.io.freeform.FreeForm`)."""
+    from subtrace.nurbs.surface import bezier_patches
+    from subtrace.nurbs.trim import monotone_units
+
+    surfaces = freeform.surfaces
+    rational = sum(s.rational for s in surfaces)
+    rows = [("free-form surfaces", f"{len(surfaces)} ({rational} rational, "
+                                   f"{len(surfaces) - rational} polynomial)")]
+    degrees: dict = {}
+    for s in surfaces:
+        degrees[s.degree] = degrees.get(s.degree, 0) + 1
+    rows.append(("surface degrees", ", ".join(
+        f"{du}x{dv}: {count}" for (du, dv), count in sorted(degrees.items()))))
+    patches = [len(bezier_patches(s)[0]) for s in surfaces]
+    rows.append(("Bezier patches", f"{sum(patches)} (knot insertion; "
+                                   f"{min(patches)}..{max(patches)} per surface)"))
+    outer = sum(not lp.hole for s in surfaces for lp in s.loops)
+    holes = sum(lp.hole for s in surfaces for lp in s.loops)
+    trimmed = sum(bool(s.loops) for s in surfaces)
+    rows.append(("trim loops", f"{outer} outer, {holes} holes ({trimmed} of {len(surfaces)} "
+                               "surfaces trimmed)"))
+    loops = [lp for s in surfaces for lp in s.loops]
+    segments = sum(len(lp.segments) for lp in loops)
+    units = len(monotone_units(loops)) if loops else 0
+    rows.append(("trim curves", f"{len(freeform.curves)} curv2, {segments} Bezier segments in "
+                                f"loops, {units} monotone curve units"))
+    points = np.concatenate([s.control.reshape(-1, 4) for s in surfaces])
+    xyz = points[:, :3] / points[:, 3:]
+    rows.append(("free-form bounds", _bounds(xyz.min(axis=0), xyz.max(axis=0))
+                 + " (control points: the surfaces lie inside)"))
+    return rows

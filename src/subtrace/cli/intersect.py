@@ -1,6 +1,8 @@
 """``subtrace intersect CAGE.obj --lines LINES.csv --precision D``: every hit of the lines
-of a CSV with a cage's limit surface (:func:`subtrace.lines.api.intersect_lines`), written
-as CSV or JSON to stdout or, through a temporary and a rename, to a file."""
+of a CSV with a cage's limit surface, or with the trimmed NURBS surfaces of an OBJ file of
+free-form surfaces (:func:`subtrace.lines.api.intersect_lines`; ``ptex`` is then the
+surface index, ``u, v`` its parameters), written as CSV or JSON to stdout or, through a
+temporary and a rename, to a file."""
 
 from __future__ import annotations
 
@@ -8,17 +10,20 @@ import json
 import math
 import os
 import sys
+import warnings
 
 import numpy as np
 
 from subtrace import config
 from subtrace.cli.common import boundary_code, trim_numba
-from subtrace.errors import SubtraceError
+from subtrace.errors import SubtraceError, SubtraceWarning
 from subtrace.io.atomic import write_text
 from subtrace.io.limits import check_coordinates, check_valences
 from subtrace.io.lines_csv import read_lines_csv
 from subtrace.lines.api import intersect_lines
 from subtrace.mesh.cage import load_cage
+from subtrace.nurbs.model import load_model
+from subtrace.nurbs.scene import has_faces, has_surfaces
 
 HIT_COLUMNS = "line,t,x,y,z,ptex,u,v,nx,ny,nz,tangent"
 
@@ -27,10 +32,7 @@ def execute(args) -> int:
     """Check the options and inputs, intersect, write the hits."""
     precision, t_range = _check_options(args)
     data = read_lines_csv(args.lines)
-    cage = load_cage(args.cage, scheme=args.scheme, boundary=boundary_code(args))
-    check_coordinates(cage.path, cage.points, config.MAX_COORDINATE)
-    check_valences(cage.path, cage.face_sizes, np.diff(cage.base.vert_edge_offsets),
-                   config.MAX_VALENCE, cage.scheme == "catmark")
+    cage = _target(args)
     out = args.output
     if out is not None:
         folder = os.path.dirname(os.path.abspath(out))
@@ -48,6 +50,24 @@ def execute(args) -> int:
         print(f"{out}: {len(hits)} hit{'s' if len(hits) != 1 else ''} on {n_hit} of "
               f"{len(data)} line{'s' if len(data) != 1 else ''} (precision {precision:g})")
     return 0
+
+
+def _target(args):
+    """What the lines meet: the file's free-form surfaces (a NurbsModel) when it has no
+    polygon faces, else its subdivision cage (a file with both: its cage, as for render's
+    cages; the surfaces are reported by a warning, not intersected)."""
+    if has_surfaces(args.cage) and not has_faces(args.cage):
+        model = load_model(args.cage)
+        check_coordinates(args.cage, model.nets[..., :3].reshape(-1, 3), config.MAX_COORDINATE)
+        return model
+    cage = load_cage(args.cage, scheme=args.scheme, boundary=boundary_code(args))
+    check_coordinates(cage.path, cage.points, config.MAX_COORDINATE)
+    check_valences(cage.path, cage.face_sizes, np.diff(cage.base.vert_edge_offsets),
+                   config.MAX_VALENCE, cage.scheme == "catmark")
+    if has_surfaces(args.cage):
+        warnings.warn(f"{args.cage}: its free-form surfaces are not intersected (a file with "
+                      "polygon faces is intersected as a cage)", SubtraceWarning, stacklevel=2)
+    return cage
 
 
 def _check_options(args) -> tuple[float, tuple[float, float]]:

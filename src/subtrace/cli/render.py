@@ -34,7 +34,7 @@ def scene_from_inputs(inputs, args, **overrides):
                                  camera=getattr(args, "camera", None))
     else:
         raise SceneError("give one TOML scene, or OBJ cages, not both")
-    vec = lambda v: None if v is None else " ".join(v)  # noqa: E731
+    vec = lambda v: None if v is None else " ".join(v)
     return apply_overrides(
         scene, width=args.width, height=args.height, fov=args.fov, eye=vec(args.eye),
         target=vec(args.target), up=vec(args.up), scheme=args.scheme,

@@ -15,7 +15,9 @@ Tags follow OpenSubdiv's regression reader (regression/common/shape_utils.cpp pa
 Speed: a jitted byte scanner (:mod:`subtrace.io.obj_scan`) reads the v / vt / vn / f lines
 and lists the other statements for Python; anything it cannot read exactly as the statement
 reader does (continuation lines, malformed or out-of-range values) sends the file to the
-statement reader (ObjReader.read), which is also the tests' oracle. That reader splits
+statement reader (ObjReader.read), which is also the tests' oracle. Files with free-form
+geometry (:mod:`subtrace.io.freeform`: ``surf``, ``curv2``, ``vp`` ...) are read by the
+statement reader too: it keeps the weights of ``v x y z w`` lines for rational surfaces. That reader splits
 statements in one Python pass keeping number tokens as strings; numpy converts each block in
 bulk, and only a failed conversion walks the rows again to name the first bad line.
 """
@@ -32,6 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from subtrace.errors import ObjError, SubtraceWarning
+from subtrace.io.freeform import STATEMENTS as FREEFORM_STATEMENTS
+from subtrace.io.freeform import FreeForm, FreeFormReader
 from subtrace.io.obj_scan import MAX_INDEX, scan
 from subtrace.io.text import decode, read_bytes
 
@@ -47,7 +51,8 @@ _SMOOTH_TRIANGLES = ("catmark", "smooth")
 _TAGS = frozenset(
     ("crease", "corner", "hole", "interpolateboundary", "creasemethod", "smoothtriangles")
 )
-# Free-form geometry and its body statements: polygons only are read.
+# Free-form statements: those read and ignored are warned about as such (the rest are
+# read by subtrace.io.freeform).
 _FREEFORM = frozenset(
     "cstype deg bmat step curv curv2 surf parm trim hole scrv sp end con vp".split()
 )
@@ -88,6 +93,7 @@ class ObjData:
     crease_method: str | None  # "uniform" | "chaikin"; None without a creasemethod tag
     smooth_triangles: str | None  # "catmark" | "smooth"; None without a smoothtriangles tag
     warnings: tuple[str, ...]  # each "path:line: message"
+    freeform: FreeForm | None = None  # trimmed NURBS surfaces (subtrace.io.freeform)
 
 
 def read_obj(path) -> ObjData:
@@ -244,6 +250,10 @@ class ObjReader:
         self.boundary = None
         self.crease_method = None
         self.smooth_triangles = None
+        # Free-form geometry (subtrace.io.freeform), and the w of v lines that have one
+        # (v index -> token; the rational surfaces' weights).
+        self.freeform = FreeFormReader(self.fail, self._ignored)
+        self.point_w: dict[int, str] = {}
 
     def fail(self, line, problem):
         raise ObjError(self.path, line, problem)
@@ -284,6 +294,8 @@ class ObjReader:
                     continue
                 if parts[0] in ("v", "vt", "vn", "f"):
                     return None  # split at a non-ASCII space the scanner does not know
+                if parts[0] in FREEFORM_STATEMENTS:
+                    return None  # free-form geometry: weights of v lines are needed
                 self._statement(number, line, parts, num_faces)
             return self._finish(
                 points[: 3 * nv].reshape(-1, 3).copy(), uvs[: 2 * nt].reshape(-1, 2).copy(),
@@ -303,7 +315,7 @@ class ObjReader:
             raise
         points, uvs, normals, face_verts, face_uvs, face_normals = self._convert(
             check_forward=True)
-        if not self.face_sizes:
+        if not self.face_sizes and not self.freeform.has_surfaces:
             empty = not any(line.split() for line in lines)
             self.fail(None, "empty file: no faces" if empty else "no faces (no `f` statements)")
         return self._finish(points, uvs, normals, self.face_sizes, face_verts, face_uvs,
@@ -324,6 +336,8 @@ class ObjReader:
                 # x y z, then an optional w or r g b that are ignored.
                 if len(parts) < 4:
                     self.fail(number, f"v needs 3 coordinates x y z, got {len(parts) - 1}")
+                if len(parts) == 5:  # x y z w: the weight of a rational surface's point
+                    self.point_w[len(point_lines)] = parts[4]
                 point_tokens += parts[1:4]
                 point_lines.append(number)
             elif keyword == "f":
@@ -383,9 +397,16 @@ class ObjReader:
             self._mtllib(number, line.split(None, 1)[1].strip() if len(parts) > 1 else "")
         elif keyword == "s":
             pass  # smoothing groups do not affect subdivision surfaces
+        elif keyword in FREEFORM_STATEMENTS:
+            self.freeform.statement(number, parts, len(self.point_lines),
+                                    self.material_runs[-1][1])
         else:
-            seen = self.unknown.setdefault(keyword, [number, 0])
-            seen[1] += 1
+            self._ignored(keyword, number)
+
+    def _ignored(self, keyword, number):
+        """Record a statement that is read and ignored (one warning per keyword)."""
+        seen = self.unknown.setdefault(keyword, [number, 0])
+        seen[1] += 1
 
     # -- OpenSubdiv tags -----------------------------------------------------------------
 
@@ -733,8 +754,9 @@ class ObjReader:
                           f"library; using diffuse {DEFAULT_DIFFUSE}")
         materials = tuple(Material(name, tuple(float(c) for c in rgb))
                           for name, rgb in diffuse.items())
+        material_ids = {name: k for k, name in enumerate(diffuse)}
+        freeform = self.freeform.finish(points, self.point_lines, self.point_w, material_ids)
         if local_ids:
-            material_ids = {name: k for k, name in enumerate(diffuse)}
             remap = np.array([material_ids[name] for name in local_ids], dtype=np.int32)
             face_material = np.where(face_material >= 0, remap[face_material], -1)
 
@@ -781,6 +803,7 @@ class ObjReader:
             crease_method=self.crease_method,
             smooth_triangles=self.smooth_triangles,
             warnings=tuple(message for _, message in self.warnings),
+            freeform=freeform,
         )
 
 

@@ -1,5 +1,5 @@
 """Every intersection of many lines with a Catmull-Clark or Loop limit surface, to a given
-precision.
+precision (free-form NURBS surfaces: :mod:`subtrace.lines.nurbs`).
 
 The method of the "Chinese paper" (docs/seeds.md section 1: patch grids, multi-level 1-to-4
 segmentation with AABBs of index ranges), with the patch grid replaced by the exact Bezier
@@ -46,9 +46,11 @@ import numpy as np
 from subtrace.accel.bvh import padded
 from subtrace.errors import SubtraceError, SubtraceWarning
 from subtrace.lines.items import MAX_ISOLATION, items_for
+from subtrace.lines.nurbs import nurbs_line_hits
 from subtrace.lines.kernels import (
     C_A, C_B, C_ITEM, C_T, N_FIELDS, lines_task, merge_candidates,
 )
+from subtrace.nurbs.model import NurbsModel
 from subtrace.patches.basis import (
     SPLIT_COL, SPLIT_PTR, SPLIT_W, TRI_MONO, bez_normals, tri_normals,
 )
@@ -112,9 +114,11 @@ def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf
     ``point`` lies within ``precision`` of the surface and of ``cage.evaluate(ptex, uv)``.
     ``mode="first"`` keeps each line's nearest hit. ``threads``: worker threads (default all
     cores). See the module doc for tangent lines and flat regions. Returns :class:`Hits`."""
-    if getattr(cage, "scheme", None) not in ("catmark", "loop"):
+    nurbs = isinstance(cage, NurbsModel)
+    if not nurbs and getattr(cage, "scheme", None) not in ("catmark", "loop"):
         raise SubtraceError("intersect_lines: expected a Catmull-Clark or Loop cage "
-                            "(subtrace.load_cage / make_cage)")
+                            "(subtrace.load_cage / make_cage) or free-form surfaces "
+                            "(subtrace.nurbs.model.load_model)")
     org = _as_lines(origins, "origins")
     dirs = _as_lines(directions, "directions")
     if len(org) != len(dirs):
@@ -135,6 +139,8 @@ def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf
         raise SubtraceError(f"t_range: expected t_min < t_max, got {t_range!r}")
     if mode not in MODES:
         raise SubtraceError(f"mode: expected one of {', '.join(MODES)}, got {mode!r}")
+    if nurbs:
+        return _nurbs_hits(cage, org, dirs, precision, t_lo, t_hi, mode, threads)
 
     items = items_for(cage, precision)
     tol_flat = 0.5 * precision
@@ -202,6 +208,23 @@ def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf
             "hits there are within the cells' bound, not the precision"), stacklevel=2)
     return _hits(items, org, dirs, out_rows, out_tan, out_line, mode, n_lines, precision,
                  dict(items=len(items.all_exact), items_entered=entered, leaves=leaves))
+
+
+def _nurbs_hits(model, org, dirs, precision, t_lo, t_hi, mode, threads) -> Hits:
+    """:func:`intersect_lines` for free-form surfaces (:mod:`subtrace.lines.nurbs`): ``ptex``
+    is the surface index and ``uv`` its parameters; ``tangent`` is always False."""
+    old = thread_count() if threads is not None else None
+    if threads is not None:
+        set_threads(threads)
+    try:
+        line, t, point, surface, uv, normal = nurbs_line_hits(model, org, dirs, precision, t_lo,
+                                                              t_hi, mode == "first")
+    finally:
+        if threads is not None:
+            set_threads(old)
+    return Hits(line=line, t=t, point=point, ptex=surface, uv=uv, normal=normal,
+                tangent=np.zeros(len(t), bool), n_lines=len(org), precision=precision,
+                stats={"items": model.n_patches})
 
 
 def _hits(items, org, dirs, rows, tans, lines, mode, n_lines, precision, stats) -> Hits:

@@ -257,7 +257,12 @@ def load_cage(path, scheme: str | None = None, boundary: int | None = None,
         if boundary is not None:
             arrays["boundary"] = boundary
         return make_cage(path=Path(path), **arrays)
-    data = read_obj(path)
+    return cage_from_obj(read_obj(path), scheme, boundary)
+
+
+def cage_from_obj(data, scheme: str | None = None, boundary: int | None = None) -> Cage:
+    """The :class:`Cage` of an OBJ file already read (:func:`subtrace.io.obj.read_obj`);
+    ``scheme`` / ``boundary`` as :func:`load_cage` takes them."""
     return make_cage(
         data.points,
         data.face_sizes,
@@ -271,7 +276,7 @@ def load_cage(path, scheme: str | None = None, boundary: int | None = None,
         corner_verts=data.corner_verts,
         corner_sharpness=data.corner_sharpness,
         hole_faces=data.hole_faces,
-        path=Path(path),
+        path=Path(data.path),
         face_material=data.face_material,
         materials=data.materials,
     )

@@ -1,0 +1,154 @@
+"""The trimmed NURBS surfaces of a scene, rendered beside its subdivision cages.
+
+:func:`load_nurbs` reads the free-form surfaces of every scene object whose OBJ file has
+``surf`` statements into one :class:`NurbsScene`: one :class:`~subtrace.nurbs.model.NurbsModel`
+over all of them (surface index = the ``patch_id`` channel, in object then file order), the
+BVH over its patches' shells, and per surface its scene object and colour (the object's
+colour, else its material's diffuse colour). An object's polygon faces, if its file has any,
+are its subdivision cage as before (:func:`has_faces`).
+
+:func:`render_nurbs` traces the surfaces (:mod:`subtrace.nurbs.trace`) and shades the
+pixels whose NURBS hit is nearer than what the subdivision pass found into the same channel
+planes (:data:`subtrace.shade.CHANNELS`), with the same two-sided Lambert lighting.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from subtrace import config
+from subtrace.errors import SubtraceWarning
+from subtrace.io.limits import check_coordinates
+from subtrace.io.obj import DEFAULT_DIFFUSE, read_obj, read_obj_bytes
+from subtrace.nurbs.model import NurbsModel, build_model
+from subtrace.nurbs.trace import (
+    NurbsHits,
+    hit_geometry,
+    patch_boxes,
+    patch_bvh,
+    trace_nurbs,
+)
+from subtrace.runtime.jit import nb
+from subtrace.runtime.threads import run_tasks
+from subtrace.shade import C_A, C_LEVEL, C_N, C_OBJECT, C_PATCH, C_R, C_U, C_Z
+from subtrace.trace.prims import ray_setup
+
+_SURF = re.compile(rb"^[ \t]*surf[ \t]", re.MULTILINE)  # a free-form surface statement
+_FACE = re.compile(rb"^[ \t]*f[ \t]", re.MULTILINE)  # a polygon face statement
+
+
+def has_surfaces(path) -> bool:
+    """The OBJ file has a ``surf`` statement (a quick scan of its bytes)."""
+    return _SURF.search(read_obj_bytes(str(path))) is not None
+
+
+def has_faces(path) -> bool:
+    """The OBJ file has an ``f`` statement: a subdivision cage (a quick scan)."""
+    return _FACE.search(read_obj_bytes(str(path))) is not None
+
+
+@dataclass(frozen=True, eq=False)
+class NurbsScene:
+    """A scene's free-form surfaces (S surfaces; see the module comment)."""
+
+    model: NurbsModel
+    bvh: object  # subtrace.accel.bvh.BVH over the patches' shells
+    surface_object: np.ndarray  # (S,) int32 scene object index
+    surface_color: np.ndarray  # (S, 3) float64 diffuse colour
+
+    def bounds(self):
+        """(lo (3,), hi (3,)): the box of every patch's projected control points."""
+        lo, hi = patch_boxes(self.model.nets, self.model.patch_degree)
+        return lo.min(axis=0), hi.max(axis=0)
+
+
+def load_nurbs(scene, quiet: bool = False) -> NurbsScene | None:
+    """The free-form surfaces of ``scene``'s objects (None when no object has any).
+    ``quiet``: the file's reading warnings are not repeated (the cage load gives them)."""
+    surfaces, owner, colors = [], [], []
+    for k, obj in enumerate(scene.objects):
+        if not has_surfaces(obj.mesh):
+            continue
+        with warnings.catch_warnings():
+            if quiet or has_faces(obj.mesh):  # the cage's load warns once already
+                warnings.simplefilter("ignore", SubtraceWarning)
+            data = read_obj(obj.mesh)
+        if data.freeform is None:
+            continue
+        check_coordinates(obj.mesh, data.points, config.MAX_COORDINATE)
+        table = [m.diffuse for m in data.materials] + [DEFAULT_DIFFUSE]
+        for surface in data.freeform.surfaces:
+            surfaces.append(surface)
+            owner.append(k)
+            colors.append(obj.color if obj.color is not None else table[surface.material])
+    if not surfaces:
+        return None
+    model = build_model(surfaces)
+    return NurbsScene(model, patch_bvh(model), np.array(owner, dtype=np.int32),
+                      np.array(colors, dtype=np.float64).reshape(-1, 3))
+
+
+def render_nurbs(nurbs: NurbsScene, frame, width, height, tol_rad, other_t, lights, headlight,
+                 planes) -> NurbsHits:
+    """Trace ``nurbs`` for every pixel and shade the hits nearer than ``other_t`` (n,)
+    (the other surfaces' distances, inf: none) into ``planes`` (len(CHANNELS), n) float32;
+    ``lights`` (L, 6), ``headlight`` (1,) as :func:`subtrace.shade.shade` takes them.
+    Returns the hits (only those shaded keep their patch; the others get -1)."""
+    hits = trace_nurbs(nurbs.model, nurbs.bvh, frame, width, height, tol_rad)
+    near = np.nonzero(hits.t < other_t)[0]
+    keep = np.zeros(len(hits.t), dtype=np.bool_)
+    keep[near] = True
+    hits.patch[~keep] = -1
+    hits.level[~keep] = -1
+    if not len(near):
+        return hits
+    _, normals, uv = hit_geometry(nurbs.model, hits.patch[near], hits.st[near])
+    surface = nurbs.model.patch_surface[hits.patch[near]]
+    run_tasks(_shade_hits, frame, int(width), near, hits.t, hits.level, surface, normals, uv,
+              nurbs.surface_object, nurbs.surface_color, lights, headlight, planes)
+    return hits
+
+
+@nb.njit(cache=True, nogil=True)
+def _shade_hits(task, n_tasks, frame, width, pixels, t, level, surface, normals, uv,
+                surface_object, surface_color, lights, headlight, planes):
+    """Shade every n_tasks-th of ``pixels`` (hit k at pixel ``pixels[k]``) into ``planes``."""
+    for k in range(task, len(pixels), n_tasks):
+        r = pixels[k]
+        row = r // width
+        col = r - row * width
+        dx, dy, dz = ray_setup(frame, row, col)
+        nx, ny, nz = normals[k, 0], normals[k, 1], normals[k, 2]
+        s = surface[k]
+        planes[C_Z, r] = t[r]
+        planes[C_N, r] = nx
+        planes[C_N + 1, r] = ny
+        planes[C_N + 2, r] = nz
+        planes[C_U, r] = uv[k, 0]
+        planes[C_U + 1, r] = uv[k, 1]
+        planes[C_LEVEL, r] = level[r]
+        planes[C_PATCH, r] = s
+        planes[C_OBJECT, r] = surface_object[s]
+        # two-sided Lambert: headlight plus directional lights
+        sgn = -1.0 if nx * dx + ny * dy + nz * dz > 0.0 else 1.0
+        fx, fy, fz = sgn * nx, sgn * ny, sgn * nz
+        lr = lg = lb = 0.0
+        if headlight[0] > 0.0:
+            c = -(fx * dx + fy * dy + fz * dz) * headlight[0]
+            lr += c
+            lg += c
+            lb += c
+        for j in range(lights.shape[0]):
+            c = -(fx * lights[j, 0] + fy * lights[j, 1] + fz * lights[j, 2])
+            if c > 0.0:
+                lr += c * lights[j, 3]
+                lg += c * lights[j, 4]
+                lb += c * lights[j, 5]
+        planes[C_R, r] = surface_color[s, 0] * lr
+        planes[C_R + 1, r] = surface_color[s, 1] * lg
+        planes[C_R + 2, r] = surface_color[s, 2] * lb
+        planes[C_A, r] = 1.0
