@@ -84,10 +84,13 @@ def execute(args) -> int:
         result = render_scene(scene, threads=args.threads, accel=args.accel, progress=progress)
         _write(args, scene, result, out, png, picture, bits)
         return 0
+    from subtrace.nurbs.scene import has_surfaces, load_nurbs
     from subtrace.render import load_objects, scene_bounds
 
     cages = load_objects(scene)  # once for every frame
-    camera = scene.make_camera(*scene_bounds(cages))
+    camera = scene.make_camera(*scene_bounds(cages, load_nurbs(scene)))
+    if any(has_surfaces(o.mesh) for o in scene.objects):
+        cages = None  # (a render given cages leaves free-form surfaces out: each frame reads)
     scenes = [apply_overrides(scene, target=tuple(camera.target), up=tuple(camera.up),
                               fov=camera.fov_deg, eye=turntable_eye(camera.eye, camera.target,
                                                                     camera.up, k, n))

@@ -23,7 +23,9 @@ import numpy as np
 from subtrace import config
 from subtrace.errors import SubtraceWarning
 from subtrace.io.limits import check_coordinates
+from subtrace.io.meshes import is_mesh_file
 from subtrace.io.obj import DEFAULT_DIFFUSE, read_obj, read_obj_bytes
+from subtrace.io.usd import is_usd
 from subtrace.nurbs.model import NurbsModel, build_model
 from subtrace.nurbs.trace import (
     NurbsHits,
@@ -41,14 +43,20 @@ _SURF = re.compile(rb"^[ \t]*surf[ \t]", re.MULTILINE)  # a free-form surface st
 _FACE = re.compile(rb"^[ \t]*f[ \t]", re.MULTILINE)  # a polygon face statement
 
 
+def _is_obj(path) -> bool:
+    """Whether ``path`` is read as OBJ (not a USD stage or a PLY / STL / OFF / glTF mesh)."""
+    return not (is_usd(path) or is_mesh_file(path))
+
+
 def has_surfaces(path) -> bool:
     """The OBJ file has a ``surf`` statement (a quick scan of its bytes)."""
-    return _SURF.search(read_obj_bytes(str(path))) is not None
+    return _is_obj(path) and _SURF.search(read_obj_bytes(str(path))) is not None
 
 
 def has_faces(path) -> bool:
-    """The OBJ file has an ``f`` statement: a subdivision cage (a quick scan)."""
-    return _FACE.search(read_obj_bytes(str(path))) is not None
+    """The OBJ file has an ``f`` statement: a subdivision cage (a quick scan); meshes of
+    other formats always are cages."""
+    return not _is_obj(path) or _FACE.search(read_obj_bytes(str(path))) is not None
 
 
 @dataclass(frozen=True, eq=False)
