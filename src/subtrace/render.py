@@ -32,11 +32,13 @@ from subtrace.patches.criterion import edge_sampling
 from subtrace.patches.table import build_patch_table
 from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
-from subtrace.shade import CHANNELS, deepest_level, miss_values, patch_shading, shade
+from subtrace.shade import (CHANNELS, background_rows, deepest_level, ground_pixels, light,
+                            light_array, miss_values, patch_shading, shade, shadow_visibility)
 from subtrace.subdiv.limit import limit_points
 from subtrace.trace.budget import check_memory, choose_within_budget, warn_tiles
 from subtrace.trace.build import build_requested
 from subtrace.trace.kernels import trace_round
+from subtrace.trace.rays import Pools, trace_rays
 from subtrace.trace.pools import (LoopGrids, Memos, Pieces, candidate_lists, hit_arrays,
                                   leaf_tables)
 
@@ -72,6 +74,8 @@ class RenderStats:
     accel_fallback: int = 0
     pixels_covered: int = 0
     rays: int = 0
+    shadow_rays: int = 0  # shadow rays traced (towards every light from lit-facing hits)
+    time_shadows: float = 0.0  # of which tracing shadow rays (building included)
 
     def as_attributes(self) -> dict:
         return {f"subtrace:{k}": v for k, v in self.__dict__.items()}
@@ -105,7 +109,7 @@ def _shell_walk(chosen, frame, width, height, accel, max_memory, stats):
 
 
 def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, accel=None,
-               progress=None, max_memory=None):
+               progress=None, max_memory=None, keep=None):
     """Run the refinement rounds; returns (hits (:class:`~subtrace.trace.pools.Hits`), the
     Loop grids (:class:`~subtrace.trace.pools.GridArrays`), the Catmull-Clark pieces
     (:class:`~subtrace.trace.pools.Pieces`), every patch refined). ``compiling``: the
@@ -118,7 +122,9 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     (``patches.criterion.memory_estimate``) exceeds it are capped, with a warning, and the
     threads' memos are kept within what is left. ``max_depth``: an explicit cap on every
     patch's depth (None: only what floating point resolves, ``config.PRECISION_BITS``);
-    any cap that holds a patch below its tolerance is warned of and recorded in ``stats``."""
+    any cap that holds a patch below its tolerance is warned of and recorded in ``stats``.
+    ``keep``: None, or a dict that receives what secondary rays need of the pools
+    (``trace.rays.Pools``' fields)."""
     accel = config.PRIMARY_ACCEL if accel is None else accel
     if accel not in ("projection", "bvh"):
         raise ValueError(f"unknown acceleration {accel!r}")
@@ -141,10 +147,11 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
             limit_points(o.level, o.points, o.cage.options, which=np.zeros(0, np.int64))
     warmup.wait(compiling)
     return _rounds(table, frame, W, W * H, tol_rad, chosen, tiles, bvh,
-                   Memos(n_threads, memo_bytes), stats, progress)
+                   Memos(n_threads, memo_bytes), stats, progress, keep)
 
 
-def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, stats, progress):
+def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, stats, progress,
+            keep=None):
     """The rounds of :func:`trace_hits`: trace the rays that asked, build what they asked
     for, until no ray asks."""
     depths = chosen.depths
@@ -195,6 +202,11 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
     stats.max_depth = int(max(grids.a["slot_depth"].max(initial=0),
                               iso.a["depth_i"].max(initial=0)))
     built = np.concatenate([grids.a["slot_patch"], iso.a["patch"][iso.a["round"] >= 0], direct])
+    if keep is not None:  # for secondary rays (trace/rays.py)
+        keep.update(table=table, depths=depths, edge_depth=edge_depth, grids=grids,
+                    tables=tables, iso=iso, record=chosen.record, shell_min=chosen.shell_min,
+                    shell_max=chosen.shell_max, bvh=bvh, eye=frame[0], tol_rad=tol_rad,
+                    stats=stats, round_no=round_no + 1)
     return hits, grids.view(tables), iso, built
 
 
@@ -226,12 +238,12 @@ def _prepare(scene, cages, stats):
     table = build_patch_table(cages)
     lo = table.shell_min.min(axis=0)
     hi = table.shell_max.max(axis=0)
+    points = None
     if scene.camera.is_auto:
-        # frame the limit surface: the bounds of the level-1 limit points of every object
-        bounds = [c.bounds() for c in cages]
-        lo = np.min([b[0] for b in bounds], axis=0)
-        hi = np.max([b[1] for b in bounds], axis=0)
-    camera = scene.make_camera(lo, hi)
+        # frame the limit surface: the level-1 limit points of every object
+        points = np.concatenate([c.limit(1 if c.n_faces < 200000 else 0)[0] for c in cages])
+        lo, hi = points.min(axis=0), points.max(axis=0)
+    camera = scene.make_camera(lo, hi, points)
     budget = scene.render.max_memory
     budget = config.default_max_memory() if budget is None else budget
     check_memory(table, camera.width * camera.height, budget, camera.width, camera.height)
@@ -259,25 +271,26 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
         cages, table, camera, tol_rad, budget = _prepare(scene, cages, stats)
         if progress is not None:
             progress(0, stats.rays, "tracing")
+        keep = {}
         hits, grids, iso, built = trace_hits(table, camera, tol_rad, stats, compiling=compiling,
                                              accel=accel, progress=progress,
-                                             max_memory=budget)
+                                             max_memory=budget, keep=keep)
     except BaseException:
         warmup.stop(compiling)
         raise
     t0 = time.perf_counter()
     W, H = camera.width, camera.height
+    frame = camera_frame(camera)
     # the channels as float32 planes, written in place by the kernel (no conversion pass)
     planes = np.empty((len(CHANNELS), W * H), dtype=np.float32)
+    normals = np.empty((W * H, 3))
+    pix_patch = np.empty(W * H, np.int64)
     covered = np.zeros(tasks.thread_count(), np.int64)
-    lights = np.array(
-        [[*l.direction, *(np.asarray(l.color) * l.intensity)] for l in scene.lights],
-        dtype=np.float64,
-    ).reshape(-1, 6)
-    headlight = np.array([scene.render.headlight_intensity if scene.render.headlight else 0.0])
-    colors = [o.color for o in scene.objects]
-    shade(camera_frame(camera), W, hits, grids, iso.view(), patch_shading(table, colors), lights,
-          headlight, miss_values(scene.render.background), planes, covered)
+    patches = patch_shading(table, list(scene.objects))
+    shade(frame, W, hits, grids, iso.view(), patches, miss_values(scene.render.background),
+          planes, normals, pix_patch, covered)
+    _illuminate(scene, cages, camera, frame, keep, hits, normals, pix_patch, patches, planes,
+                stats)
     stats.pixels_covered = int(covered.sum())
     stats.max_level = deepest_level(planes)
     channels = {name: planes[k].reshape(H, W) for k, name in enumerate(CHANNELS)}
@@ -286,6 +299,50 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     schemes = tuple(c.scheme for c in cages)
     used = "bvh" if stats.accel_fallback else accel
     return RenderResult(channels, stats, camera, tol_rad, schemes, table.object_id[built], used)
+
+
+def _illuminate(scene, cages, camera, frame, keep, hits, normals, pix_patch, patches, planes,
+                stats):
+    """The colour: shadow rays towards the scene's lights (``trace/rays.py``, unless the
+    scene turns shadows off), lighting, the background and the ground."""
+    W, H = camera.width, camera.height
+    lights = light_array(scene.lights)
+    pools = None
+    if len(lights) and scene.render.shadows:
+        t0 = time.perf_counter()
+        if not len(keep["bvh"].node_first):  # primary rays used the projection
+            keep["bvh"] = build_bvh(keep["shell_min"], keep["shell_max"])
+        pools = Pools(**keep)
+        stats.time_preprocess += time.perf_counter() - t0
+
+    def trace(origins, dirs, tmax):
+        """Any-hit shadow rays: blocked (n,) uint8 (none without shadows)."""
+        if pools is None:
+            return np.zeros(len(tmax), np.uint8)
+        t0 = time.perf_counter()
+        blocked = trace_rays(pools, origins, dirs, tmax, any_hit=True)[0]
+        stats.time_shadows += time.perf_counter() - t0
+        stats.shadow_rays += len(tmax)
+        return blocked
+
+    visible = np.ones((len(lights), W * H), np.float32)
+    if pools is not None:
+        visible = shadow_visibility(trace, frame, W, hits.t, normals, pix_patch, lights,
+                                    keep["tol_rad"])
+    headlight = np.array([scene.render.headlight_intensity if scene.render.headlight else 0.0])
+    light(frame, W, hits.t, normals, pix_patch, patches, lights, headlight, visible, planes)
+    rows = background_rows(scene.render.background, scene.render.background_bottom, H)
+    if scene.render.background_bottom is not None:
+        miss = np.nonzero(pix_patch < 0)[0]
+        for k in range(3):
+            planes[k, miss] = rows[miss // W, k]
+    if scene.ground is not None:
+        up = np.asarray(camera.up, np.float64) / np.linalg.norm(camera.up)
+        height = scene.ground.height
+        if height is None:
+            height = min(float((c.limit(1)[0] @ up).min()) for c in cages)
+        ground_pixels(frame, W, pix_patch, up, height, trace, lights, scene.ground.color, rows,
+                      planes)
 
 
 # the colour channels are linear Rec.709 / sRGB primaries with a D65 white point

@@ -40,7 +40,7 @@ from subtrace.trace.prims import (
 
 
 @leaf_njit
-def _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, grids, slack, hit,
+def intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, grids, slack, hit,
                     stack, ent_t, ent_i):
     """Closest hit in the Loop grid of slot ``s`` (``grids``: a
     :class:`~subtrace.trace.pools.GridArrays`) nearer than hit[H_T]; updates ``hit``.
@@ -126,7 +126,7 @@ def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, 
     band_rows = BAND_ROWS * int(width)
     n_bands = -(-(int(rays[-1]) + 1) // band_rows) if len(rays) else 0
     bands = np.searchsorted(rays, np.arange(n_bands + 1) * band_rows).astype(np.int64)
-    scratch = tuple(_scratch(max_d) for _ in mems)
+    scratch = tuple(scratch_buffers(max_d) for _ in mems)
     # the bundles cross into the kernel as plain tuples and are named again inside: Numba's
     # dispatcher types plain tuples of arrays in C but named tuples in Python (28 against
     # 9 us a call, measured; a render of the sword makes about 320 calls)
@@ -142,7 +142,7 @@ def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, 
     run_chunks(work, max(n_bands, 1), BAND_CHUNK, n=len(mems))
 
 
-def _scratch(max_d):
+def scratch_buffers(max_d):
     """A thread's scratch buffers for grids up to depth ``max_d``: BVH stack and its entry
     distances, grid stack, Bezier nets being split, the quadtree stack and its entry
     distances, child order, a cell's points and parameters (fans included), the ray's hit
@@ -215,7 +215,7 @@ def _visit(p, r, ray, round_no, iso, grids, mem, slack, hit, scratch, gstack, te
         return False
     if grids.slot_round[s] == round_no - 1:
         ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz = ray
-        _intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, grids, slack, hit,
+        intersect_slot(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, s, grids, slack, hit,
                         gstack, scratch[3], scratch[4])
     return True
 
