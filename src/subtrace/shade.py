@@ -428,8 +428,9 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, color, row
     p . up = height, ``up`` a unit vector), write the ground's colour into ``planes``: an
     opaque Lambertian ``color`` under ``lights`` with shadows, or (``color`` None) a shadow
     catcher: the background ``rows`` darkened by the fraction of the light the objects
-    hold back, its alpha that fraction. The other channels keep saying "no hit". Returns
-    the number of ground pixels."""
+    hold back. The ground is part of the background: alpha and the other channels keep
+    saying "no hit" (the EXR's coverage is the surface's). Returns the number of ground
+    pixels."""
     miss = np.nonzero(pix_patch < 0)[0]
     d = pixel_rays(frame, width, miss)
     down = d @ up
@@ -457,11 +458,8 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, color, row
         with np.errstate(divide="ignore", invalid="ignore"):
             shadow = np.where(full > 0.0, 1.0 - lit / full, 0.0)
         out = rows[row] * (1.0 - shadow)[:, None]
-        alpha = shadow
     else:
         out = rgb * np.asarray(color)
-        alpha = np.ones(len(miss))
     for k in range(3):
         planes[C_R + k, miss] = out[:, k]
-    planes[C_A, miss] = alpha
     return len(miss)
