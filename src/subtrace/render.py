@@ -32,13 +32,12 @@ from subtrace.patches.criterion import edge_sampling
 from subtrace.patches.table import build_patch_table
 from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
-from subtrace.shade import (CHANNELS, background_rows, deepest_level, ground_pixels, light,
-                            light_array, miss_values, patch_shading, shade, shadow_visibility)
+from subtrace.picture import paint
+from subtrace.shade import CHANNELS, deepest_level, miss_values, patch_shading, shade
 from subtrace.subdiv.limit import limit_points
 from subtrace.trace.budget import check_memory, choose_within_budget, warn_tiles
 from subtrace.trace.build import build_requested
 from subtrace.trace.kernels import trace_round
-from subtrace.trace.rays import Pools, trace_rays
 from subtrace.trace.pools import (LoopGrids, Memos, Pieces, candidate_lists, hit_arrays,
                                   leaf_tables)
 
@@ -75,7 +74,10 @@ class RenderStats:
     pixels_covered: int = 0
     rays: int = 0
     shadow_rays: int = 0  # shadow rays traced (towards every light from lit-facing hits)
-    time_shadows: float = 0.0  # of which tracing shadow rays (building included)
+    time_shadows: float = 0.0  # of time_shade: tracing shadow rays (building included)
+    aa_pixels: int = 0  # pixels that got more than their centre ray (--samples)
+    aa_rays: int = 0  # the extra rays they got
+    time_aa: float = 0.0  # of time_shade: tracing and shading the extra rays
 
     def as_attributes(self) -> dict:
         return {f"subtrace:{k}": v for k, v in self.__dict__.items()}
@@ -289,8 +291,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     patches = patch_shading(table, list(scene.objects))
     shade(frame, W, hits, grids, iso.view(), patches, miss_values(scene.render.background),
           planes, normals, pix_patch, covered)
-    _illuminate(scene, cages, camera, frame, keep, hits, normals, pix_patch, patches, planes,
-                stats)
+    paint(scene, cages, camera, keep, hits, normals, pix_patch, patches, planes, stats)
     stats.pixels_covered = int(covered.sum())
     stats.max_level = deepest_level(planes)
     channels = {name: planes[k].reshape(H, W) for k, name in enumerate(CHANNELS)}
@@ -299,50 +300,6 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     schemes = tuple(c.scheme for c in cages)
     used = "bvh" if stats.accel_fallback else accel
     return RenderResult(channels, stats, camera, tol_rad, schemes, table.object_id[built], used)
-
-
-def _illuminate(scene, cages, camera, frame, keep, hits, normals, pix_patch, patches, planes,
-                stats):
-    """The colour: shadow rays towards the scene's lights (``trace/rays.py``, unless the
-    scene turns shadows off), lighting, the background and the ground."""
-    W, H = camera.width, camera.height
-    lights = light_array(scene.lights)
-    pools = None
-    if len(lights) and scene.render.shadows:
-        t0 = time.perf_counter()
-        if not len(keep["bvh"].node_first):  # primary rays used the projection
-            keep["bvh"] = build_bvh(keep["shell_min"], keep["shell_max"])
-        pools = Pools(**keep)
-        stats.time_preprocess += time.perf_counter() - t0
-
-    def trace(origins, dirs, tmax):
-        """Any-hit shadow rays: blocked (n,) uint8 (none without shadows)."""
-        if pools is None:
-            return np.zeros(len(tmax), np.uint8)
-        t0 = time.perf_counter()
-        blocked = trace_rays(pools, origins, dirs, tmax, any_hit=True)[0]
-        stats.time_shadows += time.perf_counter() - t0
-        stats.shadow_rays += len(tmax)
-        return blocked
-
-    visible = np.ones((len(lights), W * H), np.float32)
-    if pools is not None:
-        visible = shadow_visibility(trace, frame, W, hits.t, normals, pix_patch, lights,
-                                    keep["tol_rad"])
-    headlight = np.array([scene.render.headlight_intensity if scene.render.headlight else 0.0])
-    light(frame, W, hits.t, normals, pix_patch, patches, lights, headlight, visible, planes)
-    rows = background_rows(scene.render.background, scene.render.background_bottom, H)
-    if scene.render.background_bottom is not None:
-        miss = np.nonzero(pix_patch < 0)[0]
-        for k in range(3):
-            planes[k, miss] = rows[miss // W, k]
-    if scene.ground is not None:
-        up = np.asarray(camera.up, np.float64) / np.linalg.norm(camera.up)
-        height = scene.ground.height
-        if height is None:
-            height = min(float((c.limit(1)[0] @ up).min()) for c in cages)
-        ground_pixels(frame, W, pix_patch, up, height, trace, lights, scene.ground.color, rows,
-                      planes)
 
 
 # the colour channels are linear Rec.709 / sRGB primaries with a D65 white point

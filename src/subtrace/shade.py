@@ -32,7 +32,8 @@ C_R, C_A, C_Z, C_N, C_LEVEL, C_PATCH, C_OBJECT, C_U = 0, 3, 4, 5, 8, 9, 10, 11
 MISS = (0.0, 0.0, 0.0, 0.0, np.inf, 0.0, 0.0, 0.0, -1.0, -1.0, -1.0, 0.0, 0.0)
 
 
-def shade(frame, width, hits, grids, iso, patches, miss, planes, normals, pix_patch, covered):
+def shade(frame, width, hits, grids, iso, patches, miss, planes, normals, pix_patch, covered,
+          dirs=None):
     """Fill ``planes`` (len(CHANNELS), n_pixels) float32 from ``hits``
     (:class:`~subtrace.trace.pools.Hits`) on every thread (blocks of pixels in turn): every
     channel but the colour, which :func:`light` adds.
@@ -42,19 +43,29 @@ def shade(frame, width, hits, grids, iso, patches, miss, planes, normals, pix_pa
     ``patches``: per patch, its ids and material (:class:`PatchShading`); ``miss``
     (:func:`miss_values`); ``normals`` (n_pixels,3) float64 receives each hit's unit normal
     turned towards the eye, ``pix_patch`` (n_pixels,) int64 its patch (-1: a miss);
-    ``covered`` (threads,) int64 receives the hits each thread shaded."""
+    ``covered`` (threads,) int64 receives the hits each thread shaded. ``dirs``: None (ray
+    r is pixel r's centre ray), or the (n,3) unit directions of rays from the eye (extra
+    samples): then ``hits`` and the outputs are per ray."""
+    dirs = _no_dirs() if dirs is None else dirs
     run_tasks(_shade_task, frame, width, hits, grids, iso, patches, miss, planes, normals,
-              pix_patch, covered)
+              pix_patch, covered, dirs)
 
 
-def light(frame, width, t, normals, pix_patch, patches, lights, headlight, visible, planes):
+def _no_dirs():
+    return np.zeros((0, 3))
+
+
+def light(frame, width, t, normals, pix_patch, patches, lights, headlight, visible, planes,
+          dirs=None):
     """The colour (R, G, B of ``planes``) of every hit pixel: two-sided Lambert plus the
     material's Blinn-Phong lobe (``Ks (N.H)^Ns``, MTL's) under a headlight at the eye
     (``headlight`` (1,): its intensity) and ``lights`` (L,7) (:func:`light_array`), each
     scaled by ``visible`` (L, n_pixels) float32 (1 lit, 0 in shadow). ``t`` (n_pixels,)
-    float64: the hits' distances; ``normals``, ``pix_patch``: from :func:`shade`."""
+    float64: the hits' distances; ``normals``, ``pix_patch``, ``dirs``: as for
+    :func:`shade`."""
+    dirs = _no_dirs() if dirs is None else dirs
     run_tasks(_light_task, frame, width, t, normals, pix_patch, patches, lights, headlight,
-              visible, planes)
+              visible, planes, dirs)
 
 
 DIRECTIONAL, POINT = 0, 1  # light kinds (column 0 of light_array)
@@ -101,7 +112,7 @@ SHADE_BLOCK = 1024  # consecutive pixels shaded together
 
 @nb.njit(cache=True, nogil=True)
 def _shade_task(task, n_tasks, frame, width, hits, grids, iso, patches, miss, planes, normals,
-                pix_patch, covered):
+                pix_patch, covered, dirs):
     """Shade the blocks of pixels ``task, task + n_tasks, ...`` into ``planes`` (see
     :func:`shade`): each block is first filled with ``miss`` (contiguous stores), then its
     hits are shaded over it."""
@@ -120,9 +131,7 @@ def _shade_task(task, n_tasks, frame, width, hits, grids, iso, patches, miss, pl
                 continue
             n_hit += 1
             planes[C_Z, r] = t
-            row = r // width
-            col = r - row * width
-            dx, dy, dz = ray_setup(frame, row, col)
+            dx, dy, dz = _direction(frame, width, dirs, r)
             s = hits.prim[r]
             if s < 0:
                 # a Catmull-Clark patch: the item hit, (a, b) the patch parameter
@@ -166,7 +175,7 @@ def _shade_task(task, n_tasks, frame, width, hits, grids, iso, patches, miss, pl
 
 @nb.njit(cache=True, nogil=True)
 def _light_task(task, n_tasks, frame, width, t, normals, pix_patch, patches, lights, headlight,
-                visible, planes):
+                visible, planes, dirs):
     """The colour of the hit pixels of blocks ``task, task + n_tasks, ...`` (see
     :func:`light`)."""
     n_pix = len(pix_patch)
@@ -176,9 +185,7 @@ def _light_task(task, n_tasks, frame, width, t, normals, pix_patch, patches, lig
             p = pix_patch[r]
             if p < 0:
                 continue
-            row = r // width
-            col = r - row * width
-            dx, dy, dz = ray_setup(frame, row, col)
+            dx, dy, dz = _direction(frame, width, dirs, r)
             fx, fy, fz = normals[r, 0], normals[r, 1], normals[r, 2]
             ks = patches.specular[p]
             shiny = ks[0] > 0.0 or ks[1] > 0.0 or ks[2] > 0.0
@@ -216,6 +223,16 @@ def _light_task(task, n_tasks, frame, width, t, normals, pix_patch, patches, lig
                 planes[C_R, r] += ks[0] * sr
                 planes[C_R + 1, r] += ks[1] * sg
                 planes[C_R + 2, r] += ks[2] * sb
+
+
+@nb.njit(cache=True)
+def _direction(frame, width, dirs, r):
+    """Ray r's unit direction: ``dirs[r]``, or with no ``dirs`` pixel r's centre ray."""
+    if len(dirs):
+        return dirs[r, 0], dirs[r, 1], dirs[r, 2]
+    row = r // width
+    col = r - row * width
+    return ray_setup(frame, row, col)
 
 
 @nb.njit(cache=True)
@@ -386,10 +403,10 @@ def toward_lights(lights, points):
 POINT_ROUNDING = 2.0 ** -40
 
 
-def shadow_visibility(trace, frame, width, t, normals, pix_patch, lights, tol_rad):
+def shadow_visibility(trace, frame, width, t, normals, pix_patch, lights, tol_rad, dirs=None):
     """(L, n_pixels) float32: 1 where a hit pixel sees light k (or faces away from it:
     then its lighting is 0 anyway), 0 in shadow. ``trace(origins, dirs, tmax)``: an any-hit
-    trace returning blocked (``trace.rays.trace_rays``).
+    trace returning blocked (``trace.rays.trace_rays``). ``dirs``: as for :func:`shade`.
 
     A shadow ray leaves the hit displaced along its (eye-facing) normal by the hit's error
     bound: the micro-surface lies within a cell of the limit surface, and a cell subtends
@@ -401,7 +418,8 @@ def shadow_visibility(trace, frame, width, t, normals, pix_patch, lights, tol_ra
     if not len(lights) or not len(pix):
         return visible
     th = t[pix]
-    points = frame[0] + th[:, None] * pixel_rays(frame, width, pix)
+    d = pixel_rays(frame, width, pix) if dirs is None else dirs[pix]
+    points = frame[0] + th[:, None] * d
     f = normals[pix]
     err = th * tol_rad + POINT_ROUNDING * np.abs(points).max(axis=1)
     dirs, dist, _ = toward_lights(lights, points)
@@ -423,16 +441,17 @@ def background_rows(top, bottom, height) -> np.ndarray:
     return (1.0 - w) * top + w * np.asarray(bottom, np.float64)
 
 
-def ground_pixels(frame, width, pix_patch, up, height, trace, lights, color, rows, planes):
+def ground_pixels(frame, width, pix_patch, up, height, trace, lights, color, rows, planes,
+                  dirs=None):
     """Where the primary ray missed every surface and meets the ground plane (points p with
     p . up = height, ``up`` a unit vector), write the ground's colour into ``planes``: an
     opaque Lambertian ``color`` under ``lights`` with shadows, or (``color`` None) a shadow
     catcher: the background ``rows`` darkened by the fraction of the light the objects
     hold back. The ground is part of the background: alpha and the other channels keep
     saying "no hit" (the EXR's coverage is the surface's). Returns the number of ground
-    pixels."""
+    pixels. ``dirs``: as for :func:`shade` (then ``rows`` (n,3): each ray's background)."""
     miss = np.nonzero(pix_patch < 0)[0]
-    d = pixel_rays(frame, width, miss)
+    d = pixel_rays(frame, width, miss) if dirs is None else dirs[miss]
     down = d @ up
     with np.errstate(divide="ignore", invalid="ignore"):
         tg = (height - frame[0] @ up) / down
@@ -441,19 +460,19 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, color, row
     if not len(miss):
         return 0
     points = frame[0] + tg[:, None] * d
-    dirs, dist, factor = toward_lights(lights, points)
+    row = miss // width if dirs is None else miss
+    to_light, dist, factor = toward_lights(lights, points)
     lit = np.zeros(len(miss))
     full = np.zeros(len(miss))
     rgb = np.zeros((len(miss), 3))
     for k in range(len(lights)):
-        c = np.maximum(dirs[k] @ up, 0.0) * factor[k]
+        c = np.maximum(to_light[k] @ up, 0.0) * factor[k]
         facing = c > 0.0
         blocked = np.zeros(len(miss), np.uint8)
-        blocked[facing] = trace(points[facing], dirs[k][facing], dist[k][facing])
+        blocked[facing] = trace(points[facing], to_light[k][facing], dist[k][facing])
         full += c
         lit += c * (1 - blocked)
         rgb += (c * (1 - blocked))[:, None] * lights[k, 4:7]
-    row = miss // width
     if color is None:
         with np.errstate(divide="ignore", invalid="ignore"):
             shadow = np.where(full > 0.0, 1.0 - lit / full, 0.0)

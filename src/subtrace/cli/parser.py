@@ -121,6 +121,10 @@ def _add_render(sub) -> argparse.ArgumentParser:
     render.add_argument("--background", metavar="RGB[,RGB]",
                         help="background colour, or two: a vertical gradient top,bottom "
                              "(e.g. #6b7889,#181a1f)")
+    render.add_argument("--samples", metavar="N",
+                        help="rays per pixel at most: edge pixels (silhouettes, folds, shadow "
+                             "edges) get up to N stratified rays, the others keep one "
+                             "(default: the scene's, else 1)")
     render.add_argument("--no-shadows", dest="shadows", action="store_false", default=None,
                         help="no shadow rays (on by default where the scene has lights)")
     render.add_argument("--transparent", action="store_true", default=None,

@@ -49,7 +49,8 @@ def execute(args) -> int:
     scene = scene_from_inputs(inputs, args, tolerance=args.tolerance,
                               tolerance_deg=args.tolerance_deg, output=args.output,
                               color=args.color, background=args.background,
-                              shadows=args.shadows, transparent=args.transparent)
+                              shadows=args.shadows, transparent=args.transparent,
+                              samples=args.samples)
     out = scene.output or "render.exr"
     picture = picture_format(out)
     bits = int(getattr(args, "bit_depth", "8"))

@@ -38,6 +38,8 @@ Schema (every table and key optional unless marked *required*)::
     background = [0.0, 0.0, 0.0]    # linear RGB in 0..1, or [top, bottom]: a vertical
                                     #   gradient; default black
     shadows = true                  # shadow rays towards every [[light]]; default true
+    samples = 4                     # rays per pixel at most (adaptive anti-aliasing: edge
+                                    #   pixels only), 1..64; default DEFAULT_SAMPLES
     transparent = false             # .png / .tif pictures: alpha where nothing was hit
                                     #   (default false: opaque over the background)
     headlight = true                # a directional light from the eye; default true
@@ -91,6 +93,8 @@ DEFAULT_HEIGHT = 480
 DEFAULT_FOV_DEG = 30.0
 DEFAULT_UP = (0.0, 1.0, 0.0)
 DEFAULT_TOLERANCE_PX = 1.0
+DEFAULT_SAMPLES = 4  # rays per edge pixel at most (see subtrace.picture; BENCHMARKS.md)
+MAX_SAMPLES = 64
 DEFAULT_BACKGROUND = (0.0, 0.0, 0.0)
 # what OBJ cages rendered without a scene get: a soft vertical gradient, a key and a fill
 # light (directions they travel, for +Y up and the automatic camera's view) and a ground
@@ -113,7 +117,7 @@ _TOP_KEYS = ("object", "camera", "render", "light", "ground", "output", "preview
 _OBJECT_KEYS = ("mesh", "scheme", "boundary", "color", "specular", "shininess")
 _CAMERA_KEYS = ("eye", "target", "up", "fov", "width", "height")
 _RENDER_KEYS = ("tolerance", "tolerance_deg", "background", "headlight", "headlight_intensity",
-                "max_memory", "shadows", "transparent")
+                "max_memory", "shadows", "transparent", "samples")
 _LIGHT_KEYS = ("direction", "position", "color", "intensity")
 _GROUND_KEYS = ("height", "color")
 # Camera field -> scene key / command-line option
@@ -220,6 +224,7 @@ class RenderSettings:
     max_memory: int | None = None  # bytes; None: config.default_max_memory() at render time
     shadows: bool = True
     transparent: bool = False
+    samples: int = DEFAULT_SAMPLES
 
     def tolerance_rad(self, camera: Camera) -> float:
         """The angular tolerance in radians (pixels times the camera's pixel angle)."""
@@ -460,6 +465,8 @@ def _render(ctx, table) -> RenderSettings:
     if "max_memory" in table:
         values["max_memory"] = ctx.call(where + ("max_memory",), parse_memory,
                                         table["max_memory"])
+    if "samples" in table:
+        values["samples"] = ctx.call(where + ("samples",), _samples, table["samples"])
     return RenderSettings(**values)
 
 
@@ -574,6 +581,19 @@ def _color(value) -> tuple[float, float, float]:
             f"color components must be between 0 and 1 (linear RGB), got {show_value(value)}"
         )
     return rgb
+
+
+def _samples(value) -> int:
+    """Rays per pixel at most: a whole number 1..MAX_SAMPLES."""
+    if isinstance(value, str):
+        try:
+            value = int(value.strip())
+        except ValueError:
+            pass
+    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_SAMPLES:
+        raise SceneError(f"expected a whole number of rays per pixel from 1 to {MAX_SAMPLES}, "
+                         f"got {show_value(value)}")
+    return value
 
 
 def _background(value):
@@ -792,6 +812,7 @@ _OPTION = {
     "max_memory": "--max-memory",
     "color": "--color",
     "background": "--background",
+    "samples": "--samples",
 }
 
 
@@ -814,6 +835,7 @@ def apply_overrides(
     background=None,
     shadows=None,
     transparent=None,
+    samples=None,
 ) -> Scene:
     """A new Scene with command-line values replacing the file's; None means not given.
 
@@ -872,6 +894,8 @@ def apply_overrides(
                          background_bottom=colors[1] if len(colors) > 1 else None)
     if shadows is not None:
         render = replace(render, shadows=bool(shadows))
+    if samples is not None:
+        render = replace(render, samples=_option("samples", _samples, samples))
     if transparent is not None:
         render = replace(render, transparent=bool(transparent))
 
