@@ -155,7 +155,7 @@ def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights,
             planes[C_R + k, miss] = back[:, k]
     if ground is not None:
         ground_pixels(frame, width, pix_patch, ground[0], ground[1], trace_shadows, lights,
-                      scene.ground.color, rows, planes, dirs)
+                      float(headlight[0]), scene.ground.color, rows, planes, dirs)
 
 
 def _antialias(scene, frame, W, H, pools, patches, planes, lights, ground, trace_shadows,

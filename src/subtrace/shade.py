@@ -441,12 +441,13 @@ def background_rows(top, bottom, height) -> np.ndarray:
     return (1.0 - w) * top + w * np.asarray(bottom, np.float64)
 
 
-def ground_pixels(frame, width, pix_patch, up, height, trace, lights, color, rows, planes,
-                  dirs=None):
+def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight, color, rows,
+                  planes, dirs=None):
     """Where the primary ray missed every surface and meets the ground plane (points p with
     p . up = height, ``up`` a unit vector), write the ground's colour into ``planes``: an
-    opaque Lambertian ``color`` under ``lights`` with shadows, or (``color`` None) a shadow
-    catcher: the background ``rows`` darkened by the fraction of the light the objects
+    opaque Lambertian ``color`` under ``lights`` with shadows and the ``headlight`` (its
+    intensity), or (``color`` None) a shadow catcher: the background ``rows`` darkened by
+    the fraction of the light (the headlight's included: it casts no shadow) the objects
     hold back. The ground is part of the background: alpha and the other channels keep
     saying "no hit" (the EXR's coverage is the surface's). Returns the number of ground
     pixels. ``dirs``: as for :func:`shade` (then ``rows`` (n,3): each ray's background)."""
@@ -462,9 +463,9 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, color, row
     points = frame[0] + tg[:, None] * d
     row = miss // width if dirs is None else miss
     to_light, dist, factor = toward_lights(lights, points)
-    lit = np.zeros(len(miss))
-    full = np.zeros(len(miss))
-    rgb = np.zeros((len(miss), 3))
+    full = np.maximum(-(d @ up), 0.0) * headlight
+    lit = full.copy()
+    rgb = np.repeat(full[:, None], 3, axis=1)
     for k in range(len(lights)):
         c = np.maximum(to_light[k] @ up, 0.0) * factor[k]
         facing = c > 0.0
