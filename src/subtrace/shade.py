@@ -441,6 +441,29 @@ def background_rows(top, bottom, height) -> np.ndarray:
     return (1.0 - w) * top + w * np.asarray(bottom, np.float64)
 
 
+@nb.njit(cache=True)
+def _ground_points(frame, width, rays, dirs, up, height, points, down):
+    """Where rays ``rays`` (pixel centres, or rows of ``dirs``) from the eye meet the plane
+    p . up = height going down: (n,) bool, ``points`` (n,3) and ``down`` (n,) (d . up)
+    written where True."""
+    on = np.zeros(len(rays), np.bool_)
+    e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
+    for k in range(len(rays)):
+        dx, dy, dz = _direction(frame, width, dirs, rays[k])
+        dn = dx * up[0] + dy * up[1] + dz * up[2]
+        if not dn < 0.0:
+            continue
+        t = (height - e_up) / dn
+        if not (t > 0.0 and t < np.inf):
+            continue
+        on[k] = True
+        down[k] = dn
+        points[k, 0] = frame[0, 0] + t * dx
+        points[k, 1] = frame[0, 1] + t * dy
+        points[k, 2] = frame[0, 2] + t * dz
+    return on
+
+
 def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight, color, rows,
                   planes, dirs=None):
     """Where the primary ray missed every surface and meets the ground plane (points p with
@@ -452,18 +475,16 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
     saying "no hit" (the EXR's coverage is the surface's). Returns the number of ground
     pixels. ``dirs``: as for :func:`shade` (then ``rows`` (n,3): each ray's background)."""
     miss = np.nonzero(pix_patch < 0)[0]
-    d = pixel_rays(frame, width, miss) if dirs is None else dirs[miss]
-    down = d @ up
-    with np.errstate(divide="ignore", invalid="ignore"):
-        tg = (height - frame[0] @ up) / down
-    on = (down < 0.0) & (tg > 0.0) & np.isfinite(tg)
-    miss, d, tg = miss[on], d[on], tg[on]
+    points = np.empty((len(miss), 3))
+    down = np.empty(len(miss))
+    on = _ground_points(frame, width, miss, _no_dirs() if dirs is None else dirs,
+                        np.asarray(up, np.float64), float(height), points, down)
+    miss, points, down = miss[on], points[on], down[on]
     if not len(miss):
         return 0
-    points = frame[0] + tg[:, None] * d
     row = miss // width if dirs is None else miss
     to_light, dist, factor = toward_lights(lights, points)
-    full = np.maximum(-(d @ up), 0.0) * headlight
+    full = np.maximum(-down, 0.0) * headlight
     lit = full.copy()
     rgb = np.repeat(full[:, None], 3, axis=1)
     for k in range(len(lights)):
