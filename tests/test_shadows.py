@@ -32,7 +32,7 @@ def _scene(cube, tmp_path, shadows=True, ground=True, width=96, height=72,
     d = {"object": [{"mesh": str(cube)}],
          "camera": {"eye": list(eye), "target": list(target), "width": width,
                     "height": height},
-         "render": {"headlight": False, "shadows": shadows,
+         "render": {"headlight": False, "shadows": shadows, "samples": 1,
                     "background": [BACKGROUND] * 3},
          "light": [{"direction": LIGHT.tolist()}]}
     if ground:
