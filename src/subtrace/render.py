@@ -208,7 +208,7 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
         keep.update(table=table, depths=depths, edge_depth=edge_depth, grids=grids,
                     tables=tables, iso=iso, record=chosen.record, shell_min=chosen.shell_min,
                     shell_max=chosen.shell_max, bvh=bvh, eye=frame[0], tol_rad=tol_rad,
-                    stats=stats, round_no=round_no + 1, memos=memos)
+                    stats=stats, round_no=round_no + 1)
     return hits, grids.view(tables), iso, built
 
 

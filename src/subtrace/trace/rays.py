@@ -46,10 +46,8 @@ class Pools:
     """What a finished primary trace leaves for secondary rays: the patch table, each
     patch's grid depth and edge sampling, the pools built so far (``grids``: LoopGrids,
     ``tables``: their LeafTables, ``iso``: Pieces), the isolation records, the shells and
-    their BVH, the eye, the tolerance (radians), the render's statistics, the next round
-    number and the threads' memos of split nets (:class:`~subtrace.trace.pools.Memos`:
-    what primary rays split serves secondary rays near them; a memo changes the work,
-    never a hit). :func:`trace_rays` builds into the pools what its rays ask for."""
+    their BVH, the eye, the tolerance (radians), the render's statistics and the next
+    round number. :func:`trace_rays` builds into the pools what its rays ask for."""
 
     table: object
     depths: np.ndarray
@@ -65,7 +63,6 @@ class Pools:
     tol_rad: float
     stats: object
     round_no: int
-    memos: Memos
 
 
 def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
@@ -84,7 +81,9 @@ def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
     req = np.empty((n, CANDIDATES), np.int64)
     req_n = np.zeros(n, np.int64)
     n_threads = tasks.thread_count()
-    memos = pools.memos
+    # fresh memos: reusing the primary trace's (warmer: faster) changed a Loop render by an
+    # ulp between the projection and the BVH (tests/test_projection.py, random cameras)
+    memos = Memos(n_threads, None)
     built = np.zeros(n_threads, np.int64)
     req_ts = np.empty((n_threads, CANDIDATES))  # each thread's entry distances of req
     rays = np.arange(n, dtype=np.int64)
