@@ -520,7 +520,9 @@ class Renderers:
             "render", str(scene.toml), "-o", str(exr), "--threads", str(self.args.threads),
             "--width", str(width), "--height", str(height), "--fov", repr(cam["fov"]),
             "--eye", *map(repr, cam["eye"]), "--target", *map(repr, cam["target"]),
-            "--up", *map(repr, cam["up"]), "--quiet"]
+            "--up", *map(repr, cam["up"]), "--quiet",
+            # like for like with Cycles' one sample and sun lights without shadows
+            "--samples", "1", "--no-shadows"]
         return cmd
 
     def run_subtrace(self, scene, width=None, height=None, exr=None) -> dict:

@@ -1,7 +1,14 @@
 """Benchmark: render scenes and report the time split, work done and peak memory.
 
     python benchmarks/render.py [SCENE.toml ...] [--width 1280 --height 720] [--repeat 3]
-                                [--tolerance 1]
+                                [--tolerance 1] [--samples N] [--no-shadows]
+    python benchmarks/render.py --picture-cost [SCENE.toml ...]
+
+``--samples`` / ``--no-shadows`` set anti-aliasing and shadows (default: the scene's, i.e.
+the renderer's defaults). ``--picture-cost`` instead renders each scene warm in one process
+with geometry only (``--samples 1 --no-shadows``), with shadows, with anti-aliasing, and
+with both, alternating the four in ``repeat`` rounds, and prints the median total times
+and their ratios to geometry only, with the shadow rays and anti-aliased pixels counted.
 
 Default scenes: ``scenes/spot.toml`` and ``scenes/sword.toml``. Each scene runs in a fresh
 subprocess: one *cold* run (first render in the process: Numba's cache is loaded, or kernels
@@ -31,7 +38,8 @@ from _common import REPO, import_subtrace  # benchmarks/ is on sys.path when run
 DEFAULT_SCENES = [REPO / "scenes" / "spot.toml", REPO / "scenes" / "sword.toml"]
 
 
-def worker(scene_path: str, width: int, height: int, tolerance: float, repeat: int) -> dict:
+def worker(scene_path: str, width: int, height: int, tolerance: float, repeat: int,
+           samples=None, shadows=None) -> dict:
     import resource
 
     import_subtrace()
@@ -40,7 +48,7 @@ def worker(scene_path: str, width: int, height: int, tolerance: float, repeat: i
     from subtrace.render import render_scene, result_attributes
 
     scene = apply_overrides(load_scene(scene_path), width=width, height=height,
-                            tolerance=tolerance)
+                            tolerance=tolerance, samples=samples, shadows=shadows)
     runs = []
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(repeat + 1):
@@ -52,6 +60,60 @@ def worker(scene_path: str, width: int, height: int, tolerance: float, repeat: i
             runs.append(st)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     return {"cold": runs[0], "warm": runs[1:], "peak_mb": peak}
+
+
+PICTURE_MODES = (("geometry", 1, False), ("shadows", 1, True), ("aa", None, False),
+                 ("both", None, True))  # (name, samples (None: the default), shadows)
+
+
+def picture_worker(scene_path: str, width: int, height: int, repeat: int) -> dict:
+    """Warm render times of the PICTURE_MODES, alternated over ``repeat`` rounds."""
+    import_subtrace()
+    import warnings
+
+    from subtrace.io.scene import apply_overrides, load_scene
+    from subtrace.render import render_scene
+
+    base = apply_overrides(load_scene(scene_path), width=width, height=height)
+    scenes = {name: apply_overrides(base, samples=n, shadows=sh) for name, n, sh in
+              PICTURE_MODES}
+    times = {name: [] for name in scenes}
+    stats = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for name, scene in scenes.items():  # warm-up (compilation, caches)
+            render_scene(scene)
+        for _ in range(repeat):
+            for name, scene in scenes.items():
+                st = render_scene(scene).stats
+                times[name].append(st.time_total)
+                stats[name] = {"shadow_rays": st.shadow_rays, "aa_pixels": st.aa_pixels,
+                               "aa_rays": st.aa_rays, "samples": scene.render.samples}
+    return {"times": times, "stats": stats}
+
+
+def picture_cost(args) -> int:
+    """The --picture-cost table (see the module doc)."""
+    print(f"{args.width}x{args.height}, {args.repeat} alternated warm rounds (medians), "
+          f"cpus {os.cpu_count()}")
+    cols = ("scene", "geometry s", "shadows", "aa", "both", "x shadows", "x aa", "x both",
+            "shadow rays", "aa px", "aa rays")
+    print(" ".join(f"{c:>11}" for c in cols))
+    for scene in args.scenes:
+        out = subprocess.run(
+            [sys.executable, __file__, "--picture-worker", scene, str(args.width),
+             str(args.height), str(args.repeat)],
+            check=True, capture_output=True, text=True).stdout
+        r = json.loads(out.strip().splitlines()[-1])
+        med = {k: statistics.median(v) for k, v in r["times"].items()}
+        st = r["stats"]["both"]
+        row = (Path(scene).stem, f"{med['geometry']:.3f}", f"{med['shadows']:.3f}",
+               f"{med['aa']:.3f}", f"{med['both']:.3f}",
+               f"{med['shadows'] / med['geometry']:.2f}", f"{med['aa'] / med['geometry']:.2f}",
+               f"{med['both'] / med['geometry']:.2f}", str(st["shadow_rays"]),
+               str(st["aa_pixels"]), str(st["aa_rays"]))
+        print(" ".join(f"{c:>11}" for c in row), flush=True)
+    return 0
 
 
 def _command_time(scene_path, width, height, tolerance) -> float:
@@ -72,12 +134,25 @@ def main(argv=None) -> int:
     ap.add_argument("--height", type=int, default=720)
     ap.add_argument("--tolerance", type=float, default=1.0)
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--worker", nargs=5, help=argparse.SUPPRESS)
+    ap.add_argument("--samples", type=int, help="rays per edge pixel (default: the scene's)")
+    ap.add_argument("--no-shadows", dest="shadows", action="store_false", default=None,
+                    help="no shadow rays")
+    ap.add_argument("--picture-cost", action="store_true",
+                    help="the cost of shadows and anti-aliasing (see the module doc)")
+    ap.add_argument("--worker", nargs=7, help=argparse.SUPPRESS)
+    ap.add_argument("--picture-worker", nargs=4, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker:
-        s, w, h, t, r = args.worker
-        print(json.dumps(worker(s, int(w), int(h), float(t), int(r))))
+        s, w, h, t, r, n, sh = args.worker
+        print(json.dumps(worker(s, int(w), int(h), float(t), int(r),
+                                None if n == "-" else int(n), None if sh == "-" else sh == "1")))
         return 0
+    if args.picture_worker:
+        s, w, h, r = args.picture_worker
+        print(json.dumps(picture_worker(s, int(w), int(h), int(r))))
+        return 0
+    if args.picture_cost:
+        return picture_cost(args)
     print(f"{args.width}x{args.height}, tolerance {args.tolerance} px, {args.repeat} warm runs "
           f"(medians), cpus {os.cpu_count()}")
     cols = ("scene", "cold s", "load", "prep", "refine", "trace", "shade", "write", "total",
@@ -86,7 +161,9 @@ def main(argv=None) -> int:
     for scene in args.scenes:
         out = subprocess.run(
             [sys.executable, __file__, "--worker", scene, str(args.width), str(args.height),
-             str(args.tolerance), str(args.repeat)],
+             str(args.tolerance), str(args.repeat),
+             "-" if args.samples is None else str(args.samples),
+             "-" if args.shadows is None else str(int(args.shadows))],
             check=True, capture_output=True, text=True,
         ).stdout
         r = json.loads(out.strip().splitlines()[-1])

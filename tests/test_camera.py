@@ -353,3 +353,25 @@ def test_across_view_is_never_parallel(view):
 
     d = np.asarray(view) / np.linalg.norm(view)
     check_view((0.0, 0.0, 0.0), tuple(d), across_view(d))
+
+
+def test_auto_camera_frames_points_within_the_margin_and_tightly():
+    """With surface points the automatic camera fits them, not the box's empty corners:
+    every point projects within 1 / AUTO_MARGIN of the half-image, and one reaches it."""
+    from subtrace.camera import AUTO_MARGIN
+
+    rng = np.random.default_rng(3)
+    pts = rng.normal(size=(300, 3)) * [0.5, 1.0, 0.3] + [2.0, 0.0, 1.0]
+    cam = auto_camera(pts.min(axis=0), pts.max(axis=0), 1280, 720, 30.0, points=pts)
+    right, up, forward = cam.basis()
+    rel = pts - np.asarray(cam.eye)
+    depth = rel @ forward
+    tan_v = math.tan(math.radians(15.0))
+    fill = np.maximum(np.abs(rel @ right / depth) / (tan_v * 1280 / 720),
+                      np.abs(rel @ up / depth) / tan_v)
+    assert fill.max() <= 1.0 / AUTO_MARGIN + 1e-12
+    assert fill.max() >= 1.0 / AUTO_MARGIN - 1e-9
+    # the box of the points alone would leave them smaller
+    boxed = auto_camera(pts.min(axis=0), pts.max(axis=0), 1280, 720, 30.0)
+    assert np.linalg.norm(np.subtract(boxed.eye, boxed.target)) > np.linalg.norm(
+        np.subtract(cam.eye, cam.target))

@@ -15,7 +15,8 @@ from hypothesis import strategies as st
 
 from fuzzing import mutations
 from subtrace.errors import ObjError, SubtraceWarning
-from subtrace.io.obj import DEFAULT_DIFFUSE, Material, ObjData, read_obj
+from subtrace.io.obj import (DEFAULT_DIFFUSE, DEFAULT_SHININESS, DEFAULT_SPECULAR, Material,
+                             ObjData, read_obj)
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 ORACLE = SHARED / "oracle"
@@ -321,6 +322,27 @@ def test_malformed_mtl_is_an_error(tmp_path):
     with pytest.raises(ObjError) as info:
         read_quiet(write(tmp_path, "mtllib bad.mtl\n" + SQUARE + "f 1 2 3\n"))
     assert "bad.mtl:2:" in str(info.value) and "Kd" in str(info.value)
+
+
+def test_mtl_specular_and_shininess(tmp_path):
+    """Ks and Ns are read per material (Ns defaults where Ks comes alone, Ks to none)."""
+    (tmp_path / "s.mtl").write_text(
+        "newmtl shiny\nKd 0.5 0.4 0.3\nKs 0.2\nNs 64\nnewmtl half\nKs 0.1 0.2 0.3\n"
+        "newmtl matte\nKd 1 1 1\n")
+    data = read_quiet(write(tmp_path, "mtllib s.mtl\nusemtl shiny\n" + SQUARE + "f 1 2 3\n"))
+    assert data.materials == (
+        Material("shiny", (0.5, 0.4, 0.3), (0.2, 0.2, 0.2), 64.0),
+        Material("half", DEFAULT_DIFFUSE, (0.1, 0.2, 0.3), DEFAULT_SHININESS),
+        Material("matte", (1.0, 1.0, 1.0), DEFAULT_SPECULAR, DEFAULT_SHININESS))
+
+
+@pytest.mark.parametrize("line,key", [("Ks 1 2", "Ks"), ("Ns -3", "Ns"), ("Ns shiny", "Ns"),
+                                      ("Ns 1 2", "Ns")])
+def test_malformed_specular_is_an_error(tmp_path, line, key):
+    (tmp_path / "bad.mtl").write_text(f"newmtl m\n{line}\n")
+    with pytest.raises(ObjError) as info:
+        read_quiet(write(tmp_path, "mtllib bad.mtl\n" + SQUARE + "f 1 2 3\n"))
+    assert "bad.mtl:2:" in str(info.value) and key in str(info.value)
 
 
 def test_unknown_and_freeform_statements_warn_once(tmp_path):

@@ -22,8 +22,11 @@ def test_render_cli_writes_exr(tmp_path):
         assert name in ch
     assert (tmp_path / "spot.png").exists()
     miss = ch["A"] == 0
-    assert np.all(np.isinf(ch["Z"][miss])) and np.all(np.isfinite(ch["Z"][~miss]))
-    assert np.all(ch["object_id"][~miss] == 0)
+    assert np.all(np.isinf(ch["Z"][miss])) and np.all(np.isfinite(ch["Z"][ch["A"] == 1]))
+    # anti-aliased edges: partial alpha; the centre ray alone writes Z and the ids
+    hit = np.isfinite(ch["Z"])
+    assert np.all(ch["A"][hit] > 0) and np.any((ch["A"] > 0) & (ch["A"] < 1))
+    assert np.all(ch["object_id"][hit] == 0)
     for key in ["subtrace:time_total", "subtrace:time_refine", "subtrace:time_trace",
                 "subtrace:time_load", "subtrace:scheme", "subtrace:camera",
                 "subtrace:patches_refined", "subtrace:micro_triangles"]:
@@ -130,8 +133,9 @@ def _cube(tmp_path):
 ])
 def test_render_cli_output_format_follows_the_extension(tmp_path, name, fmt, bits, channels):
     """``-o x.png`` (.jpg, .tif) writes that format, readable by another library (Pillow
-    for the 8-bit ones), with alpha where the format has it, sRGB-encoded: the same pixels
-    as the EXR's colour after the sRGB transfer function; ``--png`` never writes over it."""
+    for the 8-bit ones), with alpha where the format has it (``--transparent``), sRGB-encoded:
+    the same pixels as the EXR's colour after the sRGB transfer function; ``--png`` never
+    writes over it."""
     import OpenImageIO as oiio
     from PIL import Image
 
@@ -142,7 +146,7 @@ def test_render_cli_output_format_follows_the_extension(tmp_path, name, fmt, bit
     out = tmp_path / name
     args = ["render", str(cage), *CUBE_SCENE_ARGS, "--eye", "3", "2.5", "4", "--target", "0", "0",
             "0"]
-    assert main([*args, "-o", str(out), "--bit-depth", str(bits), "--png"]) == 0
+    assert main([*args, "-o", str(out), "--bit-depth", str(bits), "--png", "--transparent"]) == 0
     assert main([*args, "-o", str(tmp_path / "ref.exr")]) == 0
     spec = oiio.ImageInput.open(str(out)).spec()
     assert spec.nchannels == len(channels) and spec.format.size() * 8 == bits
@@ -155,6 +159,8 @@ def test_render_cli_output_format_follows_the_extension(tmp_path, name, fmt, bit
     got = oiio.ImageBuf(str(out)).get_pixels(oiio.FLOAT)
     want = np.stack([srgb_encode(ref[c]) for c in "RGB"], axis=-1)
     err = np.abs(got[..., :3] - want)
+    if "A" in channels:  # (readers may premultiply by alpha: compare where it is 1)
+        err = err[ref["A"] == 1.0]
     # quantisation (half a code) plus the reference's own rounding (the EXR stores colour as
     # half floats: 2^-11 relative, up to 12.92x that after the sRGB curve's steepest part),
     # and JPEG's lossy coding for the jpg
@@ -162,6 +168,24 @@ def test_render_cli_output_format_follows_the_extension(tmp_path, name, fmt, bit
     if "A" in channels:
         np.testing.assert_allclose(got[..., 3], ref["A"], atol=0.5 / (2**bits - 1) + 1e-6)
         assert 0 < ref["A"].sum() < ref["A"].size  # the cube covers part of the image
+
+
+def test_render_cli_pictures_are_opaque_over_the_background(tmp_path):
+    """Without --transparent a .png is RGB: the colour over the background (a gradient
+    from --background top,bottom), as a picture viewer should show it."""
+    import OpenImageIO as oiio
+
+    from subtrace.cli import main
+
+    out = tmp_path / "pic.png"
+    args = ["render", str(_cube(tmp_path)), *CUBE_SCENE_ARGS, "--background",
+            "1,0,0 0,0,1", "--color", "#00ff00", "-o", str(out)]
+    assert main(args) == 0
+    got = oiio.ImageBuf(str(out)).get_pixels(oiio.FLOAT)
+    assert got.shape == (30, 40, 3)
+    assert got[0, 0, 0] > 0.9 and got[-1, 0, 2] > 0.9  # red at the top, blue at the bottom
+    centre = got[15, 20]
+    assert centre[1] > 0.3 and centre[0] < 0.05 and centre[2] < 0.05  # the green object
 
 
 def test_render_cli_sixteen_bits_only_where_the_format_has_them(tmp_path, capsys):

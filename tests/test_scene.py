@@ -232,8 +232,8 @@ BAD = [
     ("eye short", "eye = [0.0, 1.0, 5.0]", "eye = [0.0, 1.0]", 6, "camera.eye", "3 numbers"),
     ("eye inf", "eye = [0.0, 1.0, 5.0]", "eye = [0.0, 1.0, inf]", 6, "camera.eye", "finite"),
     ("eye string", "eye = [0.0, 1.0, 5.0]", 'eye = "front"', 6, "camera.eye", "3 numbers"),
-    ("target missing", "target = [0.0, 0.5, 0.0]\n", "", 6, "camera.eye",
-     "give both eye and target"),
+    ("eye missing", "eye = [0.0, 1.0, 5.0]\n", "", 6, "camera.target",
+     "target is given but eye is not"),
     ("width 0", "width = 320", "width = 0", 10, "camera.width", "between 1 and 32768"),
     ("width negative", "width = 320", "width = -320", 10, "camera.width", "between 1 and 32768"),
     ("width huge", "width = 320", "width = 32769", 10, "camera.width", "between 1 and 32768"),
@@ -279,7 +279,7 @@ BAD = [
     ("object typo", 'scheme = "loop"', 'schema = "loop"', 35, "object[1].schema",
      "did you mean 'scheme'"),
     ("top-level typo", 'output = "renders/out.exr"', 'outptu = "renders/out.exr"', 2,
-     "outptu", "allowed keys: object, camera, render, light, output, preview"),
+     "outptu", "allowed keys: object, camera, render, light, ground, output, preview"),
     ("table typo", "[camera]", "[camra]", 5, "camra", "did you mean 'camera'"),
     ("output not a string", 'output = "renders/out.exr"', "output = true", 2, "output",
      "expected a file name"),
@@ -471,10 +471,15 @@ def test_override_errors(folder, flags, option, words):
     assert words in str(info.value)
 
 
-def test_override_eye_needs_target_on_auto_camera(folder):
+def test_override_eye_alone_looks_at_the_centre(folder):
+    """--eye without --target aims at the bounds' centre; --target alone needs an eye."""
     scene = load_scene(write(folder, '[[object]]\nmesh = "tri2.obj"\n'))
-    with pytest.raises(SceneError, match="^--eye: .*give --target as well"):
-        apply_overrides(scene, eye="0,0,5")
+    alone = apply_overrides(scene, eye="0,0,5")
+    assert alone.camera.is_auto
+    cam = alone.make_camera((-1.0, 0.0, -2.0), (3.0, 2.0, 0.0))
+    assert cam.eye == (0, 0, 5) and cam.target == (1.0, 1.0, -1.0)
+    with pytest.raises(SceneError, match="^eye: .*coincide"):
+        apply_overrides(scene, eye="1,1,-1").make_camera((0.0, 0, -2), (2.0, 2, 0))
     with pytest.raises(SceneError, match="^--target: .*give --eye as well"):
         apply_overrides(scene, target="0,0,0")
     new = apply_overrides(scene, eye="0,0,5", target="0,0,0", width=10)
@@ -486,3 +491,82 @@ def test_override_unknown_flag_is_a_type_error(folder):
     scene = load_scene(write(folder, FULL))
     with pytest.raises(TypeError):
         apply_overrides(scene, fvo=30)
+
+
+# --------------------------------------------------------------------------------------
+# lighting, materials, ground and background
+# --------------------------------------------------------------------------------------
+
+
+def test_lights_materials_ground_and_gradient(folder):
+    scene = load_scene(write(folder, """
+[[object]]
+mesh = "tri2.obj"
+color = [0.5, 0.4, 0.3]
+specular = [0.2, 0.2, 0.2]
+shininess = 50
+
+[render]
+background = [[0.4, 0.5, 0.6], [0.1, 0.1, 0.1]]
+shadows = false
+transparent = true
+
+[[light]]
+direction = [0, -2, 0]
+
+[[light]]
+position = [1, 4, 2]
+intensity = 3
+
+[ground]
+height = -1.5
+"""))
+    o = scene.objects[0]
+    assert (o.color, o.specular, o.shininess) == ((0.5, 0.4, 0.3), (0.2, 0.2, 0.2), 50.0)
+    r = scene.render
+    assert (r.background, r.background_bottom) == ((0.4, 0.5, 0.6), (0.1, 0.1, 0.1))
+    assert not r.shadows and r.transparent
+    assert scene.lights[0].direction == (0.0, -1.0, 0.0) and scene.lights[0].position is None
+    assert scene.lights[1].position == (1.0, 4.0, 2.0) and scene.lights[1].direction is None
+    assert scene.ground.height == -1.5 and scene.ground.color is None
+
+
+@pytest.mark.parametrize("text,key,words", [
+    ('[[light]]\ndirection = [0, -1, 0]\nposition = [0, 1, 0]\n', "light[0].position", "not both"),
+    ('[[light]]\nintensity = 2\n', "light[0]", "needs direction"),
+    ('[render]\nbackground = [[0, 0, 0], [2, 0, 0]]\n', "render.background", "between 0 and 1"),
+    ('[render]\nshadows = "yes"\n', "render.shadows", "true or false"),
+    ('[ground]\nheight = "low"\n', "ground.height", "number"),
+    ('[ground]\nlevel = 0\n', "ground.level", "allowed keys: height, color"),
+])
+def test_bad_lighting_keys(folder, text, key, words):
+    path = write(folder, '[[object]]\nmesh = "tri2.obj"\n' + text)
+    err = error_of(path)
+    assert err.key == key and err.line is not None, str(err)
+    assert words in str(err), str(err)
+
+
+def test_override_colours(folder):
+    scene = load_scene(write(folder, '[[object]]\nmesh = "tri2.obj"\n'))
+    new = apply_overrides(scene, color="#ffffff", background="0.1,0.2,0.3 0,0,0",
+                          shadows=False, transparent=True)
+    assert new.objects[0].color == pytest.approx((1.0, 1.0, 1.0))
+    assert new.render.background == (0.1, 0.2, 0.3)
+    assert new.render.background_bottom == (0.0, 0.0, 0.0)
+    assert not new.render.shadows and new.render.transparent
+    # sRGB hex codes are decoded to linear
+    assert apply_overrides(scene, background="#808080").render.background == pytest.approx(
+        (0.2158605,) * 3)
+    for option, value in (("color", "1,2,3"), ("color", "#12345"), ("background", "0.1,0.2"),
+                          ("color", "0,0,0,1,1,1")):
+        with pytest.raises(SceneError, match=f"^--{option}: expected a colour"):
+            apply_overrides(scene, **{option: value})
+
+
+def test_scene_for_meshes_lights_a_picture(folder, monkeypatch):
+    """OBJ inputs get 1280x720, key and fill lights, a gradient and a ground shadow."""
+    monkeypatch.chdir(folder)
+    scene = scene_for_meshes(["tri2.obj"])
+    assert (scene.camera.width, scene.camera.height) == (1280, 720)
+    assert len(scene.lights) == 2 and scene.render.shadows
+    assert scene.render.background_bottom is not None and scene.ground is not None

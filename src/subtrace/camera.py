@@ -28,8 +28,10 @@ njit = nb.njit
 from subtrace.errors import SceneError, show_value
 
 MAX_RESOLUTION = 32768  # pixels per side, inclusive
-AUTO_VIEW_DIRECTION = (1.0, 0.6, 1.6)  # auto_camera: from the box centre towards the eye
-AUTO_MARGIN = 1.1  # auto_camera: bounding-sphere radius scale (10 % margin around it)
+# auto_camera: from the box centre towards the eye: a three-quarter view from the front
+# (+z, the usual front of an OBJ model), about 22 degrees above the horizon
+AUTO_VIEW_DIRECTION = (1.0, 0.62, 1.3)
+AUTO_MARGIN = 1.1  # auto_camera: the box's corners fill at most 1 / 1.1 of the half-image
 # up within this angle (radians) of the view direction is "parallel": the frame is undefined
 _MIN_UP_ANGLE = 1e-6
 
@@ -176,14 +178,19 @@ def ray_direction(frame, row, col):
 
 
 def auto_camera(
-    bounds_min, bounds_max, width: int, height: int, fov_deg: float = 30.0, up=(0.0, 1.0, 0.0)
+    bounds_min, bounds_max, width: int, height: int, fov_deg: float = 30.0, up=(0.0, 1.0, 0.0),
+    points=None,
 ) -> Camera:
     """A camera that frames the axis-aligned box [bounds_min, bounds_max].
 
     Looks at the box centre from the direction AUTO_VIEW_DIRECTION (normalised, given for
     +Y up; for another ``up`` it is rotated by the smallest rotation taking +Y to ``up``), at
-    the distance where the box's bounding sphere, enlarged by AUTO_MARGIN, fits the smaller
-    of the vertical and horizontal fields of view. A box of zero size gets a unit sphere.
+    the nearest distance where all eight corners of the box project inside the image with
+    a margin (AUTO_MARGIN: each corner within 1 / AUTO_MARGIN of the half-width and
+    half-height from the centre). A box of zero size is taken as a unit cube. With
+    ``points`` (n,3) (points of the surface, e.g. limit points), those are framed instead
+    of the corners, the target moved so that their extent across the view is centred:
+    a box's empty corners would leave the object small in a three-quarter view.
     """
     lo = np.asarray(bounds_min, dtype=np.float64).reshape(-1)
     hi = np.asarray(bounds_max, dtype=np.float64).reshape(-1)
@@ -198,15 +205,28 @@ def auto_camera(
     height = check_resolution(height, "height")
     up = check_vector(up, "up")
     centre = 0.5 * (lo + hi)
-    radius = 0.5 * float(np.linalg.norm(hi - lo))
-    if not radius > 1e-12 * max(1.0, float(np.abs(centre).max())):
-        radius = 1.0
-    half_v = math.radians(fov_deg) / 2.0
-    half_h = math.atan(math.tan(half_v) * width / height)
-    half = min(half_v, half_h)
-    distance = AUTO_MARGIN * radius / math.sin(half)
+    half_size = 0.5 * (hi - lo)
+    if not float(np.abs(half_size).max()) > 1e-12 * max(1.0, float(np.abs(centre).max())):
+        half_size = np.full(3, 0.5)
+    tan_v = math.tan(math.radians(fov_deg) / 2.0)
+    tan_h = tan_v * width / height
     direction = _y_up_to(up) @ np.asarray(AUTO_VIEW_DIRECTION, dtype=np.float64)
     direction /= np.linalg.norm(direction)
+    right, true_up, _ = _basis(centre + direction, centre, up)
+    # each corner r (relative to the centre) at depth distance - r.direction must see its
+    # offsets along right and up within the margin's share of the half-fields
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    corners = signs * half_size
+    if points is not None and len(points):
+        corners = np.asarray(points, np.float64).reshape(-1, 3) - centre
+        if np.all(np.isfinite(corners)):
+            x, y = corners @ right, corners @ true_up
+            shift = 0.5 * (x.min() + x.max()) * right + 0.5 * (y.min() + y.max()) * true_up
+            centre = centre + shift
+            corners = corners - shift
+    need = corners @ direction + AUTO_MARGIN * np.maximum(
+        np.abs(corners @ right) / tan_h, np.abs(corners @ true_up) / tan_v)
+    distance = float(need.max())
     eye = centre + distance * direction
     return Camera(
         eye=tuple(eye.tolist()),

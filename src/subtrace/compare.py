@@ -11,6 +11,7 @@ Groups, their channels and the per-pixel error each is judged by:
                                       the surface
   ids       level,patch_id,object_id  1 where any id differs, where both have the surface
 Colour and coverage are judged over all pixels, the others over the pixels covered in both
+(by their centre rays: a finite depth where the images have one)
 (coverage differences are counted once, by coverage). A group is compared when both images
 have all of its channels; one image having a group that the other lacks is a mismatch.
 
@@ -245,6 +246,10 @@ def compare_images(a, b, thresholds: dict | None = None, flip: bool = True,
     else:
         cov_a = cov_b = np.ones((height, width), dtype=bool)
     both = cov_a & cov_b
+    if "depth" in present:
+        # depth, normals and ids come from each pixel's centre ray: judged where both
+        # centre rays hit (anti-aliased alpha is above 0 where only other rays hit)
+        both = np.isfinite(f(ca, "Z")) & np.isfinite(f(cb, "Z"))
     all_px = np.ones((height, width), dtype=bool)
 
     groups, errors = {}, {}

@@ -154,6 +154,15 @@ MEMORY_BYTES_PER_ISOLATED_LEVEL = 16384
 # leaves over, but not below this (below it rays split on the spot: slower, same image)
 MEMORY_MEMO_MIN_BYTES = 8 << 20
 
+# Adaptive anti-aliasing (picture.py): a pixel gets more rays when it and a neighbour (right
+# or below) differ in coverage or object, in depth by more than AA_DEPTH_STEP of the
+# nearer, in normal by more than AA_NORMAL_DEG degrees, or in displayed (sRGB) luminance by
+# more than AA_CONTRAST (shadow edges, highlights; smooth shading changes by a few codes in
+# 255 between neighbours)
+AA_DEPTH_STEP = 0.05
+AA_NORMAL_DEG = 25.0
+AA_CONTRAST = 0.08
+
 
 def default_max_memory() -> int:
     """The default memory budget of a render in bytes: ``MEMORY_DEFAULT_FRACTION`` of

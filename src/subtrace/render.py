@@ -38,8 +38,9 @@ from subtrace.patches.criterion import edge_sampling
 from subtrace.patches.table import build_patch_table, cage_face_shells
 from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
-from subtrace.shade import (C_A, C_OBJECT, CHANNELS, deepest_level, miss_values,
-                            patch_shading, shade)
+from subtrace.picture import paint
+from subtrace.shade import (C_OBJECT, C_R, CHANNELS, background_rows, deepest_level,
+                            miss_values, patch_shading, shade)
 from subtrace.subdiv.limit import limit_points
 from subtrace.trace.budget import check_memory, choose_within_budget, warn_tiles
 from subtrace.trace.build import build_loop_regular, build_requested
@@ -79,6 +80,11 @@ class RenderStats:
     accel_fallback: int = 0
     pixels_covered: int = 0
     rays: int = 0
+    shadow_rays: int = 0  # shadow rays traced (towards every light from lit-facing hits)
+    time_shadows: float = 0.0  # of time_shade: tracing shadow rays (building included)
+    aa_pixels: int = 0  # pixels that got more than their centre ray (--samples)
+    aa_rays: int = 0  # the extra rays they got
+    time_aa: float = 0.0  # of time_shade: tracing and shading the extra rays
 
     def as_attributes(self) -> dict:
         return {f"subtrace:{k}": v for k, v in self.__dict__.items()}
@@ -112,7 +118,7 @@ def _shell_walk(chosen, frame, width, height, accel, max_memory, stats):
 
 
 def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, accel=None,
-               progress=None, max_memory=None):
+               progress=None, max_memory=None, keep=None):
     """Run the refinement rounds; returns (hits (:class:`~subtrace.trace.pools.Hits`), the
     built patches (:class:`~subtrace.trace.pools.Pieces`), every patch refined). ``compiling``: the
     process compiling the trace kernels (``warmup.start``), waited for before the first
@@ -126,7 +132,9 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     patch's depth (None: only what floating point resolves, ``config.PRECISION_BITS``);
     any cap that holds a patch below its tolerance is warned of and recorded in ``stats``.
     The pieces take over the table's net store (``patches.table.net_room``) and append to
-    it past the table's nets: a table serves one call at a time."""
+    it past the table's nets: a table serves one call at a time.
+    ``keep``: None, or a dict that receives what secondary rays need of the pools
+    (``trace.rays.Pools``' fields)."""
     accel = config.PRIMARY_ACCEL if accel is None else accel
     if accel not in ("projection", "bvh"):
         raise ValueError(f"unknown acceleration {accel!r}")
@@ -149,10 +157,11 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
             limit_points(o.level, o.points, o.cage.options, which=np.zeros(0, np.int64))
     warmup.wait(compiling)
     return _rounds(table, frame, W, W * H, tol_rad, chosen, tiles, bvh,
-                   Memos(n_threads, memo_bytes), stats, progress)
+                   Memos(n_threads, memo_bytes), stats, progress, keep)
 
 
-def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, stats, progress):
+def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, stats, progress,
+            keep=None):
     """The rounds of :func:`trace_hits`: trace the rays that asked, build what they asked
     for, until no ray asks."""
     depths = chosen.depths
@@ -205,6 +214,11 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
     stats.patches_refined += len(direct)
     stats.max_depth = int(iso.a["depth_i"].max(initial=0))
     built = np.concatenate([iso.a["patch"][iso.a["round"] >= 0], direct])
+    if keep is not None:  # for secondary rays (trace/rays.py)
+        keep.update(table=table, depths=depths, edge_depth=edge_depth, iso=iso,
+                    record=chosen.record, shell_min=chosen.shell_min,
+                    shell_max=chosen.shell_max, bvh=bvh, eye=frame[0], tol_rad=tol_rad,
+                    stats=stats, round_no=round_no + 1)
     return hits, iso, built
 
 
@@ -274,11 +288,21 @@ def _prepare(scene, cages, stats, nurbs=None):
                        config.MAX_VALENCE, c.scheme == "catmark")
     stats.time_load = time.perf_counter() - t_start
     t0 = time.perf_counter()
-    lo = hi = None
+    lo = hi = points = None
     if scene.camera.is_auto:
-        lo, hi = scene_bounds(cages, nurbs)
-    camera = scene.make_camera(lo, hi)
-    if config.CULL_TO_VIEW:
+        # frame the limit surface: the level-1 limit points of every object (and the
+        # free-form surfaces' control points)
+        extra = []
+        if nurbs is not None:  # the corners of the box of the surfaces' control points
+            b = nurbs.bounds()
+            extra = [np.array([[b[i & 1][0], b[(i >> 1) & 1][1], b[i >> 2][2]]
+                               for i in range(8)])]
+        points = np.concatenate([c.limit(1 if c.n_faces < 200000 else 0)[0] for c in cages]
+                                + extra)
+        lo, hi = points.min(axis=0), points.max(axis=0)
+    camera = scene.make_camera(lo, hi, points)
+    # shadow rays may meet what the camera does not see: cull to the view only without them
+    if config.CULL_TO_VIEW and not (scene.lights and scene.render.shadows):
         table, keep = table_in_view(cages, camera)
         stats.faces_culled = int(sum(np.count_nonzero(~k) for k in keep))
     else:
@@ -313,44 +337,53 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
         cages, table, camera, tol_rad, budget = _prepare(scene, cages, stats, nurbs)
         if progress is not None:
             progress(0, stats.rays, "tracing")
+        keep = {}
         if table is None:
             warmup.stop(compiling)  # no cage: the subdivision kernels are not needed
         else:
             hits, iso, built = trace_hits(table, camera, tol_rad, stats, compiling=compiling,
-                                          accel=accel, progress=progress, max_memory=budget)
+                                          accel=accel, progress=progress, max_memory=budget,
+                                          keep=keep)
     except BaseException:
         warmup.stop(compiling)
         raise
     t0 = time.perf_counter()
     W, H = camera.width, camera.height
+    frame = camera_frame(camera)
     # the channels as float32 planes, written in place by the kernel (no conversion pass)
     planes = np.empty((len(CHANNELS), W * H), dtype=np.float32)
+    normals = np.empty((W * H, 3))
+    pix_patch = np.empty(W * H, np.int64)
     covered = np.zeros(tasks.thread_count(), np.int64)
-    lights = np.array(
-        [[*l.direction, *(np.asarray(l.color) * l.intensity)] for l in scene.lights],
-        dtype=np.float64,
-    ).reshape(-1, 6)
-    headlight = np.array([scene.render.headlight_intensity if scene.render.headlight else 0.0])
     miss = miss_values(scene.render.background)
-    if table is None:
+    if table is None:  # free-form surfaces only: the background, then the NURBS pass
         planes[:] = miss[:, None]
+        rows = background_rows(scene.render.background, scene.render.background_bottom, H)
+        for k in range(3):
+            planes[C_R + k] = np.repeat(rows[:, k], W)
         built = np.zeros(0, np.int64)
     else:
-        colors = [scene.objects[k].color for k in owners]
-        shade(camera_frame(camera), W, hits, iso.view(), patch_shading(table, colors),
-              lights, headlight, miss, planes, covered)
+        patches = patch_shading(table, [scene.objects[k] for k in owners])
+        shade(frame, W, hits, iso.view(), patches, miss, planes, normals, pix_patch, covered)
+        paint(scene, cages, camera, keep, hits, normals, pix_patch, patches, planes, stats)
         if owners != list(range(len(owners))):  # objects without a cage: scene indices
             hit = planes[C_OBJECT] >= 0
             index = planes[C_OBJECT][hit].astype(np.int64)
             planes[C_OBJECT][hit] = np.array(owners, np.float32)[index]
     stats.time_shade = time.perf_counter() - t0
     if nurbs is not None:
+        # (shaded by its own pass: directional lights and the headlight, no shadows yet)
+        lights = np.array([[*l.direction, *(np.asarray(l.color) * l.intensity)]
+                           for l in scene.lights if l.position is None],
+                          dtype=np.float64).reshape(-1, 6)
+        headlight = np.array([scene.render.headlight_intensity if scene.render.headlight
+                              else 0.0])
         nurbs_pass(nurbs, camera, tol_rad, None if table is None else hits.t, lights,
                    headlight, planes, stats)
         if progress is not None and table is None:
             progress(stats.rays, stats.rays, "NURBS")
     stats.pixels_covered = (int(covered.sum()) if nurbs is None
-                            else int(np.count_nonzero(planes[C_A] > 0)))
+                            else int(np.count_nonzero(planes[C_OBJECT] >= 0)))
     stats.max_level = deepest_level(planes)
     channels = {name: planes[k].reshape(H, W) for k, name in enumerate(CHANNELS)}
     stats.time_total = time.perf_counter() - t_start

@@ -16,7 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from subtrace.io.obj import DEFAULT_DIFFUSE
+from subtrace.io.obj import DEFAULT_DIFFUSE, Material
 from subtrace.patches.basis import bez_normal
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
@@ -32,17 +32,51 @@ C_R, C_A, C_Z, C_N, C_LEVEL, C_PATCH, C_OBJECT, C_U = 0, 3, 4, 5, 8, 9, 10, 11
 MISS = (0.0, 0.0, 0.0, 0.0, np.inf, 0.0, 0.0, 0.0, -1.0, -1.0, -1.0, 0.0, 0.0)
 
 
-def shade(frame, width, hits, iso, patches, lights, headlight, miss, planes, covered):
+def shade(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, covered,
+          dirs=None):
     """Fill ``planes`` (len(CHANNELS), n_pixels) float32 from ``hits``
-    (:class:`~subtrace.trace.pools.Hits`) on every thread (blocks of pixels in turn).
+    (:class:`~subtrace.trace.pools.Hits`) on every thread (blocks of pixels in turn): every
+    channel but the colour, which :func:`light` adds.
 
     ``iso``: the built patches' items (:class:`~subtrace.trace.pools.PieceArrays`);
-    ``patches``: per patch, its ids and colour (:class:`PatchShading`); ``lights`` (L,6):
-    direction the light travels (unit) and its colour times intensity; ``headlight`` (1,);
-    ``miss`` (:func:`miss_values`); ``covered`` (threads,) int64 receives the hits each
-    thread shaded."""
-    run_tasks(_shade_task, frame, width, hits, iso, patches, lights, headlight, miss, planes,
-              covered)
+    ``patches``: per patch, its ids and material (:class:`PatchShading`); ``miss``
+    (:func:`miss_values`); ``normals`` (n_pixels,3) float64 receives each hit's unit normal
+    turned towards the eye, ``pix_patch`` (n_pixels,) int64 its patch (-1: a miss);
+    ``covered`` (threads,) int64 receives the hits each thread shaded. ``dirs``: None (ray
+    r is pixel r's centre ray), or the (n,3) unit directions of rays from the eye (extra
+    samples): then ``hits`` and the outputs are per ray."""
+    dirs = _no_dirs() if dirs is None else dirs
+    run_tasks(_shade_task, frame, width, hits, iso, patches, miss, planes, normals, pix_patch,
+              covered, dirs)
+
+
+def _no_dirs():
+    return np.zeros((0, 3))
+
+
+def light(frame, width, t, normals, pix_patch, patches, lights, headlight, visible, planes,
+          dirs=None):
+    """The colour (R, G, B of ``planes``) of every hit pixel: two-sided Lambert plus the
+    material's Blinn-Phong lobe (``Ks (N.H)^Ns``, MTL's) under a headlight at the eye
+    (``headlight`` (1,): its intensity) and ``lights`` (L,7) (:func:`light_array`), each
+    scaled by ``visible`` (L, n_pixels) float32 (1 lit, 0 in shadow). ``t`` (n_pixels,)
+    float64: the hits' distances; ``normals``, ``pix_patch``, ``dirs``: as for
+    :func:`shade`."""
+    dirs = _no_dirs() if dirs is None else dirs
+    run_tasks(_light_task, frame, width, t, normals, pix_patch, patches, lights, headlight,
+              visible, planes, dirs)
+
+
+DIRECTIONAL, POINT = 0, 1  # light kinds (column 0 of light_array)
+
+
+def light_array(lights) -> np.ndarray:
+    """(L,7) float64 of :class:`subtrace.io.scene.Light` s: kind (DIRECTIONAL: x, y, z the
+    unit direction the light travels; POINT: its position), then colour times intensity."""
+    rows = [[POINT if l.position is not None else DIRECTIONAL,
+             *(l.position if l.position is not None else l.direction),
+             *(np.asarray(l.color) * l.intensity)] for l in lights]
+    return np.array(rows, dtype=np.float64).reshape(-1, 7)
 
 
 class PatchShading(NamedTuple):
@@ -54,6 +88,8 @@ class PatchShading(NamedTuple):
     scale: np.ndarray  # (P,) float64: the patch's size in its ptex face
     level0: np.ndarray  # (P,) int8: the patch level (0, or 1 for split n-gons)
     color: np.ndarray  # (P,3) float64: diffuse colour
+    specular: np.ndarray  # (P,3) float64: specular colour (Ks; 0: none)
+    shininess: np.ndarray  # (P,) float64: specular exponent (Ns)
 
 
 def miss_values(background) -> np.ndarray:
@@ -74,8 +110,8 @@ SHADE_BLOCK = 1024  # consecutive pixels shaded together
 
 
 @nb.njit(cache=True, nogil=True)
-def _shade_task(task, n_tasks, frame, width, hits, iso, patches, lights, headlight, miss, planes,
-                covered):
+def _shade_task(task, n_tasks, frame, width, hits, iso, patches, miss, planes, normals,
+                pix_patch, covered, dirs):
     """Shade the blocks of pixels ``task, task + n_tasks, ...`` into ``planes`` (see
     :func:`shade`): each block is first filled with ``miss`` (contiguous stores), then its
     hits are shaded over it."""
@@ -87,15 +123,14 @@ def _shade_task(task, n_tasks, frame, width, hits, iso, patches, lights, headlig
         b1 = min(n_pix, b0 + SHADE_BLOCK)
         for k in range(planes.shape[0]):
             planes[k, b0:b1] = miss[k]
+        pix_patch[b0:b1] = -1
         for r in range(b0, b1):
             t = hits.t[r]
             if not (t < np.inf):
                 continue
             n_hit += 1
             planes[C_Z, r] = t
-            row = r // width
-            col = r - row * width
-            dx, dy, dz = ray_setup(frame, row, col)
+            dx, dy, dz = _direction(frame, width, dirs, r)
             # the patch and item hit, (a, b) the patch parameter
             p = -hits.prim[r] - 2
             u = hits.a[r]
@@ -132,26 +167,104 @@ def _shade_task(task, n_tasks, frame, width, hits, iso, patches, lights, headlig
             planes[C_LEVEL, r] = patches.level0[p] + depth
             planes[C_PATCH, r] = patches.ptex[p]
             planes[C_OBJECT, r] = patches.object_id[p]
-            # two-sided Lambert: headlight plus directional lights
+            planes[C_A, r] = 1.0
+            # two-sided: the normal turned towards the eye
             sgn = -1.0 if nx * dx + ny * dy + nz * dz > 0.0 else 1.0
-            fx, fy, fz = sgn * nx, sgn * ny, sgn * nz
+            normals[r, 0] = sgn * nx
+            normals[r, 1] = sgn * ny
+            normals[r, 2] = sgn * nz
+            pix_patch[r] = p
+    covered[task] = n_hit
+
+
+@nb.njit(cache=True, nogil=True)
+def _light_task(task, n_tasks, frame, width, t, normals, pix_patch, patches, lights, headlight,
+                visible, planes, dirs):
+    """The colour of the hit pixels of blocks ``task, task + n_tasks, ...`` (see
+    :func:`light`)."""
+    n_pix = len(pix_patch)
+    n_blocks = (n_pix + SHADE_BLOCK - 1) // SHADE_BLOCK
+    for blk in range(task, n_blocks, n_tasks):
+        for r in range(blk * SHADE_BLOCK, min(n_pix, (blk + 1) * SHADE_BLOCK)):
+            p = pix_patch[r]
+            if p < 0:
+                continue
+            dx, dy, dz = _direction(frame, width, dirs, r)
+            fx, fy, fz = normals[r, 0], normals[r, 1], normals[r, 2]
+            ks = patches.specular[p]
+            shiny = ks[0] > 0.0 or ks[1] > 0.0 or ks[2] > 0.0
             lr = lg = lb = 0.0
+            sr = sg = sb = 0.0
             if headlight[0] > 0.0:
                 c = -(fx * dx + fy * dy + fz * dz) * headlight[0]
                 lr += c
                 lg += c
                 lb += c
+                if shiny:  # the headlight's half vector is the view direction
+                    h = (-(fx * dx + fy * dy + fz * dz)) ** patches.shininess[p] * headlight[0]
+                    sr += h
+                    sg += h
+                    sb += h
             for k in range(lights.shape[0]):
-                c = -(fx * lights[k, 0] + fy * lights[k, 1] + fz * lights[k, 2])
-                if c > 0.0:
-                    lr += c * lights[k, 3]
-                    lg += c * lights[k, 4]
-                    lb += c * lights[k, 5]
+                # (lx, ly, lz): the direction the light arrives along; e: its irradiance
+                lx, ly, lz, e = _incoming(lights, k, frame, t[r], dx, dy, dz)
+                c = -(fx * lx + fy * ly + fz * lz) * e
+                if c > 0.0 and visible[k, r] > 0.0:
+                    c *= visible[k, r]
+                    lr += c * lights[k, 4]
+                    lg += c * lights[k, 5]
+                    lb += c * lights[k, 6]
+                    if shiny:
+                        h = _blinn(fx, fy, fz, lx, ly, lz, dx, dy, dz, patches.shininess[p])
+                        h *= e * visible[k, r]
+                        sr += h * lights[k, 4]
+                        sg += h * lights[k, 5]
+                        sb += h * lights[k, 6]
             planes[C_R, r] = patches.color[p, 0] * lr
             planes[C_R + 1, r] = patches.color[p, 1] * lg
             planes[C_R + 2, r] = patches.color[p, 2] * lb
-            planes[C_A, r] = 1.0
-    covered[task] = n_hit
+            if shiny:
+                planes[C_R, r] += ks[0] * sr
+                planes[C_R + 1, r] += ks[1] * sg
+                planes[C_R + 2, r] += ks[2] * sb
+
+
+@nb.njit(cache=True)
+def _direction(frame, width, dirs, r):
+    """Ray r's unit direction: ``dirs[r]``, or with no ``dirs`` pixel r's centre ray."""
+    if len(dirs):
+        return dirs[r, 0], dirs[r, 1], dirs[r, 2]
+    row = r // width
+    col = r - row * width
+    return ray_setup(frame, row, col)
+
+
+@nb.njit(cache=True)
+def _incoming(lights, k, frame, t, dx, dy, dz):
+    """Light ``k`` at the hit ``eye + t d``: the unit direction it travels there and its
+    irradiance factor (1 for a directional light, 1 / distance^2 for a point light)."""
+    if lights[k, 0] == DIRECTIONAL:
+        return lights[k, 1], lights[k, 2], lights[k, 3], 1.0
+    lx = frame[0, 0] + t * dx - lights[k, 1]
+    ly = frame[0, 1] + t * dy - lights[k, 2]
+    lz = frame[0, 2] + t * dz - lights[k, 3]
+    d2 = lx * lx + ly * ly + lz * lz
+    if not d2 > 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    inv = 1.0 / math.sqrt(d2)
+    return lx * inv, ly * inv, lz * inv, 1.0 / d2
+
+
+@nb.njit(cache=True)
+def _blinn(fx, fy, fz, lx, ly, lz, dx, dy, dz, shininess):
+    """Blinn-Phong's (N.H)^Ns for light travelling along l seen along d (H: the unit half
+    vector of -l and -d)."""
+    hx, hy, hz = -lx - dx, -ly - dy, -lz - dz
+    n = math.sqrt(hx * hx + hy * hy + hz * hz)
+    if not n > 0.0:
+        return 0.0
+    c = (fx * hx + fy * hy + fz * hz) / n
+    return c ** shininess if c > 0.0 else 0.0
 
 
 @nb.njit(cache=True)
@@ -194,18 +307,169 @@ def _tri_cell_normal(pts, nrm, b, c):
 
 
 def patch_shading(table, overrides) -> PatchShading:
-    """Per patch of ``table``: its ids, ptex placement and colour: its object's colour
-    ``overrides[object id]`` where that is not None, else its material's diffuse colour."""
+    """Per patch of ``table``: its ids, ptex placement and material: its object's
+    ``overrides[object id]`` (a :class:`subtrace.io.scene.SceneObject`, or None) where that
+    gives a colour / specular colour / shininess, else its OBJ material's."""
     colors = np.empty((table.n_patches, 3))
+    specular = np.empty((table.n_patches, 3))
+    shininess = np.empty(table.n_patches)
     for oid, o in enumerate(table.objects):
         sl = slice(o.first_patch, o.first_patch + len(o.patch_faces))
-        override = overrides[oid]
-        if override is not None:
-            colors[sl] = override
-            continue
-        mats = o.cage.materials
-        table_rgb = np.array([m.diffuse for m in mats] + [DEFAULT_DIFFUSE], dtype=np.float64)
+        mats = list(o.cage.materials) + [Material("", DEFAULT_DIFFUSE)]
         mat = table.material[sl]
-        colors[sl] = table_rgb[np.where(mat >= 0, mat, len(mats))]
+        pick = np.where(mat >= 0, mat, len(mats) - 1)
+        colors[sl] = np.array([m.diffuse for m in mats], dtype=np.float64)[pick]
+        specular[sl] = np.array([m.specular for m in mats], dtype=np.float64)[pick]
+        shininess[sl] = np.array([m.shininess for m in mats], dtype=np.float64)[pick]
+        over = overrides[oid]
+        if over is None:
+            continue
+        if over.color is not None:
+            colors[sl] = over.color
+        if over.specular is not None:
+            specular[sl] = over.specular
+        if over.shininess is not None:
+            shininess[sl] = over.shininess
     return PatchShading(table.object_id, table.ptex, table.ptex_uv0, table.ptex_scale,
-                        table.level0, colors)
+                        table.level0, colors, specular, shininess)
+
+
+# --------------------------------------------------------------------------------------
+# shadows, the ground and the background (after the geometry pass)
+# --------------------------------------------------------------------------------------
+
+
+def pixel_rays(frame, width, pixels) -> np.ndarray:
+    """(n,3) float64 unit directions of the rays through the centres of ``pixels`` (flat
+    indices), the arithmetic of ``trace.prims.ray_setup``."""
+    row, col = np.divmod(np.asarray(pixels, np.int64), width)
+    d = frame[3] + col[:, None] * frame[1] + row[:, None] * frame[2]
+    return d / np.sqrt((d * d).sum(axis=1))[:, None]
+
+
+def toward_lights(lights, points):
+    """For each light (rows of :func:`light_array`) and point (n,3): the unit direction
+    towards the light (L,n,3), the distance to it (L,n; inf for a directional light) and
+    its irradiance factor (L,n; 1 / distance^2 for a point light)."""
+    n = len(points)
+    dirs = np.empty((len(lights), n, 3))
+    dist = np.full((len(lights), n), np.inf)
+    factor = np.ones((len(lights), n))
+    for k, row in enumerate(lights):
+        if row[0] == DIRECTIONAL:
+            dirs[k] = -row[1:4]
+            continue
+        v = row[1:4] - points
+        d2 = (v * v).sum(axis=1)
+        dist[k] = np.sqrt(d2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dirs[k] = v / dist[k][:, None]
+            factor[k] = np.where(d2 > 0.0, 1.0 / d2, 0.0)
+    return dirs, dist, factor
+
+
+# relative rounding of a hit point eye + t d (a few operations on doubles, with room)
+POINT_ROUNDING = 2.0 ** -40
+
+
+def shadow_visibility(trace, frame, width, t, normals, pix_patch, lights, tol_rad, dirs=None):
+    """(L, n_pixels) float32: 1 where a hit pixel sees light k (or faces away from it:
+    then its lighting is 0 anyway), 0 in shadow. ``trace(origins, dirs, tmax)``: an any-hit
+    trace returning blocked (``trace.rays.trace_rays``). ``dirs``: as for :func:`shade`.
+
+    A shadow ray leaves the hit displaced along its (eye-facing) normal by the hit's error
+    bound: the micro-surface lies within a cell of the limit surface, and a cell subtends
+    at most the angular tolerance from the eye, so within ``t * tol_rad`` of the hit; plus
+    the rounding of the hit point itself. Rays then leave the cell they hit and never
+    speckle a lit surface with its own shadow."""
+    visible = np.ones((len(lights), len(pix_patch)), np.float32)
+    pix = np.nonzero(pix_patch >= 0)[0]
+    if not len(lights) or not len(pix):
+        return visible
+    th = t[pix]
+    d = pixel_rays(frame, width, pix) if dirs is None else dirs[pix]
+    points = frame[0] + th[:, None] * d
+    f = normals[pix]
+    err = th * tol_rad + POINT_ROUNDING * np.abs(points).max(axis=1)
+    dirs, dist, _ = toward_lights(lights, points)
+    for k in range(len(lights)):
+        facing = (f * dirs[k]).sum(axis=1) > 0.0
+        origins = points[facing] + err[facing, None] * f[facing]
+        blocked = trace(origins, dirs[k][facing], dist[k][facing] - err[facing])
+        visible[k, pix[facing]] = 1.0 - blocked
+    return visible
+
+
+def background_rows(top, bottom, height) -> np.ndarray:
+    """(height, 3) float64: the background colour of each image row: ``top`` everywhere,
+    or a linear blend from ``top`` (row 0) to ``bottom`` (the last row) at row centres."""
+    top = np.asarray(top, np.float64)
+    if bottom is None:
+        return np.repeat(top[None], height, axis=0)
+    w = (np.arange(height) + 0.5)[:, None] / height
+    return (1.0 - w) * top + w * np.asarray(bottom, np.float64)
+
+
+@nb.njit(cache=True)
+def _ground_points(frame, width, rays, dirs, up, height, points, down):
+    """Where rays ``rays`` (pixel centres, or rows of ``dirs``) from the eye meet the plane
+    p . up = height going down: (n,) bool, ``points`` (n,3) and ``down`` (n,) (d . up)
+    written where True."""
+    on = np.zeros(len(rays), np.bool_)
+    e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
+    for k in range(len(rays)):
+        dx, dy, dz = _direction(frame, width, dirs, rays[k])
+        dn = dx * up[0] + dy * up[1] + dz * up[2]
+        if not dn < 0.0:
+            continue
+        t = (height - e_up) / dn
+        if not (t > 0.0 and t < np.inf):
+            continue
+        on[k] = True
+        down[k] = dn
+        points[k, 0] = frame[0, 0] + t * dx
+        points[k, 1] = frame[0, 1] + t * dy
+        points[k, 2] = frame[0, 2] + t * dz
+    return on
+
+
+def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight, color, rows,
+                  planes, dirs=None):
+    """Where the primary ray missed every surface and meets the ground plane (points p with
+    p . up = height, ``up`` a unit vector), write the ground's colour into ``planes``: an
+    opaque Lambertian ``color`` under ``lights`` with shadows and the ``headlight`` (its
+    intensity), or (``color`` None) a shadow catcher: the background ``rows`` darkened by
+    the fraction of the light (the headlight's included: it casts no shadow) the objects
+    hold back. The ground is part of the background: alpha and the other channels keep
+    saying "no hit" (the EXR's coverage is the surface's). Returns the number of ground
+    pixels. ``dirs``: as for :func:`shade` (then ``rows`` (n,3): each ray's background)."""
+    miss = np.nonzero(pix_patch < 0)[0]
+    points = np.empty((len(miss), 3))
+    down = np.empty(len(miss))
+    on = _ground_points(frame, width, miss, _no_dirs() if dirs is None else dirs,
+                        np.asarray(up, np.float64), float(height), points, down)
+    miss, points, down = miss[on], points[on], down[on]
+    if not len(miss):
+        return 0
+    row = miss // width if dirs is None else miss
+    to_light, dist, factor = toward_lights(lights, points)
+    full = np.maximum(-down, 0.0) * headlight
+    lit = full.copy()
+    rgb = np.repeat(full[:, None], 3, axis=1)
+    for k in range(len(lights)):
+        c = np.maximum(to_light[k] @ up, 0.0) * factor[k]
+        facing = c > 0.0
+        blocked = np.zeros(len(miss), np.uint8)
+        blocked[facing] = trace(points[facing], to_light[k][facing], dist[k][facing])
+        full += c
+        lit += c * (1 - blocked)
+        rgb += (c * (1 - blocked))[:, None] * lights[k, 4:7]
+    if color is None:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            shadow = np.where(full > 0.0, 1.0 - lit / full, 0.0)
+        out = rows[row] * (1.0 - shadow)[:, None]
+    else:
+        out = rgb * np.asarray(color)
+    for k in range(3):
+        planes[C_R + k, miss] = out[:, k]
+    return len(miss)

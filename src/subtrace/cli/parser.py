@@ -118,6 +118,21 @@ def _add_render(sub) -> argparse.ArgumentParser:
                      help="angular tolerance in pixels at the image centre (default 1)")
     tol.add_argument("--tolerance-deg", metavar="DEG", help="angular tolerance in degrees")
     _add_render_options(render)
+    render.add_argument("--color", metavar="RGB",
+                        help="every object's diffuse colour: r,g,b in 0..1 (linear) or "
+                             "#rrggbb (sRGB)")
+    render.add_argument("--background", metavar="RGB[,RGB]",
+                        help="background colour, or two: a vertical gradient top,bottom "
+                             "(e.g. #6b7889,#181a1f)")
+    render.add_argument("--samples", metavar="N",
+                        help="rays per pixel at most: edge pixels (silhouettes, folds, shadow "
+                             "edges) get up to N stratified rays, the others keep one "
+                             "(default: the scene's, else 1)")
+    render.add_argument("--no-shadows", dest="shadows", action="store_false", default=None,
+                        help="no shadow rays (on by default where the scene has lights)")
+    render.add_argument("--transparent", action="store_true", default=None,
+                        help=".png / .tif outputs: alpha 0 where nothing was hit (default: "
+                             "opaque, over the background)")
     render.add_argument("--png", action="store_true",
                         help="also write an sRGB PNG preview next to the output (never over "
                              "it)")
@@ -283,5 +298,5 @@ def _add_camera_options(parser) -> None:
     parser.add_argument("--height", metavar="H", help="image height in pixels")
     parser.add_argument("--fov", metavar="DEG", help="vertical field of view in degrees")
     parser.add_argument("--eye", nargs=3, metavar=("X", "Y", "Z"), help="camera position")
-    parser.add_argument("--target", nargs=3, metavar=("X", "Y", "Z"), help="point looked at")
+    parser.add_argument("--target", nargs=3, metavar=("X", "Y", "Z"), help="point looked at (default: the objects' centre)")
     parser.add_argument("--up", nargs=3, metavar=("X", "Y", "Z"), help="camera up vector")

@@ -50,7 +50,10 @@ def execute(args) -> int:
     if not inputs and args.output is None:
         args.output = "render.exr"
     scene = scene_from_inputs(inputs, args, tolerance=args.tolerance,
-                              tolerance_deg=args.tolerance_deg, output=args.output)
+                              tolerance_deg=args.tolerance_deg, output=args.output,
+                              color=args.color, background=args.background,
+                              shadows=args.shadows, transparent=args.transparent,
+                              samples=args.samples)
     out = scene.output or "render.exr"
     picture = picture_format(out)
     bits = int(getattr(args, "bit_depth", "8"))
@@ -123,7 +126,10 @@ def _write(args, scene, result, out, png, picture, bits) -> None:
     if picture is None:
         write_exr(out, result.channels, result_attributes(result, scene), png_path=png)
     else:
-        write_picture(out, result.channels, bits)
+        ch = result.channels
+        if not scene.render.transparent:  # opaque: the colour over the background
+            ch = {c: ch[c] for c in "RGB"}
+        write_picture(out, ch, bits)
         if png:
             ch = result.channels
             write_png(png, np.stack([ch["R"], ch["G"], ch["B"]], axis=-1))

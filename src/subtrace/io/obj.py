@@ -41,6 +41,8 @@ from subtrace.io.text import decode, read_bytes
 
 DEFAULT_NAME = "default"  # group / object of faces before any `g` / `o`
 DEFAULT_DIFFUSE = (0.8, 0.8, 0.8)  # Kd of a material with no (readable) definition
+DEFAULT_SPECULAR = (0.0, 0.0, 0.0)  # Ks of a material that gives none (MTL's default)
+DEFAULT_SHININESS = 32.0  # Ns of a material that gives Ks but no Ns
 
 BOUNDARY_NONE = 0  # Sdc VTX_BOUNDARY_NONE
 BOUNDARY_EDGE_AND_CORNER = 1  # Sdc VTX_BOUNDARY_EDGE_AND_CORNER
@@ -60,10 +62,13 @@ _FREEFORM = frozenset(
 
 @dataclass(frozen=True)
 class Material:
-    """A material named by `usemtl`: its name and `Kd` diffuse colour (linear RGB, 0..1)."""
+    """A material named by `usemtl`: its name, `Kd` diffuse and `Ks` specular colours
+    (linear RGB, 0..1) and `Ns` specular exponent (MTL's Blinn-Phong lobe)."""
 
     name: str
     diffuse: tuple[float, float, float]
+    specular: tuple[float, float, float] = DEFAULT_SPECULAR
+    shininess: float = DEFAULT_SHININESS
 
 
 @dataclass(frozen=True, eq=False)
@@ -242,6 +247,8 @@ class ObjReader:
         self.material_runs: list = [(0, None)]
         self.material_first_use: dict[str, int] = {}  # usemtl name -> line of first use
         self.mtl_diffuse: dict[str, tuple] = {}  # materials defined by MTL files, in order
+        self.mtl_specular: dict[str, tuple] = {}  # their Ks, where given
+        self.mtl_shininess: dict[str, float] = {}  # their Ns, where given
         self.unknown: dict[str, list] = {}  # keyword -> [first line, count]
         # Tags, already validated except for index ranges.
         self.creases: list = []  # (line, pairs (k,2), sharpness (k,))
@@ -578,7 +585,8 @@ class ObjReader:
             self._parse_mtl(number, str(mtl_path), text)
 
     def _parse_mtl(self, obj_line, mtl_path: str, text: str):
-        """Read `newmtl` and `Kd` statements; other MTL statements do not matter here."""
+        """Read `newmtl`, `Kd`, `Ks` and `Ns` statements; other MTL statements do not
+        matter here."""
         current = None
         for number, line in enumerate(text.replace("\r", "\n").split("\n"), 1):
             if "#" in line:
@@ -591,24 +599,21 @@ class ObjReader:
                 if not current:
                     raise ObjError(mtl_path, number, "newmtl needs a material name")
                 self.mtl_diffuse[current] = DEFAULT_DIFFUSE
-            elif parts[0] == "Kd":
-                if current is None:
+            elif parts[0] in ("Kd", "Ks", "Ns") and current is None:
+                self.warnings.append(
+                    (obj_line, f"{mtl_path}:{number}: {parts[0]} before any newmtl ignored"))
+            elif parts[0] == "Ns":
+                self.mtl_shininess[current] = _mtl_exponent(mtl_path, number, parts[1:])
+            elif parts[0] in ("Kd", "Ks"):
+                store = self.mtl_diffuse if parts[0] == "Kd" else self.mtl_specular
+                if parts[1:2] in (["spectral"], ["xyz"]):
+                    what = "diffuse" if parts[0] == "Kd" else "specular"
+                    was = DEFAULT_DIFFUSE if parts[0] == "Kd" else DEFAULT_SPECULAR
                     self.warnings.append(
-                        (obj_line, f"{mtl_path}:{number}: Kd before any newmtl ignored"))
-                elif parts[1:2] in (["spectral"], ["xyz"]):
-                    self.warnings.append(
-                        (obj_line, f"{mtl_path}:{number}: Kd {parts[1]} is not supported; "
-                                   f"diffuse of '{current}' stays {DEFAULT_DIFFUSE}"))
+                        (obj_line, f"{mtl_path}:{number}: {parts[0]} {parts[1]} is not "
+                                   f"supported; {what} of '{current}' stays {was}"))
                 else:
-                    try:
-                        rgb = [float(token) for token in parts[1:]]
-                    except ValueError:
-                        rgb = []
-                    if len(rgb) not in (1, 3) or not all(math.isfinite(c) for c in rgb):
-                        got = " ".join(parts[1:])
-                        raise ObjError(mtl_path, number,
-                                       f"Kd needs 3 numbers r g b (or 1 for grey), got '{got}'")
-                    self.mtl_diffuse[current] = tuple(rgb * 3 if len(rgb) == 1 else rgb)
+                    store[current] = _mtl_rgb(mtl_path, number, parts[0], parts[1:])
 
     # -- bulk conversion -----------------------------------------------------------------
 
@@ -752,8 +757,11 @@ class ObjReader:
                 diffuse[name] = DEFAULT_DIFFUSE
                 self.warn(number, f"material '{name}' is not defined in any material "
                           f"library; using diffuse {DEFAULT_DIFFUSE}")
-        materials = tuple(Material(name, tuple(float(c) for c in rgb))
-                          for name, rgb in diffuse.items())
+        materials = tuple(
+            Material(name, tuple(float(c) for c in rgb),
+                     self.mtl_specular.get(name, DEFAULT_SPECULAR),
+                     self.mtl_shininess.get(name, DEFAULT_SHININESS))
+            for name, rgb in diffuse.items())
         material_ids = {name: k for k, name in enumerate(diffuse)}
         freeform = self.freeform.finish(points, self.point_lines, self.point_w, material_ids)
         if local_ids:
@@ -825,3 +833,28 @@ def statement_line(path, keyword: str, index: int) -> int | None:
                 return number
             seen += 1
     return None
+
+
+def _mtl_rgb(mtl_path: str, number: int, key: str, tokens) -> tuple:
+    """An MTL colour statement's ``r g b`` (or one grey value); ObjError otherwise."""
+    try:
+        rgb = [float(token) for token in tokens]
+    except ValueError:
+        rgb = []
+    if len(rgb) not in (1, 3) or not all(math.isfinite(c) for c in rgb):
+        raise ObjError(mtl_path, number,
+                       f"{key} needs 3 numbers r g b (or 1 for grey), got '{' '.join(tokens)}'")
+    return tuple(rgb * 3 if len(rgb) == 1 else rgb)
+
+
+def _mtl_exponent(mtl_path: str, number: int, tokens) -> float:
+    """An MTL ``Ns`` statement's exponent (a number >= 0); ObjError otherwise."""
+    try:
+        value = float(tokens[0]) if len(tokens) == 1 else -1.0
+    except ValueError:
+        value = -1.0
+    if not (math.isfinite(value) and value >= 0.0):
+        raise ObjError(mtl_path, number,
+                       f"Ns needs one number >= 0 (the specular exponent), got "
+                       f"'{' '.join(tokens)}'")
+    return value

@@ -21,11 +21,13 @@ Schema (every table and key optional unless marked *required*)::
     boundary = "edge-only"          # "none" | "edge-only" | "edge-and-corner";
                                     #   default: the OBJ's interpolateboundary tag, else
                                     #   edge-only (OpenSubdiv's loaders)
-    color    = [0.8, 0.6, 0.4]      # linear RGB in 0..1; overrides the OBJ's materials
+    color    = [0.8, 0.6, 0.4]      # linear RGB in 0..1; overrides the OBJ's materials' Kd
+    specular = [0.2, 0.2, 0.2]      # linear RGB in 0..1; overrides their Ks (default none)
+    shininess = 40.0                # >= 0: Blinn-Phong exponent; overrides their Ns
 
     [camera]                        # without eye and target: an automatic camera framing
-    eye    = [3.0, 2.0, 5.0]        #   all objects (subtrace.camera.auto_camera);
-    target = [0.0, 0.5, 0.0]        #   give both eye and target, or neither
+    eye    = [3.0, 2.0, 5.0]        #   all objects (subtrace.camera.auto_camera); an eye
+    target = [0.0, 0.5, 0.0]        #   without a target looks at the objects' centre
     up     = [0.0, 1.0, 0.0]        # default [0, 1, 0]; must not be along target - eye
                                     #   (the automatic camera uses it too)
     fov    = 30.0                   # vertical field of view, degrees, in (0, 180); default 30
@@ -35,18 +37,30 @@ Schema (every table and key optional unless marked *required*)::
     [render]
     tolerance = 1.0                 # angular tolerance in pixels (> 0); default 1 ...
     # tolerance_deg = 0.05          # ... or in degrees (> 0); not both
-    background = [0.0, 0.0, 0.0]    # linear RGB in 0..1; default black
+    background = [0.0, 0.0, 0.0]    # linear RGB in 0..1, or [top, bottom]: a vertical
+                                    #   gradient; default black
+    shadows = true                  # shadow rays towards every [[light]]; default true
+    samples = 4                     # rays per pixel at most (adaptive anti-aliasing: edge
+                                    #   pixels only), 1..64; default DEFAULT_SAMPLES
+    transparent = false             # .png / .tif pictures: alpha where nothing was hit
+                                    #   (default false: opaque over the background)
     headlight = true                # a directional light from the eye; default true
     headlight_intensity = 1.0       # >= 0; default 1
     max_memory = "4G"               # memory budget: a number of MiB or a size with a unit
                                     #   (K, M, G, T: powers of 1024); default half of the
                                     #   memory available when the render starts
 
-    [[light]]                       # directional lights, any number
-    direction = [-1.0, -1.0, -0.5]  # *required*: the direction the light travels (from the
-                                    #   light into the scene), any non-zero length
+    [[light]]                       # directional or point lights, any number
+    direction = [-1.0, -1.0, -0.5]  # the direction a directional light travels (from the
+                                    #   light into the scene), any non-zero length; or
+    # position = [2.0, 4.0, 1.0]    #   a point light's position (1 / distance^2 falloff)
     color     = [1.0, 1.0, 1.0]     # linear RGB in 0..1; default white
     intensity = 1.0                 # >= 0; default 1
+
+    [ground]                        # an optional ground plane, facing the camera's up
+    height = -0.7                   # along up; default: the objects' lowest point
+    color = [0.6, 0.6, 0.6]         # an opaque lit ground; without it the ground is a
+                                    #   shadow catcher (the background, darkened by shadows)
 
 Paths in a :class:`Scene` are absolute (resolved against the scene file's folder, or
 ``base_dir``); command-line overrides of paths are relative to the working directory.
@@ -56,6 +70,8 @@ from __future__ import annotations
 
 import difflib
 import math
+
+import numpy as np
 import os
 import re
 import tomllib
@@ -80,7 +96,16 @@ DEFAULT_HEIGHT = 480
 DEFAULT_FOV_DEG = 30.0
 DEFAULT_UP = (0.0, 1.0, 0.0)
 DEFAULT_TOLERANCE_PX = 1.0
+DEFAULT_SAMPLES = 4  # rays per edge pixel at most (see subtrace.picture; BENCHMARKS.md)
+MAX_SAMPLES = 64
 DEFAULT_BACKGROUND = (0.0, 0.0, 0.0)
+# what OBJ cages rendered without a scene get: a soft vertical gradient, a key and a fill
+# light (directions they travel, for +Y up and the automatic camera's view) and a ground
+# shadow, at 1280x720
+AUTO_WIDTH, AUTO_HEIGHT = 1280, 720
+AUTO_BACKGROUND = ((0.42, 0.47, 0.54), (0.09, 0.10, 0.12))
+AUTO_LIGHTS = (((0.45, -1.0, -0.5), 0.75), ((-0.8, -1.0, 0.1), 0.25))
+AUTO_HEADLIGHT = 0.2
 DEFAULT_HEADLIGHT_INTENSITY = 1.0
 DEFAULT_LIGHT_COLOR = (1.0, 1.0, 1.0)
 
@@ -91,12 +116,13 @@ BOUNDARIES = {
     "edge-and-corner": BOUNDARY_EDGE_AND_CORNER,
 }
 
-_TOP_KEYS = ("object", "camera", "render", "light", "output", "preview")
-_OBJECT_KEYS = ("mesh", "prim", "scheme", "boundary", "color")
+_TOP_KEYS = ("object", "camera", "render", "light", "ground", "output", "preview")
+_OBJECT_KEYS = ("mesh", "prim", "scheme", "boundary", "color", "specular", "shininess")
 _CAMERA_KEYS = ("eye", "target", "up", "fov", "width", "height")
 _RENDER_KEYS = ("tolerance", "tolerance_deg", "background", "headlight", "headlight_intensity",
-                "max_memory")
-_LIGHT_KEYS = ("direction", "color", "intensity")
+                "max_memory", "shadows", "transparent", "samples")
+_LIGHT_KEYS = ("direction", "position", "color", "intensity")
+_GROUND_KEYS = ("height", "color")
 # Camera field -> scene key / command-line option
 _CAMERA_FIELD_KEY = {
     "eye": "eye",
@@ -122,6 +148,8 @@ class SceneObject:
     boundary: str | None = None  # "none" | "edge-only" | "edge-and-corner"; None: OBJ tag
     color: tuple[float, float, float] | None = None  # linear RGB 0..1; None: OBJ materials
     prim: str | None = None  # a USD stage's mesh prim ("/World/Body"); None: all its meshes
+    specular: tuple[float, float, float] | None = None  # Ks; None: OBJ materials
+    shininess: float | None = None  # Ns; None: OBJ materials
 
     @property
     def boundary_code(self) -> int | None:
@@ -131,11 +159,22 @@ class SceneObject:
 
 @dataclass(frozen=True)
 class Light:
-    """A directional light: unit ``direction`` the light travels, colour and intensity."""
+    """A directional light (unit ``direction`` the light travels) or a point light
+    (``position``, the other None), its colour and intensity."""
 
-    direction: tuple[float, float, float]
+    direction: tuple[float, float, float] | None = None
     color: tuple[float, float, float] = DEFAULT_LIGHT_COLOR
     intensity: float = 1.0
+    position: tuple[float, float, float] | None = None
+
+
+@dataclass(frozen=True)
+class Ground:
+    """The [ground] table: a plane facing the camera's up at ``height`` along it (None: the
+    objects' lowest point), opaque in ``color`` or (None) a shadow catcher."""
+
+    height: float | None = None
+    color: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -151,16 +190,28 @@ class CameraSettings:
 
     @property
     def is_auto(self) -> bool:
-        return self.eye is None
+        """True when the camera needs the scene's bounds: no target (an eye alone looks at
+        their centre), or neither eye nor target (:func:`auto_camera`)."""
+        return self.target is None
 
-    def make_camera(self, bounds_min=None, bounds_max=None) -> Camera:
-        """The Camera: explicit, or :func:`auto_camera` framing the bounds (then required)."""
+    def make_camera(self, bounds_min=None, bounds_max=None, points=None) -> Camera:
+        """The Camera: explicit, or :func:`auto_camera` framing the bounds (then required)
+        and ``points`` of the surface where given."""
         if not self.is_auto:
             return Camera(self.eye, self.target, self.up, self.fov_deg, self.width, self.height)
         if bounds_min is None or bounds_max is None:
             raise ValueError("an automatic camera needs the scene bounds")
+        if self.eye is not None:
+            centre = 0.5 * (np.asarray(bounds_min, np.float64) + np.asarray(bounds_max))
+            target = tuple(float(c) for c in centre)
+            try:
+                check_view(self.eye, target, self.up)
+            except SceneError as err:
+                raise SceneError(f"{err.problem} (the target is the objects' centre)",
+                                 key="eye") from None
+            return Camera(self.eye, target, self.up, self.fov_deg, self.width, self.height)
         return auto_camera(
-            bounds_min, bounds_max, self.width, self.height, self.fov_deg, self.up
+            bounds_min, bounds_max, self.width, self.height, self.fov_deg, self.up, points
         )
 
 
@@ -170,10 +221,14 @@ class RenderSettings:
 
     tolerance_px: float | None = DEFAULT_TOLERANCE_PX
     tolerance_deg: float | None = None
-    background: tuple[float, float, float] = DEFAULT_BACKGROUND
+    background: tuple[float, float, float] = DEFAULT_BACKGROUND  # (the top of a gradient)
+    background_bottom: tuple[float, float, float] | None = None  # None: a flat background
     headlight: bool = True
     headlight_intensity: float = DEFAULT_HEADLIGHT_INTENSITY
     max_memory: int | None = None  # bytes; None: config.default_max_memory() at render time
+    shadows: bool = True
+    transparent: bool = False
+    samples: int = DEFAULT_SAMPLES
 
     def tolerance_rad(self, camera: Camera) -> float:
         """The angular tolerance in radians (pixels times the camera's pixel angle)."""
@@ -190,13 +245,14 @@ class Scene:
     camera: CameraSettings = CameraSettings()
     render: RenderSettings = RenderSettings()
     lights: tuple[Light, ...] = ()
+    ground: Ground | None = None
     output: str | None = None
     preview: str | None = None
     path: str | None = None
 
-    def make_camera(self, bounds_min=None, bounds_max=None) -> Camera:
+    def make_camera(self, bounds_min=None, bounds_max=None, points=None) -> Camera:
         """See :meth:`CameraSettings.make_camera`."""
-        return self.camera.make_camera(bounds_min, bounds_max)
+        return self.camera.make_camera(bounds_min, bounds_max, points)
 
 
 # --------------------------------------------------------------------------------------
@@ -243,6 +299,7 @@ def scene_from_dict(d: dict, path=None, base_dir=None, *, text: str | None = Non
     camera = _camera(ctx, d.get("camera", {}))
     render = _render(ctx, d.get("render", {}))
     lights = _lights(ctx, d.get("light", []))
+    ground = _ground(ctx, d["ground"]) if "ground" in d else None
     output = _out_path(ctx, d, "output", base_dir)
     preview = _out_path(ctx, d, "preview", base_dir)
     return Scene(
@@ -250,6 +307,7 @@ def scene_from_dict(d: dict, path=None, base_dir=None, *, text: str | None = Non
         camera=camera,
         render=render,
         lights=lights,
+        ground=ground,
         output=output,
         preview=preview,
         path=None if path is None else os.path.abspath(path),
@@ -257,9 +315,11 @@ def scene_from_dict(d: dict, path=None, base_dir=None, *, text: str | None = Non
 
 
 def scene_for_meshes(meshes, scheme: str | None = None, camera: str | None = None) -> Scene:
-    """A default scene (automatic camera, headlight) for OBJ files named on the command line;
-    a USD stage brings its meshes, its camera (``camera``: the prim path of one, default its
-    first) and its distant lights (:func:`subtrace.io.usd.usd_scene_table`).
+    """A default scene for OBJ files named on the command line: the automatic camera at
+    1280x720, a key and a fill light with shadows, a weak headlight, a soft vertical
+    gradient and a shadow-catching ground below the objects (AUTO_*). A USD stage brings its
+    meshes, its camera (``camera``: the prim path of one, default its first) and its distant
+    lights (:func:`subtrace.io.usd.usd_scene_table`), which replace the automatic ones.
 
     Relative paths are relative to the working directory.
     """
@@ -279,10 +339,18 @@ def scene_for_meshes(meshes, scheme: str | None = None, camera: str | None = Non
         for obj in table["object"]:
             obj["scheme"] = scheme
     try:
-        return scene_from_dict(table)
+        scene = scene_from_dict(table)
     except SceneError as err:
         key = "--scheme" if err.key and err.key.endswith(".scheme") else None
         raise SceneError(err.problem, key=key) from None
+    lights = scene.lights or tuple(  # (a USD stage's distant lights, if it has some)
+        Light(tuple(c / math.sqrt(sum(c * c for c in d)) for c in d), intensity=intensity)
+        for d, intensity in AUTO_LIGHTS)
+    render = replace(scene.render, background=AUTO_BACKGROUND[0],
+                     background_bottom=AUTO_BACKGROUND[1],
+                     headlight_intensity=AUTO_HEADLIGHT)
+    return replace(scene, camera=replace(scene.camera, width=AUTO_WIDTH, height=AUTO_HEIGHT),
+                   render=render, lights=lights, ground=Ground())
 
 
 def _read_text(path: str) -> str:
@@ -334,9 +402,13 @@ def _objects(ctx, d: dict, base_dir: str) -> tuple[SceneObject, ...]:
     objects = []
     for where, table in tables:
         mesh = _mesh_path(ctx, where + ("mesh",), table["mesh"], base_dir)
-        scheme = boundary = color = prim = None
+        scheme = boundary = color = prim = specular = shininess = None
         if "prim" in table:
             prim = ctx.call(where + ("prim",), _prim_path, table["prim"], "prim")
+        if "specular" in table:
+            specular = ctx.color(where + ("specular",), table["specular"])
+        if "shininess" in table:
+            shininess = ctx.call(where + ("shininess",), _non_negative, table["shininess"])
         if "scheme" in table:
             scheme = _choice(ctx, where + ("scheme",), table["scheme"], SCHEMES)
         if "boundary" in table:
@@ -344,7 +416,7 @@ def _objects(ctx, d: dict, base_dir: str) -> tuple[SceneObject, ...]:
         if "color" in table:
             color = ctx.color(where + ("color",), table["color"])
         objects.append(SceneObject(mesh=mesh, scheme=scheme, boundary=boundary, color=color,
-                                   prim=prim))
+                                   prim=prim, specular=specular, shininess=shininess))
     return tuple(objects)
 
 
@@ -365,15 +437,14 @@ def _camera(ctx, table) -> CameraSettings:
         if key in table:
             values[field] = ctx.call(where + (key,), _CHECKERS[field], table[key], key)
     has_eye, has_target = "eye" in values, "target" in values
-    if has_eye != has_target:
-        given, missing = ("eye", "target") if has_eye else ("target", "eye")
+    if has_target and not has_eye:
         raise ctx.error(
-            where + (given,),
-            f"{given} is given but {missing} is not: give both eye and target, or neither "
-            "for an automatic camera that frames all objects",
+            where + ("target",),
+            "target is given but eye is not: give an eye (alone it looks at the objects' "
+            "centre), or neither for an automatic camera that frames all objects",
         )
     settings = CameraSettings(**values)
-    if has_eye:
+    if has_eye and has_target:
         try:
             check_view(settings.eye, settings.target, settings.up)
         except SceneError as err:
@@ -402,12 +473,14 @@ def _render(ctx, table) -> RenderSettings:
             where + ("tolerance",), _positive, table["tolerance"], "pixels"
         )
     if "background" in table:
-        values["background"] = ctx.color(where + ("background",), table["background"])
-    if "headlight" in table:
-        value = table["headlight"]
-        if not isinstance(value, bool):
-            raise ctx.error(where + ("headlight",), f"expected true or false, got {show_value(value)}")
-        values["headlight"] = value
+        values["background"], values["background_bottom"] = ctx.call(
+            where + ("background",), _background, table["background"])
+    for key in ("headlight", "shadows", "transparent"):
+        if key in table:
+            value = table[key]
+            if not isinstance(value, bool):
+                raise ctx.error(where + (key,), f"expected true or false, got {show_value(value)}")
+            values[key] = value
     if "headlight_intensity" in table:
         values["headlight_intensity"] = ctx.call(
             where + ("headlight_intensity",), _non_negative, table["headlight_intensity"]
@@ -415,23 +488,34 @@ def _render(ctx, table) -> RenderSettings:
     if "max_memory" in table:
         values["max_memory"] = ctx.call(where + ("max_memory",), parse_memory,
                                         table["max_memory"])
+    if "samples" in table:
+        values["samples"] = ctx.call(where + ("samples",), _samples, table["samples"])
     return RenderSettings(**values)
 
 
 def _lights(ctx, raw) -> tuple[Light, ...]:
     lights = []
     for where, table in ctx.array_tables(
-        "light", raw, _LIGHT_KEYS, "direction",
-        "direction = [x, y, z] (the direction the light travels)",
+        "light", raw, _LIGHT_KEYS, None, "",
     ):
-        direction = ctx.call(where + ("direction",), check_vector, table["direction"], "")
-        norm = math.sqrt(sum(c * c for c in direction))
-        if norm == 0.0:
-            raise ctx.error(
-                where + ("direction",), "the direction is zero; give a non-zero vector"
-            )
-        direction = tuple(c / norm for c in direction)
-        values = {"direction": direction}
+        if "direction" not in table and "position" not in table:
+            raise ctx.error(where, "missing key direction: every [[light]] needs direction = "
+                            "[x, y, z] (the direction the light travels) or position = "
+                            "[x, y, z] (a point light)")
+        if ("direction" in table) == ("position" in table):
+            raise ctx.error(where + ("position",), "give a light either a direction "
+                            "(directional) or a position (point light), not both")
+        if "position" in table:
+            values = {"position": ctx.call(where + ("position",), check_vector,
+                                           table["position"], "")}
+        else:
+            direction = ctx.call(where + ("direction",), check_vector, table["direction"], "")
+            norm = math.sqrt(sum(c * c for c in direction))
+            if norm == 0.0:
+                raise ctx.error(
+                    where + ("direction",), "the direction is zero; give a non-zero vector"
+                )
+            values = {"direction": tuple(c / norm for c in direction)}
         if "color" in table:
             values["color"] = ctx.color(where + ("color",), table["color"])
         if "intensity" in table:
@@ -440,6 +524,18 @@ def _lights(ctx, raw) -> tuple[Light, ...]:
             )
         lights.append(Light(**values))
     return tuple(lights)
+
+
+def _ground(ctx, table) -> Ground:
+    where = ("ground",)
+    table = ctx.table(where, table, "[ground]")
+    ctx.check_keys(where, table, _GROUND_KEYS)
+    values = {}
+    if "height" in table:
+        values["height"] = ctx.call(where + ("height",), _number, table["height"])
+    if "color" in table:
+        values["color"] = ctx.color(where + ("color",), table["color"])
+    return Ground(**values)
 
 
 def _mesh_path(ctx, keypath, value, base_dir: str) -> str:
@@ -510,6 +606,31 @@ def _color(value) -> tuple[float, float, float]:
     return rgb
 
 
+def _samples(value) -> int:
+    """Rays per pixel at most: a whole number 1..MAX_SAMPLES."""
+    if isinstance(value, str):
+        try:
+            value = int(value.strip())
+        except ValueError:
+            pass
+    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_SAMPLES:
+        raise SceneError(f"expected a whole number of rays per pixel from 1 to {MAX_SAMPLES}, "
+                         f"got {show_value(value)}")
+    return value
+
+
+def _background(value):
+    """(top, bottom or None) of a background: one colour, or [top, bottom]."""
+    if isinstance(value, (list, tuple)) and len(value) == 2 and all(
+            isinstance(v, (list, tuple)) for v in value):
+        return _color(value[0]), _color(value[1])
+    try:
+        return _color(value), None
+    except SceneError as err:
+        raise SceneError(f"{err.problem}; a gradient is [[r, g, b], [r, g, b]] (top, "
+                         "bottom)") from None
+
+
 _CHECKERS = {
     "eye": check_vector,
     "target": check_vector,
@@ -569,12 +690,13 @@ class _Context:
 
     def array_tables(self, name: str, value, allowed, required: str, hint: str) -> list:
         """``(keypath, table)`` for each table of the array ``[[name]]``: unknown keys are
-        refused and each must have ``required`` (``hint`` says what it holds)."""
+        refused and each must have ``required`` (``hint`` says what it holds; None: the
+        caller checks)."""
         out = []
         for i, table in enumerate(self.table_list((name,), value, f"[[{name}]]")):
             where = (name, i) if isinstance(value, list) else (name,)
             self.check_keys(where, table, allowed)
-            if required not in table:
+            if required is not None and required not in table:
                 raise self.error(
                     where, f"missing key {required}: every [[{name}]] needs {hint}")
             out.append((where, table))
@@ -712,6 +834,9 @@ _OPTION = {
     "output": "--output",
     "preview": "--preview",
     "max_memory": "--max-memory",
+    "color": "--color",
+    "background": "--background",
+    "samples": "--samples",
 }
 
 
@@ -731,6 +856,11 @@ def apply_overrides(
     output=None,
     preview=None,
     max_memory=None,
+    color=None,
+    background=None,
+    shadows=None,
+    transparent=None,
+    samples=None,
 ) -> Scene:
     """A new Scene with command-line values replacing the file's; None means not given.
 
@@ -755,13 +885,11 @@ def apply_overrides(
             cam_values[field] = _option(name, check, parse(given[name], name), _OPTION[name])
     if cam_values:
         cam = replace(cam, **cam_values)
-        if (cam.eye is None) != (cam.target is None):
-            given, missing = ("eye", "target") if cam.eye is not None else ("target", "eye")
+        if cam.eye is None and cam.target is not None:
             raise SceneError(
-                f"the scene has no camera {missing}: give {_OPTION[missing]} as well (or "
-                "neither, for an automatic camera that frames all objects)",
-                key=_OPTION[given],
-            )
+                "the scene has no camera eye: give --eye as well (alone it looks at the "
+                "objects' centre), or neither, for an automatic camera that frames all "
+                "objects", key="--target")
         if not cam.is_auto and {"eye", "target", "up"} & cam_values.keys():
             try:
                 check_view(cam.eye, cam.target, cam.up)
@@ -785,6 +913,16 @@ def apply_overrides(
         render = replace(render, tolerance_px=None, tolerance_deg=value)
     if max_memory is not None:
         render = replace(render, max_memory=_option("max_memory", parse_memory, max_memory))
+    if background is not None:
+        colors = _option("background", parse_colors, background, 2)
+        render = replace(render, background=colors[0],
+                         background_bottom=colors[1] if len(colors) > 1 else None)
+    if shadows is not None:
+        render = replace(render, shadows=bool(shadows))
+    if samples is not None:
+        render = replace(render, samples=_option("samples", _samples, samples))
+    if transparent is not None:
+        render = replace(render, transparent=bool(transparent))
 
     objects = scene.objects
     if scheme is not None:
@@ -793,6 +931,9 @@ def apply_overrides(
     if boundary is not None:
         value = _option("boundary", _parse_choice, boundary, BOUNDARIES)
         objects = tuple(replace(o, boundary=value) for o in objects)
+    if color is not None:
+        value = _option("color", parse_colors, color, 1)[0]
+        objects = tuple(replace(o, color=value) for o in objects)
 
     paths = {}
     for name, value in (("output", output), ("preview", preview)):
@@ -872,6 +1013,36 @@ def parse_memory(value) -> int:
     if size > 1 << 60:
         raise SceneError(f"{hint}, at most 2^60 bytes, got {value!r}")
     return int(size)
+
+
+def parse_colors(value, most: int) -> list:
+    """Up to ``most`` linear RGB colours from an option's text: numbers in 0..1, three per
+    colour (``0.8,0.6,0.4``), or sRGB hex codes (``#cc9966``), separated by commas or
+    spaces; two colours are a gradient's top and bottom."""
+    if not isinstance(value, str):
+        return [_color(v) for v in value][:most]
+    tokens = [t for t in re.split(r"[,\s]+", value.strip()) if t]
+    hint = ("expected a colour as three numbers 0..1 (0.8,0.6,0.4) or #rrggbb"
+            + (", or two (top,bottom)" if most > 1 else ""))
+    colors = []
+    try:
+        if tokens and all(t.startswith("#") for t in tokens):
+            for t in tokens:
+                if not re.fullmatch(r"#[0-9a-fA-F]{6}", t):
+                    raise ValueError(t)
+                srgb = [int(t[k:k + 2], 16) / 255.0 for k in (1, 3, 5)]
+                colors.append(tuple(c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4
+                                    for c in srgb))
+        else:
+            numbers = [float(t) for t in tokens]
+            if len(numbers) % 3:
+                raise ValueError(value)
+            colors = [_color(numbers[k:k + 3]) for k in range(0, len(numbers), 3)]
+    except (ValueError, SceneError):
+        raise SceneError(f"{hint}, got {value!r}") from None
+    if not 1 <= len(colors) <= most:
+        raise SceneError(f"{hint}, got {value!r}")
+    return colors
 
 
 def _parse_choice(value, choices: dict) -> str:

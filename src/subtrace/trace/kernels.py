@@ -62,7 +62,7 @@ def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, 
     band_rows = BAND_ROWS * int(width)
     n_bands = -(-(int(rays[-1]) + 1) // band_rows) if len(rays) else 0
     bands = np.searchsorted(rays, np.arange(n_bands + 1) * band_rows).astype(np.int64)
-    scratch = tuple(_scratch(max_d) for _ in mems)
+    scratch = tuple(scratch_buffers(max_d) for _ in mems)
     # the bundles cross into the kernel as plain tuples and are named again inside: Numba's
     # dispatcher types plain tuples of arrays in C but named tuples in Python (28 against
     # 9 us a call, measured; a render of the sword makes about 320 calls)
@@ -77,7 +77,7 @@ def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, 
     run_chunks(work, max(n_bands, 1), BAND_CHUNK, n=len(mems))
 
 
-def _scratch(max_d):
+def scratch_buffers(max_d):
     """A thread's scratch buffers for items up to depth ``max_d``: BVH stack and its entry
     distances, Bezier nets being split, the quadtree stack and its entry
     distances, child order, a cell's points and parameters (fans included), the ray's hit

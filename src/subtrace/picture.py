@@ -1,0 +1,199 @@
+"""The picture: the colour of every pixel once the primary hits are shaded (orchestration
+over ``shade.py`` and ``trace/rays.py``; no kernels here).
+
+``paint`` adds to the planes of ``shade.shade`` (which hold every channel but the colour):
+
+* shadow rays from every hit towards each light (``[render] shadows``, on by default), as
+  any-hit rays through the BVH of the shells (``trace/rays.py``);
+* the lighting (``shade.light``: Lambert plus the materials' Blinn-Phong lobe);
+* the background (a colour or a vertical gradient) and the ground (``[ground]``);
+* adaptive anti-aliasing (``[render] samples`` / ``--samples N``): every pixel keeps its
+  centre ray, which alone writes depth, normal, ids, level and (u, v), so regression
+  comparisons stay exact; a pixel that differs from a neighbour (coverage, object, a depth
+  step, a normal jump, a contrast in the displayed colour: :func:`edge_pixels`) gets N - 1
+  more rays at fixed stratified positions in its square (:func:`sample_offsets`), traced
+  like any secondary ray (refined by the same angular criterion, at the depths chosen for
+  the camera: an extra ray's footprint is the pixel's), shaded, shadowed and lit like
+  centre rays. Its colour and alpha are the box-filtered mean of its N rays. Where the
+  centre ray missed but others hit, alpha is above 0 while the other channels say
+  "no hit".
+
+Every step writes disjoint pixels or rays in a fixed order, so the picture does not depend
+on the thread count.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from subtrace import config
+from subtrace.accel.bvh import build_bvh
+from subtrace.runtime import threads as tasks
+from subtrace.shade import (C_A, C_N, C_OBJECT, C_R, C_Z, CHANNELS, background_rows,
+                            ground_pixels, light, light_array, miss_values, shade,
+                            shadow_visibility)
+from subtrace.trace.rays import Pools, trace_rays
+
+# the R2 sequence's steps (the plastic number's powers): well-spread points in a square
+_G = 1.32471795724474602596
+_R2 = (1.0 / _G, 1.0 / (_G * _G))
+
+
+def sample_offsets(samples: int) -> np.ndarray:
+    """(samples - 1, 2) float64: the extra rays' (row, col) offsets from a pixel's centre,
+    in (-0.5, 0.5): points 1.. of the R2 low-discrepancy sequence started at the centre
+    (point 0), so every prefix is spread evenly over the pixel and the centre ray is one of
+    the samples. Fixed: the same for every pixel and run."""
+    k = np.arange(1, samples, dtype=np.float64)[:, None]
+    return np.mod(0.5 + k * np.asarray(_R2), 1.0) - 0.5
+
+
+def edge_pixels(planes, width, height) -> np.ndarray:
+    """(height, width) bool: pixels that differ from their right or lower neighbour (both
+    of a pair are marked) in coverage or object id, by a depth step (more than
+    ``config.AA_DEPTH_STEP`` of the nearer depth), a normal jump (more than
+    ``config.AA_NORMAL_DEG``) or a contrast in displayed luminance (sRGB, more than
+    ``config.AA_CONTRAST``): silhouettes, folds, creases, shadow edges."""
+    hit = planes[C_A].reshape(height, width) > 0
+    obj = planes[C_OBJECT].reshape(height, width)
+    z = planes[C_Z].reshape(height, width).astype(np.float64)
+    n = planes[C_N:C_N + 3].reshape(3, height, width).astype(np.float64)
+    lum = (0.2126 * planes[C_R] + 0.7152 * planes[C_R + 1] + 0.0722 * planes[C_R + 2])
+    lum = np.where(lum <= 0.0031308, 12.92 * lum, 1.055 * np.abs(lum) ** (1 / 2.4) - 0.055)
+    lum = np.clip(lum, 0.0, 1.0).reshape(height, width)
+    cos_jump = math.cos(math.radians(config.AA_NORMAL_DEG))
+    flag = np.zeros((height, width), bool)
+    for a, b in (((slice(None), slice(0, -1)), (slice(None), slice(1, None))),
+                 ((slice(0, -1), slice(None)), (slice(1, None), slice(None)))):
+        both = hit[a] & hit[b]
+        with np.errstate(invalid="ignore"):
+            step = np.abs(z[a] - z[b]) > config.AA_DEPTH_STEP * np.minimum(z[a], z[b])
+        differ = ((hit[a] != hit[b]) | (both & ((obj[a] != obj[b]) | step
+                                                | ((n[(slice(None),) + a] * n[(slice(None),) + b])
+                                                   .sum(axis=0) < cos_jump)))
+                  | (np.abs(lum[a] - lum[b]) > config.AA_CONTRAST))
+        flag[a] |= differ
+        flag[b] |= differ
+    return flag
+
+
+def _pools(keep, stats) -> Pools:
+    """The primary trace's pools for secondary rays (the BVH of the shells built here when
+    primary rays used the projection)."""
+    t0 = time.perf_counter()
+    if not len(keep["bvh"].node_first):
+        keep["bvh"] = build_bvh(keep["shell_min"], keep["shell_max"])
+    stats.time_preprocess += time.perf_counter() - t0
+    return Pools(**keep)
+
+
+def paint(scene, cages, camera, keep, hits, normals, pix_patch, patches, planes, stats):
+    """Fill the colour (R, G, B) and, with anti-aliasing, filter colour and alpha of
+    ``planes`` (len(CHANNELS), W*H) float32, whose other channels :func:`shade.shade` wrote
+    from ``hits``; ``normals``, ``pix_patch``: its eye-facing normals and patches;
+    ``patches``: the :class:`shade.PatchShading`; ``keep``: what ``render.trace_hits`` kept
+    for secondary rays. Counts and times go to ``stats``."""
+    W, H = camera.width, camera.height
+    frame = camera.frame()
+    samples = scene.render.samples
+    lights = light_array(scene.lights)
+    shadows = bool(len(lights)) and scene.render.shadows
+    pools = _pools(keep, stats) if shadows or samples > 1 else None
+
+    def trace_shadows(origins, dirs, tmax):
+        """Any-hit shadow rays: blocked (n,) uint8 (none without shadows)."""
+        if not shadows:
+            return np.zeros(len(tmax), np.uint8)
+        t0 = time.perf_counter()
+        blocked = trace_rays(pools, origins, dirs, tmax, any_hit=True)[0]
+        stats.time_shadows += time.perf_counter() - t0
+        stats.shadow_rays += len(tmax)
+        return blocked
+
+    ground = _ground(scene, cages, camera)
+    rows = background_rows(scene.render.background, scene.render.background_bottom, H)
+    _colour(scene, frame, W, hits.t, normals, pix_patch, patches, planes, lights, rows,
+            ground, trace_shadows, keep["tol_rad"], None)
+    if samples > 1:
+        t0 = time.perf_counter()
+        _antialias(scene, frame, W, H, pools, patches, planes, lights, ground, trace_shadows,
+                   samples, stats)
+        stats.time_aa += time.perf_counter() - t0
+
+
+def _ground(scene, cages, camera):
+    """(unit up, height) of the scene's ground plane, or None."""
+    if scene.ground is None:
+        return None
+    up = np.asarray(camera.up, np.float64) / np.linalg.norm(camera.up)
+    height = scene.ground.height
+    if height is None:  # the objects' lowest limit point along up
+        height = min(float((c.limit(1)[0] @ up).min()) for c in cages)
+    return up, height
+
+
+def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights, rows,
+            ground, trace_shadows, tol_rad, dirs):
+    """The colour of rays from the eye (pixel centres, or ``dirs``): shadows, lighting, the
+    background (``rows``: per image row, or per ray with ``dirs``) and the ground."""
+    n = len(pix_patch)
+    visible = np.ones((len(lights), n), np.float32)
+    if len(lights) and scene.render.shadows:
+        visible = shadow_visibility(trace_shadows, frame, width, t, normals, pix_patch, lights,
+                                    tol_rad, dirs)
+    r = scene.render
+    headlight = np.array([r.headlight_intensity if r.headlight else 0.0])
+    light(frame, width, t, normals, pix_patch, patches, lights, headlight, visible, planes,
+          dirs)
+    if r.background_bottom is not None or dirs is not None:
+        miss = np.nonzero(pix_patch < 0)[0]
+        back = rows[miss // width] if dirs is None else rows[miss]
+        for k in range(3):
+            planes[C_R + k, miss] = back[:, k]
+    if ground is not None:
+        ground_pixels(frame, width, pix_patch, ground[0], ground[1], trace_shadows, lights,
+                      float(headlight[0]), scene.ground.color, rows, planes, dirs)
+
+
+def _antialias(scene, frame, W, H, pools, patches, planes, lights, ground, trace_shadows,
+               samples, stats):
+    """More rays for the pixels :func:`edge_pixels` marks (see the module comment); their
+    colour and alpha become the mean of all their rays."""
+    pix = np.nonzero(edge_pixels(planes, W, H).ravel())[0]
+    offsets = sample_offsets(samples)
+    m = len(offsets)
+    if not len(pix):
+        return
+    # the extra rays, pixel by pixel: (row + dr, col + dc) through the camera's frame
+    row, col = np.divmod(pix, W)
+    rr = (row[:, None] + offsets[None, :, 0]).ravel()
+    cc = (col[:, None] + offsets[None, :, 1]).ravel()
+    d = frame[3] + cc[:, None] * frame[1] + rr[:, None] * frame[2]
+    dirs = np.ascontiguousarray(d / np.sqrt((d * d).sum(axis=1))[:, None])
+    n = len(dirs)
+    origins = np.repeat(frame[0][None], n, axis=0)
+    _, hits = trace_rays(pools, origins, dirs, np.full(n, np.inf), any_hit=False)
+    sub = np.empty((len(CHANNELS), n), np.float32)
+    normals = np.empty((n, 3))
+    pix_patch = np.empty(n, np.int64)
+    covered = np.zeros(tasks.thread_count(), np.int64)
+    shade(frame, W, hits, pools.iso.view(), patches,
+          miss_values(scene.render.background), sub, normals, pix_patch, covered, dirs)
+    # the background at each ray's own height (a gradient's blend at row rr)
+    top = np.asarray(scene.render.background, np.float64)
+    bottom = scene.render.background_bottom
+    w = np.clip((rr + 0.5) / H, 0.0, 1.0)[:, None]
+    back = np.repeat(top[None], n, axis=0) if bottom is None else (
+        (1.0 - w) * top + w * np.asarray(bottom, np.float64))
+    _colour(scene, frame, W, hits.t, normals, pix_patch, patches, sub, lights, back, ground,
+            trace_shadows, pools.tol_rad, dirs)
+    # box filter: the centre ray and the extra ones, equally weighted
+    for k in (C_R, C_R + 1, C_R + 2, C_A):
+        extra = sub[k].astype(np.float64).reshape(len(pix), m).sum(axis=1)
+        planes[k, pix] = ((planes[k, pix].astype(np.float64) + extra) / samples).astype(
+            np.float32)
+    stats.aa_pixels += len(pix)
+    stats.aa_rays += n

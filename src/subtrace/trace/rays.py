@@ -1,0 +1,192 @@
+"""Secondary rays: rays of any origin and direction (shadow rays, extra samples) traced
+through the BVH of the patch shells with the primary trace's pools.
+
+The primary trace (``render.trace_hits``) leaves its pools behind: the Catmull-Clark pieces
+and the Loop nets, pieces and cells (:class:`~subtrace.trace.pools.Pieces`) and each patch's
+grid depth. A secondary ray is intersected with exactly the same micro-surface as the
+primary rays (the same per-item function, ``bezier.intersect_patch``, at the same depths), so a
+shadow ray leaving a hit cannot meet a differently tessellated copy of its own surface.
+Patches no primary ray reached (the underside of a model that casts the ground shadow, say)
+are built when a secondary ray first enters their shell before any closer hit, in rounds as
+for primary rays, at the depth the angular criterion chose for them: the depth at which each
+cell subtends at most the tolerance from the eye. A secondary ray leaves a surface point
+whose own footprint (its ray cone from the eye) is the same tolerance at that distance, so a
+secondary ray never asks for a patch finer than what a pixel would need there.
+
+``any_hit`` rays (shadow rays) stop at the first occluder found before ``tmax``: built
+patches are intersected first, and unbuilt ones are built only when no built one occludes.
+
+Array layout: ``origins``, ``dirs`` (R,3) float64 (unit directions), ``tmax`` (R,) float64
+(distance to the light, or inf). Results: ``blocked`` (R,) uint8 and the closest hit of each
+ray as a :class:`~subtrace.trace.pools.Hits` (t = tmax, prim = -1 where nothing is nearer).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from subtrace import config
+from subtrace.accel.bvh import BVH, box_entry, bvh_next_leaf, bvh_start
+from subtrace.runtime import threads as tasks
+from subtrace.runtime.jit import nb
+from subtrace.trace.bezier import intersect_patch
+from subtrace.trace.build import build_requested
+from subtrace.trace.kernels import scratch_buffers
+from subtrace.trace.pools import CANDIDATES, Hits, Memo, Memos, PieceArrays, hit_arrays
+from subtrace.trace.prims import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, shear
+
+RAY_CHUNK = 4096  # rays a thread takes at a time
+
+
+@dataclass
+class Pools:
+    """What a finished primary trace leaves for secondary rays: the patch table, each
+    patch's grid depth and edge sampling, the pools built so far (``iso``: Pieces), the
+    isolation records, the shells and
+    their BVH, the eye, the tolerance (radians), the render's statistics and the next
+    round number. :func:`trace_rays` builds into the pools what its rays ask for."""
+
+    table: object
+    depths: np.ndarray
+    edge_depth: np.ndarray
+    iso: object
+    record: dict
+    shell_min: np.ndarray
+    shell_max: np.ndarray
+    bvh: BVH
+    eye: np.ndarray
+    tol_rad: float
+    stats: object
+    round_no: int
+
+
+def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
+    """Trace rays ``origins + t dirs``, ``0 < t < tmax``: (blocked (R,) uint8, hits
+    (:class:`~subtrace.trace.pools.Hits`)). ``any_hit``: stop at the first occluder (then
+    ``hits`` holds that occluder, not necessarily the nearest). Patches a ray reaches
+    unbuilt are built into ``pools`` (counted in its statistics). The result does not
+    depend on the thread count: a ray's hits depend only on the pools, never on the
+    threads' memos."""
+    n = len(tmax)
+    origins = np.ascontiguousarray(origins, np.float64).reshape(n, 3)
+    dirs = np.ascontiguousarray(dirs, np.float64).reshape(n, 3)
+    tmax = np.ascontiguousarray(tmax, np.float64)
+    blocked = np.zeros(n, np.uint8)
+    hits = hit_arrays(n)
+    req = np.empty((n, CANDIDATES), np.int64)
+    req_n = np.zeros(n, np.int64)
+    n_threads = tasks.thread_count()
+    # fresh memos: reusing the primary trace's (warmer: faster) changed a Loop render by an
+    # ulp between the projection and the BVH (tests/test_projection.py, random cameras)
+    memos = Memos(n_threads, None)
+    built = np.zeros(n_threads, np.int64)
+    req_ts = np.empty((n_threads, CANDIDATES))  # each thread's entry distances of req
+    rays = np.arange(n, dtype=np.int64)
+    while len(rays):
+        iso = pools.iso
+        max_d = int(iso.a["depth_i"].max(initial=0))
+        scratch = tuple(scratch_buffers(max_d) for _ in range(n_threads))
+        mems = tuple(tuple(m) for m in memos.views(len(iso.a["kind"])))
+        args = (rays, origins, dirs, tmax, bool(any_hit), tuple(pools.bvh), pools.shell_min,
+                pools.shell_max, tuple(iso.view()),
+                mems, scratch, float(config.TRI_SLACK), tuple(hits), blocked, req, req_n,
+                req_ts, built)
+
+        def work(t, a, b):
+            _rays_task(t, a, b, *args)
+
+        run_chunks(work, len(rays))
+        asked = req_n[rays] > 0
+        rays = rays[asked]
+        if not len(rays):
+            break
+        flag = np.zeros(pools.table.n_patches, bool)
+        for k in range(CANDIDATES):
+            ids = req[rays, k][req_n[rays] > k]
+            flag[ids] = True
+        build_requested(pools.table, np.nonzero(flag)[0], pools.depths, pools.edge_depth,
+                        pools.iso, pools.round_no, pools.stats, pools.eye, pools.tol_rad,
+                        pools.record)
+        pools.round_no += 1
+    pools.stats.micro_triangles += int(built.sum())
+    return blocked, hits
+
+
+def run_chunks(work, n_rays):
+    """``work(t, a, b)`` over chunks of RAY_CHUNK rays on every thread."""
+    n_chunks = max(1, -(-n_rays // RAY_CHUNK))
+    tasks.run_chunks(lambda t, a, b: work(t, a * RAY_CHUNK, min(n_rays, b * RAY_CHUNK)),
+                     n_chunks, 1)
+
+
+@nb.njit(cache=True, nogil=True, _nrt=False, error_model="numpy")  # see jit.leaf_njit
+def _rays_task(task, a, b, rays, origins, dirs, tmax, any_hit, bvh_t, shell_min, shell_max,
+               iso_t, mems_t, scratches, slack, hits_t, blocked, req, req_n, req_ts, built):
+    """Rays ``rays[a:b]`` on thread ``task`` (see :func:`trace_rays`): each walks the BVH
+    of the shells from scratch, intersects the built patches whose shells it enters before
+    its best hit and lists (in ``req``, count ``req_n``) the unbuilt ones, nearest kept
+    when there are more than CANDIDATES; an ``any_hit`` ray stops at its first occluder."""
+    bvh, iso, hits = BVH(*bvh_t), PieceArrays(*iso_t), Hits(*hits_t)
+    mem = Memo(*mems_t[task])
+    stack, stack_t, work, st, st_t, ent_t, ent_i, lv, lp, hit = scratches[task]
+    scratch = (work, st, st_t, ent_t, ent_i, lv, lp)
+    req_t = req_ts[task]
+    for q in range(a, b):
+        r = rays[q]
+        ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
+        dx, dy, dz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
+        ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
+        kx, ky, kz, sx, sy, sz = shear(dx, dy, dz)
+        ray = (ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz)
+        for k in range(HIT_FIELDS):
+            hit[k] = 0.0
+        hit[H_T] = tmax[r]
+        hit[H_SLOT] = -1.0
+        n_req = 0
+        done = False
+        # the shells the ray enters before its best hit, nearest BVH child first
+        sp = bvh_start(ox, oy, oz, ix, iy, iz, bvh, 0.0, hit[H_T], stack, stack_t)
+        while not done:
+            j, j_end, sp = bvh_next_leaf(ox, oy, oz, ix, iy, iz, bvh, 0.0, hit[H_T], stack,
+                                         stack_t, sp)
+            if j == j_end:
+                break
+            for e in range(j, j_end):
+                p = bvh.prims[e]
+                te = box_entry(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, 0.0, hit[H_T])
+                if te == np.inf:
+                    continue
+                s = iso.patch_iso[p]
+                if s >= 0:
+                    built[task] += intersect_patch(ray, p, s, iso, mem, slack, hit, scratch)
+                else:
+                    # unbuilt: keep the CANDIDATES nearest
+                    m = n_req if n_req < CANDIDATES else CANDIDATES - 1
+                    if n_req < CANDIDATES or te < req_t[m]:
+                        while m > 0 and req_t[m - 1] > te:
+                            req_t[m] = req_t[m - 1]
+                            req[r, m] = req[r, m - 1]
+                            m -= 1
+                        req_t[m] = te
+                        req[r, m] = p
+                        n_req = min(n_req + 1, CANDIDATES)
+                if any_hit and hit[H_T] < tmax[r]:
+                    done = True
+                    break
+        # the hit and the unbuilt shells still nearer than it
+        blocked[r] = 1 if hit[H_T] < tmax[r] else 0
+        n_keep = 0
+        if not done:
+            for m in range(n_req):
+                if req_t[m] < hit[H_T]:
+                    req[r, n_keep] = req[r, m]
+                    n_keep += 1
+        req_n[r] = n_keep
+        hits.t[r] = hit[H_T]
+        hits.prim[r] = np.int64(hit[H_SLOT])
+        hits.leaf[r] = np.int64(hit[H_LEAF])
+        hits.item[r] = np.int64(hit[H_TRI])
+        hits.a[r] = hit[H_B1]
+        hits.b[r] = hit[H_B2]

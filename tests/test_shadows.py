@@ -1,0 +1,118 @@
+"""Shadows (trace/rays.py through shade.shadow_visibility and the ground): the ground
+shadow's outline is the projection of the limit surface along the light, checked against
+the line / surface intersection module (an independent code path); a convex closed
+surface never shadows itself (no speckle); shadow rays build the patches no primary ray
+reached; and the image does not depend on the thread count."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from subtrace.io.scene import scene_from_dict
+from subtrace.mesh.cage import load_cage
+from subtrace.render import render_scene
+
+CUBE = ("v -1 -1 -1\nv 1 -1 -1\nv 1 1 -1\nv -1 1 -1\nv -1 -1 1\nv 1 -1 1\nv 1 1 1\n"
+        "v -1 1 1\nf 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n")
+LIGHT = np.array([0.5, -1.0, 0.3]) / np.linalg.norm([0.5, -1.0, 0.3])  # travels along it
+GROUND = -1.5
+BACKGROUND = 0.5
+
+
+@pytest.fixture
+def cube(tmp_path):
+    path = tmp_path / "cube.obj"
+    path.write_text(CUBE)
+    return path
+
+
+def _scene(cube, tmp_path, shadows=True, ground=True, width=96, height=72,
+           eye=(3.0, 6.0, 7.0), target=(0.8, -1.0, 0.4)):
+    d = {"object": [{"mesh": str(cube)}],
+         "camera": {"eye": list(eye), "target": list(target), "width": width,
+                    "height": height},
+         "render": {"headlight": False, "shadows": shadows, "samples": 1,
+                    "background": [BACKGROUND] * 3},
+         "light": [{"direction": LIGHT.tolist()}]}
+    if ground:
+        d["ground"] = {"height": GROUND}
+    return scene_from_dict(d, base_dir=tmp_path)
+
+
+def _near_edge(mask):
+    """Pixels within one pixel (8-neighbourhood) of a change in ``mask``."""
+    edge = np.zeros_like(mask)
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            shifted = np.roll(np.roll(mask, dr, axis=0), dc, axis=1)
+            edge |= shifted != mask
+    return edge
+
+
+def test_ground_shadow_is_the_projection_of_the_limit_surface(cube, tmp_path):
+    """A ground pixel is in shadow exactly where the line from its ground point towards
+    the light meets the limit surface (intersect_lines, not the renderer's kernels);
+    disagreements only within a pixel of the outline."""
+    from subtrace.lines.api import intersect_lines
+
+    result = render_scene(_scene(cube, tmp_path))
+    ch = result.channels
+    cam = result.camera
+    d = cam.ray_directions().reshape(-1, 3)
+    eye = np.asarray(cam.eye)
+    t = (GROUND - eye[1]) / d[:, 1]
+    ground = (ch["Z"].ravel() == np.inf) & (t > 0)
+    points = eye + t[:, None] * d
+    hits = intersect_lines(load_cage(str(cube)), points[ground],
+                           np.repeat(-LIGHT[None], ground.sum(), axis=0), 1e-6,
+                           t_range=(0.0, np.inf), mode="first")
+    expected = np.zeros(d.shape[0], bool)
+    expected[np.nonzero(ground)[0][np.unique(hits.line)]] = True
+    # the catcher: the background (black) where the light is held back, else the flat
+    # background lit fraction (1: the background itself)
+    shadow = ch["R"].ravel() < 0.5 * BACKGROUND
+    assert expected.sum() > 200  # the shadow is in the picture
+    wrong = (shadow != expected) & ground
+    edge = _near_edge(expected.reshape(ch["A"].shape)).ravel()
+    assert not np.any(wrong & ~edge), np.argwhere((wrong & ~edge).reshape(ch["A"].shape))
+    assert wrong.sum() <= 0.1 * edge[ground].sum()
+    # a single light: the catcher is fully dark or untouched; its alpha says "no hit"
+    assert set(np.unique(ch["R"].ravel()[ground])) <= {0.0, np.float32(BACKGROUND)}
+    assert not ch["A"].ravel()[ground].any()
+
+
+def test_no_self_shadow_speckle_on_a_convex_surface(cube, tmp_path):
+    """The limit surface of a cube is convex: no point of it can shadow another, so with
+    shadows every pixel's colour is exactly that without them (every lit-facing pixel lit),
+    while many pixels face the light and many do not."""
+    view = {"ground": False, "width": 120, "height": 90, "eye": (-4.0, 1.0, 3.0),
+            "target": (0.0, 0.0, 0.0)}  # the terminator in view
+    lit = render_scene(_scene(cube, tmp_path, **view)).channels
+    off = render_scene(_scene(cube, tmp_path, shadows=False, **view)).channels
+    hit = lit["A"] > 0
+    n = np.stack([lit[c] for c in ("N.X", "N.Y", "N.Z")], axis=-1)
+    facing = (n @ -LIGHT) > 0
+    assert (hit & facing).sum() > 1000 and (hit & ~facing).sum() > 100
+    for c in "RGB":
+        assert np.array_equal(lit[c], off[c]), c
+    assert np.all(lit["R"][hit & facing] > 0)
+
+
+def test_shadow_rays_build_what_primary_rays_left(cube, tmp_path):
+    """Seen from above, the cube's underside is built only for the shadow rays that leave
+    the ground towards the light; they are counted."""
+    result = render_scene(_scene(cube, tmp_path))
+    st = result.stats
+    assert st.shadow_rays > 0
+    no = render_scene(_scene(cube, tmp_path, shadows=False)).stats
+    assert no.shadow_rays == 0
+    assert st.patches_refined > no.patches_refined
+
+
+def test_shadows_do_not_depend_on_the_threads(cube, tmp_path):
+    scene = _scene(cube, tmp_path)
+    one = render_scene(scene, threads=1).channels
+    two = render_scene(scene, threads=2).channels
+    for c in one:
+        assert one[c].tobytes() == two[c].tobytes(), c
