@@ -176,8 +176,7 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
     iso.reserve("nets", len(reg) + 16 * n_irr)
     iso.append_regular(reg, depths[reg], reg_side, None, table.shell_min[reg],
                        table.shell_max[reg])
-    if config.LOOP_PER_RAY:
-        build_loop_regular(table, depths, edge_depth, iso)
+    build_loop_regular(table, depths, edge_depth, iso)
     hits = hit_arrays(n_rays)
     request = np.empty(n_rays, dtype=np.int64)
     tested = np.empty(n_rays, dtype=np.int64)  # (round 0 writes every ray's entries)

@@ -63,15 +63,15 @@ def warn_tiles(budget):
 
 
 def grid_patches(table) -> np.ndarray:
-    """(P,) bool: the patches built as grids of exact limit points, what the memory
-    estimate prices by depth: the Loop patches other than the regular triangles, which are
-    Bezier nets split per ray (``config.LOOP_PER_RAY``, ``trace/build.py``)."""
+    """(P,) bool: the patches the memory estimate prices as grids of 4^depth cells: the
+    irregular Loop triangles (a conservative price: they are isolated into per-ray pieces
+    and cells, ``patches/isolate_loop.py``); the regular ones are Bezier nets split per ray
+    (``trace/build.py``)."""
     grids = ~table.is_quad
-    if config.LOOP_PER_RAY:
-        for oid, o in enumerate(table.objects):
-            if o.cage.scheme == "loop":
-                rows = np.nonzero(table.object_id == oid)[0]
-                grids[rows] = ~loop_regular(o.level, o.cage.options, table.face[rows])
+    for oid, o in enumerate(table.objects):
+        if o.cage.scheme == "loop":
+            rows = np.nonzero(table.object_id == oid)[0]
+            grids[rows] = ~loop_regular(o.level, o.cage.options, table.face[rows])
     return grids
 
 
