@@ -45,7 +45,7 @@ def test_pieces_and_cells_are_the_limit_surface_and_tile_the_patch(name):
     (areas 4^-level add up to 1, every corner inside the patch)."""
     cage, table, o, ids = _irregular(name)
     depth = 4
-    (sr, sl, si, sj, sg, nets), (cr, ci, cj, cg, cp, cn) = build_loop_isolated(
+    (sr, sl, si, sj, sg, nets), (cr, ci, cj, cg, cp, _) = build_loop_isolated(
         o, table.face[ids], depth)
     size = np.abs(cage.points).max()
     rng = np.random.default_rng(7)
@@ -176,6 +176,7 @@ def test_a_hidden_irregular_loop_object_is_not_refined(tmp_path):
     res = render_scene(small_scene([plane, spot], *view, fov=40.0), cages=cages)
     assert np.all(res.channels["object_id"] == 0)
     assert np.count_nonzero(res.refined_objects == 1) == 0
+    assert res.stats.pieces == 0  # (the plane's patches are regular: built from the start)
     alone = render_scene(small_scene([spot], *view, fov=40.0), cages=cages[1:])
     assert alone.stats.pixels_covered > 100
     # isolated patches become several pieces or cells each: more than the patches built

@@ -224,6 +224,38 @@ def _snapped_node(i, j, h, lev, depth, sides, srow):
 
 
 @leaf_njit
+def _snapped_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, i, j, h, lev, depth,
+                   sides, srow, samples, tmax):
+    """Entry distance of the ray into the box ``lo, hi`` of node (i, j, h, lev) of an item
+    with side samples (``sides[srow, 3] >= 0``) widened by the samples of the coarse
+    segments its vertices on snapped sides (``0 <= de < lev``) may be moved onto: its
+    snapped points lie on those segments, so in that box. (Without samples the node is
+    entered untested: :func:`_snapped_node`.)"""
+    N = 1 << depth
+    for k in range(3):
+        de = sides[srow, k]
+        if not 0 <= de < lev:
+            continue
+        r = 1 << (depth - de)
+        t_lo = N + 1
+        t_hi = -1
+        for c in range(3):
+            on, t = _side_param(i + (h if c == 1 else 0), j + (h if c == 2 else 0), N, k)
+            if on:
+                t_lo = min(t_lo, t)
+                t_hi = max(t_hi, t)
+        if t_hi < 0:
+            continue
+        b = _side_base(sides, srow, depth, k)
+        for m in range(t_lo // r, -(-t_hi // r) + 1):
+            x, y, z = samples[b + m, 0], samples[b + m, 1], samples[b + m, 2]
+            lo0, lo1, lo2 = min(lo0, x), min(lo1, y), min(lo2, z)
+            hi0, hi1, hi2 = max(hi0, x), max(hi1, y), max(hi2, z)
+    lo0, lo1, lo2, hi0, hi1, hi2 = pad_box(lo0, lo1, lo2, hi0, hi1, hi2)
+    return slab_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, 0.0, tmax)
+
+
+@leaf_njit
 def _tri_entry(ox, oy, oz, ix, iy, iz, w, q, tmax):
     """Entry distance of the ray into the padded box of net ``w[q]``; inf on a miss."""
     lo0, lo1, lo2, hi0, hi1, hi2 = tri_box(w, q)
@@ -263,18 +295,25 @@ def _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, pts, r0, gi, gj, g, depth, slac
 
 @leaf_njit
 def _push_children(ox, oy, oz, ix, iy, iz, w, base, g, i, j, lev, t_parent, depth, sides, srow,
-                   tmax, tmp_t, order):
+                   samples, tmax, tmp_t, order):
     """The children (nets ``w[base:base+4]``) of node (g, i, j, lev) that the ray enters
     before ``tmax``, sorted far to near into ``order`` / ``tmp_t``; returns their count. A
-    child that may hold snapped points (:func:`_snapped_node`) is entered untested, at its
-    parent's entry distance ``t_parent``."""
+    child that may hold snapped points (:func:`_snapped_node`) is tested by its box widened
+    by its side's samples where the item has them (:func:`_snapped_entry`), else entered
+    untested, at its parent's entry distance ``t_parent``."""
     n = 0
     hh = g * (1 << (depth - lev - 1))  # half the node's side, signed
     for q in range(4):
         ci = i + (hh if q == 1 or q == 3 else 0)
         cj = j + (hh if q == 2 or q == 3 else 0)
-        if _snapped_node(ci, cj, -hh if q == 3 else hh, lev + 1, depth, sides, srow):
-            te = t_parent
+        ch = -hh if q == 3 else hh
+        if _snapped_node(ci, cj, ch, lev + 1, depth, sides, srow):
+            if sides[srow, 3] >= 0:
+                lo0, lo1, lo2, hi0, hi1, hi2 = tri_box(w, base + q)
+                te = _snapped_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, ci,
+                                    cj, ch, lev + 1, depth, sides, srow, samples, tmax)
+            else:
+                te = t_parent
         else:
             te = _tri_entry(ox, oy, oz, ix, iy, iz, w, base + q, tmax)
         if te < np.inf:
@@ -328,7 +367,7 @@ def descend_tri(ray, src, s, g0, i0, j0, lev0, nets, nk, depth, fr, sides, srow,
             continue
         tri_split(w, sp, SPLIT_PTR, SPLIT_COL, SPLIT_W, base)
         n = _push_children(ox, oy, oz, ix, iy, iz, w, base, g, i, j, lev, st_t[st0 + sp], depth,
-                           sides, srow, hit[H_T], tmp_t, order)
+                           sides, srow, samples, hit[H_T], tmp_t, order)
         for e in range(n):
             q = order[e]
             for p in range(N_TRI):
@@ -468,7 +507,13 @@ def intersect_tri(ray, it, nets, nk, depth, fr, sides, samples, slack, hit, code
         for q in range(4):
             cg, ci, cj = _child(g, i, j, lev, depth, q)
             if _snapped_node(ci, cj, cg * abs(hh), lev + 1, depth, sides, it):
-                te = st_t[sp]  # (see _push_children)
+                if sides[it, 3] >= 0:  # (see _push_children)
+                    te = _snapped_entry(ox, oy, oz, ix, iy, iz, box[c + q, 0], box[c + q, 1],
+                                        box[c + q, 2], box[c + q, 3], box[c + q, 4],
+                                        box[c + q, 5], ci, cj, cg * abs(hh), lev + 1, depth,
+                                        sides, it, samples, hit[H_T])
+                else:
+                    te = st_t[sp]
             else:
                 te = slab_entry(ox, oy, oz, ix, iy, iz, box[c + q, 0], box[c + q, 1],
                                 box[c + q, 2], box[c + q, 3], box[c + q, 4], box[c + q, 5],
