@@ -245,27 +245,53 @@ def scene_bounds(cages, nurbs=None):
     return np.min([b[0] for b in bounds], axis=0), np.max([b[1] for b in bounds], axis=0)
 
 
-def faces_in_view(cages, camera):
+def faces_in_view(cages, camera, sweeps=()):
     """Per cage, a (F,) bool mask of the faces whose limit surface a primary ray may reach:
     the box that holds it (``patches.table.cage_face_shells``) projects into the image
     (``accel.projection.boxes_in_view``, the test the tile lists make). The patches of the
-    other faces are never built (design invariant 5)."""
-    frame = camera_frame(camera)
-    return [boxes_in_view(*cage_face_shells(c), frame, camera.width, camera.height)
-            for c in cages]
+    other faces are never built (design invariant 5). ``sweeps``: vectors (the travel of a
+    directional light across the scene) along which each box is also swept: a face that
+    may shadow a point in view lies on that point's ray towards the light, so its box
+    swept along the light's travel reaches the view."""
+    in_view = _view_test(camera, sweeps)
+    return [in_view(*cage_face_shells(c)) for c in cages]
 
 
-def table_in_view(cages, camera):
-    """The patch table of what a primary ray of ``camera`` may reach: the patches of the
-    cage faces in view (:func:`faces_in_view`) whose own one-ring box is in view too.
-    Returns (table, the per-cage masks of the faces kept)."""
-    keep = faces_in_view(cages, camera)
+def _view_test(camera, sweeps):
+    """``in_view(lo, hi)`` -> (N,) bool of :func:`faces_in_view` (boxes, or their sweeps
+    along any of ``sweeps``, that reach the image)."""
     frame = camera_frame(camera)
 
     def in_view(lo, hi):
-        return boxes_in_view(lo, hi, frame, camera.width, camera.height)
+        seen = boxes_in_view(lo, hi, frame, camera.width, camera.height)
+        for v in sweeps:
+            seen |= boxes_in_view(np.minimum(lo, lo + v), np.maximum(hi, hi + v), frame,
+                                  camera.width, camera.height)
+        return seen
 
-    return build_patch_table(cages, keep, in_view), keep
+    return in_view
+
+
+def shadow_sweeps(scene, cages):
+    """The sweeps :func:`faces_in_view` needs for the scene's shadows: per directional
+    light, its direction times twice the diagonal of the cages' bounds; None where culling
+    to the view would lose a shadow it cannot bound so (a point light)."""
+    if not (scene.lights and scene.render.shadows):
+        return ()
+    if any(l.position is not None for l in scene.lights):
+        return None
+    lo = np.min([c.points.min(axis=0) for c in cages], axis=0)
+    hi = np.max([c.points.max(axis=0) for c in cages], axis=0)
+    span = 2.0 * float(np.linalg.norm(hi - lo))
+    return [span * np.asarray(l.direction, np.float64) for l in scene.lights]
+
+
+def table_in_view(cages, camera, sweeps=()):
+    """The patch table of what a ray of ``camera`` (or a shadow ray, with ``sweeps``) may
+    reach: the patches of the cage faces in view (:func:`faces_in_view`) whose own
+    one-ring box is in view too. Returns (table, the per-cage masks of the faces kept)."""
+    keep = faces_in_view(cages, camera, sweeps)
+    return build_patch_table(cages, keep, _view_test(camera, sweeps)), keep
 
 
 def _prepare(scene, cages, stats, nurbs=None):
@@ -300,9 +326,10 @@ def _prepare(scene, cages, stats, nurbs=None):
                                 + extra)
         lo, hi = points.min(axis=0), points.max(axis=0)
     camera = scene.make_camera(lo, hi, points)
-    # shadow rays may meet what the camera does not see: cull to the view only without them
-    if config.CULL_TO_VIEW and not (scene.lights and scene.render.shadows):
-        table, keep = table_in_view(cages, camera)
+    # (shadow rays may meet what the camera does not see: the boxes swept towards the view)
+    sweeps = shadow_sweeps(scene, cages)
+    if config.CULL_TO_VIEW and sweeps is not None:
+        table, keep = table_in_view(cages, camera, sweeps)
         stats.faces_culled = int(sum(np.count_nonzero(~k) for k in keep))
     else:
         table = build_patch_table(cages)
