@@ -7,7 +7,7 @@ BVH over its patches' shells, and per surface its scene object and colour (the o
 colour, else its material's diffuse colour). An object's polygon faces, if its file has any,
 are its subdivision cage as before (:func:`has_faces`).
 
-:func:`render_nurbs` traces the surfaces (:mod:`subtrace.nurbs.trace`) and shades the
+:func:`nurbs_pass` traces the surfaces (:mod:`subtrace.nurbs.trace`) and shades the
 pixels whose NURBS hit is nearer than what the subdivision pass found into the same channel
 planes (:data:`subtrace.shade.CHANNELS`), with the same two-sided Lambert lighting.
 """
@@ -15,6 +15,7 @@ planes (:data:`subtrace.shade.CHANNELS`), with the same two-sided Lambert lighti
 from __future__ import annotations
 
 import re
+import time
 import warnings
 from dataclasses import dataclass
 
@@ -92,12 +93,35 @@ def load_nurbs(scene, quiet: bool = False) -> NurbsScene | None:
                       np.array(colors, dtype=np.float64).reshape(-1, 3))
 
 
-def render_nurbs(nurbs: NurbsScene, frame, width, height, tol_rad, other_t, lights, headlight,
-                 planes) -> NurbsHits:
-    """Trace ``nurbs`` for every pixel and shade the hits nearer than ``other_t`` (n,)
-    (the other surfaces' distances, inf: none) into ``planes`` (len(CHANNELS), n) float32;
-    ``lights`` (L, 6), ``headlight`` (1,) as :func:`subtrace.shade.shade` takes them.
-    Returns the hits (only those shaded keep their patch; the others get -1)."""
+def nurbs_pass(nurbs: NurbsScene, frame, width, height, tol_rad, other_t, lights, headlight,
+               planes, stats) -> NurbsHits:
+    """The render's NURBS pass: trace ``nurbs`` for every pixel and shade the hits nearer
+    than ``other_t`` (n,) (the subdivision hits' distances; None: none) into ``planes``
+    (len(CHANNELS), n) float32; ``lights`` (L, 6), ``headlight`` (1,) as
+    :func:`subtrace.shade.shade` takes them. Counts go into ``stats``
+    (:class:`subtrace.render.RenderStats`): patches, the deepest split, the patches hit; a
+    leaf held at NURBS_MAX_LEVEL above the tolerance is warned of and recorded as the
+    ``precision`` cap. Returns the hits (those not shaded get patch -1)."""
+    t0 = time.perf_counter()
+    if other_t is None:
+        other_t = np.full(width * height, np.inf)
+    hits = _shade_nearer(nurbs, frame, width, height, tol_rad, other_t, lights, headlight,
+                         planes)
+    stats.patches += nurbs.model.n_patches
+    stats.max_depth = max(stats.max_depth, int(hits.level.max(initial=0)))
+    stats.patches_refined += len(np.unique(hits.patch[hits.patch >= 0]))  # (per ray)
+    if hits.capped:
+        warnings.warn(f"{hits.capped} NURBS sub-patches held at {config.NURBS_MAX_LEVEL} "
+                      "halvings above the tolerance", SubtraceWarning, stacklevel=3)
+        stats.depth_cap = max(stats.depth_cap, config.NURBS_MAX_LEVEL)
+        stats.depth_cap_reason = ("precision" if stats.depth_cap_reason == "none"
+                                  else stats.depth_cap_reason + ",precision")
+    stats.time_trace += time.perf_counter() - t0
+    return hits
+
+
+def _shade_nearer(nurbs, frame, width, height, tol_rad, other_t, lights, headlight, planes):
+    """Trace and shade (see :func:`nurbs_pass`)."""
     hits = trace_nurbs(nurbs.model, nurbs.bvh, frame, width, height, tol_rad)
     near = np.nonzero(hits.t < other_t)[0]
     keep = np.zeros(len(hits.t), dtype=np.bool_)
