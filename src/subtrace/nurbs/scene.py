@@ -14,6 +14,8 @@ planes (:data:`subtrace.shade.CHANNELS`), with the same two-sided Lambert lighti
 
 from __future__ import annotations
 
+import functools
+import os
 import re
 import time
 import warnings
@@ -42,14 +44,32 @@ _SURF = re.compile(rb"^[ \t]*surf[ \t]", re.MULTILINE)  # a free-form surface st
 _FACE = re.compile(rb"^[ \t]*f[ \t]", re.MULTILINE)  # a polygon face statement
 
 
+@functools.lru_cache(maxsize=64)
+def _scan(path: str, mtime_ns: int, size: int) -> tuple[bool, bool]:
+    """(has a ``surf`` statement, has an ``f`` statement) of the OBJ file (one read per
+    version of the file: a render asks several times)."""
+    raw = read_obj_bytes(path)
+    return _SURF.search(raw) is not None, _FACE.search(raw) is not None
+
+
+def _kinds(path) -> tuple[bool, bool]:
+    path = str(path)
+    try:
+        st = os.stat(path)
+    except OSError:
+        read_obj_bytes(path)  # the reader's one-line error for a missing file
+        raise
+    return _scan(path, st.st_mtime_ns, st.st_size)
+
+
 def has_surfaces(path) -> bool:
     """The OBJ file has a ``surf`` statement (a quick scan of its bytes)."""
-    return _SURF.search(read_obj_bytes(str(path))) is not None
+    return _kinds(path)[0]
 
 
 def has_faces(path) -> bool:
     """The OBJ file has an ``f`` statement: a subdivision cage (a quick scan)."""
-    return _FACE.search(read_obj_bytes(str(path))) is not None
+    return _kinds(path)[1]
 
 
 @dataclass(frozen=True, eq=False)
