@@ -108,6 +108,14 @@ NURBS_ON_RAY = 1e-9
 # A normal dP/du x dP/dv shorter than this fraction of |dP/du|^2 + |dP/dv|^2 is taken as
 # degenerate (a side shrunk to a point): the normal is taken a short step inside the patch.
 NURBS_DEGENERATE = 1e-10
+# Each thread keeps the children of the top NURBS_MEMO_LEVELS levels of a patch's quadtree
+# (the splits every ray into the patch repeats: 85 nodes of 4 children) for up to
+# NURBS_MEMO_PATCHES patches at a time (slot = patch % slots), in at most NURBS_MEMO_BYTES
+# (bicubic patches: 204 KB a slot, so 64 slots, 13 MB; degree 9: 14 slots). Levels 3 and 4
+# measured: 25 % and 30 % off the trace time of the torus and plate scenes.
+NURBS_MEMO_LEVELS = 4
+NURBS_MEMO_PATCHES = 64
+NURBS_MEMO_BYTES = 16 << 20
 # The trim kd-tree (nurbs/trimtree.py): a node with at most TRIM_LEAF_UNITS monotone curve
 # units is a leaf; empty space of more than TRIM_EMPTY_FRACTION of a node's side is cut off
 # first as an empty leaf (classified once, inside or outside); no node is deeper than

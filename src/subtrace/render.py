@@ -12,14 +12,14 @@ triangles into quartic Bezier nets split per ray like the quads' (``trace/tris.p
 irregular Loop triangles into such nets and cells (``patches/isolate_loop.py``). The rays
 that asked are then traced again. Patches no ray reaches before a closer hit are never refined.
 Finally ``shade.py`` turns hits into image channels. The scene's free-form (trimmed NURBS)
-surfaces are traced after that in a pass of their own (:func:`nurbs_pass`,
-``nurbs/scene.py``), which overwrites a pixel's channels where its hit is nearer.
+surfaces are traced after that in a pass of their own
+(:func:`subtrace.nurbs.scene.nurbs_pass`), which overwrites a pixel's channels where its
+hit is nearer.
 """
 
 from __future__ import annotations
 
 import time
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -30,10 +30,10 @@ from subtrace.accel.bvh import build_bvh, no_bvh
 from subtrace.accel.projection import (boxes_in_view, no_tiles, project_shells,
                                       tiles_bytes)
 from subtrace.camera import camera_frame
-from subtrace.errors import SceneError, SubtraceWarning
+from subtrace.errors import SceneError
 from subtrace.io.limits import check_coordinates, check_valences
 from subtrace.mesh.cage import load_cage
-from subtrace.nurbs.scene import has_faces, has_surfaces, load_nurbs, render_nurbs
+from subtrace.nurbs.scene import has_faces, has_surfaces, load_nurbs, nurbs_pass
 from subtrace.patches.criterion import edge_sampling
 from subtrace.patches.table import build_patch_table, cage_face_shells
 from subtrace.runtime import threads as tasks
@@ -404,8 +404,8 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
                           dtype=np.float64).reshape(-1, 6)
         headlight = np.array([scene.render.headlight_intensity if scene.render.headlight
                               else 0.0])
-        nurbs_pass(nurbs, camera, tol_rad, None if table is None else hits.t, lights,
-                   headlight, planes, stats)
+        nurbs_pass(nurbs, camera_frame(camera), W, H, tol_rad,
+                   None if table is None else hits.t, lights, headlight, planes, stats)
         if progress is not None and table is None:
             progress(stats.rays, stats.rays, "NURBS")
     stats.pixels_covered = (int(covered.sum()) if nurbs is None
@@ -417,27 +417,6 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     used = "bvh" if stats.accel_fallback else accel
     refined = np.zeros(0, np.int32) if table is None else table.object_id[built]
     return RenderResult(channels, stats, camera, tol_rad, schemes, refined, used)
-
-
-def nurbs_pass(nurbs, camera, tol_rad, other_t, lights, headlight, planes, stats) -> None:
-    """Trace the scene's free-form surfaces and shade their hits nearer than ``other_t``
-    (the subdivision hits' distances; None: none) into ``planes``; a leaf held at the depth
-    limit above the tolerance is warned of and recorded as the ``precision`` cap."""
-    t0 = time.perf_counter()
-    n = camera.width * camera.height
-    other_t = np.full(n, np.inf) if other_t is None else other_t
-    hits = render_nurbs(nurbs, camera_frame(camera), camera.width, camera.height, tol_rad,
-                        other_t, lights, headlight, planes)
-    stats.patches += nurbs.model.n_patches
-    stats.max_depth = max(stats.max_depth, int(hits.level.max(initial=0)))
-    stats.patches_refined += len(np.unique(hits.patch[hits.patch >= 0]))  # (per ray)
-    if hits.capped:
-        warnings.warn(f"{hits.capped} NURBS sub-patches held at {config.NURBS_MAX_LEVEL} "
-                      "halvings above the tolerance", SubtraceWarning, stacklevel=3)
-        stats.depth_cap = max(stats.depth_cap, config.NURBS_MAX_LEVEL)
-        stats.depth_cap_reason = ("precision" if stats.depth_cap_reason == "none"
-                                  else stats.depth_cap_reason + ",precision")
-    stats.time_trace += time.perf_counter() - t0
 
 
 # the colour channels are linear Rec.709 / sRGB primaries with a D65 white point

@@ -7,14 +7,17 @@ BVH over its patches' shells, and per surface its scene object and colour (the o
 colour, else its material's diffuse colour). An object's polygon faces, if its file has any,
 are its subdivision cage as before (:func:`has_faces`).
 
-:func:`render_nurbs` traces the surfaces (:mod:`subtrace.nurbs.trace`) and shades the
+:func:`nurbs_pass` traces the surfaces (:mod:`subtrace.nurbs.trace`) and shades the
 pixels whose NURBS hit is nearer than what the subdivision pass found into the same channel
 planes (:data:`subtrace.shade.CHANNELS`), with the same two-sided Lambert lighting.
 """
 
 from __future__ import annotations
 
+import functools
+import os
 import re
+import time
 import warnings
 from dataclasses import dataclass
 
@@ -48,15 +51,33 @@ def _is_obj(path) -> bool:
     return not (is_usd(path) or is_mesh_file(path))
 
 
+@functools.lru_cache(maxsize=64)
+def _scan(path: str, mtime_ns: int, size: int) -> tuple[bool, bool]:
+    """(has a ``surf`` statement, has an ``f`` statement) of the OBJ file (one read per
+    version of the file: a render asks several times)."""
+    raw = read_obj_bytes(path)
+    return _SURF.search(raw) is not None, _FACE.search(raw) is not None
+
+
+def _kinds(path) -> tuple[bool, bool]:
+    path = str(path)
+    try:
+        st = os.stat(path)
+    except OSError:
+        read_obj_bytes(path)  # the reader's one-line error for a missing file
+        raise
+    return _scan(path, st.st_mtime_ns, st.st_size)
+
+
 def has_surfaces(path) -> bool:
     """The OBJ file has a ``surf`` statement (a quick scan of its bytes)."""
-    return _is_obj(path) and _SURF.search(read_obj_bytes(str(path))) is not None
+    return _is_obj(path) and _kinds(path)[0]
 
 
 def has_faces(path) -> bool:
     """The OBJ file has an ``f`` statement: a subdivision cage (a quick scan); meshes of
     other formats always are cages."""
-    return not _is_obj(path) or _FACE.search(read_obj_bytes(str(path))) is not None
+    return not _is_obj(path) or _kinds(path)[1]
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,12 +121,35 @@ def load_nurbs(scene, quiet: bool = False) -> NurbsScene | None:
                       np.array(colors, dtype=np.float64).reshape(-1, 3))
 
 
-def render_nurbs(nurbs: NurbsScene, frame, width, height, tol_rad, other_t, lights, headlight,
-                 planes) -> NurbsHits:
-    """Trace ``nurbs`` for every pixel and shade the hits nearer than ``other_t`` (n,)
-    (the other surfaces' distances, inf: none) into ``planes`` (len(CHANNELS), n) float32;
-    ``lights`` (L, 6), ``headlight`` (1,) as :func:`subtrace.shade.shade` takes them.
-    Returns the hits (only those shaded keep their patch; the others get -1)."""
+def nurbs_pass(nurbs: NurbsScene, frame, width, height, tol_rad, other_t, lights, headlight,
+               planes, stats) -> NurbsHits:
+    """The render's NURBS pass: trace ``nurbs`` for every pixel and shade the hits nearer
+    than ``other_t`` (n,) (the subdivision hits' distances; None: none) into ``planes``
+    (len(CHANNELS), n) float32; ``lights`` (L, 6), ``headlight`` (1,) as
+    :func:`subtrace.shade.shade` takes them. Counts go into ``stats``
+    (:class:`subtrace.render.RenderStats`): patches, the deepest split, the patches hit; a
+    leaf held at NURBS_MAX_LEVEL above the tolerance is warned of and recorded as the
+    ``precision`` cap. Returns the hits (those not shaded get patch -1)."""
+    t0 = time.perf_counter()
+    if other_t is None:
+        other_t = np.full(width * height, np.inf)
+    hits = _shade_nearer(nurbs, frame, width, height, tol_rad, other_t, lights, headlight,
+                         planes)
+    stats.patches += nurbs.model.n_patches
+    stats.max_depth = max(stats.max_depth, int(hits.level.max(initial=0)))
+    stats.patches_refined += len(np.unique(hits.patch[hits.patch >= 0]))  # (per ray)
+    if hits.capped:
+        warnings.warn(f"{hits.capped} NURBS sub-patches held at {config.NURBS_MAX_LEVEL} "
+                      "halvings above the tolerance", SubtraceWarning, stacklevel=3)
+        stats.depth_cap = max(stats.depth_cap, config.NURBS_MAX_LEVEL)
+        stats.depth_cap_reason = ("precision" if stats.depth_cap_reason == "none"
+                                  else stats.depth_cap_reason + ",precision")
+    stats.time_trace += time.perf_counter() - t0
+    return hits
+
+
+def _shade_nearer(nurbs, frame, width, height, tol_rad, other_t, lights, headlight, planes):
+    """Trace and shade (see :func:`nurbs_pass`)."""
     hits = trace_nurbs(nurbs.model, nurbs.bvh, frame, width, height, tol_rad)
     near = np.nonzero(hits.t < other_t)[0]
     keep = np.zeros(len(hits.t), dtype=np.bool_)

@@ -1,4 +1,4 @@
-"""Ray / trimmed NURBS patch intersection by per-ray refinement (nothing stored).
+"""Ray / trimmed NURBS patch intersection by per-ray refinement.
 
 Each rational Bezier patch of a :class:`~subtrace.nurbs.model.NurbsModel` is traced as the
 renderer traces its other Bezier pieces, after docs/seeds.md sections 3 and 4:
@@ -35,6 +35,9 @@ patch's parametrisation degenerates, a sphere's pole, the limit of the normal fr
 the patch) and surface parameters (u, v). :func:`trace_rays` traces any rays;
 :func:`line_roots_task` finds every root along lines (:mod:`subtrace.lines.nurbs`).
 
+Nothing is stored per ray; each thread keeps the children of the top NURBS_MEMO_LEVELS
+levels of the quadtrees of the patches it visits last (:func:`_children`), which every ray
+into a patch would otherwise split again (the same arithmetic: images do not change).
 Every sub-patch's work is inlined into the descent (``inline_njit``): a call per child
 passing the stack's arrays cost more than the box and slab it computes.
 """
@@ -60,6 +63,8 @@ NEWTON_TOL = config.NURBS_NEWTON_TOL
 # the descent's stack: each level pops one sub-patch and pushes at most four
 DESCENT_STACK = 3 * MAX_LEVEL + 8
 TRIM_STACK = config.TRIM_STACK_SIZE
+MEMO_SLOTS = config.NURBS_MEMO_PATCHES
+MEMO_LEVELS = config.NURBS_MEMO_LEVELS
 _NUDGES = (1e-7, 1e-5, 1e-3)
 # a sub-patch's slab is widened by this much of its largest |n_k P_k| sum (rounding of n . P)
 SLAB_PAD = 1e-12  # steps towards the patch centre for a degenerate normal
@@ -92,13 +97,12 @@ def patch_bvh(model) -> BVH:
 # ------------------------------------------------------------------------------------------
 
 @inline_njit
-def _net_shell(net, du, dv, proj, ray, inv, tlo, thi):
-    """(entry, lo0, lo1, lo2, hi0, hi1, hi2) of the ray into the shell of the sub-patch
-    ``net``: the box of its projected control points ``H / w`` (padded by BOX_PAD for
-    rounding) cut by the slab between the planes, normal to its corners' diagonals'
-    cross product, through its extreme control points (padded likewise). The sub-patch lies
-    in the convex hull of its projected control points (positive weights), so in both.
-    entry is inf where the ray misses the shell within [tlo, thi]; ``proj`` (>= du+1,
+def _shell(net, du, dv, proj, g):
+    """The shell of the sub-patch ``net`` into ``g`` (11,): the box of its projected control
+    points ``H / w`` (lo (3), hi (3), padded by BOX_PAD for rounding), and the slab between
+    the planes normal to its corners' diagonals' cross product ``n`` (3) through its extreme
+    control points (n . P from lo to hi, padded likewise). The sub-patch lies in the convex
+    hull of its projected control points (positive weights), so in both. ``proj`` (>= du+1,
     >= dv+1, >= 3) receives the projected points."""
     lo0 = lo1 = lo2 = np.inf
     hi0 = hi1 = hi2 = -np.inf
@@ -110,12 +114,7 @@ def _net_shell(net, du, dv, proj, ray, inv, tlo, thi):
             lo0, hi0 = min(lo0, x), max(hi0, x)
             lo1, hi1 = min(lo1, y), max(hi1, y)
             lo2, hi2 = min(lo2, z), max(hi2, z)
-    lo0, lo1, lo2, hi0, hi1, hi2 = pad_box(lo0, lo1, lo2, hi0, hi1, hi2)
-    ox, oy, oz, dx, dy, dz = ray
-    tn, tf = slab_range(ox, oy, oz, inv[0], inv[1], inv[2], lo0, lo1, lo2, hi0, hi1, hi2, tlo,
-                        thi)
-    if tn == np.inf:
-        return np.inf, lo0, lo1, lo2, hi0, hi1, hi2
+    g[0], g[1], g[2], g[3], g[4], g[5] = pad_box(lo0, lo1, lo2, hi0, hi1, hi2)
     # the slab: n = (P_dd - P_00) x (P_0d - P_d0), range of n . P over the control points
     ax, ay, az = (proj[du, dv, 0] - proj[0, 0, 0], proj[du, dv, 1] - proj[0, 0, 1],
                   proj[du, dv, 2] - proj[0, 0, 2])
@@ -130,8 +129,19 @@ def _net_shell(net, du, dv, proj, ray, inv, tlo, thi):
             lo, hi = min(lo, h), max(hi, h)
             big = max(big, abs(nx * x) + abs(ny * y) + abs(nz * z))
     pad = SLAB_PAD * big
-    lo -= pad
-    hi += pad
+    g[6], g[7], g[8], g[9], g[10] = nx, ny, nz, lo - pad, hi + pad
+
+
+@inline_njit
+def _shell_entry(g, ray, inv, tlo, thi):
+    """Entry distance of the ray into the shell ``g`` (:func:`_shell`) within [tlo, thi]
+    (inf: a miss)."""
+    ox, oy, oz, dx, dy, dz = ray
+    tn, tf = slab_range(ox, oy, oz, inv[0], inv[1], inv[2], g[0], g[1], g[2], g[3], g[4], g[5],
+                        tlo, thi)
+    if tn == np.inf:
+        return np.inf
+    nx, ny, nz, lo, hi = g[6], g[7], g[8], g[9], g[10]
     h0 = nx * ox + ny * oy + nz * oz
     hd = nx * dx + ny * dy + nz * dz
     if hd != 0.0:
@@ -139,10 +149,41 @@ def _net_shell(net, du, dv, proj, ray, inv, tlo, thi):
         tn = max(tn, min(t1, t2))
         tf = min(tf, max(t1, t2))
         if not tn <= tf:
-            return np.inf, lo0, lo1, lo2, hi0, hi1, hi2
+            return np.inf
     elif not lo <= h0 <= hi:
-        return np.inf, lo0, lo1, lo2, hi0, hi1, hi2
-    return tn, lo0, lo1, lo2, hi0, hi1, hi2
+        return np.inf
+    return tn
+
+
+@inline_njit
+def _children(sub, du, dv, kids, cb, memo, p, q):
+    """The four children of the sub-patch ``sub`` into ``kids[:4]`` and their shells into
+    ``cb[:4]``: from the thread's memo when node ``q`` (heap numbering: children of q are
+    4 q + 1 .. 4 q + 4) of patch ``p`` is one it keeps and has split before, else split
+    (and kept when it is one the memo keeps). ``memo``: (nets, shells, split flags, slot
+    patch) of :func:`_scratch`; a patch takes slot p % slots."""
+    mnets, mshells, mflags, mtag = memo
+    keep = q < mflags.shape[1] and mflags.shape[0] > 0
+    if keep:
+        slot = p % mflags.shape[0]
+        if mtag[slot] != p:  # the slot held another patch: forget it
+            mtag[slot] = p
+            mflags[slot, :] = False
+        if mflags[slot, q]:
+            for c in range(4):
+                _copy(mnets[slot, q, c], kids[c], du, dv)
+                for k in range(11):
+                    cb[c, k] = mshells[slot, q, c, k]
+            return
+    _split(sub, du, dv, kids)
+    for c in range(4):
+        _shell(kids[c], du, dv, kids[5], cb[c])
+    if keep:
+        for c in range(4):
+            _copy(kids[c], mnets[slot, q, c], du, dv)
+            for k in range(11):
+                mshells[slot, q, c, k] = cb[c, k]
+        mflags[slot, q] = True
 
 
 @inline_njit
@@ -363,16 +404,14 @@ def _leaf_root(net0, du, dv, sub, r, ray, work, out):
 
 
 @inline_njit
-def _push_children(kids, cb, du, dv, r, level, ray, inv, tlo, thi, sn, sr, sl, st, sp):
-    """Push the children of a split sub-patch (``kids[:4]``, rectangle ``r``) whose boxes the
-    ray enters within [tlo, thi] onto the stack, farthest first, each with its rectangle and
-    box (``sr`` row: s0, s1, t0, t1, box (6)); returns the stack size. ``cb`` (8, 4) holds
-    the children's entries and boxes meanwhile, ``kids[5]`` their projected points."""
-    bounds = cb
+def _push_children(kids, cb, du, dv, r, level, q, ray, inv, tlo, thi, stack, sp):
+    """Push the children of a split sub-patch (``kids[:4]``, shells ``cb[:4]``, rectangle
+    ``r``, node ``q``) whose shells the ray enters within [tlo, thi] onto the stack,
+    farthest first, each with its rectangle and box (``sr`` row: s0, s1, t0, t1, box (6)),
+    level, entry distance and node number; returns the stack size."""
+    sn, sr, sl, st, sq = stack
     for c in range(4):
-        b = _net_shell(kids[c], du, dv, kids[5], ray, inv, tlo, thi)
-        for k in range(7):
-            bounds[k, c] = b[k]
+        cb[c, 11] = _shell_entry(cb[c], ray, inv, tlo, thi)
     ms, mt = 0.5 * (r[0] + r[1]), 0.5 * (r[2] + r[3])
     done = 0
     for _ in range(4):
@@ -380,7 +419,7 @@ def _push_children(kids, cb, du, dv, r, level, ray, inv, tlo, thi, sn, sr, sl, s
         c = -1
         far = -np.inf
         for k in range(4):
-            tk = bounds[0, k]
+            tk = cb[k, 11]
             if not (done >> k) & 1 and tk < np.inf and (c < 0 or tk > far):
                 c, far = k, tk
         if c < 0:
@@ -390,11 +429,31 @@ def _push_children(kids, cb, du, dv, r, level, ray, inv, tlo, thi, sn, sr, sl, s
         sr[sp, 0], sr[sp, 1] = (r[0], ms) if c % 2 == 0 else (ms, r[1])
         sr[sp, 2], sr[sp, 3] = (r[2], mt) if c < 2 else (mt, r[3])
         for k in range(6):
-            sr[sp, 4 + k] = bounds[1 + k, c]
+            sr[sp, 4 + k] = cb[c, k]
         sl[sp] = level + 1
         st[sp] = far
+        sq[sp] = 4 * q + 1 + c
         sp += 1
     return sp
+
+
+@inline_njit
+def _push_root(net0, du, dv, kids, cb, ray, inv, tlo, thi, stack):
+    """Put patch ``net0`` on the stack if the ray enters its shell within [tlo, thi];
+    returns the stack size (0 or 1)."""
+    sn, sr, sl, st, sq = stack
+    _shell(net0, du, dv, kids[5], cb[0])
+    te = _shell_entry(cb[0], ray, inv, tlo, thi)
+    if te == np.inf:
+        return 0
+    _copy(net0, sn[0], du, dv)
+    sr[0, 0], sr[0, 1], sr[0, 2], sr[0, 3] = 0.0, 1.0, 0.0, 1.0
+    for k in range(6):
+        sr[0, 4 + k] = cb[0, k]
+    sl[0] = 0
+    st[0] = te
+    sq[0] = 0
+    return 1
 
 
 @leaf_njit
@@ -404,20 +463,11 @@ def _descend(net0, du, dv, p, rect, surface, ray, inv, tlo, thi, tol, tables, sc
     leaves held at MAX_LEVEL above the tolerance. ``tables``: (surface_trim,
     surface_invert, trim arrays); ``scratch``: :func:`_scratch`'s buffers."""
     surface_trim, surface_invert, trim = tables
-    sn, sr, sl, st, kids, work, out, tstack, cb = scratch
+    stack, kids, work, out, tstack, cb, memo = scratch
+    sn, sr, sl, st, sq = stack
     ox, oy, oz = ray[0], ray[1], ray[2]
     best, fs, ft, flev, capped = thi, 0.0, 0.0, -1, 0
-    b = _net_shell(net0, du, dv, kids[5], ray, inv, tlo, best)
-    te = b[0]
-    if te == np.inf:
-        return False, best, fs, ft, flev, capped
-    _copy(net0, sn[0], du, dv)
-    sr[0, 0], sr[0, 1], sr[0, 2], sr[0, 3] = 0.0, 1.0, 0.0, 1.0
-    for k in range(6):
-        sr[0, 4 + k] = b[1 + k]
-    sl[0] = 0
-    st[0] = te
-    sp = 1
+    sp = _push_root(net0, du, dv, kids, cb, ray, inv, tlo, best, stack)
     while sp > 0:
         sp -= 1
         if st[sp] > best:  # a nearer hit was found since it was pushed
@@ -439,22 +489,31 @@ def _descend(net0, du, dv, p, rect, surface, ray, inv, tlo, thi, tol, tables, sc
                 best, fs, ft, flev = d, s, t, level
             continue
         r = (sr[sp, 0], sr[sp, 1], sr[sp, 2], sr[sp, 3])
-        _split(sub, du, dv, kids)
-        sp = _push_children(kids, cb, du, dv, r, level, ray, inv, tlo, best, sn, sr, sl, st, sp)
+        _children(sub, du, dv, kids, cb, memo, p, sq[sp])
+        sp = _push_children(kids, cb, du, dv, r, level, sq[sp], ray, inv, tlo, best, stack, sp)
     return flev >= 0, best, fs, ft, flev, capped
 
 
 @nb.njit(cache=True)
 def _scratch(max_du, max_dv):
     """Per-thread buffers of :func:`_descend` (each thread its own): the descent stack
-    (nets, rectangles with boxes, levels, entry distances), the split's children, the work
-    and output of :func:`~subtrace.nurbs.bezier.patch_eval`, the trim test's stack, the
-    children's bounds."""
-    return (np.zeros((DESCENT_STACK, max_du + 1, max_dv + 1, 4)), np.zeros((DESCENT_STACK, 10)),
-            np.zeros(DESCENT_STACK, np.int64), np.zeros(DESCENT_STACK),
-            np.zeros((6, max_du + 1, max_dv + 1, 4)),
-            np.zeros((4, config.NURBS_MAX_DEGREE + 1, 4)), np.zeros((3, 3)),
-            np.zeros(TRIM_STACK, np.int64), np.zeros((8, 4)))
+    (nets, rectangles with boxes, levels, entry distances, node numbers), the split's
+    children, the work and output of :func:`~subtrace.nurbs.bezier.patch_eval`, the trim
+    test's stack, the children's shells and entries, and the memo: for MEMO_SLOTS patches
+    (fewer where they would take more than NURBS_MEMO_BYTES) the children of their nodes above level NURBS_MEMO_LEVELS (nets, shells, which
+    nodes are split, the patch each slot holds). The memo changes the work, never a hit
+    (the same arithmetic makes the same children), so images do not depend on it."""
+    shape = (max_du + 1, max_dv + 1, 4)
+    nodes = (4 ** MEMO_LEVELS - 1) // 3
+    per_slot = nodes * 4 * ((max_du + 1) * (max_dv + 1) * 4 + 11) * 8
+    memo_slots = max(1, min(MEMO_SLOTS, config.NURBS_MEMO_BYTES // per_slot))
+    stack = (np.zeros((DESCENT_STACK,) + shape), np.zeros((DESCENT_STACK, 10)),
+             np.zeros(DESCENT_STACK, np.int64), np.zeros(DESCENT_STACK),
+             np.zeros(DESCENT_STACK, np.int64))
+    memo = (np.zeros((memo_slots, nodes, 4) + shape), np.zeros((memo_slots, nodes, 4, 11)),
+            np.zeros((memo_slots, nodes), np.bool_), np.full(memo_slots, -1, np.int64))
+    return (stack, np.zeros((6,) + shape), np.zeros((4, config.NURBS_MAX_DEGREE + 1, 4)),
+            np.zeros((3, 3)), np.zeros(TRIM_STACK, np.int64), np.zeros((4, 12)), memo)
 
 
 @leaf_njit
@@ -668,15 +727,9 @@ def _line_roots(net0, du, dv, rect, surface, ray, inv, tlo, thi, tol_flat, table
     line enters are split until flat within ``tol_flat`` (or MAX_LEVEL), then Newton's root
     of each leaf is taken as for rays. Returns the new count."""
     surface_trim, surface_invert, trim = tables
-    sn, sr, sl, st, kids, work, out3, tstack, cb = scratch
-    te = _net_shell(net0, du, dv, kids[5], ray, inv, tlo, thi)[0]
-    if te == np.inf:
-        return n
-    _copy(net0, sn[0], du, dv)
-    sr[0, 0], sr[0, 1], sr[0, 2], sr[0, 3] = 0.0, 1.0, 0.0, 1.0
-    sl[0] = 0
-    st[0] = te
-    sp = 1
+    stack, kids, work, out3, tstack, cb, memo = scratch
+    sn, sr, sl, _, sq = stack
+    sp = _push_root(net0, du, dv, kids, cb, ray, inv, tlo, thi, stack)
     while sp > 0:
         sp -= 1
         sub = sn[sp]
@@ -690,8 +743,8 @@ def _line_roots(net0, du, dv, rect, surface, ray, inv, tlo, thi, tol_flat, table
                 n += 1
             continue
         r = (sr[sp, 0], sr[sp, 1], sr[sp, 2], sr[sp, 3])
-        _split(sub, du, dv, kids)
-        sp = _push_children(kids, cb, du, dv, r, level, ray, inv, tlo, thi, sn, sr, sl, st, sp)
+        _children(sub, du, dv, kids, cb, memo, p, sq[sp])
+        sp = _push_children(kids, cb, du, dv, r, level, sq[sp], ray, inv, tlo, thi, stack, sp)
     return n
 
 
