@@ -7,7 +7,8 @@ over ``shade.py`` and ``trace/rays.py``; no kernels here).
   any-hit rays through the BVH of the shells (``trace/rays.py``);
 * the lighting (``shade.light``: Lambert plus the materials' Blinn-Phong lobe);
 * the background (a colour or a vertical gradient) and the ground (``[ground]``);
-* adaptive anti-aliasing (``[render] samples`` / ``--samples N``): every pixel keeps its
+* adaptive anti-aliasing (``[render] samples`` / ``--samples N``; the API's default is one
+  ray per pixel, the command line's ``io.scene.DEFAULT_SAMPLES``): every pixel keeps its
   centre ray, which alone writes depth, normal, ids, level and (u, v), so regression
   comparisons stay exact; a pixel that differs from a neighbour (coverage, object, a depth
   step, a normal jump, a contrast in the displayed colour: :func:`edge_pixels`) gets N - 1
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 import math
 import time
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -82,12 +84,21 @@ def edge_pixels(planes, width, height) -> np.ndarray:
 
 def _pools(keep, stats) -> Pools:
     """The primary trace's pools for secondary rays (the BVH of the shells built here when
-    primary rays used the projection)."""
+    primary rays used the projection). What secondary rays build is counted apart
+    (:func:`_count_secondary`), so the primary counts mean what they meant."""
     t0 = time.perf_counter()
     if not len(keep["bvh"].node_first):
         keep["bvh"] = build_bvh(keep["shell_min"], keep["shell_max"])
     stats.time_preprocess += time.perf_counter() - t0
-    return Pools(**keep)
+    side = SimpleNamespace(pieces=0, micro_triangles=0, grid_points=0, patches_refined=0)
+    return Pools(**dict(keep, stats=side))
+
+
+def _count_secondary(pools, stats) -> None:
+    """The patches and micro-triangles secondary rays built, into ``stats``."""
+    if pools is not None:
+        stats.secondary_patches_refined = pools.stats.patches_refined
+        stats.secondary_micro_triangles = pools.stats.micro_triangles
 
 
 def paint(scene, cages, camera, keep, hits, normals, pix_patch, patches, planes, stats):
@@ -98,7 +109,7 @@ def paint(scene, cages, camera, keep, hits, normals, pix_patch, patches, planes,
     for secondary rays. Counts and times go to ``stats``."""
     W, H = camera.width, camera.height
     frame = camera.frame()
-    samples = scene.render.samples
+    samples = scene.render.samples or 1
     lights = light_array(scene.lights)
     shadows = bool(len(lights)) and scene.render.shadows
     pools = _pools(keep, stats) if shadows or samples > 1 else None
@@ -122,6 +133,7 @@ def paint(scene, cages, camera, keep, hits, normals, pix_patch, patches, planes,
         _antialias(scene, frame, W, H, pools, patches, planes, lights, ground, trace_shadows,
                    samples, stats)
         stats.time_aa += time.perf_counter() - t0
+    _count_secondary(pools, stats)
 
 
 def _ground(scene, cages, camera):

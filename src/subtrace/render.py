@@ -78,6 +78,10 @@ class RenderStats:
     aa_pixels: int = 0  # pixels that got more than their centre ray (--samples)
     aa_rays: int = 0  # the extra rays they got
     time_aa: float = 0.0  # of time_shade: tracing and shading the extra rays
+    # built for secondary rays (shadow and anti-aliasing rays: patches no primary ray had
+    # reached, micro-triangles they evaluated), not counted in the primary counts above
+    secondary_patches_refined: int = 0
+    secondary_micro_triangles: int = 0
 
     def as_attributes(self) -> dict:
         return {f"subtrace:{k}": v for k, v in self.__dict__.items()}

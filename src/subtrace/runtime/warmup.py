@@ -79,10 +79,11 @@ def compile_kernels(threads: int) -> None:
         misses = hit_arrays(2)  # two pixels, both missed: the output planes' layout
         misses.t[:] = np.inf
         patches = PatchShading(np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros((0, 2)),
-                               np.zeros(0), np.zeros(0, np.int8), np.zeros((0, 3)))
-        shade(frame, 1, misses, grids, iso, patches, np.zeros((0, 6)), np.zeros(1),
-              miss_values((0.0, 0.0, 0.0)), np.zeros((len(CHANNELS), 2), np.float32),
-              np.zeros(threads, np.int64))
+                               np.zeros(0), np.zeros(0, np.int8), np.zeros((0, 3)),
+                               np.zeros((0, 3)), np.zeros(0))
+        shade(frame, 1, misses, grids, iso, patches, miss_values((0.0, 0.0, 0.0)),
+              np.zeros((len(CHANNELS), 2), np.float32), np.zeros((2, 3)),
+              np.zeros(2, np.int64), np.zeros(threads, np.int64))
     finally:
         tasks.set_threads(None)
 
