@@ -25,18 +25,15 @@ on the thread count.
 
 from __future__ import annotations
 
-import math
 import time
 from types import SimpleNamespace
 
 import numpy as np
 
-from subtrace import config
 from subtrace.accel.bvh import build_bvh
 from subtrace.runtime import threads as tasks
-from subtrace.shade import (C_A, C_N, C_OBJECT, C_R, C_Z, CHANNELS, background_rows,
-                            ground_pixels, light, light_array, miss_values, shade,
-                            shadow_visibility)
+from subtrace.shade import (C_A, C_R, CHANNELS, background_rows, edge_pixels, ground_pixels,
+                            light, light_array, miss_values, shade, shadow_visibility)
 from subtrace.trace.rays import Pools, trace_rays
 
 # the R2 sequence's steps (the plastic number's powers): well-spread points in a square
@@ -51,35 +48,6 @@ def sample_offsets(samples: int) -> np.ndarray:
     the samples. Fixed: the same for every pixel and run."""
     k = np.arange(1, samples, dtype=np.float64)[:, None]
     return np.mod(0.5 + k * np.asarray(_R2), 1.0) - 0.5
-
-
-def edge_pixels(planes, width, height) -> np.ndarray:
-    """(height, width) bool: pixels that differ from their right or lower neighbour (both
-    of a pair are marked) in coverage or object id, by a depth step (more than
-    ``config.AA_DEPTH_STEP`` of the nearer depth), a normal jump (more than
-    ``config.AA_NORMAL_DEG``) or a contrast in displayed luminance (sRGB, more than
-    ``config.AA_CONTRAST``): silhouettes, folds, creases, shadow edges."""
-    hit = planes[C_A].reshape(height, width) > 0
-    obj = planes[C_OBJECT].reshape(height, width)
-    z = planes[C_Z].reshape(height, width).astype(np.float64)
-    n = planes[C_N:C_N + 3].reshape(3, height, width).astype(np.float64)
-    lum = (0.2126 * planes[C_R] + 0.7152 * planes[C_R + 1] + 0.0722 * planes[C_R + 2])
-    lum = np.where(lum <= 0.0031308, 12.92 * lum, 1.055 * np.abs(lum) ** (1 / 2.4) - 0.055)
-    lum = np.clip(lum, 0.0, 1.0).reshape(height, width)
-    cos_jump = math.cos(math.radians(config.AA_NORMAL_DEG))
-    flag = np.zeros((height, width), bool)
-    for a, b in (((slice(None), slice(0, -1)), (slice(None), slice(1, None))),
-                 ((slice(0, -1), slice(None)), (slice(1, None), slice(None)))):
-        both = hit[a] & hit[b]
-        with np.errstate(invalid="ignore"):
-            step = np.abs(z[a] - z[b]) > config.AA_DEPTH_STEP * np.minimum(z[a], z[b])
-        differ = ((hit[a] != hit[b]) | (both & ((obj[a] != obj[b]) | step
-                                                | ((n[(slice(None),) + a] * n[(slice(None),) + b])
-                                                   .sum(axis=0) < cos_jump)))
-                  | (np.abs(lum[a] - lum[b]) > config.AA_CONTRAST))
-        flag[a] |= differ
-        flag[b] |= differ
-    return flag
 
 
 def _pools(keep, stats) -> Pools:

@@ -323,6 +323,8 @@ def result_attributes(result: RenderResult, scene) -> dict:
     attrs["chromaticities"] = REC709_CHROMATICITIES
     attrs["subtrace:Z"] = "distance from the eye along the pixel's ray (not camera-space z)"
     attrs["subtrace:accel"] = result.accel
+    attrs["subtrace:samples"] = int(scene.render.samples or 1)  # rays per edge pixel at most
+    attrs["subtrace:shadows"] = int(bool(scene.render.shadows and scene.lights))
     for k, v in result.stats.__dict__.items():
         attrs[f"subtrace:{k}"] = (v if isinstance(v, str) else float(v) if isinstance(v, float)
                                   else int(v))
