@@ -246,8 +246,10 @@ def _prepare(scene, cages, stats):
     hi = table.shell_max.max(axis=0)
     points = None
     if scene.camera.is_auto:
-        # frame the limit surface: the level-1 limit points of every object
-        points = np.concatenate([c.limit(1 if c.n_faces < 200000 else 0)[0] for c in cages])
+        # frame the limit surface: limit points of every object (level 2 on small cages,
+        # whose level-1 points are too sparse to reach the silhouette)
+        points = np.concatenate([c.limit(2 if c.n_faces < 20000 else 1 if c.n_faces < 200000
+                                         else 0)[0] for c in cages])
         lo, hi = points.min(axis=0), points.max(axis=0)
     camera = scene.make_camera(lo, hi, points)
     budget = scene.render.max_memory
