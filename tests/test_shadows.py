@@ -104,10 +104,12 @@ def test_shadow_rays_build_what_primary_rays_left(cube, tmp_path):
     the ground towards the light; they are counted."""
     result = render_scene(_scene(cube, tmp_path))
     st = result.stats
-    assert st.shadow_rays > 0
+    assert st.shadow_rays > 0 and st.secondary_patches_refined > 0
+    assert st.secondary_micro_triangles > 0
     no = render_scene(_scene(cube, tmp_path, shadows=False)).stats
-    assert no.shadow_rays == 0
-    assert st.patches_refined > no.patches_refined
+    assert no.shadow_rays == 0 and no.secondary_patches_refined == 0
+    # the primary counts are the primary rays' alone
+    assert (st.patches_refined, st.micro_triangles) == (no.patches_refined, no.micro_triangles)
 
 
 def test_shadows_do_not_depend_on_the_threads(cube, tmp_path):

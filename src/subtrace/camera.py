@@ -31,7 +31,7 @@ MAX_RESOLUTION = 32768  # pixels per side, inclusive
 # auto_camera: from the box centre towards the eye: a three-quarter view from the front
 # (+z, the usual front of an OBJ model), about 22 degrees above the horizon
 AUTO_VIEW_DIRECTION = (1.0, 0.62, 1.3)
-AUTO_MARGIN = 1.1  # auto_camera: the box's corners fill at most 1 / 1.1 of the half-image
+AUTO_MARGIN = 1.15  # auto_camera: what it frames fills at most 1 / 1.15 of the half-image
 # up within this angle (radians) of the view direction is "parallel": the frame is undefined
 _MIN_UP_ANGLE = 1e-6
 

@@ -7,7 +7,8 @@ over ``shade.py`` and ``trace/rays.py``; no kernels here).
   any-hit rays through the BVH of the shells (``trace/rays.py``);
 * the lighting (``shade.light``: Lambert plus the materials' Blinn-Phong lobe);
 * the background (a colour or a vertical gradient) and the ground (``[ground]``);
-* adaptive anti-aliasing (``[render] samples`` / ``--samples N``): every pixel keeps its
+* adaptive anti-aliasing (``[render] samples`` / ``--samples N``; the API's default is one
+  ray per pixel, the command line's ``io.scene.DEFAULT_SAMPLES``): every pixel keeps its
   centre ray, which alone writes depth, normal, ids, level and (u, v), so regression
   comparisons stay exact; a pixel that differs from a neighbour (coverage, object, a depth
   step, a normal jump, a contrast in the displayed colour: :func:`edge_pixels`) gets N - 1
@@ -24,17 +25,15 @@ on the thread count.
 
 from __future__ import annotations
 
-import math
 import time
+from types import SimpleNamespace
 
 import numpy as np
 
-from subtrace import config
 from subtrace.accel.bvh import build_bvh
 from subtrace.runtime import threads as tasks
-from subtrace.shade import (C_A, C_N, C_OBJECT, C_R, C_Z, CHANNELS, background_rows,
-                            ground_pixels, light, light_array, miss_values, shade,
-                            shadow_visibility)
+from subtrace.shade import (C_A, C_R, CHANNELS, background_rows, edge_pixels, ground_pixels,
+                            light, light_array, miss_values, shade, shadow_visibility)
 from subtrace.trace.rays import Pools, trace_rays
 
 # the R2 sequence's steps (the plastic number's powers): well-spread points in a square
@@ -51,43 +50,23 @@ def sample_offsets(samples: int) -> np.ndarray:
     return np.mod(0.5 + k * np.asarray(_R2), 1.0) - 0.5
 
 
-def edge_pixels(planes, width, height) -> np.ndarray:
-    """(height, width) bool: pixels that differ from their right or lower neighbour (both
-    of a pair are marked) in coverage or object id, by a depth step (more than
-    ``config.AA_DEPTH_STEP`` of the nearer depth), a normal jump (more than
-    ``config.AA_NORMAL_DEG``) or a contrast in displayed luminance (sRGB, more than
-    ``config.AA_CONTRAST``): silhouettes, folds, creases, shadow edges."""
-    hit = planes[C_A].reshape(height, width) > 0
-    obj = planes[C_OBJECT].reshape(height, width)
-    z = planes[C_Z].reshape(height, width).astype(np.float64)
-    n = planes[C_N:C_N + 3].reshape(3, height, width).astype(np.float64)
-    lum = (0.2126 * planes[C_R] + 0.7152 * planes[C_R + 1] + 0.0722 * planes[C_R + 2])
-    lum = np.where(lum <= 0.0031308, 12.92 * lum, 1.055 * np.abs(lum) ** (1 / 2.4) - 0.055)
-    lum = np.clip(lum, 0.0, 1.0).reshape(height, width)
-    cos_jump = math.cos(math.radians(config.AA_NORMAL_DEG))
-    flag = np.zeros((height, width), bool)
-    for a, b in (((slice(None), slice(0, -1)), (slice(None), slice(1, None))),
-                 ((slice(0, -1), slice(None)), (slice(1, None), slice(None)))):
-        both = hit[a] & hit[b]
-        with np.errstate(invalid="ignore"):
-            step = np.abs(z[a] - z[b]) > config.AA_DEPTH_STEP * np.minimum(z[a], z[b])
-        differ = ((hit[a] != hit[b]) | (both & ((obj[a] != obj[b]) | step
-                                                | ((n[(slice(None),) + a] * n[(slice(None),) + b])
-                                                   .sum(axis=0) < cos_jump)))
-                  | (np.abs(lum[a] - lum[b]) > config.AA_CONTRAST))
-        flag[a] |= differ
-        flag[b] |= differ
-    return flag
-
-
 def _pools(keep, stats) -> Pools:
     """The primary trace's pools for secondary rays (the BVH of the shells built here when
-    primary rays used the projection)."""
+    primary rays used the projection). What secondary rays build is counted apart
+    (:func:`_count_secondary`), so the primary counts mean what they meant."""
     t0 = time.perf_counter()
     if not len(keep["bvh"].node_first):
         keep["bvh"] = build_bvh(keep["shell_min"], keep["shell_max"])
     stats.time_preprocess += time.perf_counter() - t0
-    return Pools(**keep)
+    side = SimpleNamespace(pieces=0, micro_triangles=0, grid_points=0, patches_refined=0)
+    return Pools(**dict(keep, stats=side))
+
+
+def _count_secondary(pools, stats) -> None:
+    """The patches and micro-triangles secondary rays built, into ``stats``."""
+    if pools is not None:
+        stats.secondary_patches_refined = pools.stats.patches_refined
+        stats.secondary_micro_triangles = pools.stats.micro_triangles
 
 
 def paint(scene, cages, camera, keep, hits, normals, pix_patch, patches, planes, stats):
@@ -98,7 +77,7 @@ def paint(scene, cages, camera, keep, hits, normals, pix_patch, patches, planes,
     for secondary rays. Counts and times go to ``stats``."""
     W, H = camera.width, camera.height
     frame = camera.frame()
-    samples = scene.render.samples
+    samples = scene.render.samples or 1
     lights = light_array(scene.lights)
     shadows = bool(len(lights)) and scene.render.shadows
     pools = _pools(keep, stats) if shadows or samples > 1 else None
@@ -122,6 +101,7 @@ def paint(scene, cages, camera, keep, hits, normals, pix_patch, patches, planes,
         _antialias(scene, frame, W, H, pools, patches, planes, lights, ground, trace_shadows,
                    samples, stats)
         stats.time_aa += time.perf_counter() - t0
+    _count_secondary(pools, stats)
 
 
 def _ground(scene, cages, camera):

@@ -85,6 +85,10 @@ class RenderStats:
     aa_pixels: int = 0  # pixels that got more than their centre ray (--samples)
     aa_rays: int = 0  # the extra rays they got
     time_aa: float = 0.0  # of time_shade: tracing and shading the extra rays
+    # built for secondary rays (shadow and anti-aliasing rays: patches no primary ray had
+    # reached, micro-triangles they evaluated), not counted in the primary counts above
+    secondary_patches_refined: int = 0
+    secondary_micro_triangles: int = 0
 
     def as_attributes(self) -> dict:
         return {f"subtrace:{k}": v for k, v in self.__dict__.items()}
@@ -315,15 +319,16 @@ def _prepare(scene, cages, stats, nurbs=None):
     t0 = time.perf_counter()
     lo = hi = points = None
     if scene.camera.is_auto:
-        # frame the limit surface: the level-1 limit points of every object (and the
-        # free-form surfaces' control points)
+        # frame the limit surface: limit points of every object (level 2 on small cages,
+        # whose level-1 points are too sparse to reach the silhouette), and the corners of
+        # the box of the free-form surfaces' control points
         extra = []
-        if nurbs is not None:  # the corners of the box of the surfaces' control points
+        if nurbs is not None:
             b = nurbs.bounds()
             extra = [np.array([[b[i & 1][0], b[(i >> 1) & 1][1], b[i >> 2][2]]
                                for i in range(8)])]
-        points = np.concatenate([c.limit(1 if c.n_faces < 200000 else 0)[0] for c in cages]
-                                + extra)
+        points = np.concatenate([c.limit(2 if c.n_faces < 20000 else 1 if c.n_faces < 200000
+                                         else 0)[0] for c in cages] + extra)
         lo, hi = points.min(axis=0), points.max(axis=0)
     camera = scene.make_camera(lo, hi, points)
     # (shadow rays may meet what the camera does not see: the boxes swept towards the view)
@@ -436,6 +441,8 @@ def result_attributes(result: RenderResult, scene) -> dict:
     attrs["chromaticities"] = REC709_CHROMATICITIES
     attrs["subtrace:Z"] = "distance from the eye along the pixel's ray (not camera-space z)"
     attrs["subtrace:accel"] = result.accel
+    attrs["subtrace:samples"] = int(scene.render.samples or 1)  # rays per edge pixel at most
+    attrs["subtrace:shadows"] = int(bool(scene.render.shadows and scene.lights))
     for k, v in result.stats.__dict__.items():
         attrs[f"subtrace:{k}"] = (v if isinstance(v, str) else float(v) if isinstance(v, float)
                                   else int(v))

@@ -6,7 +6,11 @@ hit's parameter. On a cell (of an irregular patch) the normal interpolates the e
 limit normals of the cell's corners (computed from the limit tangents of the subdivision
 core) with the hit's barycentrics, so it is within the tolerance's angle of the limit normal at that point; where the limit
 tangents leave a corner's normal undefined, the micro-triangle's own normal is used.
-Lighting is Lambertian, two-sided: a headlight at the eye plus directional lights.
+Lighting (:func:`light`) is two-sided Lambert plus the material's Blinn-Phong lobe (MTL's
+``Ks (N.H)^Ns``) under a headlight at the eye and directional and point lights, each scaled
+by its visibility (shadow rays: ``subtrace.picture``). Also here: the ground plane's colour
+(:func:`ground_pixels`), the background gradient, and which pixels need more rays
+(:func:`edge_pixels`).
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from subtrace import config
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material
 from subtrace.patches.basis import bez_normal
 from subtrace.runtime.jit import nb
@@ -473,3 +478,67 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
     for k in range(3):
         planes[C_R + k, miss] = out[:, k]
     return len(miss)
+
+
+def edge_pixels(planes, width, height) -> np.ndarray:
+    """(height, width) bool: pixels that differ from their right or lower neighbour (both
+    of a pair are marked) in coverage or object id, by a depth step (more than
+    ``config.AA_DEPTH_STEP`` of the nearer depth), a normal jump (more than
+    ``config.AA_NORMAL_DEG``) or a contrast in displayed luminance (sRGB, more than
+    ``config.AA_CONTRAST``): silhouettes, folds, creases, shadow edges. ``planes``: the
+    (len(CHANNELS), width*height) float32 of :func:`shade` with the colour lit."""
+    flag = np.zeros(width * height, np.bool_)
+    _edge_flags(planes, width, height, config.AA_DEPTH_STEP,
+                math.cos(math.radians(config.AA_NORMAL_DEG)), config.AA_CONTRAST, flag)
+    return flag.reshape(height, width)
+
+
+@nb.njit(cache=True)
+def _display_luminance(planes, r):
+    """The sRGB-encoded luminance of pixel r's colour, clipped to 0..1."""
+    y = 0.2126 * planes[C_R, r] + 0.7152 * planes[C_R + 1, r] + 0.0722 * planes[C_R + 2, r]
+    if y <= 0.0031308:
+        return max(12.92 * y, 0.0)
+    return min(1.055 * y ** (1.0 / 2.4) - 0.055, 1.0)
+
+
+@nb.njit(cache=True)
+def _differ(planes, lum, a, b, depth_step, cos_jump, contrast):
+    """Whether pixels a and b differ enough for more rays (see :func:`edge_pixels`);
+    ``lum``: each pixel's displayed luminance."""
+    if abs(lum[a] - lum[b]) > contrast:
+        return True
+    ha = planes[C_A, a] > 0.0
+    hb = planes[C_A, b] > 0.0
+    if ha != hb:
+        return True
+    if ha:
+        if planes[C_OBJECT, a] != planes[C_OBJECT, b]:
+            return True
+        za, zb = planes[C_Z, a], planes[C_Z, b]
+        if abs(za - zb) > depth_step * min(za, zb):
+            return True
+        dot = (planes[C_N, a] * planes[C_N, b] + planes[C_N + 1, a] * planes[C_N + 1, b]
+               + planes[C_N + 2, a] * planes[C_N + 2, b])
+        if dot < cos_jump:
+            return True
+    return False
+
+
+@nb.njit(cache=True)
+def _edge_flags(planes, width, height, depth_step, cos_jump, contrast, flag):
+    """Mark in ``flag`` (width*height,) both pixels of every differing neighbour pair."""
+    lum = np.empty(width * height)
+    for r in range(width * height):
+        lum[r] = _display_luminance(planes, r)
+    for row in range(height):
+        for col in range(width):
+            r = row * width + col
+            if col + 1 < width and _differ(planes, lum, r, r + 1, depth_step, cos_jump,
+                                           contrast):
+                flag[r] = True
+                flag[r + 1] = True
+            if row + 1 < height and _differ(planes, lum, r, r + width, depth_step, cos_jump,
+                                            contrast):
+                flag[r] = True
+                flag[r + width] = True

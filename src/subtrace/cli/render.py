@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 import sys
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -17,7 +18,7 @@ from subtrace.errors import SceneError
 from subtrace.frames import check_turntable, frame_path, parse_frames, turntable_eye
 from subtrace.io.atomic import check_writable
 from subtrace.io.formats import DEEP, picture_format
-from subtrace.io.scene import apply_overrides, load_scene, scene_for_meshes
+from subtrace.io.scene import DEFAULT_SAMPLES, apply_overrides, load_scene, scene_for_meshes
 from subtrace.runtime.progress import ProgressBar
 
 
@@ -54,6 +55,8 @@ def execute(args) -> int:
                               color=args.color, background=args.background,
                               shadows=args.shadows, transparent=args.transparent,
                               samples=args.samples)
+    if scene.render.samples is None:  # neither the scene nor --samples: the default
+        scene = replace(scene, render=replace(scene.render, samples=DEFAULT_SAMPLES))
     out = scene.output or "render.exr"
     picture = picture_format(out)
     bits = int(getattr(args, "bit_depth", "8"))

@@ -41,7 +41,8 @@ Schema (every table and key optional unless marked *required*)::
                                     #   gradient; default black
     shadows = true                  # shadow rays towards every [[light]]; default true
     samples = 4                     # rays per pixel at most (adaptive anti-aliasing: edge
-                                    #   pixels only), 1..64; default DEFAULT_SAMPLES
+                                    #   pixels only), 1..64; default: one ray per pixel in
+                                    #   the API, DEFAULT_SAMPLES on the command line
     transparent = false             # .png / .tif pictures: alpha where nothing was hit
                                     #   (default false: opaque over the background)
     headlight = true                # a directional light from the eye; default true
@@ -96,7 +97,10 @@ DEFAULT_HEIGHT = 480
 DEFAULT_FOV_DEG = 30.0
 DEFAULT_UP = (0.0, 1.0, 0.0)
 DEFAULT_TOLERANCE_PX = 1.0
-DEFAULT_SAMPLES = 4  # rays per edge pixel at most (see subtrace.picture; BENCHMARKS.md)
+# rays per edge pixel at most where neither the scene nor --samples says: the command
+# line's default (subtrace.picture; chosen in BENCHMARKS.md); the API renders one ray per
+# pixel unless asked
+DEFAULT_SAMPLES = 4
 MAX_SAMPLES = 64
 DEFAULT_BACKGROUND = (0.0, 0.0, 0.0)
 # what OBJ cages rendered without a scene get: a soft vertical gradient, a key and a fill
@@ -228,7 +232,7 @@ class RenderSettings:
     max_memory: int | None = None  # bytes; None: config.default_max_memory() at render time
     shadows: bool = True
     transparent: bool = False
-    samples: int = DEFAULT_SAMPLES
+    samples: int | None = None  # None: not given (one ray; the command line: DEFAULT_SAMPLES)
 
     def tolerance_rad(self, camera: Camera) -> float:
         """The angular tolerance in radians (pixels times the camera's pixel angle)."""

@@ -271,7 +271,7 @@ def image_errors(result, ref) -> dict:
     c, r = result.channels, ref.channels
     z = np.asarray(c["Z"], np.float64)
     z_ref = np.asarray(r["Z"], np.float64)
-    both = (np.asarray(c["A"]) > 0) & (np.asarray(r["A"]) > 0)
+    both = np.isfinite(z) & np.isfinite(z_ref)  # both centre rays hit (alpha is filtered)
     dz = np.abs(z[both] - z_ref[both])
     footprint = z_ref[both] * ref.camera.pixel_angle()
     dz_px = dz / footprint
