@@ -33,6 +33,7 @@ from subtrace.runtime import threads as tasks
 from subtrace.runtime.jit import nb
 from subtrace.trace.bezier import intersect_patch
 from subtrace.trace.build import build_requested
+from subtrace.trace.counts import thread_correction
 from subtrace.trace.kernels import scratch_buffers
 from subtrace.trace.pools import CANDIDATES, Hits, Memo, Memos, PieceArrays, hit_arrays
 from subtrace.trace.prims import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, shear
@@ -110,7 +111,8 @@ def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
                         pools.iso, pools.round_no, pools.stats, pools.eye, pools.tol_rad,
                         pools.record)
         pools.round_no += 1
-    pools.stats.micro_triangles += int(built.sum())
+    # (each cell once, however the threads shared the rays: trace/counts.py)
+    pools.stats.micro_triangles += int(built.sum()) + thread_correction(memos, pools.iso.view())
     return blocked, hits
 
 
