@@ -90,11 +90,11 @@ def test_precision_cap_on_an_absurd_tolerance_is_reported_once():
 
 @needs_shared
 def test_loop_scene_at_a_tiny_tolerance_is_capped_by_the_memory_budget():
-    """The memory estimate counts Loop patches as whole grids of 4^depth cells
-    (``criterion.memory_estimate``; they are traced per ray since): a tiny tolerance is held
-    by the memory budget (one warning, reason "memory"), never by a silent constant, and the
-    image's levels are the cap's."""
-    scene = small_scene([TORUS], (1.226, 4.085, 4.902), (0.0, 0.0, 0.0), width=96, height=54,
+    """The memory estimate prices irregular Loop patches as grids of 4^depth cells (a
+    conservative price: they are isolated per ray since): a tiny tolerance is held by the
+    memory budget (one warning, reason "memory"), never by a silent constant, and the
+    image's levels are the cap's. (The icosahedron's corners all have valence 5.)"""
+    scene = small_scene([ICOSA], (1.226, 4.085, 4.902), (0.0, 0.0, 0.0), width=96, height=54,
                         fov=30.0, tolerance=0.001)
     scene = apply_overrides(scene, max_memory="256M")
     res, said = _render(scene)

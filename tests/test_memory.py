@@ -54,7 +54,9 @@ def test_tiny_budget_caps_refinement_with_one_warning(capsys, tmp_path):
     assert "--max-memory" in lines[0]
     lv_full, lv_capped = levels(full), levels(capped)
     assert lv_capped.max() < lv_full.max()
-    assert lv_capped.mean() < lv_full.mean() - 1
+    # (at least three quarters of a level coarser on average: the tightest budget that
+    # still fits the unrefined patches leaves the nearest ones a level or two)
+    assert lv_capped.mean() < lv_full.mean() - 0.75
     # the picture is the same surface, only coarser: coverage nearly identical
     assert abs(len(lv_capped) - len(lv_full)) <= 0.02 * len(lv_full)
 
@@ -152,7 +154,7 @@ def test_tile_lists_over_the_budget_fall_back_to_the_bvh(capsys, tmp_path):
     if not spot.exists():
         pytest.skip(f"{spot} not present")
     argv = [spot, "--eye", "0", "0.05", "0.2", "--target", "0.3", "0.15", "1.2", "--fov",
-            "120"]
+            "120", "--no-shadows"]  # (shadows would keep more patches: a bigger table)
     code, err, free = render(capsys, tmp_path, *argv, name="free.exr")
     assert code == 0 and err == "", err
     # the budget: the refinement's estimate and the memos' minimum, plus half the lists

@@ -47,6 +47,7 @@ from subtrace.trace.build import build_loop_regular, build_requested
 from subtrace.trace.counts import thread_correction
 from subtrace.trace.kernels import trace_round
 from subtrace.trace.pools import Memos, Pieces, candidate_lists, hit_arrays
+from subtrace.trace.tris import TRI
 
 
 @dataclass
@@ -213,8 +214,12 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
     # (each cell once, however the threads shared the rays: trace/counts.py)
     stats.micro_triangles += int(tested.sum()) + thread_correction(memos, iso.view())
     # regular patches count as refined once a ray has descended into them
-    direct = iso.a["patch"][(iso.a["round"] < 0) & (iso.a["touched"] > 0)]
+    first = (iso.a["round"] < 0) & (iso.a["touched"] > 0)
+    direct = iso.a["patch"][first]
     stats.patches_refined += len(direct)
+    # (regular Loop nets are built before the first round: they count as pieces once a ray
+    # descends into them, as they did when rays asked for them)
+    stats.pieces += int(np.count_nonzero(first & (iso.a["kind"][iso.a["first"]] == TRI)))
     stats.max_depth = int(iso.a["depth_i"].max(initial=0))
     built = np.concatenate([iso.a["patch"][iso.a["round"] >= 0], direct])
     if keep is not None:  # for secondary rays (trace/rays.py)
