@@ -90,16 +90,21 @@ def test_oracle_shapes_round_trip_through_usd(tmp_path, name):
     assert err < 1e-7 * diag + rounding
 
 
-def _cube_stage(path, **attrs):
-    stage = Usd.Stage.CreateNew(str(path))
-    world = UsdGeom.Xform.Define(stage, "/World")
-    mesh = UsdGeom.Mesh.Define(stage, "/World/Cube")
+def _cube_mesh(stage, prim, **attrs):
+    """A cube UsdGeomMesh at ``prim`` with the attributes ``attrs`` (``CreaseIndices=...``)."""
+    mesh = UsdGeom.Mesh.Define(stage, prim)
     mesh.CreatePointsAttr(CUBE_PTS)
     mesh.CreateFaceVertexCountsAttr([4] * 6)
     mesh.CreateFaceVertexIndicesAttr(sum(CUBE_FACES, []))
     for key, value in attrs.items():
         getattr(mesh, f"Create{key}Attr")(value)
-    return stage, world, mesh
+    return mesh
+
+
+def _cube_stage(path, **attrs):
+    stage = Usd.Stage.CreateNew(str(path))
+    world = UsdGeom.Xform.Define(stage, "/World")
+    return stage, world, _cube_mesh(stage, "/World/Cube", **attrs)
 
 
 def test_stage_renders_as_the_equivalent_obj(tmp_path, capsys):
@@ -144,21 +149,9 @@ def test_transform_orientation_visibility_and_purpose(tmp_path):
                                      CreaseSharpnesses=[1.5, 2.5],
                                      DisplayColor=[(0.1, 0.2, 0.3)])
     world.AddTranslateOp().Set((10.0, 0.0, 0.0))
-    left = UsdGeom.Mesh.Define(stage, "/World/Left")
-    left.CreatePointsAttr(CUBE_PTS)
-    left.CreateFaceVertexCountsAttr([4] * 6)
-    left.CreateFaceVertexIndicesAttr(sum(CUBE_FACES, []))
-    left.CreateOrientationAttr("leftHanded")
-    hidden = UsdGeom.Mesh.Define(stage, "/World/Hidden")
-    hidden.CreatePointsAttr(CUBE_PTS)
-    hidden.CreateFaceVertexCountsAttr([4] * 6)
-    hidden.CreateFaceVertexIndicesAttr(sum(CUBE_FACES, []))
-    hidden.CreateVisibilityAttr("invisible")
-    guide = UsdGeom.Mesh.Define(stage, "/World/Guide")
-    guide.CreatePointsAttr(CUBE_PTS)
-    guide.CreateFaceVertexCountsAttr([4] * 6)
-    guide.CreateFaceVertexIndicesAttr(sum(CUBE_FACES, []))
-    guide.CreatePurposeAttr("guide")
+    _cube_mesh(stage, "/World/Left", Orientation="leftHanded")
+    _cube_mesh(stage, "/World/Hidden", Visibility="invisible")
+    _cube_mesh(stage, "/World/Guide", Purpose="guide")
     light = UsdLux.DistantLight.Define(stage, "/World/Sun")
     light.AddRotateXOp().Set(-90.0)  # pointing down: its -Z axis becomes -Y
     stage.Save()
