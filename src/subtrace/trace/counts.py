@@ -52,7 +52,8 @@ def _walk(roots, childs, datas, it, leaf, tri, depth, sides, st_node, st_pos, pa
     any_root = False
     counted = False
     for t in range(T):
-        r = roots[t][it]
+        # (a memo that never took a round has no room for the items built since)
+        r = roots[t][it] if it < len(roots[t]) else -1
         st_node[0, t] = r
         any_root |= r >= 0
         counted |= r == COUNTED
