@@ -88,6 +88,11 @@ class _OneLineWarnings:
     """Show a SubtraceWarning as ``subtrace: warning: <message>`` (one line, no source)."""
 
     def __enter__(self):
+        # every warning of every command is said, even one a previous command in the same
+        # process said already (Python's default shows a message once per place)
+        self._filters = warnings.catch_warnings()
+        self._filters.__enter__()
+        warnings.simplefilter("always", SubtraceWarning)
         self._saved = warnings.showwarning
         saved = self._saved
 
@@ -102,6 +107,7 @@ class _OneLineWarnings:
 
     def __exit__(self, *exc):
         warnings.showwarning = self._saved
+        self._filters.__exit__(*exc)
         return False
 
 
