@@ -225,19 +225,26 @@ def _next_level(subs, k, cur, cur_pts, kids, reg, root, i0, j0, depth, eye, tol_
     return cur, cur_pts, kid_root[irr], kids[irr], ki[irr], kj[irr], recorded
 
 
-def _add_cells(cells, level, points, options, faces, root, i0, j0):
-    """Append the cells ``faces`` of ``level`` (exact limit points and unit normals of their
-    corners, NaN normals where undefined, and, when ``cells`` has seven lists, the
-    diagonals of their one-rings' boxes and whether they touch the mesh's boundary) to the
-    lists ``cells``."""
+def corner_limits(level, points, options, faces, n):
+    """The corners (f,n) of the ``n``-sided ``faces`` of ``level``, their exact limit
+    points (f,n,3) and unit limit normals (f,n,3), NaN where a normal is undefined."""
     fo = level.face_offsets
-    corners = level.face_verts[fo[faces][:, None] + np.arange(4)]
+    corners = level.face_verts[fo[faces][:, None] + np.arange(n)]
     P, du, dv = limit_points(level, points, options, which=corners.ravel())
     nrm = np.cross(du, dv)
     length = np.linalg.norm(nrm, axis=1, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
         nrm = np.where(length > 0, nrm / length, np.nan)
-    for lst, a in zip(cells, (root, i0, j0, P.reshape(-1, 4, 3), nrm.reshape(-1, 4, 3))):
+    return corners, P.reshape(-1, n, 3), nrm.reshape(-1, n, 3)
+
+
+def _add_cells(cells, level, points, options, faces, root, i0, j0):
+    """Append the cells ``faces`` of ``level`` (exact limit points and unit normals of their
+    corners, NaN normals where undefined, and, when ``cells`` has seven lists, the
+    diagonals of their one-rings' boxes and whether they touch the mesh's boundary) to the
+    lists ``cells``."""
+    corners, P, nrm = corner_limits(level, points, options, faces, 4)
+    for lst, a in zip(cells, (root, i0, j0, P, nrm)):
         lst.append(a)
     if len(cells) > 5:
         lo, hi, _, _ = one_ring_shells(level, faces, points)

@@ -30,7 +30,7 @@ import numpy as np
 from subtrace.lines.items import box_nets, loop_regular
 from subtrace.patches.basis import tri_bernstein
 from subtrace.patches.grids import cut_around
-from subtrace.subdiv.limit import limit_points
+from subtrace.patches.isolate import corner_limits
 from subtrace.subdiv.refine import refine_level, refine_points
 
 
@@ -96,14 +96,8 @@ def build_loop_isolated(obj, faces, depth):
 def _add_cells(cells, level, points, options, faces, root, i0, j0, g):
     """Append the triangles ``faces`` of ``level`` as cells (exact limit points and unit
     normals of their corners) to the lists ``cells``."""
-    fo = level.face_offsets
-    corners = level.face_verts[fo[faces][:, None] + np.arange(3)]
-    P, du, dv = limit_points(level, points, options, which=corners.ravel())
-    nrm = np.cross(du, dv)
-    length = np.linalg.norm(nrm, axis=1, keepdims=True)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        nrm = np.where(length > 0, nrm / length, np.nan)
-    for lst, a in zip(cells, (root, i0, j0, g, P.reshape(-1, 3, 3), nrm.reshape(-1, 3, 3))):
+    _, P, nrm = corner_limits(level, points, options, faces, 3)
+    for lst, a in zip(cells, (root, i0, j0, g, P, nrm)):
         lst.append(a)
 
 
