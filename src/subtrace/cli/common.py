@@ -1,5 +1,6 @@
 """What every ``subtrace`` command shares: the program name, one-line messages, and the
-process-wide Numba shortcut a command may take when it runs as a process of its own.
+Numba set-up of a command (the process-wide shortcut a command may take when it runs as a
+process of its own, the first-run notice).
 
 Imports nothing beyond the standard library, so that parsing stays fast.
 """
@@ -25,10 +26,16 @@ def boundary_code(args):
     return BOUNDARIES[name]
 
 
-def trim_numba(args) -> None:
-    """Trim Numba's set-up (:func:`subtrace.runtime.jit.trim_loader`) in a process of its
-    own (:func:`subtrace.cli.main.run`); in-process callers (tests) keep Numba as it is."""
-    if getattr(args, "own_process", False):
-        from subtrace.runtime.jit import trim_loader  # imports Numba: only for a command
+def set_up_numba(args) -> None:
+    """Numba for a command: in a process of its own (:func:`subtrace.cli.main.run`) its
+    set-up is trimmed (:func:`subtrace.runtime.jit.trim_loader`; in-process callers, tests,
+    keep Numba as it is); unless ``--quiet``, a terminal hears once that the kernels are
+    compiling when the cache lacks them (:func:`subtrace.runtime.jit.notify_compiles`)."""
+    import sys
 
-        trim_loader()
+    from subtrace.runtime import jit  # imports Numba: only for a command
+
+    if getattr(args, "own_process", False):
+        jit.trim_loader()
+    if not getattr(args, "quiet", False):
+        jit.notify_compiles(sys.stderr)

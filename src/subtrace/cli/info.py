@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from subtrace.cli.common import boundary_code, trim_numba
+from subtrace.cli.common import boundary_code, set_up_numba
 from subtrace.config import SHARPNESS_INFINITE
 from subtrace.data import sample_cage_path
 from subtrace.io.obj import read_obj
@@ -28,7 +28,7 @@ SIZE_NAMES = {3: "triangles", 4: "quads", 5: "pentagons", 6: "hexagons"}
 
 def execute(args) -> int:
     """Print the report of ``args.cage`` (the built-in sample cage without one)."""
-    trim_numba(args)
+    set_up_numba(args)
     if args.cage is None:
         path = sample_cage_path()
         label = f"{path} (built-in sample: Spot by Keenan Crane, public domain)"

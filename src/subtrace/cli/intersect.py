@@ -15,7 +15,7 @@ import warnings
 import numpy as np
 
 from subtrace import config
-from subtrace.cli.common import boundary_code, trim_numba
+from subtrace.cli.common import boundary_code, set_up_numba
 from subtrace.errors import SubtraceError, SubtraceWarning
 from subtrace.io.atomic import write_text
 from subtrace.io.limits import check_coordinates, check_valences
@@ -38,7 +38,7 @@ def execute(args) -> int:
         folder = os.path.dirname(os.path.abspath(out))
         if not os.path.isdir(folder):
             raise SubtraceError(f"{out}: no such folder {folder}")
-    trim_numba(args)
+    set_up_numba(args)
     hits = intersect_lines(cage, data[:, :3], data[:, 3:], precision, t_range=t_range,
                            mode="first" if args.first else "all", threads=args.threads)
     text = hits_json(hits, precision, len(data)) if args.json else hits_csv(hits)

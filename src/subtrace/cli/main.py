@@ -13,7 +13,7 @@ one line ``subtrace: warning: <message>``.
 Each command lives in ``subtrace.cli.<command>`` and is imported only when it runs, so
 ``subtrace --help`` and ``--version`` load neither numpy nor Numba nor OpenImageIO.
 :func:`run` trims two fixed costs of a short process that :func:`main`, which tests call
-in-process, leaves alone: Numba's loader (:func:`subtrace.cli.common.trim_numba`, taken by
+in-process, leaves alone: Numba's loader (:func:`subtrace.cli.common.set_up_numba`, taken by
 the commands) and the interpreter's teardown (:func:`_exit_now`).
 """
 
@@ -44,7 +44,7 @@ def main(argv=None, own_process: bool = False) -> int:
     """Run the command line; returns the exit code (0 ok, 2 bad input or usage).
 
     own_process: this process exists only to run this command (:func:`run`), so the
-    process-wide shortcut of :func:`subtrace.cli.common.trim_numba` is allowed.
+    process-wide shortcut of :func:`subtrace.cli.common.set_up_numba` is allowed.
     """
     parser = build_parser()
     try:

@@ -12,7 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from subtrace.cli.common import trim_numba
+from subtrace.cli.common import set_up_numba
 from subtrace.data import default_scene_path
 from subtrace.errors import SceneError
 from subtrace.frames import check_turntable, frame_path, parse_frames, turntable_eye
@@ -84,7 +84,7 @@ def execute(args) -> int:
     # and OpenImageIO load
     from subtrace.render import render_scene
 
-    trim_numba(args)
+    set_up_numba(args)
     progress = ProgressBar() if sys.stderr.isatty() and not args.quiet else None
     if frames is None:
         result = render_scene(scene, threads=args.threads, accel=args.accel, progress=progress)

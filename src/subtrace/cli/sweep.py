@@ -7,7 +7,7 @@ from __future__ import annotations
 import os
 import sys
 
-from subtrace.cli.common import trim_numba
+from subtrace.cli.common import set_up_numba
 from subtrace.cli.render import scene_from_inputs
 from subtrace.runtime.progress import ProgressBar
 from subtrace.sweep import check_reference, check_repeat, check_tolerances, format_table, sweep
@@ -21,7 +21,7 @@ def execute(args) -> int:
     scenes = [scene_from_inputs([path], args) for path in args.inputs] or [
         scene_from_inputs([], args)]
     progress = ProgressBar() if sys.stderr.isatty() and not args.quiet else None
-    trim_numba(args)
+    set_up_numba(args)
     records = sweep(scenes, tols, reference_tolerance=reference, repeat=repeat,
                     output_dir=args.output, threads=args.threads, accel=args.accel,
                     progress=progress)

@@ -1,47 +1,95 @@
-"""Numba for subtrace's kernels: the cache folder, the decorators, and a faster loader.
+"""Numba for subtrace's kernels: the cache folder and its key, the decorators, the first-run
+notice, and a faster loader.
 
-Numba reads ``NUMBA_CACHE_DIR`` when it is first imported, so every module with kernels
-imports Numba from here (``from subtrace.runtime.jit import nb``): the first such import
-sets the folder (unless the environment names one) and only then imports Numba. Importing
-:mod:`subtrace` or its command line alone imports no Numba and sets nothing.
+Every module with kernels imports Numba from here (``from subtrace.runtime.jit import nb``),
+so the cache is set up before the first kernel is defined; importing :mod:`subtrace` or its
+command line alone imports no Numba and sets nothing.
+
+The kernels are cached in :data:`KERNEL_DIR`, ``<base>/numba-<key>``:
+
+* ``<base>`` is ``$SUBTRACE_CACHE_DIR``, else ``$NUMBA_CACHE_DIR``, else
+  ``$XDG_CACHE_HOME/subtrace`` (``~/.cache/subtrace``); workers that share one folder share
+  the compiled kernels (Numba writes each file under a temporary name, then renames it);
+* ``<key>`` hashes the bytes of every source file of the package, the Numba and Python
+  versions and the CPU Numba compiles for (:func:`cache_key`): a kernel calls jitted helpers
+  of other modules, and Numba's own cache only notices edits to the kernel's file. Nothing
+  in the key is a file's time, so reinstalling the same sources (new modification times, or
+  another folder) finds every kernel compiled;
+* inside it, each kernel's index is stamped with the hash of its module's bytes, not with
+  the file's modification time (:class:`_ContentLocator`, which Numba's cache uses for
+  subtrace's files), and lies at the module's path in the package, not at a hash of the
+  folder it was installed in.
+
+The folders of other keys are pruned to the :data:`CACHES_KEPT` most recently used.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import re
 import sys
 from pathlib import Path
 
 from subtrace.version import VERSION
 
-
-def _set_cache_dir() -> None:
-    # Numba's on-disk cache only notices edits to the file of the cached function itself, not
-    # to jitted helpers it calls from other modules. Keying the cache folder on a hash of the
-    # package sources makes any change (or upgrade) start from a clean cache.
-    if "NUMBA_CACHE_DIR" in os.environ:
-        return
-    root = Path(__file__).resolve().parents[1]
-    h = hashlib.sha1(VERSION.encode())
-    for p in sorted(root.rglob("*.py")):
-        st = p.stat()
-        h.update(f"{p.relative_to(root)}:{st.st_size}:{st.st_mtime_ns}".encode())
-    base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "subtrace"
-    folder = base / f"numba-{h.hexdigest()[:16]}"
-    if not folder.exists():
-        prune_caches(base)
-    os.environ["NUMBA_CACHE_DIR"] = str(folder)
+ROOT = Path(__file__).resolve().parents[1]  # the package folder: src/subtrace
+CACHES_KEPT = 8  # cache folders of other keys kept (other versions, checkouts, branches)
+_FOLDER = re.compile(r"numba-[0-9a-f]{16}")  # the only names prune_caches removes
 
 
-CACHES_KEPT = 8  # cache folders of other source versions kept (other checkouts, branches)
+def cache_base() -> Path:
+    """The folder that holds the cache folders: ``$SUBTRACE_CACHE_DIR``, else
+    ``$NUMBA_CACHE_DIR``, else ``$XDG_CACHE_HOME/subtrace`` (``~/.cache/subtrace``)."""
+    for name in ("SUBTRACE_CACHE_DIR", "NUMBA_CACHE_DIR"):
+        if os.environ.get(name):
+            return Path(os.environ[name]).expanduser()
+    xdg = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(xdg) / "subtrace"
+
+
+def source_digests(root: Path = ROOT) -> dict[str, str]:
+    """sha256 (hex) of the bytes of every ``.py`` file under ``root``, by its path relative
+    to ``root`` (posix separators)."""
+    digests = {}
+    for path in sorted(root.rglob("*.py")):
+        digests[path.relative_to(root).as_posix()] = hashlib.sha256(path.read_bytes()).hexdigest()
+    return digests
+
+
+def cache_key(digests: dict[str, str], numba_version: str, cpu: tuple) -> str:
+    """The cache folder's key (16 hex digits) for sources with these ``digests``
+    (:func:`source_digests`), this Numba version and CPU (:func:`compile_target`) and the
+    running Python."""
+    h = hashlib.sha256()
+    h.update(repr((VERSION, numba_version, sys.version_info[:2], cpu)).encode())
+    for rel in sorted(digests):
+        h.update(f"{rel}\0{digests[rel]}\n".encode())
+    return h.hexdigest()[:16]
+
+
+def compile_target() -> tuple:
+    """What Numba compiles for: (target triple, CPU name, CPU features), read as Numba's
+    code generator reads them (``NUMBA_CPU_NAME`` / ``NUMBA_CPU_FEATURES`` override the
+    host's: e.g. ``NUMBA_CPU_NAME=generic`` for one cache on machines of different CPUs)."""
+    import llvmlite.binding as ll
+
+    name = os.environ.get("NUMBA_CPU_NAME") or ll.get_host_cpu_name()
+    features = os.environ.get("NUMBA_CPU_FEATURES")
+    if features is None:
+        try:
+            features = ll.get_host_cpu_features().flatten()
+        except RuntimeError:  # LLVM cannot tell: Numba compiles without features too
+            features = ""
+    return ll.get_process_triple(), name, features
 
 
 def prune_caches(base: Path) -> None:
-    """Remove all but the ``CACHES_KEPT`` most recently used cache folders (each edit of the
-    sources starts a new one)."""
+    """Remove all but the ``CACHES_KEPT`` most recently used cache folders (``numba-`` and
+    16 hex digits) of ``base``; any other file or folder there is left alone."""
     try:
-        old = sorted(base.glob("numba-*"), key=lambda p: p.stat().st_mtime, reverse=True)
+        old = sorted((p for p in base.iterdir() if _FOLDER.fullmatch(p.name)),
+                     key=lambda p: p.stat().st_mtime, reverse=True)
     except OSError:
         return
     import shutil
@@ -50,9 +98,125 @@ def prune_caches(base: Path) -> None:
         shutil.rmtree(p, ignore_errors=True)
 
 
-_set_cache_dir()
+def _set_numba_cache_dir() -> None:
+    # Numba reads NUMBA_CACHE_DIR when it is first imported. Subtrace's kernels go to
+    # KERNEL_DIR whatever it says (_ContentLocator); setting it to the base when it is unset
+    # keeps other cached functions of the process (tests') in the same place, and child
+    # processes (the warm-up, workers) inherit the base.
+    if not os.environ.get("NUMBA_CACHE_DIR"):
+        os.environ["NUMBA_CACHE_DIR"] = str(cache_base())
+
+
+_set_numba_cache_dir()
 
 import numba as nb  # noqa: E402  (after the cache folder is set)
+from numba.core import event as _event  # noqa: E402
+
+DIGESTS = source_digests()
+KERNEL_DIR = cache_base() / f"numba-{cache_key(DIGESTS, nb.__version__, compile_target())}"
+if KERNEL_DIR.exists():
+    try:
+        os.utime(KERNEL_DIR)  # used now: prune_caches keeps the most recently used
+    except OSError:  # a read-only shared cache
+        pass
+else:
+    prune_caches(KERNEL_DIR.parent)
+
+
+def _content_locator():
+    """Numba's cache locator for subtrace's own files (None for a Numba whose cache is
+    organised differently: its own locators then apply, keyed on file times)."""
+    try:
+        from numba.core import caching
+        base = (caching._SourceFileBackedLocatorMixin, caching._CacheLocator)
+        caching.CacheImpl._locator_classes  # noqa: B018  (present, or this Numba differs)
+    except (ImportError, AttributeError):  # pragma: no cover - another Numba
+        return None
+
+    class _ContentLocator(*base):
+        """Caches a kernel of subtrace's package in ``KERNEL_DIR/subtrace/<module's folder>``,
+        its index stamped with the sha256 of the module's bytes (:data:`DIGESTS`)."""
+
+        def __init__(self, py_func, py_file, rel):
+            self._py_file = py_file
+            self._lineno = py_func.__code__.co_firstlineno
+            self._stamp = DIGESTS.get(rel) or hashlib.sha256(Path(py_file).read_bytes()).hexdigest()
+            self._cache_path = str(KERNEL_DIR / "subtrace" / Path(rel).parent)
+
+        def get_cache_path(self):
+            return self._cache_path
+
+        def get_source_stamp(self):
+            return self._stamp
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            try:
+                rel = Path(py_file).resolve().relative_to(ROOT).as_posix()
+            except (OSError, ValueError):
+                return None  # not subtrace's: Numba's own locators
+            self = cls(py_func, py_file, rel)
+            try:
+                self.ensure_cache_path()
+            except OSError:
+                return None  # an unwritable folder: Numba's own locators
+            return self
+
+    caching.CacheImpl._locator_classes = [_ContentLocator, *caching.CacheImpl._locator_classes]
+    return _ContentLocator
+
+
+_content_locator()
+
+
+# What the first-run notice says the compile takes (benchmarks/startup.py: a cold render of
+# the default scene on 2 cores)
+COLD_COMPILE = "about 20 s on 2 cores"
+_notice = {"stream": None, "said": False, "listening": False}
+
+
+def notify_compiles(stream) -> None:
+    """Say once on ``stream``, when this process first has to compile one of subtrace's
+    kernels (the cache lacks it) or starts a process that does (:func:`compiling`), that
+    the kernels are compiling, about how long that takes and where they are kept. Only a
+    terminal hears it: a ``stream`` that is not a TTY (a pipe, a file, a test's capture)
+    gets nothing, so logs and scripts see no difference."""
+    try:
+        if not stream.isatty():
+            return
+    except (AttributeError, OSError, ValueError):  # closed or not a real stream
+        return
+    _notice["stream"] = stream
+    if not _notice["listening"]:
+        _event.register("numba:compile", _CompileListener())
+        _notice["listening"] = True
+
+
+def compiling() -> None:
+    """A kernel of subtrace is about to compile, here or in a helper process: the notice of
+    :func:`notify_compiles`, once per process."""
+    stream = _notice["stream"]
+    if stream is None or _notice["said"]:
+        return
+    _notice["said"] = True
+    try:
+        print(f"subtrace: compiling the Numba kernels for these sources ({COLD_COMPILE}, "
+              f"once; later runs load them from {KERNEL_DIR})", file=stream, flush=True)
+    except (OSError, ValueError):  # a terminal that went away: the render goes on
+        pass
+
+
+class _CompileListener(_event.Listener):
+    """Numba's "numba:compile" event (a cache miss, before compiling): the notice when the
+    function is one of subtrace's."""
+
+    def on_start(self, event):
+        func = getattr(event.data.get("dispatcher"), "py_func", None)
+        if getattr(func, "__module__", "").startswith("subtrace."):
+            compiling()
+
+    def on_end(self, event):
+        pass
 
 
 def leaf_njit(fn):
