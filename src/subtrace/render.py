@@ -47,6 +47,7 @@ from subtrace.trace.build import build_loop_regular, build_requested
 from subtrace.trace.counts import thread_correction
 from subtrace.trace.kernels import trace_round
 from subtrace.trace.pools import Memos, Pieces, candidate_lists, hit_arrays
+from subtrace.trace.rays import compile_kernel as compile_secondary
 from subtrace.trace.tris import TRI
 
 
@@ -160,6 +161,7 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
         # need here (exact limit points of isolated cells), on inputs of the same types
         for o in table.objects[:1]:
             limit_points(o.level, o.points, o.cage.options, which=np.zeros(0, np.int64))
+        compile_secondary()  # shadow and extra anti-aliasing rays, the memos' cell count
     warmup.wait(compiling)
     return _rounds(table, frame, W, W * H, tol_rad, chosen, tiles, bvh,
                    Memos(n_threads, memo_bytes), stats, progress, keep)

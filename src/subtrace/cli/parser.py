@@ -15,7 +15,7 @@ from subtrace.cli.common import PROG, one_line
 from subtrace.version import VERSION
 
 # The commands, in the order --help lists them; each is run by subtrace.cli.<name>.execute.
-COMMANDS = ("info", "render", "compare", "sweep", "intersect")
+COMMANDS = ("info", "render", "compare", "sweep", "intersect", "warmup")
 # The threshold options of ``compare``, each GROUP=VALUE or a bare VALUE, repeatable.
 THRESHOLD_OPTIONS = ("fail", "failpercent", "warn", "warnpercent", "hardfail")
 
@@ -58,7 +58,7 @@ def build_parser() -> Parser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     adders = {"info": _add_info, "render": _add_render, "compare": _add_compare,
-              "sweep": _add_sweep, "intersect": _add_intersect}
+              "sweep": _add_sweep, "intersect": _add_intersect, "warmup": _add_warmup}
     parser.commands = {name: adders[name](sub) for name in COMMANDS}
     return parser
 
@@ -257,6 +257,25 @@ def _add_intersect(sub) -> argparse.ArgumentParser:
     intersect.add_argument("--threads", type=level_arg, metavar="N",
                            help="worker threads (default: all cores)")
     return intersect
+
+
+def _add_warmup(sub) -> argparse.ArgumentParser:
+    warmup = sub.add_parser(
+        "warmup",
+        help="compile every kernel into the kernel cache and print where it is",
+        description=(
+            "Compile the Numba kernels of every command (renders of both schemes and of "
+            "trimmed NURBS surfaces, line queries, the cage report) into the kernel cache, "
+            "so that later commands load them. The cache is $SUBTRACE_CACHE_DIR (else "
+            "$NUMBA_CACHE_DIR, else ~/.cache/subtrace)/numba-<key>, the key a hash of the "
+            "sources' bytes, the Numba and Python versions and the CPU: workers that share "
+            "one folder share the kernels. Prints the folder and what it holds."
+        ),
+    )
+    warmup.add_argument("--jobs", metavar="N",
+                        help="commands compiled at once, each a process (default: the cores)")
+    warmup.add_argument("--quiet", action="store_true", help="print nothing on success")
+    return warmup
 
 
 BOUNDARY_CHOICES = ("none", "edge-only", "edge-and-corner")

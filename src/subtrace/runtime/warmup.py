@@ -1,4 +1,5 @@
-"""Compile the trace and shade kernels in a second process on a cold Numba cache.
+"""Compile kernels ahead of their use: the trace and shade kernels in a second process on a
+cold Numba cache, and every kernel of every command for ``subtrace warmup``.
 
 The first render with an empty cache spends most of its time compiling: the kernels of
 loading and preprocessing, then the trace and shade kernels. The two groups do not depend
@@ -9,22 +10,31 @@ shared cache; the first process waits for it before tracing and then loads them 
 cache. On a warm cache nothing is started.
 
     python -m subtrace.runtime.warmup THREADS      # what the second process runs
+
+:func:`compile_all` (``subtrace warmup``) runs small commands of every kind (the default
+render, which compiles in two processes itself; then, side by side, renders of a Loop cage
+and of trimmed NURBS surfaces, the BVH, line queries on both schemes and on surfaces, the
+cage report) so that the kernel cache holds every kernel before the first real command,
+e.g. once per machine or image before a cluster's workers start.
 """
 
 from __future__ import annotations
 
-import os
+import shutil
 import subprocess
 import sys
+import tempfile
+import time
 from pathlib import Path
 
 from subtrace.runtime import signals
 
 
 def _cached(name: str) -> bool:
-    """Whether Numba's cache (this package version's folder) holds the kernel ``name``."""
-    root = os.environ.get("NUMBA_CACHE_DIR")
-    return bool(root) and any(Path(root).rglob(f"*{name}-*.nbi"))
+    """Whether the kernel cache (this source version's folder) holds the kernel ``name``."""
+    from subtrace.runtime.jit import KERNEL_DIR
+
+    return any(KERNEL_DIR.rglob(f"*{name}-*.nbi"))
 
 
 def start(threads: int):
@@ -32,6 +42,9 @@ def start(threads: int):
     process if the cache lacks them; returns the process (or None)."""
     if _cached("_trace_task") and _cached("_shade_task"):
         return None
+    from subtrace.runtime.jit import compiling
+
+    compiling()  # the first-run notice, where one was asked for
     try:
         proc = subprocess.Popen([sys.executable, "-m", "subtrace.runtime.warmup",
                                  str(int(threads))],
@@ -91,6 +104,87 @@ def compile_kernels(threads: int) -> None:
               np.zeros(2, np.int64), np.zeros(threads, np.int64))
     finally:
         tasks.set_threads(None)
+
+
+def compile_all(jobs: int) -> float:
+    """Compile every kernel of every command into the kernel cache (``subtrace warmup``),
+    running up to ``jobs`` commands at once; returns the seconds it took. A command that
+    fails raises :class:`subtrace.errors.SubtraceError` naming it and its error line."""
+    t0 = time.perf_counter()
+    folder = Path(tempfile.mkdtemp(prefix="subtrace-warmup-"))
+    try:
+        for stage in _stages(folder):
+            _run_side_by_side(stage, max(1, jobs))
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+    return time.perf_counter() - t0
+
+
+def _stages(folder: Path) -> list[list[list[str]]]:
+    """The commands (argument lists of ``subtrace``) that :func:`compile_all` runs, by stage:
+    the default render first (it compiles the shared loading kernels, and its trace kernels
+    in a second process), then the rest side by side, reading inputs written to ``folder``."""
+    from subtrace.data import sample_cage_path, sample_surfaces_path
+
+    tris = folder / "spot_triangles.obj"
+    tris.write_text(_triangulated(sample_cage_path().read_text()))
+    lines = folder / "lines.csv"
+    lines.write_text("ox,oy,oz,dx,dy,dz\n0,0.1,5,0,0,-1\n0.2,0.3,-5,0,0,1\n0.3,-3,0.2,0.1,1,0\n")
+    small = ["--width", "48", "--height", "32", "--quiet"]
+    out = str(folder / "out.exr")
+    first = [["render", *small, "-o", out]]
+    rest = [["render", str(tris), *small, "-o", str(folder / "loop.exr")],
+            ["render", str(sample_surfaces_path()), *small, "-o", str(folder / "nurbs.exr")],
+            ["render", *small, "--accel", "bvh", "-o", str(folder / "bvh.exr")]]
+    for cage in (sample_cage_path(), tris, sample_surfaces_path()):
+        for mode in ([], ["--first"]):
+            rest.append(["intersect", str(cage), "--lines", str(lines), "--precision", "1e-3",
+                         *mode, "-o", str(folder / "hits.csv")])
+    rest.append(["info", str(tris), "--level", "1"])
+    return [first, rest]
+
+
+def _triangulated(obj_text: str) -> str:
+    """An OBJ cage's text with each face split into a fan of triangles (a Loop cage)."""
+    out = []
+    for line in obj_text.splitlines():
+        parts = line.split()
+        if parts and parts[0] == "f":
+            corners = parts[1:]
+            out += [f"f {corners[0]} {corners[k]} {corners[k + 1]}"
+                    for k in range(1, len(corners) - 1)]
+        else:
+            out.append(line)
+    return "\n".join(out) + "\n"
+
+
+def _run_side_by_side(commands: list[list[str]], jobs: int) -> None:
+    """Run the ``subtrace`` commands, at most ``jobs`` at once, each a process of its own."""
+    from subtrace.errors import SubtraceError
+
+    pending = list(commands)
+    running = []
+    try:
+        while pending or running:
+            while pending and len(running) < jobs:
+                argv = pending.pop(0)
+                proc = subprocess.Popen([sys.executable, "-m", "subtrace.cli", *argv],
+                                        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                        stderr=subprocess.PIPE, text=True)
+                signals.register_child(proc)
+                running.append((argv, proc))
+            argv, proc = running.pop(0)
+            _, err = proc.communicate()
+            signals.forget_child(proc)
+            if proc.returncode != 0:
+                last = (err.strip().splitlines() or ["no message"])[-1]
+                raise SubtraceError(f"warmup: `subtrace {' '.join(argv)}` failed "
+                                    f"(exit code {proc.returncode}): {last}")
+    finally:
+        for _, proc in running:
+            proc.kill()
+            proc.wait()
+            signals.forget_child(proc)
 
 
 if __name__ == "__main__":

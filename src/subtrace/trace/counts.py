@@ -106,12 +106,12 @@ def distinct_cells(roots, childs, datas, kind, depth_i, level, sides):
     par = np.empty(T, np.int64)
     total = 0
     for it in range(len(kind)):
-        if kind[it] == PIECE:
-            total += _walk(roots, childs, datas, it, depth_i[it] - level[it], False,
-                           depth_i[it], sides, st_node, st_pos, par)
-        elif kind[it] == TRI:
-            # (a Loop piece's tree starts at its level: depth - level levels to its cells)
-            total += _walk(roots, childs, datas, it, depth_i[it] - level[it], True,
+        tri = kind[it] == TRI
+        if tri or kind[it] == PIECE:
+            # (one call with a run-time flag: a constant True / False at two call sites
+            # compiled _walk once per literal; a Loop piece's tree starts at its level:
+            # depth - level levels to its cells, as a Catmull-Clark piece's)
+            total += _walk(roots, childs, datas, it, depth_i[it] - level[it], tri,
                            depth_i[it], sides, st_node, st_pos, par)
     return total
 
@@ -125,5 +125,12 @@ def thread_correction(memos, iso) -> int:
     args = (iso.kind, iso.depth_i, iso.level, iso.side)
     union = distinct_cells(tuple(x.root for x in m), tuple(x.child for x in m),
                            tuple(x.data for x in m), *args)
-    own = sum(distinct_cells((x.root,), (x.child,), (x.data,), *args) for x in m)
-    return int(union - own)
+    # each memo alone, as a tuple of the same length whose other memos are empty: one
+    # compiled distinct_cells per thread count, not one more for 1-tuples
+    empty = np.zeros(0, np.int64)
+    own = 0
+    for k in range(len(m) if len(m) > 1 else 0):
+        alone = [(x.root, x.child, x.data) if j == k else (empty, empty, empty)
+                 for j, x in enumerate(m)]
+        own += distinct_cells(*(tuple(a[f] for a in alone) for f in range(3)), *args)
+    return int(union - own) if len(m) > 1 else 0

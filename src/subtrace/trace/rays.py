@@ -85,7 +85,9 @@ def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
     built = np.zeros(n_threads, np.int64)
     req_ts = np.empty((n_threads, CANDIDATES))  # each thread's entry distances of req
     rays = np.arange(n, dtype=np.int64)
-    while len(rays):
+    first = True
+    while len(rays) or first:  # (no rays still run the kernel once: compile_kernel)
+        first = False
         iso = pools.iso
         max_d = int(iso.a["depth_i"].max(initial=0))
         scratch = tuple(scratch_buffers(max_d) for _ in range(n_threads))
@@ -114,6 +116,23 @@ def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
     # (each cell once, however the threads shared the rays: trace/counts.py)
     pools.stats.micro_triangles += int(built.sum()) + thread_correction(memos, pools.iso.view())
     return blocked, hits
+
+
+def compile_kernel() -> None:
+    """Compile the secondary-ray kernel and the memos' cell count for the current thread
+    count (``runtime.threads``) by tracing no rays through empty pools of the types a
+    render passes (a cold cache: ``render.trace_hits`` does it while the trace kernels
+    compile in another process)."""
+    from types import SimpleNamespace
+
+    from subtrace.accel.bvh import no_bvh
+    from subtrace.trace.pools import Pieces
+
+    none = np.zeros((0, 3))
+    pools = Pools(table=None, depths=None, edge_depth=None, iso=Pieces(0), record={},
+                  shell_min=none, shell_max=none, bvh=no_bvh(), eye=np.zeros(3), tol_rad=1.0,
+                  stats=SimpleNamespace(micro_triangles=0), round_no=0)
+    trace_rays(pools, none, none, np.zeros(0), True)
 
 
 def run_chunks(work, n_rays):
