@@ -112,15 +112,47 @@ _set_numba_cache_dir()
 import numba as nb  # noqa: E402  (after the cache folder is set)
 from numba.core import event as _event  # noqa: E402
 
+def _writable(folder: Path) -> str | None:
+    """None when ``folder`` exists (created here if need be) and takes a file, else why not.
+    A folder already there is marked as used now (prune_caches keeps the most recent)."""
+    try:
+        if folder.is_dir():
+            os.utime(folder)
+        else:
+            prune_caches(folder.parent)
+            folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / f".probe-{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    return None
+
+
+def _check_folder(folder: Path) -> None:
+    """The kernel cache must be writable: a ``$SUBTRACE_CACHE_DIR`` that is not is an error
+    (one line); otherwise a warning, and Numba caches the kernels where it can."""
+    why = _writable(folder)
+    if why is None:
+        return
+    chosen = os.environ.get("SUBTRACE_CACHE_DIR")
+    if chosen:
+        from subtrace.errors import SubtraceError
+
+        raise SubtraceError(f"SUBTRACE_CACHE_DIR={chosen}: cannot write the kernel cache "
+                            f"{folder} ({why}); name a writable folder, or unset it")
+    import warnings
+
+    from subtrace.errors import SubtraceWarning
+
+    warnings.warn(SubtraceWarning(f"cannot write the kernel cache {folder} ({why}): kernels "
+                                  "are cached where Numba can; set SUBTRACE_CACHE_DIR to a "
+                                  "writable folder"), stacklevel=2)
+
+
 DIGESTS = source_digests()
 KERNEL_DIR = cache_base() / f"numba-{cache_key(DIGESTS, nb.__version__, compile_target())}"
-if KERNEL_DIR.exists():
-    try:
-        os.utime(KERNEL_DIR)  # used now: prune_caches keeps the most recently used
-    except OSError:  # a read-only shared cache
-        pass
-else:
-    prune_caches(KERNEL_DIR.parent)
+_check_folder(KERNEL_DIR)
 
 
 def _content_locator():

@@ -7,19 +7,22 @@ on each other, so while the first process compiles (and runs) the loading and
 preprocessing, a second process compiles the trace and shade kernels on the other core, by
 calling them on empty inputs of exactly the types a render passes, and stores them in the
 shared cache; the first process waits for it before tracing and then loads them from the
-cache. On a warm cache nothing is started.
-
-    python -m subtrace.runtime.warmup THREADS      # what the second process runs
+cache (meanwhile the first process compiles the secondary-ray kernel and the memos' cell
+count: ``render.trace_hits``). On a warm cache nothing is started.
 
 :func:`compile_all` (``subtrace warmup``) runs small commands of every kind (the default
 render, which compiles in two processes itself; then, side by side, renders of a Loop cage
 and of trimmed NURBS surfaces, the BVH, line queries on both schemes and on surfaces, the
 cage report) so that the kernel cache holds every kernel before the first real command,
 e.g. once per machine or image before a cluster's workers start.
+
+    python -m subtrace.runtime.warmup THREADS          # the render's second process
+    python -m subtrace.runtime.warmup --commands JSON  # a chain of subtrace warmup's
 """
 
 from __future__ import annotations
 
+import json
 import shutil
 import subprocess
 import sys
@@ -120,10 +123,14 @@ def compile_all(jobs: int) -> float:
     return time.perf_counter() - t0
 
 
-def _stages(folder: Path) -> list[list[list[str]]]:
-    """The commands (argument lists of ``subtrace``) that :func:`compile_all` runs, by stage:
-    the default render first (it compiles the shared loading kernels, and its trace kernels
-    in a second process), then the rest side by side, reading inputs written to ``folder``."""
+def _stages(folder: Path) -> list[list[list[list[str]]]]:
+    """What :func:`compile_all` runs: stages one after the other, each a list of chains run
+    side by side, each chain a list of ``subtrace`` commands (argument lists) run in order
+    by one process. The default render comes first (it compiles the shared loading kernels,
+    and its trace kernels in a second process); then the line queries and the cage report
+    beside the renders of a Loop cage, of trimmed NURBS surfaces and through the BVH, on
+    inputs written to ``folder``; commands that share kernels share a chain, so that no two
+    processes compile the same kernel."""
     from subtrace.data import sample_cage_path, sample_surfaces_path
 
     tris = folder / "spot_triangles.obj"
@@ -131,17 +138,19 @@ def _stages(folder: Path) -> list[list[list[str]]]:
     lines = folder / "lines.csv"
     lines.write_text("ox,oy,oz,dx,dy,dz\n0,0.1,5,0,0,-1\n0.2,0.3,-5,0,0,1\n0.3,-3,0.2,0.1,1,0\n")
     small = ["--width", "48", "--height", "32", "--quiet"]
-    out = str(folder / "out.exr")
-    first = [["render", *small, "-o", out]]
-    rest = [["render", str(tris), *small, "-o", str(folder / "loop.exr")],
-            ["render", str(sample_surfaces_path()), *small, "-o", str(folder / "nurbs.exr")],
-            ["render", *small, "--accel", "bvh", "-o", str(folder / "bvh.exr")]]
-    for cage in (sample_cage_path(), tris, sample_surfaces_path()):
-        for mode in ([], ["--first"]):
-            rest.append(["intersect", str(cage), "--lines", str(lines), "--precision", "1e-3",
-                         *mode, "-o", str(folder / "hits.csv")])
-    rest.append(["info", str(tris), "--level", "1"])
-    return [first, rest]
+
+    def intersect(cage):
+        return [["intersect", str(cage), "--lines", str(lines), "--precision", "1e-3", *mode,
+                 "-o", str(folder / "hits.csv")] for mode in ([], ["--first"])]
+
+    first = [["render", *small, "-o", str(folder / "default.exr")]]
+    queries = [*intersect(sample_cage_path()), *intersect(tris),
+               ["info", str(tris), "--level", "1"]]
+    renders = [["render", str(tris), *small, "-o", str(folder / "loop.exr")],
+               ["render", *small, "--accel", "bvh", "-o", str(folder / "bvh.exr")],
+               ["render", str(sample_surfaces_path()), *small, "-o", str(folder / "nurbs.exr")],
+               *intersect(sample_surfaces_path())]
+    return [[first], [queries, renders]]
 
 
 def _triangulated(obj_text: str) -> str:
@@ -158,35 +167,52 @@ def _triangulated(obj_text: str) -> str:
     return "\n".join(out) + "\n"
 
 
-def _run_side_by_side(commands: list[list[str]], jobs: int) -> None:
-    """Run the ``subtrace`` commands, at most ``jobs`` at once, each a process of its own."""
+def _run_side_by_side(chains: list[list[list[str]]], jobs: int) -> None:
+    """Run each chain of ``subtrace`` commands in a process of its own (``python -m
+    subtrace.runtime.warmup --commands JSON``), at most ``jobs`` processes at once."""
     from subtrace.errors import SubtraceError
 
-    pending = list(commands)
+    pending = list(chains)
     running = []
     try:
         while pending or running:
             while pending and len(running) < jobs:
-                argv = pending.pop(0)
-                proc = subprocess.Popen([sys.executable, "-m", "subtrace.cli", *argv],
+                chain = pending.pop(0)
+                proc = subprocess.Popen([sys.executable, "-m", "subtrace.runtime.warmup",
+                                         "--commands", json.dumps(chain)],
                                         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                         stderr=subprocess.PIPE, text=True)
                 signals.register_child(proc)
-                running.append((argv, proc))
-            argv, proc = running.pop(0)
+                running.append(proc)
+            proc = running.pop(0)
             _, err = proc.communicate()
             signals.forget_child(proc)
             if proc.returncode != 0:
                 last = (err.strip().splitlines() or ["no message"])[-1]
-                raise SubtraceError(f"warmup: `subtrace {' '.join(argv)}` failed "
-                                    f"(exit code {proc.returncode}): {last}")
+                raise SubtraceError(f"warmup: a command failed (exit code {proc.returncode}): "
+                                    f"{last}")
     finally:
-        for _, proc in running:
+        for proc in running:
             proc.kill()
             proc.wait()
             signals.forget_child(proc)
 
 
+def _run_commands(chain: list[list[str]]) -> int:
+    """Run the ``subtrace`` commands of ``chain`` in this process, in order; the first
+    failure's exit code (its error line is on stderr, followed by the command), else 0."""
+    from subtrace.cli import main
+
+    for argv in chain:
+        code = main(argv)
+        if code != 0:
+            print(f"subtrace warmup: `subtrace {' '.join(argv)}` failed", file=sys.stderr)
+            return code
+    return 0
+
+
 if __name__ == "__main__":
     signals.unblock()  # the mask of a parent that hands its signals to a watcher thread
+    if sys.argv[1] == "--commands":  # subtrace warmup: a chain of commands (JSON)
+        sys.exit(_run_commands(json.loads(sys.argv[2])))
     compile_kernels(int(sys.argv[1]))
