@@ -318,7 +318,7 @@ def test_every_commands_help_reads_as_written():
     import subprocess
     import sys
 
-    for command in ("render", "info", "compare", "sweep", "intersect"):
+    for command in ("render", "info", "compare", "sweep", "intersect", "warmup"):
         out = subprocess.run([sys.executable, "-m", "subtrace.cli", command, "--help"],
                              capture_output=True, text=True, check=True).stdout
         assert "%%" not in out and "%(" not in out, command
