@@ -165,6 +165,8 @@ def _content_locator():
     except (ImportError, AttributeError):  # pragma: no cover - another Numba
         return None
 
+    made = set()  # cache folders known to exist
+
     class _ContentLocator(*base):
         """Caches a kernel of subtrace's package in ``KERNEL_DIR/subtrace/<module's folder>``,
         its index stamped with the sha256 of the module's bytes (:data:`DIGESTS`)."""
@@ -177,6 +179,14 @@ def _content_locator():
 
         def get_cache_path(self):
             return self._cache_path
+
+        def ensure_cache_path(self):
+            # the folder once per process, without Numba's write test per kernel (a
+            # temporary file for each of ~200 kernels at every start): _check_folder
+            # tested the cache folder these lie in
+            if self._cache_path not in made:
+                os.makedirs(self._cache_path, exist_ok=True)
+                made.add(self._cache_path)
 
         def get_source_stamp(self):
             return self._stamp
