@@ -127,7 +127,7 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
                progress=None, max_memory=None, keep=None):
     """Run the refinement rounds; returns (hits (:class:`~subtrace.trace.pools.Hits`), the
     built patches (:class:`~subtrace.trace.pools.Pieces`), every patch refined). ``compiling``: the
-    process compiling the trace kernels (``warmup.start``), waited for before the first
+    processes compiling the trace kernels (``warmup.start``), waited for before the first
     round. ``accel``: how a ray finds the shells it enters, ``"projection"`` (the shells
     binned into image tiles, ``accel/projection.py``) or ``"bvh"`` (``accel/bvh.py``);
     default ``config.PRIMARY_ACCEL``. Either structure is built here (preprocess time).
@@ -161,7 +161,8 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
         # need here (exact limit points of isolated cells), on inputs of the same types
         for o in table.objects[:1]:
             limit_points(o.level, o.points, o.cage.options, which=np.zeros(0, np.int64))
-        compile_secondary()  # shadow and extra anti-aliasing rays, the memos' cell count
+        if not compiling.secondary:  # (else a third process compiles them)
+            compile_secondary()  # shadow and extra anti-aliasing rays, the memos' cell count
     warmup.wait(compiling)
     return _rounds(table, frame, W, W * H, tol_rad, chosen, tiles, bvh,
                    Memos(n_threads, memo_bytes), stats, progress, keep)

@@ -7,8 +7,9 @@ on each other, so while the first process compiles (and runs) the loading and
 preprocessing, a second process compiles the trace and shade kernels on the other core, by
 calling them on empty inputs of exactly the types a render passes, and stores them in the
 shared cache; the first process waits for it before tracing and then loads them from the
-cache (meanwhile the first process compiles the secondary-ray kernel and the memos' cell
-count: ``render.trace_hits``). On a warm cache nothing is started.
+cache. The secondary-ray kernel (shadow and anti-aliasing rays) and the memos' cell count
+compile in a third process where the machine has three cores or more, else in the first
+process while it waits (``render.trace_hits``). On a warm cache nothing is started.
 
 :func:`compile_all` (``subtrace warmup``) runs small commands of every kind (the default
 render, which compiles in two processes itself; then, side by side, renders of a Loop cage
@@ -17,6 +18,7 @@ cage report) so that the kernel cache holds every kernel before the first real c
 e.g. once per machine or image before a cluster's workers start.
 
     python -m subtrace.runtime.warmup THREADS          # the render's second process
+    python -m subtrace.runtime.warmup --secondary THREADS   # and its third
     python -m subtrace.runtime.warmup --commands JSON  # a chain of subtrace warmup's
 """
 
@@ -40,39 +42,65 @@ def _cached(name: str) -> bool:
     return any(KERNEL_DIR.rglob(f"*{name}-*.nbi"))
 
 
+class Helpers:
+    """The processes :func:`start` started: ``procs``; ``secondary``: whether one of them
+    compiles the secondary-ray kernels (else the render's own process does, while it waits)."""
+
+    def __init__(self, procs, secondary):
+        self.procs = procs
+        self.secondary = secondary
+
+
 def start(threads: int):
     """Start compiling the trace and shade kernels for ``threads`` threads in a second
-    process if the cache lacks them; returns the process (or None)."""
+    process if the cache lacks them, and on a machine of three cores or more the
+    secondary-ray kernels in a third; returns the :class:`Helpers` (or None)."""
     if _cached("_trace_task") and _cached("_shade_task"):
         return None
     from subtrace.runtime.jit import compiling
 
     compiling()  # the first-run notice, where one was asked for
-    try:
-        proc = subprocess.Popen([sys.executable, "-m", "subtrace.runtime.warmup",
-                                 str(int(threads))],
-                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL)
-    except OSError:  # no second process: the kernels compile when first called
-        return None
-    signals.register_child(proc)  # ended with this process if it is interrupted
-    return proc
+    jobs = [[str(int(threads))]]
+    if _cores() >= 3 and not _cached("_rays_task"):
+        jobs.append(["--secondary", str(int(threads))])
+    procs = []
+    for args in jobs:
+        try:
+            proc = subprocess.Popen([sys.executable, "-m", "subtrace.runtime.warmup", *args],
+                                    stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                    stderr=subprocess.DEVNULL)
+        except OSError:  # no helper: the kernels compile when first called
+            break
+        signals.register_child(proc)  # ended with this process if it is interrupted
+        procs.append(proc)
+    return Helpers(procs, secondary=len(procs) == 2) if procs else None
 
 
-def wait(proc) -> None:
-    """Wait for a process from :func:`start` (whatever its outcome: a kernel it did not
-    store is compiled by the caller when first called)."""
-    if proc is not None:
-        proc.wait()
-        signals.forget_child(proc)
+def _cores() -> int:
+    """The cores this process may run on."""
+    import os
+
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
 
 
-def stop(proc) -> None:
-    """End a process from :func:`start` (the render it served failed)."""
-    if proc is not None:
-        proc.kill()
-        proc.wait()
-        signals.forget_child(proc)
+def wait(helpers) -> None:
+    """Wait for the processes from :func:`start` (whatever their outcome: a kernel they did
+    not store is compiled by the caller when first called)."""
+    if helpers is not None:
+        for proc in helpers.procs:
+            proc.wait()
+            signals.forget_child(proc)
+
+
+def stop(helpers) -> None:
+    """End the processes from :func:`start` (the render they served failed)."""
+    if helpers is not None:
+        for proc in helpers.procs:
+            proc.kill()
+            proc.wait()
+            signals.forget_child(proc)
 
 
 def compile_kernels(threads: int) -> None:
@@ -105,6 +133,19 @@ def compile_kernels(threads: int) -> None:
         shade(frame, 1, misses, iso, patches, miss_values((0.0, 0.0, 0.0)),
               np.zeros((len(CHANNELS), 2), np.float32), np.zeros((2, 3)),
               np.zeros(2, np.int64), np.zeros(threads, np.int64))
+    finally:
+        tasks.set_threads(None)
+
+
+def compile_secondary(threads: int) -> None:
+    """Compile the secondary-ray kernel and the memos' cell count for ``threads`` threads
+    (``trace.rays.compile_kernel``)."""
+    from subtrace.runtime import threads as tasks
+    from subtrace.trace.rays import compile_kernel
+
+    tasks.set_threads(threads)
+    try:
+        compile_kernel()
     finally:
         tasks.set_threads(None)
 
@@ -215,4 +256,7 @@ if __name__ == "__main__":
     signals.unblock()  # the mask of a parent that hands its signals to a watcher thread
     if sys.argv[1] == "--commands":  # subtrace warmup: a chain of commands (JSON)
         sys.exit(_run_commands(json.loads(sys.argv[2])))
-    compile_kernels(int(sys.argv[1]))
+    if sys.argv[1] == "--secondary":  # the secondary-ray kernels, a third process
+        compile_secondary(int(sys.argv[2]))
+    else:
+        compile_kernels(int(sys.argv[1]))
