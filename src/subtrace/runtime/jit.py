@@ -71,11 +71,13 @@ def cache_key(digests: dict[str, str], numba_version: str, cpu: tuple) -> str:
 def compile_target() -> tuple:
     """What Numba compiles for: (target triple, CPU name, CPU features), read as Numba's
     code generator reads them (``NUMBA_CPU_NAME`` / ``NUMBA_CPU_FEATURES`` override the
-    host's: e.g. ``NUMBA_CPU_NAME=generic`` for one cache on machines of different CPUs)."""
+    host's: e.g. ``NUMBA_CPU_NAME=generic`` for one cache on machines of different CPUs).
+    Call after Numba is imported (its configuration reads the environment)."""
     import llvmlite.binding as ll
+    from numba.core import config
 
-    name = os.environ.get("NUMBA_CPU_NAME") or ll.get_host_cpu_name()
-    features = os.environ.get("NUMBA_CPU_FEATURES")
+    name = config.CPU_NAME or ll.get_host_cpu_name()
+    features = config.CPU_FEATURES
     if features is None:
         try:
             features = ll.get_host_cpu_features().flatten()
