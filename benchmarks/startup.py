@@ -84,8 +84,9 @@ def _copy_sources(dest: Path) -> Path:
     return dest
 
 
-def _cache_files(cache: Path) -> int:
-    return sum(1 for _ in cache.rglob("*.nb[ic]"))
+def _cache_files(tmp: Path) -> int:
+    """Numba cache files under ``tmp`` (the cache and XDG_CACHE_HOME folders)."""
+    return sum(1 for _ in tmp.rglob("*.nb[ic]"))
 
 
 def cold_and_reinstall(runs: int, env: dict) -> list[tuple[float, float, int, str]]:
@@ -99,13 +100,14 @@ def cold_and_reinstall(runs: int, env: dict) -> list[tuple[float, float, int, st
             run_env = {k: v for k, v in env.items()
                        if k not in ("NUMBA_CACHE_DIR", "PYTHONPATH")}
             run_env["SUBTRACE_CACHE_DIR"] = str(cache)
+            run_env["XDG_CACHE_HOME"] = str(tmp / "xdg")  # (a tree older than the variable)
             argv = [sys.executable, "-m", "subtrace.cli", "render", "--quiet",
                     "-o", str(tmp / "cold.exr")]
             times = []
             load0 = os.getloadavg()[0]
             for copy in ("install-a", "install-b"):
                 run_env["PYTHONPATH"] = str(_copy_sources(tmp / copy))
-                before = _cache_files(cache) if cache.exists() else 0
+                before = _cache_files(tmp)
                 t0 = time.perf_counter()
                 proc = subprocess.run(argv, env=run_env, stdout=subprocess.DEVNULL,
                                       stderr=subprocess.PIPE, text=True)
@@ -114,7 +116,7 @@ def cold_and_reinstall(runs: int, env: dict) -> list[tuple[float, float, int, st
                     raise SystemExit(f"{' '.join(argv)} failed: {proc.stderr}")
                 if copy == "install-a":
                     load1 = os.getloadavg()[0]
-                added = _cache_files(cache) - before
+                added = _cache_files(tmp) - before
             rows.append((times[0], times[1], added, f"{load0:.1f} / {load1:.1f}"))
     return rows
 
