@@ -176,6 +176,8 @@ def _stages(folder: Path) -> list[list[list[list[str]]]]:
 
     tris = folder / "spot_triangles.obj"
     tris.write_text(_triangulated(sample_cage_path().read_text()))
+    creased = folder / "creased_cube.obj"
+    creased.write_text(_CREASED_CUBE)
     lines = folder / "lines.csv"
     lines.write_text("ox,oy,oz,dx,dy,dz\n0,0.1,5,0,0,-1\n0.2,0.3,-5,0,0,1\n0.3,-3,0.2,0.1,1,0\n")
     small = ["--width", "48", "--height", "32", "--quiet"]
@@ -186,12 +188,36 @@ def _stages(folder: Path) -> list[list[list[list[str]]]]:
 
     first = [["render", *small, "-o", str(folder / "default.exr")]]
     queries = [*intersect(sample_cage_path()), *intersect(tris),
-               ["info", str(tris), "--level", "1"]]
+               ["info", str(tris), "--level", "1"], ["info", str(creased), "--level", "2"]]
     renders = [["render", str(tris), *small, "-o", str(folder / "loop.exr")],
+               ["render", str(creased), *small, "-o", str(folder / "creased.exr")],
                ["render", *small, "--accel", "bvh", "-o", str(folder / "bvh.exr")],
                ["render", str(sample_surfaces_path()), *small, "-o", str(folder / "nurbs.exr")],
                *intersect(sample_surfaces_path())]
     return [[first], [queries, renders]]
+
+
+# an open box (five faces of a cube: a boundary) with a semi-sharp and two infinitely sharp
+# crease edges, a corner and a hole: the kernels of creases, corners, boundaries and holes
+# that Spot does not reach
+_CREASED_CUBE = """v -1 -1 -1
+v 1 -1 -1
+v 1 1 -1
+v -1 1 -1
+v -1 -1 1
+v 1 -1 1
+v 1 1 1
+v -1 1 1
+f 1 4 3 2
+f 5 6 7 8
+f 1 2 6 5
+f 2 3 7 6
+f 3 4 8 7
+t crease 2/1/0 0 1 2.5
+t crease 4/1/0 1 2 2 6 10
+t corner 1/1/0 7 3
+t hole 1/0/0 4
+"""
 
 
 def _triangulated(obj_text: str) -> str:
