@@ -44,7 +44,6 @@ from subtrace.shade import (C_OBJECT, C_R, CHANNELS, background_rows, deepest_le
 from subtrace.subdiv.limit import limit_points
 from subtrace.trace.budget import check_memory, choose_within_budget, warn_tiles
 from subtrace.trace.build import build_loop_regular, build_requested
-from subtrace.trace.counts import thread_correction
 from subtrace.trace.kernels import trace_round
 from subtrace.trace.pools import Memos, Pieces, candidate_lists, hit_arrays
 from subtrace.trace.tris import TRI
@@ -68,13 +67,14 @@ class RenderStats:
     pieces: int = 0  # regular sub-patches and cells of the isolated irregular patches
     memo_nodes: int = 0  # quadtree nodes of Bezier pieces split and kept by the threads
     memo_full: int = 0  # times a thread's memo ran out during a round (rays split on the spot)
-    memo_bytes: int = 0  # bytes of the memos' stores in use at the end
+    memo_bytes: int = 0  # the most bytes the memos' stores held at once (summed over threads)
     rounds: int = 0
     max_depth: int = 0  # the deepest grid built (in its patch's units)
     max_level: int = -1  # the deepest level hit: the level channel's maximum (-1: none)
     # the deepest grid depth a cap held a patch to, below what its tolerance asked (-1: no
     # cap), and why: "memory" (the budget), "precision" (what doubles resolve, config:
-    # PRECISION_BITS), "size" (Loop grids' quadtree index), comma-separated, or "none"
+    # PRECISION_BITS), "size" (Loop patches: LOOP_MAX_ISOLATED_DEPTH, LOOP_MAX_INSIDE_DEPTH),
+    # "depth" (an explicit maximum depth), comma-separated, or "none"
     depth_cap: int = -1
     depth_cap_reason: str = "none"
     # 1: the projection's tile lists did not fit the memory budget, so rays walked the BVH
@@ -211,8 +211,8 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
         round_no += 1
     stats.rounds = round_no + 1
     memos.finish(stats)
-    # (each cell once, however the threads shared the rays: trace/counts.py)
-    stats.micro_triangles += int(tested.sum()) + thread_correction(memos, iso.view())
+    # (each chunk of rays counts what its own memo built: the same on any thread)
+    stats.micro_triangles += int(tested.sum())
     # regular patches count as refined once a ray has descended into them
     first = (iso.a["round"] < 0) & (iso.a["touched"] > 0)
     direct = iso.a["patch"][first]
