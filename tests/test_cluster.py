@@ -50,3 +50,80 @@ def test_a_failing_task_stops_the_job_with_one_line(tmp_path):
                    lambda *a: None)
     assert str(remote.value) == str(local.value) and "bad.obj:" in str(remote.value)
     assert not (tmp_path / "x.exr").exists()
+
+
+@pytest.fixture(scope="module")
+def two_workers():
+    """A LocalCluster of two worker processes (one thread each) and its client."""
+    from distributed import Client, LocalCluster
+
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                           dashboard_address=None)
+    client = Client(cluster)
+    yield client
+    client.close()
+    cluster.close()
+
+
+def _scene(tmp_path):
+    from subtrace.io.scene import apply_overrides
+
+    cube = tmp_path / "cube.obj"
+    cube.write_text(CUBE)
+    return apply_overrides(scene_for_meshes([str(cube)]), width=40, height=30,
+                           eye=(4.0, 2.0, 3.0), target=(0.0, 0.0, 0.0))
+
+
+def test_tiles_on_two_workers_equal_the_local_render(tmp_path, two_workers):
+    """Frames cut into tiles of 16 x 16 (6 tasks a frame, on two worker processes) and put
+    together by a task each: every channel of every frame is the local render's, bit for
+    bit, and no tile file is left."""
+    from subtrace.frames import render_frames
+
+    scene = _scene(tmp_path)
+    local = render_frames(scene, str(tmp_path / "local.#.exr"), turntable=3)
+    remote = render_frames(scene, str(tmp_path / "dask.#.exr"), turntable=3, tile=16,
+                           dask=two_workers)
+    assert [f.frame for f in remote] == [0, 1, 2]
+    for f, g in zip(local, remote):
+        a, _ = read_exr(f.path)
+        b, head = read_exr(g.path)
+        assert head["subtrace:tiles"] == 6
+        for name in a:
+            np.testing.assert_array_equal(a[name], b[name], err_msg=f"{g.path} {name}")
+    assert not list(tmp_path.glob(".*.tile.npz")) and not list(tmp_path.glob(".*.tmp"))
+
+
+def test_a_worker_killed_mid_job_is_survived(tmp_path, two_workers):
+    """A worker process that dies as it starts a tile (a worker plugin kills it once, the
+    first time a tile task starts executing, leaving a marker file) has the task run again
+    elsewhere: the job completes and the frame is the local render's."""
+    import os
+
+    from distributed.diagnostics.plugin import WorkerPlugin
+
+    from subtrace.frames import render_frames
+
+    marker = str(tmp_path / "killed")
+
+    class KillOnce(WorkerPlugin):
+        name = "subtrace-kill-once"
+
+        def transition(self, key, start, finish, **kwargs):
+            if (finish == "executing" and str(key).startswith("subtrace-tile")
+                    and not os.path.exists(marker)):
+                open(marker, "w").close()
+                os._exit(1)
+
+    scene = _scene(tmp_path)
+    local = render_frames(scene, str(tmp_path / "local.exr"))
+    two_workers.register_plugin(KillOnce())
+    try:
+        remote = render_frames(scene, str(tmp_path / "dask.exr"), tile=16, dask=two_workers)
+    finally:
+        two_workers.unregister_worker_plugin("subtrace-kill-once")
+    assert os.path.exists(marker)  # a worker did die
+    a, _ = read_exr(local[0].path)
+    b, _ = read_exr(remote[0].path)
+    for name in a:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
