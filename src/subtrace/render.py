@@ -105,10 +105,9 @@ class RenderResult:
     schemes: tuple
     refined_objects: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     accel: str = "projection"  # how rays found the shells they enter
-    # (x0, y0, x1, y1): the pixels of ``camera``'s image the channels hold (``crop``); None:
-    # all of them
-    crop: tuple | None = None
     # object id of every refined patch (what was built, for tests and reports)
+    # crop: (x0, y0, x1, y1), the pixels of ``camera``'s image the channels hold; None: all
+    crop: tuple | None = None
 
 
 def _shell_walk(chosen, frame, width, height, accel, max_memory, stats, image=None):

@@ -143,8 +143,12 @@ def _summary(out, png, result, time_write: float) -> str:
     written before the write ends); the total adds the write."""
     st = result.stats
     cam = result.camera
+    size = f"{cam.width}x{cam.height}"
+    if result.crop is not None:
+        x0, y0, x1, y1 = result.crop
+        size = f"columns {x0}..{x1 - 1}, rows {y0}..{y1 - 1} of {size}"
     return (
-        f"{out}: {cam.width}x{cam.height}, tolerance "
+        f"{out}: {size}, tolerance "
         f"{result.tolerance_rad / cam.pixel_angle():.3g} px, {st.pixels_covered} pixels "
         f"covered; {st.patches_refined} of {st.patches} patches refined, "
         f"{st.micro_triangles} micro-triangles, deepest level {st.max_level}; "
