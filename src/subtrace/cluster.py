@@ -50,7 +50,7 @@ def render_frame(scene, out, png, picture, bits, accel, crop=None):
     its limit."""
     import dataclasses
 
-    from subtrace.frames import result_files, write_frame
+    from subtrace.jobs import result_files, write_frame
     from subtrace.render import render_scene
 
     scene, threads = _on_worker(scene)
@@ -66,7 +66,7 @@ def render_tile(scene, crop, path, accel):
     statistics as a dict)."""
     import dataclasses
 
-    from subtrace.frames import result_files
+    from subtrace.jobs import result_files
     from subtrace.render import render_scene
     from subtrace.tiles import write_tile
 
@@ -86,7 +86,7 @@ def finish_frame(tiles, size, out, png, picture, bits, transparent):
     header is the first tile's, with the merged statistics."""
     import os
 
-    from subtrace.frames import write_frame
+    from subtrace.jobs import write_frame
     from subtrace.tiles import assemble, merge_stats, read_tile
 
     stats = merge_stats([t[3] for t in tiles])
@@ -140,7 +140,7 @@ def run_jobs(dask, jobs, crop, tile, picture, bits, accel, report=None, wait=Tru
     the caller's). Raises the first task's error (the others cancelled, tiles removed)."""
     import uuid
 
-    from subtrace.frames import FrameResult
+    from subtrace.jobs import FrameResult
     from subtrace.tiles import tile_grid, tile_path
 
     try:

@@ -22,7 +22,6 @@ import dataclasses
 import math
 import os
 import re
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -93,23 +92,6 @@ def check_turntable(n) -> int:
     return value
 
 
-@dataclass
-class FrameResult:
-    """One frame of :func:`render_frames`: its number (None: the one image), its output and
-    preview paths, its statistics (``dataclasses.asdict(RenderStats)``; empty for a frame
-    left out), whether it was left out (``resume``), the render (a local one's
-    :class:`subtrace.render.RenderResult`, else None) and the seconds its files took to
-    write."""
-
-    frame: int | None
-    path: str
-    preview: str | None
-    stats: dict = field(default_factory=dict)
-    skipped: bool = False
-    result: object = None
-    time_write: float = 0.0
-
-
 def is_complete(path) -> bool:
     """Whether ``path`` is an image that reads back whole (outputs are written through a
     temporary and renamed, so one that exists is complete unless it was damaged since)."""
@@ -123,40 +105,6 @@ def is_complete(path) -> bool:
     except SubtraceError:
         return False
     return True
-
-
-def write_frame(out, png, picture, bits, channels, attributes, transparent) -> float:
-    """Write one frame's output (an EXR with ``attributes``, or the ``picture`` format of
-    ``out`` at ``bits`` per channel: colour over the background unless ``transparent``) and
-    its preview ``png``; returns the seconds it took. ``attributes`` may hold
-    ``window`` = (x, y, width, height): the channels are that tile of the image."""
-    import time
-
-    from subtrace.io.exr import write_exr, write_picture, write_png
-
-    t0 = time.perf_counter()
-    attributes = dict(attributes)
-    window = attributes.pop("window", None)
-    if picture is None:
-        write_exr(out, channels, attributes, png_path=png, window=window)
-    else:
-        ch = channels if transparent else {c: channels[c] for c in "RGB"}
-        write_picture(out, ch, bits)
-        if png:
-            write_png(png, np.stack([channels[c] for c in "RGB"], axis=-1))
-    return time.perf_counter() - t0
-
-
-def result_files(result, scene) -> dict:
-    """The header of a render's output (``render.result_attributes``), with the data window
-    of a tile (``result.crop``) as ``window``, for :func:`write_frame`."""
-    from subtrace.render import result_attributes
-
-    attributes = result_attributes(result, scene)
-    if result.crop is not None:
-        x0, y0 = result.crop[:2]
-        attributes["window"] = (x0, y0, result.camera.width, result.camera.height)
-    return attributes
 
 
 def frame_scenes(scene, turntable=None, frames=None, output=None, png=None):
@@ -206,6 +154,7 @@ def render_frames(scene, output=None, *, turntable=None, frames=None, crop=None,
     and ``wait=False``: the Dask futures of the frames (each gives (out, png, stats)) and
     nothing is reported; the frames left out are not among them."""
     from subtrace.io.formats import picture_format
+    from subtrace.jobs import FrameResult, render_tiled, result_files, write_frame
 
     if isinstance(scene, (str, os.PathLike)):
         from subtrace.io.scene import load_scene, scene_for_meshes
@@ -246,7 +195,6 @@ def render_frames(scene, output=None, *, turntable=None, frames=None, crop=None,
             return futures
     else:
         from subtrace.render import render_scene
-        from subtrace.tiles import render_tiled
 
         for k, scene_k, out_k, png_k in jobs:
             if tile is not None:
@@ -277,4 +225,4 @@ def _is_client(dask) -> bool:
 
 
 __all__ = ["parse_frames", "frame_path", "turntable_eye", "check_turntable", "render_frames",
-           "FrameResult", "is_complete"]
+           "is_complete"]

@@ -16,7 +16,6 @@ output is encoded), written atomically beside the frame it belongs to.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 
 import numpy as np
@@ -97,25 +96,6 @@ def merge_stats(stats: list[dict]) -> dict:
     return merged
 
 
-def render_tiled(scene, size: int, cages=None, threads=None, accel=None, progress=None):
-    """Render ``scene`` as tiles of at most ``size`` x ``size`` pixels, one after another,
-    and put them together: a :class:`subtrace.render.RenderResult` whose channels are the
-    whole render's, bit for bit, and whose statistics are the tiles' (:func:`merge_stats`).
-    Only one tile's rays, hits and pools are held at a time."""
-    from subtrace.render import RenderStats, render_scene
-
-    width, height = scene.camera.width, scene.camera.height
-    parts, stats, first = [], [], None
-    for crop in tile_grid(width, height, size):
-        result = render_scene(scene, cages=cages, threads=threads, accel=accel,
-                              progress=progress, crop=crop)
-        parts.append((crop, result.channels))
-        stats.append(dataclasses.asdict(result.stats))
-        first = first or result
-    return dataclasses.replace(first, channels=assemble(width, height, parts),
-                               stats=RenderStats(**merge_stats(stats)), crop=None)
-
-
 def tile_path(out: str, crop) -> str:
     """Where the tile ``crop`` of the frame written to ``out`` waits to be put together: a
     hidden file beside it."""
@@ -138,4 +118,4 @@ def read_tile(path: str) -> dict:
         return {k: data[k] for k in data.files}
 
 
-__all__ = ["check_crop", "check_tile", "tile_grid", "assemble", "merge_stats", "render_tiled"]
+__all__ = ["check_crop", "check_tile", "tile_grid", "assemble", "merge_stats"]

@@ -176,8 +176,8 @@ def _rectangles(task, n_tasks, bmin, bmax, eye, inv, width, height, tile_a0, til
     when it lies behind the eye plane or outside the ``width`` x ``height`` image, in the
     image's tiles; counts per tile of the window (``tx`` x ``ty`` tiles from tile
     (tile_a0, tile_b0); the whole image: 0, 0 and all its tiles) into ``count[task]``; the
-    distance from the eye to each box into ``key``. Task ``task`` of ``n_tasks`` (tasks.run_tasks) takes every n_tasks-th block of
-    ``_BLOCK`` boxes."""
+    distance from the eye to each box into ``key``. Task ``task`` of ``n_tasks``
+    (tasks.run_tasks) takes every n_tasks-th block of ``_BLOCK`` boxes."""
     for b0 in range(task * _BLOCK, len(bmin), n_tasks * _BLOCK):
         for i in range(b0, min(b0 + _BLOCK, len(bmin))):
             d2 = 0.0

@@ -129,7 +129,7 @@ def execute(args) -> int:
 def _write(args, scene, result, out, png, picture, bits) -> None:
     """Write one render's EXR (or picture; a tile's as its data window) and preview; print
     its summary line."""
-    from subtrace.frames import result_files, write_frame
+    from subtrace.jobs import result_files, write_frame
 
     took = write_frame(out, png, picture, bits, result.channels, result_files(result, scene),
                        scene.render.transparent)
