@@ -127,3 +127,40 @@ def test_a_worker_killed_mid_job_is_survived(tmp_path, two_workers):
     b, _ = read_exr(remote[0].path)
     for name in a:
         np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+
+
+def test_command_on_a_scheduler_address_with_tiles_and_resume(tmp_path, two_workers, capsys):
+    """``render --turntable 2 --tile 16 --dask ADDRESS``: the frames are the local ones;
+    run again with --resume, every frame is left out and said so."""
+    cube = tmp_path / "cube.obj"
+    cube.write_text(CUBE)
+    view = [str(cube), "--eye", "4", "2", "3", "--target", "0", "0", "0", "--width", "40",
+            "--height", "30", "--turntable", "2"]
+    address = two_workers.scheduler.address
+    assert main(["render", *view, "-o", str(tmp_path / "local.#.exr"), "--quiet"]) == 0
+    assert main(["render", *view, "-o", str(tmp_path / "dask.#.exr"), "--tile", "16",
+                 "--dask", address, "--quiet"]) == 0
+    for k in range(2):
+        a, _ = read_exr(tmp_path / f"local.{k}.exr")
+        b, _ = read_exr(tmp_path / f"dask.{k}.exr")
+        for name in a:
+            np.testing.assert_array_equal(a[name], b[name], err_msg=f"frame {k} {name}")
+    capsys.readouterr()
+    assert main(["render", *view, "-o", str(tmp_path / "dask.#.exr"), "--tile", "16",
+                 "--dask", address, "--resume"]) == 0
+    assert "--resume: 2 of 2 frames already there" in capsys.readouterr().out
+
+
+def test_render_frames_gives_futures(tmp_path, two_workers):
+    """With a Client and wait=False, render_frames returns a future per frame, each giving
+    (output, preview, statistics) once its file is written."""
+    from subtrace.frames import render_frames
+
+    futures = render_frames(_scene(tmp_path), str(tmp_path / "f.#.exr"), turntable=2,
+                            dask=two_workers, wait=False)
+    assert len(futures) == 2
+    done = [f.result() for f in futures]
+    assert [d[0] for d in done] == [str(tmp_path / "f.0.exr"), str(tmp_path / "f.1.exr")]
+    assert all(d[2]["pixels_covered"] > 0 for d in done)
+    for out, _, _ in done:
+        read_exr(out)
