@@ -165,3 +165,33 @@ def test_a_window_lists_its_image_lists(seed, width, height, data):
             K = (b + y0 // TILE) * full.per_row + a + x0 // TILE
             np.testing.assert_array_equal(win.items[win.off[k]:win.off[k + 1]],
                                           full.items[full.off[K]:full.off[K + 1]])
+
+
+def test_a_tile_of_a_huge_image_holds_only_its_own_pixels():
+    """A 32x24 tile of an 8192x6144 image (50 M pixels: its channels alone would take
+    2.2 GB, and the image fails a 256 MiB budget) renders within that budget, traces only
+    its window's rays, and allocates about what a tile of a 64x48 image does (tracemalloc
+    peaks within 64 MiB of each other: numpy's arrays are traced)."""
+    import tracemalloc
+
+    from subtrace.data import default_scene_path
+    from subtrace.errors import SceneError
+    from subtrace.io.scene import apply_overrides, load_scene
+    from subtrace.render import render_scene
+
+    peaks = []
+    for w, h in ((64, 48), (8192, 6144)):
+        scene = apply_overrides(load_scene(default_scene_path()), width=w, height=h,
+                                max_memory="256M")
+        render_scene(scene, crop=(w // 2, h // 2, w // 2 + 32, h // 2 + 24))  # (warm)
+        tracemalloc.start()
+        try:
+            result = render_scene(scene, crop=(w // 2, h // 2, w // 2 + 32, h // 2 + 24))
+            peaks.append(tracemalloc.get_traced_memory()[1])
+        finally:
+            tracemalloc.stop()
+        assert result.channels["R"].shape == (24, 32)
+        assert result.stats.rays <= 36 * 28  # the window: a pixel around, even bounds
+    assert peaks[1] - peaks[0] < 64 << 20, [p >> 20 for p in peaks]
+    with pytest.raises(SceneError, match="budget"):
+        render_scene(scene)  # the whole image does not fit

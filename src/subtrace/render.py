@@ -149,11 +149,11 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
         raise ValueError(f"unknown acceleration {accel!r}")
     W, H = camera.width, camera.height
     frame = camera.frame()
-    # (a window, ``camera.CameraWindow``, decides depths and budgets as its image does)
+    # (a window, ``camera.CameraWindow``, budgets for its own pixels)
     image = whole_image(camera)
     t0 = time.perf_counter()
-    chosen = choose_within_budget(table, frame[0], tol_rad, max_depth, max_memory,
-                                  image.width * image.height, stats)
+    chosen = choose_within_budget(table, frame[0], tol_rad, max_depth, max_memory, W * H,
+                                  stats)
     stats.time_refine += time.perf_counter() - t0
     t0 = time.perf_counter()
     tiles, bvh = _shell_walk(chosen, frame, W, H, accel, max_memory, stats,
@@ -310,19 +310,22 @@ def table_in_view(cages, camera, sweeps=()):
     return build_patch_table(cages, keep, _view_test(camera, sweeps)), keep
 
 
-def _prepare(scene, cages, stats, nurbs=None):
+def _prepare(scene, cages, stats, nurbs=None, crop=None):
     """Load and check the cages, frame the camera (around the free-form surfaces ``nurbs``
-    too), build the patch table of the cage faces in view, check the budget: (cages, table
-    (None without cages), camera, tolerance in radians, budget in bytes)."""
+    too), build the patch table of the cage faces in view, check the budget against the
+    pixels traced (the image's, or the window of its ``crop``: :func:`crop_window`):
+    (cages, table (None without cages), camera, the camera or its window, tolerance in
+    radians, budget in bytes)."""
     t_start = time.perf_counter()
     if cages is None:
         cages = load_objects(scene)
     if not cages:
         lo, hi = nurbs.bounds()
         camera = scene.make_camera(lo, hi)
-        stats.rays = camera.width * camera.height
+        view = camera if crop is None else crop_window(camera, crop)
+        stats.rays = view.width * view.height
         stats.time_load = time.perf_counter() - t_start
-        return cages, None, camera, scene.render.tolerance_rad(camera), None
+        return cages, None, camera, view, scene.render.tolerance_rad(camera), None
     for c in cages:
         check_coordinates(c.path, c.points, config.MAX_COORDINATE)
         check_valences(c.path, c.face_sizes, np.diff(c.base.vert_edge_offsets),
@@ -352,11 +355,12 @@ def _prepare(scene, cages, stats, nurbs=None):
         table = build_patch_table(cages)
     budget = scene.render.max_memory
     budget = config.default_max_memory() if budget is None else budget
-    check_memory(table, camera.width * camera.height, budget, camera.width, camera.height)
+    view = camera if crop is None else crop_window(camera, crop)
+    check_memory(table, view.width * view.height, budget, view.width, view.height)
     stats.patches = table.n_patches
-    stats.rays = camera.width * camera.height
+    stats.rays = view.width * view.height
     stats.time_preprocess = time.perf_counter() - t0
-    return cages, table, camera, scene.render.tolerance_rad(camera), budget
+    return cages, table, camera, view, scene.render.tolerance_rad(camera), budget
 
 
 def crop_window(camera, crop) -> CameraWindow:
@@ -385,7 +389,9 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
     ``crop``: (x0, y0, x1, y1), a tile of the image (pixels, x1 and y1 excluded): only the
     rays of its :func:`crop_window` are traced and the channels are the tile's, equal bit
     for bit to those pixels of the whole render (the camera, tolerance, patch table, depths
-    and budget are the whole image's; the per-pixel arrays are the window's)."""
+    and projection lists are the whole image's; the per-pixel arrays are the window's, and
+    the memory budget holds them: where the whole image's pixels would make the budget cap
+    depths (a warning says so), its tiles, needing less, may be refined further)."""
     t_start = time.perf_counter()
     threads = tasks.usable_threads(threads)
     accel = config.PRIMARY_ACCEL if accel is None else accel
@@ -397,11 +403,10 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
     try:
         owners = cage_objects(scene) if cages is None else list(range(len(cages)))
         nurbs = load_nurbs(scene) if cages is None else None  # free-form surfaces
-        cages, table, camera, tol_rad, budget = _prepare(scene, cages, stats, nurbs)
+        cages, table, camera, view, tol_rad, budget = _prepare(scene, cages, stats, nurbs,
+                                                               crop)
         if crop is not None:
             crop = check_crop(crop, camera.width, camera.height)
-        view = camera if crop is None else crop_window(camera, crop)
-        stats.rays = view.width * view.height
         if progress is not None:
             progress(0, stats.rays, "tracing")
         keep = {}

@@ -4,9 +4,12 @@ each: ``cluster.py``) and puts them together.
 
 A tile is rendered by ``render.render_scene(crop=...)``: everything that depends on the
 whole image (the camera, the tolerance, the patch table of the faces in view, the depths,
-the memory budget, the projection's tile lists) is the whole image's, and only the rays of
-the tile (and of a pixel around it, for anti-aliasing's neighbour test) are traced, so its
-pixels are the whole render's, bit for bit, and tiles put together are the whole image.
+the projection's tile lists) is the whole image's, and only the rays of the tile (and of a
+pixel around it, for anti-aliasing's neighbour test) are traced, so its pixels are the
+whole render's, bit for bit, and tiles put together are the whole image. The memory budget
+holds the tile's own per-pixel arrays (a tile of an image too large to render whole
+renders): only where the whole image's would make the budget cap depths do its tiles
+differ from it, refined further.
 
 Layout: a crop is (x0, y0, x1, y1), pixels, x1 and y1 excluded; channels are name -> (H,W)
 float32, row 0 at the top. A tile on disk (a task's output, waiting to be put together) is

@@ -57,9 +57,8 @@ def project_shells(bmin, bmax, frame, width: int, height: int,
 
     ``image``: (width, height) of the whole image when ``frame`` is a window's
     (``camera.CameraWindow``: its offset, even, in a fifth row): only the window's tiles
-    are listed, each exactly as the whole image lists it (the same boxes, in the same
-    order), and ``max_bytes`` is held against the whole image's lists, so a window falls
-    back to the BVH exactly when its image does."""
+    are listed (and held against ``max_bytes``), each exactly as the whole image lists it:
+    the same boxes, in the same order."""
     bmin = np.ascontiguousarray(bmin, dtype=np.float64)
     bmax = np.ascontiguousarray(bmax, dtype=np.float64)
     eye = frame[0]
@@ -79,15 +78,9 @@ def project_shells(bmin, bmax, frame, width: int, height: int,
                     full_h, a0, b0, tx, ty, rect, count, key, n=n_tasks)
     off = np.zeros(tx * ty + 1, np.int64)
     np.cumsum(count.sum(axis=0)[:-1], out=off[1:])
-    seen = np.nonzero(rect[:, 0] <= rect[:, 2])[0]  # (the others are in no tile)
-    if image is None:
-        n_items, n_tiles = int(off[-1]), tx * ty
-    else:  # the whole image's lists
-        r = rect[seen]
-        n_items = int(((r[:, 2] - r[:, 0] + 1) * (r[:, 3] - r[:, 1] + 1)).sum())
-        n_tiles = -(-full_w // TILE) * -(-full_h // TILE)
-    if max_bytes is not None and tiles_bytes(n_items, n_tiles) > max_bytes:
+    if max_bytes is not None and tiles_bytes(int(off[-1]), tx * ty) > max_bytes:
         return None
+    seen = np.nonzero(rect[:, 0] <= rect[:, 2])[0]  # (the others are in no tile)
     items = np.empty(int(off[-1]), np.int32)
     # each box's tiles within the window, in the window's tiles (empty: none)
     local = np.empty_like(rect)
