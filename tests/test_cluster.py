@@ -36,7 +36,7 @@ def test_dask_frames_equal_local_frames(tmp_path, capsys):
 def test_a_failing_task_stops_the_job_with_one_line(tmp_path):
     """A frame whose cage the worker cannot read (here: a file changed after the job was
     made) raises the error a local render raises, naming the file and line."""
-    from subtrace.cluster import run_frames
+    from subtrace.cluster import run_jobs
     from subtrace.render import render_scene
 
     bad = tmp_path / "bad.obj"
@@ -46,8 +46,8 @@ def test_a_failing_task_stops_the_job_with_one_line(tmp_path):
     with pytest.raises(SubtraceError) as local:
         render_scene(scene)
     with pytest.raises(SubtraceError) as remote:
-        run_frames(None, [(scene, str(tmp_path / "x.exr"), None, None, 8)], None,
-                   lambda *a: None)
+        run_jobs(None, [(0, scene, str(tmp_path / "x.exr"), None)], None, None, None, 8,
+                 None)
     assert str(remote.value) == str(local.value) and "bad.obj:" in str(remote.value)
     assert not (tmp_path / "x.exr").exists()
 
@@ -164,3 +164,18 @@ def test_render_frames_gives_futures(tmp_path, two_workers):
     assert all(d[2]["pixels_covered"] > 0 for d in done)
     for out, _, _ in done:
         read_exr(out)
+
+
+def test_a_failing_tile_stops_the_job_and_leaves_no_tile(tmp_path, two_workers):
+    """A tiled frame whose cage is bad by the time the workers read it: the local render's
+    one line, no frame, no tile file."""
+    from subtrace.cluster import run_jobs
+
+    bad = tmp_path / "bad.obj"
+    bad.write_text(CUBE)
+    scene = scene_for_meshes([str(bad)])
+    bad.write_text(CUBE + "f 1 2 99\n")
+    with pytest.raises(SubtraceError, match="bad.obj:"):
+        run_jobs(two_workers, [(0, scene, str(tmp_path / "x.exr"), None)], None, 16, None,
+                 8, None)
+    assert not list(tmp_path.glob("x.exr")) and not list(tmp_path.glob(".*.tile.npz"))

@@ -200,26 +200,3 @@ def _remove(paths) -> None:
             os.unlink(path)
         except OSError:
             pass
-
-
-def run_frames(address, jobs, accel, report):
-    """Render ``jobs`` = [(scene, out, png, picture, bits)] as tasks; ``report(out, png,
-    stats)`` for each as it finishes. Raises the first task's error (others cancelled)."""
-    from distributed import as_completed
-
-    client = client_for(address)
-    try:
-        futures = [client.submit(render_frame, *job, accel, key=f"subtrace-frame-{k}-{job[1]}",
-                                 retries=RETRIES, pure=False) for k, job in enumerate(jobs)]
-        try:
-            for future in as_completed(futures):
-                out, png, stats = future.result()
-                report(out, png, stats)
-        except BaseException:
-            client.cancel(futures)
-            raise
-    finally:
-        cluster = getattr(client, "cluster", None)
-        client.close()
-        if cluster is not None and address is None:
-            cluster.close()
