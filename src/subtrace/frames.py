@@ -174,7 +174,7 @@ def render_frames(scene, output=None, *, turntable=None, frames=None, crop=None,
         if crop is not None:
             raise SceneError("--crop renders one tile: leave out --tile", key="--tile")
     if resume and turntable is None:
-        raise SceneError("--resume leaves out frames already rendered: give --turntable N",
+        raise SceneError("it leaves out frames already rendered: give --turntable N",
                          key="--resume")
     jobs, cages = frame_scenes(scene, turntable, frames, out, png)
     results = {}

@@ -83,11 +83,11 @@ def execute(args) -> int:
         raise SceneError("--frames picks frames of a camera path: give --turntable N",
                          key="--frames")
     elif resume:
-        raise SceneError("--resume leaves out frames already rendered: give --turntable N",
+        raise SceneError("it leaves out frames already rendered: give --turntable N",
                          key="--resume")
     elif dask is not None and tile is None:
-        raise SceneError("--dask renders frames or tiles as tasks: give --turntable N or "
-                         "--tile N", key="--dask")
+        raise SceneError("its tasks are frames or tiles: give --turntable N or --tile N",
+                         key="--dask")
     else:
         paths = [out, png]
     for path in paths:
