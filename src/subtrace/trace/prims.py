@@ -93,7 +93,14 @@ def ray_triangle(ox, oy, oz, kx, ky, kz, sx, sy, sz, a, b, c, verts, tmax, slack
 
 @leaf_njit
 def ray_setup(frame, row, col):
-    """Unit direction of the ray through the centre of pixel (row, col)."""
+    """Unit direction of the ray through the centre of pixel (row, col); a window's frame
+    (a fifth row: ``camera.CameraWindow``) first adds its offset in the image."""
+    if frame.shape[0] > 4:
+        col = col + frame[4, 0]
+        row = row + frame[4, 1]
+    else:
+        col = col + 0.0
+        row = row + 0.0
     dx = frame[3, 0] + col * frame[1, 0] + row * frame[2, 0]
     dy = frame[3, 1] + col * frame[1, 1] + row * frame[2, 1]
     dz = frame[3, 2] + col * frame[1, 2] + row * frame[2, 2]
