@@ -797,6 +797,13 @@ def _main(args) -> int:
         work = Path(tmp)
         paths = sorted((REPO / "scenes").glob("*.toml")) + write_extra_scenes(work)
         scenes = [load_scene(p) for p in paths]
+        # free-form (NURBS) surfaces: Cycles has no such primitive, so there is nothing to
+        # compare (benchmarks/trim.py --renders times subtrace's NURBS scenes alone)
+        freeform = [s.name for s in scenes if any(not c.faces for c, *_ in s.objects)]
+        scenes = [s for s in scenes if s.name not in freeform]
+        if freeform and not args.list:
+            print(f"cycles.py: skipping {', '.join(freeform)}: free-form surfaces, which "
+                  "Cycles does not render", file=sys.stderr)
         if args.list:
             for s in scenes:
                 print(f"{s.name:28} {s.features()}")

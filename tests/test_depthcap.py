@@ -89,16 +89,33 @@ def test_precision_cap_on_an_absurd_tolerance_is_reported_once():
 
 
 @needs_shared
-def test_loop_scene_at_a_tiny_tolerance_is_capped_by_the_memory_budget():
-    """The memory estimate prices irregular Loop patches as grids of 4^depth cells (a
-    conservative price: they are isolated per ray since): a tiny tolerance is held by the
-    memory budget (one warning, reason "memory"), never by a silent constant, and the
-    image's levels are the cap's. (The icosahedron's corners all have valence 5.)"""
+def test_irregular_loop_scene_refines_as_deep_as_its_tolerance_asks():
+    """Irregular Loop triangles are isolated level by level along their irregular
+    remainder, priced per level: at 0.001 px a 256 MiB budget holds the icosahedron (every
+    corner of valence 5) to no cap, and it refines deeper than at 0.01 px, which refines
+    deeper than at 0.1 px (no constant caps the depth)."""
+    levels = []
+    for tol in (0.1, 0.01, 0.001):
+        scene = small_scene([ICOSA], (1.226, 4.085, 4.902), (0.0, 0.0, 0.0), width=96,
+                            height=54, fov=30.0, tolerance=tol)
+        res, said = _render(apply_overrides(scene, max_memory="256M"))
+        assert said == [], said
+        assert res.stats.depth_cap_reason == "none" and res.stats.depth_cap == -1
+        levels.append(_level_max(res))
+    assert levels[0] < levels[1] < levels[2], levels
+
+
+@needs_shared
+def test_loop_scene_over_a_small_budget_is_capped_with_one_warning():
+    """A budget too small for the isolation levels a tiny tolerance asks for caps them: one
+    warning, reason "memory", and the image's levels are the cap's."""
     scene = small_scene([ICOSA], (1.226, 4.085, 4.902), (0.0, 0.0, 0.0), width=96, height=54,
                         fov=30.0, tolerance=0.001)
-    scene = apply_overrides(scene, max_memory="256M")
-    res, said = _render(scene)
-    assert len(said) == 1 and "memory budget" in said[0], said
+    res, said = _render(apply_overrides(scene, max_memory="12M"))
+    assert len(said) == 1 and "memory budget 12 MiB" in said[0], said
+    # the estimate it names is over the budget (the memos' minimum included)
+    estimate = float(said[0].split("an estimated ")[1].split(" MiB")[0])
+    assert estimate > 12
     assert res.stats.depth_cap_reason == "memory"
     assert 0 <= res.stats.depth_cap < 8
     # Loop patches are the cage's triangles (L0 = 0): the deepest level is the cap
@@ -134,14 +151,26 @@ def test_precision_depths_follow_the_coordinates():
     assert d.max() <= config.PRECISION_BITS + 2
 
 
-def test_memory_estimate_of_deep_loop_grids_does_not_overflow():
-    """Deep Loop grids' estimates grow with depth and stay huge at the precision limit
-    (in int64, 4^40 grid points wrapped around), so the budget caps them."""
+def test_memory_estimate_prices_isolated_loop_patches_per_level():
+    """An irregular Loop triangle is isolated one level at a time along its irregular
+    remainder (patches/isolate_loop.py), so its estimate grows by the same amount per level
+    (not 4^depth, as the retired whole grids did), plus the exact samples of its sides
+    (2^depth a side); regular patches cost nothing per level."""
     from types import SimpleNamespace
 
+    from subtrace import config
     from subtrace.patches.criterion import memory_estimate
 
-    table = SimpleNamespace(is_quad=np.zeros(3, bool), regular=np.zeros(3, bool), n_patches=3)
-    est = [memory_estimate(table, np.full(3, d, np.int32), 100) for d in (20, 24, 33, 40)]
-    assert 0 < est[0] < est[1] <= est[2] <= est[3]
-    assert est[3] >= 2**60
+    table = SimpleNamespace(is_quad=np.array([True, False, False]), regular=np.zeros(3, bool),
+                            n_patches=3)
+    isolated = np.array([True, True, False])  # an irregular quad, an irregular triangle
+    est = [memory_estimate(table, np.full(3, d, np.int32), 100, isolated) for d in range(43)]
+    # per level, both; and the triangle's exact side samples, 3 sides of 2^(d-1) + 1
+    sides = [3 * (2 ** max(d - 1, 0) + 1) * config.MEMORY_BYTES_PER_SIDE_SAMPLE
+             for d in range(43)]
+    steps = np.diff(np.array(est) - np.array(sides))
+    assert (steps == 2 * config.MEMORY_BYTES_PER_ISOLATED_LEVEL).all()
+    assert est[42] > 2**48  # (depth 42 asks for 2^41 samples a side: the budget caps it)
+    none = [memory_estimate(table, np.full(3, d, np.int32), 100, np.zeros(3, bool))
+            for d in (0, 42)]
+    assert none[0] == none[1]

@@ -47,10 +47,10 @@ def test_same_image_whatever_the_threads_and_the_run(name):
 @pytest.mark.parametrize("name", ["spot", "creases", "torus_loop"])
 def test_counts_whatever_the_threads_and_the_run(name):
     """Micro-triangles and the other counts of the header are the same with 1 and 2 threads
-    and across runs: a cell evaluated by both threads' memos counts once
-    (trace/counts.py). Full resolution, so that rays of one patch land in several bands
-    and the threads share patches (the memos must not run out: the count would then
-    include cells evaluated per ray)."""
+    and across runs: each chunk of rays has a memo of its own, so a chunk counts the same
+    cells on any thread (trace/prims.memo_restart). Full resolution, so that rays of one
+    patch land in several chunks and the threads share patches (the memos must not run
+    out: the count would then include cells evaluated per ray)."""
     scene = load_scene(SCENES / f"{name}.toml")
     runs = [render(scene, t).stats for t in (1, 2, 2)]
     assert all(st.memo_full == 0 for st in runs)

@@ -36,9 +36,10 @@ def levels(path):
 
 
 # a budget that Spot's Loop cage at 160x120 fits only coarser: the estimate prices the
-# grids of its irregular triangles (its regular ones are nets split per ray, their splits
-# kept within the memos) above the minimum of 28 MiB (pixels, patches, two memos)
-TIGHT = "30M"
+# isolation levels of its irregular triangles (its regular ones are nets split per ray,
+# their splits kept within the memos) above the minimum (pixels, patches, two memos, and
+# the projection's tile lists, which below about 36 MiB fall back to the BVH)
+TIGHT = "44M"
 
 
 def test_tiny_budget_caps_refinement_with_one_warning(capsys, tmp_path):
@@ -125,17 +126,20 @@ def test_estimate_grows_with_depth_and_cap_fits():
     from subtrace.io.scene import load_scene
     from subtrace.patches.criterion import depth_cap, memory_estimate
     from subtrace.patches.table import build_patch_table
+    from subtrace.trace.budget import isolated_patches
 
     scene = load_scene(SPOT_LOOP)
     table = build_patch_table([load_cage(o.mesh, scheme=o.scheme) for o in scene.objects])
-    est = [memory_estimate(table, np.full(table.n_patches, d, np.int32), 1000)
+    iso = isolated_patches(table)  # Spot's irregular Loop triangles
+    assert 0 < iso.sum() < table.n_patches
+    est = [memory_estimate(table, np.full(table.n_patches, d, np.int32), 1000, iso)
            for d in range(6)]
     assert all(b > a for a, b in zip(est, est[1:]))
     depths = np.full(table.n_patches, 5, np.int32)
-    assert depth_cap(table, depths, 1000, est[5]) is None
-    assert depth_cap(table, depths, 1000, est[5] - 1) == 4
-    assert depth_cap(table, depths, 1000, est[2]) == 2
-    assert depth_cap(table, depths, 1000, est[0] - 1) == -1
+    assert depth_cap(table, depths, 1000, est[5], iso) is None
+    assert depth_cap(table, depths, 1000, est[5] - 1, iso) == 4
+    assert depth_cap(table, depths, 1000, est[2], iso) == 2
+    assert depth_cap(table, depths, 1000, est[0] - 1, iso) == -1
 
 
 def test_tile_lists_over_the_budget_fall_back_to_the_bvh(capsys, tmp_path):

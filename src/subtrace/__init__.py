@@ -7,6 +7,8 @@ OpenImageIO and sets no environment variable):
 * :func:`compare_images` (:mod:`subtrace.compare`);
 * ``sweep(...)``: the module :mod:`subtrace.sweep`, callable as :func:`subtrace.sweep.sweep`;
 * :func:`intersect_lines` (:mod:`subtrace.lines.api`);
+* :func:`render_frames` (:mod:`subtrace.frames`), :class:`FrameResult`
+  (:mod:`subtrace.jobs`): frames, tiles, resume, Dask;
 * the error types of :mod:`subtrace.errors` (and :class:`TopologyKind`, what a
   TopologyError is about).
 """
@@ -24,6 +26,8 @@ _LAZY = {
     "make_cage": "subtrace.mesh.cage",
     "compare_images": "subtrace.compare",
     "intersect_lines": "subtrace.lines.api",
+    "render_frames": "subtrace.frames",
+    "FrameResult": "subtrace.jobs",
     "SubtraceError": "subtrace.errors",
     "ObjError": "subtrace.errors",
     "TopologyError": "subtrace.errors",

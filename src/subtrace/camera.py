@@ -14,6 +14,11 @@
 # jitted `ray_direction(frame, row, col)`; row and col may be fractional (pixel corners are
 # at row +- 0.5, col +- 0.5). `Camera.ray_directions` is the same arithmetic in numpy, in the
 # same order, so both give the same bits.
+# A window of the image (`CameraWindow`: a tile, ``render --crop``) is traced as an image of
+# its own size whose frame has a fifth row, the window's offset (col0, row0, 0) in its
+# image: `trace.prims.ray_setup` adds it to the window's (row, col) before the arithmetic
+# above, so a window pixel's ray is its image pixel's, bit for bit (an integer offset added
+# to an integer is exact; p00 moved by the offset would not be).
 
 from __future__ import annotations
 
@@ -159,6 +164,41 @@ def camera_frame(camera: Camera) -> np.ndarray:
         forward + (0.5 - 0.5 * camera.width) * frame[1] + (0.5 - 0.5 * camera.height) * frame[2]
     )
     return frame
+
+
+@dataclass(frozen=True)
+class CameraWindow:
+    """Pixels [x0, x0 + width) x [y0, y0 + height) of ``camera``'s image, traced as an image
+    of their own (``render --crop``). ``frame()`` is the camera's frame with a fifth row,
+    the offset (x0, y0, 0); any other attribute is the camera's (eye, up, pixel_angle ...)."""
+
+    camera: Camera
+    x0: int
+    y0: int
+    width: int
+    height: int
+
+    def frame(self) -> np.ndarray:
+        """(5,3) float64: :func:`camera_frame` of the camera, then (x0, y0, 0)."""
+        frame = np.zeros((5, 3), dtype=np.float64)
+        frame[:4] = camera_frame(self.camera)
+        frame[4, 0], frame[4, 1] = self.x0, self.y0
+        return frame
+
+    def __getattr__(self, name):
+        return getattr(self.camera, name)
+
+
+def whole_image(view) -> Camera:
+    """The camera of ``view``: the Camera itself, or a :class:`CameraWindow`'s."""
+    return view.camera if isinstance(view, CameraWindow) else view
+
+
+def window_offset(frame) -> tuple[int, int]:
+    """(col0, row0): the offset of a window's frame in its image ((0, 0): a whole image)."""
+    if len(frame) > 4:
+        return int(frame[4, 0]), int(frame[4, 1])
+    return 0, 0
 
 
 @njit(cache=True, nogil=True)

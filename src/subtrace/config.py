@@ -53,11 +53,18 @@ MAX_VALENCE = 1024
 # header's subtrace:depth_cap and depth_cap_reason = "precision").
 PRECISION_BITS = 40
 
-# Loop grids index their quadtree nodes in 40 bits (trace/kernels.py packs a node's level
-# and index in one int64), so a grid is at most 2^20 x 2^20 cells; the memory budget caps
-# them far earlier (4^20 points of 640 bytes: 700 TB a patch), but a larger budget is capped here, with
-# the warning (reason "size").
-LOOP_MAX_GRID_DEPTH = 20
+# An isolated Loop patch (an irregular triangle, patches/isolate_loop.py) keeps the exact
+# samples of each side it snaps onto a coarser neighbour: 2^d + 1 of them for a neighbour at
+# depth d, built with the patch. Where the eye sits inside shells the tolerance asks for the
+# precision limit (about 40) on both sides of an edge, 2^40 samples; such patches are held
+# at this depth, with the warning (reason "size"). Regular Loop patches and every
+# Catmull-Clark patch are not.
+LOOP_MAX_ISOLATED_DEPTH = 20
+# A Loop patch whose shell holds the eye (a view from inside or on the edge of a shell)
+# asks for no finite depth, and its rays' descent near the eye grows about 4x a level (an
+# open Loop box seen from inside, 48x36 px: depth 14 0.6 s, depth 20 31 s and 33 million
+# micro-triangles): such patches are held at this depth, with the warning (reason "size").
+LOOP_MAX_INSIDE_DEPTH = 14
 
 # A cell side carries at most 2^FAN_LEVELS samples (a regular patch or piece beside a finer
 # one fans its cells, trace/bezier.py): a coarser neighbour is raised to within FAN_LEVELS
@@ -151,13 +158,11 @@ MEMORY_FALLBACK_BYTES = 4 << 30
 MEMORY_BYTES_PER_PIXEL = 320
 # per patch of the table: its arrays, the cage's refined levels, the shells' projection
 MEMORY_BYTES_PER_PATCH = 2048
-# per grid point of a built Loop patch: points, normals, quadtree boxes, and the transient
-# refinement of the patch's neighbourhood (measured 370-530 B per point on Spot and the
-# torus over all refined patches)
-MEMORY_BYTES_PER_GRID_POINT = 640
-# per level of an irregular Catmull-Clark patch: its pieces (3 Bezier nets and boxes per
-# level) and the isolation's cut of its neighbourhood
+# per level of an irregular patch (Catmull-Clark or Loop): its pieces (3 Bezier nets and
+# boxes per level) and the isolation's cut of its neighbourhood
 MEMORY_BYTES_PER_ISOLATED_LEVEL = 16384
+# per exact side sample of an isolated Loop patch (a point, and its share of the sorting)
+MEMORY_BYTES_PER_SIDE_SAMPLE = 64
 # a thread's memo of split Bezier nets (trace/bezier.py) is kept within what the budget
 # leaves over, but not below this (below it rays split on the spot: slower, same image)
 MEMORY_MEMO_MIN_BYTES = 8 << 20

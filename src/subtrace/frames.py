@@ -8,10 +8,17 @@ a run of ``#`` in the output name is the frame number padded to its length
 (``spin.####.exr`` -> ``spin.0007.exr``), and a name without ``#`` gets ``.####`` before its
 extension. One process renders every frame: the cages are read and checked once and the
 kernels loaded once; each frame then builds what its view needs.
+
+:func:`render_frames` is the Python API of all of it (``subtrace.render_frames``): frames
+of a turntable or one image, a tile of each (``crop``) or each cut into tiles (``tile``),
+here or on a Dask cluster (``dask``: ``cluster.py``), leaving out frames already written
+(``resume``: an output is written whole or not at all, so one that is there and reads
+back is complete).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import re
@@ -85,4 +92,137 @@ def check_turntable(n) -> int:
     return value
 
 
-__all__ = ["parse_frames", "frame_path", "turntable_eye", "check_turntable"]
+def is_complete(path) -> bool:
+    """Whether ``path`` is an image that reads back whole (outputs are written through a
+    temporary and renamed, so one that exists is complete unless it was damaged since)."""
+    from subtrace.errors import SubtraceError
+    from subtrace.io.exr import read_exr
+
+    if not os.path.isfile(path):
+        return False
+    try:
+        read_exr(path)
+    except SubtraceError:
+        return False
+    return True
+
+
+def frame_scenes(scene, turntable=None, frames=None, output=None, png=None):
+    """The frames of ``scene``: [(number, scene of the frame, output, preview)] and the
+    cages read for them (None where each frame reads its own: free-form surfaces). Without
+    ``turntable``, the one image (number None)."""
+    from subtrace.io.scene import apply_overrides
+    from subtrace.nurbs.scene import has_surfaces, load_nurbs
+    from subtrace.render import load_objects, scene_bounds
+
+    out = output or scene.output or "render.exr"
+    loaded = cages = load_objects(scene)  # once for every frame
+    if any(has_surfaces(o.mesh) for o in scene.objects):
+        cages = None  # (a render given cages leaves free-form surfaces out: each frame reads)
+    if turntable is None:
+        if frames is not None:
+            raise SceneError("--frames picks frames of a camera path: give --turntable N",
+                             key="--frames")
+        return [(None, scene, out, png)], cages
+    n = check_turntable(turntable)
+    picked = parse_frames(frames, n)
+    camera = scene.make_camera(*scene_bounds(loaded, load_nurbs(scene)))
+    return [(k, apply_overrides(scene, target=tuple(camera.target), up=tuple(camera.up),
+                                fov=camera.fov_deg,
+                                eye=turntable_eye(camera.eye, camera.target, camera.up, k, n)),
+             frame_path(out, k), png and frame_path(png, k)) for k in picked], cages
+
+
+def render_frames(scene, output=None, *, turntable=None, frames=None, crop=None, tile=None,
+                  dask=False, resume=False, png=None, bits=8, threads=None, accel=None,
+                  progress=None, report=None, wait=True):
+    """Render the frames of ``scene`` (a :class:`subtrace.io.scene.Scene`, or the path of a
+    TOML scene or an OBJ cage) to ``output`` (default: the scene's, else ``render.exr``):
+
+    * ``turntable`` N: N frames orbiting the target (numbered outputs, :func:`frame_path`),
+      ``frames`` "A:B[:STEP]" of them; without it, the one image;
+    * ``crop`` (x0, y0, x1, y1): only that tile of each frame (an EXR's data window);
+      ``tile`` N: each frame rendered as tiles of at most N x N pixels, put together;
+    * ``dask``: False (here, the cages read once for every frame), None (a LocalCluster of
+      a worker process per core), a scheduler's address or a ``distributed.Client``: each
+      frame, or each tile, is a task (``cluster.py``);
+    * ``resume``: leave out the frames whose files are already there and complete;
+    * ``png``: a preview's path (numbered as the output); ``bits``: of a picture output.
+
+    Returns a :class:`FrameResult` per frame, in frame order (those left out included, with
+    ``skipped``); ``report(FrameResult)`` is also called as each finishes. With a Client
+    and ``wait=False``: the Dask futures of the frames (each gives (out, png, stats)) and
+    nothing is reported; the frames left out are not among them."""
+    from subtrace.io.formats import picture_format
+    from subtrace.jobs import FrameResult, render_tiled, result_files, write_frame
+
+    if isinstance(scene, (str, os.PathLike)):
+        from subtrace.io.scene import load_scene, scene_for_meshes
+
+        path = os.fspath(scene)
+        scene = load_scene(path) if path.lower().endswith(".toml") else scene_for_meshes([path])
+    out = output or scene.output or "render.exr"
+    picture = picture_format(out)
+    if crop is not None:
+        from subtrace.tiles import check_crop
+
+        crop = check_crop(crop, scene.camera.width, scene.camera.height)
+    if tile is not None:
+        from subtrace.tiles import check_tile
+
+        tile = check_tile(tile)
+        if crop is not None:
+            raise SceneError("--crop renders one tile: leave out --tile", key="--tile")
+    if resume and turntable is None:
+        raise SceneError("it leaves out frames already rendered: give --turntable N",
+                         key="--resume")
+    jobs, cages = frame_scenes(scene, turntable, frames, out, png)
+    results = {}
+    if resume:
+        for k, _, out_k, png_k in jobs:
+            if is_complete(out_k) and (not png_k or is_complete(png_k)):
+                results[k] = FrameResult(k, out_k, png_k, skipped=True)
+        jobs = [j for j in jobs if j[0] not in results]
+    if dask is not False:
+        from subtrace.cluster import run_jobs
+
+        if not wait and not _is_client(dask):
+            raise ValueError("wait=False needs dask=<a distributed.Client> to hold the futures")
+        futures = run_jobs(dask, jobs, crop, tile, picture, bits, accel,
+                           report=None if not wait else
+                           lambda f: _done(results, f, report), wait=wait)
+        if not wait:
+            return futures
+    else:
+        from subtrace.render import render_scene
+
+        for k, scene_k, out_k, png_k in jobs:
+            if tile is not None:
+                result = render_tiled(scene_k, tile, cages=cages, threads=threads,
+                                      accel=accel, progress=progress)
+            else:
+                result = render_scene(scene_k, cages=cages, threads=threads, accel=accel,
+                                      progress=progress, crop=crop)
+            took = write_frame(out_k, png_k, picture, bits, result.channels,
+                               result_files(result, scene_k), scene_k.render.transparent)
+            _done(results, FrameResult(k, out_k, png_k, dataclasses.asdict(result.stats),
+                                       result=result, time_write=took), report)
+    return [results[k] for k in sorted(results, key=lambda k: -1 if k is None else k)]
+
+
+def _done(results, frame: FrameResult, report) -> None:
+    results[frame.frame] = frame
+    if report is not None:
+        report(frame)
+
+
+def _is_client(dask) -> bool:
+    try:
+        from distributed import Client
+    except ImportError:
+        return False
+    return isinstance(dask, Client)
+
+
+__all__ = ["parse_frames", "frame_path", "turntable_eye", "check_turntable", "render_frames",
+           "is_complete"]

@@ -31,6 +31,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from subtrace.accel.bvh import build_bvh
+from subtrace.camera import whole_image, window_offset
 from subtrace.runtime import threads as tasks
 from subtrace.shade import (C_A, C_R, CHANNELS, background_rows, edge_pixels, ground_pixels,
                             light, light_array, miss_values, shade, shadow_visibility)
@@ -93,12 +94,15 @@ def paint(scene, cages, camera, keep, hits, normals, pix_patch, patches, planes,
         return blocked
 
     ground = _ground(scene, cages, camera)
-    rows = background_rows(scene.render.background, scene.render.background_bottom, H)
+    # (a window's rows of its image's gradient)
+    y0, image_h = getattr(camera, "y0", 0), whole_image(camera).height
+    rows = background_rows(scene.render.background, scene.render.background_bottom,
+                           image_h)[y0:y0 + H]
     _colour(scene, frame, W, hits.t, normals, pix_patch, patches, planes, lights, rows,
             ground, trace_shadows, keep["tol_rad"], None)
     if samples > 1:
         t0 = time.perf_counter()
-        _antialias(scene, frame, W, H, pools, patches, planes, lights, ground, trace_shadows,
+        _antialias(scene, frame, W, image_h, pools, patches, planes, lights, ground, trace_shadows,
                    samples, stats)
         stats.time_aa += time.perf_counter() - t0
     _count_secondary(pools, stats)
@@ -141,14 +145,17 @@ def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights,
 def _antialias(scene, frame, W, H, pools, patches, planes, lights, ground, trace_shadows,
                samples, stats):
     """More rays for the pixels :func:`edge_pixels` marks (see the module comment); their
-    colour and alpha become the mean of all their rays."""
-    pix = np.nonzero(edge_pixels(planes, W, H).ravel())[0]
+    colour and alpha become the mean of all their rays. ``W``: the width of ``planes``;
+    ``H``: the height of the image (a window's rows are offset in it: ``frame``)."""
+    pix = np.nonzero(edge_pixels(planes, W, planes.shape[1] // W).ravel())[0]
     offsets = sample_offsets(samples)
     m = len(offsets)
     if not len(pix):
         return
     # the extra rays, pixel by pixel: (row + dr, col + dc) through the camera's frame
     row, col = np.divmod(pix, W)
+    col0, row0 = window_offset(frame)  # (a window's pixels: their image's rays)
+    row, col = row + row0, col + col0
     rr = (row[:, None] + offsets[None, :, 0]).ravel()
     cc = (col[:, None] + offsets[None, :, 1]).ravel()
     d = frame[3] + cc[:, None] * frame[1] + rr[:, None] * frame[2]

@@ -27,9 +27,9 @@ import numpy as np
 
 from subtrace import config
 from subtrace.accel.bvh import build_bvh, no_bvh
-from subtrace.accel.projection import (boxes_in_view, no_tiles, project_shells,
+from subtrace.accel.projection import (TILE, boxes_in_view, no_tiles, project_shells,
                                       tiles_bytes)
-from subtrace.camera import camera_frame
+from subtrace.camera import CameraWindow, camera_frame, whole_image
 from subtrace.errors import SceneError
 from subtrace.io.limits import check_coordinates, check_valences
 from subtrace.mesh.cage import load_cage
@@ -42,9 +42,9 @@ from subtrace.picture import paint
 from subtrace.shade import (C_OBJECT, C_R, CHANNELS, background_rows, deepest_level,
                             miss_values, patch_shading, shade)
 from subtrace.subdiv.limit import limit_points
+from subtrace.tiles import check_crop
 from subtrace.trace.budget import check_memory, choose_within_budget, warn_tiles
 from subtrace.trace.build import build_loop_regular, build_requested
-from subtrace.trace.counts import thread_correction
 from subtrace.trace.kernels import trace_round
 from subtrace.trace.pools import Memos, Pieces, candidate_lists, hit_arrays
 from subtrace.trace.rays import compile_kernel as compile_secondary
@@ -69,13 +69,14 @@ class RenderStats:
     pieces: int = 0  # regular sub-patches and cells of the isolated irregular patches
     memo_nodes: int = 0  # quadtree nodes of Bezier pieces split and kept by the threads
     memo_full: int = 0  # times a thread's memo ran out during a round (rays split on the spot)
-    memo_bytes: int = 0  # bytes of the memos' stores in use at the end
+    memo_bytes: int = 0  # the most bytes the memos' stores held at once (summed over threads)
     rounds: int = 0
     max_depth: int = 0  # the deepest grid built (in its patch's units)
     max_level: int = -1  # the deepest level hit: the level channel's maximum (-1: none)
     # the deepest grid depth a cap held a patch to, below what its tolerance asked (-1: no
     # cap), and why: "memory" (the budget), "precision" (what doubles resolve, config:
-    # PRECISION_BITS), "size" (Loop grids' quadtree index), comma-separated, or "none"
+    # PRECISION_BITS), "size" (Loop patches: LOOP_MAX_ISOLATED_DEPTH, LOOP_MAX_INSIDE_DEPTH),
+    # "depth" (an explicit maximum depth), comma-separated, or "none"
     depth_cap: int = -1
     depth_cap_reason: str = "none"
     # 1: the projection's tile lists did not fit the memory budget, so rays walked the BVH
@@ -106,14 +107,17 @@ class RenderResult:
     refined_objects: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     accel: str = "projection"  # how rays found the shells they enter
     # object id of every refined patch (what was built, for tests and reports)
+    # crop: (x0, y0, x1, y1), the pixels of ``camera``'s image the channels hold; None: all
+    crop: tuple | None = None
 
 
-def _shell_walk(chosen, frame, width, height, accel, max_memory, stats):
+def _shell_walk(chosen, frame, width, height, accel, max_memory, stats, image=None):
     """How rays find the shells they enter: (tiles, bvh), one of them empty. Projection
-    tiles that would not fit the budget fall back to the BVH, with a warning."""
+    tiles that would not fit the budget fall back to the BVH, with a warning. ``image``:
+    the whole image's (width, height) when ``frame`` is a window's."""
     if accel == "projection":
         projected = project_shells(chosen.shell_min, chosen.shell_max, frame, width, height,
-                                   max_bytes=chosen.left)
+                                   max_bytes=chosen.left, image=image)
         if projected is not None:
             if chosen.left is not None:
                 chosen.left -= tiles_bytes(len(projected.items), len(projected.off) - 1)
@@ -145,13 +149,16 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     if accel not in ("projection", "bvh"):
         raise ValueError(f"unknown acceleration {accel!r}")
     W, H = camera.width, camera.height
-    frame = camera_frame(camera)
+    frame = camera.frame()
+    # (a window, ``camera.CameraWindow``, budgets for its own pixels)
+    image = whole_image(camera)
     t0 = time.perf_counter()
     chosen = choose_within_budget(table, frame[0], tol_rad, max_depth, max_memory, W * H,
                                   stats)
     stats.time_refine += time.perf_counter() - t0
     t0 = time.perf_counter()
-    tiles, bvh = _shell_walk(chosen, frame, W, H, accel, max_memory, stats)
+    tiles, bvh = _shell_walk(chosen, frame, W, H, accel, max_memory, stats,
+                             None if image is camera else (image.width, image.height))
     stats.time_preprocess += time.perf_counter() - t0
     n_threads = tasks.thread_count()
     memo_bytes = (None if chosen.left is None
@@ -162,7 +169,7 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
         for o in table.objects[:1]:
             limit_points(o.level, o.points, o.cage.options, which=np.zeros(0, np.int64))
         if not compiling.secondary:  # (else a third process compiles them)
-            compile_secondary()  # shadow and extra anti-aliasing rays, the memos' cell count
+            compile_secondary()  # shadow and extra anti-aliasing rays
     warmup.wait(compiling)
     return _rounds(table, frame, W, W * H, tol_rad, chosen, tiles, bvh,
                    Memos(n_threads, memo_bytes), stats, progress, keep)
@@ -214,8 +221,8 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
         round_no += 1
     stats.rounds = round_no + 1
     memos.finish(stats)
-    # (each cell once, however the threads shared the rays: trace/counts.py)
-    stats.micro_triangles += int(tested.sum()) + thread_correction(memos, iso.view())
+    # (each chunk of rays counts what its own memo built: the same on any thread)
+    stats.micro_triangles += int(tested.sum())
     # regular patches count as refined once a ray has descended into them
     first = (iso.a["round"] < 0) & (iso.a["touched"] > 0)
     direct = iso.a["patch"][first]
@@ -306,19 +313,22 @@ def table_in_view(cages, camera, sweeps=()):
     return build_patch_table(cages, keep, _view_test(camera, sweeps)), keep
 
 
-def _prepare(scene, cages, stats, nurbs=None):
+def _prepare(scene, cages, stats, nurbs=None, crop=None):
     """Load and check the cages, frame the camera (around the free-form surfaces ``nurbs``
-    too), build the patch table of the cage faces in view, check the budget: (cages, table
-    (None without cages), camera, tolerance in radians, budget in bytes)."""
+    too), build the patch table of the cage faces in view, check the budget against the
+    pixels traced (the image's, or the window of its ``crop``: :func:`crop_window`):
+    (cages, table (None without cages), camera, the camera or its window, tolerance in
+    radians, budget in bytes)."""
     t_start = time.perf_counter()
     if cages is None:
         cages = load_objects(scene)
     if not cages:
         lo, hi = nurbs.bounds()
         camera = scene.make_camera(lo, hi)
-        stats.rays = camera.width * camera.height
+        view = camera if crop is None else crop_window(camera, crop)
+        stats.rays = view.width * view.height
         stats.time_load = time.perf_counter() - t_start
-        return cages, None, camera, scene.render.tolerance_rad(camera), None
+        return cages, None, camera, view, scene.render.tolerance_rad(camera), None
     for c in cages:
         check_coordinates(c.path, c.points, config.MAX_COORDINATE)
         check_valences(c.path, c.face_sizes, np.diff(c.base.vert_edge_offsets),
@@ -348,20 +358,43 @@ def _prepare(scene, cages, stats, nurbs=None):
         table = build_patch_table(cages)
     budget = scene.render.max_memory
     budget = config.default_max_memory() if budget is None else budget
-    check_memory(table, camera.width * camera.height, budget, camera.width, camera.height)
+    view = camera if crop is None else crop_window(camera, crop)
+    check_memory(table, view.width * view.height, budget, view.width, view.height)
     stats.patches = table.n_patches
-    stats.rays = camera.width * camera.height
+    stats.rays = view.width * view.height
     stats.time_preprocess = time.perf_counter() - t0
-    return cages, table, camera, scene.render.tolerance_rad(camera), budget
+    return cages, table, camera, view, scene.render.tolerance_rad(camera), budget
 
 
-def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> RenderResult:
+def crop_window(camera, crop) -> CameraWindow:
+    """The window of ``camera``'s image that :func:`render_scene` traces for ``crop`` =
+    (x0, y0, x1, y1) (pixels, x1 and y1 excluded; checked: SceneError naming --crop): the
+    crop and a pixel around it (anti-aliasing compares each pixel with its right and lower
+    neighbours), widened to even bounds (the projection's tiles are 2x2 pixels of the
+    image) and held within the image. Every pixel of the crop is then traced and shaded
+    exactly as in the whole image."""
+    x0, y0, x1, y1 = check_crop(crop, camera.width, camera.height)
+    a = TILE
+    wx0, wy0 = max(x0 - 1, 0) // a * a, max(y0 - 1, 0) // a * a
+    wx1 = min(-(-(x1 + 1) // a) * a, camera.width)
+    wy1 = min(-(-(y1 + 1) // a) * a, camera.height)
+    return CameraWindow(camera, wx0, wy0, wx1 - wx0, wy1 - wy0)
+
+
+def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
+                 crop=None) -> RenderResult:
     """Render a :class:`subtrace.io.scene.Scene`; returns the channels and statistics.
     ``accel``: how rays find the shells they enter (see :func:`trace_hits`). ``progress``:
     None, or called as ``progress(done, total, label)`` with the rays whose hits are final
     out of all (e.g. :class:`subtrace.runtime.progress.ProgressBar`); it reaches
     done == total. ``cages``: the scene's cages already loaded (its free-form surfaces are
-    then not rendered); None: loaded here, with the free-form surfaces of its OBJ files."""
+    then not rendered); None: loaded here, with the free-form surfaces of its OBJ files.
+    ``crop``: (x0, y0, x1, y1), a tile of the image (pixels, x1 and y1 excluded): only the
+    rays of its :func:`crop_window` are traced and the channels are the tile's, equal bit
+    for bit to those pixels of the whole render (the camera, tolerance, patch table, depths
+    and projection lists are the whole image's; the per-pixel arrays are the window's, and
+    the memory budget holds them: where the whole image's pixels would make the budget cap
+    depths (a warning says so), its tiles, needing less, may be refined further)."""
     t_start = time.perf_counter()
     threads = tasks.usable_threads(threads)
     accel = config.PRIMARY_ACCEL if accel is None else accel
@@ -373,22 +406,25 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     try:
         owners = cage_objects(scene) if cages is None else list(range(len(cages)))
         nurbs = load_nurbs(scene) if cages is None else None  # free-form surfaces
-        cages, table, camera, tol_rad, budget = _prepare(scene, cages, stats, nurbs)
+        cages, table, camera, view, tol_rad, budget = _prepare(scene, cages, stats, nurbs,
+                                                               crop)
+        if crop is not None:
+            crop = check_crop(crop, camera.width, camera.height)
         if progress is not None:
             progress(0, stats.rays, "tracing")
         keep = {}
         if table is None:
             warmup.stop(compiling)  # no cage: the subdivision kernels are not needed
         else:
-            hits, iso, built = trace_hits(table, camera, tol_rad, stats, compiling=compiling,
+            hits, iso, built = trace_hits(table, view, tol_rad, stats, compiling=compiling,
                                           accel=accel, progress=progress, max_memory=budget,
                                           keep=keep)
     except BaseException:
         warmup.stop(compiling)
         raise
     t0 = time.perf_counter()
-    W, H = camera.width, camera.height
-    frame = camera_frame(camera)
+    W, H = view.width, view.height
+    frame = view.frame()
     # the channels as float32 planes, written in place by the kernel (no conversion pass)
     planes = np.empty((len(CHANNELS), W * H), dtype=np.float32)
     normals = np.empty((W * H, 3))
@@ -397,14 +433,16 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     miss = miss_values(scene.render.background)
     if table is None:  # free-form surfaces only: the background, then the NURBS pass
         planes[:] = miss[:, None]
-        rows = background_rows(scene.render.background, scene.render.background_bottom, H)
+        y0 = getattr(view, "y0", 0)  # (a window's rows of the image's gradient)
+        rows = background_rows(scene.render.background, scene.render.background_bottom,
+                               camera.height)[y0:y0 + H]
         for k in range(3):
             planes[C_R + k] = np.repeat(rows[:, k], W)
         built = np.zeros(0, np.int64)
     else:
         patches = patch_shading(table, [scene.objects[k] for k in owners])
         shade(frame, W, hits, iso.view(), patches, miss, planes, normals, pix_patch, covered)
-        paint(scene, cages, camera, keep, hits, normals, pix_patch, patches, planes, stats)
+        paint(scene, cages, view, keep, hits, normals, pix_patch, patches, planes, stats)
         if owners != list(range(len(owners))):  # objects without a cage: scene indices
             hit = planes[C_OBJECT] >= 0
             index = planes[C_OBJECT][hit].astype(np.int64)
@@ -417,11 +455,17 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
                           dtype=np.float64).reshape(-1, 6)
         headlight = np.array([scene.render.headlight_intensity if scene.render.headlight
                               else 0.0])
-        nurbs_pass(nurbs, camera_frame(camera), W, H, tol_rad,
+        nurbs_pass(nurbs, frame, W, H, tol_rad,
                    None if table is None else hits.t, lights, headlight, planes, stats)
         if progress is not None and table is None:
             progress(stats.rays, stats.rays, "NURBS")
-    stats.pixels_covered = (int(covered.sum()) if nurbs is None
+    if crop is not None:  # the tile's pixels of the window
+        x0, y0, x1, y1 = crop
+        cx, cy = x0 - view.x0, y0 - view.y0
+        planes = np.ascontiguousarray(planes.reshape(len(CHANNELS), H, W)[
+            :, cy:cy + y1 - y0, cx:cx + x1 - x0]).reshape(len(CHANNELS), -1)
+        W, H = x1 - x0, y1 - y0
+    stats.pixels_covered = (int(covered.sum()) if nurbs is None and crop is None
                             else int(np.count_nonzero(planes[C_OBJECT] >= 0)))
     stats.max_level = deepest_level(planes)
     channels = {name: planes[k].reshape(H, W) for k, name in enumerate(CHANNELS)}
@@ -429,7 +473,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     schemes = tuple(c.scheme for c in cages) + (("nurbs",) if nurbs is not None else ())
     used = "bvh" if stats.accel_fallback else accel
     refined = np.zeros(0, np.int32) if table is None else table.object_id[built]
-    return RenderResult(channels, stats, camera, tol_rad, schemes, refined, used)
+    return RenderResult(channels, stats, camera, tol_rad, schemes, refined, used, crop)
 
 
 # the colour channels are linear Rec.709 / sRGB primaries with a D65 white point
@@ -451,6 +495,8 @@ def result_attributes(result: RenderResult, scene) -> dict:
     attrs["subtrace:accel"] = result.accel
     attrs["subtrace:samples"] = int(scene.render.samples or 1)  # rays per edge pixel at most
     attrs["subtrace:shadows"] = int(bool(scene.render.shadows and scene.lights))
+    if result.crop is not None:  # (the file's data window, in its display window)
+        attrs["subtrace:crop"] = " ".join(map(str, result.crop))
     for k, v in result.stats.__dict__.items():
         attrs[f"subtrace:{k}"] = (v if isinstance(v, str) else float(v) if isinstance(v, float)
                                   else int(v))

@@ -21,6 +21,7 @@ from typing import NamedTuple
 import numpy as np
 
 from subtrace import config
+from subtrace.camera import window_offset
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material
 from subtrace.patches.basis import bez_normal
 from subtrace.runtime.jit import nb
@@ -348,6 +349,8 @@ def pixel_rays(frame, width, pixels) -> np.ndarray:
     """(n,3) float64 unit directions of the rays through the centres of ``pixels`` (flat
     indices), the arithmetic of ``trace.prims.ray_setup``."""
     row, col = np.divmod(np.asarray(pixels, np.int64), width)
+    col0, row0 = window_offset(frame)  # (a window's pixels: their image's rays)
+    row, col = row + row0, col + col0
     d = frame[3] + col[:, None] * frame[1] + row[:, None] * frame[2]
     return d / np.sqrt((d * d).sum(axis=1))[:, None]
 

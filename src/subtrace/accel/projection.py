@@ -49,31 +49,46 @@ def no_tiles() -> Tiles:
 
 
 def project_shells(bmin, bmax, frame, width: int, height: int,
-                   max_bytes: int | None = None) -> Tiles | None:
+                   max_bytes: int | None = None, image=None) -> Tiles | None:
     """Bin the boxes ``[bmin, bmax]`` (N,3) into the tiles of a ``width`` x ``height`` image
     seen through ``frame`` (``trace.camera.camera_frame``). With ``max_bytes``: None, and
     nothing allocated, when the tile lists would take more (boxes that reach the eye plane
-    are listed in every tile: with the eye inside a model they can be many)."""
+    are listed in every tile: with the eye inside a model they can be many).
+
+    ``image``: (width, height) of the whole image when ``frame`` is a window's
+    (``camera.CameraWindow``: its offset, even, in a fifth row): only the window's tiles
+    are listed (and held against ``max_bytes``), each exactly as the whole image lists it:
+    the same boxes, in the same order."""
     bmin = np.ascontiguousarray(bmin, dtype=np.float64)
     bmax = np.ascontiguousarray(bmax, dtype=np.float64)
     eye = frame[0]
     inv = _pixel_map(frame)
     key = np.empty(len(bmin))
+    full_w, full_h = (int(width), int(height)) if image is None else map(int, image)
+    col0, row0 = (int(frame[4, 0]), int(frame[4, 1])) if len(frame) > 4 else (0, 0)
+    if col0 % TILE or row0 % TILE:
+        raise ValueError(f"a window's offset must be a multiple of {TILE}, got {col0, row0}")
+    a0, b0 = col0 // TILE, row0 // TILE  # the window's first tile in the image's
     tx = -(-int(width) // TILE)
     ty = -(-int(height) // TILE)
-    rect = np.empty((len(bmin), 4), np.int64)
+    rect = np.empty((len(bmin), 4), np.int64)  # (in the image's tiles)
     n_tasks = tasks.thread_count() if len(bmin) >= _PARALLEL_MIN else 1
     count = np.zeros((n_tasks, tx * ty + 1), np.int64)
-    tasks.run_tasks(_rectangles, bmin, bmax, np.ascontiguousarray(eye), inv, int(width),
-                    int(height), tx, ty, rect, count, key, n=n_tasks)
+    tasks.run_tasks(_rectangles, bmin, bmax, np.ascontiguousarray(eye), inv, full_w,
+                    full_h, a0, b0, tx, ty, rect, count, key, n=n_tasks)
     off = np.zeros(tx * ty + 1, np.int64)
     np.cumsum(count.sum(axis=0)[:-1], out=off[1:])
     if max_bytes is not None and tiles_bytes(int(off[-1]), tx * ty) > max_bytes:
         return None
-    items = np.empty(int(off[-1]), np.int32)
     seen = np.nonzero(rect[:, 0] <= rect[:, 2])[0]  # (the others are in no tile)
-    # nearest first (ties: any fixed order will do)
-    _fill(seen[np.argsort(key[seen])], rect, tx, off.copy(), items)
+    items = np.empty(int(off[-1]), np.int32)
+    # each box's tiles within the window, in the window's tiles (empty: none)
+    local = np.empty_like(rect)
+    np.maximum(rect[:, 0:2] - (a0, b0), 0, out=local[:, 0:2])
+    np.minimum(rect[:, 2:4] - (a0, b0), (tx - 1, ty - 1), out=local[:, 2:4])
+    # nearest first (ties: any fixed order will do; a window's is its image's: the order of
+    # the image's boxes in view)
+    _fill(seen[np.argsort(key[seen])], local, tx, off.copy(), items)
     return Tiles(off, items, key, np.int64(tx))
 
 
@@ -148,11 +163,14 @@ def _box_rect(i, bmin, bmax, eye, inv, width, height):
 
 
 @nb.njit(cache=True, nogil=True)
-def _rectangles(task, n_tasks, bmin, bmax, eye, inv, width, height, tx, ty, rect, count, key):
+def _rectangles(task, n_tasks, bmin, bmax, eye, inv, width, height, tile_a0, tile_b0, tx, ty,
+                rect, count, key):
     """Each box's tile rectangle ``rect[i]`` = (x0, y0, x1, y1), inclusive, empty (x0 > x1)
-    when it lies behind the eye plane or outside the image; counts per tile into
-    ``count[task]``; the distance from the eye to each box into ``key``. Task ``task`` of
-    ``n_tasks`` (tasks.run_tasks) takes every n_tasks-th block of ``_BLOCK`` boxes."""
+    when it lies behind the eye plane or outside the ``width`` x ``height`` image, in the
+    image's tiles; counts per tile of the window (``tx`` x ``ty`` tiles from tile
+    (tile_a0, tile_b0); the whole image: 0, 0 and all its tiles) into ``count[task]``; the
+    distance from the eye to each box into ``key``. Task ``task`` of ``n_tasks``
+    (tasks.run_tasks) takes every n_tasks-th block of ``_BLOCK`` boxes."""
     for b0 in range(task * _BLOCK, len(bmin), n_tasks * _BLOCK):
         for i in range(b0, min(b0 + _BLOCK, len(bmin))):
             d2 = 0.0
@@ -166,8 +184,9 @@ def _rectangles(task, n_tasks, bmin, bmax, eye, inv, width, height, tx, ty, rect
                 continue
             rect[i, 0], rect[i, 1] = x0 // TILE, y0 // TILE
             rect[i, 2], rect[i, 3] = x1 // TILE, y1 // TILE
-            for b in range(rect[i, 1], rect[i, 3] + 1):
-                for a in range(rect[i, 0], rect[i, 2] + 1):
+            for b in range(max(rect[i, 1] - tile_b0, 0), min(rect[i, 3] - tile_b0, ty - 1) + 1):
+                for a in range(max(rect[i, 0] - tile_a0, 0),
+                               min(rect[i, 2] - tile_a0, tx - 1) + 1):
                     count[task, b * tx + a] += 1
 
 

@@ -148,6 +148,17 @@ def _add_render(sub) -> argparse.ArgumentParser:
                         help="render the frames as tasks on a Dask cluster: the scheduler at "
                              "ADDRESS (tcp://host:8786), or without one a local cluster of "
                              "worker processes (pip install 'subtrace[dask]')")
+    render.add_argument("--crop", nargs=4, metavar=("X0", "Y0", "X1", "Y1"),
+                        help="render only pixels X0..X1-1 of columns and Y0..Y1-1 of rows: "
+                             "the EXR holds that tile as its data window (the same pixels, "
+                             "bit for bit, as the whole render's)")
+    render.add_argument("--tile", metavar="N",
+                        help="render in tiles of at most N x N pixels (with --dask: one task "
+                             "per tile) and put them together")
+    render.add_argument("--resume", action="store_true",
+                        help="with --turntable: leave out the frames whose output is already "
+                             "there (a complete image: outputs are written whole or not at "
+                             "all)")
     render.add_argument("--quiet", action="store_true", help="print nothing on success")
     return render
 

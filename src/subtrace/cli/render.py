@@ -7,19 +7,17 @@ from __future__ import annotations
 
 import os
 import sys
-import time
 from dataclasses import replace
-
-import numpy as np
 
 from subtrace.cli.common import set_up_numba
 from subtrace.data import default_scene_path
 from subtrace.errors import SceneError
-from subtrace.frames import check_turntable, frame_path, parse_frames, turntable_eye
+from subtrace.frames import check_turntable, frame_path, parse_frames
 from subtrace.io.atomic import check_writable
 from subtrace.io.formats import DEEP, picture_format
 from subtrace.io.scene import DEFAULT_SAMPLES, apply_overrides, load_scene, scene_for_meshes
 from subtrace.runtime.progress import ProgressBar
+from subtrace.tiles import check_crop, check_tile
 
 
 def scene_from_inputs(inputs, args, **overrides):
@@ -67,17 +65,32 @@ def execute(args) -> int:
     if png and os.path.abspath(png) == os.path.abspath(out):
         png = None  # the output is that picture already: --png never writes over it
     turntable = getattr(args, "turntable", None)
-    frames = None
+    crop = getattr(args, "crop", None)
+    if crop is not None:
+        crop = check_crop(crop, scene.camera.width, scene.camera.height)
+    tile = getattr(args, "tile", None)
+    dask = getattr(args, "dask", None)
+    resume = getattr(args, "resume", False)
+    if tile is not None:
+        tile = check_tile(tile)
+        if crop is not None:
+            raise SceneError("--crop renders one tile: leave out --tile", key="--tile")
     if turntable is not None:
         n = check_turntable(turntable)
-        frames = [(k, frame_path(out, k), png and frame_path(png, k))
-                  for k in parse_frames(args.frames, n)]
+        paths = [p for k in parse_frames(args.frames, n)
+                 for p in (frame_path(out, k), png and frame_path(png, k))]
     elif getattr(args, "frames", None) is not None:
         raise SceneError("--frames picks frames of a camera path: give --turntable N",
                          key="--frames")
-    elif getattr(args, "dask", None) is not None:
-        raise SceneError("--dask renders frames on a cluster: give --turntable N", key="--dask")
-    for path in [out, png] if frames is None else [p for _, o, g in frames for p in (o, g)]:
+    elif resume:
+        raise SceneError("it leaves out frames already rendered: give --turntable N",
+                         key="--resume")
+    elif dask is not None and tile is None:
+        raise SceneError("its tasks are frames or tiles: give --turntable N or --tile N",
+                         key="--dask")
+    else:
+        paths = [out, png]
+    for path in paths:
         if path:
             check_writable(path)
     # imported once the inputs are checked: bad input fails before the renderer's kernels
@@ -86,58 +99,42 @@ def execute(args) -> int:
 
     set_up_numba(args)
     progress = ProgressBar() if sys.stderr.isatty() and not args.quiet else None
-    if frames is None:
-        result = render_scene(scene, threads=args.threads, accel=args.accel, progress=progress)
+    if turntable is None and tile is None and dask is None:
+        result = render_scene(scene, threads=args.threads, accel=args.accel, progress=progress,
+                              crop=crop)
         _write(args, scene, result, out, png, picture, bits)
         return 0
-    from subtrace.nurbs.scene import has_surfaces, load_nurbs
-    from subtrace.render import load_objects, scene_bounds
+    from subtrace.frames import render_frames
 
-    cages = load_objects(scene)  # once for every frame
-    camera = scene.make_camera(*scene_bounds(cages, load_nurbs(scene)))
-    if any(has_surfaces(o.mesh) for o in scene.objects):
-        cages = None  # (a render given cages leaves free-form surfaces out: each frame reads)
-    scenes = [apply_overrides(scene, target=tuple(camera.target), up=tuple(camera.up),
-                              fov=camera.fov_deg, eye=turntable_eye(camera.eye, camera.target,
-                                                                    camera.up, k, n))
-              for k, _, _ in frames]
-    if getattr(args, "dask", None) is not None:
-        from subtrace.cluster import run_frames
+    def report(frame):
+        if args.quiet:
+            return
+        if frame.result is not None:
+            print(_summary(frame.path, frame.preview, frame.result, frame.time_write))
+        else:
+            print(f"{frame.path}: {frame.stats['pixels_covered']} pixels covered, render "
+                  f"{frame.stats['time_total']:.3f} s"
+                  + (f"; preview {frame.preview}" if frame.preview else ""))
 
-        def report(out_k, png_k, stats):
-            if not args.quiet:
-                print(f"{out_k}: {stats['pixels_covered']} pixels covered, render "
-                      f"{stats['time_total']:.3f} s" + (f"; preview {png_k}" if png_k else ""))
-
-        run_frames(args.dask or None, [(sc, o, g, picture, bits)
-                                       for sc, (_, o, g) in zip(scenes, frames)],
-                   args.accel, report)
-        return 0
-    for scene_k, (_, out_k, png_k) in zip(scenes, frames):
-        result = render_scene(scene_k, cages=cages, threads=args.threads, accel=args.accel,
-                              progress=progress)
-        _write(args, scene_k, result, out_k, png_k, picture, bits)
+    done = render_frames(scene, out, turntable=turntable, frames=args.frames, crop=crop,
+                         tile=tile, dask=False if dask is None else (dask or None),
+                         resume=resume, png=png, bits=bits, threads=args.threads,
+                         accel=args.accel, progress=progress, report=report)
+    skipped = sum(f.skipped for f in done)
+    if resume and not args.quiet:
+        print(f"--resume: {skipped} of {len(done)} frames already there, left out")
     return 0
 
 
 def _write(args, scene, result, out, png, picture, bits) -> None:
-    """Write one render's EXR (or picture) and preview; print its summary line."""
-    from subtrace.io.exr import write_exr, write_picture, write_png
-    from subtrace.render import result_attributes
+    """Write one render's EXR (or picture; a tile's as its data window) and preview; print
+    its summary line."""
+    from subtrace.jobs import result_files, write_frame
 
-    t0 = time.perf_counter()
-    if picture is None:
-        write_exr(out, result.channels, result_attributes(result, scene), png_path=png)
-    else:
-        ch = result.channels
-        if not scene.render.transparent:  # opaque: the colour over the background
-            ch = {c: ch[c] for c in "RGB"}
-        write_picture(out, ch, bits)
-        if png:
-            ch = result.channels
-            write_png(png, np.stack([ch["R"], ch["G"], ch["B"]], axis=-1))
+    took = write_frame(out, png, picture, bits, result.channels, result_files(result, scene),
+                       scene.render.transparent)
     if not args.quiet:
-        print(_summary(out, png, result, time.perf_counter() - t0))
+        print(_summary(out, png, result, took))
 
 
 def _summary(out, png, result, time_write: float) -> str:
@@ -146,8 +143,12 @@ def _summary(out, png, result, time_write: float) -> str:
     written before the write ends); the total adds the write."""
     st = result.stats
     cam = result.camera
+    size = f"{cam.width}x{cam.height}"
+    if result.crop is not None:
+        x0, y0, x1, y1 = result.crop
+        size = f"columns {x0}..{x1 - 1}, rows {y0}..{y1 - 1} of {size}"
     return (
-        f"{out}: {cam.width}x{cam.height}, tolerance "
+        f"{out}: {size}, tolerance "
         f"{result.tolerance_rad / cam.pixel_angle():.3g} px, {st.pixels_covered} pixels "
         f"covered; {st.patches_refined} of {st.patches} patches refined, "
         f"{st.micro_triangles} micro-triangles, deepest level {st.max_level}; "

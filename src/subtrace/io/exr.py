@@ -64,7 +64,8 @@ _INT32 = (-(2**31), 2**31 - 1)
 _FLOAT_TUPLES = {3: "vector", 8: "float[8]", 16: "matrix"}
 
 
-def write_exr(path, channels: dict, attributes: dict | None = None, png_path=None) -> None:
+def write_exr(path, channels: dict, attributes: dict | None = None, png_path=None,
+              window=None) -> None:
     """Write a multi-channel EXR (and optionally an sRGB PNG preview of R, G, B).
 
     path: destination (OpenEXR whatever the extension; :func:`write_picture` writes the
@@ -76,6 +77,9 @@ def write_exr(path, channels: dict, attributes: dict | None = None, png_path=Non
       without ':' (other than STANDARD_ATTRIBUTES) are stored as ``subtrace:<name>``.
       ``subtrace:version`` and ``Software`` are always written.
     png_path: also write an 8-bit sRGB preview of R, G, B (needs those channels).
+    window: None, or (x, y, width, height): the channels are a tile of a width x height
+      image, from pixel (x, y): the file's data window, inside its display window (OpenEXR's
+      convention; :func:`read_exr` reports both). The preview holds the tile alone.
     Raises SubtraceError naming the file when it cannot be written (no partial file is left
     behind and an existing file is left untouched); ValueError / TypeError for bad arrays or
     attribute values (programming errors).
@@ -90,6 +94,10 @@ def write_exr(path, channels: dict, attributes: dict | None = None, png_path=Non
     spec.alpha_channel = names.index("A") if "A" in names else -1
     spec.z_channel = names.index("Z") if "Z" in names else -1
     spec.attribute("compression", COMPRESSION)
+    if window is not None:
+        spec.x, spec.y = int(window[0]), int(window[1])
+        spec.full_x = spec.full_y = 0
+        spec.full_width, spec.full_height = int(window[2]), int(window[3])
     for key, value in _header(attributes or {}).items():
         _set_attribute(spec, key, value)
     jobs = [(path, "openexr", spec, arrays)]
@@ -163,7 +171,10 @@ def read_exr(path) -> tuple[dict[str, np.ndarray], dict]:
 
     channels: name -> (H,W) float32 C-contiguous array, in CHANNEL_ORDER first, then the
     others in the reader's order. attributes: every header attribute, name -> value (str,
-    int, float, or a tuple for vectors / matrices), plus ``compression``.
+    int, float, or a tuple for vectors / matrices), plus ``compression``; a file whose data
+    window is not its display window (a tile: ``write_exr(window=...)``) adds
+    ``dataWindow`` and ``displayWindow``, (x0, y0, x1, y1) inclusive, as OpenEXR states
+    them (the channels are the data window's pixels).
     Raises SubtraceError naming the file when it is missing or cannot be read.
     """
     file = path_str(path)
@@ -183,6 +194,13 @@ def read_exr(path) -> tuple[dict[str, np.ndarray], dict]:
         for param in spec.extra_attribs:
             value = param.value
             attributes[param.name] = value
+        if (spec.x, spec.y, spec.width, spec.height) != (
+                spec.full_x, spec.full_y, spec.full_width, spec.full_height):
+            attributes["dataWindow"] = (spec.x, spec.y, spec.x + spec.width - 1,
+                                        spec.y + spec.height - 1)
+            attributes["displayWindow"] = (spec.full_x, spec.full_y,
+                                           spec.full_x + spec.full_width - 1,
+                                           spec.full_y + spec.full_height - 1)
     finally:
         inp.close()
     pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, -1)
@@ -331,13 +349,14 @@ def _write_rows(out, arrays: list[np.ndarray]) -> bool:
     """Hand (H,W) channel arrays to an open ImageOutput ROWS_PER_WRITE scanlines at a time,
     interleaved into one small float32 buffer; False when a write fails."""
     height, width = arrays[0].shape
+    top = out.spec().y  # (a tile's rows are its data window's)
     rows = np.empty((min(ROWS_PER_WRITE, height), width, len(arrays)), dtype=np.float32)
     for y0 in range(0, height, ROWS_PER_WRITE):
         y1 = min(y0 + ROWS_PER_WRITE, height)
         chunk = rows[: y1 - y0]
         for k, array in enumerate(arrays):
             chunk[:, :, k] = array[y0:y1]
-        if not out.write_scanlines(y0, y1, 0, chunk):
+        if not out.write_scanlines(top + y0, top + y1, 0, chunk):
             return False
     return True
 

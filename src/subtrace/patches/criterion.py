@@ -89,36 +89,39 @@ def choose_depths(table, eye: np.ndarray, tol_rad: float, max_depth,
     return depths
 
 
-def memory_estimate(table, depths, n_pixels: int, grids=None) -> int:
+def memory_estimate(table, depths, n_pixels: int, isolated=None) -> int:
     """A conservative estimate (bytes) of a render's memory with grid depths ``depths``:
-    the image's per-pixel buffers, the patch table, every Loop patch built as a grid at its
-    depth and every irregular Catmull-Clark patch isolated to its depth, as if rays reached
-    them all. ``grids`` (P,) bool: the Loop patches built as grids of exact limit points
-    (None: all); the others are Bezier nets split per ray (``trace/tris.py``), one net and
-    item each (in the per-patch figure): what rays split of them lives in the per-thread
-    memos, which are kept within what is left (``trace.pools.Memos``), so their depth costs
+    the image's per-pixel buffers, the patch table, and every irregular patch isolated to
+    its depth, as if rays reached them all. An isolation follows only the irregular
+    remainder of its patch, one level at a time (``patches/isolate.py``,
+    ``patches/isolate_loop.py``), so it costs per level, not per cell, plus an isolated Loop
+    patch's exact side samples (2^depth a side at most). ``isolated`` (P,)
+    bool: the patches isolated so (None: the irregular Catmull-Clark ones); the others are
+    Bezier nets split per ray (``trace/bezier.py``, ``trace/tris.py``), one net and item
+    each (in the per-patch figure): what rays split of them lives in the per-thread memos,
+    which are kept within what is left (``trace.pools.Memos``), so their depth costs
     nothing here. The constants are ``config.MEMORY_*``."""
-    loop = ~table.is_quad if grids is None else grids
-    # in floating point: grids of depth 40 would overflow int64 (the result is clamped)
-    N = np.exp2(depths[loop].astype(np.float64))
-    grid_points = float(((N + 1) * (N + 2) / 2).sum())
-    iso = table.is_quad & ~table.regular
-    iso_levels = int((depths[iso].astype(np.int64) + 1).sum())
+    iso = table.is_quad & ~table.regular if isolated is None else isolated
+    iso_levels = float((depths[iso].astype(np.float64) + 1.0).sum())
+    # an isolated Loop patch keeps the exact samples of each side it snaps onto a coarser
+    # neighbour's polyline (``isolate_loop.side_samples``): up to 2^(depth-1) + 1 a side
+    d_loop = depths[iso & ~table.is_quad].astype(np.float64)
+    side_samples = float((3.0 * (np.exp2(np.maximum(d_loop - 1.0, 0.0)) + 1.0)).sum())
     total = (config.MEMORY_BYTES_PER_PIXEL * float(n_pixels)
              + config.MEMORY_BYTES_PER_PATCH * float(table.n_patches)
-             + config.MEMORY_BYTES_PER_GRID_POINT * grid_points
-             + config.MEMORY_BYTES_PER_ISOLATED_LEVEL * float(iso_levels))
+             + config.MEMORY_BYTES_PER_ISOLATED_LEVEL * iso_levels
+             + config.MEMORY_BYTES_PER_SIDE_SAMPLE * side_samples)
     return int(min(total, 2.0**62))
 
 
-def depth_cap(table, depths, n_pixels: int, budget: int, grids=None):
+def depth_cap(table, depths, n_pixels: int, budget: int, isolated=None):
     """The deepest grid depth ``cap`` at which ``np.minimum(depths, cap)`` fits ``budget``
-    bytes (:func:`memory_estimate`, ``grids`` as there), or None when ``depths`` fit as
+    bytes (:func:`memory_estimate`, ``isolated`` as there), or None when ``depths`` fit as
     they are; -1 when nothing fits (not even depth 0)."""
-    if memory_estimate(table, depths, n_pixels, grids) <= budget:
+    if memory_estimate(table, depths, n_pixels, isolated) <= budget:
         return None
     for cap in range(int(depths.max(initial=0)) - 1, -1, -1):
-        if memory_estimate(table, np.minimum(depths, cap), n_pixels, grids) <= budget:
+        if memory_estimate(table, np.minimum(depths, cap), n_pixels, isolated) <= budget:
             return cap
     return -1
 

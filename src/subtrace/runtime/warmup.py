@@ -7,8 +7,8 @@ on each other, so while the first process compiles (and runs) the loading and
 preprocessing, a second process compiles the trace and shade kernels on the other core, by
 calling them on empty inputs of exactly the types a render passes, and stores them in the
 shared cache; the first process waits for it before tracing and then loads them from the
-cache. The secondary-ray kernel (shadow and anti-aliasing rays) and the memos' cell count
-compile in a third process where the machine has three cores or more, else in the first
+cache. The secondary-ray kernel (shadow and anti-aliasing rays) compiles in a third
+process where the machine has three cores or more, else in the first
 process while it waits (``render.trace_hits``). On a warm cache nothing is started.
 
 :func:`compile_all` (``subtrace warmup``) runs small commands of every kind (the default
@@ -138,7 +138,7 @@ def compile_kernels(threads: int) -> None:
 
 
 def compile_secondary(threads: int) -> None:
-    """Compile the secondary-ray kernel and the memos' cell count for ``threads`` threads
+    """Compile the secondary-ray kernel for ``threads`` threads
     (``trace.rays.compile_kernel``)."""
     from subtrace.runtime import threads as tasks
     from subtrace.trace.rays import compile_kernel

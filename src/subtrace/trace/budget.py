@@ -31,7 +31,8 @@ def warn_capped(budget, cap, depths, estimate):
 def warn_depth_cap(reasons, cap, wanted, budget=None, estimate=None, stacklevel=3):
     """The one warning of a render whose refinement depth was capped: ``reasons`` among
     "memory" (the budget ``budget``, the uncapped depths' estimate ``estimate`` bytes),
-    "size" (Loop grids, ``config.LOOP_MAX_GRID_DEPTH``) and "precision"
+    "size" (isolated Loop patches, ``config.LOOP_MAX_ISOLATED_DEPTH``), "depth" (the caller's
+    explicit cap) and "precision"
     (``config.PRECISION_BITS``); ``cap`` the deepest depth a capped patch was held to,
     ``wanted`` the deepest the tolerance asked for (inf: unbounded, the eye in a shell)."""
     need = "no finite depth (the eye is inside a shell)" if not np.isfinite(wanted) else (
@@ -43,8 +44,14 @@ def warn_depth_cap(reasons, cap, wanted, budget=None, estimate=None, stacklevel=
                      f"{mib(estimate)}), so the image is coarser than the tolerance; raise "
                      "--max-memory (or [render] max_memory in the scene) to refine fully")
     if "size" in reasons:
-        parts.append(f"Loop grids capped at depth {config.LOOP_MAX_GRID_DEPTH} (the most "
-                     "their quadtree indexes), so the image is coarser than the tolerance")
+        parts.append(f"Loop patches capped at depth {config.LOOP_MAX_ISOLATED_DEPTH} where "
+                     "isolated (the exact samples of their sides grow as 2^depth) and at "
+                     f"{config.LOOP_MAX_INSIDE_DEPTH} where the eye is inside their shells, so "
+                     "the image is coarser there than the tolerance")
+    if "depth" in reasons:
+        parts.append(f"refinement capped at depth {max(cap, 0)} by the caller's maximum "
+                     f"depth (the tolerance needs {need}), so the image is coarser than the "
+                     "tolerance")
     if "precision" in reasons:
         parts.append(f"refinement capped at depth {max(cap, 0)} where cells would fall "
                      f"below 2^-{config.PRECISION_BITS} of the coordinates, what double "
@@ -62,17 +69,17 @@ def warn_tiles(budget):
         stacklevel=3)
 
 
-def grid_patches(table) -> np.ndarray:
-    """(P,) bool: the patches the memory estimate prices as grids of 4^depth cells: the
-    irregular Loop triangles (a conservative price: they are isolated into per-ray pieces
-    and cells, ``patches/isolate_loop.py``); the regular ones are Bezier nets split per ray
+def isolated_patches(table) -> np.ndarray:
+    """(P,) bool: the patches isolated level by level when a ray reaches them (priced per
+    level by the memory estimate): the irregular Catmull-Clark quads and the irregular Loop
+    triangles (``patches/isolate_loop.py``); the regular ones are Bezier nets split per ray
     (``trace/build.py``)."""
-    grids = ~table.is_quad
+    iso = table.is_quad & ~table.regular
     for oid, o in enumerate(table.objects):
         if o.cage.scheme == "loop":
             rows = np.nonzero(table.object_id == oid)[0]
-            grids[rows] = ~loop_regular(o.level, o.cage.options, table.face[rows])
-    return grids
+            iso[rows] = ~loop_regular(o.level, o.cage.options, table.face[rows])
+    return iso
 
 
 def check_memory(table, n_pixels: int, budget: int, width: int, height: int):
@@ -93,25 +100,32 @@ class DepthChoice:
     """The depth choice of a render: per patch grid depth, what the choice's isolation made
     (``record``, reused when the patches are built), the (tightened) shells, the bytes
     of the memory budget left for the tile lists and the memos (None: no budget), and which
-    patches are built as grids (:func:`grid_patches`)."""
+    patches are isolated level by level (:func:`isolated_patches`)."""
 
     depths: np.ndarray
     record: dict
     shell_min: np.ndarray
     shell_max: np.ndarray
     left: int | None
-    grids: np.ndarray
+    isolated: np.ndarray
 
 
-def depth_limits(table, eye, max_depth=None):
+def depth_limits(table, eye, max_depth=None, isolated=None, wanted=None):
     """(P,) int32 deepest depth of each patch and (P,) the reason code of each limit: 0
-    floating point (:func:`~subtrace.patches.criterion.precision_depths`), 1 a Loop grid's
-    size (``config.LOOP_MAX_GRID_DEPTH``), 2 the caller's ``max_depth`` (None: none)."""
+    floating point (:func:`~subtrace.patches.criterion.precision_depths`), 1 a Loop
+    patch's size: an isolated one's side samples (``config.LOOP_MAX_ISOLATED_DEPTH``;
+    ``isolated``: the patches of :func:`isolated_patches`) or one whose shell holds the eye
+    (``config.LOOP_MAX_INSIDE_DEPTH``; ``wanted``: the tolerance's depths, inf there), 2
+    the caller's ``max_depth`` (None: none)."""
     limit = precision_depths(table, eye)
     why = np.zeros(table.n_patches, np.int8)
-    loop = ~table.is_quad & (limit > config.LOOP_MAX_GRID_DEPTH)
-    limit[loop] = config.LOOP_MAX_GRID_DEPTH
-    why[loop] = 1
+    for rows, cap in ((isolated, config.LOOP_MAX_ISOLATED_DEPTH),
+                      (None if wanted is None else ~np.isfinite(wanted),
+                       config.LOOP_MAX_INSIDE_DEPTH)):
+        if rows is not None:
+            big = rows & ~table.is_quad & (limit > cap)
+            limit[big] = cap
+            why[big] = 1
     if max_depth is not None:
         low = limit > max_depth
         limit[low] = max_depth
@@ -136,29 +150,29 @@ def choose_within_budget(table, eye, tol_rad, max_depth, max_memory, n_pixels,
         shells = table.shell_min.copy(), table.shell_max.copy()
         return choose_depths(table, eye, tol_rad, cap, record, shells), record, shells
 
-    limit, why = depth_limits(table, eye, max_depth)
+    isolated = isolated_patches(table)
     wanted = wanted_depths(table, eye, tol_rad)
+    limit, why = depth_limits(table, eye, max_depth, isolated, wanted)
     depths, record, (shell_min, shell_max) = choose(limit)
     # held below the tolerance's depth (an isolated patch at its limit counts as held)
     held = (wanted > limit) & (depths >= limit)
     reasons = [LIMIT_REASONS[k] for k in np.unique(why[held])]
     left = None
     budget_cap = estimate = None
-    grids = grid_patches(table)
     if max_memory is not None:
         left = max_memory - config.MEMORY_MEMO_MIN_BYTES * tasks.thread_count()
-        budget_cap = depth_cap(table, depths, n_pixels, left, grids)
-        if budget_cap is not None:
-            estimate = memory_estimate(table, depths, n_pixels, grids)
+        budget_cap = depth_cap(table, depths, n_pixels, left, isolated)
+        if budget_cap is not None:  # (the estimate said: with the memos' minimum)
+            estimate = memory_estimate(table, depths, n_pixels, isolated) + max_memory - left
             by_memory = limit > max(budget_cap, 0)
             limit = np.minimum(limit, max(budget_cap, 0))
             depths, record, (shell_min, shell_max) = choose(limit)
             held = (wanted > limit) & (depths >= limit)
             reasons = ((["memory"] if (held & by_memory).any() else [])
                        + [LIMIT_REASONS[k] for k in np.unique(why[held & ~by_memory])])
-        left = max(left - memory_estimate(table, depths, n_pixels, grids), 0)
+        left = max(left - memory_estimate(table, depths, n_pixels, isolated), 0)
     if held.any():
         stats.depth_cap = int(depths[held].max())
         stats.depth_cap_reason = ",".join(reasons)
         warn_depth_cap(reasons, stats.depth_cap, wanted[held].max(), max_memory, estimate)
-    return DepthChoice(depths, record, shell_min, shell_max, left, grids)
+    return DepthChoice(depths, record, shell_min, shell_max, left, isolated)

@@ -28,7 +28,7 @@ from subtrace.runtime.threads import run_chunks
 from subtrace.trace.bezier import MAX_SIDE_SAMPLES, intersect_patch
 from subtrace.trace.pools import CANDIDATES, Candidates, Hits, Memo, PieceArrays
 from subtrace.trace.prims import (
-    H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, ray_setup, shear,
+    H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, memo_restart, ray_setup, shear,
 )
 
 
@@ -157,6 +157,7 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
     bvh, tiles = BVH(*bvh_t), Tiles(*tiles_t)
     iso, cands, hits = PieceArrays(*iso_t), Candidates(*cands_t), Hits(*hits_t)
     mem = Memo(*mems_t[task])
+    memo_restart(mem.root, mem.cnt)  # one chunk of bands: a memo of its own (prims)
     stack, stack_t, work, st, st_t, ent_t, ent_i, lv, lp, hit = scratches[task]
     scratch = (work, st, st_t, ent_t, ent_i, lv, lp)
     projected = len(tiles.off) > 1

@@ -28,6 +28,9 @@ from subtrace import config
 from subtrace.patches.basis import BOX_PAD, net_bounds
 from subtrace.patches.isolate import item_sides, rest_boxes
 from subtrace.trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
+from subtrace.trace.prims import (
+    M_COUNTS, M_MADE, M_PEAK_CELLS, M_PEAK_NETS, M_PEAK_NODES, memo_restart,
+)
 from subtrace.patches.isolate_loop import sample_ranges, side_samples
 from subtrace.trace.tris import LOOP_CELL, TRI, tri_nets_as_pieces
 
@@ -367,7 +370,7 @@ class Memos:
         if old is None:
             old = Memo(np.full(0, -1, np.int64), np.empty(0, np.int64), np.empty((0, 6)),
                        np.empty((0, 5)), np.empty(0, np.int64), np.empty((0, 4, 4, 3)),
-                       np.empty((0, 3)), np.zeros(4, np.int64))
+                       np.empty((0, 3)), np.zeros(M_COUNTS, np.int64))
         root, child, box, slab, data, nets, cells, cnt = old
         if len(root) < n_items:
             root = np.concatenate([root, np.full(max(n_items, 2 * len(root)) - len(root), -1)])
@@ -388,17 +391,25 @@ class Memos:
     def views(self, n_items) -> tuple:
         """One :class:`Memo` per thread with room for ``n_items`` items (a store that ran
         out during the last round doubled)."""
+        # every memo grows when one ran out: a chunk of rays finds the same room on any
+        # thread, so its work and counts do not depend on which thread took it
+        full = any(m.cnt[M_FULL] for m in self.m)
         for k, m in enumerate(self.m):
             self.full += int(m.cnt[M_FULL])
-            if m.cnt[M_FULL] or len(m.root) < n_items:
+            if full or len(m.root) < n_items:
                 self.m[k] = self._grow(m, n_items, *(("child", "nets", "cells")
-                                                     if m.cnt[M_FULL] else ()))
+                                                     if full else ()))
         return tuple(self.m)
 
     def finish(self, stats):
-        """Count what the memos hold into ``stats`` (memo_nodes, memo_bytes, memo_full)."""
-        stats.memo_nodes = int(sum(m.cnt[M_NODES] for m in self.m))
+        """Count what the memos made and held into ``stats``: memo_nodes (nodes made over
+        every chunk of rays), memo_bytes (the most each memo held at once, summed over the
+        threads), memo_full."""
+        for m in self.m:
+            memo_restart(m.root, m.cnt)  # (folds what the last chunk held)
+        stats.memo_nodes = int(sum(m.cnt[M_MADE] for m in self.m))
         stats.memo_bytes = int(sum(
-            m.cnt[M_NODES] * self.ROW_BYTES["child"] + m.cnt[M_NETS] * self.ROW_BYTES["nets"]
-            + 4 * m.cnt[M_CELLS] * self.ROW_BYTES["cells"] for m in self.m))
+            m.cnt[M_PEAK_NODES] * self.ROW_BYTES["child"]
+            + m.cnt[M_PEAK_NETS] * self.ROW_BYTES["nets"]
+            + 4 * m.cnt[M_PEAK_CELLS] * self.ROW_BYTES["cells"] for m in self.m))
         stats.memo_full = self.full + int(sum(m.cnt[M_FULL] for m in self.m))

@@ -17,9 +17,29 @@ H_T, H_SLOT, H_LEAF, H_TRI, H_B1, H_B2 = range(6)
 HIT_FIELDS = 6
 
 # a thread's memo of split nets (``trace/bezier.py`` says what it holds): the rows of its
-# counts, and the state of a node not yet evaluated
-M_NODES, M_NETS, M_CELLS, M_FULL = range(4)
+# counts (nodes, nets and cells in use; a flag set when a store ran out; then, over every
+# chunk of rays the memo served, the nodes it made and the most rows of each store it held
+# at once), and the state of a node not yet evaluated
+M_NODES, M_NETS, M_CELLS, M_FULL, M_MADE, M_PEAK_NODES, M_PEAK_NETS, M_PEAK_CELLS = range(8)
+M_COUNTS = 8
 NOT_YET = -1
+
+
+@leaf_njit
+def memo_restart(root, cnt):
+    """Empty a memo (its item ``root`` s and counts ``cnt``) for the next chunk of rays,
+    folding what it held into the totals and peaks of ``cnt``. A memo serves one chunk of
+    neighbouring rays (``trace/kernels.py``): what a chunk's rays split is what they share,
+    and a chunk's work (and the micro-triangles it counts) is then the same whichever thread
+    takes it."""
+    cnt[M_MADE] += cnt[M_NODES]
+    cnt[M_PEAK_NODES] = max(cnt[M_PEAK_NODES], cnt[M_NODES])
+    cnt[M_PEAK_NETS] = max(cnt[M_PEAK_NETS], cnt[M_NETS])
+    cnt[M_PEAK_CELLS] = max(cnt[M_PEAK_CELLS], cnt[M_CELLS])
+    cnt[M_NODES] = 0
+    cnt[M_NETS] = 0
+    cnt[M_CELLS] = 0
+    root[:] = NOT_YET
 
 
 @leaf_njit
@@ -73,7 +93,14 @@ def ray_triangle(ox, oy, oz, kx, ky, kz, sx, sy, sz, a, b, c, verts, tmax, slack
 
 @leaf_njit
 def ray_setup(frame, row, col):
-    """Unit direction of the ray through the centre of pixel (row, col)."""
+    """Unit direction of the ray through the centre of pixel (row, col); a window's frame
+    (a fifth row: ``camera.CameraWindow``) first adds its offset in the image."""
+    if frame.shape[0] > 4:
+        col = col + frame[4, 0]
+        row = row + frame[4, 1]
+    else:
+        col = col + 0.0
+        row = row + 0.0
     dx = frame[3, 0] + col * frame[1, 0] + row * frame[2, 0]
     dy = frame[3, 1] + col * frame[1, 1] + row * frame[2, 1]
     dz = frame[3, 2] + col * frame[1, 2] + row * frame[2, 2]

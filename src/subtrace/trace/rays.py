@@ -33,10 +33,10 @@ from subtrace.runtime import threads as tasks
 from subtrace.runtime.jit import nb
 from subtrace.trace.bezier import intersect_patch
 from subtrace.trace.build import build_requested
-from subtrace.trace.counts import thread_correction
 from subtrace.trace.kernels import scratch_buffers
 from subtrace.trace.pools import CANDIDATES, Hits, Memo, Memos, PieceArrays, hit_arrays
-from subtrace.trace.prims import H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, shear
+from subtrace.trace.prims import (H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, memo_restart,
+                                  shear)
 
 RAY_CHUNK = 4096  # rays a thread takes at a time
 
@@ -113,13 +113,13 @@ def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
                         pools.iso, pools.round_no, pools.stats, pools.eye, pools.tol_rad,
                         pools.record)
         pools.round_no += 1
-    # (each cell once, however the threads shared the rays: trace/counts.py)
-    pools.stats.micro_triangles += int(built.sum()) + thread_correction(memos, pools.iso.view())
+    # (each chunk of rays has a memo of its own: its count is the same on any thread)
+    pools.stats.micro_triangles += int(built.sum())
     return blocked, hits
 
 
 def compile_kernel() -> None:
-    """Compile the secondary-ray kernel and the memos' cell count for the current thread
+    """Compile the secondary-ray kernel for the current thread
     count (``runtime.threads``) by tracing no rays through empty pools of the types a
     render passes (a cold cache: ``render.trace_hits`` does it while the trace kernels
     compile in another process)."""
@@ -151,6 +151,7 @@ def _rays_task(task, a, b, rays, origins, dirs, tmax, any_hit, bvh_t, shell_min,
     when there are more than CANDIDATES; an ``any_hit`` ray stops at its first occluder."""
     bvh, iso, hits = BVH(*bvh_t), PieceArrays(*iso_t), Hits(*hits_t)
     mem = Memo(*mems_t[task])
+    memo_restart(mem.root, mem.cnt)  # one chunk of rays: a memo of its own (trace/prims.py)
     stack, stack_t, work, st, st_t, ent_t, ent_i, lv, lp, hit = scratches[task]
     scratch = (work, st, st_t, ent_t, ent_i, lv, lp)
     req_t = req_ts[task]
