@@ -30,11 +30,14 @@ from subtrace.trace.tris import LOOP_CELL, TRI, tri_normal
 
 
 # the planes the shading fills, in this order, and what a pixel whose ray missed holds
-# (R, G, B: the background colour)
+# (R, G, B: the background colour). P.X, P.Y, P.Z: the world-space hit point of the
+# centre ray, eye + Z d (OpenEXR's / Cycles' names), NaN where it missed (Z = +inf: no
+# point)
 CHANNELS = ("R", "G", "B", "A", "Z", "N.X", "N.Y", "N.Z", "level", "patch_id", "object_id",
-            "u", "v")
-C_R, C_A, C_Z, C_N, C_LEVEL, C_PATCH, C_OBJECT, C_U = 0, 3, 4, 5, 8, 9, 10, 11
-MISS = (0.0, 0.0, 0.0, 0.0, np.inf, 0.0, 0.0, 0.0, -1.0, -1.0, -1.0, 0.0, 0.0)
+            "u", "v", "P.X", "P.Y", "P.Z")
+C_R, C_A, C_Z, C_N, C_LEVEL, C_PATCH, C_OBJECT, C_U, C_P = 0, 3, 4, 5, 8, 9, 10, 11, 13
+MISS = (0.0, 0.0, 0.0, 0.0, np.inf, 0.0, 0.0, 0.0, -1.0, -1.0, -1.0, 0.0, 0.0, np.nan,
+        np.nan, np.nan)
 
 
 def shade(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, covered,
@@ -136,6 +139,9 @@ def _shade_task(task, n_tasks, frame, width, hits, iso, patches, miss, planes, n
             n_hit += 1
             planes[C_Z, r] = t
             dx, dy, dz = _direction(frame, width, dirs, r)
+            planes[C_P, r] = frame[0, 0] + t * dx
+            planes[C_P + 1, r] = frame[0, 1] + t * dy
+            planes[C_P + 2, r] = frame[0, 2] + t * dz
             # the patch and item hit, (a, b) the patch parameter
             p = -hits.prim[r] - 2
             u = hits.a[r]

@@ -39,7 +39,7 @@ from subtrace.nurbs.trace import (
 )
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
-from subtrace.shade import C_A, C_LEVEL, C_N, C_OBJECT, C_PATCH, C_R, C_U, C_Z
+from subtrace.shade import C_A, C_LEVEL, C_N, C_OBJECT, C_P, C_PATCH, C_R, C_U, C_Z
 from subtrace.trace.prims import ray_setup
 
 _SURF = re.compile(rb"^[ \t]*surf[ \t]", re.MULTILINE)  # a free-form surface statement
@@ -177,6 +177,9 @@ def _shade_hits(task, n_tasks, frame, width, pixels, t, level, surface, normals,
         nx, ny, nz = normals[k, 0], normals[k, 1], normals[k, 2]
         s = surface[k]
         planes[C_Z, r] = t[r]
+        planes[C_P, r] = frame[0, 0] + t[r] * dx
+        planes[C_P + 1, r] = frame[0, 1] + t[r] * dy
+        planes[C_P + 2, r] = frame[0, 2] + t[r] * dz
         planes[C_N, r] = nx
         planes[C_N + 1, r] = ny
         planes[C_N + 2, r] = nz
