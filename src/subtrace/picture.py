@@ -5,6 +5,10 @@ over ``shade.py`` and ``trace/rays.py``; no kernels here).
 
 * shadow rays from every hit towards each light (``[render] shadows``, on by default), as
   any-hit rays through the BVH of the shells (``trace/rays.py``);
+* ambient occlusion (``[render] ao`` / ``--ao N``, off by default): N cosine-weighted
+  any-hit rays from every hit (``shade.ambient_occlusion``) reaching ``config.AO_DISTANCE``
+  of the diagonal of the scene's control points; the share that escapes scales the
+  diffuse lighting;
 * the lighting (``shade.light``: Lambert plus the materials' Blinn-Phong lobe);
 * the background (a colour or a vertical gradient) and the ground (``[ground]``);
 * adaptive anti-aliasing (``[render] samples`` / ``--samples N``; the API's default is one
@@ -32,8 +36,10 @@ import numpy as np
 
 from subtrace.accel.bvh import build_bvh
 from subtrace.runtime import threads as tasks
-from subtrace.shade import (C_A, C_R, CHANNELS, background_rows, edge_pixels, ground_pixels,
-                            light, light_array, miss_values, shade, shadow_visibility)
+from subtrace import config
+from subtrace.shade import (C_A, C_R, CHANNELS, ambient_occlusion, background_rows,
+                            edge_pixels, ground_pixels, light, light_array, miss_values, shade,
+                            shadow_visibility)
 from subtrace.trace.rays import Pools, trace_rays
 
 # the R2 sequence's steps (the plastic number's powers): well-spread points in a square
@@ -80,7 +86,8 @@ def paint(scene, cages, camera, keep, hits, normals, pix_patch, patches, planes,
     samples = scene.render.samples or 1
     lights = light_array(scene.lights)
     shadows = bool(len(lights)) and scene.render.shadows
-    pools = _pools(keep, stats) if shadows or samples > 1 else None
+    pools = (_pools(keep, stats) if shadows or samples > 1 or scene.render.ao > 0
+             else None)
 
     def trace_shadows(origins, dirs, tmax):
         """Any-hit shadow rays: blocked (n,) uint8 (none without shadows)."""
@@ -92,16 +99,36 @@ def paint(scene, cages, camera, keep, hits, normals, pix_patch, patches, planes,
         stats.shadow_rays += len(tmax)
         return blocked
 
+    def trace_ao(origins, dirs, tmax):
+        """Any-hit ambient occlusion rays: blocked (n,) uint8."""
+        t0 = time.perf_counter()
+        blocked = trace_rays(pools, origins, dirs, tmax, any_hit=True)[0]
+        stats.time_ao += time.perf_counter() - t0
+        stats.ao_rays += len(tmax)
+        return blocked
+
+    ao = None
+    if scene.render.ao > 0:
+        ao = (trace_ao, scene.render.ao, config.AO_DISTANCE * _diagonal(cages))
+
     ground = _ground(scene, cages, camera)
     rows = background_rows(scene.render.background, scene.render.background_bottom, H)
     _colour(scene, frame, W, hits.t, normals, pix_patch, patches, planes, lights, rows,
-            ground, trace_shadows, keep["tol_rad"], None)
+            ground, trace_shadows, keep["tol_rad"], None, ao)
     if samples > 1:
         t0 = time.perf_counter()
         _antialias(scene, frame, W, H, pools, patches, planes, lights, ground, trace_shadows,
-                   samples, stats)
+                   samples, stats, ao)
         stats.time_aa += time.perf_counter() - t0
     _count_secondary(pools, stats)
+
+
+def _diagonal(cages) -> float:
+    """The diagonal of the box of the cages' control points (which holds their limit
+    surfaces)."""
+    lo = np.min([c.points.min(axis=0) for c in cages], axis=0)
+    hi = np.max([c.points.max(axis=0) for c in cages], axis=0)
+    return float(np.linalg.norm(hi - lo))
 
 
 def _ground(scene, cages, camera):
@@ -116,18 +143,25 @@ def _ground(scene, cages, camera):
 
 
 def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights, rows,
-            ground, trace_shadows, tol_rad, dirs):
-    """The colour of rays from the eye (pixel centres, or ``dirs``): shadows, lighting, the
-    background (``rows``: per image row, or per ray with ``dirs``) and the ground."""
+            ground, trace_shadows, tol_rad, dirs, ao=None):
+    """The colour of rays from the eye (pixel centres, or ``dirs``): shadows, ambient
+    occlusion (``ao``: None, or (trace, rays per hit, distance)), lighting, the background
+    (``rows``: per image row, or per ray with ``dirs``) and the ground."""
     n = len(pix_patch)
     visible = np.ones((len(lights), n), np.float32)
     if len(lights) and scene.render.shadows:
         visible = shadow_visibility(trace_shadows, frame, width, t, normals, pix_patch, lights,
                                     tol_rad, dirs)
+    occlusion = None
+    if ao is not None:
+        # (the extra anti-aliasing rays turn their patterns by their own indices, past the
+        # pixels')
+        occlusion = ambient_occlusion(ao[0], frame, width, t, normals, pix_patch, ao[1], ao[2],
+                                      tol_rad, dirs, salt=0 if dirs is None else 1 << 40)
     r = scene.render
     headlight = np.array([r.headlight_intensity if r.headlight else 0.0])
     light(frame, width, t, normals, pix_patch, patches, lights, headlight, visible, planes,
-          dirs)
+          dirs, occlusion)
     if r.background_bottom is not None or dirs is not None:
         miss = np.nonzero(pix_patch < 0)[0]
         back = rows[miss // width] if dirs is None else rows[miss]
@@ -139,7 +173,7 @@ def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights,
 
 
 def _antialias(scene, frame, W, H, pools, patches, planes, lights, ground, trace_shadows,
-               samples, stats):
+               samples, stats, ao=None):
     """More rays for the pixels :func:`edge_pixels` marks (see the module comment); their
     colour and alpha become the mean of all their rays."""
     pix = np.nonzero(edge_pixels(planes, W, H).ravel())[0]
@@ -169,7 +203,7 @@ def _antialias(scene, frame, W, H, pools, patches, planes, lights, ground, trace
     back = np.repeat(top[None], n, axis=0) if bottom is None else (
         (1.0 - w) * top + w * np.asarray(bottom, np.float64))
     _colour(scene, frame, W, hits.t, normals, pix_patch, patches, sub, lights, back, ground,
-            trace_shadows, pools.tol_rad, dirs)
+            trace_shadows, pools.tol_rad, dirs, ao)
     # box filter: the centre ray and the extra ones, equally weighted
     for k in (C_R, C_R + 1, C_R + 2, C_A):
         extra = sub[k].astype(np.float64).reshape(len(pix), m).sum(axis=1)

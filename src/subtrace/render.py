@@ -86,6 +86,8 @@ class RenderStats:
     aa_pixels: int = 0  # pixels that got more than their centre ray (--samples)
     aa_rays: int = 0  # the extra rays they got
     time_aa: float = 0.0  # of time_shade: tracing and shading the extra rays
+    ao_rays: int = 0  # ambient occlusion rays traced ([render] ao per hit, extra rays too)
+    time_ao: float = 0.0  # of time_shade: tracing them (building included)
     # built for secondary rays (shadow and anti-aliasing rays: patches no primary ray had
     # reached, micro-triangles they evaluated), not counted in the primary counts above
     secondary_patches_refined: int = 0
@@ -450,6 +452,7 @@ def result_attributes(result: RenderResult, scene) -> dict:
     attrs["subtrace:accel"] = result.accel
     attrs["subtrace:samples"] = int(scene.render.samples or 1)  # rays per edge pixel at most
     attrs["subtrace:shadows"] = int(bool(scene.render.shadows and scene.lights))
+    attrs["subtrace:ao"] = int(scene.render.ao)  # ambient occlusion rays per hit (0: none)
     for k, v in result.stats.__dict__.items():
         attrs[f"subtrace:{k}"] = (v if isinstance(v, str) else float(v) if isinstance(v, float)
                                   else int(v))

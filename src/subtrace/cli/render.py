@@ -54,7 +54,7 @@ def execute(args) -> int:
                               tolerance_deg=args.tolerance_deg, output=args.output,
                               color=args.color, background=args.background,
                               shadows=args.shadows, transparent=args.transparent,
-                              samples=args.samples)
+                              samples=args.samples, ao=getattr(args, "ao", None))
     if scene.render.samples is None:  # neither the scene nor --samples: the default
         scene = replace(scene, render=replace(scene.render, samples=DEFAULT_SAMPLES))
     out = scene.output or "render.exr"
