@@ -64,7 +64,8 @@ def _pools(keep, stats) -> Pools:
     if not len(keep["bvh"].node_first):
         keep["bvh"] = build_bvh(keep["shell_min"], keep["shell_max"])
     stats.time_preprocess += time.perf_counter() - t0
-    side = SimpleNamespace(pieces=0, micro_triangles=0, grid_points=0, patches_refined=0)
+    side = SimpleNamespace(pieces=0, micro_triangles=0, grid_points=0, patches_refined=0,
+                           max_depth=-1)
     return Pools(**dict(keep, stats=side))
 
 
@@ -73,6 +74,7 @@ def _count_secondary(pools, stats) -> None:
     if pools is not None:
         stats.secondary_patches_refined = pools.stats.patches_refined
         stats.secondary_micro_triangles = pools.stats.micro_triangles
+        stats.secondary_max_depth = pools.stats.max_depth
 
 
 def paint(scene, cages, camera, keep, hits, normals, pix_patch, patches, planes, stats):

@@ -92,6 +92,9 @@ class RenderStats:
     # reached, micro-triangles they evaluated), not counted in the primary counts above
     secondary_patches_refined: int = 0
     secondary_micro_triangles: int = 0
+    # the deepest grid (in its patch's units, as max_depth) secondary rays reached: where
+    # they found their hits or occluders, and what they built (-1: no secondary ray hit)
+    secondary_max_depth: int = -1
 
     def as_attributes(self) -> dict:
         return {f"subtrace:{k}": v for k, v in self.__dict__.items()}
