@@ -35,6 +35,8 @@ from types import SimpleNamespace
 import numpy as np
 
 from subtrace.accel.bvh import build_bvh
+from subtrace.nurbs.scene import blocked as nurbs_blocked
+from subtrace.nurbs.scene import shade_rays
 from subtrace.runtime import threads as tasks
 from subtrace import config
 from subtrace.shade import (C_A, C_R, CHANNELS, ambient_occlusion, background_rows,
@@ -77,26 +79,32 @@ def _count_secondary(pools, stats) -> None:
         stats.secondary_max_depth = pools.stats.max_depth
 
 
-def paint(scene, cages, camera, keep, hits, normals, pix_patch, patches, planes, stats):
+def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, stats,
+          nurbs=None, offset=0):
     """Fill the colour (R, G, B) and, with anti-aliasing, filter colour and alpha of
-    ``planes`` (len(CHANNELS), W*H) float32, whose other channels :func:`shade.shade` wrote
-    from ``hits``; ``normals``, ``pix_patch``: its eye-facing normals and patches;
-    ``patches``: the :class:`shade.PatchShading`; ``keep``: what ``render.trace_hits`` kept
-    for secondary rays. Counts and times go to ``stats``."""
+    ``planes`` (len(CHANNELS), W*H) float32, whose other channels :func:`shade.shade` (and
+    the NURBS pass) wrote; ``t`` (W*H,) float64 each pixel's hit distance (inf: none);
+    ``normals``, ``pix_patch``: its eye-facing normals and patches (the free-form surfaces'
+    rows of ``patches`` from ``offset``: ``nurbs.scene.with_surfaces``); ``patches``: the
+    :class:`shade.PatchShading`; ``keep``: what ``render.trace_hits`` kept for secondary
+    rays (empty: no cage); ``nurbs``: the free-form surfaces (None: none), which cast
+    shadows, occlude and take extra rays too. Counts and times go to ``stats``."""
     W, H = camera.width, camera.height
     frame = camera.frame()
     samples = scene.render.samples or 1
     lights = light_array(scene.lights)
     shadows = bool(len(lights)) and scene.render.shadows
-    pools = (_pools(keep, stats) if shadows or samples > 1 or scene.render.ao > 0
+    tol_rad = scene.render.tolerance_rad(camera)
+    pools = (_pools(keep, stats) if keep and (shadows or samples > 1 or scene.render.ao > 0)
              else None)
+    any_hit = _any_hit(pools, nurbs, frame[0], tol_rad)
 
     def trace_shadows(origins, dirs, tmax):
         """Any-hit shadow rays: blocked (n,) uint8 (none without shadows)."""
         if not shadows:
             return np.zeros(len(tmax), np.uint8)
         t0 = time.perf_counter()
-        blocked = trace_rays(pools, origins, dirs, tmax, any_hit=True)[0]
+        blocked = any_hit(origins, dirs, tmax)
         stats.time_shadows += time.perf_counter() - t0
         stats.shadow_rays += len(tmax)
         return blocked
@@ -104,43 +112,99 @@ def paint(scene, cages, camera, keep, hits, normals, pix_patch, patches, planes,
     def trace_ao(origins, dirs, tmax):
         """Any-hit ambient occlusion rays: blocked (n,) uint8."""
         t0 = time.perf_counter()
-        blocked = trace_rays(pools, origins, dirs, tmax, any_hit=True)[0]
+        blocked = any_hit(origins, dirs, tmax)
         stats.time_ao += time.perf_counter() - t0
         stats.ao_rays += len(tmax)
         return blocked
 
+    lo, hi = _bounds(cages, nurbs)
     ao = None
     if scene.render.ao > 0:
-        ao = (trace_ao, scene.render.ao, config.AO_DISTANCE * _diagonal(cages))
-
-    ground = _ground(scene, cages, camera)
+        ao = (trace_ao, scene.render.ao, config.AO_DISTANCE * float(np.linalg.norm(hi - lo)))
+    ground = _ground(scene, cages, camera, nurbs)
     rows = background_rows(scene.render.background, scene.render.background_bottom, H)
-    _colour(scene, frame, W, hits.t, normals, pix_patch, patches, planes, lights, rows,
-            ground, trace_shadows, keep["tol_rad"], None, ao)
+    _colour(scene, frame, W, t, normals, pix_patch, patches, planes, lights, rows,
+            ground, trace_shadows, tol_rad, None, ao)
     if samples > 1:
         t0 = time.perf_counter()
-        _antialias(scene, frame, W, H, pools, patches, planes, lights, ground, trace_shadows,
-                   samples, stats, ao)
+        closest = _closest(pools, nurbs, frame, W, patches, scene, tol_rad, offset)
+        _antialias(scene, frame, W, H, closest, patches, planes, lights, ground,
+                   trace_shadows, samples, stats, tol_rad, ao)
         stats.time_aa += time.perf_counter() - t0
     _count_secondary(pools, stats)
 
 
-def _diagonal(cages) -> float:
-    """The diagonal of the box of the cages' control points (which holds their limit
-    surfaces)."""
-    lo = np.min([c.points.min(axis=0) for c in cages], axis=0)
-    hi = np.max([c.points.max(axis=0) for c in cages], axis=0)
-    return float(np.linalg.norm(hi - lo))
+def _any_hit(pools, nurbs, eye, tol_rad):
+    """``blocked(origins, dirs, tmax)`` -> (n,) uint8: any-hit rays against the cages (the
+    pools' BVH of shells, ``trace.rays``) and then, for the rays no cage blocks, the
+    free-form surfaces, each ray with its cone (width ``|origin - eye| * tol_rad`` at its
+    origin: the footprint of the hit it leaves)."""
+
+    def blocked(origins, dirs, tmax):
+        out = np.zeros(len(tmax), np.uint8)
+        if pools is not None:
+            out = trace_rays(pools, origins, dirs, tmax, any_hit=True)[0]
+        if nurbs is not None:
+            rest = np.nonzero(out == 0)[0]
+            if len(rest):
+                o = np.asarray(origins)[rest]
+                cone = np.sqrt(((o - eye) ** 2).sum(axis=1)) * tol_rad
+                out[rest] = nurbs_blocked(nurbs, o, np.asarray(dirs)[rest],
+                                          np.asarray(tmax)[rest], cone, tol_rad)
+        return out
+
+    return blocked
 
 
-def _ground(scene, cages, camera):
+def _closest(pools, nurbs, frame, width, patches, scene, tol_rad, offset):
+    """``closest(dirs)`` -> (t (n,), normals (n,3), pix_patch (n,), planes): rays from the
+    eye along ``dirs`` (extra anti-aliasing rays) traced and shaded as centre rays are:
+    the cages' hits, then the free-form surfaces' where nearer."""
+
+    def closest(dirs):
+        n = len(dirs)
+        sub = np.empty((len(CHANNELS), n), np.float32)
+        normals = np.empty((n, 3))
+        pix_patch = np.full(n, -1, np.int64)
+        miss = miss_values(scene.render.background)
+        if pools is None:
+            sub[:] = miss[:, None]
+            t = np.full(n, np.inf)
+        else:
+            origins = np.repeat(frame[0][None], n, axis=0)
+            _, hits = trace_rays(pools, origins, dirs, np.full(n, np.inf), any_hit=False)
+            covered = np.zeros(tasks.thread_count(), np.int64)
+            shade(frame, width, hits, pools.iso.view(), patches, miss, sub, normals,
+                  pix_patch, covered, dirs)
+            t = hits.t.copy()
+        if nurbs is not None:
+            shade_rays(nurbs, frame, dirs, tol_rad, offset, t, normals, pix_patch, sub)
+        return t, normals, pix_patch, sub
+
+    return closest
+
+
+def _bounds(cages, nurbs):
+    """(lo, hi): the box of the cages' control points (which holds their limit surfaces)
+    and of the free-form surfaces' patches."""
+    boxes = [(c.points.min(axis=0), c.points.max(axis=0)) for c in cages]
+    if nurbs is not None:
+        boxes.append(nurbs.bounds())
+    return np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
+
+
+def _ground(scene, cages, camera, nurbs=None):
     """(unit up, height) of the scene's ground plane, or None."""
     if scene.ground is None:
         return None
     up = np.asarray(camera.up, np.float64) / np.linalg.norm(camera.up)
     height = scene.ground.height
     if height is None:  # the objects' lowest limit point along up
-        height = min(float((c.limit(1)[0] @ up).min()) for c in cages)
+        lows = [float((c.limit(1)[0] @ up).min()) for c in cages]
+        if nurbs is not None:  # (the lowest corner of the box of the surfaces' patches)
+            lo, hi = nurbs.bounds()
+            lows.append(float(np.minimum(lo * up, hi * up).sum()))
+        height = min(lows)
     return up, height
 
 
@@ -174,8 +238,8 @@ def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights,
                       float(headlight[0]), scene.ground.color, rows, planes, dirs)
 
 
-def _antialias(scene, frame, W, H, pools, patches, planes, lights, ground, trace_shadows,
-               samples, stats, ao=None):
+def _antialias(scene, frame, W, H, closest, patches, planes, lights, ground, trace_shadows,
+               samples, stats, tol_rad, ao=None):
     """More rays for the pixels :func:`edge_pixels` marks (see the module comment); their
     colour and alpha become the mean of all their rays."""
     pix = np.nonzero(edge_pixels(planes, W, H).ravel())[0]
@@ -190,22 +254,15 @@ def _antialias(scene, frame, W, H, pools, patches, planes, lights, ground, trace
     d = frame[3] + cc[:, None] * frame[1] + rr[:, None] * frame[2]
     dirs = np.ascontiguousarray(d / np.sqrt((d * d).sum(axis=1))[:, None])
     n = len(dirs)
-    origins = np.repeat(frame[0][None], n, axis=0)
-    _, hits = trace_rays(pools, origins, dirs, np.full(n, np.inf), any_hit=False)
-    sub = np.empty((len(CHANNELS), n), np.float32)
-    normals = np.empty((n, 3))
-    pix_patch = np.empty(n, np.int64)
-    covered = np.zeros(tasks.thread_count(), np.int64)
-    shade(frame, W, hits, pools.iso.view(), patches,
-          miss_values(scene.render.background), sub, normals, pix_patch, covered, dirs)
+    t, normals, pix_patch, sub = closest(dirs)
     # the background at each ray's own height (a gradient's blend at row rr)
     top = np.asarray(scene.render.background, np.float64)
     bottom = scene.render.background_bottom
     w = np.clip((rr + 0.5) / H, 0.0, 1.0)[:, None]
     back = np.repeat(top[None], n, axis=0) if bottom is None else (
         (1.0 - w) * top + w * np.asarray(bottom, np.float64))
-    _colour(scene, frame, W, hits.t, normals, pix_patch, patches, sub, lights, back, ground,
-            trace_shadows, pools.tol_rad, dirs, ao)
+    _colour(scene, frame, W, t, normals, pix_patch, patches, sub, lights, back, ground,
+            trace_shadows, tol_rad, dirs, ao)
     # box filter: the centre ray and the extra ones, equally weighted
     for k in (C_R, C_R + 1, C_R + 2, C_A):
         extra = sub[k].astype(np.float64).reshape(len(pix), m).sum(axis=1)

@@ -33,7 +33,8 @@ from subtrace.camera import camera_frame
 from subtrace.errors import SceneError
 from subtrace.io.limits import check_coordinates, check_valences
 from subtrace.mesh.cage import load_cage
-from subtrace.nurbs.scene import has_faces, has_surfaces, load_nurbs, nurbs_pass
+from subtrace.nurbs.scene import (has_faces, has_surfaces, load_nurbs, nurbs_pass,
+                                  picture_hits, with_surfaces)
 from subtrace.patches.criterion import edge_sampling
 from subtrace.patches.table import build_patch_table, cage_face_shells
 from subtrace.runtime import threads as tasks
@@ -397,32 +398,35 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     pix_patch = np.empty(W * H, np.int64)
     covered = np.zeros(tasks.thread_count(), np.int64)
     miss = miss_values(scene.render.background)
+    patches = None
     if table is None:  # free-form surfaces only: the background, then the NURBS pass
         planes[:] = miss[:, None]
         rows = background_rows(scene.render.background, scene.render.background_bottom, H)
         for k in range(3):
             planes[C_R + k] = np.repeat(rows[:, k], W)
         built = np.zeros(0, np.int64)
+        pix_patch[:] = -1
+        t = np.full(W * H, np.inf)
     else:
         patches = patch_shading(table, [scene.objects[k] for k in owners])
         shade(frame, W, hits, iso.view(), patches, miss, planes, normals, pix_patch, covered)
-        paint(scene, cages, camera, keep, hits, normals, pix_patch, patches, planes, stats)
         if owners != list(range(len(owners))):  # objects without a cage: scene indices
             hit = planes[C_OBJECT] >= 0
             index = planes[C_OBJECT][hit].astype(np.int64)
             planes[C_OBJECT][hit] = np.array(owners, np.float32)[index]
-    stats.time_shade = time.perf_counter() - t0
+        t = hits.t.copy()
+    offset = 0
     if nurbs is not None:
-        # (shaded by its own pass: directional lights and the headlight, no shadows yet)
-        lights = np.array([[*l.direction, *(np.asarray(l.color) * l.intensity)]
-                           for l in scene.lights if l.position is None],
-                          dtype=np.float64).reshape(-1, 6)
-        headlight = np.array([scene.render.headlight_intensity if scene.render.headlight
-                              else 0.0])
-        nurbs_pass(nurbs, camera_frame(camera), W, H, tol_rad,
-                   None if table is None else hits.t, lights, headlight, planes, stats)
+        t_trace = stats.time_trace
+        t, patches, offset = _nurbs_hits(scene, nurbs, frame, W, H, tol_rad, table, t, normals,
+                                         pix_patch, patches, planes, stats)
+        t0 += stats.time_trace - t_trace  # (the NURBS pass counts as trace)
         if progress is not None and table is None:
             progress(stats.rays, stats.rays, "NURBS")
+    # the colour: shadows, ambient occlusion, lighting, anti-aliasing (picture.py)
+    paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, stats, nurbs,
+          offset)
+    stats.time_shade = time.perf_counter() - t0
     stats.pixels_covered = (int(covered.sum()) if nurbs is None
                             else int(np.count_nonzero(planes[C_OBJECT] >= 0)))
     stats.max_level = deepest_level(planes)
@@ -432,6 +436,25 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None) -> 
     used = "bvh" if stats.accel_fallback else accel
     refined = np.zeros(0, np.int32) if table is None else table.object_id[built]
     return RenderResult(channels, stats, camera, tol_rad, schemes, refined, used)
+
+
+def _nurbs_hits(scene, nurbs, frame, W, H, tol_rad, table, t, normals, pix_patch, patches,
+                planes, stats):
+    """The free-form surfaces' pass (``nurbs.scene.nurbs_pass``: every channel of the
+    pixels where they are nearer than ``t``), handed to the picture as hits of their own
+    rows of the patch shading (``nurbs.scene.picture_hits``): (t, patches, offset of the
+    surfaces' rows)."""
+    # (its own Lambert colour is replaced by the picture's lighting)
+    lights = np.array([[*l.direction, *(np.asarray(l.color) * l.intensity)]
+                       for l in scene.lights if l.position is None],
+                      dtype=np.float64).reshape(-1, 6)
+    headlight = np.array([scene.render.headlight_intensity if scene.render.headlight
+                          else 0.0])
+    nh = nurbs_pass(nurbs, frame, W, H, tol_rad, None if table is None else t, lights,
+                    headlight, planes, stats)
+    patches, offset = with_surfaces(nurbs, patches)
+    picture_hits(nurbs, nh, frame, W, offset, t, normals, pix_patch)
+    return t, patches, offset
 
 
 # the colour channels are linear Rec.709 / sRGB primaries with a D65 white point
