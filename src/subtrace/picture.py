@@ -4,7 +4,9 @@ over ``shade.py`` and ``trace/rays.py``; no kernels here).
 ``paint`` adds to the planes of ``shade.shade`` (which hold every channel but the colour):
 
 * shadow rays from every hit towards each light (``[render] shadows``, on by default), as
-  any-hit rays through the BVH of the shells (``trace/rays.py``);
+  any-hit rays through the BVH of the shells (``trace/rays.py``) and then, for those no
+  cage blocks, through the free-form surfaces' (``nurbs.scene.blocked``, with the ray's
+  cone: its pixel's footprint at the hit it leaves);
 * ambient occlusion (``[render] ao`` / ``--ao N``, off by default): N cosine-weighted
   any-hit rays from every hit (``shade.ambient_occlusion``) reaching ``config.AO_DISTANCE``
   of the diagonal of the scene's control points; the share that escapes scales the
@@ -22,6 +24,10 @@ over ``shade.py`` and ``trace/rays.py``; no kernels here).
   centre rays. Its colour and alpha are the box-filtered mean of its N rays. Where the
   centre ray missed but others hit, alpha is above 0 while the other channels say
   "no hit".
+
+The free-form (NURBS) surfaces' pixels take part in every step as the cages' do: they are
+hits of their own rows of the patch shading (``nurbs.scene.with_surfaces``), and the extra
+anti-aliasing rays trace them too (``nurbs.scene.shade_rays``).
 
 Every step writes disjoint pixels or rays in a fixed order, so the picture does not depend
 on the thread count.
