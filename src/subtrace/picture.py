@@ -247,7 +247,8 @@ def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights,
         for k in range(3):
             planes[C_R + k, miss] = back[:, k]
     if ground is not None:
-        ground_pixels(frame, width, pix_patch, ground[0], ground[1], trace_shadows, lights,
+        ground_pixels(frame, width, pix_patch, ground[0], ground[1],
+                      trace_shadows if len(lights) and r.shadows else None, lights,
                       float(headlight[0]), scene.ground.color, rows, planes, dirs)
 
 

@@ -550,7 +550,8 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
     opaque Lambertian ``color`` under ``lights`` with shadows and the ``headlight`` (its
     intensity), or (``color`` None) a shadow catcher: the background ``rows`` darkened by
     the fraction of the light (the headlight's included: it casts no shadow) the objects
-    hold back. The ground is part of the background: alpha and the other channels keep
+    hold back (``trace``: as for :func:`shadow_visibility`; None: no shadows). The ground
+    is part of the background: alpha and the other channels keep
     saying "no hit" (the EXR's coverage is the surface's). Returns the number of ground
     pixels. ``dirs``: as for :func:`shade` (then ``rows`` (n,3): each ray's background)."""
     miss = np.nonzero(pix_patch < 0)[0]
@@ -562,27 +563,73 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
     if not len(miss):
         return 0
     row = miss // width if dirs is None else miss
-    to_light, dist, factor = toward_lights(lights, points)
-    full = np.maximum(-down, 0.0) * headlight
-    lit = full.copy()
-    rgb = np.repeat(full[:, None], 3, axis=1)
-    for k in range(len(lights)):
-        c = np.maximum(to_light[k] @ up, 0.0) * factor[k]
-        facing = c > 0.0
-        blocked = np.zeros(len(miss), np.uint8)
-        blocked[facing] = trace(points[facing], to_light[k][facing], dist[k][facing])
-        full += c
-        lit += c * (1 - blocked)
-        rgb += (c * (1 - blocked))[:, None] * lights[k, 4:7]
-    if color is None:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            shadow = np.where(full > 0.0, 1.0 - lit / full, 0.0)
-        out = rows[row] * (1.0 - shadow)[:, None]
-    else:
-        out = rgb * np.asarray(color)
-    for k in range(3):
-        planes[C_R + k, miss] = out[:, k]
+    up = np.asarray(up, np.float64)
+    to_light = np.empty((len(lights), len(miss), 3))
+    dist = np.empty((len(lights), len(miss)))
+    c = np.empty((len(lights), len(miss)))
+    _ground_light(lights, points, up, to_light, dist, c)
+    blocked = np.zeros((len(lights), len(miss)), np.uint8)
+    for k in range(len(lights) if trace is not None else 0):
+        facing = c[k] > 0.0
+        if facing.any():
+            blocked[k, facing] = trace(points[facing], to_light[k][facing], dist[k][facing])
+    catcher = color is None
+    _ground_colour(down, float(headlight), c, blocked, lights,
+                   np.zeros(3) if catcher else np.asarray(color, np.float64), catcher,
+                   np.ascontiguousarray(rows, np.float64), row, miss, planes)
     return len(miss)
+
+
+@nb.njit(cache=True)
+def _ground_light(lights, points, up, to_light, dist, c):
+    """For each light (rows of :func:`light_array`) and ground point: the unit direction
+    towards it, the distance (inf: directional) and its irradiance on the ground, the cosine
+    with ``up`` times 1 / distance^2 for a point light (0 facing away): as
+    :func:`toward_lights`, per point."""
+    for k in range(len(lights)):
+        for i in range(len(points)):
+            if lights[k, 0] == DIRECTIONAL:
+                x, y, z = -lights[k, 1], -lights[k, 2], -lights[k, 3]
+                d, f = np.inf, 1.0
+            else:
+                x = lights[k, 1] - points[i, 0]
+                y = lights[k, 2] - points[i, 1]
+                z = lights[k, 3] - points[i, 2]
+                d2 = x * x + y * y + z * z
+                d = np.sqrt(d2)
+                x, y, z = x / d, y / d, z / d
+                f = 1.0 / d2 if d2 > 0.0 else 0.0
+            to_light[k, i, 0], to_light[k, i, 1], to_light[k, i, 2] = x, y, z
+            dist[k, i] = d
+            c[k, i] = max(x * up[0] + y * up[1] + z * up[2], 0.0) * f
+
+
+@nb.njit(cache=True)
+def _ground_colour(down, headlight, c, blocked, lights, color, catcher, rows, row, miss,
+                   planes):
+    """The ground's colour at pixels ``miss`` (see :func:`ground_pixels`): the headlight
+    (``-down`` its cosine) and each light's irradiance ``c`` where not ``blocked``; an
+    opaque ``color``, or (``catcher``) the background ``rows[row]`` darkened by the share
+    of the light held back."""
+    for i in range(len(miss)):
+        full = max(-down[i], 0.0) * headlight
+        lit = full
+        r = g = b = full
+        for k in range(len(lights)):
+            full += c[k, i]
+            if blocked[k, i] == 0:
+                lit += c[k, i]
+                r += c[k, i] * lights[k, 4]
+                g += c[k, i] * lights[k, 5]
+                b += c[k, i] * lights[k, 6]
+        if catcher:
+            keep = 1.0 - (1.0 - lit / full if full > 0.0 else 0.0)
+            r, g, b = rows[row[i], 0] * keep, rows[row[i], 1] * keep, rows[row[i], 2] * keep
+        else:
+            r, g, b = r * color[0], g * color[1], b * color[2]
+        planes[C_R, miss[i]] = r
+        planes[C_R + 1, miss[i]] = g
+        planes[C_R + 2, miss[i]] = b
 
 
 def edge_pixels(planes, width, height) -> np.ndarray:
