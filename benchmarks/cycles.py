@@ -433,8 +433,11 @@ def load_scene(path: Path) -> Scene:
     headlight = rnd.get("headlight_intensity", 1.0) if rnd.get("headlight", True) else 0.0
     lights = [{"direction": list(li["direction"]), "color": list(li.get("color", [1, 1, 1])),
                "intensity": float(li.get("intensity", 1.0))} for li in data.get("light", [])]
-    return Scene(path.stem, path, items, camera, list(rnd.get("background", [0, 0, 0])),
-                 float(headlight), lights, notes)
+    background = rnd.get("background", [0, 0, 0])
+    if background and isinstance(background[0], list):  # a gradient: Cycles gets its top
+        background = background[0]
+    return Scene(path.stem, path, items, camera, list(background), float(headlight), lights,
+                 notes)
 
 
 def cycles_job(scene: Scene, width: int, height: int, threads: int, exr: str) -> dict:
@@ -521,8 +524,8 @@ class Renderers:
             "--width", str(width), "--height", str(height), "--fov", repr(cam["fov"]),
             "--eye", *map(repr, cam["eye"]), "--target", *map(repr, cam["target"]),
             "--up", *map(repr, cam["up"]), "--quiet",
-            # like for like with Cycles' one sample and sun lights without shadows
-            "--samples", "1", "--no-shadows"]
+            # like for like with Cycles' one sample and sun lights without shadows or AO
+            "--samples", "1", "--no-shadows", "--ao", "0"]
         return cmd
 
     def run_subtrace(self, scene, width=None, height=None, exr=None) -> dict:

@@ -2,13 +2,15 @@
 
     python benchmarks/render.py [SCENE.toml ...] [--width 1280 --height 720] [--repeat 3]
                                 [--tolerance 1] [--samples N] [--no-shadows]
-    python benchmarks/render.py --picture-cost [SCENE.toml ...]
+    python benchmarks/render.py --picture-cost [SCENE.toml ...] [--ao 16]
 
 ``--samples`` / ``--no-shadows`` set anti-aliasing and shadows (default: the scene's, i.e.
 the renderer's defaults). ``--picture-cost`` instead renders each scene warm in one process
-with geometry only (``--samples 1 --no-shadows``), with shadows, with anti-aliasing, and
-with both, alternating the four in ``repeat`` rounds, and prints the median total times
-and their ratios to geometry only, with the shadow rays and anti-aliased pixels counted.
+with geometry only (``--samples 1 --no-shadows``), with shadows, with anti-aliasing, with
+both, and with both plus ambient occlusion (``--ao``, default 16 rays per hit), alternating
+the five in ``repeat`` rounds, and prints the median total times and their ratios to
+geometry only, with the shadow rays, anti-aliased pixels and AO rays counted, and the
+median of the renderer's own AO timer (``time_ao``).
 
 Default scenes: ``scenes/spot.toml`` and ``scenes/sword.toml``. Each scene runs in a fresh
 subprocess: one *cold* run (first render in the process: Numba's cache is loaded, or kernels
@@ -62,11 +64,12 @@ def worker(scene_path: str, width: int, height: int, tolerance: float, repeat: i
     return {"cold": runs[0], "warm": runs[1:], "peak_mb": peak}
 
 
-PICTURE_MODES = (("geometry", 1, False), ("shadows", 1, True), ("aa", None, False),
-                 ("both", None, True))  # (name, samples (None: the default), shadows)
+PICTURE_MODES = (("geometry", 1, False, 0), ("shadows", 1, True, 0), ("aa", None, False, 0),
+                 ("both", None, True, 0), ("ao", None, True, None))
+# (name, samples (None: the default), shadows, AO rays (None: --ao))
 
 
-def picture_worker(scene_path: str, width: int, height: int, repeat: int) -> dict:
+def picture_worker(scene_path: str, width: int, height: int, repeat: int, ao: int) -> dict:
     """Warm render times of the PICTURE_MODES, alternated over ``repeat`` rounds."""
     import_subtrace()
     import warnings
@@ -75,9 +78,10 @@ def picture_worker(scene_path: str, width: int, height: int, repeat: int) -> dic
     from subtrace.render import render_scene
 
     base = apply_overrides(load_scene(scene_path), width=width, height=height)
-    scenes = {name: apply_overrides(base, samples=n, shadows=sh) for name, n, sh in
-              PICTURE_MODES}
+    scenes = {name: apply_overrides(base, samples=n, shadows=sh, ao=ao if a is None else a)
+              for name, n, sh, a in PICTURE_MODES}
     times = {name: [] for name in scenes}
+    ao_times = []
     stats = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -88,30 +92,34 @@ def picture_worker(scene_path: str, width: int, height: int, repeat: int) -> dic
                 st = render_scene(scene).stats
                 times[name].append(st.time_total)
                 stats[name] = {"shadow_rays": st.shadow_rays, "aa_pixels": st.aa_pixels,
-                               "aa_rays": st.aa_rays, "samples": scene.render.samples}
-    return {"times": times, "stats": stats}
+                               "aa_rays": st.aa_rays, "samples": scene.render.samples,
+                               "ao_rays": st.ao_rays}
+                if name == "ao":
+                    ao_times.append(st.time_ao)
+    return {"times": times, "stats": stats, "time_ao": ao_times}
 
 
 def picture_cost(args) -> int:
     """The --picture-cost table (see the module doc)."""
     print(f"{args.width}x{args.height}, {args.repeat} alternated warm rounds (medians), "
           f"cpus {os.cpu_count()}")
-    cols = ("scene", "geometry s", "shadows", "aa", "both", "x shadows", "x aa", "x both",
-            "shadow rays", "aa px", "aa rays")
+    cols = ("scene", "geometry s", "shadows", "aa", "both", "+ao", "x shadows", "x aa",
+            "x both", "x +ao", "ao s", "shadow rays", "aa px", "aa rays", "ao rays")
     print(" ".join(f"{c:>11}" for c in cols))
     for scene in args.scenes:
         out = subprocess.run(
             [sys.executable, __file__, "--picture-worker", scene, str(args.width),
-             str(args.height), str(args.repeat)],
+             str(args.height), str(args.repeat), str(args.ao)],
             check=True, capture_output=True, text=True).stdout
         r = json.loads(out.strip().splitlines()[-1])
         med = {k: statistics.median(v) for k, v in r["times"].items()}
         st = r["stats"]["both"]
-        row = (Path(scene).stem, f"{med['geometry']:.3f}", f"{med['shadows']:.3f}",
-               f"{med['aa']:.3f}", f"{med['both']:.3f}",
-               f"{med['shadows'] / med['geometry']:.2f}", f"{med['aa'] / med['geometry']:.2f}",
-               f"{med['both'] / med['geometry']:.2f}", str(st["shadow_rays"]),
-               str(st["aa_pixels"]), str(st["aa_rays"]))
+        g = med["geometry"]
+        row = (Path(scene).stem, f"{g:.3f}", f"{med['shadows']:.3f}", f"{med['aa']:.3f}",
+               f"{med['both']:.3f}", f"{med['ao']:.3f}", f"{med['shadows'] / g:.2f}",
+               f"{med['aa'] / g:.2f}", f"{med['both'] / g:.2f}", f"{med['ao'] / g:.2f}",
+               f"{statistics.median(r['time_ao']):.3f}", str(st["shadow_rays"]),
+               str(st["aa_pixels"]), str(st["aa_rays"]), str(r["stats"]["ao"]["ao_rays"]))
         print(" ".join(f"{c:>11}" for c in row), flush=True)
     return 0
 
@@ -140,7 +148,9 @@ def main(argv=None) -> int:
     ap.add_argument("--picture-cost", action="store_true",
                     help="the cost of shadows and anti-aliasing (see the module doc)")
     ap.add_argument("--worker", nargs=7, help=argparse.SUPPRESS)
-    ap.add_argument("--picture-worker", nargs=4, help=argparse.SUPPRESS)
+    ap.add_argument("--ao", type=int, default=16,
+                    help="--picture-cost: AO rays per hit of its last mode (default 16)")
+    ap.add_argument("--picture-worker", nargs=5, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker:
         s, w, h, t, r, n, sh = args.worker
@@ -148,8 +158,8 @@ def main(argv=None) -> int:
                                 None if n == "-" else int(n), None if sh == "-" else sh == "1")))
         return 0
     if args.picture_worker:
-        s, w, h, r = args.picture_worker
-        print(json.dumps(picture_worker(s, int(w), int(h), int(r))))
+        s, w, h, r, ao = args.picture_worker
+        print(json.dumps(picture_worker(s, int(w), int(h), int(r), int(ao))))
         return 0
     if args.picture_cost:
         return picture_cost(args)

@@ -205,6 +205,26 @@ def test_only_shared_groups_are_compared():
     assert list(result.groups) == ["colour"] and result.verdict == PASS
 
 
+def test_position_is_an_optional_group():
+    """P.X, P.Y, P.Z compare as the position group when both images have them (relative to
+    the depth, as depth is), and an image without them still compares with one that has
+    them (the group is left out)."""
+    a, b = image(), image()
+    for k, c in enumerate(("P.X", "P.Y", "P.Z")):
+        a[c] = np.where(a["A"] > 0, np.float32(k + 1.0), np.float32(np.nan))
+        b[c] = a[c].copy()
+    b["P.X"] = b["P.X"] + np.float32(0.01)  # 0.01 / Z (2) = 5e-3: above the fail threshold
+    result = compare_images(a, b)
+    g = result.groups["position"]
+    assert g.verdict == FAIL and g.pixels == int((a["A"] > 0).sum())
+    assert g.metrics["max"] == pytest.approx(0.005, rel=1e-4)
+    assert "position_rel" in result.diff_channels()
+    plain = image()
+    for x, y in ((a, plain), (plain, a)):
+        r = compare_images(x, y)
+        assert "position" not in r.groups and r.verdict == PASS
+
+
 def test_unreadable_file(tmp_path):
     with pytest.raises(UnreadableImageError, match="missing.exr: no such file"):
         compare_images(tmp_path / "missing.exr", image())

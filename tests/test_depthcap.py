@@ -174,3 +174,24 @@ def test_memory_estimate_prices_isolated_loop_patches_per_level():
     none = [memory_estimate(table, np.full(3, d, np.int32), 100, np.zeros(3, bool))
             for d in (0, 42)]
     assert none[0] == none[1]
+
+
+def test_loop_patches_holding_the_eye_are_capped_with_one_warning(tmp_path):
+    """From inside an open Loop box, the eye sits on the shells of the patches beside the
+    nearest wall (no finite depth asks for their tolerance): they are held at
+    config.LOOP_MAX_INSIDE_DEPTH, reason "size", said once; every ray still hits, and the
+    patches whose shells the eye is outside are not held."""
+    from test_isolate_loop import _open_box
+
+    path = tmp_path / "open_box.obj"
+    _open_box(path)
+    scene = small_scene([path], (-0.75, 0.0, 0.45), (-1.0, 0.0, 0.45), fov=96.0, width=48,
+                        height=36, tolerance=4.0)
+    res, said = _render(scene)
+    assert len(said) == 1 and f"at {config.LOOP_MAX_INSIDE_DEPTH} where the eye" in said[0]
+    assert res.stats.depth_cap == config.LOOP_MAX_INSIDE_DEPTH
+    assert res.stats.depth_cap_reason == "size"
+    assert np.count_nonzero(res.channels["A"] == 0) == 0
+    level = res.channels["level"]
+    assert level.max() == config.LOOP_MAX_INSIDE_DEPTH  # the held patches, at the cap
+    assert level.min() < 8  # the far walls at their own (finite) depth

@@ -1,5 +1,6 @@
 """Determinism (design invariant 6, issue 8): the same scene renders bit-identically, every
-channel, with 1 and 2 threads and across runs (Catmull-Clark and Loop scenes)."""
+channel, with 1 and 2 threads and across runs (Catmull-Clark and Loop scenes, ambient
+occlusion, NURBS beside a Loop cage)."""
 
 from __future__ import annotations
 
@@ -33,7 +34,8 @@ def assert_identical(a, b):
         assert a[name].tobytes() == b[name].tobytes(), name
 
 
-@pytest.mark.parametrize("name", ["spot", "spot_loop", "creases", "torus_loop"])
+@pytest.mark.parametrize("name", ["spot", "spot_loop", "creases", "torus_loop", "spot_ao",
+                                  "nurbs_mixed"])
 def test_same_image_whatever_the_threads_and_the_run(name):
     scene = apply_overrides(load_scene(SCENES / f"{name}.toml"), width="96", height="64")
     one = channels(scene, 1)

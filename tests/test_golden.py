@@ -24,7 +24,7 @@ import pytest
 from naive import ray_triangles
 
 import subtrace
-from subtrace.compare import DEFAULT_THRESHOLDS, FAIL, GROUPS, compare_images
+from subtrace.compare import DEFAULT_THRESHOLDS, FAIL, GROUPS, OPTIONAL_GROUPS, compare_images
 from subtrace.io.exr import HALF_CHANNELS, read_exr, write_exr, write_png
 from subtrace.io.scene import apply_overrides, load_scene
 from subtrace.nurbs.scene import has_faces, has_surfaces
@@ -40,8 +40,10 @@ SCENES = sorted(p.stem for p in SCENES_DIR.glob("*.toml"))
 # once the kernels are compiled. The scenes' own tolerance (1 px) is kept, so the goldens
 # exercise the adaptive depth choice at this resolution.
 GOLDEN_WIDTH, GOLDEN_HEIGHT = 160, 120
-# Only the channels that `subtrace compare` judges are stored (u, v would double the size).
-GOLDEN_CHANNELS = tuple(c for names in GROUPS.values() for c in names)
+# Only the channels that `subtrace compare` judges are stored (u, v would double the size),
+# less the optional position group (P is eye + Z d: the camera and Z give it).
+GOLDEN_CHANNELS = tuple(c for g, names in GROUPS.items() if g not in OPTIONAL_GROUPS
+                        for c in names)
 # The comparison uses subtrace compare's defaults: the renderer is deterministic, so an
 # unchanged renderer gives 0 everywhere; the percents absorb silhouette, crease and patch
 # border pixels that harmless arithmetic changes flip, while a one-level refinement change

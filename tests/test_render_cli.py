@@ -267,3 +267,26 @@ def test_summary_total_includes_the_write(tmp_path, capsys):
     render, write, total = (float(x) for x in re.search(
         r"render ([\d.]+) s \(.*\) \+ write ([\d.]+) s = total ([\d.]+) s", line).groups())
     assert abs(render + write - total) <= 0.0015 and write > 0
+
+
+def test_render_cli_ao_option(tmp_path, capsys):
+    """--ao N renders ambient occlusion (the header's subtrace:ao and ao_rays, the summary's
+    secondary rays' deepest grid), and writes P.X, P.Y, P.Z; a bad count is one error line
+    naming the option, exit code 2, no output."""
+    from subtrace.cli import main
+    from subtrace.io.exr import read_exr
+
+    out = tmp_path / "ao.exr"
+    assert main(["render", str(_cube(tmp_path)), "--width", "40", "--height", "30", "--ao",
+                 "4", "-o", str(out)]) == 0
+    assert "secondary rays' deepest grid" in capsys.readouterr().out
+    ch, attrs = read_exr(out)
+    assert attrs["subtrace:ao"] == 4 and attrs["subtrace:ao_rays"] > 0
+    assert {"P.X", "P.Y", "P.Z"} <= set(ch)
+    bad = tmp_path / "bad.exr"
+    for value in ("-1", "x", "2000"):
+        rc = main(["render", str(_cube(tmp_path)), *CUBE_SCENE_ARGS, "--ao", value, "-o",
+                   str(bad)])
+        err = capsys.readouterr().err
+        assert rc == 2 and err.count("\n") == 1 and "--ao" in err and "Traceback" not in err
+        assert not bad.exists()

@@ -118,3 +118,34 @@ def test_shadows_do_not_depend_on_the_threads(cube, tmp_path):
     two = render_scene(scene, threads=2).channels
     for c in one:
         assert one[c].tobytes() == two[c].tobytes(), c
+
+
+def test_secondary_rays_refine_no_deeper_than_the_footprint(cube, tmp_path):
+    """Shadow rays reach the cube's underside (built for them alone) at the depth the
+    angular criterion asks from the eye, never deeper: their deepest grid is reported
+    (``secondary_max_depth``, header and summary), it is at most the deepest depth any
+    patch of the table asks for from the eye (patches.criterion.wanted_depths, computed
+    here apart from the render), and at most the primary rays' deepest grid (the underside
+    is farther from the eye than the top the pixels see). A shadow ray's cone (the pixel's
+    spread from the eye, width t times the tolerance at its hit) is wider at every point of
+    the ray than the eye's footprint there (triangle inequality), so the eye's depth is
+    never coarser than the cone needs; with AO rays (longer cones) it stays the same."""
+    from subtrace.io.scene import apply_overrides
+    from subtrace.patches.criterion import wanted_depths
+    from subtrace.patches.table import build_patch_table
+    from subtrace.render import result_attributes
+
+    scene = _scene(cube, tmp_path)
+    result = render_scene(scene)
+    st = result.stats
+    assert st.secondary_patches_refined > 0 and st.secondary_max_depth >= 0
+    table = build_patch_table([load_cage(str(cube))])
+    want = wanted_depths(table, np.asarray(result.camera.eye), result.tolerance_rad)
+    assert st.secondary_max_depth <= want[np.isfinite(want)].max()
+    assert st.secondary_max_depth <= st.max_depth
+    assert result_attributes(result, scene)["subtrace:secondary_max_depth"] == \
+        st.secondary_max_depth
+    with_ao = render_scene(apply_overrides(scene, ao=4)).stats
+    assert with_ao.secondary_max_depth <= want[np.isfinite(want)].max()
+    none = render_scene(_scene(cube, tmp_path, shadows=False, ground=False)).stats
+    assert none.secondary_max_depth == -1

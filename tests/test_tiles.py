@@ -65,6 +65,7 @@ def test_tiles_put_together_are_the_whole_render(tmp_path, whole):
     ["scenes/nurbs_mixed.toml"],  # the NURBS pass beside subdivision surfaces
     ["scenes/torus_loop.toml"],  # Loop triangles
     ["scenes/creases.toml", "--accel", "bvh"],  # rays walking the BVH
+    ["scenes/spot_ao.toml"],  # ambient occlusion: each pixel's pattern is its image pixel's
 ])
 def test_tiles_of_other_scenes(tmp_path, inputs):
     """Two tiles split at an odd column and row: the whole render's pixels, bit for bit."""

@@ -10,10 +10,14 @@ Groups, their channels and the per-pixel error each is judged by:
   normals   N.X,N.Y,N.Z               angle between the normals in degrees, where both have
                                       the surface
   ids       level,patch_id,object_id  1 where any id differs, where both have the surface
+  position  P.X,P.Y,P.Z               |Pa - Pb| / min(Za, Zb) (relative to the distance from
+                                      the eye, as depth; world units without Z), where both
+                                      have the surface
 Colour and coverage are judged over all pixels, the others over the pixels covered in both
 (by their centre rays: a finite depth where the images have one)
 (coverage differences are counted once, by coverage). A group is compared when both images
-have all of its channels; one image having a group that the other lacks is a mismatch.
+have all of its channels; one image having a group that the other lacks is a mismatch,
+except for the optional groups (OPTIONAL_GROUPS: position), which are then left out.
 
 Verdict of a group (idiff's rule, per group): n_fail pixels have error > fail, n_warn have
 error > warn; FAIL when n_fail > failpercent % of the group's pixels or the largest error
@@ -45,7 +49,11 @@ GROUPS = {
     "depth": ("Z",),
     "normals": ("N.X", "N.Y", "N.Z"),
     "ids": ("level", "patch_id", "object_id"),
+    "position": ("P.X", "P.Y", "P.Z"),
 }
+# groups compared only when both images have them (images written before subtrace wrote
+# P, or by other renderers, still compare)
+OPTIONAL_GROUPS = frozenset(("position",))
 
 
 class ImageMismatchError(SubtraceError):
@@ -79,12 +87,15 @@ class Thresholds:
 # normals: 2 degrees, 1 % may exceed (pixels beside creases and occlusion edges);
 # ids: any difference counts; 1 % may differ (patch borders that a tiny shift crosses). A
 #   change of refinement level changes `level` over whole patches and fails.
+# position: as depth (the hit point moves along the ray by the depth's change, and a
+#   sideways move of the same size is as large a change of the surface)
 DEFAULT_THRESHOLDS = {
     "colour": Thresholds(warn=0.005, fail=0.02, warnpercent=0.1, failpercent=1.0),
     "coverage": Thresholds(warn=0.5, fail=0.5, warnpercent=0.0, failpercent=0.5),
     "depth": Thresholds(warn=1e-4, fail=1e-3, warnpercent=0.1, failpercent=1.0),
     "normals": Thresholds(warn=0.5, fail=2.0, warnpercent=0.1, failpercent=1.0),
     "ids": Thresholds(warn=0.5, fail=0.5, warnpercent=0.0, failpercent=1.0),
+    "position": Thresholds(warn=1e-4, fail=1e-3, warnpercent=0.1, failpercent=1.0),
 }
 THRESHOLD_FIELDS = ("warn", "fail", "warnpercent", "failpercent", "hardfail")
 
@@ -153,11 +164,11 @@ class Comparison:
 
     def diff_channels(self) -> dict:
         """Difference image channels: |dR|,|dG|,|dB| as R,G,B, then each group's per-pixel
-        error (``coverage``, ``depth_rel``, ``normal_deg``, ``ids``) and ``heat``: the largest
-        error divided by its group's fail threshold (>= 1 fails)."""
+        error (``coverage``, ``depth_rel``, ``normal_deg``, ``ids``, ``position_rel``) and
+        ``heat``: the largest error divided by its group's fail threshold (>= 1 fails)."""
         out = {c: self.errors[c] for c in ("R", "G", "B") if c in self.errors}
         names = {"coverage": "coverage", "depth": "depth_rel", "normals": "normal_deg",
-                 "ids": "ids"}
+                 "ids": "ids", "position": "position_rel"}
         for group, name in names.items():
             if group in self.groups:
                 out[name] = self.errors[group]
@@ -223,12 +234,12 @@ def compare_images(a, b, thresholds: dict | None = None, flip: bool = True,
         if group not in wanted:
             continue
         has_a, has_b = _has_group(ca, names), _has_group(cb, names)
-        if has_a != has_b:
+        if has_a != has_b and group not in OPTIONAL_GROUPS:
             with_it, without = (name_a, name_b) if has_a else (name_b, name_a)
             raise ImageMismatchError(
                 f"{with_it} has the {group} channels {','.join(names)} but {without} has not"
             )
-        if has_a:
+        if has_a and has_b:
             present.append(group)
     if not present:
         raise ImageMismatchError(
@@ -283,6 +294,16 @@ def compare_images(a, b, thresholds: dict | None = None, flip: bool = True,
             err, mask = np.where(both, normal_angle_deg(na, nb), 0.0), both
             metrics["max_deg"] = float(err.max(initial=0.0))
             metrics["mean_deg"] = float(err[both].mean()) if both.any() else 0.0
+        elif group == "position":
+            pa = np.stack([f(ca, c) for c in GROUPS["position"]], axis=-1)
+            pb = np.stack([f(cb, c) for c in GROUPS["position"]], axis=-1)
+            dist = np.sqrt(np.square(pa - pb).sum(axis=-1))
+            if "depth" in present:
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    dist = dist / np.minimum(np.abs(f(ca, "Z")), np.abs(f(cb, "Z")))
+            err, mask = np.where(both, _finite_or_inf(dist), 0.0), both
+            metrics["max"] = float(err.max(initial=0.0))
+            metrics["mean"] = float(err[both].mean()) if both.any() else 0.0
         else:  # ids
             differ = np.zeros((height, width), dtype=bool)
             for c in GROUPS["ids"]:

@@ -176,6 +176,12 @@ AA_DEPTH_STEP = 0.05
 AA_NORMAL_DEG = 25.0
 AA_CONTRAST = 0.08
 
+# Ambient occlusion (shade.ambient_occlusion, [render] ao / --ao): its rays look this far,
+# as a fraction of the diagonal of the box of the scene's control points (a crevice or a
+# contact darkens; a wall across the room does not), and are traced this many at a time
+AO_DISTANCE = 0.2
+AO_CHUNK_RAYS = 1 << 20
+
 
 def default_max_memory() -> int:
     """The default memory budget of a render in bytes: ``MEMORY_DEFAULT_FRACTION`` of

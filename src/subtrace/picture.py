@@ -4,7 +4,13 @@ over ``shade.py`` and ``trace/rays.py``; no kernels here).
 ``paint`` adds to the planes of ``shade.shade`` (which hold every channel but the colour):
 
 * shadow rays from every hit towards each light (``[render] shadows``, on by default), as
-  any-hit rays through the BVH of the shells (``trace/rays.py``);
+  any-hit rays through the BVH of the shells (``trace/rays.py``) and then, for those no
+  cage blocks, through the free-form surfaces' (``nurbs.scene.blocked``, with the ray's
+  cone: its pixel's footprint at the hit it leaves);
+* ambient occlusion (``[render] ao`` / ``--ao N``, off by default): N cosine-weighted
+  any-hit rays from every hit (``shade.ambient_occlusion``) reaching ``config.AO_DISTANCE``
+  of the diagonal of the scene's control points; the share that escapes scales the
+  diffuse lighting;
 * the lighting (``shade.light``: Lambert plus the materials' Blinn-Phong lobe);
 * the background (a colour or a vertical gradient) and the ground (``[ground]``);
 * adaptive anti-aliasing (``[render] samples`` / ``--samples N``; the API's default is one
@@ -19,6 +25,10 @@ over ``shade.py`` and ``trace/rays.py``; no kernels here).
   centre ray missed but others hit, alpha is above 0 while the other channels say
   "no hit".
 
+The free-form (NURBS) surfaces' pixels take part in every step as the cages' do: they are
+hits of their own rows of the patch shading (``nurbs.scene.with_surfaces``), and the extra
+anti-aliasing rays trace them too (``nurbs.scene.shade_rays``).
+
 Every step writes disjoint pixels or rays in a fixed order, so the picture does not depend
 on the thread count.
 """
@@ -32,9 +42,13 @@ import numpy as np
 
 from subtrace.accel.bvh import build_bvh
 from subtrace.camera import whole_image, window_offset
+from subtrace.nurbs.scene import blocked as nurbs_blocked
+from subtrace.nurbs.scene import shade_rays
 from subtrace.runtime import threads as tasks
-from subtrace.shade import (C_A, C_R, CHANNELS, background_rows, edge_pixels, ground_pixels,
-                            light, light_array, miss_values, shade, shadow_visibility)
+from subtrace import config
+from subtrace.shade import (C_A, C_R, CHANNELS, ambient_occlusion, background_rows,
+                            edge_pixels, ground_pixels, light, light_array, miss_values, shade,
+                            shadow_visibility)
 from subtrace.trace.rays import Pools, trace_rays
 
 # the R2 sequence's steps (the plastic number's powers): well-spread points in a square
@@ -59,7 +73,8 @@ def _pools(keep, stats) -> Pools:
     if not len(keep["bvh"].node_first):
         keep["bvh"] = build_bvh(keep["shell_min"], keep["shell_max"])
     stats.time_preprocess += time.perf_counter() - t0
-    side = SimpleNamespace(pieces=0, micro_triangles=0, grid_points=0, patches_refined=0)
+    side = SimpleNamespace(pieces=0, micro_triangles=0, grid_points=0, patches_refined=0,
+                           max_depth=-1)
     return Pools(**dict(keep, stats=side))
 
 
@@ -68,82 +83,177 @@ def _count_secondary(pools, stats) -> None:
     if pools is not None:
         stats.secondary_patches_refined = pools.stats.patches_refined
         stats.secondary_micro_triangles = pools.stats.micro_triangles
+        stats.secondary_max_depth = pools.stats.max_depth
 
 
-def paint(scene, cages, camera, keep, hits, normals, pix_patch, patches, planes, stats):
+def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, stats,
+          nurbs=None, offset=0):
     """Fill the colour (R, G, B) and, with anti-aliasing, filter colour and alpha of
-    ``planes`` (len(CHANNELS), W*H) float32, whose other channels :func:`shade.shade` wrote
-    from ``hits``; ``normals``, ``pix_patch``: its eye-facing normals and patches;
-    ``patches``: the :class:`shade.PatchShading`; ``keep``: what ``render.trace_hits`` kept
-    for secondary rays. Counts and times go to ``stats``."""
+    ``planes`` (len(CHANNELS), W*H) float32, whose other channels :func:`shade.shade` (and
+    the NURBS pass) wrote; ``t`` (W*H,) float64 each pixel's hit distance (inf: none);
+    ``normals``, ``pix_patch``: its eye-facing normals and patches (the free-form surfaces'
+    rows of ``patches`` from ``offset``: ``nurbs.scene.with_surfaces``); ``patches``: the
+    :class:`shade.PatchShading`; ``keep``: what ``render.trace_hits`` kept for secondary
+    rays (empty: no cage); ``nurbs``: the free-form surfaces (None: none), which cast
+    shadows, occlude and take extra rays too. Counts and times go to ``stats``."""
     W, H = camera.width, camera.height
     frame = camera.frame()
     samples = scene.render.samples or 1
     lights = light_array(scene.lights)
     shadows = bool(len(lights)) and scene.render.shadows
-    pools = _pools(keep, stats) if shadows or samples > 1 else None
+    tol_rad = keep["tol_rad"] if keep else scene.render.tolerance_rad(whole_image(camera))
+    pools = (_pools(keep, stats) if keep and (shadows or samples > 1 or scene.render.ao > 0)
+             else None)
+    any_hit = _any_hit(pools, nurbs, frame[0], tol_rad)
 
     def trace_shadows(origins, dirs, tmax):
         """Any-hit shadow rays: blocked (n,) uint8 (none without shadows)."""
         if not shadows:
             return np.zeros(len(tmax), np.uint8)
         t0 = time.perf_counter()
-        blocked = trace_rays(pools, origins, dirs, tmax, any_hit=True)[0]
+        blocked = any_hit(origins, dirs, tmax)
         stats.time_shadows += time.perf_counter() - t0
         stats.shadow_rays += len(tmax)
         return blocked
 
-    ground = _ground(scene, cages, camera)
-    # (a window's rows of its image's gradient)
-    y0, image_h = getattr(camera, "y0", 0), whole_image(camera).height
+    def trace_ao(origins, dirs, tmax):
+        """Any-hit ambient occlusion rays: blocked (n,) uint8."""
+        t0 = time.perf_counter()
+        blocked = any_hit(origins, dirs, tmax)
+        stats.time_ao += time.perf_counter() - t0
+        stats.ao_rays += len(tmax)
+        return blocked
+
+    image = whole_image(camera)  # (a window's pixels are its image's: rows, AO patterns)
+    lo, hi = _bounds(cages, nurbs)
+    ao = ids = None
+    if scene.render.ao > 0:
+        ao = (trace_ao, scene.render.ao, config.AO_DISTANCE * float(np.linalg.norm(hi - lo)),
+              image.width)
+        col0, row0 = window_offset(frame)
+        row, col = np.divmod(np.arange(W * H, dtype=np.int64), W)
+        ids = (row + row0) * image.width + col + col0
+    ground = _ground(scene, cages, camera, nurbs)
+    y0 = getattr(camera, "y0", 0)
     rows = background_rows(scene.render.background, scene.render.background_bottom,
-                           image_h)[y0:y0 + H]
-    _colour(scene, frame, W, hits.t, normals, pix_patch, patches, planes, lights, rows,
-            ground, trace_shadows, keep["tol_rad"], None)
+                           image.height)[y0:y0 + H]
+    _colour(scene, frame, W, t, normals, pix_patch, patches, planes, lights, rows,
+            ground, trace_shadows, tol_rad, None, ao, ids)
     if samples > 1:
         t0 = time.perf_counter()
-        _antialias(scene, frame, W, image_h, pools, patches, planes, lights, ground, trace_shadows,
-                   samples, stats)
+        closest = _closest(pools, nurbs, frame, W, patches, scene, tol_rad, offset)
+        _antialias(scene, frame, W, image.height, closest, patches, planes, lights, ground,
+                   trace_shadows, samples, stats, tol_rad, ao)
         stats.time_aa += time.perf_counter() - t0
     _count_secondary(pools, stats)
 
 
-def _ground(scene, cages, camera):
+def _any_hit(pools, nurbs, eye, tol_rad):
+    """``blocked(origins, dirs, tmax)`` -> (n,) uint8: any-hit rays against the cages (the
+    pools' BVH of shells, ``trace.rays``) and then, for the rays no cage blocks, the
+    free-form surfaces, each ray with its cone (width ``|origin - eye| * tol_rad`` at its
+    origin: the footprint of the hit it leaves)."""
+
+    def blocked(origins, dirs, tmax):
+        out = np.zeros(len(tmax), np.uint8)
+        if pools is not None:
+            out = trace_rays(pools, origins, dirs, tmax, any_hit=True)[0]
+        if nurbs is not None:
+            rest = np.nonzero(out == 0)[0]
+            if len(rest):
+                o = np.asarray(origins)[rest]
+                cone = np.sqrt(((o - eye) ** 2).sum(axis=1)) * tol_rad
+                out[rest] = nurbs_blocked(nurbs, o, np.asarray(dirs)[rest],
+                                          np.asarray(tmax)[rest], cone, tol_rad)
+        return out
+
+    return blocked
+
+
+def _closest(pools, nurbs, frame, width, patches, scene, tol_rad, offset):
+    """``closest(dirs)`` -> (t (n,), normals (n,3), pix_patch (n,), planes): rays from the
+    eye along ``dirs`` (extra anti-aliasing rays) traced and shaded as centre rays are:
+    the cages' hits, then the free-form surfaces' where nearer."""
+
+    def closest(dirs):
+        n = len(dirs)
+        sub = np.empty((len(CHANNELS), n), np.float32)
+        normals = np.empty((n, 3))
+        pix_patch = np.full(n, -1, np.int64)
+        miss = miss_values(scene.render.background)
+        if pools is None:
+            sub[:] = miss[:, None]
+            t = np.full(n, np.inf)
+        else:
+            origins = np.repeat(frame[0][None], n, axis=0)
+            _, hits = trace_rays(pools, origins, dirs, np.full(n, np.inf), any_hit=False)
+            covered = np.zeros(tasks.thread_count(), np.int64)
+            shade(frame, width, hits, pools.iso.view(), patches, miss, sub, normals,
+                  pix_patch, covered, dirs)
+            t = hits.t.copy()
+        if nurbs is not None:
+            shade_rays(nurbs, frame, dirs, tol_rad, offset, t, normals, pix_patch, sub)
+        return t, normals, pix_patch, sub
+
+    return closest
+
+
+def _bounds(cages, nurbs):
+    """(lo, hi): the box of the cages' control points (which holds their limit surfaces)
+    and of the free-form surfaces' patches."""
+    boxes = [(c.points.min(axis=0), c.points.max(axis=0)) for c in cages]
+    if nurbs is not None:
+        boxes.append(nurbs.bounds())
+    return np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
+
+
+def _ground(scene, cages, camera, nurbs=None):
     """(unit up, height) of the scene's ground plane, or None."""
     if scene.ground is None:
         return None
     up = np.asarray(camera.up, np.float64) / np.linalg.norm(camera.up)
     height = scene.ground.height
     if height is None:  # the objects' lowest limit point along up
-        height = min(float((c.limit(1)[0] @ up).min()) for c in cages)
+        lows = [float((c.limit(1)[0] @ up).min()) for c in cages]
+        if nurbs is not None:  # (the lowest corner of the box of the surfaces' patches)
+            lo, hi = nurbs.bounds()
+            lows.append(float(np.minimum(lo * up, hi * up).sum()))
+        height = min(lows)
     return up, height
 
 
 def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights, rows,
-            ground, trace_shadows, tol_rad, dirs):
-    """The colour of rays from the eye (pixel centres, or ``dirs``): shadows, lighting, the
+            ground, trace_shadows, tol_rad, dirs, ao=None, ids=None):
+    """The colour of rays from the eye (pixel centres, or ``dirs``): shadows, ambient
+    occlusion (``ao``: None, or (trace, rays per hit, distance, the image's width); ``ids``:
+    each ray's key for its AO pattern, :func:`shade.ambient_occlusion`), lighting, the
     background (``rows``: per image row, or per ray with ``dirs``) and the ground."""
     n = len(pix_patch)
     visible = np.ones((len(lights), n), np.float32)
     if len(lights) and scene.render.shadows:
         visible = shadow_visibility(trace_shadows, frame, width, t, normals, pix_patch, lights,
                                     tol_rad, dirs)
+    occlusion = None
+    if ao is not None:
+        occlusion = ambient_occlusion(ao[0], frame, width, t, normals, pix_patch, ao[1], ao[2],
+                                      tol_rad, dirs, ids)
     r = scene.render
     headlight = np.array([r.headlight_intensity if r.headlight else 0.0])
     light(frame, width, t, normals, pix_patch, patches, lights, headlight, visible, planes,
-          dirs)
+          dirs, occlusion)
     if r.background_bottom is not None or dirs is not None:
         miss = np.nonzero(pix_patch < 0)[0]
         back = rows[miss // width] if dirs is None else rows[miss]
         for k in range(3):
             planes[C_R + k, miss] = back[:, k]
     if ground is not None:
-        ground_pixels(frame, width, pix_patch, ground[0], ground[1], trace_shadows, lights,
+        ground_pixels(frame, width, pix_patch, ground[0], ground[1],
+                      trace_shadows if len(lights) and r.shadows else None, lights,
                       float(headlight[0]), scene.ground.color, rows, planes, dirs)
 
 
-def _antialias(scene, frame, W, H, pools, patches, planes, lights, ground, trace_shadows,
-               samples, stats):
+def _antialias(scene, frame, W, H, closest, patches, planes, lights, ground, trace_shadows,
+               samples, stats, tol_rad, ao=None):
     """More rays for the pixels :func:`edge_pixels` marks (see the module comment); their
     colour and alpha become the mean of all their rays. ``W``: the width of ``planes``;
     ``H``: the height of the image (a window's rows are offset in it: ``frame``)."""
@@ -161,22 +271,18 @@ def _antialias(scene, frame, W, H, pools, patches, planes, lights, ground, trace
     d = frame[3] + cc[:, None] * frame[1] + rr[:, None] * frame[2]
     dirs = np.ascontiguousarray(d / np.sqrt((d * d).sum(axis=1))[:, None])
     n = len(dirs)
-    origins = np.repeat(frame[0][None], n, axis=0)
-    _, hits = trace_rays(pools, origins, dirs, np.full(n, np.inf), any_hit=False)
-    sub = np.empty((len(CHANNELS), n), np.float32)
-    normals = np.empty((n, 3))
-    pix_patch = np.empty(n, np.int64)
-    covered = np.zeros(tasks.thread_count(), np.int64)
-    shade(frame, W, hits, pools.iso.view(), patches,
-          miss_values(scene.render.background), sub, normals, pix_patch, covered, dirs)
+    t, normals, pix_patch, sub = closest(dirs)
     # the background at each ray's own height (a gradient's blend at row rr)
     top = np.asarray(scene.render.background, np.float64)
     bottom = scene.render.background_bottom
     w = np.clip((rr + 0.5) / H, 0.0, 1.0)[:, None]
     back = np.repeat(top[None], n, axis=0) if bottom is None else (
         (1.0 - w) * top + w * np.asarray(bottom, np.float64))
-    _colour(scene, frame, W, hits.t, normals, pix_patch, patches, sub, lights, back, ground,
-            trace_shadows, pools.tol_rad, dirs)
+    ids = None
+    if ao is not None:  # each extra ray's AO pattern: its image pixel and sample, apart
+        ids = ((row * ao[3] + col)[:, None] * m + np.arange(m)).ravel() + (np.int64(1) << 40)
+    _colour(scene, frame, W, t, normals, pix_patch, patches, sub, lights, back, ground,
+            trace_shadows, tol_rad, dirs, ao, ids)
     # box filter: the centre ray and the extra ones, equally weighted
     for k in (C_R, C_R + 1, C_R + 2, C_A):
         extra = sub[k].astype(np.float64).reshape(len(pix), m).sum(axis=1)

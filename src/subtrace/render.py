@@ -33,7 +33,8 @@ from subtrace.camera import CameraWindow, camera_frame, whole_image
 from subtrace.errors import SceneError
 from subtrace.io.limits import check_coordinates, check_valences
 from subtrace.mesh.cage import load_cage
-from subtrace.nurbs.scene import has_faces, has_surfaces, load_nurbs, nurbs_pass
+from subtrace.nurbs.scene import (has_faces, has_surfaces, load_nurbs, nurbs_pass,
+                                  picture_hits, with_surfaces)
 from subtrace.patches.criterion import edge_sampling
 from subtrace.patches.table import build_patch_table, cage_face_shells
 from subtrace.runtime import threads as tasks
@@ -88,10 +89,15 @@ class RenderStats:
     aa_pixels: int = 0  # pixels that got more than their centre ray (--samples)
     aa_rays: int = 0  # the extra rays they got
     time_aa: float = 0.0  # of time_shade: tracing and shading the extra rays
+    ao_rays: int = 0  # ambient occlusion rays traced ([render] ao per hit, extra rays too)
+    time_ao: float = 0.0  # of time_shade: tracing them (building included)
     # built for secondary rays (shadow and anti-aliasing rays: patches no primary ray had
     # reached, micro-triangles they evaluated), not counted in the primary counts above
     secondary_patches_refined: int = 0
     secondary_micro_triangles: int = 0
+    # the deepest grid (in its patch's units, as max_depth) secondary rays reached: where
+    # they found their hits or occluders, and what they built (-1: no secondary ray hit)
+    secondary_max_depth: int = -1
 
     def as_attributes(self) -> dict:
         return {f"subtrace:{k}": v for k, v in self.__dict__.items()}
@@ -431,6 +437,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
     pix_patch = np.empty(W * H, np.int64)
     covered = np.zeros(tasks.thread_count(), np.int64)
     miss = miss_values(scene.render.background)
+    patches = None
     if table is None:  # free-form surfaces only: the background, then the NURBS pass
         planes[:] = miss[:, None]
         y0 = getattr(view, "y0", 0)  # (a window's rows of the image's gradient)
@@ -439,26 +446,28 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
         for k in range(3):
             planes[C_R + k] = np.repeat(rows[:, k], W)
         built = np.zeros(0, np.int64)
+        pix_patch[:] = -1
+        t = np.full(W * H, np.inf)
     else:
         patches = patch_shading(table, [scene.objects[k] for k in owners])
         shade(frame, W, hits, iso.view(), patches, miss, planes, normals, pix_patch, covered)
-        paint(scene, cages, view, keep, hits, normals, pix_patch, patches, planes, stats)
         if owners != list(range(len(owners))):  # objects without a cage: scene indices
             hit = planes[C_OBJECT] >= 0
             index = planes[C_OBJECT][hit].astype(np.int64)
             planes[C_OBJECT][hit] = np.array(owners, np.float32)[index]
-    stats.time_shade = time.perf_counter() - t0
+        t = hits.t.copy()
+    offset = 0
     if nurbs is not None:
-        # (shaded by its own pass: directional lights and the headlight, no shadows yet)
-        lights = np.array([[*l.direction, *(np.asarray(l.color) * l.intensity)]
-                           for l in scene.lights if l.position is None],
-                          dtype=np.float64).reshape(-1, 6)
-        headlight = np.array([scene.render.headlight_intensity if scene.render.headlight
-                              else 0.0])
-        nurbs_pass(nurbs, frame, W, H, tol_rad,
-                   None if table is None else hits.t, lights, headlight, planes, stats)
+        t_trace = stats.time_trace
+        t, patches, offset = _nurbs_hits(scene, nurbs, frame, W, H, tol_rad, table, t, normals,
+                                         pix_patch, patches, planes, stats)
+        t0 += stats.time_trace - t_trace  # (the NURBS pass counts as trace)
         if progress is not None and table is None:
             progress(stats.rays, stats.rays, "NURBS")
+    # the colour: shadows, ambient occlusion, lighting, anti-aliasing (picture.py)
+    paint(scene, cages, view, keep, t, normals, pix_patch, patches, planes, stats, nurbs,
+          offset)
+    stats.time_shade = time.perf_counter() - t0
     if crop is not None:  # the tile's pixels of the window
         x0, y0, x1, y1 = crop
         cx, cy = x0 - view.x0, y0 - view.y0
@@ -474,6 +483,25 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
     used = "bvh" if stats.accel_fallback else accel
     refined = np.zeros(0, np.int32) if table is None else table.object_id[built]
     return RenderResult(channels, stats, camera, tol_rad, schemes, refined, used, crop)
+
+
+def _nurbs_hits(scene, nurbs, frame, W, H, tol_rad, table, t, normals, pix_patch, patches,
+                planes, stats):
+    """The free-form surfaces' pass (``nurbs.scene.nurbs_pass``: every channel of the
+    pixels where they are nearer than ``t``), handed to the picture as hits of their own
+    rows of the patch shading (``nurbs.scene.picture_hits``): (t, patches, offset of the
+    surfaces' rows)."""
+    # (its own Lambert colour is replaced by the picture's lighting)
+    lights = np.array([[*l.direction, *(np.asarray(l.color) * l.intensity)]
+                       for l in scene.lights if l.position is None],
+                      dtype=np.float64).reshape(-1, 6)
+    headlight = np.array([scene.render.headlight_intensity if scene.render.headlight
+                          else 0.0])
+    nh = nurbs_pass(nurbs, frame, W, H, tol_rad, None if table is None else t, lights,
+                    headlight, planes, stats)
+    patches, offset = with_surfaces(nurbs, patches)
+    picture_hits(nurbs, nh, frame, W, offset, t, normals, pix_patch)
+    return t, patches, offset
 
 
 # the colour channels are linear Rec.709 / sRGB primaries with a D65 white point
@@ -492,9 +520,12 @@ def result_attributes(result: RenderResult, scene) -> dict:
     attrs["subtrace:meshes"] = ";".join(Path(o.mesh).name for o in scene.objects)
     attrs["chromaticities"] = REC709_CHROMATICITIES
     attrs["subtrace:Z"] = "distance from the eye along the pixel's ray (not camera-space z)"
+    attrs["subtrace:P"] = ("world-space hit point of the pixel's centre ray, eye + Z * its "
+                           "unit direction; NaN where it missed (Z = +inf)")
     attrs["subtrace:accel"] = result.accel
     attrs["subtrace:samples"] = int(scene.render.samples or 1)  # rays per edge pixel at most
     attrs["subtrace:shadows"] = int(bool(scene.render.shadows and scene.lights))
+    attrs["subtrace:ao"] = int(scene.render.ao)  # ambient occlusion rays per hit (0: none)
     if result.crop is not None:  # (the file's data window, in its display window)
         attrs["subtrace:crop"] = " ".join(map(str, result.crop))
     for k, v in result.stats.__dict__.items():

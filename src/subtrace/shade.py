@@ -31,11 +31,14 @@ from subtrace.trace.tris import LOOP_CELL, TRI, tri_normal
 
 
 # the planes the shading fills, in this order, and what a pixel whose ray missed holds
-# (R, G, B: the background colour)
+# (R, G, B: the background colour). P.X, P.Y, P.Z: the world-space hit point of the
+# centre ray, eye + Z d (OpenEXR's / Cycles' names), NaN where it missed (Z = +inf: no
+# point)
 CHANNELS = ("R", "G", "B", "A", "Z", "N.X", "N.Y", "N.Z", "level", "patch_id", "object_id",
-            "u", "v")
-C_R, C_A, C_Z, C_N, C_LEVEL, C_PATCH, C_OBJECT, C_U = 0, 3, 4, 5, 8, 9, 10, 11
-MISS = (0.0, 0.0, 0.0, 0.0, np.inf, 0.0, 0.0, 0.0, -1.0, -1.0, -1.0, 0.0, 0.0)
+            "u", "v", "P.X", "P.Y", "P.Z")
+C_R, C_A, C_Z, C_N, C_LEVEL, C_PATCH, C_OBJECT, C_U, C_P = 0, 3, 4, 5, 8, 9, 10, 11, 13
+MISS = (0.0, 0.0, 0.0, 0.0, np.inf, 0.0, 0.0, 0.0, -1.0, -1.0, -1.0, 0.0, 0.0, np.nan,
+        np.nan, np.nan)
 
 
 def shade(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, covered,
@@ -61,16 +64,19 @@ def _no_dirs():
 
 
 def light(frame, width, t, normals, pix_patch, patches, lights, headlight, visible, planes,
-          dirs=None):
+          dirs=None, occlusion=None):
     """The colour (R, G, B of ``planes``) of every hit pixel: two-sided Lambert plus the
     material's Blinn-Phong lobe (``Ks (N.H)^Ns``, MTL's) under a headlight at the eye
     (``headlight`` (1,): its intensity) and ``lights`` (L,7) (:func:`light_array`), each
     scaled by ``visible`` (L, n_pixels) float32 (1 lit, 0 in shadow). ``t`` (n_pixels,)
     float64: the hits' distances; ``normals``, ``pix_patch``, ``dirs``: as for
-    :func:`shade`."""
+    :func:`shade`. ``occlusion``: None, or (n_pixels,) float32 ambient occlusion
+    (:func:`ambient_occlusion`: the share of the hemisphere open) scaling the diffuse
+    (Lambert) part of every light; the specular lobe keeps its own visibility."""
     dirs = _no_dirs() if dirs is None else dirs
+    occlusion = np.zeros(0, np.float32) if occlusion is None else occlusion
     run_tasks(_light_task, frame, width, t, normals, pix_patch, patches, lights, headlight,
-              visible, planes, dirs)
+              visible, planes, dirs, occlusion)
 
 
 DIRECTIONAL, POINT = 0, 1  # light kinds (column 0 of light_array)
@@ -137,6 +143,9 @@ def _shade_task(task, n_tasks, frame, width, hits, iso, patches, miss, planes, n
             n_hit += 1
             planes[C_Z, r] = t
             dx, dy, dz = _direction(frame, width, dirs, r)
+            planes[C_P, r] = frame[0, 0] + t * dx
+            planes[C_P + 1, r] = frame[0, 1] + t * dy
+            planes[C_P + 2, r] = frame[0, 2] + t * dz
             # the patch and item hit, (a, b) the patch parameter
             p = -hits.prim[r] - 2
             u = hits.a[r]
@@ -185,7 +194,7 @@ def _shade_task(task, n_tasks, frame, width, hits, iso, patches, miss, planes, n
 
 @nb.njit(cache=True, nogil=True)
 def _light_task(task, n_tasks, frame, width, t, normals, pix_patch, patches, lights, headlight,
-                visible, planes, dirs):
+                visible, planes, dirs, occlusion):
     """The colour of the hit pixels of blocks ``task, task + n_tasks, ...`` (see
     :func:`light`)."""
     n_pix = len(pix_patch)
@@ -226,6 +235,10 @@ def _light_task(task, n_tasks, frame, width, t, normals, pix_patch, patches, lig
                         sr += h * lights[k, 4]
                         sg += h * lights[k, 5]
                         sb += h * lights[k, 6]
+            if len(occlusion):  # ambient occlusion darkens the diffuse light
+                lr *= occlusion[r]
+                lg *= occlusion[r]
+                lb *= occlusion[r]
             planes[C_R, r] = patches.color[p, 0] * lr
             planes[C_R + 1, r] = patches.color[p, 1] * lg
             planes[C_R + 2, r] = patches.color[p, 2] * lb
@@ -408,6 +421,95 @@ def shadow_visibility(trace, frame, width, t, normals, pix_patch, lights, tol_ra
     return visible
 
 
+def ambient_occlusion(trace, frame, width, t, normals, pix_patch, samples, distance, tol_rad,
+                      dirs=None, ids=None):
+    """(n_pixels,) float32: the share of ``samples`` ambient occlusion rays per hit pixel
+    that meet no surface within ``distance`` (1 where nothing was hit). ``trace(origins,
+    dirs, tmax)``: an any-hit trace returning blocked, as for :func:`shadow_visibility`;
+    ``dirs``: as for :func:`shade`.
+
+    The rays are cosine-weighted over the hemisphere of the hit's eye-facing normal: points
+    0..samples-1 of the R2 sequence (:func:`ao_directions`), the whole set turned by a hash
+    of each ray's key (``ids`` (n,) int64: by default its index; a window passes its
+    image's pixel indices and the extra anti-aliasing rays keys of their own), so
+    neighbours see different patterns (noise, not bands) and the result depends on the
+    pixel alone, never on the threads or the window. They leave the hit displaced along its normal by
+    the hit's error bound, as shadow rays do (:func:`shadow_visibility`). Traced in chunks
+    of config.AO_CHUNK_RAYS rays."""
+    open_ = np.ones(len(pix_patch), np.float32)
+    pix = np.nonzero(pix_patch >= 0)[0]
+    if samples <= 0 or not len(pix):
+        return open_
+    per = max(1, config.AO_CHUNK_RAYS // samples)
+    for a in range(0, len(pix), per):
+        px = pix[a:a + per]
+        th = t[px]
+        d = pixel_rays(frame, width, px) if dirs is None else dirs[px]
+        points = frame[0] + th[:, None] * d
+        f = np.ascontiguousarray(normals[px])
+        err = th * tol_rad + POINT_ROUNDING * np.abs(points).max(axis=1)
+        origins = np.repeat(points + err[:, None] * f, samples, axis=0)
+        rays = ao_directions(f, px if ids is None else ids[px], samples)
+        blocked = trace(origins, rays, np.full(len(rays), float(distance)))
+        hidden = blocked.reshape(len(px), samples).sum(axis=1, dtype=np.int64)
+        open_[px] = (samples - hidden).astype(np.float32) / np.float32(samples)
+    return open_
+
+
+def ao_directions(normals, ids, samples) -> np.ndarray:
+    """(n * samples, 3) float64 unit directions, ``samples`` per row of ``normals`` (n,3)
+    (unit), cosine-weighted over its hemisphere (see :func:`ambient_occlusion`); ``ids``
+    (n,) int64: what turns each row's set (a pixel or ray index)."""
+    out = np.empty((len(normals) * samples, 3))
+    _ao_directions(np.ascontiguousarray(normals, np.float64),
+                   np.ascontiguousarray(ids, np.int64), samples, out)
+    return out
+
+
+# the R2 sequence's steps (the plastic number's powers), as picture.sample_offsets
+_R2_A1 = 1.0 / 1.32471795724474602596
+_R2_A2 = 1.0 / (1.32471795724474602596 * 1.32471795724474602596)
+
+
+@nb.njit(cache=True)
+def _hash01(x, k):
+    """A float in [0, 1) from the integer ``x`` and stream ``k`` (splitmix64's finaliser)."""
+    z = np.uint64(x) * np.uint64(0x9E3779B97F4A7C15) + np.uint64(k) * np.uint64(
+        0xD1B54A32D192ED03)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    z = z ^ (z >> np.uint64(31))
+    return np.float64(z >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@nb.njit(cache=True)
+def _ao_directions(normals, ids, samples, out):
+    """Fill ``out`` (see :func:`ao_directions`)."""
+    for i in range(len(normals)):
+        nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
+        # an orthonormal basis (b1, b2, n) (Duff et al. 2017: continuous, no division by 0)
+        sign = 1.0 if nz >= 0.0 else -1.0
+        a = -1.0 / (sign + nz)
+        b = nx * ny * a
+        b1x, b1y, b1z = 1.0 + sign * nx * nx * a, sign * b, -sign * nx
+        b2x, b2y, b2z = b, sign + ny * ny * a, -ny
+        # the R2 points turned by this row's hash (Cranley-Patterson rotation)
+        r1 = _hash01(ids[i], 1)
+        r2 = _hash01(ids[i], 2)
+        for k in range(samples):
+            u1 = (0.5 + k * _R2_A1 + r1) % 1.0
+            u2 = (0.5 + k * _R2_A2 + r2) % 1.0
+            # cosine-weighted: uniform on the unit disc, lifted to the hemisphere
+            rad = math.sqrt(u1)
+            phi = 2.0 * math.pi * u2
+            x, y = rad * math.cos(phi), rad * math.sin(phi)
+            z = math.sqrt(max(0.0, 1.0 - u1))
+            j = i * samples + k
+            out[j, 0] = x * b1x + y * b2x + z * nx
+            out[j, 1] = x * b1y + y * b2y + z * ny
+            out[j, 2] = x * b1z + y * b2z + z * nz
+
+
 def background_rows(top, bottom, height) -> np.ndarray:
     """(height, 3) float64: the background colour of each image row: ``top`` everywhere,
     or a linear blend from ``top`` (row 0) to ``bottom`` (the last row) at row centres."""
@@ -448,7 +550,8 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
     opaque Lambertian ``color`` under ``lights`` with shadows and the ``headlight`` (its
     intensity), or (``color`` None) a shadow catcher: the background ``rows`` darkened by
     the fraction of the light (the headlight's included: it casts no shadow) the objects
-    hold back. The ground is part of the background: alpha and the other channels keep
+    hold back (``trace``: as for :func:`shadow_visibility`; None: no shadows). The ground
+    is part of the background: alpha and the other channels keep
     saying "no hit" (the EXR's coverage is the surface's). Returns the number of ground
     pixels. ``dirs``: as for :func:`shade` (then ``rows`` (n,3): each ray's background)."""
     miss = np.nonzero(pix_patch < 0)[0]
@@ -460,27 +563,73 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
     if not len(miss):
         return 0
     row = miss // width if dirs is None else miss
-    to_light, dist, factor = toward_lights(lights, points)
-    full = np.maximum(-down, 0.0) * headlight
-    lit = full.copy()
-    rgb = np.repeat(full[:, None], 3, axis=1)
-    for k in range(len(lights)):
-        c = np.maximum(to_light[k] @ up, 0.0) * factor[k]
-        facing = c > 0.0
-        blocked = np.zeros(len(miss), np.uint8)
-        blocked[facing] = trace(points[facing], to_light[k][facing], dist[k][facing])
-        full += c
-        lit += c * (1 - blocked)
-        rgb += (c * (1 - blocked))[:, None] * lights[k, 4:7]
-    if color is None:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            shadow = np.where(full > 0.0, 1.0 - lit / full, 0.0)
-        out = rows[row] * (1.0 - shadow)[:, None]
-    else:
-        out = rgb * np.asarray(color)
-    for k in range(3):
-        planes[C_R + k, miss] = out[:, k]
+    up = np.asarray(up, np.float64)
+    to_light = np.empty((len(lights), len(miss), 3))
+    dist = np.empty((len(lights), len(miss)))
+    c = np.empty((len(lights), len(miss)))
+    _ground_light(lights, points, up, to_light, dist, c)
+    blocked = np.zeros((len(lights), len(miss)), np.uint8)
+    for k in range(len(lights) if trace is not None else 0):
+        facing = c[k] > 0.0
+        if facing.any():
+            blocked[k, facing] = trace(points[facing], to_light[k][facing], dist[k][facing])
+    catcher = color is None
+    _ground_colour(down, float(headlight), c, blocked, lights,
+                   np.zeros(3) if catcher else np.asarray(color, np.float64), catcher,
+                   np.ascontiguousarray(rows, np.float64), row, miss, planes)
     return len(miss)
+
+
+@nb.njit(cache=True)
+def _ground_light(lights, points, up, to_light, dist, c):
+    """For each light (rows of :func:`light_array`) and ground point: the unit direction
+    towards it, the distance (inf: directional) and its irradiance on the ground, the cosine
+    with ``up`` times 1 / distance^2 for a point light (0 facing away): as
+    :func:`toward_lights`, per point."""
+    for k in range(len(lights)):
+        for i in range(len(points)):
+            if lights[k, 0] == DIRECTIONAL:
+                x, y, z = -lights[k, 1], -lights[k, 2], -lights[k, 3]
+                d, f = np.inf, 1.0
+            else:
+                x = lights[k, 1] - points[i, 0]
+                y = lights[k, 2] - points[i, 1]
+                z = lights[k, 3] - points[i, 2]
+                d2 = x * x + y * y + z * z
+                d = np.sqrt(d2)
+                x, y, z = x / d, y / d, z / d
+                f = 1.0 / d2 if d2 > 0.0 else 0.0
+            to_light[k, i, 0], to_light[k, i, 1], to_light[k, i, 2] = x, y, z
+            dist[k, i] = d
+            c[k, i] = max(x * up[0] + y * up[1] + z * up[2], 0.0) * f
+
+
+@nb.njit(cache=True)
+def _ground_colour(down, headlight, c, blocked, lights, color, catcher, rows, row, miss,
+                   planes):
+    """The ground's colour at pixels ``miss`` (see :func:`ground_pixels`): the headlight
+    (``-down`` its cosine) and each light's irradiance ``c`` where not ``blocked``; an
+    opaque ``color``, or (``catcher``) the background ``rows[row]`` darkened by the share
+    of the light held back."""
+    for i in range(len(miss)):
+        full = max(-down[i], 0.0) * headlight
+        lit = full
+        r = g = b = full
+        for k in range(len(lights)):
+            full += c[k, i]
+            if blocked[k, i] == 0:
+                lit += c[k, i]
+                r += c[k, i] * lights[k, 4]
+                g += c[k, i] * lights[k, 5]
+                b += c[k, i] * lights[k, 6]
+        if catcher:
+            keep = 1.0 - (1.0 - lit / full if full > 0.0 else 0.0)
+            r, g, b = rows[row[i], 0] * keep, rows[row[i], 1] * keep, rows[row[i], 2] * keep
+        else:
+            r, g, b = r * color[0], g * color[1], b * color[2]
+        planes[C_R, miss[i]] = r
+        planes[C_R + 1, miss[i]] = g
+        planes[C_R + 2, miss[i]] = b
 
 
 def edge_pixels(planes, width, height) -> np.ndarray:

@@ -128,6 +128,9 @@ def _add_render(sub) -> argparse.ArgumentParser:
                         help="rays per pixel at most: edge pixels (silhouettes, folds, shadow "
                              "edges) get up to N stratified rays, the others keep one "
                              "(default: the scene's, else 4)")
+    render.add_argument("--ao", metavar="SAMPLES",
+                        help="ambient occlusion: SAMPLES cosine-weighted rays from every hit "
+                             "(0: none; default: the scene's, else 0)")
     render.add_argument("--no-shadows", dest="shadows", action="store_false", default=None,
                         help="no shadow rays (on by default where the scene has lights)")
     render.add_argument("--transparent", action="store_true", default=None,

@@ -52,7 +52,7 @@ def execute(args) -> int:
                               tolerance_deg=args.tolerance_deg, output=args.output,
                               color=args.color, background=args.background,
                               shadows=args.shadows, transparent=args.transparent,
-                              samples=args.samples)
+                              samples=args.samples, ao=getattr(args, "ao", None))
     if scene.render.samples is None:  # neither the scene nor --samples: the default
         scene = replace(scene, render=replace(scene.render, samples=DEFAULT_SAMPLES))
     out = scene.output or "render.exr"
@@ -151,7 +151,9 @@ def _summary(out, png, result, time_write: float) -> str:
         f"{out}: {size}, tolerance "
         f"{result.tolerance_rad / cam.pixel_angle():.3g} px, {st.pixels_covered} pixels "
         f"covered; {st.patches_refined} of {st.patches} patches refined, "
-        f"{st.micro_triangles} micro-triangles, deepest level {st.max_level}; "
+        f"{st.micro_triangles} micro-triangles, deepest level {st.max_level}"
+        + (f" (secondary rays' deepest grid {st.secondary_max_depth})"
+           if st.secondary_max_depth >= 0 else "") + "; "
         f"render {st.time_total:.3f} s (load {st.time_load:.3f}, preprocess "
         f"{st.time_preprocess:.3f}, refine {st.time_refine:.3f}, trace {st.time_trace:.3f}, "
         f"shade {st.time_shade:.3f}) + write {time_write:.3f} s = total "

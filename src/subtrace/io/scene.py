@@ -43,6 +43,9 @@ Schema (every table and key optional unless marked *required*)::
     samples = 4                     # rays per pixel at most (adaptive anti-aliasing: edge
                                     #   pixels only), 1..64; default: one ray per pixel in
                                     #   the API, DEFAULT_SAMPLES on the command line
+    ao = 16                         # ambient occlusion rays per hit pixel, 0..1024 (0:
+                                    #   none, the default): the diffuse lighting scaled by
+                                    #   the share of cosine-weighted rays that escape
     transparent = false             # .png / .tif pictures: alpha where nothing was hit
                                     #   (default false: opaque over the background)
     headlight = true                # a directional light from the eye; default true
@@ -102,6 +105,7 @@ DEFAULT_TOLERANCE_PX = 1.0
 # pixel unless asked
 DEFAULT_SAMPLES = 4
 MAX_SAMPLES = 64
+MAX_AO_SAMPLES = 1024
 DEFAULT_BACKGROUND = (0.0, 0.0, 0.0)
 # what OBJ cages rendered without a scene get: a soft vertical gradient, a key and a fill
 # light (directions they travel, for +Y up and the automatic camera's view) and a ground
@@ -124,7 +128,7 @@ _TOP_KEYS = ("object", "camera", "render", "light", "ground", "output", "preview
 _OBJECT_KEYS = ("mesh", "prim", "scheme", "boundary", "color", "specular", "shininess")
 _CAMERA_KEYS = ("eye", "target", "up", "fov", "width", "height")
 _RENDER_KEYS = ("tolerance", "tolerance_deg", "background", "headlight", "headlight_intensity",
-                "max_memory", "shadows", "transparent", "samples")
+                "max_memory", "shadows", "transparent", "samples", "ao")
 _LIGHT_KEYS = ("direction", "position", "color", "intensity")
 _GROUND_KEYS = ("height", "color")
 # Camera field -> scene key / command-line option
@@ -233,6 +237,7 @@ class RenderSettings:
     shadows: bool = True
     transparent: bool = False
     samples: int | None = None  # None: not given (one ray; the command line: DEFAULT_SAMPLES)
+    ao: int = 0  # ambient occlusion rays per hit pixel (0: none)
 
     def tolerance_rad(self, camera: Camera) -> float:
         """The angular tolerance in radians (pixels times the camera's pixel angle)."""
@@ -494,6 +499,8 @@ def _render(ctx, table) -> RenderSettings:
                                         table["max_memory"])
     if "samples" in table:
         values["samples"] = ctx.call(where + ("samples",), _samples, table["samples"])
+    if "ao" in table:
+        values["ao"] = ctx.call(where + ("ao",), _ao_samples, table["ao"])
     return RenderSettings(**values)
 
 
@@ -620,6 +627,20 @@ def _samples(value) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_SAMPLES:
         raise SceneError(f"expected a whole number of rays per pixel from 1 to {MAX_SAMPLES}, "
                          f"got {show_value(value)}")
+    return value
+
+
+def _ao_samples(value) -> int:
+    """Ambient occlusion rays per hit pixel: a whole number 0..MAX_AO_SAMPLES."""
+    if isinstance(value, str):
+        try:
+            value = int(value.strip())
+        except ValueError:
+            pass
+    if isinstance(value, bool) or not isinstance(value, int) or not (
+            0 <= value <= MAX_AO_SAMPLES):
+        raise SceneError(f"expected a whole number of ambient occlusion rays per pixel from 0 "
+                         f"to {MAX_AO_SAMPLES}, got {show_value(value)}")
     return value
 
 
@@ -841,6 +862,7 @@ _OPTION = {
     "color": "--color",
     "background": "--background",
     "samples": "--samples",
+    "ao": "--ao",
 }
 
 
@@ -865,6 +887,7 @@ def apply_overrides(
     shadows=None,
     transparent=None,
     samples=None,
+    ao=None,
 ) -> Scene:
     """A new Scene with command-line values replacing the file's; None means not given.
 
@@ -925,6 +948,8 @@ def apply_overrides(
         render = replace(render, shadows=bool(shadows))
     if samples is not None:
         render = replace(render, samples=_option("samples", _samples, samples))
+    if ao is not None:
+        render = replace(render, ao=_option("ao", _ao_samples, ao))
     if transparent is not None:
         render = replace(render, transparent=bool(transparent))
 

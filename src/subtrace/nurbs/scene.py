@@ -10,6 +10,12 @@ are its subdivision cage as before (:func:`has_faces`).
 :func:`nurbs_pass` traces the surfaces (:mod:`subtrace.nurbs.trace`) and shades the
 pixels whose NURBS hit is nearer than what the subdivision pass found into the same channel
 planes (:data:`subtrace.shade.CHANNELS`), with the same two-sided Lambert lighting.
+:func:`picture_hits` then hands those pixels to the picture (``subtrace.picture``) as hits
+of extra patches (:func:`with_surfaces`: one per surface, past the cages' patches), so the
+picture lights them with ``shade.light`` (shadows, ambient occlusion, point lights) and
+anti-aliases their edges like the cages'; :func:`shade_rays` does the same for the extra
+anti-aliasing rays, and :func:`blocked` answers the secondary rays (shadow, AO) with their
+ray cones (``trace.trace_rays``'s ``cone``).
 """
 
 from __future__ import annotations
@@ -36,10 +42,12 @@ from subtrace.nurbs.trace import (
     patch_boxes,
     patch_bvh,
     trace_nurbs,
+    trace_rays,
 )
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
-from subtrace.shade import C_A, C_LEVEL, C_N, C_OBJECT, C_PATCH, C_R, C_U, C_Z
+from subtrace.shade import (C_A, C_LEVEL, C_N, C_OBJECT, C_P, C_PATCH, C_R, C_U, C_Z,
+                            PatchShading, pixel_rays)
 from subtrace.trace.prims import ray_setup
 
 _SURF = re.compile(rb"^[ \t]*surf[ \t]", re.MULTILINE)  # a free-form surface statement
@@ -165,6 +173,64 @@ def _shade_nearer(nurbs, frame, width, height, tol_rad, other_t, lights, headlig
     return hits
 
 
+def with_surfaces(nurbs: NurbsScene, patches: PatchShading | None):
+    """(the cages' ``patches`` (None: none) followed by one row per free-form surface, the
+    row of surface 0): the surfaces' materials for ``shade.light`` (their colour, no
+    specular lobe, as the NURBS pass lit them)."""
+    s = len(nurbs.surface_color)
+    rows = PatchShading(nurbs.surface_object.astype(np.int32), np.arange(s, dtype=np.int32),
+                        np.zeros((s, 2)), np.ones(s), np.zeros(s, np.int8),
+                        nurbs.surface_color.astype(np.float64), np.zeros((s, 3)), np.ones(s))
+    if patches is None:
+        return rows, 0
+    return PatchShading(*(np.concatenate([a, b]) for a, b in zip(patches, rows))), len(
+        patches.object_id)
+
+
+def picture_hits(nurbs: NurbsScene, hits, frame, width, offset, t, normals, pix_patch,
+                 dirs=None) -> np.ndarray:
+    """Hand the rays whose ``hits`` (:class:`~subtrace.nurbs.trace.NurbsHits`) have a patch
+    to the picture: their distance into ``t``, their exact unit normal turned towards the
+    eye into ``normals`` and their surface's row of :func:`with_surfaces` (``offset`` +
+    surface) into ``pix_patch``. Rays: pixel centres, or ``dirs`` (n,3) from the eye.
+    Returns the rays (indices)."""
+    near = np.nonzero(hits.patch >= 0)[0]
+    if not len(near):
+        return near
+    _, n, _ = hit_geometry(nurbs.model, hits.patch[near], hits.st[near])
+    d = pixel_rays(frame, width, near) if dirs is None else dirs[near]
+    n = np.where(((n * d).sum(axis=1) > 0.0)[:, None], -n, n)
+    t[near] = hits.t[near]
+    normals[near] = n
+    pix_patch[near] = offset + nurbs.model.patch_surface[hits.patch[near]]
+    return near
+
+
+def shade_rays(nurbs: NurbsScene, frame, dirs, tol_rad, offset, t, normals, pix_patch,
+               planes) -> None:
+    """Rays from the eye along ``dirs`` (n,3) (extra anti-aliasing rays) whose NURBS hit
+    is nearer than ``t`` (n,) (their subdivision hits): ``t``, ``normals``, ``pix_patch``
+    as :func:`picture_hits` writes them, and in ``planes`` (len(CHANNELS), n) the channels
+    the picture reads of them (A, Z, N, P, object_id)."""
+    eye = np.repeat(frame[0][None], len(dirs), axis=0)
+    hits = trace_rays(nurbs.model, nurbs.bvh, eye, dirs, tol_rad)
+    hits.patch[~(hits.t < t)] = -1
+    near = picture_hits(nurbs, hits, frame, 0, offset, t, normals, pix_patch, dirs)
+    planes[C_A, near] = 1.0
+    planes[C_Z, near] = t[near]
+    for k in range(3):
+        planes[C_N + k, near] = normals[near, k]
+        planes[C_P + k, near] = frame[0, k] + t[near] * dirs[near, k]
+    planes[C_OBJECT, near] = nurbs.surface_object[pix_patch[near] - offset]
+
+
+def blocked(nurbs: NurbsScene, origins, dirs, tmax, cone, tol_rad) -> np.ndarray:
+    """(n,) bool: whether a free-form surface lies on each ray ``origins + s dirs`` before
+    ``tmax``; ``cone`` (n,): each ray's width at its origin (its ray cone)."""
+    hits = trace_rays(nurbs.model, nurbs.bvh, origins, dirs, tol_rad, cone=cone)
+    return hits.t < tmax
+
+
 @nb.njit(cache=True, nogil=True)
 def _shade_hits(task, n_tasks, frame, width, pixels, t, level, surface, normals, uv,
                 surface_object, surface_color, lights, headlight, planes):
@@ -177,6 +243,9 @@ def _shade_hits(task, n_tasks, frame, width, pixels, t, level, surface, normals,
         nx, ny, nz = normals[k, 0], normals[k, 1], normals[k, 2]
         s = surface[k]
         planes[C_Z, r] = t[r]
+        planes[C_P, r] = frame[0, 0] + t[r] * dx
+        planes[C_P + 1, r] = frame[0, 1] + t[r] * dy
+        planes[C_P + 2, r] = frame[0, 2] + t[r] * dz
         planes[C_N, r] = nx
         planes[C_N + 1, r] = ny
         planes[C_N + 2, r] = nz

@@ -457,11 +457,14 @@ def _push_root(net0, du, dv, kids, cb, ray, inv, tlo, thi, stack):
 
 
 @leaf_njit
-def _descend(net0, du, dv, p, rect, surface, ray, inv, tlo, thi, tol, tables, scratch):
+def _descend(net0, du, dv, p, rect, surface, ray, inv, tlo, thi, tol, cone, tables, scratch):
     """The nearest kept hit of the ray on patch ``p`` (net ``net0``) within [tlo, thi] by
     per-ray refinement (module comment): (found, distance, s, t, level, capped), capped:
     leaves held at MAX_LEVEL above the tolerance. ``tables``: (surface_trim,
-    surface_invert, trim arrays); ``scratch``: :func:`_scratch`'s buffers."""
+    surface_invert, trim arrays); ``scratch``: :func:`_scratch`'s buffers. ``cone``: the
+    ray's width at its origin (0 from the eye; a secondary ray's ray cone: its pixel's
+    footprint at the hit it leaves): a sub-patch is small enough within
+    ``cone + tol * distance``."""
     surface_trim, surface_invert, trim = tables
     stack, kids, work, out, tstack, cb, memo = scratch
     sn, sr, sl, st, sq = stack
@@ -479,7 +482,7 @@ def _descend(net0, du, dv, p, rect, surface, ray, inv, tlo, thi, tol, tables, sc
         ey = max(sr[sp, 5] - oy, 0.0, oy - sr[sp, 8])
         ez = max(sr[sp, 6] - oz, 0.0, oz - sr[sp, 9])
         dist = math.sqrt(ex * ex + ey * ey + ez * ez)
-        small = _net_size(sub, du, dv) <= tol * dist
+        small = _net_size(sub, du, dv) <= cone + tol * dist
         if small or level >= MAX_LEVEL:
             # a leaf: the exact root, kept when the trim keeps it
             capped += 0 if small else 1
@@ -517,10 +520,10 @@ def _scratch(max_du, max_dv):
 
 
 @leaf_njit
-def _trace_ray(ray, tlo, thi, bvh, nets, degrees, rects, owner, tol, tables, scratch, stack,
-               stack_t):
+def _trace_ray(ray, tlo, thi, bvh, nets, degrees, rects, owner, tol, cone, tables, scratch,
+               stack, stack_t):
     """Nearest kept hit of one ray over all patches: (patch (-1: none), distance, s, t,
-    level, capped leaves)."""
+    level, capped leaves); ``cone``: the ray's width at its origin (:func:`_descend`)."""
     ox, oy, oz, dx, dy, dz = ray
     inv = (1.0 / dx, 1.0 / dy, 1.0 / dz)
     best, hp, hs, ht, hl, capped = thi, -1, 0.0, 0.0, -1, 0
@@ -532,7 +535,7 @@ def _trace_ray(ray, tlo, thi, bvh, nets, degrees, rects, owner, tol, tables, scr
             p = bvh.prims[k]
             found, d, s, t, level, c = _descend(nets[p], degrees[p, 0], degrees[p, 1], p,
                                                 rects[p], owner[p], ray, inv, tlo, best, tol,
-                                                tables, scratch)
+                                                cone, tables, scratch)
             capped += c
             if found and d < best:
                 best, hp, hs, ht, hl = d, p, s, t, level
@@ -553,7 +556,7 @@ def _trace_rows(task, n_tasks, frame, width, height, bvh, nets, degrees, rects, 
             r = row * width + col
             dx, dy, dz = ray_setup(frame, row, col)
             p, d, s, t, level, c = _trace_ray((ox, oy, oz, dx, dy, dz), 0.0, np.inf, bvh, nets,
-                                              degrees, rects, owner, tol, tables, buffers,
+                                              degrees, rects, owner, tol, 0.0, tables, buffers,
                                               stack, stack_t)
             n_capped += c
             out_t[r] = d
@@ -649,7 +652,7 @@ def hit_geometry(model, patch, st):
 
 @nb.njit(cache=True, nogil=True)
 def _trace_list(task, n_tasks, origins, directions, tlo, thi, bvh, nets, degrees, rects, owner,
-                tol, tables, out_t, out_patch, out_st, out_level):
+                tol, cone, tables, out_t, out_patch, out_st, out_level):
     """Rays ``task, task + n_tasks, ...`` of the list (origins, unit directions (n, 3))."""
     buffers = _scratch(nets.shape[1] - 1, nets.shape[2] - 1)
     stack = np.empty(config.STACK_SIZE, np.int64)
@@ -658,6 +661,7 @@ def _trace_list(task, n_tasks, origins, directions, tlo, thi, bvh, nets, degrees
         ray = (origins[r, 0], origins[r, 1], origins[r, 2], directions[r, 0],
                directions[r, 1], directions[r, 2])
         p, d, s, t, level, _ = _trace_ray(ray, tlo, thi, bvh, nets, degrees, rects, owner, tol,
+                                          cone[r] if len(cone) else 0.0,
                                           tables, buffers, stack, stack_t)
         out_t[r] = d
         out_patch[r] = p
@@ -667,19 +671,23 @@ def _trace_list(task, n_tasks, origins, directions, tlo, thi, bvh, nets, degrees
 
 
 def trace_rays(model, bvh, origins, directions, tol_rad: float, tlo: float = 0.0,
-               thi: float = np.inf) -> NurbsHits:
+               thi: float = np.inf, cone=None) -> NurbsHits:
     """Nearest kept hits within [tlo, thi] of rays ``origins + t directions`` ((n, 3) each,
     directions of unit length; the angular criterion measured from each ray's origin), on
-    every thread."""
+    every thread. ``cone``: None, or (n,) each ray's width at its origin (a ray cone: a
+    shadow ray leaving a hit at distance t from the eye carries its pixel's footprint
+    ``t * tol_rad`` there), so a sub-patch at distance s along the ray is small enough
+    within ``cone + tol_rad * s``: a secondary ray refines no finer than its pixel needs."""
     origins = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
     directions = np.ascontiguousarray(directions, dtype=np.float64).reshape(-1, 3)
+    cone = np.zeros(0) if cone is None else np.ascontiguousarray(cone, dtype=np.float64)
     hits = NurbsHits(len(origins))
     if model.n_patches == 0 or not len(origins):
         return hits
     tables = (model.surface_trim, model.surface_trim_invert, trim_arrays(model))
     run_tasks(_trace_list, origins, directions, float(tlo), float(thi), bvh, model.nets,
-              model.patch_degree, model.patch_rect, model.patch_surface, float(tol_rad), tables,
-              hits.t, hits.patch, hits.st, hits.level, n=thread_count())
+              model.patch_degree, model.patch_rect, model.patch_surface, float(tol_rad), cone,
+              tables, hits.t, hits.patch, hits.st, hits.level, n=thread_count())
     return hits
 
 

@@ -189,10 +189,11 @@ def _stages(folder: Path) -> list[list[list[list[str]]]]:
     first = [["render", *small, "-o", str(folder / "default.exr")]]
     queries = [*intersect(sample_cage_path()), *intersect(tris),
                ["info", str(tris), "--level", "1"], ["info", str(creased), "--level", "2"]]
-    renders = [["render", str(tris), *small, "-o", str(folder / "loop.exr")],
+    renders = [["render", str(tris), *small, "--ao", "4", "-o", str(folder / "loop.exr")],
                ["render", str(creased), *small, "-o", str(folder / "creased.exr")],
-               ["render", *small, "--accel", "bvh", "-o", str(folder / "bvh.exr")],
-               ["render", str(sample_surfaces_path()), *small, "-o", str(folder / "nurbs.exr")],
+               ["render", *small, "--accel", "bvh", "--ao", "4", "-o", str(folder / "bvh.exr")],
+               ["render", str(sample_surfaces_path()), *small, "--ao", "4",
+                "-o", str(folder / "nurbs.exr")],
                *intersect(sample_surfaces_path())]
     return [[first], [queries, renders]]
 

@@ -13,6 +13,16 @@ cell subtends at most the tolerance from the eye. A secondary ray leaves a surfa
 whose own footprint (its ray cone from the eye) is the same tolerance at that distance, so a
 secondary ray never asks for a patch finer than what a pixel would need there.
 
+Ray cones: a shadow or ambient occlusion ray leaving a hit at distance t carries the
+pixel's cone (spread: the tolerance angle; width t * tol_rad at its origin), whose width
+at a point q a distance s along it is tol_rad (t + s) >= tol_rad |q - eye| (triangle
+inequality). The depth chosen from the eye is therefore never coarser than the cone asks,
+and never finer than a pixel of the image asks at q: what secondary rays build is bounded
+by the primary criterion (``secondary_max_depth`` in the render's statistics reports the
+deepest grid they reached; tests/test_shadows.py). Patches are not coarsened below the
+eye's depth for wide cones: a patch's depth is shared by every ray, and its sides must
+sample the edges its neighbours already built alike (design invariant 4).
+
 ``any_hit`` rays (shadow rays) stop at the first occluder found before ``tmax``: built
 patches are intersected first, and unbuilt ones are built only when no built one occludes.
 
@@ -85,6 +95,7 @@ def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
     built = np.zeros(n_threads, np.int64)
     req_ts = np.empty((n_threads, CANDIDATES))  # each thread's entry distances of req
     rays = np.arange(n, dtype=np.int64)
+    first_round = pools.round_no
     first = True
     while len(rays) or first:  # (no rays still run the kernel once: compile_kernel)
         first = False
@@ -115,7 +126,25 @@ def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
         pools.round_no += 1
     # (each chunk of rays has a memo of its own: its count is the same on any thread)
     pools.stats.micro_triangles += int(built.sum())
+    _deepest(pools, hits, tmax, first_round)
     return blocked, hits
+
+
+def _deepest(pools, hits, tmax, first_round) -> None:
+    """Raise ``pools.stats.max_depth`` (if it has one) to the deepest grid these rays
+    reached: the depth of the grid each hit (or occluder) was found on, and of every item
+    built for them (rounds from ``first_round``)."""
+    if not hasattr(pools.stats, "max_depth"):
+        return
+    hit = hits.t < tmax
+    deepest = int(hits.leaf[hit].max(initial=-1))
+    a = pools.iso.a
+    new = np.nonzero(a["round"] >= first_round)[0]  # slots built for these rays
+    count = a["count"][new]
+    start = np.repeat(a["first"][new] - np.cumsum(count) + count, count)
+    items = start + np.arange(int(count.sum()))
+    deepest = max(deepest, int(a["depth_i"][items].max(initial=-1)))
+    pools.stats.max_depth = max(pools.stats.max_depth, deepest)
 
 
 def compile_kernel() -> None:
