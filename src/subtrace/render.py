@@ -242,7 +242,7 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
         keep.update(table=table, depths=depths, edge_depth=edge_depth, iso=iso,
                     record=chosen.record, shell_min=chosen.shell_min,
                     shell_max=chosen.shell_max, bvh=bvh, eye=frame[0], tol_rad=tol_rad,
-                    stats=stats, round_no=round_no + 1)
+                    stats=stats, round_no=round_no + 1, memo_bytes=memos.max_bytes)
     return hits, iso, built
 
 

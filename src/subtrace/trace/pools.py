@@ -355,6 +355,7 @@ class Memos:
         self.max_rows = {k: (None if max_bytes is None else
                              max(self.MIN_ROWS, int(max_bytes * start[k] / total)))
                          for k in start}
+        self.max_bytes = max_bytes
         self.m = [self._grow(None, 0, "child", "nets", "cells") for _ in range(n_threads)]
         self.full = 0
 

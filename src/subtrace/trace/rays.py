@@ -56,8 +56,9 @@ class Pools:
     """What a finished primary trace leaves for secondary rays: the patch table, each
     patch's grid depth and edge sampling, the pools built so far (``iso``: Pieces), the
     isolation records, the shells and
-    their BVH, the eye, the tolerance (radians), the render's statistics and the next
-    round number. :func:`trace_rays` builds into the pools what its rays ask for."""
+    their BVH, the eye, the tolerance (radians), the render's statistics, the next
+    round number and each thread's memo budget (bytes; None: none), the primary trace's.
+    :func:`trace_rays` builds into the pools what its rays ask for."""
 
     table: object
     depths: np.ndarray
@@ -71,6 +72,7 @@ class Pools:
     tol_rad: float
     stats: object
     round_no: int
+    memo_bytes: int | None = None
 
 
 def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
@@ -91,7 +93,8 @@ def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
     n_threads = tasks.thread_count()
     # fresh memos: reusing the primary trace's (warmer: faster) changed a Loop render by an
     # ulp between the projection and the BVH (tests/test_projection.py, random cameras)
-    memos = Memos(n_threads, None)
+    # (within the primary memos' budget: they are gone by now)
+    memos = Memos(n_threads, pools.memo_bytes)
     built = np.zeros(n_threads, np.int64)
     req_ts = np.empty((n_threads, CANDIDATES))  # each thread's entry distances of req
     rays = np.arange(n, dtype=np.int64)
