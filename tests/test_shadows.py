@@ -149,3 +149,26 @@ def test_secondary_rays_refine_no_deeper_than_the_footprint(cube, tmp_path):
     assert with_ao.secondary_max_depth <= want[np.isfinite(want)].max()
     none = render_scene(_scene(cube, tmp_path, shadows=False, ground=False)).stats
     assert none.secondary_max_depth == -1
+
+
+def test_a_cage_with_no_patch_renders_its_ground_without_hanging(tmp_path):
+    """Two boundary faces under boundary interpolation "none" make no patch: the shadow rays
+    of the automatic lights' ground see an empty pool and miss (they once walked an empty
+    BVH for ever). In a process of its own, with a time limit, so a hang fails."""
+    import subprocess
+    import sys
+
+    from subtrace.io.exr import read_exr
+
+    obj = tmp_path / "holes.obj"
+    obj.write_text("t interpolateboundary 1/0/0 0\n"
+                   + "".join(f"v {x} 0 {z}\n" for z in (0, 1, 2) for x in (0, 1, 2))
+                   + "f 1 2 5 4\nf 2 3 6\n")
+    out = tmp_path / "out.exr"
+    proc = subprocess.run([sys.executable, "-m", "subtrace.cli", "render", str(obj), "-o",
+                           str(out), "--width", "32", "--height", "24", "--quiet"],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    channels, attrs = read_exr(out)
+    assert attrs["subtrace:patches"] == 0
+    assert not (channels["A"] > 0).any()

@@ -88,6 +88,14 @@ def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
     tmax = np.ascontiguousarray(tmax, np.float64)
     blocked = np.zeros(n, np.uint8)
     hits = hit_arrays(n)
+    if not len(pools.shell_min):  # no patch (every face a hole): every ray misses
+        hits.t[:] = tmax
+        hits.prim[:] = -1
+        hits.leaf[:] = 0
+        hits.item[:] = 0
+        hits.a[:] = 0.0
+        hits.b[:] = 0.0
+        return blocked, hits
     req = np.empty((n, CANDIDATES), np.int64)
     req_n = np.zeros(n, np.int64)
     n_threads = tasks.thread_count()
