@@ -88,7 +88,8 @@ def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
     tmax = np.ascontiguousarray(tmax, np.float64)
     blocked = np.zeros(n, np.uint8)
     hits = hit_arrays(n)
-    if not len(pools.shell_min):  # no patch (every face a hole): every ray misses
+    if n and not len(pools.shell_min):  # no patch (every face a hole): every ray misses
+        # (with no rays the kernel still runs: compile_kernel compiles it so)
         hits.t[:] = tmax
         hits.prim[:] = -1
         hits.leaf[:] = 0
