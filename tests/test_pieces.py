@@ -129,28 +129,82 @@ def test_isolated_pieces_tile_the_grid(name):
         assert np.all(covered == 1)
 
 
+def _walk(first, count, kind, ref, lo, hi, enters):
+    """The items a ray reaches in rows ``first .. first + count - 1``, walked as
+    ``bezier.intersect_patch`` does: a group whose box it misses is skipped whole."""
+    from subtrace.patches.groups import GROUP
+
+    seen, it = [], first
+    while it < first + count:
+        inside = enters(lo[it], hi[it])
+        if kind[it] == GROUP:
+            it += 1 if inside else int(ref[it])
+            continue
+        if inside:
+            seen.append(it)
+        it += 1
+    return seen
+
+
 @needs_shared
-def test_rest_boxes_contain_the_later_items():
-    """The box a ray tests before a level's pieces contains every later piece of the patch
-    (a miss skips them all) and is no larger than their union."""
+@pytest.mark.parametrize("scheme", ["catmark", "loop"])
+def test_item_groups_skip_only_items_the_ray_misses(scheme):
+    """Isolated patches' items with their group rows (patches/groups.py): every item once;
+    each group's box holds the boxes of the rows it spans, its span within its parent's;
+    and a ray walking the rows with skips reaches exactly the items whose boxes it enters
+    (random rays through the patches, against testing every item's box)."""
+    from subtrace.patches.groups import GROUP
     from subtrace.patches.isolate import build_isolated
+    from subtrace.patches.isolate_loop import build_loop_isolated
     from subtrace.trace.pools import Pieces
 
-    cage = subtrace.load_cage(MODELS / "spot_control_mesh.obj")
+    if scheme == "catmark":
+        cage = subtrace.load_cage(MODELS / "spot_control_mesh.obj")
+    else:
+        cage = subtrace.load_cage(SHAPES / "loop_icos_semisharp.obj")
     table = build_patch_table([cage])
     irr = np.nonzero(~table.regular)[0][:40]
-    depth = np.full(len(irr), 4)
-    subs, cells = build_isolated(table.objects[0], table.face[irr], depth)
+    depth = np.full(len(irr), 5)
     iso = Pieces(table.n_patches)
-    iso.append(irr, depth, np.repeat(depth, 4), subs, cells, 0)
+    if scheme == "catmark":
+        subs, cells = build_isolated(table.objects[0], table.face[irr], depth)
+        iso.append(irr, depth, np.repeat(depth, 4), subs, cells, 0)
+        n_items = len(subs[0]) + len(cells[0])
+    else:
+        subs, cells = build_loop_isolated(table.objects[0], table.face[irr], depth)
+        iso.append_loop(irr, depth, np.full((len(irr), 3), -1), subs, cells, 0)
+        n_items = len(subs[0]) + len(cells[0])
     a = iso.a
-    assert np.all(a["count"] > 1)
+    kind, ref, lo, hi = a["kind"], a["ref"], a["lo"], a["hi"]
+    groups = np.nonzero(kind == GROUP)[0]
+    assert len(groups) > 0 and np.count_nonzero(kind != GROUP) == n_items
+    rng = np.random.default_rng(7)
     for f, c in zip(a["first"], a["count"]):
-        for it in range(f, f + c):
-            lo = a["lo"][it:f + c].min(axis=0)
-            hi = a["hi"][it:f + c].max(axis=0)
-            assert np.array_equal(a["rest_lo"][it], lo)
-            assert np.array_equal(a["rest_hi"][it], hi)
+        end = f + c
+        assert kind[f] == GROUP and f + ref[f] == end  # the whole patch first
+        for g in range(f, end):
+            if kind[g] != GROUP:
+                continue
+            span = slice(g, g + int(ref[g]))
+            assert g + ref[g] <= end
+            assert np.all(lo[span] >= lo[g]) and np.all(hi[span] <= hi[g])
+        # rays from random points towards random points of the patch's box
+        box_lo, box_hi = lo[f], hi[f]
+        size = float(np.max(box_hi - box_lo))
+        for _ in range(40):
+            target = box_lo + rng.random(3) * (box_hi - box_lo)
+            origin = target + rng.normal(size=3) * 4 * size
+            d = target - origin
+
+            def enters(b_lo, b_hi, o=origin, d=d):
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    t0, t1 = (b_lo - o) / d, (b_hi - o) / d
+                tn = np.nanmax(np.minimum(t0, t1))
+                tf = np.nanmin(np.maximum(t0, t1))
+                return tn <= tf and tf >= 0
+
+            want = [it for it in range(f, end) if kind[it] != GROUP and enters(lo[it], hi[it])]
+            assert _walk(f, c, kind, ref, lo, hi, enters) == want
 
 
 @needs_shared

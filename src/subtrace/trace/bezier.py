@@ -32,6 +32,7 @@ from subtrace.trace.prims import (
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, M_CELLS, M_FULL, M_NETS, M_NODES, NOT_YET,
     push_sorted, ray_triangle,
 )
+from subtrace.patches.groups import GROUP
 from subtrace.trace.tris import LOOP_CELL, TRI, intersect_tri, intersect_tri_cell
 
 # samples per cell side at most (2^(side depth - depth)): neighbours are kept within
@@ -375,18 +376,20 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch):
     work, st, st_t, tmp_t, order, lv, lp = scratch
     root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
     item_depth, item_side, kind, ref, level = iso.depth_i, iso.side, iso.kind, iso.ref, iso.level
-    i0, j0, lo, hi, rest_lo, rest_hi = iso.i0, iso.j0, iso.lo, iso.hi, iso.rest_lo, iso.rest_hi
+    i0, j0, lo, hi = iso.i0, iso.j0, iso.lo, iso.hi
     nets, cells = iso.nets, iso.cells
     first, count = iso.first[s], iso.count[s]
     code = -2.0 - p
     tested = 0
-    for it in range(first, first + count):
-        if count > 1 and (it == first or level[it] != level[it - 1]):
-            # the pieces of a level and all finer ones: skipped together on a miss
-            if box_entry(ox, oy, oz, ix, iy, iz, rest_lo, rest_hi, it, 0.0,
-                         hit[H_T]) == np.inf:
-                break
+    nxt, end = first, first + count
+    while nxt < end:  # the rows depth first; a group missed is skipped whole
+        it = nxt
+        nxt = it + 1
         if box_entry(ox, oy, oz, ix, iy, iz, lo, hi, it, 0.0, hit[H_T]) == np.inf:
+            if kind[it] == GROUP:
+                nxt = it + ref[it]
+            continue
+        if kind[it] == GROUP:  # entered: its rows follow
             continue
         depth = item_depth[it]  # its grid, in the patch's units
         inv = 1.0 / (1 << depth)

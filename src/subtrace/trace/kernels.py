@@ -10,10 +10,13 @@ A round (:func:`trace_round`) takes each active ray through the patch shells it 
 from its image tile's list (``accel/projection.py``, nearest box first) or the BVH of the
 shells: built patches are intersected (only those built since the ray's previous round:
 older ones were tested then), and the nearest *unbuilt* patch whose shell the ray enters
-before its best hit so far is recorded as the ray's request; the driver builds the requested
-patches and runs another round for the rays that asked, each going through just the unbuilt
-shells it remembers. This is the refinement criterion: a patch is refined only when a ray
-reaches its shell before any closer hit.
+before its best hit so far is recorded as the ray's request, with how far it reaches (the
+exit of that shell, or the hit if nearer); the driver builds the requested patches and those
+whose shells the asking rays enter within that reach (``trace.build.requested_patches``),
+and runs another round for the rays that asked, each going through just the unbuilt shells
+it remembers. This is the refinement criterion: a patch is refined only when a ray reaches
+its shell before any closer hit (one whose shell overlaps the request's along the ray is
+taken a round early: the request's surface may lie beyond its entry).
 """
 
 from __future__ import annotations
@@ -21,7 +24,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from subtrace.accel.bvh import BVH, box_entry, bvh_next_leaf, bvh_start, traversal_stack
+from subtrace.accel.bvh import (
+    BVH, box_entry, bvh_next_leaf, bvh_start, slab_range, traversal_stack,
+)
 from subtrace.accel.projection import TILE, Tiles
 from subtrace.runtime.jit import inline_njit, nb
 from subtrace.runtime.threads import run_chunks
@@ -191,7 +196,7 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
             else:
                 sp = bvh_start(ox, oy, oz, ix, iy, iz, bvh, 0.0, hit[H_T], stack, stack_t)
             req = -1
-            req_t = np.inf
+            req_t = req_x = np.inf
             n_c = 0
             while True:
                 if j == j_end:  # the next BVH leaf
@@ -227,6 +232,10 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
                     if te < req_t:
                         req_t = te
                         req = p
+                        req_x = slab_range(ox, oy, oz, ix, iy, iz, shell_min[p, 0],
+                                           shell_min[p, 1], shell_min[p, 2], shell_max[p, 0],
+                                           shell_max[p, 1], shell_max[p, 2], 0.0, np.inf)[1]
             request[r] = req if req_t < hit[H_T] else -1
-            cands.count[r] = n_c if n_c <= CANDIDATES else -1
+            cands.reach[r] = min(req_x, hit[H_T])
+            cands.count[r] = n_c if n_c <= CANDIDATES else -1 - CANDIDATES
             _store_hit(hit, hits, r)

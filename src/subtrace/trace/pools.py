@@ -26,7 +26,8 @@ import numpy as np
 
 from subtrace import config
 from subtrace.patches.basis import BOX_PAD, net_bounds
-from subtrace.patches.isolate import item_sides, rest_boxes
+from subtrace.patches.groups import GROUP, grouped_layout
+from subtrace.patches.isolate import item_sides
 from subtrace.trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
 from subtrace.trace.prims import (
     M_COUNTS, M_MADE, M_PEAK_CELLS, M_PEAK_NETS, M_PEAK_NODES, memo_restart,
@@ -46,16 +47,16 @@ class PieceArrays(NamedTuple):
     round: np.ndarray  # (S,) int64: round it was built in (-1: from the start)
     depth_i: np.ndarray  # (I,) int64: grid depth, in the patch's units
     side: np.ndarray  # (I,4) int64: sampling depth of each side, in the patch's units
-    # (I,) int8: 0 Bezier piece, 1 cell, 2 (TRI) Loop triangular net, 3 (LOOP_CELL) Loop cell
+    # (I,) int8: 0 Bezier piece, 1 cell, 2 (TRI) Loop triangular net, 3 (LOOP_CELL) Loop cell,
+    # 4 (GROUP) a group of the rows after it (``patches/groups.py``)
     kind: np.ndarray
-    ref: np.ndarray  # (I,) int64: row in nets (piece) or cells (cell, 4 rows each)
+    # (I,) int64: row in nets (piece) or cells (cell, 4 rows each); a group's row span
+    ref: np.ndarray
     level: np.ndarray  # (I,) int64: the item's level
     i0: np.ndarray  # (I,) int64: origin in units of 2^-level
     j0: np.ndarray  # (I,) int64
-    lo: np.ndarray  # (I,3) float64: the item's box
+    lo: np.ndarray  # (I,3) float64: the item's box (a group's: of its items)
     hi: np.ndarray  # (I,3) float64
-    rest_lo: np.ndarray  # (I,3) float64: box of the item and the slot's items after it
-    rest_hi: np.ndarray  # (I,3) float64
     nets: np.ndarray  # (., 4, 4, 3) float64: Bezier nets
     cells: np.ndarray  # (., 3) float64: cell corners, 4 rows per cell
     cell_normals: np.ndarray  # (., 4, 3) float64: exact limit normals at the corners
@@ -83,7 +84,12 @@ class Candidates(NamedTuple):
 
     patch: np.ndarray  # (R, CANDIDATES) int32
     t: np.ndarray  # (R, CANDIDATES) float64: entry distances
-    count: np.ndarray  # (R,) int8: how many, or -1 when there were more than CANDIDATES
+    # (R,) int8: how many; -1 - CANDIDATES when there were more (the first CANDIDATES met
+    # are kept: what the build may take besides the request, but the ray traverses again)
+    count: np.ndarray
+    # (R,) float32: where the ray's request could still hide a hit: the exit of its nearest
+    # unbuilt shell, or its best hit if nearer (``trace.build.requested_patches``)
+    reach: np.ndarray
 
 
 class Hits(NamedTuple):
@@ -101,7 +107,8 @@ class Hits(NamedTuple):
 def candidate_lists(n_rays: int) -> Candidates:
     """Empty candidate lists for ``n_rays`` rays (round 0 sets every ray's)."""
     return Candidates(np.empty((n_rays, CANDIDATES), np.int32),
-                      np.empty((n_rays, CANDIDATES)), np.empty(n_rays, np.int8))
+                      np.empty((n_rays, CANDIDATES)), np.empty(n_rays, np.int8),
+                      np.empty(n_rays, np.float32))
 
 
 def hit_arrays(n_rays: int) -> Hits:
@@ -181,8 +188,7 @@ class Pieces(Growable):
         "items": {"kind": ((), np.int8), "ref": ((), np.int64), "level": ((), np.int64),
                   "i0": ((), np.int64), "j0": ((), np.int64), "depth_i": ((), np.int64),
                   "side": ((4,), np.int64), "lo": ((3,), np.float64),
-                  "hi": ((3,), np.float64), "rest_lo": ((3,), np.float64),
-                  "rest_hi": ((3,), np.float64), "orient": ((), np.int8)},
+                  "hi": ((3,), np.float64), "orient": ((), np.int8)},
         "nets": {"nets": ((4, 4, 3), np.float64)},
         "cells": {"cells": ((4, 3), np.float64), "normals": ((4, 3), np.float64)},
         "samples": {"samples": ((3,), np.float64)},
@@ -223,15 +229,12 @@ class Pieces(Growable):
         c0 = self.put("cells", cells=cp, normals=cn)
         lo = np.concatenate([lo_s, cp.min(axis=1)])[order]
         hi = np.concatenate([hi_s, cp.max(axis=1)])[order]
-        rest_lo, rest_hi = np.empty_like(lo), np.empty_like(hi)
-        rest_boxes(first, count, lo, hi, rest_lo, rest_hi)
-        i_start = self.put(
-            "items",
+        i_start, first, count = self._put_grouped(
+            root[order], None,
             kind=np.r_[np.zeros(len(sr), np.int8), np.ones(len(cr), np.int8)][order],
             ref=np.r_[n0 + np.arange(len(sr)), c0 + np.arange(len(cr))][order],
             level=level, i0=i0, j0=j0, depth_i=depth_i, side=item_side, lo=lo, hi=hi,
-            rest_lo=rest_lo, rest_hi=rest_hi,
-        )
+            orient=np.ones(len(root), np.int8))
         s0 = self.put("slots", patch=patches, first=i_start + first, count=count,
                       round=np.full(len(patches), round_no))
         self.patch_iso[patches] = s0 + np.arange(len(patches))
@@ -247,8 +250,8 @@ class Pieces(Growable):
         ar = np.arange(m, dtype=np.int64)
         n0 = 0 if nets is None else self.put("nets", nets=nets)
         i_start = self.put("items", kind=np.zeros(m, np.int8), ref=n0 + ar, level=z, i0=z,
-                           j0=z, depth_i=depth, side=side, lo=lo, hi=hi, rest_lo=lo,
-                           rest_hi=hi)
+                           j0=z, depth_i=depth, side=side, lo=lo, hi=hi,
+                           orient=np.ones(m, np.int8))
         s0 = self.put("slots", patch=patches, first=i_start + ar, count=np.ones(m, np.int64),
                       round=np.full(m, -1))
         self.patch_iso[patches] = s0 + ar
@@ -266,8 +269,8 @@ class Pieces(Growable):
         lo, hi = lo - pad, hi + pad  # (widened for rounding, as basis.net_box)
         n0 = self.put("nets", nets=nets)
         i_start = self.put("items", kind=np.full(m, TRI, np.int8), ref=n0 + ar, level=z, i0=z,
-                           j0=z, depth_i=depth, side=side, lo=lo, hi=hi, rest_lo=lo,
-                           rest_hi=hi, orient=np.ones(m, np.int8))
+                           j0=z, depth_i=depth, side=side, lo=lo, hi=hi,
+                           orient=np.ones(m, np.int8))
         s0 = self.put("slots", patch=patches, first=i_start + ar, count=np.ones(m, np.int64),
                       round=np.full(m, round_no))
         self.patch_iso[patches] = s0 + ar
@@ -280,7 +283,7 @@ class Pieces(Growable):
         of each side's edge (-1: none). A side sampled more coarsely than ``depth`` is
         snapped onto the coarse polyline through its exact samples
         (:func:`~subtrace.patches.isolate_loop.side_samples`, kept in ``samples``). Items
-        go coarse levels first, so a ray skips a level and all finer ones on one box test.
+        go depth first in the patch's split tree, with group rows (:meth:`_put_grouped`).
         Returns the numbers of pieces and cells."""
         (sr, sl, si, sj, sg, nets15), (cr, ci, cj, cg, cp, cn) = subs, cells
         side = np.asarray(side, dtype=np.int64).reshape(-1, 3)
@@ -296,38 +299,53 @@ class Pieces(Growable):
         pad = BOX_PAD * np.maximum(np.abs(lo), np.abs(hi)).max(axis=1, keepdims=True)
         lo, hi = lo - pad, hi + pad  # (widened for rounding, as basis.net_box)
         root = np.r_[sr, cr]
-        level = np.r_[sl, depth[cr]]
-        order = np.lexsort((level, root))
-        count = np.bincount(root, minlength=len(patches))
-        first = np.cumsum(count) - count
-        lo, hi = np.ascontiguousarray(lo[order]), np.ascontiguousarray(hi[order])
-        rest_lo, rest_hi = np.empty_like(lo), np.empty_like(hi)
-        rest_boxes(first, count, lo, hi, rest_lo, rest_hi)
         s0 = self.put("samples", samples=samples) if len(samples) else 0
         item_side = np.empty((len(root), 4), np.int64)
-        item_side[:, :3] = side[root[order]]
-        item_side[:, 3] = np.where(offset >= 0, s0 + offset, -1)[root[order]]
+        item_side[:, :3] = side[root]
+        item_side[:, 3] = np.where(offset >= 0, s0 + offset, -1)[root]
         n0 = self.put("nets", nets=nets)
         c0 = self.put("cells", cells=cp4, normals=cn4)
-        i_start = self.put(
-            "items",
-            kind=np.r_[np.full(len(sr), TRI, np.int8), np.full(len(cr), LOOP_CELL,
-                                                               np.int8)][order],
-            ref=np.r_[n0 + np.arange(len(sr)), c0 + np.arange(len(cr))][order],
-            level=level[order], i0=np.r_[si, ci][order], j0=np.r_[sj, cj][order],
-            depth_i=depth[root][order], side=item_side, lo=lo, hi=hi,
-            rest_lo=rest_lo, rest_hi=rest_hi, orient=np.r_[sg, cg].astype(np.int8)[order],
-        )
+        i_start, first, count = self._put_grouped(
+            root, np.r_[sg, cg],
+            kind=np.r_[np.full(len(sr), TRI, np.int8), np.full(len(cr), LOOP_CELL, np.int8)],
+            ref=np.r_[n0 + np.arange(len(sr)), c0 + np.arange(len(cr))],
+            level=np.r_[sl, depth[cr]], i0=np.r_[si, ci], j0=np.r_[sj, cj],
+            depth_i=depth[root], side=item_side, lo=lo, hi=hi,
+            orient=np.r_[sg, cg].astype(np.int8))
         s0 = self.put("slots", patch=patches, first=i_start + first, count=count,
                       round=np.full(len(patches), round_no))
         self.patch_iso[patches] = s0 + np.arange(len(patches))
         return len(sr), len(cr)
 
+    def _put_grouped(self, root, split_orient, **items):
+        """Append the items of a batch of isolated patches (item k of patch ``root[k]``)
+        depth first in each patch's split tree, with their group rows
+        (:func:`~subtrace.patches.groups.grouped_layout`; ``split_orient``: the
+        sub-triangles' orientations, None for sub-squares). Returns (first new row, each patch's first
+        row relative to it, its row count)."""
+        take, g_level, g_lo, g_hi, g_span, first, count = grouped_layout(
+            root, items["level"], items["i0"], items["j0"], split_orient, items["lo"],
+            items["hi"])
+        is_item = take >= 0
+        rows = {}
+        for name, v in items.items():
+            v = np.asarray(v)
+            rows[name] = np.zeros((len(take),) + v.shape[1:], v.dtype)
+            rows[name][is_item] = v[take[is_item]]
+        group = ~is_item
+        rows["kind"][group] = GROUP
+        rows["ref"][group] = g_span
+        rows["level"][group] = g_level
+        rows["lo"][group], rows["hi"][group] = g_lo, g_hi
+        rows["side"][group] = -1
+        rows["orient"][group] = 1
+        return self.put("items", **rows), first, count
+
     def view(self) -> PieceArrays:
         a = self.a
         return PieceArrays(self.patch_iso, a["first"], a["count"], a["round"], a["depth_i"],
                            a["side"], a["kind"], a["ref"], a["level"], a["i0"], a["j0"],
-                           a["lo"], a["hi"], a["rest_lo"], a["rest_hi"], a["nets"],
+                           a["lo"], a["hi"], a["nets"],
                            a["cells"].reshape(-1, 3), a["normals"], a["touched"], a["orient"],
                            a["samples"])
 
