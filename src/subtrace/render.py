@@ -45,7 +45,7 @@ from subtrace.shade import (C_OBJECT, C_R, CHANNELS, background_rows, deepest_le
 from subtrace.subdiv.limit import limit_points
 from subtrace.tiles import check_crop
 from subtrace.trace.budget import check_memory, choose_within_budget, warn_tiles
-from subtrace.trace.build import build_loop_regular, build_requested, requested_patches
+from subtrace.trace.build import build_loop_regular, build_requested
 from subtrace.trace.kernels import trace_round
 from subtrace.trace.pools import Memos, Pieces, candidate_lists, hit_arrays
 from subtrace.trace.rays import compile_kernel as compile_secondary
@@ -201,7 +201,7 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
     hits = hit_arrays(n_rays)
     request = np.empty(n_rays, dtype=np.int64)
     tested = np.empty(n_rays, dtype=np.int64)  # (round 0 writes every ray's entries)
-    cands = candidate_lists(n_rays)
+    cands = candidate_lists(n_rays, table.n_patches)
     rays = np.arange(n_rays, dtype=np.int64)
     round_no = 0
     while len(rays):
@@ -210,15 +210,14 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
                     chosen.shell_max, iso.view(), memos.views(len(iso.a["kind"])), cands,
                     config.TRI_SLACK, hits, request, tested)
         stats.time_trace += time.perf_counter() - t0
-        t0 = time.perf_counter()
-        new = requested_patches(table.n_patches, rays, request, cands)
         rays = rays[request[rays] >= 0]  # the rays that asked: traced again
-        stats.time_refine += time.perf_counter() - t0
         if progress is not None:
             progress(n_rays - len(rays), n_rays, f"round {round_no + 1}")
         if not len(rays):
             break
         t0 = time.perf_counter()
+        new = np.nonzero(cands.wanted)[0]  # (kernels.py: requests and what they overlap)
+        cands.wanted[:] = 0
         build_requested(table, new, depths, edge_depth, iso, round_no, stats, frame[0], tol_rad,
                         chosen.record)
         stats.time_refine += time.perf_counter() - t0

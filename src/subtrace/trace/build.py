@@ -11,28 +11,6 @@ from subtrace.patches.isolate_loop import build_loop_isolated
 from subtrace.trace.tris import tri_nets_as_pieces
 
 
-def requested_patches(n_patches, rays, request, cands):
-    """The patches to build after a round: each asking ray's request (the nearest unbuilt
-    shell it enters before its best hit), and the unbuilt shells it remembers entering
-    before that shell's exit (``cands.reach``, the best hit if nearer). Their shells
-    overlap the request's along the ray, so the surface it hides may lie beyond their
-    entries: the ray would ask for them next. Taking them now saves rounds (each a pass of
-    every asking ray) where shells overlap, as those of a coarse cage's patches do; shells
-    that begin past the request's exit (an object hidden behind another) wait for a round
-    that shows they are reached. ``rays``: the rays of the round; ``request``, ``cands``:
-    what the kernel wrote for them (``trace/pools.py``). Returns sorted patch ids."""
-    req = request[rays]
-    asking = rays[req >= 0]
-    flag = np.zeros(n_patches, bool)
-    flag[req[req >= 0]] = True
-    count = cands.count[asking].astype(np.int64)
-    stored = np.where(count >= 0, count, -1 - count)  # (an overflow keeps the first ones)
-    near = cands.t[asking] < cands.reach[asking][:, None]
-    near &= np.arange(cands.t.shape[1]) < stored[:, None]
-    flag[cands.patch[asking][near]] = True
-    return np.nonzero(flag)[0]
-
-
 def build_requested(table, requested, depths, edge_depth, iso, round_no, stats, eye, tol_rad,
                     record):
     """Build the patches ``requested`` (sorted ids) in round ``round_no`` into ``iso`` (a

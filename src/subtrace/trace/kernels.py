@@ -10,13 +10,16 @@ A round (:func:`trace_round`) takes each active ray through the patch shells it 
 from its image tile's list (``accel/projection.py``, nearest box first) or the BVH of the
 shells: built patches are intersected (only those built since the ray's previous round:
 older ones were tested then), and the nearest *unbuilt* patch whose shell the ray enters
-before its best hit so far is recorded as the ray's request, with how far it reaches (the
-exit of that shell, or the hit if nearer); the driver builds the requested patches and those
-whose shells the asking rays enter within that reach (``trace.build.requested_patches``),
-and runs another round for the rays that asked, each going through just the unbuilt shells
-it remembers. This is the refinement criterion: a patch is refined only when a ray reaches
-its shell before any closer hit (one whose shell overlaps the request's along the ray is
-taken a round early: the request's surface may lie beyond its entry).
+before its best hit so far is recorded as the ray's request. The driver builds the requested
+patches, and with them the unbuilt patches whose shells an asking ray entered before its
+request's exit (or its hit, if nearer): their shells overlap the request's along the ray, so
+the surface that shell hides may lie beyond their entries and the ray would ask for them
+next. Taking them a round early saves rounds (each a pass of every asking ray) where shells
+overlap, as those of a coarse cage's patches do; a shell that begins past the request's exit
+(an object hidden behind another) waits for a round that shows it is reached. Then another
+round runs for the rays that asked, each going through just the unbuilt shells it
+remembers. This is the refinement criterion: a patch is refined only when a ray reaches its
+shell before any closer hit.
 """
 
 from __future__ import annotations
@@ -235,7 +238,16 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
                         req_x = slab_range(ox, oy, oz, ix, iy, iz, shell_min[p, 0],
                                            shell_min[p, 1], shell_min[p, 2], shell_max[p, 0],
                                            shell_max[p, 1], shell_max[p, 2], 0.0, np.inf)[1]
-            request[r] = req if req_t < hit[H_T] else -1
-            cands.reach[r] = min(req_x, hit[H_T])
-            cands.count[r] = n_c if n_c <= CANDIDATES else -1 - CANDIDATES
+            request[r] = -1
+            if req_t < hit[H_T]:
+                # the request, and the unbuilt shells the ray entered before the request's
+                # exit (its surface may lie beyond their entries): built together (the
+                # flags are only ever set, so threads may race on them)
+                request[r] = req
+                cands.wanted[req] = 1
+                reach = min(req_x, hit[H_T])
+                for k in range(min(n_c, CANDIDATES)):
+                    if cands.t[r, k] < reach:
+                        cands.wanted[cands.patch[r, k]] = 1
+            cands.count[r] = n_c if n_c <= CANDIDATES else -1
             _store_hit(hit, hits, r)

@@ -84,12 +84,10 @@ class Candidates(NamedTuple):
 
     patch: np.ndarray  # (R, CANDIDATES) int32
     t: np.ndarray  # (R, CANDIDATES) float64: entry distances
-    # (R,) int8: how many; -1 - CANDIDATES when there were more (the first CANDIDATES met
-    # are kept: what the build may take besides the request, but the ray traverses again)
-    count: np.ndarray
-    # (R,) float32: where the ray's request could still hide a hit: the exit of its nearest
-    # unbuilt shell, or its best hit if nearer (``trace.build.requested_patches``)
-    reach: np.ndarray
+    count: np.ndarray  # (R,) int8: how many, or -1 when there were more than CANDIDATES
+    # (P,) uint8: 1 for each patch to build after the round (``trace/kernels.py``): the
+    # rays' requests and the unbuilt shells they enter within their requests' reach
+    wanted: np.ndarray
 
 
 class Hits(NamedTuple):
@@ -104,11 +102,12 @@ class Hits(NamedTuple):
     b: np.ndarray  # (R,) float64: the patch parameter v
 
 
-def candidate_lists(n_rays: int) -> Candidates:
-    """Empty candidate lists for ``n_rays`` rays (round 0 sets every ray's)."""
+def candidate_lists(n_rays: int, n_patches: int = 0) -> Candidates:
+    """Empty candidate lists for ``n_rays`` rays (round 0 sets every ray's) among
+    ``n_patches`` patches."""
     return Candidates(np.empty((n_rays, CANDIDATES), np.int32),
                       np.empty((n_rays, CANDIDATES)), np.empty(n_rays, np.int8),
-                      np.empty(n_rays, np.float32))
+                      np.zeros(n_patches, np.uint8))
 
 
 def hit_arrays(n_rays: int) -> Hits:
