@@ -296,3 +296,85 @@ def nurbs_grid(surface, n):
     H = np.einsum("ai,bj,jic->abc", Nu, Nv, surface.control)
     uv = np.stack(np.meshgrid(us, vs, indexing="ij"), axis=-1)
     return H[..., :3] / H[..., 3:], uv
+
+
+def boundary_recipe(level, f, sharp_edge):
+    """Plain-Python oracle of ``lines.items._boundary_recipes`` for one triangle: the 12
+    box-spline points of triangle ``f`` with corners on a boundary or an infinitely sharp
+    crease, or None.
+
+    A *regular crease vertex* has 3 faces on the triangle's side, between its two sharp
+    edges (a boundary vertex of 4 edges, or an interior one of 6 whose sharp edges are
+    opposite), and no other sharp edge. The lattice points beyond the crease are replaced by
+    the *phantom* points that mirror the triangle's side across a sharp edge (a, b):
+    ``a + b - r``, r the lattice point across (a, b) from it, so that the box spline's
+    smooth rules reproduce the crease rules there (edge: (3/8)(a + b) + (1/8)(r + a + b - r)
+    = (a + b) / 2; vertex: the ring's two phantoms add up to what the rule 3/4, 1/8, 1/8
+    needs), and the side's surface is that box spline (checked against the exact evaluator
+    in the tests). Returns ``(a, b, r)`` (12,) int64 each, the point ``a`` (b = r = -1) or
+    the phantom ``a + b - r``; None where some point cannot be so made (the triangle is
+    then isolated further)."""
+    from subtrace.patches.basis import BOX_POINTS, LATTICE_DIRS, TRI_CORNER, TRI_LEAD
+
+    fo, fv = level.face_offsets, level.face_verts
+    ve, veo = level.vert_edges, level.vert_edge_offsets
+    vf, vfo = level.vert_faces, level.vert_face_offsets
+    ev = level.edge_verts
+    at = {}
+    for k in range(3):
+        c = int(fv[fo[f] + k])
+        ring = ve[veo[c]:veo[c + 1]]
+        n = len(ring)
+        slot = int(np.nonzero(vf[vfo[c]:vfo[c + 1]] == f)[0][0])
+        cut = np.nonzero(sharp_edge[ring])[0]
+        if len(cut) == 0 and n == 6:
+            fan = np.roll(ring, -slot)  # a smooth regular corner: the whole ring
+            lead = 0
+        elif len(cut) == 2 and (n == 4 and list(cut) == [0, 3] or n == 6 and cut[1] - cut[0] == 3):
+            # the triangle's side: edges from the sharp one before the face to the next
+            s0 = cut[0] if cut[0] <= slot < cut[1] else cut[1]
+            fan = np.roll(ring, -s0)[:4]
+            lead = (slot - s0) % n
+        else:
+            return None
+        at[tuple(TRI_CORNER[k])] = c
+        for t in range(6):
+            m = lead + t if lead + t < len(fan) else lead + t - 6
+            if len(fan) == 4 and not 0 <= m < 4:
+                continue  # beyond the crease
+            e = fan[m % 6]
+            far = int(ev[e, 1] if ev[e, 0] == c else ev[e, 0])
+            q = tuple(TRI_CORNER[k] + LATTICE_DIRS[(TRI_LEAD[k] + t) % 6])
+            if at.setdefault(q, far) != far:
+                return None  # the ring does not lie on one lattice (not regular)
+    out = np.full((3, len(BOX_POINTS)), -1, dtype=np.int64)
+    for i, q in enumerate(BOX_POINTS.tolist()):
+        if tuple(q) in at:
+            out[0, i] = at[tuple(q)]
+            continue
+        for d in range(6):
+            a = tuple(np.add(q, LATTICE_DIRS[d]))
+            b = tuple(np.add(q, LATTICE_DIRS[(d + 1) % 6]))
+            r = tuple(np.add(a, LATTICE_DIRS[(d + 1) % 6]))
+            if a in at and b in at and r in at and _edge_flag(level, at[a], at[b], sharp_edge):
+                out[:, i] = at[a], at[b], at[r]
+                break
+        else:
+            return None
+    return out[0], out[1], out[2]
+
+
+def _edge_is(level, a, b, flag):
+    """``flag`` of the edge joining vertices a and b (False if there is none)."""
+    for e in level.vert_edges[level.vert_edge_offsets[a]:level.vert_edge_offsets[a + 1]]:
+        if b in level.edge_verts[e]:
+            return bool(flag[e])
+    return False
+
+
+def _edge_flag(level, a, b, flag):
+    """``flag`` of the edge joining vertices a and b (False if there is none)."""
+    for e in level.vert_edges[level.vert_edge_offsets[a]:level.vert_edge_offsets[a + 1]]:
+        if b in level.edge_verts[e]:
+            return bool(flag[e])
+    return False

@@ -276,9 +276,7 @@ def loop_regular(level, options, faces) -> np.ndarray:
     maybe = np.nonzero(tri & ~ok & (inner | border).all(axis=1) & border.any(axis=1)
                        & ~level.face_hole[faces])[0]
     if len(maybe):
-        sharp = level.edge_sharpness >= INF_SHARP
-        for i in maybe:
-            ok[i] = _boundary_recipe(level, int(faces[i]), sharp) is not None
+        ok[maybe] = _boundary_recipes(level, faces[maybe], level.edge_sharpness >= INF_SHARP)[0]
     return ok
 
 
@@ -298,15 +296,24 @@ def box_nets(level, points, faces) -> np.ndarray:
                 level.vert_edge_offsets, level.vert_edges, level.edge_verts,
                 faces[rows], _RING_SLOT, ids)
     X[rows] = points[ids]
-    for i in np.nonzero(~inner)[0]:
-        a, b, r = _boundary_recipe(level, int(faces[i]), sharp)
-        X[i] = points[a] + np.where(b[:, None] >= 0, points[b] - points[r], 0.0)
+    border = np.nonzero(~inner)[0]
+    if len(border):
+        _, abr = _boundary_recipes(level, faces[border], sharp)
+        a, b, r = abr[:, 0], abr[:, 1], abr[:, 2]
+        X[border] = points[a] + np.where(b[..., None] >= 0, points[b] - points[r], 0.0)
     return np.ascontiguousarray(np.matmul(BOX_TO_TRI, X))
 
 
 def _boundary_recipe(level, f, sharp_edge):
     """The 12 box-spline points of triangle ``f`` with corners on a boundary or an
-    infinitely sharp crease, or None.
+    infinitely sharp crease, or None (:func:`_boundary_recipes` for one triangle)."""
+    ok, out = _boundary_recipes(level, np.array([f], np.int64), sharp_edge)
+    return (out[0, 0], out[0, 1], out[0, 2]) if ok[0] else None
+
+
+def _boundary_recipes(level, faces, sharp_edge):
+    """Per triangle of ``faces`` with corners on a boundary or an infinitely sharp crease:
+    whether its 12 box-spline points can be made, and ``(a, b, r)`` for each (m,3,12).
 
     A *regular crease vertex* has 3 faces on the triangle's side, between its two sharp
     edges (a boundary vertex of 4 edges, or an interior one of 6 whose sharp edges are
@@ -316,62 +323,114 @@ def _boundary_recipe(level, f, sharp_edge):
     smooth rules reproduce the crease rules there (edge: (3/8)(a + b) + (1/8)(r + a + b - r)
     = (a + b) / 2; vertex: the ring's two phantoms add up to what the rule 3/4, 1/8, 1/8
     needs), and the side's surface is that box spline (checked against the exact evaluator
-    in the tests). Returns ``(a, b, r)`` (12,) int64 each, the point ``a`` (b = r = -1) or
-    the phantom ``a + b - r``; None where some point cannot be so made (the triangle is
-    then isolated further)."""
-    fo, fv = level.face_offsets, level.face_verts
-    ve, veo = level.vert_edges, level.vert_edge_offsets
-    vf, vfo = level.vert_faces, level.vert_face_offsets
-    ev = level.edge_verts
-    at = {}
-    for k in range(3):
-        c = int(fv[fo[f] + k])
-        ring = ve[veo[c]:veo[c + 1]]
-        n = len(ring)
-        slot = int(np.nonzero(vf[vfo[c]:vfo[c + 1]] == f)[0][0])
-        cut = np.nonzero(sharp_edge[ring])[0]
-        if len(cut) == 0 and n == 6:
-            fan = np.roll(ring, -slot)  # a smooth regular corner: the whole ring
-            lead = 0
-        elif len(cut) == 2 and (n == 4 and list(cut) == [0, 3] or n == 6 and cut[1] - cut[0] == 3):
-            # the triangle's side: edges from the sharp one before the face to the next
-            s0 = cut[0] if cut[0] <= slot < cut[1] else cut[1]
-            fan = np.roll(ring, -s0)[:4]
-            lead = (slot - s0) % n
-        else:
-            return None
-        at[tuple(TRI_CORNER[k])] = c
-        for t in range(6):
-            m = lead + t if lead + t < len(fan) else lead + t - 6
-            if len(fan) == 4 and not 0 <= m < 4:
-                continue  # beyond the crease
-            e = fan[m % 6]
-            far = int(ev[e, 1] if ev[e, 0] == c else ev[e, 0])
-            q = tuple(TRI_CORNER[k] + LATTICE_DIRS[(TRI_LEAD[k] + t) % 6])
-            if at.setdefault(q, far) != far:
-                return None  # the ring does not lie on one lattice (not regular)
-    out = np.full((3, len(BOX_POINTS)), -1, dtype=np.int64)
-    for i, q in enumerate(BOX_POINTS.tolist()):
-        if tuple(q) in at:
-            out[0, i] = at[tuple(q)]
-            continue
-        for d in range(6):
-            a = tuple(np.add(q, LATTICE_DIRS[d]))
-            b = tuple(np.add(q, LATTICE_DIRS[(d + 1) % 6]))
-            r = tuple(np.add(a, LATTICE_DIRS[(d + 1) % 6]))
-            if a in at and b in at and r in at and _edge_is(level, at[a], at[b], sharp_edge):
-                out[:, i] = at[a], at[b], at[r]
+    in the tests). Point k is ``a`` (b = r = -1) or the phantom ``a + b - r``; a triangle
+    where some point cannot be so made is not regular (it is isolated further)."""
+    faces = np.asarray(faces, dtype=np.int64)
+    out = np.full((len(faces), 3, len(BOX_POINTS)), -1, dtype=np.int64)
+    ok = np.zeros(len(faces), dtype=np.bool_)
+    _recipes(level.face_offsets, level.face_verts, level.vert_face_offsets, level.vert_faces,
+             level.vert_edge_offsets, level.vert_edges, level.edge_verts,
+             np.ascontiguousarray(sharp_edge, dtype=np.bool_), faces, _LATTICE, out, ok)
+    return ok, out
+
+
+# lattice constants of _recipes: corners, directions, each corner's leading direction, the
+# box points; coordinates reach -3 .. 4 (a phantom's r), offset by _AT_OFF in its table
+_LATTICE = (TRI_CORNER.astype(np.int64), LATTICE_DIRS.astype(np.int64),
+            TRI_LEAD.astype(np.int64), BOX_POINTS.astype(np.int64))
+_AT_OFF = 4
+
+
+@nb.njit(cache=True)
+def _recipes(fo, fv, vfo, vf, veo, ve, ev, sharp, faces, lattice, out, ok):
+    """:func:`_boundary_recipes`: per face, the lattice point -> vertex table ``at`` of its
+    corners' rings (the whole ring of a smooth valence-6 corner, the triangle's side of a
+    regular crease vertex), then each box point from it or as a phantom."""
+    corner, dirs, lead_dir, box = lattice
+    at = np.empty((2 * _AT_OFF + 2, 2 * _AT_OFF + 2), np.int64)
+    fan = np.empty(6, np.int64)
+    for m in range(len(faces)):
+        f = faces[m]
+        at[:] = -1
+        good = True
+        for k in range(3):
+            c = fv[fo[f] + k]
+            r0, n = veo[c], veo[c + 1] - veo[c]
+            slot = 0
+            while vf[vfo[c] + slot] != f:
+                slot += 1
+            n_cut = 0
+            cut0 = cut1 = -1
+            for t in range(n):
+                if sharp[ve[r0 + t]]:
+                    n_cut += 1
+                    if cut0 < 0:
+                        cut0 = t
+                    else:
+                        cut1 = t
+            if n_cut == 0 and n == 6:  # a smooth regular corner: the whole ring
+                n_fan = 6
+                for t in range(6):
+                    fan[t] = ve[r0 + (slot + t) % n]
+                lead = 0
+            elif n_cut == 2 and ((n == 4 and cut0 == 0 and cut1 == 3)
+                                 or (n == 6 and cut1 - cut0 == 3)):
+                # the triangle's side: edges from the sharp one before the face to the next
+                s0 = cut0 if cut0 <= slot < cut1 else cut1
+                n_fan = 4
+                for t in range(4):
+                    fan[t] = ve[r0 + (s0 + t) % n]
+                lead = (slot - s0) % n
+            else:
+                good = False
                 break
-        else:
-            return None
-    return out[0], out[1], out[2]
+            at[corner[k, 0] + _AT_OFF, corner[k, 1] + _AT_OFF] = c
+            for t in range(6):
+                mm = lead + t if lead + t < n_fan else lead + t - 6
+                if n_fan == 4 and not 0 <= mm < 4:
+                    continue  # beyond the crease
+                e = fan[mm % 6]
+                far = ev[e, 1] if ev[e, 0] == c else ev[e, 0]
+                d = (lead_dir[k] + t) % 6
+                qi = corner[k, 0] + dirs[d, 0] + _AT_OFF
+                qj = corner[k, 1] + dirs[d, 1] + _AT_OFF
+                if at[qi, qj] < 0:
+                    at[qi, qj] = far
+                elif at[qi, qj] != far:
+                    good = False  # the ring does not lie on one lattice (not regular)
+                    break
+            if not good:
+                break
+        if not good:
+            continue
+        for i in range(len(box)):
+            qi, qj = box[i, 0] + _AT_OFF, box[i, 1] + _AT_OFF
+            if at[qi, qj] >= 0:
+                out[m, 0, i] = at[qi, qj]
+                continue
+            found = False
+            for d in range(6):
+                d1 = (d + 1) % 6
+                a = at[qi + dirs[d, 0], qj + dirs[d, 1]]
+                b = at[qi + dirs[d1, 0], qj + dirs[d1, 1]]
+                r = at[qi + dirs[d, 0] + dirs[d1, 0], qj + dirs[d, 1] + dirs[d1, 1]]
+                if a >= 0 and b >= 0 and r >= 0 and _edge_is(veo, ve, ev, a, b, sharp):
+                    out[m, 0, i], out[m, 1, i], out[m, 2, i] = a, b, r
+                    found = True
+                    break
+            if not found:
+                good = False
+                break
+        ok[m] = good
 
 
-def _edge_is(level, a, b, flag):
+@nb.njit(cache=True)
+def _edge_is(veo, ve, ev, a, b, flag):
     """``flag`` of the edge joining vertices a and b (False if there is none)."""
-    for e in level.vert_edges[level.vert_edge_offsets[a]:level.vert_edge_offsets[a + 1]]:
-        if b in level.edge_verts[e]:
-            return bool(flag[e])
+    for k in range(veo[a], veo[a + 1]):
+        e = ve[k]
+        if ev[e, 0] == b or ev[e, 1] == b:
+            return flag[e]
     return False
 
 
