@@ -10,7 +10,11 @@ half a turn: ``basis.TRI_SPLIT``), entering the children whose net boxes it hits
 first, until level ``d``. Each thread keeps what its rays split in its memo (the quads' memo,
 ``trace/bezier.py``: node boxes, the nets of inner nodes, three corner rows per cell), so a
 node is split and a cell evaluated once per thread (:func:`intersect_tri`); a full store
-makes the ray split on the spot (:func:`descend_tri`), which changes no hit.
+makes the ray split on the spot (:func:`descend_tri`), which changes no hit. The last split
+evaluates no nets: a node of level ``d - 1`` becomes its four cells at once, from its six
+grid points (:func:`_expand_cells`), each cell boxed by its own micro-triangle (three
+quarters of all splits are these; splitting their nets was half the trace time of a Loop
+cage with creases). A cell counts as a micro-triangle when a ray of the memo first tests it.
 
 A node at level ``l`` is the sub-triangle with corners ``A, A + g (h, 0), A + g (0, h)`` of
 the depth-``d`` grid (``h = 2^(d-l)``, ``g = +1`` upright, ``-1`` turned), grid vertex
@@ -383,11 +387,11 @@ def descend_tri(ray, src, s, g0, i0, j0, lev0, nets, nk, depth, fr, sides, srow,
 
 @leaf_njit
 def _expand_tri(node, lev, depth, mem, work):
-    """Split memo node ``node`` (its net stored): its four children with their boxes, and
-    their nets unless they are cells. Returns the first child, or -1 when a store is full."""
+    """Split memo node ``node`` (its net stored, level ``lev`` < depth - 1): its four
+    children with their boxes and nets. Returns the first child, or -1 when a store is
+    full."""
     root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
-    leaf = lev + 1 == depth
-    if cnt[M_NODES] + 4 > len(child) or (not leaf and cnt[M_NETS] + 4 > len(m_nets)):
+    if cnt[M_NODES] + 4 > len(child) or cnt[M_NETS] + 4 > len(m_nets):
         cnt[M_FULL] = 1
         return -1
     w = work.reshape((work.shape[0], 16, 3))
@@ -401,13 +405,11 @@ def _expand_tri(node, lev, depth, mem, work):
     for q in range(4):
         lo0, lo1, lo2, hi0, hi1, hi2 = tri_box(w, base + q)
         lo0, lo1, lo2, hi0, hi1, hi2 = pad_box(lo0, lo1, lo2, hi0, hi1, hi2)
-        row = NOT_YET
-        if not leaf:
-            row = cnt[M_NETS]
-            cnt[M_NETS] = row + 1
-            for p in range(16):
-                for c in range(3):
-                    mw[row, p, c] = w[base + q, p if p < N_TRI else N_TRI - 1, c]
+        row = cnt[M_NETS]
+        cnt[M_NETS] = row + 1
+        for p in range(16):
+            for c in range(3):
+                mw[row, p, c] = w[base + q, p if p < N_TRI else N_TRI - 1, c]
         m = cnt[M_NODES]
         cnt[M_NODES] = m + 1
         child[m] = -1
@@ -416,6 +418,57 @@ def _expand_tri(node, lev, depth, mem, work):
         data[m] = row
     child[node] = first
     return first
+
+
+@leaf_njit
+def _expand_cells(node, g, i, j, depth, root, nk, fr, sides, srow, samples, mem, lv):
+    """Split memo node ``node`` (g, i, j) of level ``depth - 1`` into its four cells: the
+    six grid points of its corners and side midpoints (:func:`grid_point`, the points every
+    cell of the patch shares bit for bit) into the cells' rows of the memo, each cell's box
+    the box of its three corners (the micro-triangle the rays test, snapped sides
+    included), its fourth row's first entry 0 until a ray tests it. No net is split: the
+    nets of cells are never needed. Returns the first child, or -1 when a store is full.
+    ``lv`` (>= 6, 3) is scratch."""
+    root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
+    if cnt[M_NODES] + 4 > len(child) or cnt[M_CELLS] + 4 > len(m_cells) // 4:
+        cnt[M_FULL] = 1
+        return -1
+    # lv rows: 0 A, 1 A + 2g (1,0), 2 A + 2g (0,1), 3 A + g (1,0), 4 A + g (0,1), 5 A + g (1,1)
+    for k in range(6):
+        a = i + g * (2 if k == 1 else (1 if k == 3 or k == 5 else 0))
+        b = j + g * (2 if k == 2 else (1 if k == 4 or k == 5 else 0))
+        lv[k, 0], lv[k, 1], lv[k, 2] = grid_point(root, nk, a, b, depth, fr, sides, srow,
+                                                  samples)
+    first = cnt[M_NODES]
+    for q in range(4):  # Loop's child order (_child); corners A, A + g (1,0), A + g (0,1)
+        r = cnt[M_CELLS]
+        cnt[M_CELLS] = r + 1
+        for c in range(3):
+            k = _CELL_CORNER[q][c]
+            m_cells[4 * r + c, 0] = lv[k, 0]
+            m_cells[4 * r + c, 1] = lv[k, 1]
+            m_cells[4 * r + c, 2] = lv[k, 2]
+        m_cells[4 * r + 3, 0] = 0.0  # (tested yet)
+        lo0 = min(m_cells[4 * r, 0], m_cells[4 * r + 1, 0], m_cells[4 * r + 2, 0])
+        lo1 = min(m_cells[4 * r, 1], m_cells[4 * r + 1, 1], m_cells[4 * r + 2, 1])
+        lo2 = min(m_cells[4 * r, 2], m_cells[4 * r + 1, 2], m_cells[4 * r + 2, 2])
+        hi0 = max(m_cells[4 * r, 0], m_cells[4 * r + 1, 0], m_cells[4 * r + 2, 0])
+        hi1 = max(m_cells[4 * r, 1], m_cells[4 * r + 1, 1], m_cells[4 * r + 2, 1])
+        hi2 = max(m_cells[4 * r, 2], m_cells[4 * r + 1, 2], m_cells[4 * r + 2, 2])
+        lo0, lo1, lo2, hi0, hi1, hi2 = pad_box(lo0, lo1, lo2, hi0, hi1, hi2)
+        m = cnt[M_NODES]
+        cnt[M_NODES] = m + 1
+        child[m] = -1
+        box[m, 0], box[m, 1], box[m, 2] = lo0, lo1, lo2
+        box[m, 3], box[m, 4], box[m, 5] = hi0, hi1, hi2
+        data[m] = r
+    child[node] = first
+    return first
+
+
+# the six points of _expand_cells (rows of lv) at each child's corners A, A + g' (1, 0),
+# A + g' (0, 1) (the middle child is turned: g' = -g)
+_CELL_CORNER = ((0, 3, 4), (3, 1, 5), (4, 5, 2), (5, 4, 3))
 
 
 # intersect_tri (about 80 lines) is not split: it is inlined into the trace kernel (through
@@ -473,40 +526,33 @@ def intersect_tri(ray, it, nets, nk, depth, fr, sides, samples, slack, hit, code
         if st_t[sp] >= hit[H_T]:  # a nearer hit was found since it was pushed
             continue
         node, g, i, j, lev = st[sp, 0], st[sp, 1], st[sp, 2], st[sp, 3], st[sp, 4]
-        if lev == depth:
+        if lev == depth:  # a cell (its corners evaluated when its parent was split)
             r = data[node]
-            if r == NOT_YET:
-                if cnt[M_CELLS] < len(m_cells) // 4:
-                    r = data[node] = cnt[M_CELLS]
-                    cnt[M_CELLS] = r + 1
-                    _tri_points(root, nk, i, j, g, depth, fr, sides, it, samples, m_cells,
-                                4 * r)
-                    tested += 1
-                else:
-                    cnt[M_FULL] = 1
-            if r >= 0:
-                _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, m_cells, 4 * r, i, j, g, depth,
-                         slack, hit, code, it)
-            else:  # no room: evaluated on the spot
-                _tri_points(root, nk, i, j, g, depth, fr, sides, it, samples, lv, 0)
-                _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, 0, i, j, g, depth, slack, hit,
-                         code, it)
+            if m_cells[4 * r + 3, 0] == 0.0:  # the first ray of the memo to test it
+                m_cells[4 * r + 3, 0] = 1.0
                 tested += 1
+            _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, m_cells, 4 * r, i, j, g, depth,
+                     slack, hit, code, it)
             continue
         c = child[node]
         if c < 0:
-            c = _expand_tri(node, lev, depth, mem, work)
+            if lev + 1 == depth:
+                c = _expand_cells(node, g, i, j, depth, root, nk, fr, sides, it, samples, mem,
+                                  lv)
+            else:
+                c = _expand_tri(node, lev, depth, mem, work)
             if c < 0:  # a store is full: split per ray below this node
                 tested += descend_tri(ray, m_nets, data[node], g, i, j, lev, nets, nk, depth,
                                       fr, sides, it, samples, slack, hit, code, it, work, st,
                                       st_t, sp + 1, tmp_t, order, lv)
                 continue
-        # the children the ray enters, pushed far to near
+        # the children the ray enters, pushed far to near (a cell's box is its triangle's)
         n = 0
         hh = g * (1 << (depth - lev - 1))  # half the node's side, signed
         for q in range(4):
             cg, ci, cj = _child(g, i, j, lev, depth, q)
-            if _snapped_node(ci, cj, cg * abs(hh), lev + 1, depth, sides, it):
+            if lev + 1 < depth and _snapped_node(ci, cj, cg * abs(hh), lev + 1, depth, sides,
+                                                 it):
                 if sides[it, 3] >= 0:  # (see _push_children)
                     te = _snapped_entry(ox, oy, oz, ix, iy, iz, box[c + q, 0], box[c + q, 1],
                                         box[c + q, 2], box[c + q, 3], box[c + q, 4],
