@@ -303,17 +303,9 @@ def boundary_recipe(level, f, sharp_edge):
     box-spline points of triangle ``f`` with corners on a boundary or an infinitely sharp
     crease, or None.
 
-    A *regular crease vertex* has 3 faces on the triangle's side, between its two sharp
-    edges (a boundary vertex of 4 edges, or an interior one of 6 whose sharp edges are
-    opposite), and no other sharp edge. The lattice points beyond the crease are replaced by
-    the *phantom* points that mirror the triangle's side across a sharp edge (a, b):
-    ``a + b - r``, r the lattice point across (a, b) from it, so that the box spline's
-    smooth rules reproduce the crease rules there (edge: (3/8)(a + b) + (1/8)(r + a + b - r)
-    = (a + b) / 2; vertex: the ring's two phantoms add up to what the rule 3/4, 1/8, 1/8
-    needs), and the side's surface is that box spline (checked against the exact evaluator
-    in the tests). Returns ``(a, b, r)`` (12,) int64 each, the point ``a`` (b = r = -1) or
-    the phantom ``a + b - r``; None where some point cannot be so made (the triangle is
-    then isolated further)."""
+    The rules are in that function's docstring; here dictionaries of lattice points stand
+    for the kernel's fixed table. Returns ``(a, b, r)`` (12,) int64 each, the point ``a``
+    (b = r = -1) or the phantom ``a + b - r``; None where some point cannot be so made."""
     from subtrace.patches.basis import BOX_POINTS, LATTICE_DIRS, TRI_CORNER, TRI_LEAD
 
     fo, fv = level.face_offsets, level.face_verts

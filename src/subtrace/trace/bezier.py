@@ -30,7 +30,7 @@ from subtrace.patches.basis import (
 )
 from subtrace.trace.prims import (
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, M_CELLS, M_FULL, M_NETS, M_NODES, NOT_YET,
-    push_sorted, ray_triangle,
+    new_node, push_sorted, ray_triangle,
 )
 from subtrace.patches.groups import GROUP
 from subtrace.trace.tris import LOOP_CELL, TRI, intersect_tri, intersect_tri_cell
@@ -286,17 +286,6 @@ COUNTED = -3  # an item root: a one-cell piece (evaluated per ray) whose triangl
 
 
 @leaf_njit
-def _new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, row):
-    m = cnt[M_NODES]
-    cnt[M_NODES] = m + 1
-    child[m] = -1
-    box[m, 0], box[m, 1], box[m, 2] = lo0, lo1, lo2
-    box[m, 3], box[m, 4], box[m, 5] = hi0, hi1, hi2
-    data[m] = row
-    return m
-
-
-@leaf_njit
 def _store_net(m_nets, cnt, src, s):
     r = cnt[M_NETS]
     cnt[M_NETS] = r + 1
@@ -343,7 +332,7 @@ def _expand(node, parent, ci, cj, lev, pd, mem, work):
     first = cnt[M_NODES]
     for q in range(4):
         lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(work, base + q)
-        m = _new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, NOT_YET)
+        m = new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, NOT_YET)
         if lev + 1 == pd:  # a cell: its slab too
             _cell_slab(work, base + q, slab, m)
     child[node] = first
@@ -428,7 +417,7 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch):
                         root_m[it] = COUNTED
                 continue
             lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(nets, nk)
-            node = _new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2,
+            node = new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2,
                              _store_net(m_nets, cnt, nets, nk))
             root_m[it] = node
         # stack rows: node, parent, i, j, level; st_t: entry distance when pushed

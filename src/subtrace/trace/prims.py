@@ -43,6 +43,18 @@ def memo_restart(root, cnt):
 
 
 @leaf_njit
+def new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, row):
+    """A new leaf node of a memo (``trace/bezier.py``): its box and data row; returns it."""
+    m = cnt[M_NODES]
+    cnt[M_NODES] = m + 1
+    child[m] = -1
+    box[m, 0], box[m, 1], box[m, 2] = lo0, lo1, lo2
+    box[m, 3], box[m, 4], box[m, 5] = hi0, hi1, hi2
+    data[m] = row
+    return m
+
+
+@leaf_njit
 def push_sorted(ent_t, ent_i, n, te, item):
     """Insert ``item`` with entry distance ``te`` into the first ``n`` entries of
     (ent_t, ent_i), kept in descending distance (so pushing them in order puts the nearest

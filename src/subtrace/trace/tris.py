@@ -52,7 +52,7 @@ from subtrace.patches.basis import (
 from subtrace.runtime.jit import inline_njit, leaf_njit
 from subtrace.trace.prims import (
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, M_CELLS, M_FULL, M_NETS, M_NODES, NOT_YET,
-    push_sorted, ray_triangle,
+    new_node, push_sorted, ray_triangle,
 )
 
 TRI = 2  # item kind of a Loop net (a regular patch, or a piece) in ``trace.pools.Pieces``
@@ -410,12 +410,7 @@ def _expand_tri(node, lev, depth, mem, work):
         for p in range(16):
             for c in range(3):
                 mw[row, p, c] = w[base + q, p if p < N_TRI else N_TRI - 1, c]
-        m = cnt[M_NODES]
-        cnt[M_NODES] = m + 1
-        child[m] = -1
-        box[m, 0], box[m, 1], box[m, 2] = lo0, lo1, lo2
-        box[m, 3], box[m, 4], box[m, 5] = hi0, hi1, hi2
-        data[m] = row
+        new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, row)
     child[node] = first
     return first
 
@@ -456,12 +451,7 @@ def _expand_cells(node, g, i, j, depth, root, nk, fr, sides, srow, samples, mem,
         hi1 = max(m_cells[4 * r, 1], m_cells[4 * r + 1, 1], m_cells[4 * r + 2, 1])
         hi2 = max(m_cells[4 * r, 2], m_cells[4 * r + 1, 2], m_cells[4 * r + 2, 2])
         lo0, lo1, lo2, hi0, hi1, hi2 = pad_box(lo0, lo1, lo2, hi0, hi1, hi2)
-        m = cnt[M_NODES]
-        cnt[M_NODES] = m + 1
-        child[m] = -1
-        box[m, 0], box[m, 1], box[m, 2] = lo0, lo1, lo2
-        box[m, 3], box[m, 4], box[m, 5] = hi0, hi1, hi2
-        data[m] = r
+        new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, r)
     child[node] = first
     return first
 
