@@ -23,7 +23,9 @@ A = (i, j) and orientation g (corners A, A + g (1, 0), A + g (0, 1), as
 ``(i + g/3, j + g/3) / 2``: with ``a, b`` the integer parts, upright at (a, b) when the
 fractional parts sum below 1, else turned at (a + 1, b + 1). Its code is 3 when its
 orientation differs from its parent's (the middle child), else ``g (i - 2 pi) + 2 g (j -
-2 pj)`` (0, 1, 2: the corner children in Loop's order).
+2 pj)`` (0, 1, 2: the corner children in Loop's order). The order among a node's children
+puts its items first (they are the coarsest pieces left there, the likeliest first hits:
+a hit found early bounds the boxes tested after it), then its subtrees.
 """
 
 from __future__ import annotations
@@ -31,6 +33,9 @@ from __future__ import annotations
 import numpy as np
 
 GROUP = 4  # item kind of a group row (trace/pools.Pieces; kinds 0-3: trace/bezier, tris)
+# the fewest items a subtree below the patch's own needs for a group row: a ray entering a
+# group tests its box besides its items', so a small group saves nothing
+MIN_GROUP = 4
 
 
 def child_codes(level, i0, j0, orient=None):
@@ -81,7 +86,10 @@ def grouped_layout(root, level, i0, j0, orient, lo, hi):
     m = int(root.max(initial=-1)) + 1
     codes = child_codes(level, i0, j0, orient)
     top = codes.shape[1] - 1
-    # depth-first order: by patch, then the child codes from the top of the tree down
+    # depth-first order: by patch, then from the top of the tree down by child, a node's
+    # own items (the larger pieces, which a ray hits first) before its subtrees
+    lev = np.asarray(level, np.int64)[:, None]
+    codes = codes + 4 * (lev > np.arange(top + 1)).astype(np.int8)
     order = np.lexsort(tuple(codes[:, l] for l in range(top, 0, -1)) + (root,))
     codes, root_s = codes[order], root[order]
     # subtree k of level l: the items whose patch and codes 1..l agree; a new subtree
@@ -96,7 +104,7 @@ def grouped_layout(root, level, i0, j0, orient, lo, hi):
         s = np.nonzero(new[l])[0]
         e = np.r_[s[1:], n]
         # (a subtree with the same items as a coarser kept group adds nothing)
-        keep = (e - s >= 2) & ~_kept_above(s, e, starts, ends, n)
+        keep = (e - s >= (2 if l == 0 else MIN_GROUP)) & ~_kept_above(s, e, starts, ends, n)
         starts.append(s[keep])
         ends.append(e[keep])
         levels.append(np.full(int(keep.sum()), l))
