@@ -263,6 +263,9 @@ GOOD = dict(eye=(0, 0, 5), target=(0, 0, 0), up=(0, 1, 0), fov_deg=40, width=64,
     [
         ({"target": (0, 0, 5)}, "target", "coincide"),
         ({"eye": (1e8, 0, 0), "target": (1e8, 0, 0)}, "target", "coincide"),
+        # (a distance that overflows is not a coincidence: found by fuzzing, seed 25)
+        ({"eye": (1e300, 0, 0), "target": (0, 0, 0)}, "eye", "beyond 1e+100"),
+        ({"target": (0, -1e200, 0)}, "target", "beyond 1e+100"),
         ({"up": (0, 0, 3)}, "up", "parallel"),
         ({"up": (0, 0, -1)}, "up", "parallel"),
         ({"up": (0, 0, 0)}, "up", "zero"),

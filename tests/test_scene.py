@@ -452,6 +452,7 @@ OVERRIDE_ERRORS = [
     ({"eye": "a,b,c"}, "--eye", "3 numbers"),
     ({"eye": "0, 0.5, 0"}, "--eye", "coincide"),
     ({"target": "0, 1, 5"}, "--target", "coincide"),
+    ({"eye": "1e300, 0, 0"}, "--eye", "beyond 1e+100"),
     ({"up": "0, -0.5, -5"}, "--up", "parallel"),
     ({"tolerance": 0}, "--tolerance", "greater than 0"),
     ({"tolerance_deg": "-1"}, "--tolerance-deg", "greater than 0"),

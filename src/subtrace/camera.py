@@ -327,14 +327,29 @@ def check_resolution(value, key: str) -> int:
     return int(value)
 
 
+# the farthest an eye or target may lie from the origin: squared distances (ray setup,
+# shells' distances) stay finite in float64 well past it
+MAX_VIEW_COORD = 1e100
+
+
 def check_view(eye, target, up) -> None:
     """eye != target and up not parallel to the view direction; SceneError otherwise.
 
-    The error's key is ``target`` for eye == target and ``up`` for a parallel up.
+    The error's key is ``eye`` or ``target`` for one too far from the origin
+    (``MAX_VIEW_COORD``), ``target`` for eye == target and ``up`` for a parallel up.
     """
-    d = np.subtract(target, eye, dtype=np.float64)
-    dist = float(np.linalg.norm(d))
-    scale = max(float(np.linalg.norm(eye)), float(np.linalg.norm(target)))
+    with np.errstate(over="ignore", invalid="ignore"):
+        d = np.subtract(target, eye, dtype=np.float64)
+        dist = float(np.linalg.norm(d))
+        far_eye = float(np.linalg.norm(eye))
+        scale = max(far_eye, float(np.linalg.norm(target)))
+    if not (math.isfinite(dist) and scale <= MAX_VIEW_COORD):
+        which, where = ("eye", eye) if not far_eye <= MAX_VIEW_COORD else ("target", target)
+        raise SceneError(
+            f"{which} {_fmt(where)} lies beyond {MAX_VIEW_COORD:g} from the origin, where the "
+            "camera's distances overflow; scale the scene down or move it nearer the origin",
+            key=which,
+        )
     if not dist > 4.0 * np.finfo(np.float64).eps * scale or dist == 0.0:
         raise SceneError(
             f"eye {_fmt(eye)} and target {_fmt(target)} coincide; the camera needs a view "
