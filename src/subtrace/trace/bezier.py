@@ -87,7 +87,7 @@ def _cell_slab(net, s, slab, m):
     slab[m, 3], slab[m, 4] = lo - pad, hi + pad
 
 
-@leaf_njit
+@inline_njit
 def _cell_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, box, slab, c, tmax):
     """Entry distance of the ray into the box of cell node ``c`` cut by its slab; inf when
     the ray misses either before ``tmax``. (The ray's stretch between the planes is widened
@@ -205,7 +205,7 @@ def _record(hit, t, code, item, depth, lp, a, b, c, ba, bb, bc):
     hit[H_B2] = ba * lp[a, 1] + bb * lp[b, 1] + bc * lp[c, 1]
 
 
-@leaf_njit
+@inline_njit
 def tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, v0, lp, slack, hit, code, item, depth):
     """The two triangles (0,1,2), (0,2,3) of the cell ``lv[v0 : v0+4]`` (root parameters
     ``lp[:4]``)."""
