@@ -520,29 +520,6 @@ def background_rows(top, bottom, height) -> np.ndarray:
     return (1.0 - w) * top + w * np.asarray(bottom, np.float64)
 
 
-@nb.njit(cache=True)
-def _ground_points(frame, width, rays, dirs, up, height, points, down):
-    """Where rays ``rays`` (pixel centres, or rows of ``dirs``) from the eye meet the plane
-    p . up = height going down: (n,) bool, ``points`` (n,3) and ``down`` (n,) (d . up)
-    written where True."""
-    on = np.zeros(len(rays), np.bool_)
-    e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
-    for k in range(len(rays)):
-        dx, dy, dz = _direction(frame, width, dirs, rays[k])
-        dn = dx * up[0] + dy * up[1] + dz * up[2]
-        if not dn < 0.0:
-            continue
-        t = (height - e_up) / dn
-        if not (t > 0.0 and t < np.inf):
-            continue
-        on[k] = True
-        down[k] = dn
-        points[k, 0] = frame[0, 0] + t * dx
-        points[k, 1] = frame[0, 1] + t * dy
-        points[k, 2] = frame[0, 2] + t * dz
-    return on
-
-
 def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight, color, rows,
                   planes, dirs=None):
     """Where the primary ray missed every surface and meets the ground plane (points p with
@@ -553,83 +530,133 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
     hold back (``trace``: as for :func:`shadow_visibility`; None: no shadows). The ground
     is part of the background: alpha and the other channels keep
     saying "no hit" (the EXR's coverage is the surface's). Returns the number of ground
-    pixels. ``dirs``: as for :func:`shade` (then ``rows`` (n,3): each ray's background)."""
+    pixels. ``dirs``: as for :func:`shade` (then ``rows`` (n,3): each ray's background).
+    Without shadows one pass over the missed pixels does it all (:func:`_ground_shade`);
+    with them the ground points and their shadow rays come first."""
     miss = np.nonzero(pix_patch < 0)[0]
-    points = np.empty((len(miss), 3))
-    down = np.empty(len(miss))
-    on = _ground_points(frame, width, miss, _no_dirs() if dirs is None else dirs,
-                        np.asarray(up, np.float64), float(height), points, down)
-    miss, points, down = miss[on], points[on], down[on]
-    if not len(miss):
-        return 0
-    row = miss // width if dirs is None else miss
+    dirs = _no_dirs() if dirs is None else dirs
     up = np.asarray(up, np.float64)
-    to_light = np.empty((len(lights), len(miss), 3))
-    dist = np.empty((len(lights), len(miss)))
-    c = np.empty((len(lights), len(miss)))
-    _ground_light(lights, points, up, to_light, dist, c)
-    blocked = np.zeros((len(lights), len(miss)), np.uint8)
-    for k in range(len(lights) if trace is not None else 0):
-        facing = c[k] > 0.0
-        if facing.any():
-            blocked[k, facing] = trace(points[facing], to_light[k][facing], dist[k][facing])
+    blocked = np.zeros((len(lights), 0), np.uint8)
+    if trace is not None:
+        points = np.empty((len(miss), 3))
+        down = np.empty(len(miss))
+        on = _ground_points(frame, width, miss, dirs, up, float(height), points, down)
+        points = points[on]
+        to_light = np.empty((len(lights), len(points), 3))
+        dist = np.empty((len(lights), len(points)))
+        c = np.empty((len(lights), len(points)))
+        _ground_light(lights, points, up, to_light, dist, c)
+        blocked = np.zeros((len(lights), len(points)), np.uint8)
+        for k in range(len(lights)):
+            facing = c[k] > 0.0
+            if facing.any():
+                blocked[k, facing] = trace(points[facing], to_light[k][facing],
+                                           dist[k][facing])
     catcher = color is None
-    _ground_colour(down, float(headlight), c, blocked, lights,
-                   np.zeros(3) if catcher else np.asarray(color, np.float64), catcher,
-                   np.ascontiguousarray(rows, np.float64), row, miss, planes)
-    return len(miss)
+    return _ground_shade(frame, width, miss, dirs, up, float(height), lights,
+                         float(headlight), np.zeros(3) if catcher else np.asarray(color,
+                                                                                  np.float64),
+                         catcher, np.ascontiguousarray(rows, np.float64), blocked,
+                         trace is not None, planes)
+
+
+@nb.njit(cache=True)
+def _ground_hit(frame, width, dirs, r, up, e_up, height):
+    """Where ray r meets the ground plane going down: (hit, point x, y, z, d . up)."""
+    dx, dy, dz = _direction(frame, width, dirs, r)
+    dn = dx * up[0] + dy * up[1] + dz * up[2]
+    if not dn < 0.0:
+        return False, 0.0, 0.0, 0.0, dn
+    t = (height - e_up) / dn
+    if not (t > 0.0 and t < np.inf):
+        return False, 0.0, 0.0, 0.0, dn
+    return True, frame[0, 0] + t * dx, frame[0, 1] + t * dy, frame[0, 2] + t * dz, dn
+
+
+@nb.njit(cache=True)
+def _ground_points(frame, width, rays, dirs, up, height, points, down):
+    """Where rays ``rays`` (pixel centres, or rows of ``dirs``) from the eye meet the plane
+    p . up = height going down: (n,) bool, ``points`` (n,3) and ``down`` (n,) (d . up)
+    written where True."""
+    on = np.zeros(len(rays), np.bool_)
+    e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
+    for k in range(len(rays)):
+        hit, x, y, z, dn = _ground_hit(frame, width, dirs, rays[k], up, e_up, height)
+        if hit:
+            on[k] = True
+            down[k] = dn
+            points[k, 0], points[k, 1], points[k, 2] = x, y, z
+    return on
+
+
+@nb.njit(cache=True)
+def _ground_irradiance(lights, k, x, y, z, up):
+    """Light k at the ground point (x, y, z): the unit direction towards it, its distance
+    (inf: directional) and its irradiance there, the cosine with ``up`` times
+    1 / distance^2 for a point light (0 facing away), as :func:`toward_lights`."""
+    if lights[k, 0] == DIRECTIONAL:
+        lx, ly, lz = -lights[k, 1], -lights[k, 2], -lights[k, 3]
+        d, f = np.inf, 1.0
+    else:
+        lx, ly, lz = lights[k, 1] - x, lights[k, 2] - y, lights[k, 3] - z
+        d2 = lx * lx + ly * ly + lz * lz
+        d = np.sqrt(d2)
+        lx, ly, lz = lx / d, ly / d, lz / d
+        f = 1.0 / d2 if d2 > 0.0 else 0.0
+    return lx, ly, lz, d, max(lx * up[0] + ly * up[1] + lz * up[2], 0.0) * f
 
 
 @nb.njit(cache=True)
 def _ground_light(lights, points, up, to_light, dist, c):
     """For each light (rows of :func:`light_array`) and ground point: the unit direction
-    towards it, the distance (inf: directional) and its irradiance on the ground, the cosine
-    with ``up`` times 1 / distance^2 for a point light (0 facing away): as
-    :func:`toward_lights`, per point."""
+    towards it, the distance and its irradiance on the ground (:func:`_ground_irradiance`)."""
     for k in range(len(lights)):
         for i in range(len(points)):
-            if lights[k, 0] == DIRECTIONAL:
-                x, y, z = -lights[k, 1], -lights[k, 2], -lights[k, 3]
-                d, f = np.inf, 1.0
-            else:
-                x = lights[k, 1] - points[i, 0]
-                y = lights[k, 2] - points[i, 1]
-                z = lights[k, 3] - points[i, 2]
-                d2 = x * x + y * y + z * z
-                d = np.sqrt(d2)
-                x, y, z = x / d, y / d, z / d
-                f = 1.0 / d2 if d2 > 0.0 else 0.0
+            x, y, z, d, ck = _ground_irradiance(lights, k, points[i, 0], points[i, 1],
+                                                points[i, 2], up)
             to_light[k, i, 0], to_light[k, i, 1], to_light[k, i, 2] = x, y, z
             dist[k, i] = d
-            c[k, i] = max(x * up[0] + y * up[1] + z * up[2], 0.0) * f
+            c[k, i] = ck
 
 
 @nb.njit(cache=True)
-def _ground_colour(down, headlight, c, blocked, lights, color, catcher, rows, row, miss,
-                   planes):
-    """The ground's colour at pixels ``miss`` (see :func:`ground_pixels`): the headlight
-    (``-down`` its cosine) and each light's irradiance ``c`` where not ``blocked``; an
-    opaque ``color``, or (``catcher``) the background ``rows[row]`` darkened by the share
-    of the light held back."""
-    for i in range(len(miss)):
-        full = max(-down[i], 0.0) * headlight
+def _ground_shade(frame, width, miss, dirs, up, height, lights, headlight, color, catcher,
+                  rows, blocked, shadows, planes):
+    """The ground's colour at the missed pixels ``miss`` that see it (see
+    :func:`ground_pixels`): the headlight (``-d . up`` its cosine) and each light's
+    irradiance where not blocked (``shadows``: ``blocked[k, i]`` for the i-th ground pixel,
+    in order); an opaque ``color``, or (``catcher``) the background ``rows`` of the pixel
+    (its image row, or its own with ``dirs``) darkened by the share of the light held back.
+    Returns the number of ground pixels."""
+    e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
+    i = 0
+    for m in range(len(miss)):
+        r = miss[m]
+        hit, x, y, z, dn = _ground_hit(frame, width, dirs, r, up, e_up, height)
+        if not hit:
+            continue
+        full = max(-dn, 0.0) * headlight
         lit = full
-        r = g = b = full
+        cr = cg = cb = full
         for k in range(len(lights)):
-            full += c[k, i]
-            if blocked[k, i] == 0:
-                lit += c[k, i]
-                r += c[k, i] * lights[k, 4]
-                g += c[k, i] * lights[k, 5]
-                b += c[k, i] * lights[k, 6]
+            ck = _ground_irradiance(lights, k, x, y, z, up)[4]
+            full += ck
+            if not (shadows and blocked[k, i] != 0):
+                lit += ck
+                cr += ck * lights[k, 4]
+                cg += ck * lights[k, 5]
+                cb += ck * lights[k, 6]
         if catcher:
+            row = r if len(dirs) else r // width
             keep = 1.0 - (1.0 - lit / full if full > 0.0 else 0.0)
-            r, g, b = rows[row[i], 0] * keep, rows[row[i], 1] * keep, rows[row[i], 2] * keep
+            cr, cg, cb = rows[row, 0] * keep, rows[row, 1] * keep, rows[row, 2] * keep
         else:
-            r, g, b = r * color[0], g * color[1], b * color[2]
-        planes[C_R, miss[i]] = r
-        planes[C_R + 1, miss[i]] = g
-        planes[C_R + 2, miss[i]] = b
+            cr, cg, cb = cr * color[0], cg * color[1], cb * color[2]
+        planes[C_R, r] = cr
+        planes[C_R + 1, r] = cg
+        planes[C_R + 2, r] = cb
+        i += 1
+    return i
 
 
 def edge_pixels(planes, width, height) -> np.ndarray:
