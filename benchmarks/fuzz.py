@@ -11,7 +11,13 @@ multi-line or traceback-bearing ``info`` error) is a crash and the input is save
 ``--out``. Command lines of ``render``, ``info`` and ``intersect`` with random valid and
 junk option values (as often as renders) must end with exit 0, or exit 2 and one error
 line, with no temporary left. Free-form (NURBS) OBJ statements are in the corpus's ff_*
-files, so their mutations are read and rendered too. Prints inputs tried, outcomes by kind,
+files, so their mutations are read and rendered too. USD stages (a text ``.usda`` written
+here with ``pxr``: subdivision tags, creases, corners, holes, a transform, a camera, a
+distant light, time samples) and the mesh formats read through trimesh (``.ply`` text and
+binary, ``.stl``, ``.off``, ``.gltf``, ``.glb``, written here from the cube) are mutated the
+same way and go through ``subtrace info`` (USD in a process of its own: a fault in the native
+reader must not end the fuzzer) and, for a fraction, ``subtrace render``; each kind is left
+out with a line when its optional library is missing. Prints inputs tried, outcomes by kind,
 and crashes.
 
     python benchmarks/fuzz.py --seconds 3600 [--seed N] [--out fuzz_crashes] [--timeout 10]
@@ -62,6 +68,109 @@ def seeds() -> tuple[list[bytes], list[bytes]]:
     return objs, tomls
 
 
+USDA_SEED = """#usda 1.0
+(
+    defaultPrim = "World"
+    startTimeCode = 1
+    endTimeCode = 3
+    upAxis = "Y"
+)
+
+def Xform "World"
+{
+    def Mesh "Cage" (
+        prepend apiSchemas = ["MaterialBindingAPI"]
+    )
+    {
+        int[] cornerIndices = [0, 6]
+        float[] cornerSharpnesses = [2, 10]
+        int[] creaseIndices = [0, 1, 2, 3, 0]
+        int[] creaseLengths = [5]
+        float[] creaseSharpnesses = [1.5]
+        int[] faceVertexCounts = [4, 4, 4, 4, 4, 3, 3]
+        int[] faceVertexIndices = [0, 3, 2, 1, 4, 5, 6, 7, 0, 1, 5, 4, 2, 3, 7, 6, 1, 2, 6, 0, 4, 7, 3, 2, 6, 5]
+        int[] holeIndices = [1]
+        uniform token interpolateBoundary = "edgeAndCorner"
+        point3f[] points.timeSamples = {
+            1: [(-1, -1, -1), (1, -1, -1), (1, 1, -1), (-1, 1, -1), (-1, -1, 1), (1, -1, 1), (1, 1, 1), (-1, 1, 1)],
+            3: [(-1, -1, -1), (1, -1, -1), (1, 2, -1), (-1, 1, -1), (-1, -1, 1), (1, -1, 1), (1, 1, 1), (-1, 1, 2)],
+        }
+        color3f[] primvars:displayColor = [(0.8, 0.3, 0.2)]
+        uniform token subdivisionScheme = "catmullClark"
+        uniform token triangleSubdivisionRule = "smooth"
+        token visibility = "inherited"
+        double3 xformOp:translate = (0.5, 0, 0)
+        float3 xformOp:rotateXYZ.timeSamples = {1: (0, 0, 0), 3: (0, 90, 0)}
+        uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateXYZ"]
+    }
+
+    def Mesh "Tris"
+    {
+        int[] faceVertexCounts = [3, 3, 3, 3]
+        int[] faceVertexIndices = [0, 1, 2, 0, 2, 3, 0, 3, 1, 1, 3, 2]
+        point3f[] points = [(3, 0, 0), (4, 0, 0), (3, 1, 0), (3, 0, 1)]
+        uniform token subdivisionScheme = "catmullClark"
+        uniform token triangleSubdivisionRule = "smooth"
+        uniform token purpose = "default"
+    }
+
+    def Camera "Cam"
+    {
+        float focalLength = 35
+        float horizontalAperture = 36
+        float verticalAperture = 24
+        float2 clippingRange = (0.1, 1000)
+        double3 xformOp:translate = (0, 1, 8)
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }
+
+    def DistantLight "Sun"
+    {
+        float inputs:intensity = 2
+        color3f inputs:color = (1, 0.9, 0.8)
+        float3 xformOp:rotateXYZ = (-45, 30, 0)
+        uniform token[] xformOpOrder = ["xformOp:rotateXYZ"]
+    }
+}
+"""
+
+
+def format_seeds() -> list[tuple[str, bytes]]:
+    """(extension, bytes) of the USD and mesh-format seeds: the stage above (when ``pxr``
+    imports, so that the seed is one the installed reader opens) and the cube written by
+    trimesh in every format subtrace reads through it (when trimesh imports)."""
+    out = []
+    try:
+        from pxr import Usd
+    except ImportError:
+        print("fuzz: usd-core is not installed: no USD inputs", file=sys.stderr)
+    else:
+        stage = Usd.Stage.CreateInMemory()
+        stage.GetRootLayer().ImportFromString(USDA_SEED)
+        out.append((".usda", stage.GetRootLayer().ExportToString().encode()))
+    try:
+        import numpy as np
+        import trimesh
+    except ImportError:
+        print("fuzz: trimesh is not installed: no PLY, STL, OFF or glTF inputs", file=sys.stderr)
+        return out
+    from subtrace.io.obj import read_obj
+
+    d = read_obj(CORPUS / "cube.obj")
+    starts = np.concatenate([[0], np.cumsum(d.face_sizes)])
+    tris = [[d.face_verts[a], d.face_verts[a + k], d.face_verts[a + k + 1]]
+            for a, n in zip(starts[:-1], d.face_sizes) for k in range(1, n - 1)]
+    mesh = trimesh.Trimesh(d.points, np.array(tris), process=False)
+    for ext, kwargs in [(".ply", {"encoding": "ascii"}), (".ply", {"encoding": "binary"}),
+                        (".stl", {"file_type": "stl_ascii"}), (".stl", {}), (".off", {}),
+                        (".gltf", {}), (".glb", {})]:
+        data = mesh.export(file_type=kwargs.pop("file_type", ext[1:]), **kwargs)
+        if isinstance(data, dict):  # gltf: the JSON with its buffer embedded
+            data = trimesh.exchange.gltf.export_gltf(mesh, embed_buffers=True)["model.gltf"]
+        out.append((ext, data if isinstance(data, bytes) else data.encode()))
+    return out
+
+
 def mutate(rng: random.Random, data: bytes) -> tuple[bytes, str]:
     """One to three random mutations of ``data``; returns (bytes, names of mutations)."""
     names = []
@@ -97,6 +206,26 @@ def mutate(rng: random.Random, data: bytes) -> tuple[bytes, str]:
                 a, b = rng.choice(spans)
                 data = data[:a] + rng.choice(SWAPS) + data[b:]
     return data, "+".join(names)
+
+
+def check_info_process(path: Path, timeout: float) -> str:
+    """``subtrace info path`` in a process of its own (for USD: a fault in the native reader
+    must not end the fuzzer): "ok" (exit 0) or "info-error" (exit 2, one error line); raise
+    otherwise, ``Hang`` past ``timeout`` seconds."""
+    import subprocess
+
+    try:
+        proc = subprocess.run([sys.executable, "-m", "subtrace.cli", "info", str(path)],
+                              capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        raise Hang() from None
+    errors = [line for line in proc.stderr.splitlines()
+              if not line.startswith("subtrace: warning:")]
+    if proc.returncode == 0 and not errors:
+        return "ok"
+    if proc.returncode == 2 and len(errors) == 1 and errors[0].startswith("subtrace: error: "):
+        return "info-error"
+    raise AssertionError(f"info exit {proc.returncode}, stderr {proc.stderr[-2000:]!r}")
 
 
 def check(target: str, path: Path) -> str:
@@ -273,6 +402,7 @@ def main(argv=None) -> int:
     seed = args.seed if args.seed is not None else int(time.time())
     rng = random.Random(seed)
     objs, tomls = seeds()
+    formats = format_seeds()
     work = Path(args.out) / "work"
     work.mkdir(parents=True, exist_ok=True)
     (work / "cube.obj").write_bytes((CORPUS / "cube.obj").read_bytes())  # scenes' mesh
@@ -287,7 +417,8 @@ def main(argv=None) -> int:
     tried = 0
     t_end = time.monotonic() + args.seconds
     while time.monotonic() < t_end:
-        target = rng.choice(["obj", "obj", "info", "scene", "options"])
+        target = rng.choice(["obj", "obj", "info", "scene", "options"]
+                            + ["format"] * (2 if formats else 0))
         if target == "options":
             if rng.random() >= args.render_fraction:
                 continue  # (command lines run processes: as often as renders)
@@ -307,14 +438,24 @@ def main(argv=None) -> int:
                 crashes.append((name, kind))
                 print(f"crash: {kind} on options -> {name}", file=sys.stderr)
             continue
-        base = rng.choice(tomls if target == "scene" else objs)
+        if target == "format":  # USD and the mesh formats: read by `info`, or rendered
+            suffix, base = rng.choice(formats)
+            target = "usd" if suffix == ".usda" else "mesh"
+        else:
+            suffix = ".toml" if target == "scene" else ".obj"
+            base = rng.choice(tomls if target == "scene" else objs)
         data, how = mutate(rng, base)
-        path = work / ("input.toml" if target == "scene" else "input.obj")
+        for old in work.glob("input.*"):
+            old.unlink()
+        path = work / f"input{suffix}"
         path.write_bytes(data)
         tried += 1
+        if target == "mesh":
+            target = "info"  # in this process: trimesh is Python and numpy
         if target != "scene" and rng.random() < args.render_fraction:
             target = "render"
-        signal.setitimer(signal.ITIMER_REAL, 0 if target == "render" else args.timeout)
+        in_process = target not in ("render", "usd")
+        signal.setitimer(signal.ITIMER_REAL, args.timeout if in_process else 0)
         detail = None
         try:
             if target == "render":
@@ -323,6 +464,8 @@ def main(argv=None) -> int:
                 except Hang:  # a cold cache (another process edited the sources)? once more
                     warm_render_cache(work)
                     kind = check_render(path, args.render_timeout)
+            elif target == "usd":
+                kind = check_info_process(path, args.render_timeout)
             else:
                 kind = check(target, path)
         except Hang:
@@ -334,9 +477,10 @@ def main(argv=None) -> int:
             detail = None
         finally:
             signal.setitimer(signal.ITIMER_REAL, 0)
-        outcomes[(target, kind)] += 1
+        label = target if suffix in (".obj", ".toml") else f"{target} {suffix}"
+        outcomes[(label, kind)] += 1
         if kind.startswith("CRASH"):
-            name = Path(args.out) / f"crash_{len(crashes):04d}_{target}{path.suffix}"
+            name = Path(args.out) / f"crash_{len(crashes):04d}_{target}{suffix}"
             name.write_bytes(data)
             name.with_suffix(name.suffix + ".txt").write_text(
                 f"target {target}, mutations {how}, seed {seed}\n{detail or kind}\n")
@@ -344,7 +488,7 @@ def main(argv=None) -> int:
             print(f"crash: {kind} on {target} -> {name}", file=sys.stderr)
     print(f"seed {seed}: {tried} inputs in {args.seconds:.0f} s, {len(crashes)} crashes")
     for (target, kind), n in sorted(outcomes.items()):
-        print(f"  {target:7s} {kind:28s} {n}")
+        print(f"  {target:13s} {kind:28s} {n}")
     for name, kind in crashes[:20]:
         print(f"  crash {kind}: {name}")
     return 1 if crashes else 0

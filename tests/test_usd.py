@@ -190,6 +190,22 @@ def test_bad_stages_are_one_line(tmp_path, capsys, attrs, words):
     assert not (tmp_path / "x.exr").exists()
 
 
+def test_text_stage_with_a_byte_that_is_not_utf8_is_one_line(tmp_path, capsys):
+    """A .usda whose text holds a byte that is not UTF-8 (where USD's own error message
+    cannot even be turned into a string) is one line naming the file and the line."""
+    usd = tmp_path / "bad.usda"
+    stage, _, _ = _cube_stage(usd)
+    stage.Save()
+    lines = usd.read_bytes().split(b"\n")
+    lines[3] = lines[3] + b' "\xe3\x28"'
+    usd.write_bytes(b"\n".join(lines))
+    for command in (["render", str(usd), "-o", str(tmp_path / "x.exr")], ["info", str(usd)]):
+        assert main(command) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "bad.usda:4:" in err and "UTF-8" in err, err
+    assert not (tmp_path / "x.exr").exists()
+
+
 def test_stage_without_meshes_and_missing_camera(tmp_path, capsys):
     empty = tmp_path / "empty.usda"
     Usd.Stage.CreateNew(str(empty)).Save()
@@ -212,3 +228,110 @@ def test_bilinear_scheme_is_flat(tmp_path):
     P, _, _ = cage.evaluate(np.arange(6), np.full((6, 2), 0.5))
     # the face centres of the cube: one coordinate is +-1, the others 0
     np.testing.assert_allclose(np.sort(np.abs(P), axis=1), [[0, 0, 1]] * 6, atol=1e-12)
+
+
+def _animated_stage(path, *, points=True, camera=True, light=True, time_range=(1, 3)):
+    """A cube whose top corners rise over frames 1..3 (``points``), a camera that orbits
+    (``camera``: its rotation sampled, else still), a distant light that turns (``light``),
+    and the stage's time range (None: none authored)."""
+    stage, world, mesh = _cube_stage(path)
+    if points:
+        attr = mesh.GetPointsAttr()
+        attr.Clear()
+        for t in (1, 2, 3):
+            attr.Set([Gf.Vec3f(x, y + (0.4 * t if y > 0 else 0.0), z) for x, y, z in CUBE_PTS],
+                     Usd.TimeCode(t))
+    cam = UsdGeom.Camera.Define(stage, "/World/Cam")
+    rot = cam.AddRotateXYZOp()
+    if camera:
+        for t in (1, 2, 3):
+            rot.Set((-20.0, 25.0 * t, 0.0), Usd.TimeCode(t))
+    else:
+        rot.Set((-20.0, 25.0, 0.0))
+    cam.AddTranslateOp().Set((0.0, 0.0, 8.0))
+    if light:
+        sun = UsdLux.DistantLight.Define(stage, "/World/Sun")
+        turn = sun.AddRotateXYZOp()
+        for t in (1, 3):
+            turn.Set((-60.0, 60.0 * t, 0.0), Usd.TimeCode(t))
+    if time_range is not None:
+        stage.SetStartTimeCode(time_range[0])
+        stage.SetEndTimeCode(time_range[1])
+    stage.Save()
+    return stage
+
+
+def _still_of(animated, still_path, t):
+    """The animated stage at time ``t`` written again with every value a default (no time
+    samples): a stage that an independent reader must render as frame ``t``."""
+    src = Usd.Stage.Open(str(animated))
+    out = Usd.Stage.CreateNew(str(still_path))
+    for prim in src.Traverse():
+        dst = out.DefinePrim(prim.GetPath(), prim.GetTypeName())
+        for attr in prim.GetAttributes():
+            value = attr.Get(Usd.TimeCode(t)) if attr.HasAuthoredValue() else None
+            if value is not None:  # (fallbacks stay fallbacks)
+                dst.CreateAttribute(attr.GetName(), attr.GetTypeName(),
+                                    custom=attr.IsCustom()).Set(value)
+    out.Save()
+
+
+def test_stage_frames_are_its_time_samples(tmp_path, capsys):
+    """``--frames`` without --turntable renders the stage's time codes to numbered files:
+    frame t is, bit for bit, the render of the stage rewritten with its values at t as
+    still defaults (moving points, an orbiting camera, a turning light), and a render
+    without --frames is the first frame of the stage's authored range."""
+    usd = tmp_path / "anim.usda"
+    _animated_stage(usd)
+    size = ["--width", "64", "--height", "48", "--quiet"]
+    assert main(["render", str(usd), "-o", str(tmp_path / "f.#.exr"), "--frames", ":",
+                 *size]) == 0
+    assert sorted(p.name for p in tmp_path.glob("f.*.exr")) == ["f.1.exr", "f.2.exr",
+                                                                  "f.3.exr"]
+    frames = {t: read_exr(tmp_path / f"f.{t}.exr")[0] for t in (1, 2, 3)}
+    for t in (1, 2, 3):
+        _still_of(usd, tmp_path / f"still{t}.usda", t)
+        assert main(["render", str(tmp_path / f"still{t}.usda"), "-o",
+                     str(tmp_path / f"s{t}.exr"), *size]) == 0
+        still, _ = read_exr(tmp_path / f"s{t}.exr")
+        assert np.count_nonzero(still["A"]) > 300
+        for name in ("R", "G", "B", "A", "Z", "N.X", "u", "v", "patch_id"):
+            np.testing.assert_array_equal(frames[t][name], still[name], err_msg=f"{t} {name}")
+    assert not np.array_equal(frames[1]["Z"], frames[3]["Z"])  # it moves
+    assert main(["render", str(usd), "-o", str(tmp_path / "first.exr"), *size]) == 0
+    np.testing.assert_array_equal(read_exr(tmp_path / "first.exr")[0]["Z"], frames[1]["Z"])
+    capsys.readouterr()
+    assert main(["render", str(usd), "-o", str(tmp_path / "g.#.exr"), "--frames", "2:9",
+                 *size]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--frames" in err and "1..3" in err
+
+
+def test_stage_frames_without_a_range_and_cage_reuse(tmp_path):
+    """Without an authored time range the frames are the span of the time samples; a stage
+    whose meshes do not move (only its camera does) reads its cages once for every frame,
+    one whose points move reads them per frame."""
+    from subtrace.frames import frame_scenes
+    from subtrace.io.scene import scene_for_meshes
+    from subtrace.io.usd import is_animated, time_range
+
+    moving, still = tmp_path / "moving.usda", tmp_path / "still.usda"
+    _animated_stage(moving, time_range=None)
+    _animated_stage(still, points=False, light=False, time_range=None)
+    assert time_range(moving) == (1, 3) and time_range(still) == (1, 3)
+    assert is_animated(moving) and not is_animated(still)
+    jobs, cages = frame_scenes(scene_for_meshes([str(moving)]), frames="1:3")
+    assert [k for k, *_ in jobs] == [1, 2] and cages is None
+    jobs, cages = frame_scenes(scene_for_meshes([str(still)]), frames=":")
+    assert [k for k, *_ in jobs] == [1, 2, 3] and cages is not None
+    assert len({s.camera.eye for _, s, _, _ in jobs}) == 3  # the camera orbits
+
+
+def test_frames_of_a_stage_without_time_samples_is_one_line(tmp_path, capsys):
+    usd = tmp_path / "cube.usda"
+    stage, _, _ = _cube_stage(usd)
+    stage.Save()
+    assert main(["render", str(usd), "-o", str(tmp_path / "x.#.exr"), "--frames", "1:3"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no time samples" in err and "cube.usda" in err
+    assert not list(tmp_path.glob("x*"))

@@ -9,6 +9,12 @@ a run of ``#`` in the output name is the frame number padded to its length
 extension. One process renders every frame: the cages are read and checked once and the
 kernels loaded once; each frame then builds what its view needs.
 
+A scene of USD stages with time samples has frames of its own: without ``--turntable``,
+``--frames A:B[:STEP]`` picks time codes of the stages' frame range (``A:B`` as above, with
+A and B time codes; ``:`` all of them), and each frame reads the stages at its time code:
+the meshes (read once for every frame when no mesh is animated), and the camera and
+lights where the scene took them from a stage.
+
 :func:`render_frames` is the Python API of all of it (``subtrace.render_frames``): frames
 of a turntable or one image, a tile of each (``crop``) or each cut into tiles (``tile``),
 here or on a Dask cluster (``dask``: ``cluster.py``), leaving out frames already written
@@ -30,18 +36,20 @@ from subtrace.errors import SceneError
 PAD = 4  # digits of a frame number when the output name has no '#'
 
 
-def parse_frames(text: str | None, n_frames: int) -> range:
-    """The frames ``A:B[:STEP]`` of ``n_frames`` (None: all); SceneError naming --frames."""
+def parse_frames(text: str | None, n_frames: int, first: int = 0) -> range:
+    """The frames ``A:B[:STEP]`` of the ``n_frames`` numbered from ``first`` (None: all);
+    SceneError naming --frames."""
+    end = first + n_frames
     if text is None:
-        return range(n_frames)
+        return range(first, end)
     parts = text.split(":")
     try:
         if len(parts) == 1:
             a = int(parts[0])
             frames = range(a, a + 1)
         elif len(parts) in (2, 3):
-            a = int(parts[0]) if parts[0] else 0
-            b = int(parts[1]) if parts[1] else n_frames
+            a = int(parts[0]) if parts[0] else first
+            b = int(parts[1]) if parts[1] else end
             step = int(parts[2]) if len(parts) == 3 and parts[2] else 1
             if step <= 0:
                 raise ValueError
@@ -51,9 +59,73 @@ def parse_frames(text: str | None, n_frames: int) -> range:
     except ValueError:
         raise SceneError(f"expected A:B[:STEP] (frame numbers, a step > 0), got {text!r}",
                          key="--frames") from None
-    if not frames or frames.start < 0 or frames[-1] >= n_frames:
-        raise SceneError(f"{text!r} selects no frames of 0..{n_frames - 1}", key="--frames")
+    if not frames or frames.start < first or frames[-1] >= end:
+        raise SceneError(f"{text!r} selects no frames of {first}..{end - 1}"
+                         if not frames or frames[-1] < first or frames.start >= end else
+                         f"{text!r} goes beyond the frames {first}..{end - 1}", key="--frames")
     return frames
+
+
+def usd_stages(scene) -> list[str]:
+    """The USD stages of ``scene`` (its objects' and the one its camera or lights came
+    from), each once."""
+    from subtrace.io.usd import is_usd
+
+    paths = [o.mesh for o in scene.objects if is_usd(o.mesh)]
+    if scene.usd_source is not None:
+        paths.append(scene.usd_source[0])
+    return list(dict.fromkeys(os.path.abspath(p) for p in paths))
+
+
+def stage_frames(scene, frames: str) -> range:
+    """The time codes ``frames`` (A:B[:STEP]) picks of the frame range of ``scene``'s USD
+    stages (the union of theirs); SceneError naming --frames where there is none."""
+    from subtrace.io.usd import time_range
+
+    stages = usd_stages(scene)
+    spans = [s for s in map(time_range, stages) if s is not None]
+    if not spans:
+        raise SceneError("--frames picks frames of a camera path or of a USD stage's time "
+                         "samples: give --turntable N" if not stages else
+                         f"{stages[0]}: the stage has no time samples, so no frames: give "
+                         "--turntable N for a camera path", key="--frames")
+    first, last = min(a for a, _ in spans), max(b for _, b in spans)
+    return parse_frames(frames, last - first + 1, first)
+
+
+def scene_at_time(scene, time: float):
+    """``scene`` at a USD time code: its stages' meshes read at ``time``, and its camera
+    and lights too where they came from a stage."""
+    from subtrace.io.scene import Light
+    from subtrace.io.usd import is_usd, read_stage
+
+    out = dataclasses.replace(scene, objects=tuple(
+        dataclasses.replace(o, time=float(time)) if is_usd(o.mesh) else o
+        for o in scene.objects))
+    if scene.usd_source is None:
+        return out
+    stage, camera, lights = scene.usd_source
+    content = read_stage(stage, time)
+    cams = [c for c in content.cameras if c.prim == camera]
+    if cams:  # (a camera hidden at this time keeps the last one seen)
+        c = cams[0]
+        out = dataclasses.replace(out, camera=dataclasses.replace(
+            scene.camera, eye=c.eye, target=c.target, up=c.up, fov_deg=c.fov_deg))
+    if lights and content.lights:
+        out = dataclasses.replace(out, lights=tuple(
+            Light(tuple(float(x) for x in d), tuple(min(max(float(x), 0.0), 1.0) for x in col), float(i))
+            for d, col, i in content.lights))
+    return out
+
+
+def frame_numbers(scene, turntable=None, frames=None) -> range | None:
+    """The frames to render: of the turntable (``turntable`` N), else of the USD stages'
+    time samples (``frames`` given without a turntable); None for the one image."""
+    if turntable is not None:
+        return parse_frames(frames, check_turntable(turntable))
+    if frames is not None:
+        return stage_frames(scene, frames)
+    return None
 
 
 def frame_path(pattern: str, frame: int) -> str:
@@ -119,13 +191,17 @@ def frame_scenes(scene, turntable=None, frames=None, output=None, png=None):
     loaded = cages = load_objects(scene)  # once for every frame
     if any(has_surfaces(o.mesh) for o in scene.objects):
         cages = None  # (a render given cages leaves free-form surfaces out: each frame reads)
-    if turntable is None:
-        if frames is not None:
-            raise SceneError("--frames picks frames of a camera path: give --turntable N",
-                             key="--frames")
+    picked = frame_numbers(scene, turntable, frames)
+    if picked is None:
         return [(None, scene, out, png)], cages
+    if turntable is None:  # a USD stage's time codes
+        from subtrace.io.usd import is_animated
+
+        if any(map(is_animated, usd_stages(scene))):
+            cages = None  # each frame reads its meshes
+        return [(t, scene_at_time(scene, t), frame_path(out, t), png and frame_path(png, t))
+                for t in picked], cages
     n = check_turntable(turntable)
-    picked = parse_frames(frames, n)
     camera = scene.make_camera(*scene_bounds(loaded, load_nurbs(scene)))
     return [(k, apply_overrides(scene, target=tuple(camera.target), up=tuple(camera.up),
                                 fov=camera.fov_deg,
@@ -140,7 +216,8 @@ def render_frames(scene, output=None, *, turntable=None, frames=None, crop=None,
     TOML scene or an OBJ cage) to ``output`` (default: the scene's, else ``render.exr``):
 
     * ``turntable`` N: N frames orbiting the target (numbered outputs, :func:`frame_path`),
-      ``frames`` "A:B[:STEP]" of them; without it, the one image;
+      ``frames`` "A:B[:STEP]" of them; without it, ``frames`` picks time codes of the
+      scene's USD stages (:func:`stage_frames`), and without either, the one image;
     * ``crop`` (x0, y0, x1, y1): only that tile of each frame (an EXR's data window);
       ``tile`` N: each frame rendered as tiles of at most N x N pixels, put together;
     * ``dask``: False (here, the cages read once for every frame), None (a LocalCluster of
@@ -173,9 +250,9 @@ def render_frames(scene, output=None, *, turntable=None, frames=None, crop=None,
         tile = check_tile(tile)
         if crop is not None:
             raise SceneError("--crop renders one tile: leave out --tile", key="--tile")
-    if resume and turntable is None:
-        raise SceneError("it leaves out frames already rendered: give --turntable N",
-                         key="--resume")
+    if resume and turntable is None and frames is None:
+        raise SceneError("it leaves out frames already rendered: give --turntable N (or "
+                         "--frames of a USD stage)", key="--resume")
     jobs, cages = frame_scenes(scene, turntable, frames, out, png)
     results = {}
     if resume:
@@ -225,4 +302,4 @@ def _is_client(dask) -> bool:
 
 
 __all__ = ["parse_frames", "frame_path", "turntable_eye", "check_turntable", "render_frames",
-           "is_complete"]
+           "is_complete", "frame_numbers", "stage_frames", "scene_at_time", "usd_stages"]

@@ -253,7 +253,8 @@ def cage_objects(scene) -> list[int]:
 def load_objects(scene):
     """Cages of the scene's objects (scheme / boundary overrides applied), in the order of
     :func:`cage_objects`."""
-    return [load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code, prim=o.prim)
+    return [load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code, prim=o.prim,
+                      time=o.time)
             for o in (scene.objects[k] for k in cage_objects(scene))]
 
 

@@ -146,7 +146,9 @@ def _add_render(sub) -> argparse.ArgumentParser:
                              "one full turn, to numbered outputs (a run of # in -o is the "
                              "frame number, e.g. spin.####.exr; else .#### is added)")
     render.add_argument("--frames", metavar="A:B[:STEP]",
-                        help="only these frames of --turntable (Python's range; default all)")
+                        help="only these frames of --turntable (Python's range; default "
+                             "all); without --turntable, these time codes of a USD stage's "
+                             "animation (':' for all of them), each read at its time")
     render.add_argument("--dask", nargs="?", const="", metavar="ADDRESS",
                         help="render the frames as tasks on a Dask cluster: the scheduler at "
                              "ADDRESS (tcp://host:8786), or without one a local cluster of "
@@ -159,7 +161,7 @@ def _add_render(sub) -> argparse.ArgumentParser:
                         help="render in tiles of at most N x N pixels (with --dask: one task "
                              "per tile) and put them together")
     render.add_argument("--resume", action="store_true",
-                        help="with --turntable: leave out the frames whose output is already "
+                        help="with frames: leave out the frames whose output is already "
                              "there (a complete image: outputs are written whole or not at "
                              "all)")
     render.add_argument("--quiet", action="store_true", help="print nothing on success")

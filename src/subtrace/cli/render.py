@@ -12,7 +12,7 @@ from dataclasses import replace
 from subtrace.cli.common import set_up_numba
 from subtrace.data import default_scene_path
 from subtrace.errors import SceneError
-from subtrace.frames import check_turntable, frame_path, parse_frames
+from subtrace.frames import frame_numbers, frame_path
 from subtrace.io.atomic import check_writable
 from subtrace.io.formats import DEEP, picture_format
 from subtrace.io.scene import DEFAULT_SAMPLES, apply_overrides, load_scene, scene_for_meshes
@@ -75,19 +75,15 @@ def execute(args) -> int:
         tile = check_tile(tile)
         if crop is not None:
             raise SceneError("--crop renders one tile: leave out --tile", key="--tile")
-    if turntable is not None:
-        n = check_turntable(turntable)
-        paths = [p for k in parse_frames(args.frames, n)
-                 for p in (frame_path(out, k), png and frame_path(png, k))]
-    elif getattr(args, "frames", None) is not None:
-        raise SceneError("--frames picks frames of a camera path: give --turntable N",
-                         key="--frames")
+    numbers = frame_numbers(scene, turntable, getattr(args, "frames", None))
+    if numbers is not None:
+        paths = [p for k in numbers for p in (frame_path(out, k), png and frame_path(png, k))]
     elif resume:
-        raise SceneError("it leaves out frames already rendered: give --turntable N",
-                         key="--resume")
+        raise SceneError("it leaves out frames already rendered: give --turntable N (or "
+                         "--frames of a USD stage)", key="--resume")
     elif dask is not None and tile is None:
-        raise SceneError("its tasks are frames or tiles: give --turntable N or --tile N",
-                         key="--dask")
+        raise SceneError("its tasks are frames or tiles: give --turntable N, --frames of a "
+                         "USD stage, or --tile N", key="--dask")
     else:
         paths = [out, png]
     for path in paths:
@@ -99,7 +95,7 @@ def execute(args) -> int:
 
     set_up_numba(args)
     progress = ProgressBar() if sys.stderr.isatty() and not args.quiet else None
-    if turntable is None and tile is None and dask is None:
+    if numbers is None and tile is None and dask is None:
         result = render_scene(scene, threads=args.threads, accel=args.accel, progress=progress,
                               crop=crop)
         _write(args, scene, result, out, png, picture, bits)

@@ -158,6 +158,7 @@ class SceneObject:
     prim: str | None = None  # a USD stage's mesh prim ("/World/Body"); None: all its meshes
     specular: tuple[float, float, float] | None = None  # Ks; None: OBJ materials
     shininess: float | None = None  # Ns; None: OBJ materials
+    time: float | None = None  # a USD stage's time code; None: its still (io/usd.py)
 
     @property
     def boundary_code(self) -> int | None:
@@ -258,6 +259,9 @@ class Scene:
     output: str | None = None
     preview: str | None = None
     path: str | None = None
+    # a scene made from a USD stage: (its path, the camera prim the camera came from or
+    # None, whether the lights came from it): read again at each frame's time code
+    usd_source: tuple[str, str | None, bool] | None = None
 
     def make_camera(self, bounds_min=None, bounds_max=None, points=None) -> Camera:
         """See :meth:`CameraSettings.make_camera`."""
@@ -323,12 +327,14 @@ def scene_from_dict(d: dict, path=None, base_dir=None, *, text: str | None = Non
     )
 
 
-def scene_for_meshes(meshes, scheme: str | None = None, camera: str | None = None) -> Scene:
+def scene_for_meshes(meshes, scheme: str | None = None, camera: str | None = None,
+                     time: float | None = None) -> Scene:
     """A default scene for OBJ files named on the command line: the automatic camera at
     1280x720, a key and a fill light with shadows, a weak headlight, a soft vertical
     gradient and a shadow-catching ground below the objects (AUTO_*). A USD stage brings its
     meshes, its camera (``camera``: the prim path of one, default its first) and its distant
-    lights (:func:`subtrace.io.usd.usd_scene_table`), which replace the automatic ones.
+    lights (:func:`subtrace.io.usd.usd_scene_table`), which replace the automatic ones, all
+    at the time code ``time`` (None: the stage's still, :func:`subtrace.io.usd.read_stage`).
 
     Relative paths are relative to the working directory.
     """
@@ -339,8 +345,10 @@ def scene_for_meshes(meshes, scheme: str | None = None, camera: str | None = Non
         if not os.path.isfile(obj["mesh"]):
             raise SceneError("no such mesh file", path=obj["mesh"])
     table = {"object": objects}
+    usd = None
     if any(is_usd(o["mesh"]) for o in objects):
-        table = usd_scene_table(objects, camera)
+        table = usd_scene_table(objects, camera, time)
+        usd = table.pop("usd", None)
     elif camera is not None:
         raise SceneError("--camera names a USD camera prim: give a USD stage",
                          key="--camera")
@@ -358,6 +366,12 @@ def scene_for_meshes(meshes, scheme: str | None = None, camera: str | None = Non
     render = replace(scene.render, background=AUTO_BACKGROUND[0],
                      background_bottom=AUTO_BACKGROUND[1],
                      headlight_intensity=AUTO_HEADLIGHT)
+    if time is not None:
+        scene = replace(scene, objects=tuple(replace(o, time=float(time)) if is_usd(o.mesh)
+                                             else o for o in scene.objects))
+    if usd is not None:
+        scene = replace(scene, usd_source=(os.path.abspath(usd["stage"]), usd["camera"],
+                                           usd["lights"]))
     return replace(scene, camera=replace(scene.camera, width=AUTO_WIDTH, height=AUTO_HEIGHT),
                    render=render, lights=lights, ground=Ground())
 
@@ -912,6 +926,10 @@ def apply_overrides(
             cam_values[field] = _option(name, check, parse(given[name], name), _OPTION[name])
     if cam_values:
         cam = replace(cam, **cam_values)
+        if scene.usd_source is not None and cam_values.keys() - {"width", "height"}:
+            # the camera is the command line's now, not the stage's at each frame
+            scene = replace(scene, usd_source=(scene.usd_source[0], None,
+                                               scene.usd_source[2]))
         if cam.eye is None and cam.target is not None:
             raise SceneError(
                 "the scene has no camera eye: give --eye as well (alone it looks at the "

@@ -1,7 +1,9 @@
 """USD stages (``.usd``, ``.usda``, ``.usdc``, ``.usdz``) as subtrace cages, camera and lights.
 
 Reads through Pixar's ``usd-core`` (``pip install subtrace[usd]``), imported only when a
-stage is opened. What is read, at the stage's default time (or ``time``):
+stage is opened. What is read, at a time code ``time`` (:func:`read_stage`; None, for a still:
+the start of the stage's authored time range, else its earliest time samples, where an
+attribute has any, else the default values):
 
 * every ``UsdGeomMesh`` that is visible and of purpose ``default`` or ``render``, its points
   in world space (the prim's local-to-world transform), faces (``faceVertexCounts`` /
@@ -17,6 +19,9 @@ stage is opened. What is read, at the stage's default time (or ``time``):
   (``holeIndices``); a constant ``primvars:displayColor`` as the object's colour;
 * ``UsdGeomCamera`` prims (focal length and vertical aperture as the vertical field of
   view, the transform as eye, target and up); :func:`read_stage` returns them by path;
+* time: :func:`time_range` gives the frames (time codes) a stage animates, and
+  :func:`is_animated` whether its meshes change between them (points, topology, tags,
+  visibility or a transform above them), so frames of a still stage share one cage;
 * ``UsdLuxDistantLight`` as a directional light (its -Z axis in world space, colour, and
   intensity times 2^exposure relative to the brightest: USD's units are physical, a sun's
   default is 50,000, subtrace's are relative, 1 for a full light); other lights are
@@ -123,14 +128,42 @@ def open_stage(path):
         raise SubtraceError(f"{path}: no such file")
     if os.path.isdir(path):
         raise SubtraceError(f"{path}: is a directory, expected a USD stage")
+    _check_text(path)
     try:
         stage = pxr.Usd.Stage.Open(path)
     except Exception as exc:  # noqa: BLE001 - USD raises its own Tf errors
-        text = " ".join(str(exc).split())
-        raise SubtraceError(f"{path}: not a readable USD stage: {text[:300]}") from None
+        raise SubtraceError(f"{path}: not a readable USD stage: {_describe(exc)}") from None
     if stage is None:
         raise SubtraceError(f"{path}: not a readable USD stage")
     return stage
+
+
+def _check_text(path) -> None:
+    """A text stage (``#usda`` first) must be UTF-8: a bad byte is named by its line, as in
+    an OBJ file (USD's own parser reports it in a message that cannot be decoded)."""
+    from subtrace.io.text import BadByte, utf8_text
+
+    try:
+        with open(path, "rb") as f:
+            if f.read(5) != b"#usda":
+                return
+            data = b"#usda" + f.read()
+    except OSError as err:
+        raise SubtraceError(f"{path}: cannot read the file: {err.strerror or err}") from None
+    try:
+        utf8_text(data)
+    except BadByte as err:
+        raise SubtraceError(f"{path}:{err.line}: {err}; save the stage as UTF-8") from None
+
+
+def _describe(exc) -> str:
+    """One line (at most 300 characters) of a USD error: its text may hold bytes of the file
+    that are not UTF-8, and then ``str`` of the exception itself fails."""
+    try:
+        text = str(exc)
+    except Exception:  # noqa: BLE001 - (UnicodeDecodeError inside pxr.Tf)
+        text = "USD's error message could not be decoded"
+    return " ".join(text.split())[:300] or type(exc).__name__
 
 
 _CACHE: dict = {}  # the last stage read: (path, size, mtime, time) -> its content
@@ -147,7 +180,14 @@ def read_stage(path, time=None) -> UsdStageContent:
         key = None
     if key is not None and key in _CACHE:
         return _CACHE[key]
-    content = _read_stage(path, time)
+    try:
+        content = _read_stage(path, time)
+    except SubtraceError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - a Tf error from a prim or value USD rejects
+        if type(exc).__module__.split(".")[0] != "pxr":
+            raise
+        raise SubtraceError(f"{path}: not a readable USD stage: {_describe(exc)}") from None
     _CACHE.clear()
     if key is not None:
         _CACHE[key] = content
@@ -158,7 +198,7 @@ def _read_stage(path, time) -> UsdStageContent:
     stage = open_stage(path)
     pxr = _pxr(path)
     Usd, UsdGeom, UsdLux = pxr.Usd, pxr.UsdGeom, pxr.UsdLux
-    t = Usd.TimeCode.Default() if time is None else Usd.TimeCode(float(time))
+    t = _time_code(stage, Usd, time)
     out = UsdStageContent(path)
     cache = UsdGeom.XformCache(t)
     for prim in stage.Traverse():
@@ -188,6 +228,70 @@ def _read_stage(path, time) -> UsdStageContent:
     if top > 1.0:
         out.lights = [(d, c, i / top) for d, c, i in out.lights]
     return out
+
+
+def _time_code(stage, Usd, time):
+    """``time`` as a UsdTimeCode; None: the start of the authored time range, else the
+    earliest time (time samples where an attribute has them, else its default value)."""
+    if time is not None:
+        return Usd.TimeCode(float(time))
+    if stage.HasAuthoredTimeCodeRange():
+        return Usd.TimeCode(stage.GetStartTimeCode())
+    return Usd.TimeCode.EarliestTime()
+
+
+def _rendered_prims(stage, pxr):
+    """The prims that the stage's picture depends on: meshes, cameras, lights, and every
+    prim above them (their transforms)."""
+    UsdGeom, UsdLux = pxr.UsdGeom, pxr.UsdLux
+    seen = {}
+    for prim in stage.Traverse():
+        if prim.IsA(UsdGeom.Mesh) or prim.IsA(UsdGeom.Camera) or prim.HasAPI(UsdLux.LightAPI):
+            p = prim
+            while p and not p.IsPseudoRoot() and p.GetPath() not in seen:
+                seen[p.GetPath()] = p
+                p = p.GetParent()
+    return list(seen.values())
+
+
+def time_range(path) -> tuple[int, int] | None:
+    """(first, last) frame (whole time codes) of the stage ``path``: its authored
+    ``startTimeCode`` / ``endTimeCode``, else the span of the time samples of its meshes,
+    cameras, lights and their transforms; None when nothing in it is animated."""
+    path = os.fsdecode(os.fspath(path))
+    stage = open_stage(path)
+    if stage.HasAuthoredTimeCodeRange():
+        a, b = stage.GetStartTimeCode(), stage.GetEndTimeCode()
+    else:
+        times = [t for prim in _rendered_prims(stage, _pxr(path))
+                 for attr in prim.GetAttributes() for t in attr.GetTimeSamples()]
+        if not times:
+            return None
+        a, b = min(times), max(times)
+    if not (math.isfinite(a) and math.isfinite(b)) or b < a:
+        raise SubtraceError(f"{path}: its time range {a:g}..{b:g} is not a range of frames")
+    first, last = math.ceil(a), math.floor(b)
+    if last < first:
+        raise SubtraceError(f"{path}: its time range {a:g}..{b:g} holds no whole frame")
+    return int(first), int(last)
+
+
+def is_animated(path) -> bool:
+    """Whether a mesh of the stage ``path`` may change between time codes: an attribute of
+    the mesh prim (points, topology, tags, visibility) or a transform above it is
+    time-varying."""
+    path = os.fsdecode(os.fspath(path))
+    stage = open_stage(path)
+    pxr = _pxr(path)
+    for prim in stage.Traverse():
+        if not prim.IsA(pxr.UsdGeom.Mesh):
+            continue
+        p = prim
+        while p and not p.IsPseudoRoot():
+            if any(a.ValueMightBeTimeVarying() for a in p.GetAttributes()):
+                return True
+            p = p.GetParent()
+    return False
 
 
 def combined_mesh(content: UsdStageContent, prim: str | None) -> UsdMesh:
@@ -323,15 +427,17 @@ def _distant_light(light, matrix, t):
     return tuple(direction / np.linalg.norm(direction)), color, intensity * 2.0 ** exposure
 
 
-__all__ = ["read_stage", "open_stage", "is_usd", "combined_mesh", "UsdMesh", "UsdCamera", "UsdStageContent",
+__all__ = ["read_stage", "open_stage", "is_usd", "time_range", "is_animated", "combined_mesh", "UsdMesh", "UsdCamera", "UsdStageContent",
            "USD_EXTENSIONS"]
 
 
-def usd_scene_table(objects: list[dict], camera: str | None) -> dict:
+def usd_scene_table(objects: list[dict], camera: str | None, time=None) -> dict:
     """A scene table (as a TOML scene parses) for ``objects`` (``{"mesh": path}`` each)
     where the USD stages are replaced by one object per mesh prim (its displayColor as the
     object's colour) and the first stage's camera (``camera``: a prim path; default its
-    first camera, if it has one) and distant lights are the scene's."""
+    first camera, if it has one) and distant lights are the scene's, all read at ``time``
+    (:func:`read_stage`). The table's ``"usd"`` entry (taken out before the table is
+    parsed) names the stage, the camera prim and whether the lights came from it."""
     out: list[dict] = []
     table: dict = {"object": out}
     first = True
@@ -339,7 +445,7 @@ def usd_scene_table(objects: list[dict], camera: str | None) -> dict:
         if not is_usd(obj["mesh"]):
             out.append(obj)
             continue
-        content = read_stage(obj["mesh"])
+        content = read_stage(obj["mesh"], time)
         for m in content.meshes:
             item = {"mesh": obj["mesh"], "prim": m.prim}
             if m.color is not None:
@@ -354,6 +460,8 @@ def usd_scene_table(objects: list[dict], camera: str | None) -> dict:
                     names = ", ".join(c.prim for c in content.cameras) or "none"
                     raise SubtraceError(f"{content.path}: no camera prim {camera} (its "
                                         f"cameras: {names})")
+            table["usd"] = {"stage": obj["mesh"], "camera": cams[0].prim if cams else None,
+                            "lights": bool(content.lights)}
             if cams:
                 c = cams[0]
                 table["camera"] = {"eye": [float(x) for x in c.eye],

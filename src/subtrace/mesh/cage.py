@@ -235,11 +235,12 @@ def make_cage(
 
 
 def load_cage(path, scheme: str | None = None, boundary: int | None = None,
-              prim: str | None = None) -> Cage:
+              prim: str | None = None, time: float | None = None) -> Cage:
     """Read an OBJ control cage (with OpenSubdiv ``t`` tags), a mesh of a USD stage
     (``subtrace.io.usd``: the mesh ``prim``, or all its meshes as one), or a PLY, STL, OFF or
     glTF mesh (``subtrace.io.meshes``), and prepare it for subdivision. ``boundary`` (0 none, 1 edge-and-corner, 2 edge-only) overrides the file's
-    ``interpolateboundary`` tag or attribute."""
+    ``interpolateboundary`` tag or attribute; ``time``: a USD stage's time code (None:
+    its still)."""
     from subtrace.io.meshes import is_mesh_file
     from subtrace.io.usd import is_usd
 
@@ -251,7 +252,7 @@ def load_cage(path, scheme: str | None = None, boundary: int | None = None,
     if is_usd(path):
         from subtrace.io.usd import combined_mesh, read_stage
 
-        arrays = combined_mesh(read_stage(path), prim).cage_arrays()
+        arrays = combined_mesh(read_stage(path, time), prim).cage_arrays()
         if scheme is not None:
             arrays["scheme"] = scheme
         if boundary is not None:
