@@ -116,6 +116,8 @@ def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, st
         stats.shadow_rays += len(tmax)
         return blocked
 
+    trace_shadows.bounds = any_hit.bounds  # (for the ground: :func:`shade.ground_pixels`)
+
     def trace_ao(origins, dirs, tmax):
         """Any-hit ambient occlusion rays: blocked (n,) uint8."""
         t0 = time.perf_counter()
@@ -167,7 +169,24 @@ def _any_hit(pools, nurbs, eye, tol_rad):
                                           np.asarray(tmax)[rest], cone, tol_rad)
         return out
 
+    blocked.bounds = _occluder_bounds(pools, nurbs)
     return blocked
+
+
+def _occluder_bounds(pools, nurbs):
+    """(lo, hi) of a box that holds everything an any-hit ray can meet: the roots of the
+    shells' BVH and of the free-form surfaces' BVH, grown by a relative 1e-9 (a ray whose
+    segment misses it is unblocked, and need not be traced); None where there is nothing
+    to hit (then nothing is left out: there is nothing to trace either)."""
+    roots = [b for b in ((None if pools is None else pools.bvh),
+                         (None if nurbs is None else nurbs.bvh))
+             if b is not None and len(b.node_count)]
+    if not roots:
+        return None
+    lo = np.min([b.node_min[0] for b in roots], axis=0)
+    hi = np.max([b.node_max[0] for b in roots], axis=0)
+    pad = 1e-9 * (float(np.max(hi - lo)) + float(np.max(np.abs(np.concatenate([lo, hi])))))
+    return lo - pad, hi + pad
 
 
 def _closest(pools, nurbs, frame, width, patches, scene, tol_rad, offset):

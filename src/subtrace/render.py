@@ -84,7 +84,8 @@ class RenderStats:
     accel_fallback: int = 0
     pixels_covered: int = 0
     rays: int = 0
-    shadow_rays: int = 0  # shadow rays traced (towards every light from lit-facing hits)
+    shadow_rays: int = 0  # shadow rays traced (towards every light from lit-facing hits;
+    # the ground's only where they may meet an object: shade.ground_pixels)
     time_shadows: float = 0.0  # of time_shade: tracing shadow rays (building included)
     aa_pixels: int = 0  # pixels that got more than their centre ray (--samples)
     aa_rays: int = 0  # the extra rays they got

@@ -21,6 +21,7 @@ from typing import NamedTuple
 import numpy as np
 
 from subtrace import config
+from subtrace.accel.bvh import slab_entry
 from subtrace.camera import window_offset
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material
 from subtrace.patches.basis import bez_normal
@@ -538,26 +539,70 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
     up = np.asarray(up, np.float64)
     blocked = np.zeros((len(lights), 0), np.uint8)
     if trace is not None:
-        points = np.empty((len(miss), 3))
-        down = np.empty(len(miss))
-        on = _ground_points(frame, width, miss, dirs, up, float(height), points, down)
-        points = points[on]
-        to_light = np.empty((len(lights), len(points), 3))
-        dist = np.empty((len(lights), len(points)))
-        c = np.empty((len(lights), len(points)))
-        _ground_light(lights, points, up, to_light, dist, c)
-        blocked = np.zeros((len(lights), len(points)), np.uint8)
-        for k in range(len(lights)):
-            facing = c[k] > 0.0
-            if facing.any():
-                blocked[k, facing] = trace(points[facing], to_light[k][facing],
-                                           dist[k][facing])
+        blocked = _ground_shadows(frame, width, miss, dirs, up, float(height), lights, trace)
     catcher = color is None
     return _ground_shade(frame, width, miss, dirs, up, float(height), lights,
                          float(headlight), np.zeros(3) if catcher else np.asarray(color,
                                                                                   np.float64),
                          catcher, np.ascontiguousarray(rows, np.float64), blocked,
                          trace is not None, planes)
+
+
+def _ground_shadows(frame, width, miss, dirs, up, height, lights, trace):
+    """``blocked`` (lights, ground pixels) uint8 of :func:`ground_pixels`: the shadow ray of
+    each ground pixel towards each light it faces, traced where it may meet an object: the
+    rays that miss ``trace.bounds`` (a box holding everything ``trace`` can hit, or None)
+    are left out, unblocked, and only the rest are made and traced (on a scene that is
+    mostly ground, most of them)."""
+    bounds = getattr(trace, "bounds", None)
+    cull = bounds is not None
+    lo, hi = (np.asarray(bounds[0], np.float64), np.asarray(bounds[1], np.float64)) if cull \
+        else (np.zeros(3), np.zeros(3))
+    out = (np.empty(0, np.int64), np.empty(0, np.int64), np.empty((0, 3)), np.empty((0, 3)),
+           np.empty(0))
+    n, n_ground = _ground_rays(frame, width, miss, dirs, up, height, lights, cull, lo, hi,
+                               False, *out)
+    out = (np.empty(n, np.int64), np.empty(n, np.int64), np.empty((n, 3)), np.empty((n, 3)),
+           np.empty(n))
+    _ground_rays(frame, width, miss, dirs, up, height, lights, cull, lo, hi, True, *out)
+    blocked = np.zeros((len(lights), n_ground), np.uint8)
+    if n:
+        ground_i, light_k, origins, to_light, dist = out
+        blocked[light_k, ground_i] = trace(origins, to_light, dist)
+    return blocked
+
+
+@nb.njit(cache=True, error_model="numpy")  # (1 / 0: inf, as the ray kernels take it)
+def _ground_rays(frame, width, miss, dirs, up, height, lights, cull, lo, hi, fill, ground_i,
+                 light_k, origins, to_light, dist):
+    """The shadow rays of the ground pixels among ``miss`` (:func:`_ground_hit`) towards
+    the lights they face (:func:`_ground_irradiance`), less (``cull``) those whose segment
+    misses the box [lo, hi]: their count and the number of ground pixels; with ``fill``
+    each ray's ground pixel (its rank among them), light, origin, direction and length are
+    written too."""
+    e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
+    n = 0
+    i = 0
+    for m in range(len(miss)):
+        hit, x, y, z, dn = _ground_hit(frame, width, dirs, miss[m], up, e_up, height)
+        if not hit:
+            continue
+        for k in range(len(lights)):
+            lx, ly, lz, d, ck = _ground_irradiance(lights, k, x, y, z, up)
+            if not ck > 0.0:
+                continue
+            if cull and slab_entry(x, y, z, 1.0 / lx, 1.0 / ly, 1.0 / lz, lo[0], lo[1],
+                                   lo[2], hi[0], hi[1], hi[2], 0.0, d) == np.inf:
+                continue
+            if fill:
+                ground_i[n] = i
+                light_k[n] = k
+                origins[n, 0], origins[n, 1], origins[n, 2] = x, y, z
+                to_light[n, 0], to_light[n, 1], to_light[n, 2] = lx, ly, lz
+                dist[n] = d
+            n += 1
+        i += 1
+    return n, i
 
 
 @nb.njit(cache=True)
@@ -571,22 +616,6 @@ def _ground_hit(frame, width, dirs, r, up, e_up, height):
     if not (t > 0.0 and t < np.inf):
         return False, 0.0, 0.0, 0.0, dn
     return True, frame[0, 0] + t * dx, frame[0, 1] + t * dy, frame[0, 2] + t * dz, dn
-
-
-@nb.njit(cache=True)
-def _ground_points(frame, width, rays, dirs, up, height, points, down):
-    """Where rays ``rays`` (pixel centres, or rows of ``dirs``) from the eye meet the plane
-    p . up = height going down: (n,) bool, ``points`` (n,3) and ``down`` (n,) (d . up)
-    written where True."""
-    on = np.zeros(len(rays), np.bool_)
-    e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
-    for k in range(len(rays)):
-        hit, x, y, z, dn = _ground_hit(frame, width, dirs, rays[k], up, e_up, height)
-        if hit:
-            on[k] = True
-            down[k] = dn
-            points[k, 0], points[k, 1], points[k, 2] = x, y, z
-    return on
 
 
 @nb.njit(cache=True)
@@ -604,19 +633,6 @@ def _ground_irradiance(lights, k, x, y, z, up):
         lx, ly, lz = lx / d, ly / d, lz / d
         f = 1.0 / d2 if d2 > 0.0 else 0.0
     return lx, ly, lz, d, max(lx * up[0] + ly * up[1] + lz * up[2], 0.0) * f
-
-
-@nb.njit(cache=True)
-def _ground_light(lights, points, up, to_light, dist, c):
-    """For each light (rows of :func:`light_array`) and ground point: the unit direction
-    towards it, the distance and its irradiance on the ground (:func:`_ground_irradiance`)."""
-    for k in range(len(lights)):
-        for i in range(len(points)):
-            x, y, z, d, ck = _ground_irradiance(lights, k, points[i, 0], points[i, 1],
-                                                points[i, 2], up)
-            to_light[k, i, 0], to_light[k, i, 1], to_light[k, i, 2] = x, y, z
-            dist[k, i] = d
-            c[k, i] = ck
 
 
 @nb.njit(cache=True)
