@@ -176,3 +176,63 @@ def _pixels(path):
         return inp.read_image(oiio.FLOAT)
     finally:
         inp.close()
+
+
+
+def test_no_temporary_reappears_after_the_cleanup(tmp_path):
+    """The interrupt's clean-up (the watcher thread: it takes the temporaries' lock for
+    good, then removes every registered temporary) may land after a temporary was created
+    and before its writer opens it by name: the writer must not create it again. Here the
+    clean-up runs at exactly that moment (from the pixels callable) and holds the lock for
+    0.4 s, watching the folder: before the writers opened their temporaries under the
+    lock, OpenImageIO created the file again within that time (1 of 50 seeded trials of
+    the interrupt test, under load)."""
+    import threading
+
+    from subtrace.io.atomic import open_temp
+    from subtrace.io.exr import _png_spec, _write_all
+    from subtrace.runtime import signals
+
+    seen = []
+    holding, release, opened = threading.Event(), threading.Event(), threading.Event()
+
+    def cleanup():
+        with signals.temp_lock():
+            for path in list(signals._temps):
+                os.unlink(path)
+                signals.forget_temp(path)
+            holding.set()
+            deadline = time.perf_counter() + 0.4
+            while time.perf_counter() < deadline:
+                seen.extend(p.name for p in tmp_path.iterdir() if p.name.endswith(".tmp"))
+                time.sleep(0.01)
+            release.wait(5)
+
+    def pixels():
+        threading.Thread(target=cleanup, daemon=True).start()
+        holding.wait(5)
+        return np.zeros((4, 4, 3), np.uint8)
+
+    def write():
+        try:
+            _write_all([(tmp_path / "out.png", "png", _png_spec(4, 4), pixels)])
+        except Exception:  # noqa: BLE001 - (its temporary was removed under it)
+            pass
+
+    def open_text():
+        holding.wait(5)
+        with open_temp(str(tmp_path / ".x.tmp"), "w"):
+            opened.set()
+
+    jobs = [threading.Thread(target=f, daemon=True) for f in (write, open_text)]
+    try:
+        for job in jobs:
+            job.start()
+        assert holding.wait(5), "the clean-up never ran"
+        time.sleep(0.5)
+        assert not seen, f"a temporary came back after the clean-up: {sorted(set(seen))}"
+        assert not opened.is_set()  # open_temp waits for the lock too
+    finally:
+        release.set()
+        for job in jobs:
+            job.join(10)

@@ -108,10 +108,10 @@ def tile_path(out: str, crop) -> str:
 
 def write_tile(path: str, channels: dict) -> None:
     """Write a tile's channels (float32) to ``path``, whole or not at all."""
-    from subtrace.io.atomic import atomic_paths
+    from subtrace.io.atomic import atomic_paths, open_temp
 
     with atomic_paths([path]) as temps:
-        with open(temps[0], "wb") as f:
+        with open_temp(temps[0], "wb") as f:
             np.savez(f, **{k: np.asarray(v, np.float32) for k, v in channels.items()})
 
 

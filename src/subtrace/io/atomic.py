@@ -8,8 +8,9 @@ as OpenImageIO) and moves them all into place at the end; :func:`write_text` wri
 Failures raise :class:`subtrace.errors.SubtraceError` naming the destination.
 
 Every temporary is registered with :mod:`subtrace.runtime.signals` while it exists, and is
-created, moved and removed under its lock: an interrupted command removes what is left and
-never sees a temporary appear or move after that.
+created, opened by its writer (:func:`open_temp`), moved and removed under its lock: an
+interrupted command removes what is left and never sees a temporary appear or move after
+that.
 
 Two processes writing one destination at once each write their own temporary (the names
 carry the process id and a random part) and each moves it into place; the rename is
@@ -112,11 +113,19 @@ def atomic_paths(paths):
                 remove_temp(temp)
 
 
+def open_temp(temp: str, mode: str = "wb", **kwargs):
+    """``open(temp, mode)`` under the temporaries' lock: an interrupt's clean-up holds it
+    from the signal on, so a writer never creates a temporary again after the clean-up
+    removed it (a writer that opens files by name does the same: ``io/exr.py``)."""
+    with temp_lock():
+        return open(temp, mode, **kwargs)
+
+
 def write_text(path, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` through a temporary (module comment)."""
     with atomic_paths([path]) as (temp,):
         try:
-            with open(temp, "w", encoding="utf-8") as fh:
+            with open_temp(temp, "w", encoding="utf-8") as fh:
                 fh.write(text)
         except OSError as err:
             raise SubtraceError(

@@ -28,6 +28,7 @@ import OpenImageIO as oiio
 
 from subtrace.errors import SubtraceError
 from subtrace.io.atomic import atomic_paths, check_writable, path_str
+from subtrace.runtime.signals import temp_lock
 from subtrace.io.formats import DEEP, PICTURE_FORMATS, WITH_ALPHA, picture_format
 from subtrace.version import VERSION
 
@@ -331,7 +332,11 @@ def _write_image(path_str: str, temp: str, fmt: str, spec, pixels) -> None:
     if out is None:
         raise SubtraceError(f"{path_str}: OpenImageIO has no {fmt} writer: {_oiio_error()}")
     try:
-        if not out.open(temp, spec):
+        # (opened under the temporaries' lock: once an interrupt's clean-up holds it, no
+        # writer can create its temporary again after the clean-up removed it)
+        with temp_lock():
+            opened = out.open(temp, spec)
+        if not opened:
             raise SubtraceError(f"{path_str}: cannot write the file: {_oiio_error(out)}")
         if isinstance(pixels, np.ndarray):
             written = out.write_image(pixels)

@@ -15,6 +15,8 @@ cloud, an empty scene) is refused with one line naming it and what is read.
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import os
 import re
 import warnings
@@ -47,7 +49,7 @@ def read_mesh(path):
     if os.path.isdir(path):
         raise SubtraceError(f"{path}: is a directory, expected a {kind} file")
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), _quiet_log("trimesh"):
             warnings.simplefilter("ignore")
             loaded = trimesh.load(path, process=False, force=None)
     except Exception as exc:  # noqa: BLE001 - trimesh raises many kinds
@@ -73,6 +75,20 @@ def read_mesh(path):
             stacklevel=3)
     sizes = np.full(len(faces), faces.shape[1], np.int32)
     return points, sizes, faces.ravel().astype(np.int32)
+
+
+@contextlib.contextmanager
+def _quiet_log(name):
+    """The logger ``name`` silenced for the block: trimesh logs the tracebacks of the
+    readers it tries before the one that works (a damaged binary STL read as text, say)
+    to stderr, which must hold only subtrace's one line."""
+    log = logging.getLogger(name)  # (its modules' loggers inherit its level)
+    was = log.level
+    log.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        log.setLevel(was)
 
 
 def _merge_corners(points, faces):
