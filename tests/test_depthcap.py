@@ -195,3 +195,50 @@ def test_loop_patches_holding_the_eye_are_capped_with_one_warning(tmp_path):
     level = res.channels["level"]
     assert level.max() == config.LOOP_MAX_INSIDE_DEPTH  # the held patches, at the cap
     assert level.min() < 8  # the far walls at their own (finite) depth
+
+
+def test_isolation_that_doubles_along_a_non_manifold_edge_is_capped_once(tmp_path,
+                                                                         monkeypatch):
+    """Three quads on one edge (a non-manifold edge, infinitely sharp, no level makes its
+    patches regular) seen up close at a tiny tolerance: the isolation's frontier doubles at
+    every level. It is stopped before it passes its limit (64 faces per patch and level, at
+    least ISOLATION_MIN_FACES, here lowered to 4,096), the depth is capped
+    for every patch at the last level within it, and one warning and the header say so
+    ("isolation"). Before the limit a fuzzed 32x24 render of such a cage took all memory."""
+    import subtrace.patches.criterion as criterion
+    import subtrace.patches.isolate as iso
+
+    book = tmp_path / "book.obj"
+    book.write_text("v 0 0 0\nv 0 1 0\nv 1 0 0\nv 1 1 0\nv -1 0 0\nv -1 1 0\nv 0 0 1\n"
+                    "v 0 1 1\nf 1 3 4 2\nf 1 2 6 5\nf 1 7 8 2\n")
+    monkeypatch.setattr(config, "ISOLATION_MIN_FACES", 4096)
+    calls = []
+    real = iso.isolated_depths
+
+    def counting(obj, faces, cap, *args):
+        record = args[2] if len(args) > 2 and args[2] is not None else {}
+        args = (*args[:2], record, *args[3:])
+        try:
+            out = real(obj, faces, cap, *args)
+        except iso.IsolationTooLarge:
+            calls.append(None)
+            raise
+        limit = max(4096, 64 * len(faces) * int(np.max(cap)))
+        calls.append(([len(lv.start) for lv in record["levels"]], limit))
+        return out
+
+    monkeypatch.setattr(criterion, "isolated_depths", counting)
+    scene = small_scene([book], (0.2, 0.5, 0.3), (0.0, 0.5, 0.0), width=32, height=24,
+                        fov=40.0, tolerance=0.01)
+    res, said = _render(scene)
+    st = res.stats
+    assert len(said) == 1 and "non-manifold edge" in said[0], said
+    assert st.depth_cap_reason == "isolation" and 4 <= st.depth_cap < 13, st
+    assert calls[0] is None and calls[-1] is not None  # stopped, then chosen within it
+    kept, limit = calls[-1]
+    assert sum(kept) <= limit and len(kept) == st.depth_cap
+    assert np.all(np.diff(kept[2:]) > 0) and kept[-1] > 4 * kept[1]  # (it does double)
+    attrs = result_attributes(res, scene)
+    assert attrs["subtrace:depth_cap"] == st.depth_cap
+    assert attrs["subtrace:depth_cap_reason"] == "isolation"
+    assert res.stats.pixels_covered > 100

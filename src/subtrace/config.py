@@ -161,6 +161,18 @@ MEMORY_BYTES_PER_PATCH = 2048
 # per level of an irregular patch (Catmull-Clark or Loop): its pieces (3 Bezier nets and
 # boxes per level) and the isolation's cut of its neighbourhood
 MEMORY_BYTES_PER_ISOLATED_LEVEL = 16384
+# per face of an isolation's frontier, counted over every level it refines (measured ~4.4
+# KB: the refined cut of its neighbourhood, points, the regular children's Bezier nets, all
+# kept for the build): a frontier that grows with each level (an isolation along a
+# non-manifold edge doubles it) is stopped where it would pass half the budget
+MEMORY_BYTES_PER_ISOLATION_FACE = 8192
+# and, whatever the budget, an isolation stops before its frontier passes this many faces
+# per irregular patch and level (the scenes' isolations take 1-10: an irregular corner keeps
+# about one face per level) or ISOLATION_MIN_FACES, whichever is more: what grows faster
+# is a feature along an edge, refined far below the pixels (a 32x24 render of a fuzzed
+# cage with a non-manifold edge took minutes at the memory limit alone)
+ISOLATION_FACES_PER_PATCH_LEVEL = 64
+ISOLATION_MIN_FACES = 1 << 16
 # per exact side sample of an isolated Loop patch (a point, and its share of the sorting)
 MEMORY_BYTES_PER_SIDE_SAMPLE = 64
 # a thread's memo of split Bezier nets (trace/bezier.py) is kept within what the budget

@@ -56,7 +56,7 @@ def precision_depths(table, eye: np.ndarray) -> np.ndarray:
 
 
 def choose_depths(table, eye: np.ndarray, tol_rad: float, max_depth,
-                  record=None, shells=None):
+                  record=None, shells=None, max_faces=None):
     """Grid depth of every patch: the smallest n with ``edge_bound * rate^n`` at most
     ``tol_rad`` times the distance from the eye to the patch's shell (:func:`wanted_depths`),
     capped at ``max_depth`` (an int, or (P,) per patch: :func:`precision_depths`); irregular
@@ -64,7 +64,9 @@ def choose_depths(table, eye: np.ndarray, tol_rad: float, max_depth,
     With a dict ``record``, ``record[object id]`` keeps what the isolation made (see
     :func:`~subtrace.patches.isolate.isolated_depths`). ``shells`` = (lo, hi), each (P,3),
     the shells to tighten: an isolated patch's shell becomes the box of what its isolation
-    ended in (intersected with its own shell); the others' are left as they are."""
+    ended in (intersected with its own shell); the others' are left as they are.
+    ``max_faces``: the isolations' limit (:func:`~subtrace.patches.isolate.isolated_depths`,
+    each object's; :class:`~subtrace.patches.isolate.IsolationTooLarge` past it)."""
     n = wanted_depths(table, eye, tol_rad)
     n = np.where(np.isfinite(n), n, max_depth)
     depths = np.clip(n, 0, max_depth).astype(np.int32)
@@ -80,7 +82,7 @@ def choose_depths(table, eye: np.ndarray, tol_rad: float, max_depth,
             if shells is not None:
                 boxes = (np.full((len(sel), 3), np.inf), np.full((len(sel), 3), -np.inf))
             depths[sel] = isolated_depths(o, table.face[sel], depths[sel], eye, tol_rad, rec,
-                                          int(depths[sel].max()), boxes)
+                                          int(depths[sel].max()), boxes, max_faces)
             if shells is not None:
                 done = np.isfinite(boxes[0]).all(axis=1)
                 at = sel[done]

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from subtrace import config
+
 from subtrace.config import IRREGULAR_MARGIN
 from subtrace.patches.basis import bezier_nets, net_bounds
 from subtrace.patches.bspline import control_points, regular_mask
@@ -49,7 +51,17 @@ def refine_children(level, points, faces, options):
     return ref.child, cur_pts, kids, regular_mask(ref.child, options, kids)
 
 
-def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0, boxes=None):
+class IsolationTooLarge(Exception):
+    """:func:`isolated_depths` stopped: the next level's frontier would pass ``max_faces``;
+    ``level`` levels were refined within it (a cap of that depth everywhere fits)."""
+
+    def __init__(self, level: int):
+        super().__init__(f"isolation frontier too large below level {level}")
+        self.level = level
+
+
+def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0, boxes=None,
+                    max_faces=None):
     """Depths (len(faces),) int32 of the irregular quads ``faces`` of ``obj``'s patch level,
     none above ``cap`` (their conservative depths, (len(faces),) int). With a dict
     ``record``, what each level's refinement made is kept in it (see :class:`_Level`), for
@@ -61,7 +73,14 @@ def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0, 
     refined at least once gets the union of the boxes of what its refinement ended in (the
     Bezier nets of its regular descendants, the control-point boxes of the one-rings of the
     irregular ones it stopped at), a bound of its limit surface far tighter than its own
-    one-ring's box; the others are left as they are."""
+    one-ring's box; the others are left as they are.
+
+    ``max_faces``: the most faces the refinement may take over all its levels (None: no
+    limit from memory), and never more than ``config.ISOLATION_FACES_PER_PATCH_LEVEL`` per
+    face and level of ``cap`` (at least ``config.ISOLATION_MIN_FACES``). An irregular
+    corner keeps its frontier at a face or so per level, but a feature along an edge that
+    no level makes regular (a non-manifold edge) doubles it at every level; before a level
+    would pass the limit, :class:`IsolationTooLarge` is raised."""
     faces = np.asarray(faces, dtype=np.int64)
     cap = np.asarray(cap, dtype=np.int64)
     need = np.zeros(len(faces), dtype=np.int64)
@@ -75,7 +94,15 @@ def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0, 
     active = cap[root] > 0
     cur, cur_pts, start = obj.level, obj.points, faces[root]
     k = 0
+    taken = 0
+    most = max(config.ISOLATION_MIN_FACES,
+               config.ISOLATION_FACES_PER_PATCH_LEVEL * len(faces) * int(cap.max(initial=0)))
+    if max_faces is not None:
+        most = min(most, max_faces)
     while len(root):
+        taken += len(start)
+        if taken > most:
+            raise IsolationTooLarge(k)
         parent_start = start
         cur, cur_pts, kids, reg = refine_children(cur, cur_pts, start, options)
         k += 1

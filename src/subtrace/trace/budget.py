@@ -14,6 +14,7 @@ from subtrace.errors import SceneError, SubtraceWarning
 from subtrace.lines.items import loop_regular
 from subtrace.patches.criterion import (choose_depths, depth_cap, memory_estimate,
                                         precision_depths, wanted_depths)
+from subtrace.patches.isolate import IsolationTooLarge
 from subtrace.runtime import threads as tasks
 
 
@@ -31,6 +32,8 @@ def warn_capped(budget, cap, depths, estimate):
 def warn_depth_cap(reasons, cap, wanted, budget=None, estimate=None, stacklevel=3):
     """The one warning of a render whose refinement depth was capped: ``reasons`` among
     "memory" (the budget ``budget``, the uncapped depths' estimate ``estimate`` bytes),
+    "isolation" (an isolation's frontier would pass half of ``budget``:
+    ``config.MEMORY_BYTES_PER_ISOLATION_FACE``),
     "size" (isolated Loop patches, ``config.LOOP_MAX_ISOLATED_DEPTH``), "depth" (the caller's
     explicit cap) and "precision"
     (``config.PRECISION_BITS``); ``cap`` the deepest depth a capped patch was held to,
@@ -43,6 +46,14 @@ def warn_depth_cap(reasons, cap, wanted, budget=None, estimate=None, stacklevel=
                      f"below the patches (the tolerance needs {need}, an estimated "
                      f"{mib(estimate)}), so the image is coarser than the tolerance; raise "
                      "--max-memory (or [render] max_memory in the scene) to refine fully")
+    if "isolation" in reasons:
+        parts.append(f"refinement capped at depth {max(cap, 0)}: isolating a feature that "
+                     "no level makes regular along an edge (a non-manifold edge) doubles its "
+                     "pieces at every level, and the next level would pass "
+                     f"{config.ISOLATION_FACES_PER_PATCH_LEVEL} faces per irregular patch "
+                     "and level, or half the memory budget "
+                     f"{mib(budget)} (the tolerance needs {need}), so the image is coarser "
+                     "than the tolerance there")
     if "size" in reasons:
         parts.append(f"Loop patches capped at depth {config.LOOP_MAX_ISOLATED_DEPTH} where "
                      "isolated (the exact samples of their sides grow as 2^depth) and at "
@@ -133,7 +144,8 @@ def depth_limits(table, eye, max_depth=None, isolated=None, wanted=None):
     return limit, why
 
 
-LIMIT_REASONS = ("precision", "size", "depth")
+LIMIT_REASONS = ("precision", "size", "depth", "isolation")
+ISOLATION_REASON = 3  # an isolation's frontier would pass its share of the memory budget
 
 
 def choose_within_budget(table, eye, tol_rad, max_depth, max_memory, n_pixels,
@@ -145,10 +157,23 @@ def choose_within_budget(table, eye, tol_rad, max_depth, max_memory, n_pixels,
     (``depth_cap``: the deepest depth a capped patch was held to, ``depth_cap_reason``) and
     said in one warning."""
 
+    # the isolations may take half the budget (config.MEMORY_BYTES_PER_ISOLATION_FACE)
+    budget = config.default_max_memory() if max_memory is None else max_memory
+    max_faces = budget // (2 * config.MEMORY_BYTES_PER_ISOLATION_FACE)
+
     def choose(cap):
-        record = {}
-        shells = table.shell_min.copy(), table.shell_max.copy()
-        return choose_depths(table, eye, tol_rad, cap, record, shells), record, shells
+        """The depths within ``cap`` (lowered in place, to one depth for all, where an
+        isolation would pass ``max_faces``) and what their isolation made."""
+        while True:
+            record = {}
+            shells = table.shell_min.copy(), table.shell_max.copy()
+            try:
+                return (choose_depths(table, eye, tol_rad, cap, record, shells, max_faces),
+                        record, shells)
+            except IsolationTooLarge as err:  # (one cap for all: neighbours raise depths)
+                low = cap > err.level
+                cap[low] = err.level
+                why[low] = ISOLATION_REASON
 
     isolated = isolated_patches(table)
     wanted = wanted_depths(table, eye, tol_rad)
@@ -168,11 +193,12 @@ def choose_within_budget(table, eye, tol_rad, max_depth, max_memory, n_pixels,
             limit = np.minimum(limit, max(budget_cap, 0))
             depths, record, (shell_min, shell_max) = choose(limit)
             held = (wanted > limit) & (depths >= limit)
-            reasons = ((["memory"] if (held & by_memory).any() else [])
-                       + [LIMIT_REASONS[k] for k in np.unique(why[held & ~by_memory])])
+            reasons = sorted(set((["memory"] if (held & by_memory).any() else [])
+                                 + [LIMIT_REASONS[k] for k in np.unique(why[held & ~by_memory])]),
+                             key=(("memory",) + LIMIT_REASONS).index)
         left = max(left - memory_estimate(table, depths, n_pixels, isolated), 0)
     if held.any():
         stats.depth_cap = int(depths[held].max())
         stats.depth_cap_reason = ",".join(reasons)
-        warn_depth_cap(reasons, stats.depth_cap, wanted[held].max(), max_memory, estimate)
+        warn_depth_cap(reasons, stats.depth_cap, wanted[held].max(), budget, estimate)
     return DepthChoice(depths, record, shell_min, shell_max, left, isolated)
