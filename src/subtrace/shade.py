@@ -26,7 +26,7 @@ from subtrace.camera import window_offset
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material
 from subtrace.patches.basis import bez_normal
 from subtrace.runtime.jit import nb
-from subtrace.runtime.threads import run_tasks
+from subtrace.runtime.threads import run_tasks, thread_count
 from subtrace.trace.prims import ray_setup
 from subtrace.trace.tris import LOOP_CELL, TRI, tri_normal
 
@@ -532,77 +532,37 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
     is part of the background: alpha and the other channels keep
     saying "no hit" (the EXR's coverage is the surface's). Returns the number of ground
     pixels. ``dirs``: as for :func:`shade` (then ``rows`` (n,3): each ray's background).
-    Without shadows one pass over the missed pixels does it all (:func:`_ground_shade`);
-    with them the ground points and their shadow rays come first."""
+
+    On every thread, three passes over the missed pixels: the first shades each ground
+    pixel none of whose shadow rays may meet an object (a ray whose segment towards its
+    light misses ``trace.bounds``, the box of everything ``trace`` can hit: on a scene that
+    is mostly ground, most of them) and counts the rays of the others; the second makes
+    those rays, ``trace`` traces them, and the third shades their pixels."""
     miss = np.nonzero(pix_patch < 0)[0]
     dirs = _no_dirs() if dirs is None else dirs
     up = np.asarray(up, np.float64)
-    blocked = np.zeros((len(lights), 0), np.uint8)
-    if trace is not None:
-        blocked = _ground_shadows(frame, width, miss, dirs, up, float(height), lights, trace)
-    catcher = color is None
-    return _ground_shade(frame, width, miss, dirs, up, float(height), lights,
-                         float(headlight), np.zeros(3) if catcher else np.asarray(color,
-                                                                                  np.float64),
-                         catcher, np.ascontiguousarray(rows, np.float64), blocked,
-                         trace is not None, planes)
-
-
-def _ground_shadows(frame, width, miss, dirs, up, height, lights, trace):
-    """``blocked`` (lights, ground pixels) uint8 of :func:`ground_pixels`: the shadow ray of
-    each ground pixel towards each light it faces, traced where it may meet an object: the
-    rays that miss ``trace.bounds`` (a box holding everything ``trace`` can hit, or None)
-    are left out, unblocked, and only the rest are made and traced (on a scene that is
-    mostly ground, most of them)."""
-    bounds = getattr(trace, "bounds", None)
+    shadows = trace is not None
+    bounds = getattr(trace, "bounds", None) if shadows else None
     cull = bounds is not None
     lo, hi = (np.asarray(bounds[0], np.float64), np.asarray(bounds[1], np.float64)) if cull \
         else (np.zeros(3), np.zeros(3))
-    out = (np.empty(0, np.int64), np.empty(0, np.int64), np.empty((0, 3)), np.empty((0, 3)),
-           np.empty(0))
-    n, n_ground = _ground_rays(frame, width, miss, dirs, up, height, lights, cull, lo, hi,
-                               False, *out)
-    out = (np.empty(n, np.int64), np.empty(n, np.int64), np.empty((n, 3)), np.empty((n, 3)),
-           np.empty(n))
-    _ground_rays(frame, width, miss, dirs, up, height, lights, cull, lo, hi, True, *out)
-    blocked = np.zeros((len(lights), n_ground), np.uint8)
-    if n:
-        ground_i, light_k, origins, to_light, dist = out
-        blocked[light_k, ground_i] = trace(origins, to_light, dist)
-    return blocked
-
-
-@nb.njit(cache=True, error_model="numpy")  # (1 / 0: inf, as the ray kernels take it)
-def _ground_rays(frame, width, miss, dirs, up, height, lights, cull, lo, hi, fill, ground_i,
-                 light_k, origins, to_light, dist):
-    """The shadow rays of the ground pixels among ``miss`` (:func:`_ground_hit`) towards
-    the lights they face (:func:`_ground_irradiance`), less (``cull``) those whose segment
-    misses the box [lo, hi]: their count and the number of ground pixels; with ``fill``
-    each ray's ground pixel (its rank among them), light, origin, direction and length are
-    written too."""
-    e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
-    n = 0
-    i = 0
-    for m in range(len(miss)):
-        hit, x, y, z, dn = _ground_hit(frame, width, dirs, miss[m], up, e_up, height)
-        if not hit:
-            continue
-        for k in range(len(lights)):
-            lx, ly, lz, d, ck = _ground_irradiance(lights, k, x, y, z, up)
-            if not ck > 0.0:
-                continue
-            if cull and slab_entry(x, y, z, 1.0 / lx, 1.0 / ly, 1.0 / lz, lo[0], lo[1],
-                                   lo[2], hi[0], hi[1], hi[2], 0.0, d) == np.inf:
-                continue
-            if fill:
-                ground_i[n] = i
-                light_k[n] = k
-                origins[n, 0], origins[n, 1], origins[n, 2] = x, y, z
-                to_light[n, 0], to_light[n, 1], to_light[n, 2] = lx, ly, lz
-                dist[n] = d
-            n += 1
-        i += 1
-    return n, i
+    catcher = color is None
+    color = np.zeros(3) if catcher else np.asarray(color, np.float64)
+    rows = np.ascontiguousarray(rows, np.float64)
+    n_tasks = thread_count()
+    pending = np.empty(len(miss), np.int8)  # per missed pixel: its shadow rays to trace
+    counts = np.zeros((n_tasks, 2), np.int64)  # per thread: ground pixels, rays
+    shading = (frame, width, miss, dirs, up, float(height), lights, float(headlight), color,
+               catcher, rows, shadows, cull, lo, hi, planes, pending)
+    run_tasks(_ground_first, *shading, counts, n=n_tasks)
+    n_rays = int(counts[:, 1].sum())
+    if n_rays:
+        base = np.concatenate([[0], np.cumsum(counts[:, 1])[:-1]]).astype(np.int64)
+        origins, to_light, dist = np.empty((n_rays, 3)), np.empty((n_rays, 3)), np.empty(n_rays)
+        run_tasks(_ground_rays, *shading, base, origins, to_light, dist, n=n_tasks)
+        blocked = np.ascontiguousarray(trace(origins, to_light, dist), np.uint8)
+        run_tasks(_ground_last, *shading, base, blocked, n=n_tasks)
+    return int(counts[:, 0].sum())
 
 
 @nb.njit(cache=True)
@@ -635,44 +595,123 @@ def _ground_irradiance(lights, k, x, y, z, up):
     return lx, ly, lz, d, max(lx * up[0] + ly * up[1] + lz * up[2], 0.0) * f
 
 
+@nb.njit(cache=True, error_model="numpy")  # (1 / 0: inf, as the ray kernels take it)
+def _ground_ray(lights, k, x, y, z, up, shadows, cull, lo, hi):
+    """Light k at the ground point (:func:`_ground_irradiance`) and whether its shadow ray
+    is to be traced: shadows on, the light faces the ground, and (``cull``) the ray's
+    segment enters the box [lo, hi]."""
+    lx, ly, lz, d, ck = _ground_irradiance(lights, k, x, y, z, up)
+    ray = shadows and ck > 0.0
+    if ray and cull:
+        ray = slab_entry(x, y, z, 1.0 / lx, 1.0 / ly, 1.0 / lz, lo[0], lo[1], lo[2], hi[0],
+                         hi[1], hi[2], 0.0, d) < np.inf
+    return lx, ly, lz, d, ck, ray
+
+
 @nb.njit(cache=True)
-def _ground_shade(frame, width, miss, dirs, up, height, lights, headlight, color, catcher,
-                  rows, blocked, shadows, planes):
-    """The ground's colour at the missed pixels ``miss`` that see it (see
-    :func:`ground_pixels`): the headlight (``-d . up`` its cosine) and each light's
-    irradiance where not blocked (``shadows``: ``blocked[k, i]`` for the i-th ground pixel,
-    in order); an opaque ``color``, or (``catcher``) the background ``rows`` of the pixel
-    (its image row, or its own with ``dirs``) darkened by the share of the light held back.
-    Returns the number of ground pixels."""
+def _segment(task, n_tasks, n):
+    """Thread ``task``'s share [a, b) of ``n`` items (contiguous: its rays keep pixel order)."""
+    return n * task // n_tasks, n * (task + 1) // n_tasks
+
+
+@nb.njit(cache=True)
+def _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, color, catcher,
+                  rows, shadows, cull, lo, hi, planes, blocked, b):
+    """The colour of ground pixel r (point (x, y, z), ``dn`` its ray's d . up) into
+    ``planes``: each light's irradiance unless its shadow ray (the next of ``blocked`` from
+    ``b``, for the lights :func:`_ground_ray` traces) was blocked; returns the next ``b``."""
+    full = max(-dn, 0.0) * headlight
+    lit = full
+    cr = cg = cb = full
+    for k in range(len(lights)):
+        ck, ray = _ground_ray(lights, k, x, y, z, up, shadows, cull, lo, hi)[4:]
+        full += ck
+        dark = False
+        if ray:
+            dark = blocked[b] != 0
+            b += 1
+        if not dark:
+            lit += ck
+            cr += ck * lights[k, 4]
+            cg += ck * lights[k, 5]
+            cb += ck * lights[k, 6]
+    if catcher:
+        row = r if len(dirs) else r // width
+        keep = 1.0 - (1.0 - lit / full if full > 0.0 else 0.0)
+        cr, cg, cb = rows[row, 0] * keep, rows[row, 1] * keep, rows[row, 2] * keep
+    else:
+        cr, cg, cb = cr * color[0], cg * color[1], cb * color[2]
+    planes[C_R, r] = cr
+    planes[C_R + 1, r] = cg
+    planes[C_R + 2, r] = cb
+    return b
+
+
+@nb.njit(cache=True, nogil=True)
+def _ground_first(task, n_tasks, frame, width, miss, dirs, up, height, lights, headlight,
+                  color, catcher, rows, shadows, cull, lo, hi, planes, pending, counts):
+    """Pass 1 of :func:`ground_pixels` over thread ``task``'s missed pixels: shade the ground
+    pixels with no shadow ray to trace, set ``pending`` (their rays' count, 0 for the
+    others) and count the ground pixels and rays (``counts[task]``)."""
     e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
-    i = 0
-    for m in range(len(miss)):
+    a, b = _segment(task, n_tasks, len(miss))
+    no_rays = np.zeros(0, np.uint8)
+    for m in range(a, b):
         r = miss[m]
+        pending[m] = 0
         hit, x, y, z, dn = _ground_hit(frame, width, dirs, r, up, e_up, height)
         if not hit:
             continue
-        full = max(-dn, 0.0) * headlight
-        lit = full
-        cr = cg = cb = full
+        counts[task, 0] += 1
+        n = 0
         for k in range(len(lights)):
-            ck = _ground_irradiance(lights, k, x, y, z, up)[4]
-            full += ck
-            if not (shadows and blocked[k, i] != 0):
-                lit += ck
-                cr += ck * lights[k, 4]
-                cg += ck * lights[k, 5]
-                cb += ck * lights[k, 6]
-        if catcher:
-            row = r if len(dirs) else r // width
-            keep = 1.0 - (1.0 - lit / full if full > 0.0 else 0.0)
-            cr, cg, cb = rows[row, 0] * keep, rows[row, 1] * keep, rows[row, 2] * keep
+            if _ground_ray(lights, k, x, y, z, up, shadows, cull, lo, hi)[5]:
+                n += 1
+        if n == 0:
+            _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, color,
+                          catcher, rows, shadows, cull, lo, hi, planes, no_rays, 0)
         else:
-            cr, cg, cb = cr * color[0], cg * color[1], cb * color[2]
-        planes[C_R, r] = cr
-        planes[C_R + 1, r] = cg
-        planes[C_R + 2, r] = cb
-        i += 1
-    return i
+            pending[m] = n
+            counts[task, 1] += n
+
+
+@nb.njit(cache=True, nogil=True)
+def _ground_rays(task, n_tasks, frame, width, miss, dirs, up, height, lights, headlight,
+                 color, catcher, rows, shadows, cull, lo, hi, planes, pending, base,
+                 origins, to_light, dist):
+    """Pass 2: the shadow rays of thread ``task``'s pending pixels, from ``base[task]`` on,
+    in pixel and light order."""
+    e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
+    a, b = _segment(task, n_tasks, len(miss))
+    j = base[task]
+    for m in range(a, b):
+        if pending[m] == 0:
+            continue
+        x, y, z = _ground_hit(frame, width, dirs, miss[m], up, e_up, height)[1:4]
+        for k in range(len(lights)):
+            lx, ly, lz, d, ck, ray = _ground_ray(lights, k, x, y, z, up, shadows, cull, lo,
+                                                 hi)
+            if ray:
+                origins[j, 0], origins[j, 1], origins[j, 2] = x, y, z
+                to_light[j, 0], to_light[j, 1], to_light[j, 2] = lx, ly, lz
+                dist[j] = d
+                j += 1
+
+
+@nb.njit(cache=True, nogil=True)
+def _ground_last(task, n_tasks, frame, width, miss, dirs, up, height, lights, headlight,
+                 color, catcher, rows, shadows, cull, lo, hi, planes, pending, base, blocked):
+    """Pass 3: shade thread ``task``'s pending pixels with their rays' ``blocked``."""
+    e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
+    a, b = _segment(task, n_tasks, len(miss))
+    j = base[task]
+    for m in range(a, b):
+        if pending[m] == 0:
+            continue
+        r = miss[m]
+        hit, x, y, z, dn = _ground_hit(frame, width, dirs, r, up, e_up, height)
+        j = _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, color,
+                          catcher, rows, shadows, cull, lo, hi, planes, blocked, j)
 
 
 def edge_pixels(planes, width, height) -> np.ndarray:
