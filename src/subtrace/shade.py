@@ -25,7 +25,7 @@ from subtrace.accel.bvh import slab_entry
 from subtrace.camera import window_offset
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material
 from subtrace.patches.basis import bez_normal
-from subtrace.runtime.jit import nb
+from subtrace.runtime.jit import inline_njit, nb
 from subtrace.runtime.threads import run_tasks, thread_count
 from subtrace.trace.prims import ray_setup
 from subtrace.trace.tris import LOOP_CELL, TRI, tri_normal
@@ -565,7 +565,7 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
     return int(counts[:, 0].sum())
 
 
-@nb.njit(cache=True)
+@inline_njit
 def _ground_hit(frame, width, dirs, r, up, e_up, height):
     """Where ray r meets the ground plane going down: (hit, point x, y, z, d . up)."""
     dx, dy, dz = _direction(frame, width, dirs, r)
@@ -578,7 +578,7 @@ def _ground_hit(frame, width, dirs, r, up, e_up, height):
     return True, frame[0, 0] + t * dx, frame[0, 1] + t * dy, frame[0, 2] + t * dz, dn
 
 
-@nb.njit(cache=True)
+@inline_njit
 def _ground_irradiance(lights, k, x, y, z, up):
     """Light k at the ground point (x, y, z): the unit direction towards it, its distance
     (inf: directional) and its irradiance there, the cosine with ``up`` times
@@ -595,7 +595,7 @@ def _ground_irradiance(lights, k, x, y, z, up):
     return lx, ly, lz, d, max(lx * up[0] + ly * up[1] + lz * up[2], 0.0) * f
 
 
-@nb.njit(cache=True, error_model="numpy")  # (1 / 0: inf, as the ray kernels take it)
+@inline_njit  # (1 / 0: inf, as the ray kernels take it)
 def _ground_ray(lights, k, x, y, z, up, shadows, cull, lo, hi):
     """Light k at the ground point (:func:`_ground_irradiance`) and whether its shadow ray
     is to be traced: shadows on, the light faces the ground, and (``cull``) the ray's
@@ -608,13 +608,13 @@ def _ground_ray(lights, k, x, y, z, up, shadows, cull, lo, hi):
     return lx, ly, lz, d, ck, ray
 
 
-@nb.njit(cache=True)
+@inline_njit
 def _segment(task, n_tasks, n):
     """Thread ``task``'s share [a, b) of ``n`` items (contiguous: its rays keep pixel order)."""
     return n * task // n_tasks, n * (task + 1) // n_tasks
 
 
-@nb.njit(cache=True)
+@inline_njit
 def _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, color, catcher,
                   rows, shadows, cull, lo, hi, planes, blocked, b):
     """The colour of ground pixel r (point (x, y, z), ``dn`` its ray's d . up) into
@@ -655,24 +655,26 @@ def _ground_first(task, n_tasks, frame, width, miss, dirs, up, height, lights, h
     others) and count the ground pixels and rays (``counts[task]``)."""
     e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
     a, b = _segment(task, n_tasks, len(miss))
-    no_rays = np.zeros(0, np.uint8)
+    n_ground = n_rays = 0  # (counted here: threads adding to ``counts`` share a cache line)
     for m in range(a, b):
         r = miss[m]
         pending[m] = 0
         hit, x, y, z, dn = _ground_hit(frame, width, dirs, r, up, e_up, height)
         if not hit:
             continue
-        counts[task, 0] += 1
+        n_ground += 1
         n = 0
-        for k in range(len(lights)):
+        for k in range(len(lights) if shadows else 0):
             if _ground_ray(lights, k, x, y, z, up, shadows, cull, lo, hi)[5]:
                 n += 1
         if n == 0:
             _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, color,
-                          catcher, rows, shadows, cull, lo, hi, planes, no_rays, 0)
+                          catcher, rows, shadows, cull, lo, hi, planes, pending, -1)
         else:
             pending[m] = n
-            counts[task, 1] += n
+            n_rays += n
+    counts[task, 0] = n_ground
+    counts[task, 1] = n_rays
 
 
 @nb.njit(cache=True, nogil=True)

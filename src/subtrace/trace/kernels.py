@@ -149,7 +149,8 @@ def _visit(p, r, ray, round_no, iso, mem, slack, hit, scratch, tested):
     s = iso.patch_iso[p]
     if s >= 0:
         if iso.round[s] == round_no - 1:
-            iso.touched[s] = 1
+            if iso.touched[s] == 0:  # (a store, even of the same value, takes the cache
+                iso.touched[s] = 1   # line from the other threads reading it)
             tested[r] += intersect_patch(ray, p, s, iso, mem, slack, hit, scratch)
         return True
     return False

@@ -196,6 +196,7 @@ def _rays_task(task, a, b, rays, origins, dirs, tmax, any_hit, bvh_t, shell_min,
     stack, stack_t, work, st, st_t, ent_t, ent_i, lv, lp, hit = scratches[task]
     scratch = (work, st, st_t, ent_t, ent_i, lv, lp)
     req_t = req_ts[task]
+    n_built = 0  # (counted here: threads adding to ``built`` share a cache line)
     for q in range(a, b):
         r = rays[q]
         ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
@@ -223,7 +224,7 @@ def _rays_task(task, a, b, rays, origins, dirs, tmax, any_hit, bvh_t, shell_min,
                     continue
                 s = iso.patch_iso[p]
                 if s >= 0:
-                    built[task] += intersect_patch(ray, p, s, iso, mem, slack, hit, scratch)
+                    n_built += intersect_patch(ray, p, s, iso, mem, slack, hit, scratch)
                 else:
                     # unbuilt: keep the CANDIDATES nearest
                     m = n_req if n_req < CANDIDATES else CANDIDATES - 1
@@ -253,3 +254,4 @@ def _rays_task(task, a, b, rays, origins, dirs, tmax, any_hit, bvh_t, shell_min,
         hits.item[r] = np.int64(hit[H_TRI])
         hits.a[r] = hit[H_B1]
         hits.b[r] = hit[H_B2]
+    built[task] += n_built
