@@ -46,9 +46,9 @@ from subtrace.nurbs.scene import blocked as nurbs_blocked
 from subtrace.nurbs.scene import shade_rays
 from subtrace.runtime import threads as tasks
 from subtrace import config
-from subtrace.shade import (C_A, C_R, CHANNELS, ambient_occlusion, background_rows,
-                            edge_pixels, ground_pixels, light, light_array, miss_values, shade,
-                            shadow_visibility)
+from subtrace.shade import (C_A, C_R, CHANNELS, ambient_occlusion, background_pixels,
+                            background_rows, edge_pixels, ground_pixels, light, light_array,
+                            miss_values, shade, shadow_visibility)
 from subtrace.trace.rays import Pools, trace_rays
 
 # the R2 sequence's steps (the plastic number's powers): well-spread points in a square
@@ -260,15 +260,14 @@ def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights,
     headlight = np.array([r.headlight_intensity if r.headlight else 0.0])
     light(frame, width, t, normals, pix_patch, patches, lights, headlight, visible, planes,
           dirs, occlusion)
+    miss = None
     if r.background_bottom is not None or dirs is not None:
         miss = np.nonzero(pix_patch < 0)[0]
-        back = rows[miss // width] if dirs is None else rows[miss]
-        for k in range(3):
-            planes[C_R + k, miss] = back[:, k]
+        background_pixels(miss, rows, width, planes, dirs)
     if ground is not None:
         ground_pixels(frame, width, pix_patch, ground[0], ground[1],
                       trace_shadows if len(lights) and r.shadows else None, lights,
-                      float(headlight[0]), scene.ground.color, rows, planes, dirs)
+                      float(headlight[0]), scene.ground.color, rows, planes, dirs, miss)
 
 
 def _antialias(scene, frame, W, H, closest, patches, planes, lights, ground, trace_shadows,

@@ -521,8 +521,26 @@ def background_rows(top, bottom, height) -> np.ndarray:
     return (1.0 - w) * top + w * np.asarray(bottom, np.float64)
 
 
+def background_pixels(miss, rows, width, planes, dirs=None) -> None:
+    """The background colour (``rows``: per image row, or per ray with ``dirs``) into the
+    colour of the missed pixels ``miss``, on every thread."""
+    rows = np.ascontiguousarray(rows, np.float64)
+    run_tasks(_background_task, miss, rows, int(width), dirs is not None, planes)
+
+
+@nb.njit(cache=True, nogil=True)
+def _background_task(task, n_tasks, miss, rows, width, per_ray, planes):
+    a, b = _segment(task, n_tasks, len(miss))
+    for m in range(a, b):
+        r = miss[m]
+        row = r if per_ray else r // width
+        planes[C_R, r] = rows[row, 0]
+        planes[C_R + 1, r] = rows[row, 1]
+        planes[C_R + 2, r] = rows[row, 2]
+
+
 def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight, color, rows,
-                  planes, dirs=None):
+                  planes, dirs=None, miss=None):
     """Where the primary ray missed every surface and meets the ground plane (points p with
     p . up = height, ``up`` a unit vector), write the ground's colour into ``planes``: an
     opaque Lambertian ``color`` under ``lights`` with shadows and the ``headlight`` (its
@@ -531,14 +549,15 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
     hold back (``trace``: as for :func:`shadow_visibility`; None: no shadows). The ground
     is part of the background: alpha and the other channels keep
     saying "no hit" (the EXR's coverage is the surface's). Returns the number of ground
-    pixels. ``dirs``: as for :func:`shade` (then ``rows`` (n,3): each ray's background).
+    pixels. ``dirs``: as for :func:`shade` (then ``rows`` (n,3): each ray's background);
+    ``miss``: the missed pixels, if known (``pix_patch < 0``).
 
     On every thread, three passes over the missed pixels: the first shades each ground
     pixel none of whose shadow rays may meet an object (a ray whose segment towards its
     light misses ``trace.bounds``, the box of everything ``trace`` can hit: on a scene that
     is mostly ground, most of them) and counts the rays of the others; the second makes
     those rays, ``trace`` traces them, and the third shades their pixels."""
-    miss = np.nonzero(pix_patch < 0)[0]
+    miss = np.nonzero(pix_patch < 0)[0] if miss is None else miss
     dirs = _no_dirs() if dirs is None else dirs
     up = np.asarray(up, np.float64)
     shadows = trace is not None
