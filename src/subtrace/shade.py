@@ -614,7 +614,9 @@ def _ground_irradiance(lights, k, x, y, z, up):
     return lx, ly, lz, d, max(lx * up[0] + ly * up[1] + lz * up[2], 0.0) * f
 
 
-@inline_njit  # (1 / 0: inf, as the ray kernels take it)
+# (1 / 0: inf, as the ray kernels take it; inlined, it takes its callers' error model, so
+# theirs is numpy's too)
+@inline_njit
 def _ground_ray(lights, k, x, y, z, up, shadows, cull, lo, hi):
     """Light k at the ground point (:func:`_ground_irradiance`) and whether its shadow ray
     is to be traced: shadows on, the light faces the ground, and (``cull``) the ray's
@@ -666,7 +668,7 @@ def _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, col
     return b
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, error_model="numpy")  # (see _ground_ray)
 def _ground_first(task, n_tasks, frame, width, miss, dirs, up, height, lights, headlight,
                   color, catcher, rows, shadows, cull, lo, hi, planes, pending, counts):
     """Pass 1 of :func:`ground_pixels` over thread ``task``'s missed pixels: shade the ground
@@ -696,7 +698,7 @@ def _ground_first(task, n_tasks, frame, width, miss, dirs, up, height, lights, h
     counts[task, 1] = n_rays
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, error_model="numpy")  # (see _ground_ray)
 def _ground_rays(task, n_tasks, frame, width, miss, dirs, up, height, lights, headlight,
                  color, catcher, rows, shadows, cull, lo, hi, planes, pending, base,
                  origins, to_light, dist):
@@ -719,7 +721,7 @@ def _ground_rays(task, n_tasks, frame, width, miss, dirs, up, height, lights, he
                 j += 1
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, error_model="numpy")  # (see _ground_ray)
 def _ground_last(task, n_tasks, frame, width, miss, dirs, up, height, lights, headlight,
                  color, catcher, rows, shadows, cull, lo, hi, planes, pending, base, blocked):
     """Pass 3: shade thread ``task``'s pending pixels with their rays' ``blocked``."""
