@@ -120,14 +120,23 @@ def _pxr(path):
     return pxr
 
 
+_OPENED: dict = {}  # the last stage opened: (path, size, mtime) -> its Usd.Stage
+
+
 def open_stage(path):
-    """The ``Usd.Stage`` of ``path``; SubtraceError naming the file when it cannot be read."""
+    """The ``Usd.Stage`` of ``path``; SubtraceError naming the file when it cannot be read.
+    The last stage opened is kept while its file is unchanged: frames read it at each time
+    code, and their range and animation are asked of it first."""
     path = os.fsdecode(os.fspath(path))
     pxr = _pxr(path)
     if not os.path.exists(path):
         raise SubtraceError(f"{path}: no such file")
     if os.path.isdir(path):
         raise SubtraceError(f"{path}: is a directory, expected a USD stage")
+    st = os.stat(path)
+    key = (os.path.abspath(path), st.st_size, st.st_mtime_ns)
+    if key in _OPENED:
+        return _OPENED[key]
     _check_text(path)
     try:
         stage = pxr.Usd.Stage.Open(path)
@@ -135,6 +144,8 @@ def open_stage(path):
         raise SubtraceError(f"{path}: not a readable USD stage: {_describe(exc)}") from None
     if stage is None:
         raise SubtraceError(f"{path}: not a readable USD stage")
+    _OPENED.clear()
+    _OPENED[key] = stage
     return stage
 
 
