@@ -90,10 +90,11 @@ def execute(args) -> int:
         if path:
             check_writable(path)
     # imported once the inputs are checked: bad input fails before the renderer's kernels
-    # and OpenImageIO load
+    # and OpenImageIO load (Numba set up first: its runtime starts while the renderer's
+    # modules import)
+    set_up_numba(args)
     from subtrace.render import render_scene
 
-    set_up_numba(args)
     progress = ProgressBar() if sys.stderr.isatty() and not args.quiet else None
     if numbers is None and tile is None and dask is None:
         result = render_scene(scene, threads=args.threads, accel=args.accel, progress=progress,

@@ -29,6 +29,7 @@ import hashlib
 import os
 import re
 import sys
+import threading
 from pathlib import Path
 
 from subtrace.version import VERSION
@@ -297,6 +298,13 @@ def trim_loader() -> None:
       target up for a kernel that is not in the cache; a kernel that needs BLAS still
       imports scipy.linalg when it is compiled.
 
+    * the runtime is started on a thread of its own at once (compiling its few functions
+      takes about 50 ms, mostly in LLVM, which releases the GIL), while this thread goes on
+      importing the renderer; the first kernel load or compile waits for it;
+    * Numba's hooks on LLVM's lock, which only time the lock for Numba's compile events, are
+      removed: a kernel load makes thousands of LLVM calls (its symbols, one by one), each
+      of which ran them twice.
+
     Numbas whose loader is organised differently are left alone (the command is then just
     slower); tests run the command in fresh processes on warm and cold caches.
     """
@@ -309,22 +317,46 @@ def trim_loader() -> None:
     if not all(hasattr(Cache, name) for name in ("_load_overload",
                                                    "_guard_against_spurious_io_errors")):
         return  # pragma: no cover - a Numba whose cache loader is organised differently
+    _drop_llvm_lock_events()
+    context = cpu_target.target_context
+    starting = threading.Thread(target=rtsys.initialize, args=(context,), daemon=True,
+                                name="subtrace-numba-runtime")
+    starting.start()
+
+    def runtime_ready(target_context):
+        starting.join()
+        rtsys.initialize(target_context)  # idempotent (and the fallback if the thread failed)
 
     def load_overload(self, sig, target_context):
-        rtsys.initialize(target_context)  # idempotent; loaded code calls into the runtime
+        runtime_ready(target_context)  # loaded code calls into the runtime
         with _without_scipy_linalg(), self._guard_against_spurious_io_errors():
             return self._load_overload(sig, target_context)
         # None (a miss: the kernel compiles) when the guard swallowed an I/O error
 
-    context = cpu_target.target_context
     full_refresh = context.refresh
 
     def refresh():
+        starting.join()  # (a compile initialises the runtime too: not on two threads at once)
         with _without_scipy_linalg():
             return full_refresh()
 
     Cache.load_overload = load_overload
     context.refresh = refresh
+
+
+def _drop_llvm_lock_events() -> None:
+    """Remove the callbacks Numba hangs on llvmlite's lock (they record "numba:llvm_lock"
+    events, which only time compiles); any other callback stays."""
+    try:
+        import llvmlite.binding.ffi as ffi
+
+        lock = ffi.lib._lock
+        hooks = list(lock._cblist)
+    except (ImportError, AttributeError):  # pragma: no cover - another llvmlite
+        return
+    for acquire, release in hooks:
+        if getattr(acquire, "__module__", "") == "numba.core.base":
+            lock.unregister(acquire, release)
 
 
 class _without_scipy_linalg:
