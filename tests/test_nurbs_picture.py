@@ -6,6 +6,7 @@ than without them; and the image does not depend on the thread count."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -43,6 +44,41 @@ def test_a_nurbs_sphere_does_not_shadow_or_occlude_itself(tmp_path):
     assert hit.sum() > 500
     for c in "RGB":
         assert np.array_equal(plain[c], both[c]), c
+
+
+def test_nurbs_surfaces_take_the_materials_specular_lobe(tmp_path):
+    """A sphere given ``specular`` and ``shininess`` in the scene: its colour is the plain
+    (diffuse) render's plus Ks times Blinn-Phong's (N.H)^Ns for the light and for the
+    headlight (whose half vector is the view direction), computed here from the image's
+    own normals and positions; a surface read from an MTL material with Ks gets it too."""
+    eye = np.array([2.0, -6.0, 5.0])  # (_scene's camera)
+    ks, ns = 0.5, 30.0
+
+    def render(**material):
+        data = _scene(tmp_path, [SPHERE], shadows=False)
+        return render_scene(replace(data, objects=[replace(data.objects[0], **material)]))
+
+    plain = render().channels
+    shiny = render(specular=(ks, ks, ks), shininess=ns).channels
+    hit = plain["A"] > 0
+    n = np.stack([shiny[c] for c in ("N.X", "N.Y", "N.Z")], axis=-1)[hit].astype(np.float64)
+    p = np.stack([shiny[c] for c in ("P.X", "P.Y", "P.Z")], axis=-1)[hit].astype(np.float64)
+    v = eye - p
+    v /= np.linalg.norm(v, axis=1)[:, None]
+    h = v + np.array([0.0, 0.0, 1.0])  # towards the eye plus towards the light
+    h /= np.linalg.norm(h, axis=1)[:, None]
+    lobe = ks * (np.maximum((n * h).sum(axis=1), 0.0) ** ns
+                 + 0.3 * np.maximum((n * v).sum(axis=1), 0.0) ** ns)
+    extra = shiny["R"][hit].astype(np.float64) - plain["R"][hit]
+    assert lobe.max() > 0.4  # the highlight is in view
+    np.testing.assert_allclose(extra, lobe, atol=2e-3)
+
+    mtl = tmp_path / "shiny.mtl"
+    mtl.write_text(f"newmtl shiny\nKd 0.8 0.8 0.8\nKs {ks} {ks} {ks}\nNs {ns}\n")
+    obj = tmp_path / "sphere.obj"
+    obj.write_text("mtllib shiny.mtl\nusemtl shiny\n" + Path(SPHERE).read_text())
+    from_mtl = render_scene(_scene(tmp_path, [str(obj)], shadows=False)).channels
+    np.testing.assert_allclose(from_mtl["R"], shiny["R"], atol=1e-6)
 
 
 def test_nurbs_and_cages_shadow_each_other(tmp_path):

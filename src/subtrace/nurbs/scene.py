@@ -33,7 +33,7 @@ from subtrace import config
 from subtrace.errors import SubtraceWarning
 from subtrace.io.limits import check_coordinates
 from subtrace.io.meshes import is_mesh_file
-from subtrace.io.obj import DEFAULT_DIFFUSE, read_obj, read_obj_bytes
+from subtrace.io.obj import DEFAULT_DIFFUSE, Material, read_obj, read_obj_bytes
 from subtrace.io.usd import is_usd
 from subtrace.nurbs.model import NurbsModel, build_model
 from subtrace.nurbs.trace import (
@@ -96,6 +96,8 @@ class NurbsScene:
     bvh: object  # subtrace.accel.bvh.BVH over the patches' shells
     surface_object: np.ndarray  # (S,) int32 scene object index
     surface_color: np.ndarray  # (S, 3) float64 diffuse colour
+    surface_specular: np.ndarray  # (S, 3) float64 specular colour (Ks; 0: none)
+    surface_shininess: np.ndarray  # (S,) float64 specular exponent (Ns)
 
     def bounds(self):
         """(lo (3,), hi (3,)): the box of every patch's projected control points."""
@@ -106,7 +108,7 @@ class NurbsScene:
 def load_nurbs(scene, quiet: bool = False) -> NurbsScene | None:
     """The free-form surfaces of ``scene``'s objects (None when no object has any).
     ``quiet``: the file's reading warnings are not repeated (the cage load gives them)."""
-    surfaces, owner, colors = [], [], []
+    surfaces, owner, colors, speculars, shininess = [], [], [], [], []
     for k, obj in enumerate(scene.objects):
         if not has_surfaces(obj.mesh):
             continue
@@ -117,16 +119,22 @@ def load_nurbs(scene, quiet: bool = False) -> NurbsScene | None:
         if data.freeform is None:
             continue
         check_coordinates(obj.mesh, data.points, config.MAX_COORDINATE)
-        table = [m.diffuse for m in data.materials] + [DEFAULT_DIFFUSE]
+        # the surface's usemtl material (the last row: none), the scene's keys over it
+        table = [*data.materials, Material("", DEFAULT_DIFFUSE)]
         for surface in data.freeform.surfaces:
             surfaces.append(surface)
             owner.append(k)
-            colors.append(obj.color if obj.color is not None else table[surface.material])
+            mat = table[surface.material]
+            colors.append(obj.color if obj.color is not None else mat.diffuse)
+            speculars.append(obj.specular if obj.specular is not None else mat.specular)
+            shininess.append(obj.shininess if obj.shininess is not None else mat.shininess)
     if not surfaces:
         return None
     model = build_model(surfaces)
     return NurbsScene(model, patch_bvh(model), np.array(owner, dtype=np.int32),
-                      np.array(colors, dtype=np.float64).reshape(-1, 3))
+                      np.array(colors, dtype=np.float64).reshape(-1, 3),
+                      np.array(speculars, dtype=np.float64).reshape(-1, 3),
+                      np.array(shininess, dtype=np.float64))
 
 
 def nurbs_pass(nurbs: NurbsScene, frame, width, height, tol_rad, other_t, lights, headlight,
@@ -175,12 +183,14 @@ def _shade_nearer(nurbs, frame, width, height, tol_rad, other_t, lights, headlig
 
 def with_surfaces(nurbs: NurbsScene, patches: PatchShading | None):
     """(the cages' ``patches`` (None: none) followed by one row per free-form surface, the
-    row of surface 0): the surfaces' materials for ``shade.light`` (their colour, no
-    specular lobe, as the NURBS pass lit them)."""
+    row of surface 0): the surfaces' materials for ``shade.light`` (diffuse colour and
+    Blinn-Phong lobe, from the object's keys or the surface's MTL material, as the cages')."""
     s = len(nurbs.surface_color)
     rows = PatchShading(nurbs.surface_object.astype(np.int32), np.arange(s, dtype=np.int32),
                         np.zeros((s, 2)), np.ones(s), np.zeros(s, np.int8),
-                        nurbs.surface_color.astype(np.float64), np.zeros((s, 3)), np.ones(s))
+                        nurbs.surface_color.astype(np.float64),
+                        nurbs.surface_specular.astype(np.float64),
+                        nurbs.surface_shininess.astype(np.float64))
     if patches is None:
         return rows, 0
     return PatchShading(*(np.concatenate([a, b]) for a, b in zip(patches, rows))), len(
