@@ -1,7 +1,9 @@
 """Ambient occlusion (shade.ambient_occlusion through picture.paint): a point in a concave
 corner is darker than one on an open convex face; a convex surface never occludes itself;
 0 rays is no ambient occlusion, bit for bit; the cosine-weighted directions; the image does
-not depend on the thread count."""
+not depend on the thread count; the ground darkens beside an object standing on it and
+nowhere else; the smoothing (shade.smooth_occlusion) keeps constants, removes most of the
+grain and mixes neither objects nor surfaces apart in depth."""
 
 from __future__ import annotations
 
@@ -10,7 +12,8 @@ import pytest
 
 from subtrace.io.scene import apply_overrides, scene_from_dict
 from subtrace.render import render_scene
-from subtrace.shade import ao_directions
+from subtrace.camera import Camera
+from subtrace.shade import ao_directions, pixel_rays, smooth_occlusion
 
 CUBE = ("v -1 -1 -1\nv 1 -1 -1\nv 1 1 -1\nv -1 1 -1\nv -1 -1 1\nv 1 -1 1\nv 1 1 1\n"
         "v -1 1 1\nf 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n")
@@ -130,3 +133,83 @@ def test_directions_are_cosine_weighted():
     assert (cos ** 2).mean() == pytest.approx(0.5, abs=0.01)
     again = ao_directions(n[::-1], ids[::-1], 16).reshape(2000, 16, 3)[::-1]
     assert np.array_equal(again.reshape(-1, 3), d)
+
+
+def _ground_scene(tmp_path, block, ao, color):
+    data = {
+        "object": [{"mesh": block}],
+        "camera": {"eye": [3.0, 4.0, 5.0], "target": [0.0, 0.0, 0.0], "width": 96,
+                   "height": 72},
+        "render": {"headlight": True, "headlight_intensity": 1.0, "shadows": False,
+                   "samples": 1, "ao": ao, "background": [0.5, 0.6, 0.7]},
+        "ground": {} if color is None else {"color": color},
+    }
+    return scene_from_dict(data, base_dir=tmp_path)
+
+
+@pytest.mark.parametrize("color", [[0.6, 0.6, 0.6], None])  # opaque, a shadow catcher
+def test_ground_darkens_beside_an_object_and_nowhere_else(tmp_path, color):
+    """A block standing on the ground (at its lowest point): with ambient occlusion the
+    ground in the corner beside the block's foot keeps under 80 % of its colour (the
+    block's walls close much of its hemisphere), while the ground far from the block
+    (beyond the rays' reach) keeps its colour bit for bit, and so does every pixel of the
+    block's open top."""
+    block = _box(tmp_path / "block.obj", (-0.5, 0, -0.5), (0.5, 1, 0.5))
+    off = render_scene(_ground_scene(tmp_path, block, 0, color))
+    on = render_scene(_ground_scene(tmp_path, block, 32, color))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = on.channels["R"].astype(np.float64) / off.channels["R"]
+    corner = share[_pixel_of(off, (0.55, 0.0, 0.55))]
+    assert off.channels["A"][_pixel_of(off, (0.55, 0.0, 0.55))] == 0  # the ground's
+    assert corner < 0.8
+    far = _pixel_of(off, (-2.5, 0.0, 3.0))  # 3 from the block: past 0.2 of its diagonal
+    assert on.channels["R"][far] == off.channels["R"][far]
+    assert share[_pixel_of(off, (0.0, 1.0, 0.0))] == 1.0
+
+
+def _plane_grid(width=48, height=36):
+    """A camera looking straight down at the plane z = 0 from z = 10: each pixel's frame,
+    distance to the plane and the plane's normal."""
+    camera = Camera((0.0, 0.0, 10.0), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 40.0, width, height)
+    frame = camera.frame()
+    d = pixel_rays(frame, width, np.arange(width * height))
+    t = 10.0 / -d[:, 2]
+    normals = np.repeat(np.array([[0.0, 0.0, 1.0]]), len(t), axis=0)
+    return camera, frame, t, normals
+
+
+def test_smoothing_keeps_a_constant_and_removes_most_of_the_grain():
+    camera, frame, t, normals = _plane_grid()
+    group = np.zeros(len(t), np.int64)
+    rad = camera.pixel_angle()
+    flat = np.full(len(t), 0.625, np.float32)
+    assert np.array_equal(smooth_occlusion(frame, 48, t, normals, group, flat, rad, 3), flat)
+    rng = np.random.default_rng(3)
+    noisy = (0.8 + 0.1 * rng.standard_normal(len(t))).astype(np.float32)
+    smooth = smooth_occlusion(frame, 48, t, normals, group, noisy, rad, 3)
+    inner = np.zeros((36, 48), bool)
+    inner[3:-3, 3:-3] = True
+    inner = inner.ravel()
+    assert smooth[inner].std() < noisy[inner].std() / 3
+    assert abs(smooth[inner].mean() - noisy[inner].mean()) < 0.01
+    assert np.array_equal(smooth_occlusion(frame, 48, t, normals, group, noisy, rad, 0),
+                          noisy)
+
+
+def test_smoothing_mixes_no_objects_no_depths_and_leaves_other_pixels():
+    """Left half object 0 (value 1), right half object 1 (value 0): unchanged. One object
+    whose right half lies twice as far (a step in depth): unchanged too. Pixels of group -1
+    keep their values."""
+    camera, frame, t, normals = _plane_grid()
+    rad = camera.pixel_angle()
+    col = np.arange(len(t)) % 48
+    values = np.where(col < 24, 1.0, 0.0).astype(np.float32)
+    two = np.where(col < 24, 0, 1).astype(np.int64)
+    assert np.array_equal(smooth_occlusion(frame, 48, t, normals, two, values, rad, 3), values)
+    step = np.where(col < 24, t, 2.0 * t)
+    one = np.zeros(len(t), np.int64)
+    assert np.array_equal(smooth_occlusion(frame, 48, step, normals, one, values, rad, 3),
+                          values)
+    none = np.full(len(t), -1, np.int64)
+    noisy = np.random.default_rng(5).random(len(t)).astype(np.float32)
+    assert np.array_equal(smooth_occlusion(frame, 48, t, normals, none, noisy, rad, 3), noisy)

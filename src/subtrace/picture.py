@@ -10,7 +10,8 @@ over ``shade.py`` and ``trace/rays.py``; no kernels here).
 * ambient occlusion (``[render] ao`` / ``--ao N``, off by default): N cosine-weighted
   any-hit rays from every hit (``shade.ambient_occlusion``) reaching ``config.AO_DISTANCE``
   of the diagonal of the scene's control points; the share that escapes scales the
-  diffuse lighting;
+  diffuse lighting, and the ground's (``shade.ground_occlusion``: rays over the up
+  hemisphere from its points near the objects);
 * the lighting (``shade.light``: Lambert plus the materials' Blinn-Phong lobe);
 * the background (a colour or a vertical gradient) and the ground (``[ground]``);
 * adaptive anti-aliasing (``[render] samples`` / ``--samples N``; the API's default is one
@@ -47,8 +48,9 @@ from subtrace.nurbs.scene import shade_rays
 from subtrace.runtime import threads as tasks
 from subtrace import config
 from subtrace.shade import (C_A, C_R, CHANNELS, ambient_occlusion, background_pixels,
-                            background_rows, edge_pixels, ground_pixels, light, light_array,
-                            miss_values, shade, shadow_visibility)
+                            background_rows, edge_pixels, ground_occlusion, ground_pixels,
+                            light, light_array, miss_values, pixel_rays, shade,
+                            shadow_visibility, smooth_occlusion)
 from subtrace.trace.rays import Pools, trace_rays
 
 # the R2 sequence's steps (the plastic number's powers): well-spread points in a square
@@ -126,12 +128,14 @@ def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, st
         stats.ao_rays += len(tmax)
         return blocked
 
+    trace_ao.bounds = any_hit.bounds  # (for the ground: :func:`shade.ground_occlusion`)
+
     image = whole_image(camera)  # (a window's pixels are its image's: rows, AO patterns)
     lo, hi = _bounds(cages, nurbs)
     ao = ids = None
     if scene.render.ao > 0:
         ao = (trace_ao, scene.render.ao, config.AO_DISTANCE * float(np.linalg.norm(hi - lo)),
-              image.width)
+              image.width, config.AO_SMOOTH_RADIUS, image.pixel_angle())
         col0, row0 = window_offset(frame)
         row, col = np.divmod(np.arange(W * H, dtype=np.int64), W)
         ids = (row + row0) * image.width + col + col0
@@ -252,22 +256,65 @@ def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights,
     if len(lights) and scene.render.shadows:
         visible = shadow_visibility(trace_shadows, frame, width, t, normals, pix_patch, lights,
                                     tol_rad, dirs)
-    occlusion = None
+    occlusion = ground_ao = None
+    miss = None
     if ao is not None:
         occlusion = ambient_occlusion(ao[0], frame, width, t, normals, pix_patch, ao[1], ao[2],
                                       tol_rad, dirs, ids)
+        if ground is not None:  # the ground darkens where objects stand on it or come near
+            miss = np.nonzero(pix_patch < 0)[0]
+            ground_ao = ground_occlusion(ao[0], frame, width, miss, ground[0], ground[1],
+                                         ao[1], ao[2], dirs, ids)
+        if dirs is None and len(ao) > 4 and ao[4] > 0:  # a grid of pixels: smoothed
+            occlusion, ground_ao = _smooth(frame, width, t, normals, pix_patch, patches,
+                                           occlusion, miss, ground, ground_ao, ao)
     r = scene.render
     headlight = np.array([r.headlight_intensity if r.headlight else 0.0])
     light(frame, width, t, normals, pix_patch, patches, lights, headlight, visible, planes,
           dirs, occlusion)
-    miss = None
     if r.background_bottom is not None or dirs is not None:
-        miss = np.nonzero(pix_patch < 0)[0]
+        miss = np.nonzero(pix_patch < 0)[0] if miss is None else miss
         background_pixels(miss, rows, width, planes, dirs)
     if ground is not None:
         ground_pixels(frame, width, pix_patch, ground[0], ground[1],
                       trace_shadows if len(lights) and r.shadows else None, lights,
-                      float(headlight[0]), scene.ground.color, rows, planes, dirs, miss)
+                      float(headlight[0]), scene.ground.color, rows, planes, dirs, miss,
+                      ground_ao)
+
+
+def _smooth(frame, width, t, normals, pix_patch, patches, occlusion, miss, ground, ground_ao,
+            ao):
+    """The ambient occlusion of the surfaces' pixels (``occlusion``) and of the ground's
+    (``ground_ao``, per missed pixel of ``miss``; None: no ground) smoothed over the
+    pixel grid (:func:`shade.smooth_occlusion`, radius ``ao[4]``, the pixel's angle
+    ``ao[5]``): each surface pixel with its object's neighbours, each ground pixel with the
+    ground's."""
+    hit = pix_patch >= 0
+    group = np.full(len(pix_patch), -1, np.int64)
+    group[hit] = patches.object_id[pix_patch[hit]]
+    depth = np.where(hit, t, np.inf)
+    values = occlusion
+    guide = normals
+    ground_at = None
+    if ground_ao is not None:
+        up, height = ground
+        d = pixel_rays(frame, width, miss)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tg = (height - frame[0] @ up) / (d @ up)
+        on = (d @ up < 0.0) & (tg > 0.0) & (tg < np.inf)
+        ground_at = miss[on]
+        group[ground_at] = group.max(initial=-1) + 1  # (a label of its own)
+        depth[ground_at] = tg[on]
+        values = occlusion.copy()
+        values[ground_at] = ground_ao[on]
+        guide = normals.copy()
+        guide[ground_at] = up
+    smooth = smooth_occlusion(frame, width, depth, guide, group, values, ao[5], ao[4])
+    occlusion = np.where(hit, smooth, occlusion).astype(np.float32)
+    if ground_at is not None:
+        ground_ao = ground_ao.copy()
+        ground_ao[np.nonzero(on)[0]] = smooth[ground_at]
+    return occlusion, ground_ao
 
 
 def _antialias(scene, frame, W, H, closest, patches, planes, lights, ground, trace_shadows,

@@ -330,7 +330,7 @@ def _prepare(scene, cages, stats, nurbs=None, crop=None):
     if not cages:
         lo, hi = nurbs.bounds()
         camera = scene.make_camera(lo, hi)
-        view = camera if crop is None else crop_window(camera, crop)
+        view = camera if crop is None else crop_window(camera, crop, apron(scene))
         stats.rays = view.width * view.height
         stats.time_load = time.perf_counter() - t_start
         return cages, None, camera, view, scene.render.tolerance_rad(camera), None
@@ -363,7 +363,7 @@ def _prepare(scene, cages, stats, nurbs=None, crop=None):
         table = build_patch_table(cages)
     budget = scene.render.max_memory
     budget = config.default_max_memory() if budget is None else budget
-    view = camera if crop is None else crop_window(camera, crop)
+    view = camera if crop is None else crop_window(camera, crop, apron(scene))
     check_memory(table, view.width * view.height, budget, view.width, view.height)
     stats.patches = table.n_patches
     stats.rays = view.width * view.height
@@ -371,19 +371,25 @@ def _prepare(scene, cages, stats, nurbs=None, crop=None):
     return cages, table, camera, view, scene.render.tolerance_rad(camera), budget
 
 
-def crop_window(camera, crop) -> CameraWindow:
+def crop_window(camera, crop, apron=1) -> CameraWindow:
     """The window of ``camera``'s image that :func:`render_scene` traces for ``crop`` =
     (x0, y0, x1, y1) (pixels, x1 and y1 excluded; checked: SceneError naming --crop): the
-    crop and a pixel around it (anti-aliasing compares each pixel with its right and lower
-    neighbours), widened to even bounds (the projection's tiles are 2x2 pixels of the
-    image) and held within the image. Every pixel of the crop is then traced and shaded
-    exactly as in the whole image."""
+    crop and ``apron`` pixels around it (anti-aliasing compares each pixel with its right
+    and lower neighbours: 1; smoothed ambient occlusion reads its neighbours within
+    config.AO_SMOOTH_RADIUS more: :func:`apron`), widened to even bounds (the projection's
+    tiles are 2x2 pixels of the image) and held within the image. Every pixel of the crop
+    is then traced and shaded exactly as in the whole image."""
     x0, y0, x1, y1 = check_crop(crop, camera.width, camera.height)
     a = TILE
-    wx0, wy0 = max(x0 - 1, 0) // a * a, max(y0 - 1, 0) // a * a
-    wx1 = min(-(-(x1 + 1) // a) * a, camera.width)
-    wy1 = min(-(-(y1 + 1) // a) * a, camera.height)
+    wx0, wy0 = max(x0 - apron, 0) // a * a, max(y0 - apron, 0) // a * a
+    wx1 = min(-(-(x1 + apron) // a) * a, camera.width)
+    wy1 = min(-(-(y1 + apron) // a) * a, camera.height)
     return CameraWindow(camera, wx0, wy0, wx1 - wx0, wy1 - wy0)
+
+
+def apron(scene) -> int:
+    """The pixels a tile's window holds around the tile (:func:`crop_window`)."""
+    return 1 + (config.AO_SMOOTH_RADIUS if scene.render.ao > 0 else 0)
 
 
 def render_scene(scene, cages=None, threads=None, progress=None, accel=None,

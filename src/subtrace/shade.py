@@ -467,6 +467,104 @@ def ao_directions(normals, ids, samples) -> np.ndarray:
     return out
 
 
+def ground_occlusion(trace, frame, width, miss, up, height, samples, distance, dirs=None,
+                     ids=None) -> np.ndarray:
+    """(len(miss),) float32: the ambient occlusion of the ground under the missed rays
+    ``miss`` (pixel or ray indices, as for :func:`ground_pixels`): the share of ``samples``
+    cosine-weighted rays over the hemisphere of ``up`` from the ground point that meet no
+    surface within ``distance`` (``trace``: as for :func:`ambient_occlusion`). 1 where the
+    ray meets no ground, and where the ground point lies farther than ``distance`` from
+    ``trace.bounds`` (the box of everything ``trace`` can hit): nothing can occlude it
+    there, and most of a ground's pixels are traced no ray. The patterns are keyed as
+    :func:`ambient_occlusion`'s (``ids`` indexed by ray, default the ray's index)."""
+    open_ = np.ones(len(miss), np.float32)
+    bounds = getattr(trace, "bounds", None)
+    if samples <= 0 or not len(miss) or bounds is None:
+        return open_
+    up = np.asarray(up, np.float64)
+    d = pixel_rays(frame, width, miss) if dirs is None or not len(dirs) else dirs[miss]
+    dn = d @ up
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (height - frame[0] @ up) / dn
+    down = (dn < 0.0) & (t > 0.0) & (t < np.inf)
+    t = np.where(down, t, 0.0)
+    points = frame[0] + t[:, None] * d
+    gap = np.maximum(np.maximum(bounds[0] - points, points - bounds[1]), 0.0)
+    near = np.nonzero(down & ((gap * gap).sum(axis=1) < float(distance) ** 2))[0]
+    key = np.asarray(miss, np.int64) if ids is None else np.asarray(ids, np.int64)[miss]
+    per = max(1, config.AO_CHUNK_RAYS // samples)
+    for a in range(0, len(near), per):
+        m = near[a:a + per]
+        origins = np.repeat(points[m], samples, axis=0)
+        rays = ao_directions(np.repeat(up[None], len(m), axis=0), key[m], samples)
+        blocked = trace(origins, rays, np.full(len(rays), float(distance)))
+        hidden = blocked.reshape(len(m), samples).sum(axis=1, dtype=np.int64)
+        open_[m] = (samples - hidden).astype(np.float32) / np.float32(samples)
+    return open_
+
+
+def smooth_occlusion(frame, width, t, normals, group, values, pixel_rad, radius) -> np.ndarray:
+    """(n,) float32: ``values`` (n,) (ambient occlusion, one estimate per pixel of a
+    ``width``-wide grid of rays from the eye) filtered by each pixel's neighbours within
+    ``radius`` pixels that lie on the same smooth surface: a cross-bilateral filter guided
+    by the geometry, which keeps contacts and creases and removes the grain of a few rays.
+
+    A pixel of ``group`` g >= 0 (its object, or any other label of a surface: the ground)
+    takes the neighbours of its group, weighted by a Gaussian of their distance in pixels
+    (sigma radius / 2), by (n . n')^8 of the normals ``normals`` (n,3) and by how near the
+    neighbour's point (eye + t' d') lies to the pixel's tangent plane, against two of the
+    pixel's footprints (``t * pixel_rad``); pixels of group -1 keep their value. Each pixel
+    reads only its own neighbourhood, so a window of the image with ``radius`` pixels
+    more on every side gives its pixels' values bit for bit."""
+    out = np.asarray(values, np.float32).copy()
+    if radius > 0 and len(out):
+        run_tasks(_smooth_task, frame, int(width), np.ascontiguousarray(t, np.float64),
+                  np.ascontiguousarray(normals, np.float64),
+                  np.ascontiguousarray(group, np.int64),
+                  np.ascontiguousarray(values, np.float32), float(pixel_rad), int(radius),
+                  _no_dirs(), out)
+    return out
+
+
+@nb.njit(cache=True, nogil=True)
+def _smooth_task(task, n_tasks, frame, width, t, normals, group, values, pixel_rad, radius,
+                 dirs, out):
+    """Rows ``task, task + n_tasks, ...`` of :func:`smooth_occlusion`."""
+    n = len(values)
+    height = n // width
+    inv2s2 = 2.0 / (radius * radius)  # 1 / (2 sigma^2), sigma = radius / 2
+    for row in range(task, height, n_tasks):
+        for col in range(width):
+            r = row * width + col
+            g = group[r]
+            if g < 0:
+                continue
+            dx, dy, dz = _direction(frame, width, dirs, r)
+            px, py, pz = frame[0, 0] + t[r] * dx, frame[0, 1] + t[r] * dy, frame[0, 2] + t[r] * dz
+            nx, ny, nz = normals[r, 0], normals[r, 1], normals[r, 2]
+            reach = 2.0 * t[r] * pixel_rad
+            total = 0.0
+            weight = 0.0
+            for i in range(max(row - radius, 0), min(row + radius + 1, height)):
+                for j in range(max(col - radius, 0), min(col + radius + 1, width)):
+                    q = i * width + j
+                    if group[q] != g:
+                        continue
+                    c = nx * normals[q, 0] + ny * normals[q, 1] + nz * normals[q, 2]
+                    if not c > 0.0:
+                        continue
+                    ex, ey, ez = _direction(frame, width, dirs, q)
+                    h = ((frame[0, 0] + t[q] * ex - px) * nx + (frame[0, 1] + t[q] * ey - py)
+                         * ny + (frame[0, 2] + t[q] * ez - pz) * nz) / reach
+                    c2 = c * c
+                    c4 = c2 * c2
+                    w = math.exp(-((i - row) * (i - row) + (j - col) * (j - col)) * inv2s2
+                                 - h * h) * c4 * c4
+                    total += w * values[q]
+                    weight += w
+            out[r] = np.float32(total / weight)
+
+
 # the R2 sequence's steps (the plastic number's powers), as picture.sample_offsets
 _R2_A1 = 1.0 / 1.32471795724474602596
 _R2_A2 = 1.0 / (1.32471795724474602596 * 1.32471795724474602596)
@@ -540,7 +638,7 @@ def _background_task(task, n_tasks, miss, rows, width, per_ray, planes):
 
 
 def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight, color, rows,
-                  planes, dirs=None, miss=None):
+                  planes, dirs=None, miss=None, occlusion=None):
     """Where the primary ray missed every surface and meets the ground plane (points p with
     p . up = height, ``up`` a unit vector), write the ground's colour into ``planes``: an
     opaque Lambertian ``color`` under ``lights`` with shadows and the ``headlight`` (its
@@ -550,7 +648,10 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
     is part of the background: alpha and the other channels keep
     saying "no hit" (the EXR's coverage is the surface's). Returns the number of ground
     pixels. ``dirs``: as for :func:`shade` (then ``rows`` (n,3): each ray's background);
-    ``miss``: the missed pixels, if known (``pix_patch < 0``).
+    ``miss``: the missed pixels, if known (``pix_patch < 0``); ``occlusion``: None, or
+    (len(miss),) float32 the ground's ambient occlusion there (:func:`ground_occlusion`),
+    which scales its light (a shadow catcher: the share of the background it keeps) as
+    the surfaces' occlusion scales their diffuse light.
 
     On every thread, three passes over the missed pixels: the first shades each ground
     pixel none of whose shadow rays may meet an object (a ray whose segment towards its
@@ -571,8 +672,9 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
     n_tasks = thread_count()
     pending = np.empty(len(miss), np.int8)  # per missed pixel: its shadow rays to trace
     counts = np.zeros((n_tasks, 2), np.int64)  # per thread: ground pixels, rays
+    occlusion = np.zeros(0, np.float32) if occlusion is None else occlusion
     shading = (frame, width, miss, dirs, up, float(height), lights, float(headlight), color,
-               catcher, rows, shadows, cull, lo, hi, planes, pending)
+               catcher, rows, shadows, cull, lo, hi, planes, occlusion, pending)
     run_tasks(_ground_first, *shading, counts, n=n_tasks)
     n_rays = int(counts[:, 1].sum())
     if n_rays:
@@ -637,10 +739,11 @@ def _segment(task, n_tasks, n):
 
 @inline_njit
 def _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, color, catcher,
-                  rows, shadows, cull, lo, hi, planes, blocked, b):
+                  rows, shadows, cull, lo, hi, planes, occ, blocked, b):
     """The colour of ground pixel r (point (x, y, z), ``dn`` its ray's d . up) into
     ``planes``: each light's irradiance unless its shadow ray (the next of ``blocked`` from
-    ``b``, for the lights :func:`_ground_ray` traces) was blocked; returns the next ``b``."""
+    ``b``, for the lights :func:`_ground_ray` traces) was blocked, all scaled by the
+    ambient occlusion ``occ``; returns the next ``b``."""
     full = max(-dn, 0.0) * headlight
     lit = full
     cr = cg = cb = full
@@ -658,10 +761,10 @@ def _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, col
             cb += ck * lights[k, 6]
     if catcher:
         row = r if len(dirs) else r // width
-        keep = 1.0 - (1.0 - lit / full if full > 0.0 else 0.0)
+        keep = (lit / full if full > 0.0 else 1.0) * occ
         cr, cg, cb = rows[row, 0] * keep, rows[row, 1] * keep, rows[row, 2] * keep
     else:
-        cr, cg, cb = cr * color[0], cg * color[1], cb * color[2]
+        cr, cg, cb = cr * color[0] * occ, cg * color[1] * occ, cb * color[2] * occ
     planes[C_R, r] = cr
     planes[C_R + 1, r] = cg
     planes[C_R + 2, r] = cb
@@ -670,7 +773,8 @@ def _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, col
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")  # (see _ground_ray)
 def _ground_first(task, n_tasks, frame, width, miss, dirs, up, height, lights, headlight,
-                  color, catcher, rows, shadows, cull, lo, hi, planes, pending, counts):
+                  color, catcher, rows, shadows, cull, lo, hi, planes, occlusion, pending,
+                  counts):
     """Pass 1 of :func:`ground_pixels` over thread ``task``'s missed pixels: shade the ground
     pixels with no shadow ray to trace, set ``pending`` (their rays' count, 0 for the
     others) and count the ground pixels and rays (``counts[task]``)."""
@@ -689,8 +793,9 @@ def _ground_first(task, n_tasks, frame, width, miss, dirs, up, height, lights, h
             if _ground_ray(lights, k, x, y, z, up, shadows, cull, lo, hi)[5]:
                 n += 1
         if n == 0:
+            occ = occlusion[m] if len(occlusion) else 1.0
             _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, color,
-                          catcher, rows, shadows, cull, lo, hi, planes, pending, -1)
+                          catcher, rows, shadows, cull, lo, hi, planes, occ, pending, -1)
         else:
             pending[m] = n
             n_rays += n
@@ -700,8 +805,8 @@ def _ground_first(task, n_tasks, frame, width, miss, dirs, up, height, lights, h
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")  # (see _ground_ray)
 def _ground_rays(task, n_tasks, frame, width, miss, dirs, up, height, lights, headlight,
-                 color, catcher, rows, shadows, cull, lo, hi, planes, pending, base,
-                 origins, to_light, dist):
+                 color, catcher, rows, shadows, cull, lo, hi, planes, occlusion, pending,
+                 base, origins, to_light, dist):
     """Pass 2: the shadow rays of thread ``task``'s pending pixels, from ``base[task]`` on,
     in pixel and light order."""
     e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
@@ -723,7 +828,8 @@ def _ground_rays(task, n_tasks, frame, width, miss, dirs, up, height, lights, he
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")  # (see _ground_ray)
 def _ground_last(task, n_tasks, frame, width, miss, dirs, up, height, lights, headlight,
-                 color, catcher, rows, shadows, cull, lo, hi, planes, pending, base, blocked):
+                 color, catcher, rows, shadows, cull, lo, hi, planes, occlusion, pending, base,
+                 blocked):
     """Pass 3: shade thread ``task``'s pending pixels with their rays' ``blocked``."""
     e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
     a, b = _segment(task, n_tasks, len(miss))
@@ -733,8 +839,9 @@ def _ground_last(task, n_tasks, frame, width, miss, dirs, up, height, lights, he
             continue
         r = miss[m]
         hit, x, y, z, dn = _ground_hit(frame, width, dirs, r, up, e_up, height)
+        occ = occlusion[m] if len(occlusion) else 1.0
         j = _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, color,
-                          catcher, rows, shadows, cull, lo, hi, planes, blocked, j)
+                          catcher, rows, shadows, cull, lo, hi, planes, occ, blocked, j)
 
 
 def edge_pixels(planes, width, height) -> np.ndarray:
