@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import random
 import signal
+import statistics
 import subprocess
 import sys
 import time
@@ -37,9 +38,17 @@ def _env():
     return env
 
 
+def _default_signals():
+    # a test run started in the background (``pytest &``, nohup) ignores SIGINT, and its
+    # children would inherit that (subtrace then leaves the signal ignored, as it should)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_DFL)
+
+
 def _start(args):
     return subprocess.Popen([sys.executable, "-m", "subtrace.cli", *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=_env())
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=_env(),
+                            preexec_fn=_default_signals)
 
 
 def _wait_until_watched(proc, limit_s=30.0):
@@ -108,9 +117,9 @@ def earlier(tmp_path_factory):
 
 
 def _moments(rng, names):
-    """Each trial's moment as a fraction of its command's run time: stratified over
-    [0, MOMENT_SPAN) per command, so a run 25 % faster or 50 % slower than the measured one
-    still leaves both outcomes (stopped and finished) among the trials."""
+    """Each trial's moment as a fraction of its command's run time (as the trials estimate
+    it): stratified over [0, MOMENT_SPAN) per command, so that both outcomes (stopped and
+    finished) come up among its trials."""
     fractions = []
     counts = {name: 0 for name in names}
     slots = {}
@@ -133,9 +142,14 @@ def test_interrupts_at_random_moments(earlier, tmp_path):
     names = sorted(runs)
     stopped = finished = 0
     moments = _moments(rng, names)
+    # each command's run time, as the trials see it: the machine's speed drifts (other
+    # work, a cache), so it follows the trials, down to a run that finished before its
+    # signal (its own time), up to the moment of a late signal that still stopped one
+    took = {name: [runs[name][2]] for name in names}
     for trial in range(TRIALS):
         name = names[trial % len(names)]
-        args, files, duration = runs[name]
+        args, files, _ = runs[name]
+        duration = statistics.median(took[name])
         folder = tmp_path / f"t{trial}"
         for rel, data in files.items():
             (folder / rel).parent.mkdir(parents=True, exist_ok=True)
@@ -145,7 +159,14 @@ def test_interrupts_at_random_moments(earlier, tmp_path):
         sig = rng.choice([signal.SIGINT, signal.SIGTERM])
         proc = _start(args)
         _wait_until_watched(proc)
-        time.sleep(moments[trial] * duration)
+        watched = time.perf_counter()
+        moment = moments[trial] * duration
+        try:  # (its output is a few lines: the pipes do not fill while it runs)
+            proc.wait(timeout=moment)
+            took[name].append(time.perf_counter() - watched)
+        except subprocess.TimeoutExpired:
+            if moments[trial] >= 1.0:  # later than the estimate, and it still ran
+                took[name] = [max(t, moment) for t in took[name]]
         sent = time.perf_counter()
         proc.send_signal(sig)
         out, err = proc.communicate(timeout=60)
@@ -168,7 +189,7 @@ def test_interrupts_at_random_moments(earlier, tmp_path):
                 assert path.suffix in (".exr", ".png") and _complete_image(path) or \
                     path.suffix in (".csv", ".json") and path.read_text().strip(), where
     # the moments cover both outcomes (otherwise the trials would test nothing)
-    assert stopped >= TRIALS // 2 and finished >= 1, (stopped, finished)
+    assert stopped >= TRIALS // 2 and finished >= 1, (stopped, finished, took)
 
 
 def test_two_renders_to_one_path(tmp_path):
