@@ -512,40 +512,58 @@ def smooth_occlusion(frame, width, t, normals, group, values, pixel_rad, radius)
     A pixel of ``group`` g >= 0 (its object, or any other label of a surface: the ground)
     takes the neighbours of its group, weighted by a Gaussian of their distance in pixels
     (sigma radius / 2), by (n . n')^8 of the normals ``normals`` (n,3) and by how near the
-    neighbour's point (eye + t' d') lies to the pixel's tangent plane, against two of the
-    pixel's footprints (``t * pixel_rad``); pixels of group -1 keep their value. Each pixel
+    neighbour's point (eye + t' d') lies to the pixel's tangent plane: (1 - (h / reach)^2)^2
+    for a distance h within two of the pixel's footprints (``reach = 2 t pixel_rad``), none
+    beyond; pixels of group -1 keep their value. Each pixel
     reads only its own neighbourhood, so a window of the image with ``radius`` pixels
     more on every side gives its pixels' values bit for bit."""
     out = np.asarray(values, np.float32).copy()
     if radius > 0 and len(out):
-        run_tasks(_smooth_task, frame, int(width), np.ascontiguousarray(t, np.float64),
-                  np.ascontiguousarray(normals, np.float64),
-                  np.ascontiguousarray(group, np.int64),
-                  np.ascontiguousarray(values, np.float32), float(pixel_rad), int(radius),
-                  _no_dirs(), out)
+        t = np.ascontiguousarray(t, np.float64)
+        group = np.ascontiguousarray(group, np.int64)
+        points = np.empty((len(out), 3))
+        run_tasks(_points_task, frame, int(width), t, group, _no_dirs(), points)
+        spatial = np.arange(-radius, radius + 1, dtype=np.float64) ** 2
+        spatial = np.exp(-(spatial[:, None] + spatial[None, :]) * 2.0 / (radius * radius))
+        run_tasks(_smooth_task, int(width), points, np.ascontiguousarray(normals, np.float64),
+                  group, np.ascontiguousarray(values, np.float32), t * (2.0 * pixel_rad),
+                  int(radius), spatial, out)
     return out
 
 
 @nb.njit(cache=True, nogil=True)
-def _smooth_task(task, n_tasks, frame, width, t, normals, group, values, pixel_rad, radius,
-                 dirs, out):
-    """Rows ``task, task + n_tasks, ...`` of :func:`smooth_occlusion`."""
-    n = len(values)
-    height = n // width
-    inv2s2 = 2.0 / (radius * radius)  # 1 / (2 sigma^2), sigma = radius / 2
+def _points_task(task, n_tasks, frame, width, t, group, dirs, points):
+    """The points eye + t d of the pixels of ``group`` >= 0, rows ``task, task + n_tasks,
+    ...`` (:func:`smooth_occlusion`)."""
+    height = len(t) // width
     for row in range(task, height, n_tasks):
+        for r in range(row * width, (row + 1) * width):
+            if group[r] >= 0:
+                dx, dy, dz = _direction(frame, width, dirs, r)
+                points[r, 0] = frame[0, 0] + t[r] * dx
+                points[r, 1] = frame[0, 1] + t[r] * dy
+                points[r, 2] = frame[0, 2] + t[r] * dz
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _smooth_task(task, n_tasks, width, points, normals, group, values, reach, radius, spatial,
+                 out):
+    """Rows ``task, task + n_tasks, ...`` of :func:`smooth_occlusion` (``reach``: each
+    pixel's two footprints; ``spatial``: the Gaussian over the (2 radius + 1)^2 offsets)."""
+    height = len(values) // width
+    for row in range(task, height, n_tasks):
+        i0, i1 = max(row - radius, 0), min(row + radius + 1, height)
         for col in range(width):
             r = row * width + col
             g = group[r]
             if g < 0:
                 continue
-            dx, dy, dz = _direction(frame, width, dirs, r)
-            px, py, pz = frame[0, 0] + t[r] * dx, frame[0, 1] + t[r] * dy, frame[0, 2] + t[r] * dz
+            px, py, pz = points[r, 0], points[r, 1], points[r, 2]
             nx, ny, nz = normals[r, 0], normals[r, 1], normals[r, 2]
-            reach = 2.0 * t[r] * pixel_rad
+            inv = 1.0 / reach[r]
             total = 0.0
             weight = 0.0
-            for i in range(max(row - radius, 0), min(row + radius + 1, height)):
+            for i in range(i0, i1):
                 for j in range(max(col - radius, 0), min(col + radius + 1, width)):
                     q = i * width + j
                     if group[q] != g:
@@ -553,13 +571,14 @@ def _smooth_task(task, n_tasks, frame, width, t, normals, group, values, pixel_r
                     c = nx * normals[q, 0] + ny * normals[q, 1] + nz * normals[q, 2]
                     if not c > 0.0:
                         continue
-                    ex, ey, ez = _direction(frame, width, dirs, q)
-                    h = ((frame[0, 0] + t[q] * ex - px) * nx + (frame[0, 1] + t[q] * ey - py)
-                         * ny + (frame[0, 2] + t[q] * ez - pz) * nz) / reach
+                    h = ((points[q, 0] - px) * nx + (points[q, 1] - py) * ny
+                         + (points[q, 2] - pz) * nz) * inv
+                    near = 1.0 - h * h  # (1 - h^2)^2: 1 on the plane, 0 from one reach off
+                    if not near > 0.0:
+                        continue
                     c2 = c * c
                     c4 = c2 * c2
-                    w = math.exp(-((i - row) * (i - row) + (j - col) * (j - col)) * inv2s2
-                                 - h * h) * c4 * c4
+                    w = spatial[i - row + radius, j - col + radius] * near * near * c4 * c4
                     total += w * values[q]
                     weight += w
             out[r] = np.float32(total / weight)
