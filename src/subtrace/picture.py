@@ -261,13 +261,19 @@ def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights,
     if ao is not None:
         occlusion = ambient_occlusion(ao[0], frame, width, t, normals, pix_patch, ao[1], ao[2],
                                       tol_rad, dirs, ids)
+        smoothed = dirs is None and len(ao) > 4 and ao[4] > 0  # a grid of pixels
+        skip = None
         if ground is not None:  # the ground darkens where objects stand on it or come near
             miss = np.nonzero(pix_patch < 0)[0]
+            if smoothed:  # every other ground pixel, as a checkerboard of the image's
+                row, col = np.divmod(miss, width)
+                col0, row0 = window_offset(frame)
+                skip = ((row + row0 + col + col0) & 1) == 1
             ground_ao = ground_occlusion(ao[0], frame, width, miss, ground[0], ground[1],
-                                         ao[1], ao[2], dirs, ids)
-        if dirs is None and len(ao) > 4 and ao[4] > 0:  # a grid of pixels: smoothed
+                                         ao[1], ao[2], dirs, ids, skip)
+        if smoothed:
             occlusion, ground_ao = _smooth(frame, width, t, normals, pix_patch, patches,
-                                           occlusion, miss, ground, ground_ao, ao)
+                                           occlusion, miss, ground, ground_ao, skip, ao)
     r = scene.render
     headlight = np.array([r.headlight_intensity if r.headlight else 0.0])
     light(frame, width, t, normals, pix_patch, patches, lights, headlight, visible, planes,
@@ -283,19 +289,21 @@ def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights,
 
 
 def _smooth(frame, width, t, normals, pix_patch, patches, occlusion, miss, ground, ground_ao,
-            ao):
+            skip, ao):
     """The ambient occlusion of the surfaces' pixels (``occlusion``) and of the ground's
     (``ground_ao``, per missed pixel of ``miss``; None: no ground) smoothed over the
     pixel grid (:func:`shade.smooth_occlusion`, radius ``ao[4]``, the pixel's angle
     ``ao[5]``): each surface pixel with its object's neighbours, each ground pixel with the
-    ground's."""
+    ground's; the ground pixels ``skip`` traced no ray (every other one: the ground's
+    occlusion varies slowly, and near the objects it can hold as many pixels as they do)
+    and take their neighbours' estimates alone."""
     hit = pix_patch >= 0
     group = np.full(len(pix_patch), -1, np.int64)
     group[hit] = patches.object_id[pix_patch[hit]]
     depth = np.where(hit, t, np.inf)
     values = occlusion
     guide = normals
-    ground_at = None
+    ground_at = sampled = None
     if ground_ao is not None:
         up, height = ground
         d = pixel_rays(frame, width, miss)
@@ -309,7 +317,11 @@ def _smooth(frame, width, t, normals, pix_patch, patches, occlusion, miss, groun
         values[ground_at] = ground_ao[on]
         guide = normals.copy()
         guide[ground_at] = up
-    smooth = smooth_occlusion(frame, width, depth, guide, group, values, ao[5], ao[4])
+        if skip is not None:
+            sampled = np.ones(len(pix_patch), np.float32)
+            sampled[miss[on & skip]] = 0.0
+    smooth = smooth_occlusion(frame, width, depth, guide, group, values, ao[5], ao[4],
+                              sampled)
     occlusion = np.where(hit, smooth, occlusion).astype(np.float32)
     if ground_at is not None:
         ground_ao = ground_ao.copy()

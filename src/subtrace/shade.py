@@ -468,7 +468,7 @@ def ao_directions(normals, ids, samples) -> np.ndarray:
 
 
 def ground_occlusion(trace, frame, width, miss, up, height, samples, distance, dirs=None,
-                     ids=None) -> np.ndarray:
+                     ids=None, skip=None) -> np.ndarray:
     """(len(miss),) float32: the ambient occlusion of the ground under the missed rays
     ``miss`` (pixel or ray indices, as for :func:`ground_pixels`): the share of ``samples``
     cosine-weighted rays over the hemisphere of ``up`` from the ground point that meet no
@@ -476,7 +476,9 @@ def ground_occlusion(trace, frame, width, miss, up, height, samples, distance, d
     ray meets no ground, and where the ground point lies farther than ``distance`` from
     ``trace.bounds`` (the box of everything ``trace`` can hit): nothing can occlude it
     there, and most of a ground's pixels are traced no ray. The patterns are keyed as
-    :func:`ambient_occlusion`'s (``ids`` indexed by ray, default the ray's index)."""
+    :func:`ambient_occlusion`'s (``ids`` indexed by ray, default the ray's index).
+    ``skip``: None, or (len(miss),) bool: rays whose ground is traced no ray (left 1; the
+    smoothing fills them from their neighbours: :func:`smooth_occlusion`'s ``sampled``)."""
     open_ = np.ones(len(miss), np.float32)
     bounds = getattr(trace, "bounds", None)
     if samples <= 0 or not len(miss) or bounds is None:
@@ -490,7 +492,8 @@ def ground_occlusion(trace, frame, width, miss, up, height, samples, distance, d
     t = np.where(down, t, 0.0)
     points = frame[0] + t[:, None] * d
     gap = np.maximum(np.maximum(bounds[0] - points, points - bounds[1]), 0.0)
-    near = np.nonzero(down & ((gap * gap).sum(axis=1) < float(distance) ** 2))[0]
+    near = down & ((gap * gap).sum(axis=1) < float(distance) ** 2)
+    near = np.nonzero(near if skip is None else near & ~skip)[0]
     key = np.asarray(miss, np.int64) if ids is None else np.asarray(ids, np.int64)[miss]
     per = max(1, config.AO_CHUNK_RAYS // samples)
     for a in range(0, len(near), per):
@@ -503,7 +506,8 @@ def ground_occlusion(trace, frame, width, miss, up, height, samples, distance, d
     return open_
 
 
-def smooth_occlusion(frame, width, t, normals, group, values, pixel_rad, radius) -> np.ndarray:
+def smooth_occlusion(frame, width, t, normals, group, values, pixel_rad, radius,
+                     sampled=None) -> np.ndarray:
     """(n,) float32: ``values`` (n,) (ambient occlusion, one estimate per pixel of a
     ``width``-wide grid of rays from the eye) filtered by each pixel's neighbours within
     ``radius`` pixels that lie on the same smooth surface: a cross-bilateral filter guided
@@ -514,7 +518,9 @@ def smooth_occlusion(frame, width, t, normals, group, values, pixel_rad, radius)
     (sigma radius / 2), by (n . n')^8 of the normals ``normals`` (n,3) and by how near the
     neighbour's point (eye + t' d') lies to the pixel's tangent plane: (1 - (h / reach)^2)^2
     for a distance h within two of the pixel's footprints (``reach = 2 t pixel_rad``), none
-    beyond; pixels of group -1 keep their value. Each pixel
+    beyond; pixels of group -1 keep their value. ``sampled``: None, or (n,) float32, 0 for
+    the pixels that hold no estimate of their own (they take their neighbours' and give
+    none), 1 for the others. Each pixel
     reads only its own neighbourhood, so a window of the image with ``radius`` pixels
     more on every side gives its pixels' values bit for bit."""
     out = np.asarray(values, np.float32).copy()
@@ -525,9 +531,10 @@ def smooth_occlusion(frame, width, t, normals, group, values, pixel_rad, radius)
         run_tasks(_points_task, frame, int(width), t, group, _no_dirs(), points)
         spatial = np.arange(-radius, radius + 1, dtype=np.float64) ** 2
         spatial = np.exp(-(spatial[:, None] + spatial[None, :]) * 2.0 / (radius * radius))
+        sampled = np.ones(len(out), np.float32) if sampled is None else sampled
         run_tasks(_smooth_task, int(width), points, np.ascontiguousarray(normals, np.float64),
                   group, np.ascontiguousarray(values, np.float32), t * (2.0 * pixel_rad),
-                  int(radius), spatial, out)
+                  int(radius), spatial, np.ascontiguousarray(sampled, np.float32), out)
     return out
 
 
@@ -547,7 +554,7 @@ def _points_task(task, n_tasks, frame, width, t, group, dirs, points):
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _smooth_task(task, n_tasks, width, points, normals, group, values, reach, radius, spatial,
-                 out):
+                 sampled, out):
     """Rows ``task, task + n_tasks, ...`` of :func:`smooth_occlusion` (``reach``: each
     pixel's two footprints; ``spatial``: the Gaussian over the (2 radius + 1)^2 offsets)."""
     height = len(values) // width
@@ -578,10 +585,12 @@ def _smooth_task(task, n_tasks, width, points, normals, group, values, reach, ra
                         continue
                     c2 = c * c
                     c4 = c2 * c2
-                    w = spatial[i - row + radius, j - col + radius] * near * near * c4 * c4
+                    w = (spatial[i - row + radius, j - col + radius] * near * near * c4 * c4
+                         * sampled[q])
                     total += w * values[q]
                     weight += w
-            out[r] = np.float32(total / weight)
+            if weight > 0.0:
+                out[r] = np.float32(total / weight)
 
 
 # the R2 sequence's steps (the plastic number's powers), as picture.sample_offsets
