@@ -216,7 +216,7 @@ _content_locator()
 
 # What the first-run notice says the compile takes (benchmarks/startup.py: a cold render of
 # the default scene on 2 cores)
-COLD_COMPILE = "about 20 s on 2 cores"
+COLD_COMPILE = "about 50 s on 2 cores"
 _notice = {"stream": None, "said": False, "listening": False}
 
 
