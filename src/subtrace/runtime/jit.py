@@ -319,8 +319,14 @@ def trim_loader() -> None:
         return  # pragma: no cover - a Numba whose cache loader is organised differently
     _drop_llvm_lock_events()
     context = cpu_target.target_context
-    starting = threading.Thread(target=rtsys.initialize, args=(context,), daemon=True,
-                                name="subtrace-numba-runtime")
+
+    def start():
+        try:
+            rtsys.initialize(context)
+        except Exception:  # noqa: BLE001 - said by the first load, which initialises again
+            pass
+
+    starting = threading.Thread(target=start, daemon=True, name="subtrace-numba-runtime")
     starting.start()
 
     def runtime_ready(target_context):
