@@ -189,3 +189,40 @@ def test_a_cold_command_on_a_terminal_says_it_compiles_once(tmp_path):
     assert str(tmp_path / "cache") in err.replace("\r\n", "")
     code, err = _run_on_pty(argv, env)
     assert code == 0 and "compiling" not in err, err
+
+
+def test_object_symbols_are_what_the_object_code_defines():
+    """The names read from an object file's ELF symbol table (what the cache loader tells
+    Numba's engine a loaded kernel defines, instead of parsing its bitcode) are the
+    module's defined functions and globals, as LLVM lists them, and not what it only
+    declares; data that is not an ELF object gives None (the loader then parses the
+    bitcode as Numba does)."""
+    import llvmlite.binding as ll
+
+    ll.initialize_native_target()
+    ll.initialize_native_asmprinter()
+    module = ll.parse_assembly("""
+        @table = global [4 x double] zeroinitializer
+        @hidden = internal global i64 3
+        declare double @elsewhere(double)
+        define double @twice(double %x) {
+          %y = fadd double %x, %x
+          ret double %y
+        }
+        define linkonce_odr double @shared(double %x) {
+          %y = call double @elsewhere(double %x)
+          ret double %y
+        }
+        define i64 @peek() {
+          %v = load i64, ptr @hidden
+          ret i64 %v
+        }
+    """)
+    machine = ll.Target.from_default_triple().create_target_machine()
+    names = jit.object_symbols(machine.emit_object(module))
+    defined = {g.name for gs in (module.functions, module.global_variables) for g in gs
+               if not g.is_declaration}
+    assert defined == {"table", "hidden", "twice", "shared", "peek"}
+    assert defined <= names and "elsewhere" not in names
+    assert jit.object_symbols(b"not an object file") is None
+    assert jit.object_symbols(b"\x7fELF\x01\x01" + bytes(100)) is None  # 32-bit: not read

@@ -303,7 +303,11 @@ def trim_loader() -> None:
       importing the renderer; the first kernel load or compile waits for it;
     * Numba's hooks on LLVM's lock, which only time the lock for Numba's compile events, are
       removed: a kernel load makes thousands of LLVM calls (its symbols, one by one), each
-      of which ran them twice.
+      of which ran them twice;
+    * a cached kernel's names are read from its object code's symbol table (ELF) instead of
+      from the bitcode Numba keeps beside it, which is parsed only when a kernel compiled
+      later links against it (:func:`_lazy_bitcode`): parsing it was about half of every
+      load's time.
 
     Numbas whose loader is organised differently are left alone (the command is then just
     slower); tests run the command in fresh processes on warm and cold caches.
@@ -318,6 +322,7 @@ def trim_loader() -> None:
                                                    "_guard_against_spurious_io_errors")):
         return  # pragma: no cover - a Numba whose cache loader is organised differently
     _drop_llvm_lock_events()
+    _lazy_bitcode()
     context = cpu_target.target_context
 
     def start():
@@ -348,6 +353,80 @@ def trim_loader() -> None:
 
     Cache.load_overload = load_overload
     context.refresh = refresh
+
+
+def _lazy_bitcode() -> None:
+    """Load cached kernels without parsing their linking bitcode (see :func:`trim_loader`):
+    Numba's loader parses it to list the names the kernel defines (which the execution
+    engine is asked about before any address is taken) and keeps it for kernels compiled
+    later that call this one. Here the names come from the object code's ELF symbol table
+    (:func:`object_symbols`), and the bitcode is parsed when a compile first links against
+    the kernel. Objects that are not ELF, and Numbas organised otherwise, load as before."""
+    try:
+        from numba.core import codegen
+        library = codegen.CPUCodeLibrary
+        full_unserialize = library._unserialize.__func__
+        full_linking = library._get_module_for_linking
+        ll = codegen.ll
+    except (ImportError, AttributeError):  # pragma: no cover - another Numba
+        return
+
+    def unserialize(cls, gen, state):
+        name, kind, data = state
+        names = object_symbols(data[0]) if kind == "object" else None
+        if names is None:
+            return full_unserialize(cls, gen, state)
+        self = gen.create_library(name)
+        self.enable_object_caching()
+        self._set_compiled_object(data[0])
+        self._subtrace_bitcode = data[1]  # (parsed by get_module_for_linking)
+        self._finalize_final_module()
+        gen._engine._defined_symbols |= names
+        return self
+
+    def get_module_for_linking(self):
+        bitcode = self.__dict__.pop("_subtrace_bitcode", None)
+        if bitcode is not None:
+            self._shared_module = ll.parse_bitcode(bitcode)
+        return full_linking(self)
+
+    library._unserialize = classmethod(unserialize)
+    library._get_module_for_linking = get_module_for_linking
+
+
+def object_symbols(data: bytes) -> set[str] | None:
+    """The names an ELF64 little-endian object file defines (functions, data and untyped
+    symbols of a section), or None when ``data`` is not one."""
+    import numpy as np
+
+    if len(data) < 64 or data[:6] != b"\x7fELF\x02\x01":
+        return None
+    try:
+        shoff = int.from_bytes(data[0x28:0x30], "little")
+        entsize = int.from_bytes(data[0x3A:0x3C], "little")
+        count = int.from_bytes(data[0x3C:0x3E], "little")
+        head = np.dtype([("name", "<u4"), ("type", "<u4"), ("flags", "<u8"), ("addr", "<u8"),
+                         ("offset", "<u8"), ("size", "<u8"), ("link", "<u4"), ("info", "<u4"),
+                         ("align", "<u8"), ("entsize", "<u8")])
+        if entsize != head.itemsize:
+            return None
+        sections = np.frombuffer(data, head, count, shoff)
+        names = set()
+        for sec in sections[sections["type"] == 2]:  # SHT_SYMTAB
+            strtab = sections[int(sec["link"])]
+            strings = data[int(strtab["offset"]):int(strtab["offset"] + strtab["size"])]
+            sym = np.dtype([("name", "<u4"), ("info", "u1"), ("other", "u1"),
+                            ("shndx", "<u2"), ("value", "<u8"), ("size", "<u8")])
+            table = np.frombuffer(data, sym, int(sec["size"]) // sym.itemsize,
+                                  int(sec["offset"]))
+            kind = table["info"] & 0xF
+            keep = (table["shndx"] != 0) & (table["name"] != 0) & (kind <= 2)
+            for at in table["name"][keep]:
+                end = strings.index(b"\0", int(at))
+                names.add(strings[int(at):end].decode())
+        return names
+    except (ValueError, IndexError, UnicodeDecodeError):
+        return None
 
 
 def _drop_llvm_lock_events() -> None:
