@@ -49,7 +49,7 @@ from subtrace.runtime import threads as tasks
 from subtrace import config
 from subtrace.shade import (C_A, C_R, CHANNELS, ambient_occlusion, background_pixels,
                             background_rows, edge_pixels, ground_occlusion, ground_pixels,
-                            light, light_array, miss_values, pixel_rays, shade,
+                            ground_points, light, light_array, miss_values, shade,
                             shadow_visibility, smooth_occlusion)
 from subtrace.trace.rays import Pools, trace_rays
 
@@ -261,19 +261,21 @@ def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights,
     if ao is not None:
         occlusion = ambient_occlusion(ao[0], frame, width, t, normals, pix_patch, ao[1], ao[2],
                                       tol_rad, dirs, ids)
-        smoothed = dirs is None and len(ao) > 4 and ao[4] > 0  # a grid of pixels
-        skip = None
+        smoothed = dirs is None and ao[4] > 0  # a grid of pixels
+        skip = t_ground = None
         if ground is not None:  # the ground darkens where objects stand on it or come near
             miss = np.nonzero(pix_patch < 0)[0]
+            t_ground, points = ground_points(frame, width, miss, ground[0], ground[1], dirs)
             if smoothed:  # every other ground pixel, as a checkerboard of the image's
                 row, col = np.divmod(miss, width)
                 col0, row0 = window_offset(frame)
                 skip = ((row + row0 + col + col0) & 1) == 1
-            ground_ao = ground_occlusion(ao[0], frame, width, miss, ground[0], ground[1],
-                                         ao[1], ao[2], dirs, ids, skip)
+            ground_ao = ground_occlusion(ao[0], t_ground, points, ground[0], ao[1], ao[2],
+                                         miss if ids is None else ids[miss], skip)
         if smoothed:
             occlusion, ground_ao = _smooth(frame, width, t, normals, pix_patch, patches,
-                                           occlusion, miss, ground, ground_ao, skip, ao)
+                                           occlusion, miss, ground, t_ground, ground_ao,
+                                           skip, ao)
     r = scene.render
     headlight = np.array([r.headlight_intensity if r.headlight else 0.0])
     light(frame, width, t, normals, pix_patch, patches, lights, headlight, visible, planes,
@@ -288,10 +290,11 @@ def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights,
                       ground_ao)
 
 
-def _smooth(frame, width, t, normals, pix_patch, patches, occlusion, miss, ground, ground_ao,
-            skip, ao):
+def _smooth(frame, width, t, normals, pix_patch, patches, occlusion, miss, ground, t_ground,
+            ground_ao, skip, ao):
     """The ambient occlusion of the surfaces' pixels (``occlusion``) and of the ground's
-    (``ground_ao``, per missed pixel of ``miss``; None: no ground) smoothed over the
+    (``ground_ao``, per missed pixel of ``miss``, whose rays meet the ground at ``t_ground``,
+    :func:`shade.ground_points`; None: no ground) smoothed over the
     pixel grid (:func:`shade.smooth_occlusion`, radius ``ao[4]``, the pixel's angle
     ``ao[5]``): each surface pixel with its object's neighbours, each ground pixel with the
     ground's; the ground pixels ``skip`` traced no ray (every other one: the ground's
@@ -305,18 +308,14 @@ def _smooth(frame, width, t, normals, pix_patch, patches, occlusion, miss, groun
     guide = normals
     ground_at = sampled = None
     if ground_ao is not None:
-        up, height = ground
-        d = pixel_rays(frame, width, miss)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            tg = (height - frame[0] @ up) / (d @ up)
-        on = (d @ up < 0.0) & (tg > 0.0) & (tg < np.inf)
+        on = t_ground < np.inf
         ground_at = miss[on]
         group[ground_at] = group.max(initial=-1) + 1  # (a label of its own)
-        depth[ground_at] = tg[on]
+        depth[ground_at] = t_ground[on]
         values = occlusion.copy()
         values[ground_at] = ground_ao[on]
         guide = normals.copy()
-        guide[ground_at] = up
+        guide[ground_at] = ground[0]
         if skip is not None:
             sampled = np.ones(len(pix_patch), np.float32)
             sampled[miss[on & skip]] = 0.0

@@ -371,19 +371,19 @@ def _prepare(scene, cages, stats, nurbs=None, crop=None):
     return cages, table, camera, view, scene.render.tolerance_rad(camera), budget
 
 
-def crop_window(camera, crop, apron=1) -> CameraWindow:
+def crop_window(camera, crop, margin=1) -> CameraWindow:
     """The window of ``camera``'s image that :func:`render_scene` traces for ``crop`` =
     (x0, y0, x1, y1) (pixels, x1 and y1 excluded; checked: SceneError naming --crop): the
-    crop and ``apron`` pixels around it (anti-aliasing compares each pixel with its right
+    crop and ``margin`` pixels around it (anti-aliasing compares each pixel with its right
     and lower neighbours: 1; smoothed ambient occlusion reads its neighbours within
     config.AO_SMOOTH_RADIUS more: :func:`apron`), widened to even bounds (the projection's
     tiles are 2x2 pixels of the image) and held within the image. Every pixel of the crop
     is then traced and shaded exactly as in the whole image."""
     x0, y0, x1, y1 = check_crop(crop, camera.width, camera.height)
     a = TILE
-    wx0, wy0 = max(x0 - apron, 0) // a * a, max(y0 - apron, 0) // a * a
-    wx1 = min(-(-(x1 + apron) // a) * a, camera.width)
-    wy1 = min(-(-(y1 + apron) // a) * a, camera.height)
+    wx0, wy0 = max(x0 - margin, 0) // a * a, max(y0 - margin, 0) // a * a
+    wx1 = min(-(-(x1 + margin) // a) * a, camera.width)
+    wy1 = min(-(-(y1 + margin) // a) * a, camera.height)
     return CameraWindow(camera, wx0, wy0, wx1 - wx0, wy1 - wy0)
 
 

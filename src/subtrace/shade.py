@@ -467,39 +467,45 @@ def ao_directions(normals, ids, samples) -> np.ndarray:
     return out
 
 
-def ground_occlusion(trace, frame, width, miss, up, height, samples, distance, dirs=None,
-                     ids=None, skip=None) -> np.ndarray:
-    """(len(miss),) float32: the ambient occlusion of the ground under the missed rays
-    ``miss`` (pixel or ray indices, as for :func:`ground_pixels`): the share of ``samples``
-    cosine-weighted rays over the hemisphere of ``up`` from the ground point that meet no
-    surface within ``distance`` (``trace``: as for :func:`ambient_occlusion`). 1 where the
-    ray meets no ground, and where the ground point lies farther than ``distance`` from
-    ``trace.bounds`` (the box of everything ``trace`` can hit): nothing can occlude it
-    there, and most of a ground's pixels are traced no ray. The patterns are keyed as
-    :func:`ambient_occlusion`'s (``ids`` indexed by ray, default the ray's index).
-    ``skip``: None, or (len(miss),) bool: rays whose ground is traced no ray (left 1; the
-    smoothing fills them from their neighbours: :func:`smooth_occlusion`'s ``sampled``)."""
-    open_ = np.ones(len(miss), np.float32)
-    bounds = getattr(trace, "bounds", None)
-    if samples <= 0 or not len(miss) or bounds is None:
-        return open_
+def ground_points(frame, width, miss, up, height, dirs=None):
+    """Where the missed rays ``miss`` (pixel or ray indices, as for :func:`ground_pixels`)
+    meet the ground plane p . up = height going down: (t (n,) float64, their distances,
+    inf where a ray meets no ground; points (n,3) float64, eye + t d, the eye where none)."""
     up = np.asarray(up, np.float64)
     d = pixel_rays(frame, width, miss) if dirs is None or not len(dirs) else dirs[miss]
     dn = d @ up
     with np.errstate(divide="ignore", invalid="ignore"):
         t = (height - frame[0] @ up) / dn
     down = (dn < 0.0) & (t > 0.0) & (t < np.inf)
-    t = np.where(down, t, 0.0)
-    points = frame[0] + t[:, None] * d
+    points = frame[0] + np.where(down, t, 0.0)[:, None] * d
+    return np.where(down, t, np.inf), points
+
+
+def ground_occlusion(trace, t, points, up, samples, distance, keys, skip=None) -> np.ndarray:
+    """(n,) float32: the ambient occlusion of the ground at ``points`` (n,3), where missed
+    rays meet it at distances ``t`` (n,) (:func:`ground_points`; inf: no ground): the share
+    of ``samples`` cosine-weighted rays over the hemisphere of ``up`` from the point that
+    meet no surface within ``distance`` (``trace``: as for :func:`ambient_occlusion`). 1
+    where there is no ground, and where the point lies farther than ``distance`` from
+    ``trace.bounds`` (the box of everything ``trace`` can hit): nothing can occlude it
+    there, and most of a ground's pixels are traced no ray. ``keys`` (n,) int64 turn each
+    point's pattern, as :func:`ambient_occlusion`'s ids (the ray's pixel or id).
+    ``skip``: None, or (n,) bool: points traced no ray (left 1; the smoothing fills them
+    from their neighbours: :func:`smooth_occlusion`'s ``sampled``)."""
+    open_ = np.ones(len(t), np.float32)
+    bounds = getattr(trace, "bounds", None)
+    if samples <= 0 or not len(t) or bounds is None:
+        return open_
+    up = np.asarray(up, np.float64)
     gap = np.maximum(np.maximum(bounds[0] - points, points - bounds[1]), 0.0)
-    near = down & ((gap * gap).sum(axis=1) < float(distance) ** 2)
+    near = (t < np.inf) & ((gap * gap).sum(axis=1) < float(distance) ** 2)
     near = np.nonzero(near if skip is None else near & ~skip)[0]
-    key = np.asarray(miss, np.int64) if ids is None else np.asarray(ids, np.int64)[miss]
+    keys = np.asarray(keys, np.int64)
     per = max(1, config.AO_CHUNK_RAYS // samples)
     for a in range(0, len(near), per):
         m = near[a:a + per]
         origins = np.repeat(points[m], samples, axis=0)
-        rays = ao_directions(np.repeat(up[None], len(m), axis=0), key[m], samples)
+        rays = ao_directions(np.repeat(up[None], len(m), axis=0), keys[m], samples)
         blocked = trace(origins, rays, np.full(len(rays), float(distance)))
         hidden = blocked.reshape(len(m), samples).sum(axis=1, dtype=np.int64)
         open_[m] = (samples - hidden).astype(np.float32) / np.float32(samples)

@@ -410,13 +410,13 @@ def object_symbols(data: bytes) -> set[str] | None:
                          ("align", "<u8"), ("entsize", "<u8")])
         if entsize != head.itemsize:
             return None
+        sym = np.dtype([("name", "<u4"), ("info", "u1"), ("other", "u1"), ("shndx", "<u2"),
+                        ("value", "<u8"), ("size", "<u8")])
         sections = np.frombuffer(data, head, count, shoff)
         names = set()
         for sec in sections[sections["type"] == 2]:  # SHT_SYMTAB
             strtab = sections[int(sec["link"])]
             strings = data[int(strtab["offset"]):int(strtab["offset"] + strtab["size"])]
-            sym = np.dtype([("name", "<u4"), ("info", "u1"), ("other", "u1"),
-                            ("shndx", "<u2"), ("value", "<u8"), ("size", "<u8")])
             table = np.frombuffer(data, sym, int(sec["size"]) // sym.itemsize,
                                   int(sec["offset"]))
             kind = table["info"] & 0xF
