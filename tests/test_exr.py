@@ -195,9 +195,9 @@ def test_read_only_folder(tmp_path):
         folder.chmod(0o755)
 
 
-def test_round_trip_in_several_row_pieces(tmp_path):
-    # taller than exr.ROWS_PER_WRITE and not a multiple of it: pieces and a short last one
-    rows = 2 * exr.ROWS_PER_WRITE + 5
+def test_round_trip_in_several_row_blocks(tmp_path):
+    # taller than OpenEXR's 16-line ZIP blocks and not a multiple of them: a short last one
+    rows = 2 * 16 + 5
     rng = np.random.default_rng(1)
     ch = {c: rng.uniform(-1e3, 1e3, (rows, 3)).astype(np.float32) for c in ("Z", "N.X", "u")}
     ch["R"] = rng.uniform(0.0, 1.0, (rows, 3)).astype(np.float32)
