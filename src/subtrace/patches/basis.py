@@ -525,7 +525,15 @@ def tri_split(w, q, split_ptr, split_col, split_w, d0):
     """Child ``c`` of net ``w[q]`` into ``w[d0 + c]`` (c = 0..3; ``d0 > q``): row
     ``15 c + p`` of ``TRI_SPLIT`` as its nonzero weights (CSR: ``SPLIT_PTR``,
     ``SPLIT_COL``, ``SPLIT_W``)."""
-    for row in range(4 * N_TRI):
+    for c in range(4):
+        tri_child(w, q, c, split_ptr, split_col, split_w, w, d0 + c)
+
+
+@leaf_njit
+def tri_child(w, q, c, split_ptr, split_col, split_w, out, o):
+    """Child ``c`` (Loop's child order) of net ``w[q]`` into ``out[o]`` (not ``w[q]``)."""
+    for p in range(N_TRI):
+        row = c * N_TRI + p
         x = y = z = 0.0
         for i in range(split_ptr[row], split_ptr[row + 1]):
             r = split_col[i]
@@ -533,11 +541,9 @@ def tri_split(w, q, split_ptr, split_col, split_w, d0):
             x += a * w[q, r, 0]
             y += a * w[q, r, 1]
             z += a * w[q, r, 2]
-        c = d0 + row // N_TRI
-        p = row % N_TRI
-        w[c, p, 0] = x
-        w[c, p, 1] = y
-        w[c, p, 2] = z
+        out[o, p, 0] = x
+        out[o, p, 1] = y
+        out[o, p, 2] = z
 
 
 @leaf_njit

@@ -93,7 +93,7 @@ def scratch_buffers(max_d):
     n = 6 * max_d + 8
     stack, stack_t = traversal_stack()
     return (stack, stack_t, np.empty((3 * max_d + 10, 4, 4, 3)),
-            np.empty((n, 5), np.int64), np.empty(n), np.empty(4), np.empty(4, np.int64),
+            np.empty((n, 6), np.int64), np.empty(n), np.empty(4), np.empty(4, np.int64),
             np.empty((4 * MAX_SIDE_SAMPLES + 8, 3)), np.empty((4 * MAX_SIDE_SAMPLES + 8, 2)),
             np.empty(HIT_FIELDS))
 

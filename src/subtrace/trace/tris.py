@@ -47,7 +47,7 @@ import numpy as np
 from subtrace.accel.bvh import slab_entry
 from subtrace.patches.basis import (
     DEGREE, N_TRI, NORMAL_STEP, NORMAL_TRIES, SPLIT_COL, SPLIT_PTR, SPLIT_W, copy_net, pad_box,
-    tri_box, tri_split, unit_normal,
+    tri_box, tri_child, tri_split, unit_normal,
 )
 from subtrace.runtime.jit import inline_njit, leaf_njit
 from subtrace.trace.prims import (
@@ -386,33 +386,57 @@ def descend_tri(ray, src, s, g0, i0, j0, lev0, nets, nk, depth, fr, sides, srow,
 
 
 @leaf_njit
-def _expand_tri(node, lev, depth, mem, work):
-    """Split memo node ``node`` (its net stored, level ``lev`` < depth - 1): its four
-    children with their boxes and nets. Returns the first child, or -1 when a store is
-    full."""
+def _expand_tri(node, parent, lev, depth, mem, work):
+    """Split memo node ``node`` (level ``lev`` < depth - 1, child of ``parent``): its four
+    children with their boxes. Its net is the stored one, or is split off its parent's and
+    stored (a node's net is stored when the node is split: its children's are split off it
+    when they are split in turn, or when a full store makes a ray split below them on the
+    spot); the children's nets are not stored: a child is split only if a ray enters it,
+    and most are not (a cell's parent is split into cells without nets). Returns the first
+    child, or -1 when a store is full."""
     root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
-    if cnt[M_NODES] + 4 > len(child) or cnt[M_NETS] + 4 > len(m_nets):
+    if cnt[M_NODES] + 4 > len(child) or cnt[M_NETS] + 1 > len(m_nets):
         cnt[M_FULL] = 1
         return -1
     w = work.reshape((work.shape[0], 16, 3))
     mw = m_nets.reshape((m_nets.shape[0], 16, 3))
     base = w.shape[0] - 4
-    for p in range(N_TRI):  # (tri_split splits within one array)
-        for c in range(3):
-            w[base - 1, p, c] = mw[data[node], p, c]
+    if data[node] >= 0:
+        for p in range(N_TRI):  # (tri_split splits within one array)
+            for c in range(3):
+                w[base - 1, p, c] = mw[data[node], p, c]
+    else:
+        tri_child(mw, data[parent], node - child[parent], SPLIT_PTR, SPLIT_COL, SPLIT_W, w,
+                  base - 1)
+        row = cnt[M_NETS]
+        cnt[M_NETS] = row + 1
+        for p in range(16):
+            for c in range(3):
+                mw[row, p, c] = w[base - 1, p if p < N_TRI else N_TRI - 1, c]
+        data[node] = row
     tri_split(w, base - 1, SPLIT_PTR, SPLIT_COL, SPLIT_W, base)
     first = cnt[M_NODES]
     for q in range(4):
         lo0, lo1, lo2, hi0, hi1, hi2 = tri_box(w, base + q)
         lo0, lo1, lo2, hi0, hi1, hi2 = pad_box(lo0, lo1, lo2, hi0, hi1, hi2)
-        row = cnt[M_NETS]
-        cnt[M_NETS] = row + 1
-        for p in range(16):
-            for c in range(3):
-                mw[row, p, c] = w[base + q, p if p < N_TRI else N_TRI - 1, c]
-        new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, row)
+        new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, -1)
     child[node] = first
     return first
+
+
+@leaf_njit
+def _node_net(node, parent, mem, work):
+    """Memo node ``node``'s net as (store, row): its stored net, or split off its parent's
+    (stored: the parent was split) into ``work[0]``."""
+    root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
+    if data[node] >= 0:
+        return m_nets, data[node]
+    w = work.reshape((work.shape[0], 16, 3))
+    mw = m_nets.reshape((m_nets.shape[0], 16, 3))
+    tri_child(mw, data[parent], node - child[parent], SPLIT_PTR, SPLIT_COL, SPLIT_W, w, 0)
+    for c in range(3):  # (the 16th point repeats the 15th, as in the stores)
+        w[0, N_TRI, c] = w[0, N_TRI - 1, c]
+    return work, np.int64(0)
 
 
 @leaf_njit
@@ -506,8 +530,9 @@ def intersect_tri(ray, it, nets, nk, depth, fr, sides, samples, slack, hit, code
         child[node] = -1
         data[node] = row
         root_m[it] = node
-    # stack rows: node, orientation, i, j, level; st_t: entry distance when pushed
+    # stack rows: node, orientation, i, j, level, parent; st_t: entry distance when pushed
     st[0, 0], st[0, 1], st[0, 2], st[0, 3], st[0, 4] = node, fr[0], fr[1], fr[2], depth - fr[3]
+    st[0, 5] = -1
     st_t[0] = 0.0
     sp = 1
     tested = 0
@@ -516,6 +541,7 @@ def intersect_tri(ray, it, nets, nk, depth, fr, sides, samples, slack, hit, code
         if st_t[sp] >= hit[H_T]:  # a nearer hit was found since it was pushed
             continue
         node, g, i, j, lev = st[sp, 0], st[sp, 1], st[sp, 2], st[sp, 3], st[sp, 4]
+        parent = st[sp, 5]
         if lev == depth:  # a cell (its corners evaluated when its parent was split)
             r = data[node]
             if m_cells[4 * r + 3, 0] == 0.0:  # the first ray of the memo to test it
@@ -530,11 +556,12 @@ def intersect_tri(ray, it, nets, nk, depth, fr, sides, samples, slack, hit, code
                 c = _expand_cells(node, g, i, j, depth, root, nk, fr, sides, it, samples, mem,
                                   lv)
             else:
-                c = _expand_tri(node, lev, depth, mem, work)
+                c = _expand_tri(node, parent, lev, depth, mem, work)
             if c < 0:  # a store is full: split per ray below this node
-                tested += descend_tri(ray, m_nets, data[node], g, i, j, lev, nets, nk, depth,
-                                      fr, sides, it, samples, slack, hit, code, it, work, st,
-                                      st_t, sp + 1, tmp_t, order, lv)
+                src, row = _node_net(node, parent, mem, work)
+                tested += descend_tri(ray, src, row, g, i, j, lev, nets, nk, depth, fr, sides,
+                                      it, samples, slack, hit, code, it, work, st, st_t,
+                                      sp + 1, tmp_t, order, lv)
                 continue
         # the children the ray enters, pushed far to near (a cell's box is its triangle's)
         n = 0
@@ -560,6 +587,7 @@ def intersect_tri(ray, it, nets, nk, depth, fr, sides, samples, slack, hit, code
             q = order[e]
             cg, ci, cj = _child(g, i, j, lev, depth, q)
             st[sp, 0], st[sp, 1], st[sp, 2], st[sp, 3], st[sp, 4] = c + q, cg, ci, cj, lev + 1
+            st[sp, 5] = node
             st_t[sp] = tmp_t[e]
             sp += 1
     return tested
