@@ -120,7 +120,7 @@ def test_triangle_nets():
     nets = rng.normal(size=(2, basis.N_TRI, 3))
     w = np.zeros((8, basis.N_TRI, 3))
     w[0] = nets[1]
-    basis.tri_split(w, 0, basis.SPLIT_PTR, basis.SPLIT_COL, basis.SPLIT_W, 4)
+    basis.tri_split(w, 0, 4)
     for c in range(4):
         par = basis.CHILD_ORIGIN[c] + basis.CHILD_SCALE[c] * st_
         np.testing.assert_allclose(B @ w[4 + c], basis.tri_bernstein(par) @ nets[1], atol=1e-13)

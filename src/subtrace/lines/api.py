@@ -52,7 +52,7 @@ from subtrace.lines.kernels import (
 )
 from subtrace.nurbs.model import NurbsModel
 from subtrace.patches.basis import (
-    SPLIT_COL, SPLIT_PTR, SPLIT_W, TRI_MONO, bez_normals, tri_normals,
+    TRI_MONO, bez_normals, tri_normals,
 )
 from subtrace.runtime.threads import run_tasks, set_threads, thread_count, usable_threads
 
@@ -178,7 +178,7 @@ def intersect_lines(cage, origins, directions, precision, t_range=(0.0, math.inf
                 count = np.empty(len(sel), np.int64)
                 stats = np.empty((len(sel), 2), np.int64)
                 run_tasks(lines_task, oo, dd, t_lo, t_hi, items.all_nets, items.all_tnets,
-                          SPLIT_PTR, SPLIT_COL, SPLIT_W, items.all_exact,
+                          items.all_exact,
                           items.item_min - touch_tol, items.item_max + touch_tol,
                           padded(bv, touch_tol), tol_flat, touch_tol, res_tol,
                           mode == "first", cap, cand, count, stats)

@@ -345,12 +345,10 @@ def _copy_sub(tri, w, wt, dst, src):
 # around it, and a call per item taking them all would pass every array's fields on the
 # stack (the cost jit.inline_njit exists to avoid). Each step carries a comment instead.
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, tnets, split_ptr, split_col,
-               split_w, exact, item_min, item_max, bvh, tol_flat, touch_tol, res_tol, first, cap,
-               cand, count, stats):
+def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, tnets, exact, item_min, item_max,
+               bvh, tol_flat, touch_tol, res_tol, first, cap, cand, count, stats):
     """Candidates of lines ``task, task + n_tasks, ...`` (module doc). ``org``, ``dirs`` (L,3);
     ``nets`` (Q,4,4,3) quad items, ``tnets`` (T,15,3) triangle items (item ``Q + i``),
-    ``split_ptr``, ``split_col``, ``split_w`` the triangle split (``lines_loop.SPLIT_*``),
     ``exact`` (Q+T,) bool
     (False: a flat cell, no Newton), ``item_min/max`` (Q+T,3) boxes and ``bvh`` over them
     (:class:`~subtrace.accel.bvh.BVH`), both padded by ``touch_tol`` (``bvh.padded``); ``first``: stop as module doc step 4; ``cand`` (L,
@@ -452,7 +450,7 @@ def lines_task(task, n_tasks, org, dirs, t_lo, t_hi, nets, tnets, split_ptr, spl
                 # q+4 .. q+7; those the line enters go back to q, q+1, .. farthest first
                 d_kids = q + 4 if tri else q + 6
                 if tri:
-                    tri_split(wt, q, split_ptr, split_col, split_w, d_kids)
+                    tri_split(wt, q, d_kids)
                 else:
                     _split(w, q, w, d_kids)
                 h = 0.5 * ssz[q]

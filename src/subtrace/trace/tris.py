@@ -46,7 +46,7 @@ import numpy as np
 
 from subtrace.accel.bvh import slab_entry
 from subtrace.patches.basis import (
-    DEGREE, N_TRI, NORMAL_STEP, NORMAL_TRIES, SPLIT_COL, SPLIT_PTR, SPLIT_W, copy_net, pad_box,
+    DEGREE, N_TRI, NORMAL_STEP, NORMAL_TRIES, copy_net, pad_box,
     tri_box, tri_child, tri_split, unit_normal,
 )
 from subtrace.runtime.jit import inline_njit, leaf_njit
@@ -369,7 +369,7 @@ def descend_tri(ray, src, s, g0, i0, j0, lev0, nets, nk, depth, fr, sides, srow,
                      item)
             tested += 1
             continue
-        tri_split(w, sp, SPLIT_PTR, SPLIT_COL, SPLIT_W, base)
+        tri_split(w, sp, base)
         n = _push_children(ox, oy, oz, ix, iy, iz, w, base, g, i, j, lev, st_t[st0 + sp], depth,
                            sides, srow, samples, hit[H_T], tmp_t, order)
         for e in range(n):
@@ -406,15 +406,14 @@ def _expand_tri(node, parent, lev, depth, mem, work):
             for c in range(3):
                 w[base - 1, p, c] = mw[data[node], p, c]
     else:
-        tri_child(mw, data[parent], node - child[parent], SPLIT_PTR, SPLIT_COL, SPLIT_W, w,
-                  base - 1)
+        tri_child(mw, data[parent], node - child[parent], w, base - 1)
         row = cnt[M_NETS]
         cnt[M_NETS] = row + 1
         for p in range(16):
             for c in range(3):
                 mw[row, p, c] = w[base - 1, p if p < N_TRI else N_TRI - 1, c]
         data[node] = row
-    tri_split(w, base - 1, SPLIT_PTR, SPLIT_COL, SPLIT_W, base)
+    tri_split(w, base - 1, base)
     first = cnt[M_NODES]
     for q in range(4):
         lo0, lo1, lo2, hi0, hi1, hi2 = tri_box(w, base + q)
@@ -433,7 +432,7 @@ def _node_net(node, parent, mem, work):
         return m_nets, data[node]
     w = work.reshape((work.shape[0], 16, 3))
     mw = m_nets.reshape((m_nets.shape[0], 16, 3))
-    tri_child(mw, data[parent], node - child[parent], SPLIT_PTR, SPLIT_COL, SPLIT_W, w, 0)
+    tri_child(mw, data[parent], node - child[parent], w, 0)
     for c in range(3):  # (the 16th point repeats the 15th, as in the stores)
         w[0, N_TRI, c] = w[0, N_TRI - 1, c]
     return work, np.int64(0)
