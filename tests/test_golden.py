@@ -103,7 +103,8 @@ def golden_attributes(result, scene, name: str) -> dict:
 
 def same_golden(path: Path, channels: dict, attrs: dict) -> bool:
     """True when the golden at ``path`` has exactly these pixels and subtrace header values
-    (then it is not rewritten: OpenImageIO would stamp a new DateTime into the file)."""
+    (then it is not rewritten, so its bytes stay as committed: a rewrite would store new
+    timings)."""
     old_channels, old_attrs = read_exr(path)
     if list(old_channels) != list(channels):
         return False
@@ -199,7 +200,7 @@ def test_missing_golden_names_the_command(tmp_path, monkeypatch):
 
 def test_update_golden_writes_and_keeps_unchanged_files(tmp_path, monkeypatch):
     """--update-golden creates a missing golden that then passes, leaves an equal one
-    untouched (same bytes: no new DateTime) and rewrites one whose pixels differ."""
+    untouched (same bytes) and rewrites one whose pixels differ."""
     monkeypatch.setattr(f"{__name__}.GOLDEN_DIR", tmp_path)
     path = tmp_path / "creases.exr"
     test_golden("creases", update_golden=True)

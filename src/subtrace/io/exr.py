@@ -297,9 +297,10 @@ def _write_all(jobs) -> None:
     """Write each (path, format, spec, pixels) to a temporary, then move all into place
     (:func:`subtrace.io.atomic.atomic_paths`).
 
-    pixels: what _write_image takes for the format, or a function returning it. Every temporary is created first (so a bad folder fails
-    before anything is written); the jobs after the first are written on threads of their
-    own while the first is written here (OpenImageIO releases the GIL while it encodes).
+    pixels: what _write_image takes for the format, or a function returning it. Every
+    temporary is created first (so a bad folder fails before anything is written); the jobs
+    after the first are written on threads of their own while the first is written here
+    (OpenImageIO and OpenEXR release the GIL while they encode).
     """
     errors: list[BaseException | None] = [None] * len(jobs)
     with atomic_paths([path for path, _, _, _ in jobs]) as temps:

@@ -355,8 +355,8 @@ class Memos:
     are allocated lazily by the OS (``np.empty``); one that ran out during a round (its rays
     went on without storing) is doubled before the next."""
 
-    # virtual: touched as used. A regular Loop patch's memo keeps the net of every inner
-    # node it creates (three nets for four nodes), and with its nets built before the first
+    # virtual: touched as used. A regular Loop patch's memo keeps the net of every node its
+    # rays split (one net for the four nodes made), and with its nets built before the first
     # round (trace/build.py) it has one round to fill them: room for 2M nets from the start
     START = {"child": 1 << 22, "nets": 1 << 21, "cells": 1 << 20}
     # rows per unit of START (a cell has 4 corner rows) and bytes per row: a node (child,

@@ -8,8 +8,8 @@ comes from the angular criterion. A ray that enters the net's box descends the p
 1-to-4 split in Loop's child order (corner children 0, 1, 2, then the middle child turned
 half a turn: ``basis.TRI_SPLIT``), entering the children whose net boxes it hits, nearest
 first, until level ``d``. Each thread keeps what its rays split in its memo (the quads' memo,
-``trace/bezier.py``: node boxes, the nets of inner nodes, three corner rows per cell), so a
-node is split and a cell evaluated once per thread (:func:`intersect_tri`); a full store
+``trace/bezier.py``: node boxes, the nets of the nodes split, three corner rows per cell),
+so a node is split and a cell evaluated once per thread (:func:`intersect_tri`); a full store
 makes the ray split on the spot (:func:`descend_tri`), which changes no hit. The last split
 evaluates no nets: a node of level ``d - 1`` becomes its four cells at once, from its six
 grid points (:func:`_expand_cells`), each cell boxed by its own micro-triangle (three
