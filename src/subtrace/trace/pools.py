@@ -35,7 +35,7 @@ from subtrace.trace.prims import (
 from subtrace.patches.isolate_loop import sample_ranges, side_samples
 from subtrace.trace.tris import LOOP_CELL, TRI, tri_nets_as_pieces
 
-CANDIDATES = 8  # unbuilt shells a ray remembers between rounds (more: it traverses again)
+CANDIDATES = 4  # unbuilt shells a ray remembers between rounds (more: it traverses again)
 
 
 class PieceArrays(NamedTuple):
