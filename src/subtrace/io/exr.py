@@ -30,7 +30,7 @@ import OpenEXR
 import OpenImageIO as oiio
 
 from subtrace.errors import SubtraceError
-from subtrace.io.atomic import atomic_paths, check_writable, path_str
+from subtrace.io.atomic import atomic_paths, check_writable, open_temp, path_str, reason
 from subtrace.runtime.signals import temp_lock
 from subtrace.runtime.threads import max_threads
 from subtrace.io.formats import DEEP, PICTURE_FORMATS, WITH_ALPHA, picture_format
@@ -355,11 +355,13 @@ def _write_openexr(path_str: str, temp: str, header: dict, channels: dict) -> No
     if OpenEXR.global_thread_count() == 0:  # (its ZIP blocks compressed on every core)
         OpenEXR.set_global_thread_count(max_threads())
     try:
-        # opened by name and written in one call, all under the temporaries' lock (see
-        # _write_image): an interrupt's clean-up waits for the write (~0.15 s at 1280x720)
-        with temp_lock():
-            OpenEXR.File(header, channels).write(temp)
-    except (RuntimeError, OSError, ValueError) as exc:
+        # written through a file opened under the temporaries' lock (see _write_image),
+        # not by name: the lock is not held while the film is encoded
+        with open_temp(temp, "wb") as stream:
+            OpenEXR.File(header, channels).write(stream)
+    except OSError as err:
+        raise SubtraceError(f"{path_str}: cannot write the file: {reason(err)}") from None
+    except (RuntimeError, ValueError) as exc:
         raise SubtraceError(f"{path_str}: cannot write the file: {' '.join(str(exc).split())}"
                             ) from None
 
