@@ -25,7 +25,7 @@ from subtrace.accel.bvh import slab_entry
 from subtrace.camera import window_offset
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material
 from subtrace.patches.basis import bez_normal
-from subtrace.runtime.jit import inline_njit, nb
+from subtrace.runtime.jit import inline_njit, leaf_njit, nb
 from subtrace.runtime.threads import run_tasks, thread_count
 from subtrace.trace.prims import ray_setup
 from subtrace.trace.tris import LOOP_CELL, TRI, tri_normal
@@ -249,7 +249,7 @@ def _light_task(task, n_tasks, frame, width, t, normals, pix_patch, patches, lig
                 planes[C_R + 2, r] += ks[2] * sb
 
 
-@nb.njit(cache=True)
+@leaf_njit
 def _direction(frame, width, dirs, r):
     """Ray r's unit direction: ``dirs[r]``, or with no ``dirs`` pixel r's centre ray."""
     if len(dirs):
@@ -259,7 +259,7 @@ def _direction(frame, width, dirs, r):
     return ray_setup(frame, row, col)
 
 
-@nb.njit(cache=True)
+@leaf_njit
 def _incoming(lights, k, frame, t, dx, dy, dz):
     """Light ``k`` at the hit ``eye + t d``: the unit direction it travels there and its
     irradiance factor (1 for a directional light, 1 / distance^2 for a point light)."""
@@ -287,7 +287,7 @@ def _blinn(fx, fy, fz, lx, ly, lz, dx, dy, dz, shininess):
     return c ** shininess if c > 0.0 else 0.0
 
 
-@nb.njit(cache=True)
+@leaf_njit
 def _cell_normal(pts, nrm, a, b):
     """Bilinear blend of a cell's exact corner normals at (a, b) in [0,1]^2 (corner order
     (0,0), (1,0), (1,1), (0,1)); the cell's own normal where a corner's is undefined."""
@@ -307,7 +307,7 @@ def _cell_normal(pts, nrm, a, b):
     return 0.0, 0.0, 0.0
 
 
-@nb.njit(cache=True)
+@leaf_njit
 def _tri_cell_normal(pts, nrm, b, c):
     """Blend of a Loop cell's exact corner normals at barycentrics (1 - b - c, b, c); the
     cell's own normal where a corner's is undefined."""
@@ -891,7 +891,7 @@ def edge_pixels(planes, width, height) -> np.ndarray:
     return flag.reshape(height, width)
 
 
-@nb.njit(cache=True)
+@leaf_njit
 def _display_luminance(planes, r):
     """The sRGB-encoded luminance of pixel r's colour, clipped to 0..1."""
     y = 0.2126 * planes[C_R, r] + 0.7152 * planes[C_R + 1, r] + 0.0722 * planes[C_R + 2, r]
@@ -900,7 +900,7 @@ def _display_luminance(planes, r):
     return min(1.055 * y ** (1.0 / 2.4) - 0.055, 1.0)
 
 
-@nb.njit(cache=True)
+@leaf_njit
 def _differ(planes, lum, a, b, depth_step, cos_jump, contrast):
     """Whether pixels a and b differ enough for more rays (see :func:`edge_pixels`);
     ``lum``: each pixel's displayed luminance."""
