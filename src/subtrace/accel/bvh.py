@@ -170,7 +170,7 @@ def bvh_next_leaf(ox, oy, oz, ix, iy, iz, bvh, tlo, thi, stack, stack_t, sp):
     return np.int64(0), np.int64(0), np.int64(0)
 
 
-@nb.njit(cache=True)
+@leaf_njit
 def _area(lo, hi):
     d0, d1, d2 = hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]
     if d0 < 0:

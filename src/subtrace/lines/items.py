@@ -50,7 +50,7 @@ from subtrace.patches.basis import (
 from subtrace.patches.isolate import build_isolated, refine_children
 from subtrace.patches.shells import one_ring_shells
 from subtrace.patches.table import build_patch_table
-from subtrace.runtime.jit import nb
+from subtrace.runtime.jit import leaf_njit, nb
 from subtrace.subdiv.limit import CREASE, SMOOTH, classify, limit_points
 from subtrace.subdiv.loop import REGULAR_VALENCE
 
@@ -424,7 +424,7 @@ def _recipes(fo, fv, vfo, vf, veo, ve, ev, sharp, faces, lattice, out, ok):
         ok[m] = good
 
 
-@nb.njit(cache=True)
+@leaf_njit
 def _edge_is(veo, ve, ev, a, b, flag):
     """``flag`` of the edge joining vertices a and b (False if there is none)."""
     for k in range(veo[a], veo[a + 1]):

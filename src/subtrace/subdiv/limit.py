@@ -32,7 +32,7 @@ import numpy as np
 from subtrace.mesh.topology import (
     INF_SHARP, Level, Options, build_level, compact, gather, gather_index,
 )
-from subtrace.runtime.jit import nb
+from subtrace.runtime.jit import leaf_njit, nb
 from subtrace.subdiv import catmark, loop
 from subtrace.subdiv.creases import F0, RULE_CORNER, RULE_CREASE, RULE_SMOOTH, rule_of
 from subtrace.subdiv.refine import refine_level, refine_points
@@ -204,7 +204,7 @@ def smooth_edge_tangents(level: Level, points: np.ndarray, options: Options, ver
     return out
 
 
-@nb.njit(cache=True)
+@leaf_njit
 def _far(edge_verts, e, v):
     a = edge_verts[e, 0]
     return edge_verts[e, 1] if a == v else a
