@@ -401,21 +401,14 @@ def _expand_tri(node, parent, lev, depth, mem, work):
     w = work.reshape((work.shape[0], 16, 3))
     mw = m_nets.reshape((m_nets.shape[0], 16, 3))
     base = w.shape[0] - 4
-    if data[node] >= 0:
-        for p in range(N_TRI):  # (tri_split splits within one array)
-            for c in range(3):
-                w[base - 1, p, c] = mw[data[node], p, c]
-    else:
-        tri_child(mw, data[parent], node - child[parent], w, base - 1)
+    if data[node] < 0:
         row = cnt[M_NETS]
         cnt[M_NETS] = row + 1
-        for p in range(16):
-            for c in range(3):
-                mw[row, p, c] = w[base - 1, p if p < N_TRI else N_TRI - 1, c]
+        _split_off_parent(node, parent, mem, mw, row)
         data[node] = row
-    tri_split(w, base - 1, base)
     first = cnt[M_NODES]
     for q in range(4):
+        tri_child(mw, data[node], q, w, base + q)
         lo0, lo1, lo2, hi0, hi1, hi2 = tri_box(w, base + q)
         lo0, lo1, lo2, hi0, hi1, hi2 = pad_box(lo0, lo1, lo2, hi0, hi1, hi2)
         new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, -1)
@@ -424,17 +417,25 @@ def _expand_tri(node, parent, lev, depth, mem, work):
 
 
 @leaf_njit
+def _split_off_parent(node, parent, mem, out, o):
+    """Memo node ``node``'s net, split off the stored net of its ``parent`` (which was
+    split), into ``out[o]`` ((., 16, 3): the 16th point repeats the 15th, as in the
+    stores)."""
+    root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
+    mw = m_nets.reshape((m_nets.shape[0], 16, 3))
+    tri_child(mw, data[parent], node - child[parent], out, o)
+    for c in range(3):
+        out[o, N_TRI, c] = out[o, N_TRI - 1, c]
+
+
+@leaf_njit
 def _node_net(node, parent, mem, work):
     """Memo node ``node``'s net as (store, row): its stored net, or split off its parent's
-    (stored: the parent was split) into ``work[0]``."""
+    into ``work[0]``."""
     root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
     if data[node] >= 0:
         return m_nets, data[node]
-    w = work.reshape((work.shape[0], 16, 3))
-    mw = m_nets.reshape((m_nets.shape[0], 16, 3))
-    tri_child(mw, data[parent], node - child[parent], w, 0)
-    for c in range(3):  # (the 16th point repeats the 15th, as in the stores)
-        w[0, N_TRI, c] = w[0, N_TRI - 1, c]
+    _split_off_parent(node, parent, mem, work.reshape((work.shape[0], 16, 3)), 0)
     return work, np.int64(0)
 
 
