@@ -7,13 +7,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from shared_data import MODELS, needs_shared, small_scene
 
 import subtrace
 from subtrace.lines.items import box_nets, loop_regular
 from subtrace.patches.table import build_patch_table
 from subtrace.render import render_scene
-from subtrace.trace.tris import tri_normal, tri_point
+from subtrace.trace.tris import _level_deviation, tri_deviation, tri_normal, tri_point
 
 TORUS_VIEW = ((1.226, 4.085, 4.902), (0.0, 0.0, 0.0))  # scenes/torus_loop.toml's camera
 SPOT_VIEW = ((2.0, 0.8, 2.4), (0.0, 0.1, 0.2))
@@ -149,3 +151,32 @@ def test_a_hidden_loop_object_is_not_refined(tmp_path):
                        cages=cages[1:])
     assert res.stats.pixels_covered > 100
     assert np.count_nonzero(res.refined_objects == 0) > 100
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), level=st.integers(0, 5))
+def test_a_nodes_box_holds_its_part_of_the_patch(seed, level):
+    """A memo node's box is its corners' box grown by the net's deviation bound, a quarter
+    per level (tris.tri_deviation, _level_deviation): every point of the patch over the node
+    lies in it. Random quartic nets (wild ones: control points anywhere in a unit cube),
+    a random dyadic sub-triangle at ``level`` (upright or turned), points at random
+    barycentric coordinates in it, evaluated from the whole net."""
+    rng = np.random.default_rng(seed)
+    net = np.zeros((1, 16, 3))
+    net[0, :15] = rng.random((15, 3)) * rng.choice([1e-3, 1.0, 1e3])
+    dev = tri_deviation(net, 0)
+    # a node of the level, by random 1-to-4 splits (Loop's child order, as tris._child)
+    g, i, j = 1, 0, 0
+    for lev in range(level):
+        hh = g << (level - lev - 1)
+        q = rng.integers(0, 4)
+        i, j, g = i + (hh if q in (1, 3) else 0), j + (hh if q in (2, 3) else 0), (-g if q == 3 else g)
+    corners = np.array([(i, j), (i + g, j), (i, j + g)], float) / (1 << level)
+    e = _level_deviation(dev, level, 0)
+    pc = np.array([tri_point(net, 0, s, t) for s, t in corners])
+    lo, hi = pc.min(axis=0) - e, pc.max(axis=0) + e
+    w = rng.dirichlet(np.ones(3), 200)
+    for s, t in w @ corners:
+        p = np.array(tri_point(net, 0, s, t))
+        slack = 1e-12 * np.abs(net).max()
+        assert np.all(p >= lo - slack) and np.all(p <= hi + slack), (p, lo, hi)

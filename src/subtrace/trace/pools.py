@@ -355,9 +355,9 @@ class Memos:
     are allocated lazily by the OS (``np.empty``); one that ran out during a round (its rays
     went on without storing) is doubled before the next."""
 
-    # virtual: touched as used. A regular Loop patch's memo keeps the net of every node its
-    # rays split (one net for the four nodes made), and with its nets built before the first
-    # round (trace/build.py) it has one round to fill them: room for 2M nets from the start
+    # virtual: touched as used. A Catmull-Clark memo keeps the net of every node its rays
+    # split and its cells' corners; a Loop memo the six points of every node split (two
+    # cells' room in the cell store, trace/tris.py)
     START = {"child": 1 << 22, "nets": 1 << 21, "cells": 1 << 20}
     # rows per unit of START (a cell has 4 corner rows) and bytes per row: a node (child,
     # box, slab, data), a net, a cell corner

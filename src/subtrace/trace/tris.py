@@ -6,15 +6,34 @@ A regular Loop triangle (three smooth valence-6 corners, or a regular boundary: 
 as the first 15 of a (4,4,3) net's 16 points (item kind ``TRI``). Its grid depth ``d``
 comes from the angular criterion. A ray that enters the net's box descends the patch's
 1-to-4 split in Loop's child order (corner children 0, 1, 2, then the middle child turned
-half a turn: ``basis.TRI_SPLIT``), entering the children whose net boxes it hits, nearest
-first, until level ``d``. Each thread keeps what its rays split in its memo (the quads' memo,
-``trace/bezier.py``: node boxes, the nets of the nodes split, three corner rows per cell),
-so a node is split and a cell evaluated once per thread (:func:`intersect_tri`); a full store
-makes the ray split on the spot (:func:`descend_tri`), which changes no hit. The last split
-evaluates no nets: a node of level ``d - 1`` becomes its four cells at once, from its six
-grid points (:func:`_expand_cells`), each cell boxed by its own micro-triangle (three
-quarters of all splits are these; splitting their nets was half the trace time of a Loop
-cage with creases). A cell counts as a micro-triangle when a ray of the memo first tests it.
+half a turn: ``basis.TRI_SPLIT``), entering the children whose boxes it hits, nearest first,
+until level ``d``. No net is split on the way: a node is known by its three corners, exact
+limit points evaluated from the item's own net, and its box is theirs grown by a bound on
+how far the patch strays from the plane of its corners (below). Splitting a node evaluates
+its three side midpoints; a node of level ``d - 1`` evaluates its six grid points and tests
+its four cells in place, each boxed by its own micro-triangle. Each thread keeps what its
+rays split in its memo (the quads' memo, ``trace/bezier.py``: node boxes and children; a
+split node's six points in the cell store, a block of 8 rows, the last two a cells'
+parent's flags of cells tested), so a node is split once per thread
+(:func:`intersect_tri`); a full store makes the ray split on the spot (:func:`descend_tri`,
+the same boxes from the same points), which changes no hit. A cell counts as a
+micro-triangle when a ray of the memo first tests it.
+
+The box bound. Let ``P`` be the patch over a node and ``L`` the linear interpolant of its
+corners. ``P - L`` is a quartic Bezier triangle whose control points ``e`` are the net's
+minus ``L`` at the points ``(i, j, k) / 4``: zero at the corners, with the net's second
+differences (``L`` has none). On a side, ``e`` vanishes at both ends and its second
+differences are at most ``D`` (per coordinate, the net's largest pure second difference in
+the three directions of its grid), so ``|e| <= 2 D`` there (``3/2 D`` at the quarter
+points); an inner point is the second of a row of four whose ends are quarter points of two
+sides, so ``|e| <= 3/2 D + D``. By the convex hull property ``|P - L| <= 5/2 D`` per
+coordinate (``DEVIATION``; measured on random nets, the patch comes within about half of
+it), and ``L`` lies in its corners' box. A child's parameter steps are half its parent's
+along the same three directions, so its pure second differences are a quarter of convex
+combinations of its parent's: ``D`` falls fourfold per level (:func:`_level_deviation`). A
+child's box is also clipped to its parent's. The boxes are looser than the nets' own
+(about 6 % more nodes entered on a Loop vase), but a split costs three point evaluations
+where the four child nets cost five net splits, and the memo holds no nets.
 
 A node at level ``l`` is the sub-triangle with corners ``A, A + g (h, 0), A + g (0, h)`` of
 the depth-``d`` grid (``h = 2^(d-l)``, ``g = +1`` upright, ``-1`` turned), grid vertex
@@ -46,18 +65,18 @@ import numpy as np
 
 from subtrace.accel.bvh import slab_entry
 from subtrace.patches.basis import (
-    DEGREE, N_TRI, NORMAL_STEP, NORMAL_TRIES, copy_net, pad_box,
-    tri_box, tri_child, tri_split, unit_normal,
+    DEGREE, N_TRI, NORMAL_STEP, NORMAL_TRIES, pad_box, tri_box, unit_normal,
 )
 from subtrace.runtime.jit import inline_njit, leaf_njit
 from subtrace.trace.prims import (
-    H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, M_CELLS, M_FULL, M_NETS, M_NODES, NOT_YET,
+    H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, M_CELLS, M_FULL, M_NODES, NOT_YET,
     new_node, push_sorted, ray_triangle,
 )
 
 TRI = 2  # item kind of a Loop net (a regular patch, or a piece) in ``trace.pools.Pieces``
 LOOP_CELL = 3  # item kind of a cell of exact limit points of an isolated Loop patch
 COUNTED = -3  # memo root of a one-cell patch whose triangle was counted (as bezier's)
+DEVIATION = 2.5  # a node's box: its corners' grown by this times its net's second differences
 
 
 @leaf_njit
@@ -209,6 +228,106 @@ def _frame_point(net, q, gi, gj, fr):
 
 
 @leaf_njit
+def tri_deviation(net, q):
+    """A bound, per coordinate, on how far the patch of the quartic net ``net[q]`` lies from
+    the plane of its corners: 5/2 of its largest pure second difference (module doc)."""
+    e0 = e1 = e2 = 0.0
+    for k in range(DEGREE - 1):
+        for j in range(DEGREE - 1 - k):
+            a, b, c = _tri_index(j, k), _tri_index(j + 1, k), _tri_index(j + 2, k)
+            d, f = _tri_index(j, k + 1), _tri_index(j, k + 2)
+            m = _tri_index(j + 1, k + 1)
+            for x in range(3):
+                s = max(abs(net[q, a, x] - 2.0 * net[q, b, x] + net[q, c, x]),
+                        abs(net[q, a, x] - 2.0 * net[q, d, x] + net[q, f, x]),
+                        abs(net[q, c, x] - 2.0 * net[q, m, x] + net[q, f, x]))
+                if x == 0:
+                    e0 = max(e0, s)
+                elif x == 1:
+                    e1 = max(e1, s)
+                else:
+                    e2 = max(e2, s)
+    return DEVIATION * e0, DEVIATION * e1, DEVIATION * e2
+
+
+@leaf_njit
+def _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, pts, ra, rb, rc, gi, gj, g, depth, slack, hit,
+             code, item):
+    """Intersect the micro-triangle of rows ``ra, rb, rc`` of ``pts``: the grid vertices
+    (gi, gj), (gi + g, gj), (gi, gj + g) of the item's depth-``depth`` grid; update ``hit``
+    (H_SLOT = ``code``, H_LEAF = depth, H_TRI = ``item``, (H_B1, H_B2) = patch
+    parameter)."""
+    inv = 1.0 / (1 << depth)
+    o = (ox, oy, oz)
+    t, ba, bb, bc = ray_triangle(o[kx], o[ky], o[kz], kx, ky, kz, sx, sy, sz, ra, rb, rc, pts,
+                                 hit[H_T], slack)
+    if t < hit[H_T]:
+        hit[H_T] = t
+        hit[H_SLOT] = code
+        hit[H_LEAF] = depth
+        hit[H_TRI] = item
+        hit[H_B1] = (gi + g * bb) * inv
+        hit[H_B2] = (gj + g * bc) * inv
+
+
+@leaf_njit
+def _corner_points(net, q, g, i, j, lev, depth, fr, sides, srow, samples, pts, r):
+    """The corners of node (g, i, j, lev) into ``pts[r:r+3]``: its exact limit points, or
+    grid points (:func:`grid_point`, snapped sides moved) for a cell (``lev == depth``)."""
+    h = g * (1 << (depth - lev))
+    for c in range(3):
+        a = i + (h if c == 1 else 0)
+        b = j + (h if c == 2 else 0)
+        if lev == depth:
+            x, y, z = grid_point(net, q, a, b, depth, fr, sides, srow, samples)
+        else:
+            x, y, z = _frame_point(net, q, a, b, fr)
+        pts[r + c, 0], pts[r + c, 1], pts[r + c, 2] = x, y, z
+
+
+@leaf_njit
+def _node_points(net, q, g, i, j, lev, depth, fr, sides, srow, samples, pts, r):
+    """The six points of node (g, i, j, lev) < depth, rows ``pts[r:r+6]``: corners A,
+    A + g h (1, 0), A + g h (0, 1), then side midpoints A + g h/2 (1, 0), A + g h/2 (0, 1),
+    A + g h/2 (1, 1) (h its side in grid steps); the corners of its four children by
+    ``_CELL_CORNER``. Above the cells' parents the corners must be in place (the parent's
+    points) and the midpoints are exact limit points; a cells' parent takes all six from
+    :func:`grid_point` (the points its cells share bit for bit with every other cell)."""
+    hh = g * (1 << (depth - lev - 1))
+    cells = lev + 1 == depth
+    for k in range(0 if cells else 3, 6):
+        a = i + (2 * hh if k == 1 else (hh if k == 3 or k == 5 else 0))
+        b = j + (2 * hh if k == 2 else (hh if k == 4 or k == 5 else 0))
+        if cells:
+            x, y, z = grid_point(net, q, a, b, depth, fr, sides, srow, samples)
+        else:
+            x, y, z = _frame_point(net, q, a, b, fr)
+        pts[r + k, 0], pts[r + k, 1], pts[r + k, 2] = x, y, z
+
+
+@leaf_njit
+def _child_box(pts, r, q, e0, e1, e2, plo0, plo1, plo2, phi0, phi1, phi2):
+    """Box of child ``q`` of a node whose six points are ``pts[r:r+6]``: its corners' box
+    grown by the deviation bound ``e`` of its level (zero for a cell: the micro-triangle
+    itself), padded, within its parent's box ``plo, phi``."""
+    a, b, c = r + _CELL_CORNER[q][0], r + _CELL_CORNER[q][1], r + _CELL_CORNER[q][2]
+    lo0, lo1, lo2, hi0, hi1, hi2 = pad_box(
+        min(pts[a, 0], pts[b, 0], pts[c, 0]) - e0, min(pts[a, 1], pts[b, 1], pts[c, 1]) - e1,
+        min(pts[a, 2], pts[b, 2], pts[c, 2]) - e2, max(pts[a, 0], pts[b, 0], pts[c, 0]) + e0,
+        max(pts[a, 1], pts[b, 1], pts[c, 1]) + e1, max(pts[a, 2], pts[b, 2], pts[c, 2]) + e2)
+    return (max(lo0, plo0), max(lo1, plo1), max(lo2, plo2), min(hi0, phi0), min(hi1, phi1),
+            min(hi2, phi2))
+
+
+@leaf_njit
+def _level_deviation(dev, lev, lev0):
+    """The deviation bound of the nodes of level ``lev`` of an item of level ``lev0`` whose
+    own bound is ``dev``: a quarter per level (exact: powers of two)."""
+    s = 1.0 / (1 << (2 * (lev - lev0)))
+    return dev[0] * s, dev[1] * s, dev[2] * s
+
+
+@leaf_njit
 def _snapped_node(i, j, h, lev, depth, sides, srow):
     """Whether the level-``lev`` node with corners (i, j), (i + h, j), (i, j + h) may hold
     snapped grid vertices: it touches a side sampled at a depth ``de`` < ``lev``. Its
@@ -259,70 +378,19 @@ def _snapped_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, i, j, h
     return slab_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, 0.0, tmax)
 
 
-@leaf_njit
-def _tri_entry(ox, oy, oz, ix, iy, iz, w, q, tmax):
-    """Entry distance of the ray into the padded box of net ``w[q]``; inf on a miss."""
-    lo0, lo1, lo2, hi0, hi1, hi2 = tri_box(w, q)
-    lo0, lo1, lo2, hi0, hi1, hi2 = pad_box(lo0, lo1, lo2, hi0, hi1, hi2)
+@inline_njit
+def _child_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, cg, ci, cj, h, lev,
+                 depth, sides, srow, samples, t_parent, tmax):
+    """Entry distance of the ray into child (cg, ci, cj) of level ``lev`` (side ``h``) whose
+    box is ``lo, hi``: a child that may hold snapped points (:func:`_snapped_node`) is tested
+    by its box widened by its side's samples where the item has them
+    (:func:`_snapped_entry`), else entered untested at its parent's entry ``t_parent``."""
+    if lev < depth and _snapped_node(ci, cj, cg * h, lev, depth, sides, srow):
+        if sides[srow, 3] >= 0:
+            return _snapped_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, ci, cj,
+                                  cg * h, lev, depth, sides, srow, samples, tmax)
+        return t_parent
     return slab_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, 0.0, tmax)
-
-
-@leaf_njit
-def _tri_points(net, q, gi, gj, g, depth, fr, sides, srow, samples, out, r0):
-    """The corners (gi, gj), (gi + g, gj), (gi, gj + g) of a micro-triangle of the patch's
-    depth-``depth`` grid (:func:`grid_point`) into ``out[r0:r0+3]``."""
-    for c in range(3):
-        a = gi + (g if c == 1 else 0)
-        b = gj + (g if c == 2 else 0)
-        out[r0 + c, 0], out[r0 + c, 1], out[r0 + c, 2] = grid_point(net, q, a, b, depth, fr,
-                                                                    sides, srow, samples)
-
-
-@leaf_njit
-def _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, pts, r0, gi, gj, g, depth, slack, hit, code,
-             item):
-    """Intersect the micro-triangle ``pts[r0:r0+3]`` (corners as :func:`_tri_points`);
-    update ``hit`` (H_SLOT = ``code``, H_LEAF = depth, H_TRI = ``item``, (H_B1, H_B2) = patch
-    parameter)."""
-    inv = 1.0 / (1 << depth)
-    o = (ox, oy, oz)
-    t, ba, bb, bc = ray_triangle(o[kx], o[ky], o[kz], kx, ky, kz, sx, sy, sz, r0, r0 + 1,
-                                 r0 + 2, pts, hit[H_T], slack)
-    if t < hit[H_T]:
-        hit[H_T] = t
-        hit[H_SLOT] = code
-        hit[H_LEAF] = depth
-        hit[H_TRI] = item
-        hit[H_B1] = (gi + g * bb) * inv
-        hit[H_B2] = (gj + g * bc) * inv
-
-
-@leaf_njit
-def _push_children(ox, oy, oz, ix, iy, iz, w, base, g, i, j, lev, t_parent, depth, sides, srow,
-                   samples, tmax, tmp_t, order):
-    """The children (nets ``w[base:base+4]``) of node (g, i, j, lev) that the ray enters
-    before ``tmax``, sorted far to near into ``order`` / ``tmp_t``; returns their count. A
-    child that may hold snapped points (:func:`_snapped_node`) is tested by its box widened
-    by its side's samples where the item has them (:func:`_snapped_entry`), else entered
-    untested, at its parent's entry distance ``t_parent``."""
-    n = 0
-    hh = g * (1 << (depth - lev - 1))  # half the node's side, signed
-    for q in range(4):
-        ci = i + (hh if q == 1 or q == 3 else 0)
-        cj = j + (hh if q == 2 or q == 3 else 0)
-        ch = -hh if q == 3 else hh
-        if _snapped_node(ci, cj, ch, lev + 1, depth, sides, srow):
-            if sides[srow, 3] >= 0:
-                lo0, lo1, lo2, hi0, hi1, hi2 = tri_box(w, base + q)
-                te = _snapped_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, ci,
-                                    cj, ch, lev + 1, depth, sides, srow, samples, tmax)
-            else:
-                te = t_parent
-        else:
-            te = _tri_entry(ox, oy, oz, ix, iy, iz, w, base + q, tmax)
-        if te < np.inf:
-            n = push_sorted(tmp_t, order, n, te, q)
-    return n
 
 
 @leaf_njit
@@ -334,26 +402,25 @@ def _child(g, i, j, lev, depth, q):
 
 
 @leaf_njit
-def descend_tri(ray, src, s, g0, i0, j0, lev0, nets, nk, depth, fr, sides, srow, samples,
-                slack, hit, code, item, work, st, st_t, st0, tmp_t, order, lv):
+def descend_tri(ray, g0, i0, j0, lev0, lev_item, nets, nk, depth, fr, sides, srow, samples,
+                dev, slack, hit, code, item, work, st, st_t, st0, tmp_t, order):
     """Closest hit on the node (g0, i0, j0, lev0) of the Loop item (a regular patch, or a
-    piece of an isolated one: frame ``fr``, :func:`grid_point`) whose quartic net is
-    ``nets[nk]`` ((.,4,4,3) stores: the first 15 points), its own net ``src[s]``,
-    refined per ray down to the grid depth ``depth``, storing nothing; updates ``hit``.
+    piece of an isolated one: frame ``fr``, :func:`grid_point`; level ``lev_item``, deviation
+    bound ``dev``) whose quartic net is ``nets[nk]``, refined per ray down to the grid depth
+    ``depth``, storing nothing; updates ``hit``. The node's corners and box are the first
+    five rows of ``work`` read as rows of points (a cell's corners are its grid points), as
+    the memo would hold them: the ray meets the same boxes and triangles either way.
     ``sides[srow]``: the sampling depth of each patch side's edge (-1: none) and the first
-    of its side samples in ``samples`` (-1: none). ``work`` (>=
-    3*depth+5 nets), rows ``st0 ..`` of the stack ``st`` (>= 3*depth+1 of them) with entry
-    distances ``st_t``, ``tmp_t`` / ``order`` (4,) and ``lv`` (>= 3, 3) are scratch.
-    Returns the number of micro-triangles tested."""
+    of its side samples in ``samples`` (-1: none). ``work`` ((., 4, 4, 3): 5 rows of points
+    a stacked node, 14 more), rows ``st0 ..`` of the stack ``st`` (>= 3*depth+1 of them)
+    with entry distances ``st_t``, ``tmp_t`` / ``order`` (4,) are scratch. Returns the
+    number of micro-triangles tested."""
     ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz = ray
-    root = nets.reshape((nets.shape[0], 16, 3))
-    w = work.reshape((work.shape[0], 16, 3))
-    sw = src.reshape((src.shape[0], 16, 3))
-    base = w.shape[0] - 4  # the last four rows receive children before sorting
-    for p in range(N_TRI):
-        for c in range(3):
-            w[0, p, c] = sw[s, p, c]
-    # stack rows: orientation g (+1 upright, -1 turned), -, i, j, level (nets in w[row])
+    pts = work.reshape((-1, 3))
+    tb = pts.shape[0] - 14  # the children's boxes (2 rows each), then the node's six points
+    top = tb + 8
+    # stack rows: orientation g, -, i, j, level; rows 5 k .. 5 k + 4 of pts: the corners
+    # and the box (lo, hi) of the node in stack row k
     st[st0, 0], st[st0, 2], st[st0, 3], st[st0, 4] = g0, i0, j0, lev0
     st_t[st0] = 0.0
     sp = 1
@@ -363,21 +430,45 @@ def descend_tri(ray, src, s, g0, i0, j0, lev0, nets, nk, depth, fr, sides, srow,
         if st_t[st0 + sp] >= hit[H_T]:  # a nearer hit was found since it was pushed
             continue
         g, i, j, lev = st[st0 + sp, 0], st[st0 + sp, 2], st[st0 + sp, 3], st[st0 + sp, 4]
+        r = 5 * sp
         if lev == depth:
-            _tri_points(root, nk, i, j, g, depth, fr, sides, srow, samples, lv, 0)
-            _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, 0, i, j, g, depth, slack, hit, code,
-                     item)
+            _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, pts, r, r + 1, r + 2, i, j, g, depth,
+                     slack, hit, code, item)
             tested += 1
             continue
-        tri_split(w, sp, base)
-        n = _push_children(ox, oy, oz, ix, iy, iz, w, base, g, i, j, lev, st_t[st0 + sp], depth,
-                           sides, srow, samples, hit[H_T], tmp_t, order)
+        for k in range(3):
+            for c in range(3):
+                pts[top + k, c] = pts[r + k, c]
+        cells = lev + 1 == depth
+        plo0, plo1, plo2 = pts[r + 3, 0], pts[r + 3, 1], pts[r + 3, 2]
+        phi0, phi1, phi2 = pts[r + 4, 0], pts[r + 4, 1], pts[r + 4, 2]
+        _node_points(nets, nk, g, i, j, lev, depth, fr, sides, srow, samples, pts, top)
+        e0, e1, e2 = (0.0, 0.0, 0.0) if cells else _level_deviation(dev, lev + 1, lev_item)
+        h = 1 << (depth - lev - 1)
+        n = 0
+        for q in range(4):
+            b = tb + 2 * q
+            (pts[b, 0], pts[b, 1], pts[b, 2], pts[b + 1, 0], pts[b + 1, 1],
+             pts[b + 1, 2]) = (_cell_box(pts, top, q) if cells else
+                               _child_box(pts, top, q, e0, e1, e2, plo0, plo1, plo2, phi0, phi1,
+                                          phi2))
+            cg, ci, cj = _child(g, i, j, lev, depth, q)
+            te = _child_entry(ox, oy, oz, ix, iy, iz, pts[b, 0], pts[b, 1], pts[b, 2],
+                              pts[b + 1, 0], pts[b + 1, 1], pts[b + 1, 2], cg, ci, cj, h,
+                              lev + 1, depth, sides, srow, samples, st_t[st0 + sp], hit[H_T])
+            if te < np.inf:
+                n = push_sorted(tmp_t, order, n, te, q)
         for e in range(n):
             q = order[e]
-            for p in range(N_TRI):
-                for c in range(3):
-                    w[sp, p, c] = w[base + q, p, c]
             cg, ci, cj = _child(g, i, j, lev, depth, q)
+            r = 5 * sp
+            for c in range(3):
+                k = top + _CELL_CORNER[q][c]
+                pts[r + c, 0], pts[r + c, 1], pts[r + c, 2] = pts[k, 0], pts[k, 1], pts[k, 2]
+            for k in range(2):
+                b = tb + 2 * q + k
+                pts[r + 3 + k, 0], pts[r + 3 + k, 1], pts[r + 3 + k, 2] = (pts[b, 0], pts[b, 1],
+                                                                           pts[b, 2])
             st[st0 + sp, 0], st[st0 + sp, 2], st[st0 + sp, 3] = cg, ci, cj
             st[st0 + sp, 4] = lev + 1
             st_t[st0 + sp] = tmp_t[e]
@@ -386,101 +477,71 @@ def descend_tri(ray, src, s, g0, i0, j0, lev0, nets, nk, depth, fr, sides, srow,
 
 
 @leaf_njit
-def _expand_tri(node, parent, lev, depth, mem, work):
-    """Split memo node ``node`` (level ``lev`` < depth - 1, child of ``parent``): its four
-    children with their boxes. Its net is the stored one, or is split off its parent's and
-    stored (a node's net is stored when the node is split: its children's are split off it
-    when they are split in turn, or when a full store makes a ray split below them on the
-    spot); the children's nets are not stored: a child is split only if a ray enters it,
-    and most are not (a cell's parent is split into cells without nets). Returns the first
-    child, or -1 when a store is full."""
+def _block(mem):
+    """A block of 8 rows of the memo's cell store (two cells' room), as its first row; -1
+    when the store is full."""
     root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
-    if cnt[M_NODES] + 4 > len(child) or cnt[M_NETS] + 1 > len(m_nets):
+    if cnt[M_CELLS] + 2 > len(m_cells) // 4:
         cnt[M_FULL] = 1
         return -1
-    w = work.reshape((work.shape[0], 16, 3))
-    mw = m_nets.reshape((m_nets.shape[0], 16, 3))
-    base = w.shape[0] - 4
-    if data[node] < 0:
-        row = cnt[M_NETS]
-        cnt[M_NETS] = row + 1
-        _split_off_parent(node, parent, mem, mw, row)
-        data[node] = row
+    u = cnt[M_CELLS]
+    cnt[M_CELLS] = u + 2
+    return 4 * u
+
+
+@leaf_njit
+def _parent_corners(node, parent, mem, pts, r):
+    """The corners of memo node ``node`` into ``pts[r:r+3]``: three of the six points of its
+    ``parent`` (which was split)."""
+    root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
+    q = node - child[parent]
+    for c in range(3):
+        k = data[parent] + _CELL_CORNER[q][c]
+        pts[r + c, 0], pts[r + c, 1], pts[r + c, 2] = m_cells[k, 0], m_cells[k, 1], m_cells[k, 2]
+
+
+@leaf_njit
+def _expand_node(node, parent, g, i, j, lev, lev_item, depth, net, nk, fr, sides, srow,
+                 samples, dev, mem):
+    """Split memo node ``node`` (g, i, j, lev < depth - 1; a child of ``parent``, -1 for the
+    item's root) into its four children: its six points (:func:`_node_points`; the corners
+    its parent's) into a block of the cell store (:func:`_block`; its data), its children's
+    boxes (:func:`_child_box`). No net is split. Returns the first child, or -1 when a
+    store is full."""
+    root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
+    if cnt[M_NODES] + 4 > len(child):
+        cnt[M_FULL] = 1
+        return -1
+    r = _block(mem)
+    if r < 0:
+        return -1
+    if parent < 0:
+        _corner_points(net, nk, g, i, j, lev, depth, fr, sides, srow, samples, m_cells, r)
+    else:
+        _parent_corners(node, parent, mem, m_cells, r)
+    _node_points(net, nk, g, i, j, lev, depth, fr, sides, srow, samples, m_cells, r)
+    e0, e1, e2 = _level_deviation(dev, lev + 1, lev_item)
     first = cnt[M_NODES]
     for q in range(4):
-        tri_child(mw, data[node], q, w, base + q)
-        lo0, lo1, lo2, hi0, hi1, hi2 = tri_box(w, base + q)
-        lo0, lo1, lo2, hi0, hi1, hi2 = pad_box(lo0, lo1, lo2, hi0, hi1, hi2)
-        new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, -1)
+        lo0, lo1, lo2, hi0, hi1, hi2 = _child_box(m_cells, r, q, e0, e1, e2, box[node, 0],
+                                                  box[node, 1], box[node, 2], box[node, 3],
+                                                  box[node, 4], box[node, 5])
+        new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, NOT_YET)
+    data[node] = r
     child[node] = first
     return first
 
 
 @leaf_njit
-def _split_off_parent(node, parent, mem, out, o):
-    """Memo node ``node``'s net, split off the stored net of its ``parent`` (which was
-    split), into ``out[o]`` ((., 16, 3): the 16th point repeats the 15th, as in the
-    stores)."""
-    root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
-    mw = m_nets.reshape((m_nets.shape[0], 16, 3))
-    tri_child(mw, data[parent], node - child[parent], out, o)
-    for c in range(3):
-        out[o, N_TRI, c] = out[o, N_TRI - 1, c]
+def _cell_box(pts, r, q):
+    """Box of cell ``q`` of a cells' parent whose six grid points are ``pts[r:r+6]``: its
+    micro-triangle's, padded (not within its parent's: its snapped corners may lie outside
+    it, :func:`_snapped_node`)."""
+    return _child_box(pts, r, q, 0.0, 0.0, 0.0, -np.inf, -np.inf, -np.inf, np.inf, np.inf,
+                      np.inf)
 
 
-@leaf_njit
-def _node_net(node, parent, mem, work):
-    """Memo node ``node``'s net as (store, row): its stored net, or split off its parent's
-    into ``work[0]``."""
-    root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
-    if data[node] >= 0:
-        return m_nets, data[node]
-    _split_off_parent(node, parent, mem, work.reshape((work.shape[0], 16, 3)), 0)
-    return work, np.int64(0)
-
-
-@leaf_njit
-def _expand_cells(node, g, i, j, depth, root, nk, fr, sides, srow, samples, mem, lv):
-    """Split memo node ``node`` (g, i, j) of level ``depth - 1`` into its four cells: the
-    six grid points of its corners and side midpoints (:func:`grid_point`, the points every
-    cell of the patch shares bit for bit) into the cells' rows of the memo, each cell's box
-    the box of its three corners (the micro-triangle the rays test, snapped sides
-    included), its fourth row's first entry 0 until a ray tests it. No net is split: the
-    nets of cells are never needed. Returns the first child, or -1 when a store is full.
-    ``lv`` (>= 6, 3) is scratch."""
-    root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
-    if cnt[M_NODES] + 4 > len(child) or cnt[M_CELLS] + 4 > len(m_cells) // 4:
-        cnt[M_FULL] = 1
-        return -1
-    # lv rows: 0 A, 1 A + 2g (1,0), 2 A + 2g (0,1), 3 A + g (1,0), 4 A + g (0,1), 5 A + g (1,1)
-    for k in range(6):
-        a = i + g * (2 if k == 1 else (1 if k == 3 or k == 5 else 0))
-        b = j + g * (2 if k == 2 else (1 if k == 4 or k == 5 else 0))
-        lv[k, 0], lv[k, 1], lv[k, 2] = grid_point(root, nk, a, b, depth, fr, sides, srow,
-                                                  samples)
-    first = cnt[M_NODES]
-    for q in range(4):  # Loop's child order (_child); corners A, A + g (1,0), A + g (0,1)
-        r = cnt[M_CELLS]
-        cnt[M_CELLS] = r + 1
-        for c in range(3):
-            k = _CELL_CORNER[q][c]
-            m_cells[4 * r + c, 0] = lv[k, 0]
-            m_cells[4 * r + c, 1] = lv[k, 1]
-            m_cells[4 * r + c, 2] = lv[k, 2]
-        m_cells[4 * r + 3, 0] = 0.0  # (tested yet)
-        lo0 = min(m_cells[4 * r, 0], m_cells[4 * r + 1, 0], m_cells[4 * r + 2, 0])
-        lo1 = min(m_cells[4 * r, 1], m_cells[4 * r + 1, 1], m_cells[4 * r + 2, 1])
-        lo2 = min(m_cells[4 * r, 2], m_cells[4 * r + 1, 2], m_cells[4 * r + 2, 2])
-        hi0 = max(m_cells[4 * r, 0], m_cells[4 * r + 1, 0], m_cells[4 * r + 2, 0])
-        hi1 = max(m_cells[4 * r, 1], m_cells[4 * r + 1, 1], m_cells[4 * r + 2, 1])
-        hi2 = max(m_cells[4 * r, 2], m_cells[4 * r + 1, 2], m_cells[4 * r + 2, 2])
-        lo0, lo1, lo2, hi0, hi1, hi2 = pad_box(lo0, lo1, lo2, hi0, hi1, hi2)
-        new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, r)
-    child[node] = first
-    return first
-
-
-# the six points of _expand_cells (rows of lv) at each child's corners A, A + g' (1, 0),
+# the six points of _node_points (rows) at each child's corners A, A + g' (1, 0),
 # A + g' (0, 1) (the middle child is turned: g' = -g)
 _CELL_CORNER = ((0, 3, 4), (3, 1, 5), (4, 5, 2), (5, 4, 3))
 
@@ -499,39 +560,42 @@ def intersect_tri(ray, it, nets, nk, depth, fr, sides, samples, slack, hit, code
     (1, 0, 0, depth); side sampling ``sides[it]`` and side samples ``samples``) nearer than
     hit[H_T]; updates ``hit``.
     The ray descends the patch's 1-to-4 splits nearest first into the nodes whose boxes it
-    enters; a node is split (its children's boxes and nets stored) once per thread, a cell's
-    corners evaluated once, in the thread's memo ``mem`` (``trace/bezier.py``; a cell keeps 3
-    of its 4 corner rows); when a store is full the ray goes on splitting per ray
-    (:func:`descend_tri`). Returns the micro-triangles built: cells this ray was the first of
-    its thread to evaluate, and those it evaluated per ray."""
+    enters; a node is split (its six points and its children's boxes stored) once per
+    thread, in the thread's memo ``mem`` (``trace/bezier.py``); when a store is full the ray
+    goes on splitting per ray (:func:`descend_tri`). Returns the micro-triangles built:
+    cells this ray was the first of its thread to test, and those it tested per ray."""
     ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz = ray
     work, st, st_t, tmp_t, order, lv, lp = scratch
     root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
     root = nets.reshape((nets.shape[0], 16, 3))
+    lev_item = depth - fr[3]
     node = root_m[it]
     if node < 0:
-        if cnt[M_NODES] + 1 > len(child) or cnt[M_NETS] + 1 > len(m_nets) or fr[3] == 0:
+        lo0, lo1, lo2, hi0, hi1, hi2 = tri_box(root, nk)
+        lo0, lo1, lo2, hi0, hi1, hi2 = pad_box(lo0, lo1, lo2, hi0, hi1, hi2)
+        if cnt[M_NODES] + 1 > len(child) or fr[3] == 0:
             if fr[3] > 0:
                 cnt[M_FULL] = 1
-            zero = np.int64(0)
-            n_t = descend_tri(ray, nets, nk, fr[0], fr[1], fr[2], depth - fr[3], nets, nk,
-                              depth, fr, sides, it, samples, slack, hit, code, it, work, st,
-                              st_t, zero, tmp_t, order, lv)
-            if fr[3] > 0 or node == NOT_YET:  # a one-cell item counts once per thread
-                if fr[3] == 0:
-                    root_m[it] = COUNTED
-                return n_t
+            pts = work.reshape((-1, 3))
+            _corner_points(root, nk, fr[0], fr[1], fr[2], lev_item, depth, fr, sides, it,
+                           samples, pts, 0)
+            pts[3, 0], pts[3, 1], pts[3, 2], pts[4, 0], pts[4, 1], pts[4, 2] = (
+                lo0, lo1, lo2, hi0, hi1, hi2)
+            tested = descend_tri(ray, fr[0], fr[1], fr[2], lev_item, lev_item, root, nk, depth,
+                                 fr, sides, it, samples, (0.0, 0.0, 0.0) if fr[3] == 0 else
+                                 tri_deviation(root, nk), slack, hit, code, it, work, st, st_t,
+                                 np.int64(0), tmp_t, order)
+            if fr[3] > 0:
+                return tested
+            if node == NOT_YET:  # a one-cell item counts once per thread
+                root_m[it] = COUNTED
+                return tested
             return 0
-        row = cnt[M_NETS]
-        cnt[M_NETS] = row + 1
-        copy_net(m_nets, row, nets, nk)
-        node = cnt[M_NODES]
-        cnt[M_NODES] = node + 1
-        child[node] = -1
-        data[node] = row
+        node = new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, NOT_YET)
         root_m[it] = node
+    dev = tri_deviation(root, nk)
     # stack rows: node, orientation, i, j, level, parent; st_t: entry distance when pushed
-    st[0, 0], st[0, 1], st[0, 2], st[0, 3], st[0, 4] = node, fr[0], fr[1], fr[2], depth - fr[3]
+    st[0, 0], st[0, 1], st[0, 2], st[0, 3], st[0, 4] = node, fr[0], fr[1], fr[2], lev_item
     st[0, 5] = -1
     st_t[0] = 0.0
     sp = 1
@@ -542,45 +606,63 @@ def intersect_tri(ray, it, nets, nk, depth, fr, sides, samples, slack, hit, code
             continue
         node, g, i, j, lev = st[sp, 0], st[sp, 1], st[sp, 2], st[sp, 3], st[sp, 4]
         parent = st[sp, 5]
-        if lev == depth:  # a cell (its corners evaluated when its parent was split)
-            r = data[node]
-            if m_cells[4 * r + 3, 0] == 0.0:  # the first ray of the memo to test it
-                m_cells[4 * r + 3, 0] = 1.0
-                tested += 1
-            _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, m_cells, 4 * r, i, j, g, depth,
-                     slack, hit, code, it)
-            continue
-        c = child[node]
-        if c < 0:
-            if lev + 1 == depth:
-                c = _expand_cells(node, g, i, j, depth, root, nk, fr, sides, it, samples, mem,
-                                  lv)
+        cells = lev + 1 == depth
+        c = data[node] if cells else child[node]
+        if c < 0:  # not yet split (a cells' parent: its points not yet evaluated)
+            if cells:
+                c = _block(mem)
+                if c >= 0:
+                    _node_points(root, nk, g, i, j, lev, depth, fr, sides, it, samples, m_cells,
+                                 c)
+                    m_cells[c + 6, 0] = m_cells[c + 6, 1] = m_cells[c + 6, 2] = 0.0
+                    m_cells[c + 7, 0] = 0.0
+                    data[node] = c
             else:
-                c = _expand_tri(node, parent, lev, depth, mem, work)
+                c = _expand_node(node, parent, g, i, j, lev, lev_item, depth, root, nk, fr,
+                                 sides, it, samples, dev, mem)
             if c < 0:  # a store is full: split per ray below this node
-                src, row = _node_net(node, parent, mem, work)
-                tested += descend_tri(ray, src, row, g, i, j, lev, nets, nk, depth, fr, sides,
-                                      it, samples, slack, hit, code, it, work, st, st_t,
-                                      sp + 1, tmp_t, order, lv)
+                pts = work.reshape((-1, 3))
+                if parent < 0:
+                    _corner_points(root, nk, g, i, j, lev, depth, fr, sides, it, samples, pts, 0)
+                else:
+                    _parent_corners(node, parent, mem, pts, 0)
+                for k in range(3):
+                    pts[3, k] = box[node, k]
+                    pts[4, k] = box[node, 3 + k]
+                tested += descend_tri(ray, g, i, j, lev, lev_item, root, nk, depth, fr, sides,
+                                      it, samples, dev, slack, hit, code, it, work, st, st_t,
+                                      sp + 1, tmp_t, order)
                 continue
+        if cells:  # its four cells (rows c .. c + 5: their corners; c + 6, c + 7: tested
+            n = 0  # yet), the ones the ray enters nearest first
+            for q in range(4):
+                lo0, lo1, lo2, hi0, hi1, hi2 = _cell_box(m_cells, c, q)
+                te = slab_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, 0.0,
+                                hit[H_T])
+                if te < np.inf:
+                    n = push_sorted(tmp_t, order, n, te, q)
+            for e in range(n - 1, -1, -1):
+                if tmp_t[e] >= hit[H_T]:  # (a nearer hit was found)
+                    break
+                q = order[e]
+                f, k = (c + 7, 0) if q == 3 else (c + 6, q)
+                if m_cells[f, k] == 0.0:  # the first ray of the memo to test it
+                    m_cells[f, k] = 1.0
+                    tested += 1
+                cg, ci, cj = _child(g, i, j, lev, depth, q)
+                _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, m_cells, c + _CELL_CORNER[q][0],
+                         c + _CELL_CORNER[q][1], c + _CELL_CORNER[q][2], ci, cj, cg, depth,
+                         slack, hit, code, it)
+            continue
         # the children the ray enters, pushed far to near (a cell's box is its triangle's)
         n = 0
-        hh = g * (1 << (depth - lev - 1))  # half the node's side, signed
+        h = 1 << (depth - lev - 1)
         for q in range(4):
             cg, ci, cj = _child(g, i, j, lev, depth, q)
-            if lev + 1 < depth and _snapped_node(ci, cj, cg * abs(hh), lev + 1, depth, sides,
-                                                 it):
-                if sides[it, 3] >= 0:  # (see _push_children)
-                    te = _snapped_entry(ox, oy, oz, ix, iy, iz, box[c + q, 0], box[c + q, 1],
-                                        box[c + q, 2], box[c + q, 3], box[c + q, 4],
-                                        box[c + q, 5], ci, cj, cg * abs(hh), lev + 1, depth,
-                                        sides, it, samples, hit[H_T])
-                else:
-                    te = st_t[sp]
-            else:
-                te = slab_entry(ox, oy, oz, ix, iy, iz, box[c + q, 0], box[c + q, 1],
-                                box[c + q, 2], box[c + q, 3], box[c + q, 4], box[c + q, 5],
-                                0.0, hit[H_T])
+            te = _child_entry(ox, oy, oz, ix, iy, iz, box[c + q, 0], box[c + q, 1],
+                              box[c + q, 2], box[c + q, 3], box[c + q, 4], box[c + q, 5], cg,
+                              ci, cj, h, lev + 1, depth, sides, it, samples, st_t[sp],
+                              hit[H_T])
             if te < np.inf:
                 n = push_sorted(tmp_t, order, n, te, q)
         for e in range(n):
@@ -600,8 +682,8 @@ def intersect_tri_cell(ray, cells, c, gi, gj, g, depth, slack, hit, code, item):
     coarser neighbour's polyline on a snapped side when the patch was built); update
     ``hit`` as :func:`_tri_hit`."""
     ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz = ray
-    _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, cells, 4 * c, gi, gj, g, depth, slack, hit,
-             code, item)
+    _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, cells, 4 * c, 4 * c + 1, 4 * c + 2, gi, gj, g,
+             depth, slack, hit, code, item)
 
 
 def tri_nets_as_pieces(nets15: np.ndarray) -> np.ndarray:
