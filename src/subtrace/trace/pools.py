@@ -71,7 +71,7 @@ class Memo(NamedTuple):
     root: np.ndarray  # (I,) int64: root node of each item or -1
     child: np.ndarray  # (N,) int64: first of the four children of each node, or -1
     box: np.ndarray  # (N,6) float64: each node's padded box
-    slab: np.ndarray  # (N,5) float64: a cell's slab (normal and range)
+    slab: np.ndarray  # (N,5) float64: a cell's slab (normal and range); a Loop root's bound
     data: np.ndarray  # (N,) int64: each node's row in nets / cells, or a state code
     nets: np.ndarray  # (., 4, 4, 3) float64
     cells: np.ndarray  # (., 3) float64: cell corners, 4 rows per cell

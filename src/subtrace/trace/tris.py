@@ -305,7 +305,7 @@ def _node_points(net, q, g, i, j, lev, depth, fr, sides, srow, samples, pts, r):
         pts[r + k, 0], pts[r + k, 1], pts[r + k, 2] = x, y, z
 
 
-@leaf_njit
+@inline_njit
 def _child_box(pts, r, q, e0, e1, e2, plo0, plo1, plo2, phi0, phi1, phi2):
     """Box of child ``q`` of a node whose six points are ``pts[r:r+6]``: its corners' box
     grown by the deviation bound ``e`` of its level (zero for a cell: the micro-triangle
@@ -532,7 +532,7 @@ def _expand_node(node, parent, g, i, j, lev, lev_item, depth, net, nk, fr, sides
     return first
 
 
-@leaf_njit
+@inline_njit
 def _cell_box(pts, r, q):
     """Box of cell ``q`` of a cells' parent whose six grid points are ``pts[r:r+6]``: its
     micro-triangle's, padded (not within its parent's: its snapped corners may lie outside
@@ -593,7 +593,10 @@ def intersect_tri(ray, it, nets, nk, depth, fr, sides, samples, slack, hit, code
             return 0
         node = new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, NOT_YET)
         root_m[it] = node
-    dev = tri_deviation(root, nk)
+        # the item's deviation bound, kept in its root's slab row (which Loop nodes leave
+        # unused)
+        slab[node, 0], slab[node, 1], slab[node, 2] = tri_deviation(root, nk)
+    dev = (slab[node, 0], slab[node, 1], slab[node, 2])
     # stack rows: node, orientation, i, j, level, parent; st_t: entry distance when pushed
     st[0, 0], st[0, 1], st[0, 2], st[0, 3], st[0, 4] = node, fr[0], fr[1], fr[2], lev_item
     st[0, 5] = -1
