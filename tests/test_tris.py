@@ -170,7 +170,8 @@ def test_a_nodes_box_holds_its_part_of_the_patch(seed, level):
     for lev in range(level):
         hh = g << (level - lev - 1)
         q = rng.integers(0, 4)
-        i, j, g = i + (hh if q in (1, 3) else 0), j + (hh if q in (2, 3) else 0), (-g if q == 3 else g)
+        i, j = i + (hh if q in (1, 3) else 0), j + (hh if q in (2, 3) else 0)
+        g = -g if q == 3 else g
     corners = np.array([(i, j), (i + g, j), (i, j + g)], float) / (1 << level)
     e = _level_deviation(dev, level, 0)
     pc = np.array([tri_point(net, 0, s, t) for s, t in corners])
