@@ -775,6 +775,9 @@ def parse_args(argv):
                     "from both renderers into DIR and check that the framings match")
     ap.add_argument("--json", metavar="OUT", help="write every measurement to OUT")
     ap.add_argument("--list", action="store_true", help="list the scenes and exit")
+    ap.add_argument("--write-scenes", metavar="DIR", type=Path,
+                    help="write the extra scenes (TOML and OBJ) into DIR and exit (for "
+                         "benchmarks/ab.py, render.py and profile_kernels.py)")
     args = ap.parse_args(argv)
     if args.rounds < 1 or args.threads < 1:
         ap.error("--rounds and --threads must be at least 1")
@@ -796,6 +799,11 @@ def main(argv=None) -> int:
 
 
 def _main(args) -> int:
+    if args.write_scenes:
+        args.write_scenes.mkdir(parents=True, exist_ok=True)
+        for path in write_extra_scenes(args.write_scenes.resolve()):
+            print(path)
+        return 0
     with tempfile.TemporaryDirectory(prefix="subtrace-cycles-") as tmp:
         work = Path(tmp)
         paths = sorted((REPO / "scenes").glob("*.toml")) + write_extra_scenes(work)
