@@ -18,7 +18,8 @@ GRID_SHAPES = [
     "catmark_cube_creases1", "catmark_cubes_semisharp", "catmark_chaikin1", "catmark_edgenone",
     "catmark_edgecorner", "catmark_hole_test2", "catmark_nonman_verts", "catmark_nonquads",
     "catmark_pole8", "catmark_val2_interior", "loop_cube_creases1", "loop_saddle_edgecorner",
-    "loop_icosahedron", "loop_triangle_edgeonly",
+    "loop_icosahedron", "loop_triangle_edgeonly", "loop_icos_semisharp", "loop_chaikin1",
+    "loop_pole8",
 ]
 
 
@@ -50,13 +51,24 @@ def test_grids_equal_uniform_refinement(name):
 @needs_shared
 @pytest.mark.parametrize("name", GRID_SHAPES)
 def test_shells_contain_limit_grids(name):
-    """Invariant 2: the shell of every patch contains the exact limit points of its grid."""
+    """Invariant 2: the shell of every patch contains the exact limit points of its grid,
+    and so does the box the rays find it by (for a Loop triangle, a part of its shell made
+    from its children's one-rings, ``patches/table.py``)."""
     cage = load_shape(name)
     table = build_patch_table([cage])
     o = table.objects[0]
     P, _ = build_grids(o.level, o.points, cage.options, table.face, 3)
-    assert np.all(P >= table.shell_min[:, None, :] - 1e-12)
-    assert np.all(P <= table.shell_max[:, None, :] + 1e-12)
+    _assert_inside(P, table)
+    if cage.scheme == "loop":  # (the cut is real: the boxes' sides are shorter)
+        ray = (table.ray_max - table.ray_min).sum(axis=1)
+        assert np.median(ray / (table.shell_max - table.shell_min).sum(axis=1)) < 0.85
+
+
+def _assert_inside(P, table):
+    for lo, hi in ((table.shell_min, table.shell_max), (table.ray_min, table.ray_max)):
+        assert np.all(lo <= hi)
+        assert np.all(P >= lo[:, None, :] - 1e-12)
+        assert np.all(P <= hi[:, None, :] + 1e-12)
 
 
 def _perturbed(name, seed):
@@ -79,8 +91,7 @@ def test_shells_contain_limit_of_perturbed_cages(seed, name):
     table = build_patch_table([cage])
     o = table.objects[0]
     P, _ = build_grids(o.level, o.points, cage.options, table.face, 2)
-    assert np.all(P >= table.shell_min[:, None, :] - 1e-12)
-    assert np.all(P <= table.shell_max[:, None, :] + 1e-12)
+    _assert_inside(P, table)
 
 
 def _isolated_shells(cage, tol_rad):

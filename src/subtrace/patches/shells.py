@@ -50,6 +50,42 @@ def face_ring_boxes(level, pts):
     return lo, hi
 
 
+def split_ring_boxes(level, child_pts):
+    """(box min (F,3), box max (F,3)): per face of ``level`` (a Loop level), the box of the
+    points of the next level that its four children's one-rings hold, ``child_pts`` being
+    that level's points (vertex points first, then edge points: ``subdiv/refine.py``). A
+    child's one-ring is the next level's faces around its corners (the vertex points of the
+    face's corners and the edge points of its edges), which reach the vertex points of the
+    face's corners and the edge points of every edge at them, no further: so the box is the
+    union of its corners' boxes of those points."""
+    vlo = np.empty((level.n_verts, 3))
+    vhi = np.empty((level.n_verts, 3))
+    lo = np.empty((level.n_faces, 3))
+    hi = np.empty((level.n_faces, 3))
+    run_tasks(_vertex_split_boxes, level.vert_edge_offsets, level.vert_edges, child_pts,
+              vlo, vhi)
+    run_tasks(_face_boxes, level.face_offsets, level.face_verts, vlo, vhi, lo, hi)
+    return lo, hi
+
+
+@nb.njit(cache=True, nogil=True)
+def _vertex_split_boxes(task, n_tasks, vert_edge_offsets, vert_edges, child_pts, vlo, vhi):
+    """Per vertex v, the box of its vertex point and the edge points of its edges in the
+    next level's points (``run_tasks`` shares the vertices out as below)."""
+    n = len(vlo)
+    nv = n
+    for v in range(task * n // n_tasks, (task + 1) * n // n_tasks):
+        lo0, lo1, lo2 = child_pts[v, 0], child_pts[v, 1], child_pts[v, 2]
+        hi0, hi1, hi2 = lo0, lo1, lo2
+        for a in range(vert_edge_offsets[v], vert_edge_offsets[v + 1]):
+            p = nv + vert_edges[a]
+            x, y, z = child_pts[p, 0], child_pts[p, 1], child_pts[p, 2]
+            lo0, lo1, lo2 = min(lo0, x), min(lo1, y), min(lo2, z)
+            hi0, hi1, hi2 = max(hi0, x), max(hi1, y), max(hi2, z)
+        vlo[v, 0], vlo[v, 1], vlo[v, 2] = lo0, lo1, lo2
+        vhi[v, 0], vhi[v, 1], vhi[v, 2] = hi0, hi1, hi2
+
+
 @nb.njit(cache=True, nogil=True)
 def _vertex_ring_boxes(task, n_tasks, vert_face_offsets, vert_faces, face_offsets, face_verts,
                        pts, vlo, vhi):

@@ -16,6 +16,13 @@ Loop patches into grids of exact limit points (:mod:`subtrace.patches.grids`), o
   points, with non-negative weights, so it lies in their convex hull and in this box
   (design invariant 2; Chaikin creases of sharpness in (1, 4/3) are the known exception and
   get ``config.SHELL_CHAIKIN_MARGIN``);
+* ``ray_min``/``ray_max`` (P,3): the boxes the rays find the patches by (the image tiles'
+  and the BVH's, :mod:`subtrace.trace.budget`): the shells, but for a Loop triangle the
+  part of its shell in the union of its four children's one-ring boxes one level down
+  (the triangle's surface is theirs, so it lies there too). A Loop cage's patches are its
+  own triangles, whose one-rings reach a whole ring of neighbours out: on a coarse cage
+  (an icosahedron, a lathe's rings) a ray entered a dozen of them for the one it hits.
+  The depths still take their distances from the shells (``patches/criterion.py``);
 * ``edge_bound`` (P,): a bound on the length of the patch's iso-curves from its own and its
   neighbours' control edges (see :mod:`subtrace.patches.shells`), and ``rate`` (P,): how much
   control edges shrink per level near the patch's corners (1/2 for regular vertices, the
@@ -44,7 +51,7 @@ from subtrace.patches.basis import TO_BEZIER, net_summary, to_bezier
 from subtrace.patches.bspline import phantom_grids, regular_mask
 from subtrace.patches.criterion import subdominant
 from subtrace.patches.evaluate import ptex_layout
-from subtrace.patches.shells import face_ring_boxes, one_ring_shells
+from subtrace.patches.shells import face_ring_boxes, one_ring_shells, split_ring_boxes
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
 from subtrace.subdiv.limit import extract
@@ -77,6 +84,8 @@ class PatchTable:
     ptex_scale: np.ndarray  # (P,) float64
     shell_min: np.ndarray  # (P,3) float64
     shell_max: np.ndarray  # (P,3) float64
+    ray_min: np.ndarray  # (P,3) float64: the shells the rays walk (see the module doc)
+    ray_max: np.ndarray  # (P,3) float64
     edge_bound: np.ndarray  # (P,) float64
     rate: np.ndarray  # (P,) float64
     regular: np.ndarray  # (P,) bool: a regular bicubic patch
@@ -162,6 +171,20 @@ def cage_face_shells(cage):
     lo, hi = face_ring_boxes(cage.base, cage.points)
     _chaikin_margin(cage.base, cage.options, lo, hi)
     return lo, hi
+
+
+def _ray_shells(cage, lev, pts, faces, smin, smax, quad):
+    """The rays' boxes of the patches ``faces`` of ``lev`` (module doc): for Loop triangles
+    their shells ``smin, smax`` cut to the union of their children's one-ring boxes in the
+    level below (:func:`~subtrace.patches.shells.split_ring_boxes`), the others' their
+    shells."""
+    if quad or not len(faces):
+        return smin, smax
+    ref = refine_level(lev, cage.options)
+    lo, hi = split_ring_boxes(lev, refine_points(ref, pts))
+    lo, hi = lo[faces], hi[faces]
+    _chaikin_margin(ref.child, cage.options, lo, hi)
+    return np.maximum(smin, lo), np.minimum(smax, hi)
 
 
 def _chaikin_margin(level, options, lo, hi):
@@ -267,6 +290,7 @@ def _object_arrays(cage, L0, lev, pts, faces, F, j, oid, first_edge, quad):
     _chaikin_margin(lev, cage.options, lo, hi)
     smin[rows], smax[rows], ebound[rows] = lo, hi, bound
     rate[rows] = subdominant(valence, quad)
+    ray_min, ray_max = _ray_shells(cage, lev, pts, faces, smin, smax, quad)
     # global ids of the sides' edges, a column at a time (-1 pads a triangle's 4th side)
     edges = np.empty((n, 4), dtype=np.int64)
     starts = lev.face_offsets[faces]
@@ -283,6 +307,8 @@ def _object_arrays(cage, L0, lev, pts, faces, F, j, oid, first_edge, quad):
         ptex_scale=scale,
         shell_min=smin,
         shell_max=smax,
+        ray_min=ray_min,
+        ray_max=ray_max,
         edge_bound=ebound,
         rate=rate,
         regular=regular,

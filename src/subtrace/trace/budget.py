@@ -166,7 +166,7 @@ def choose_within_budget(table, eye, tol_rad, max_depth, max_memory, n_pixels,
         isolation would pass ``max_faces``) and what their isolation made."""
         while True:
             record = {}
-            shells = table.shell_min.copy(), table.shell_max.copy()
+            shells = table.ray_min.copy(), table.ray_max.copy()
             try:
                 return (choose_depths(table, eye, tol_rad, cap, record, shells, max_faces),
                         record, shells)
