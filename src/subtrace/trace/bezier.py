@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from subtrace import config
-from subtrace.accel.bvh import box_entry, slab_entry, slab_range
+from subtrace.accel.bvh import box_entry, slab_entry
 from subtrace.runtime.jit import inline_njit, leaf_njit
 from subtrace.patches.basis import (
     copy_net as _copy_net, bez_point as _bez_point, net_box as _net_box, quadrant as _quadrant,
@@ -33,7 +33,9 @@ from subtrace.trace.prims import (
     new_node, push_sorted, ray_triangle,
 )
 from subtrace.patches.groups import GROUP
-from subtrace.trace.tris import LOOP_CELL, TRI, intersect_tri, intersect_tri_cell
+from subtrace.trace.tris import (
+    LOOP_CELL, TRI, intersect_tri, intersect_tri_cell, slab_cut_entry,
+)
 
 # samples per cell side at most (2^(side depth - depth)): neighbours are kept within
 # config.FAN_LEVELS of each other (patches/criterion.py: edge_sampling, trace/pools.py)
@@ -90,27 +92,10 @@ def _cell_slab(net, s, slab, m):
 @inline_njit
 def _cell_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, box, slab, c, tmax):
     """Entry distance of the ray into the box of cell node ``c`` cut by its slab; inf when
-    the ray misses either before ``tmax``. (The ray's stretch between the planes is widened
-    by a relative 1e-9 for rounding.)"""
-    tn, tf = slab_range(ox, oy, oz, ix, iy, iz, box[c, 0], box[c, 1], box[c, 2], box[c, 3],
-                        box[c, 4], box[c, 5], 0.0, tmax)
-    if tn == np.inf:
-        return np.inf
-    nx, ny, nz = slab[c, 0], slab[c, 1], slab[c, 2]
-    dn = nx * dx + ny * dy + nz * dz
-    no = nx * ox + ny * oy + nz * oz
-    if dn == 0.0:
-        return tn if slab[c, 3] <= no <= slab[c, 4] else np.inf
-    ta = (slab[c, 3] - no) / dn
-    tb = (slab[c, 4] - no) / dn
-    if ta > tb:
-        ta, tb = tb, ta
-    ta -= 1e-9 * abs(ta)
-    tb += 1e-9 * abs(tb)
-    tn = max(tn, ta)
-    if tn <= min(tf, tb):
-        return tn
-    return np.inf
+    the ray misses either before ``tmax`` (``tris.slab_cut_entry``, as Loop nodes are cut)."""
+    return slab_cut_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, box[c, 0], box[c, 1], box[c, 2],
+                          box[c, 3], box[c, 4], box[c, 5], slab[c, 0], slab[c, 1], slab[c, 2],
+                          slab[c, 3], slab[c, 4], tmax)
 
 
 @leaf_njit

@@ -370,11 +370,12 @@ def _net_slab(net, q):
 
 
 @inline_njit
-def _slab_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, lo0, lo1, lo2, hi0, hi1, hi2, nx, ny, nz,
+def slab_cut_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, lo0, lo1, lo2, hi0, hi1, hi2, nx, ny, nz,
                 slo, shi, tmax):
     """Entry distance of the ray into the box ``lo, hi`` cut by the slab ``slo <= n . x <=
     shi``; inf when it misses either before ``tmax``. (The ray's stretch between the planes
-    is widened by a relative 1e-9 for rounding, as ``bezier._cell_entry``'s.)"""
+    is widened by a relative 1e-9 for rounding.) Catmull-Clark cells are cut alike
+    (``bezier._cell_entry``)."""
     tn, tf = slab_range(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, 0.0, tmax)
     if tn == np.inf:
         return np.inf
@@ -467,7 +468,7 @@ def _child_entry(ray, lo0, lo1, lo2, hi0, hi1, hi2, nx, ny, nz, slo, shi, cg, ci
             return _snapped_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, ci, cj,
                                   cg * h, lev, depth, sides, srow, samples, tmax)
         return t_parent
-    return _slab_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, lo0, lo1, lo2, hi0, hi1, hi2, nx,
+    return slab_cut_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, lo0, lo1, lo2, hi0, hi1, hi2, nx,
                        ny, nz, slo, shi, tmax)
 
 
@@ -657,7 +658,7 @@ def intersect_tri(ray, it, nets, nk, depth, fr, sides, samples, slack, hit, code
     (1, 0, 0, depth); side sampling ``sides[it]`` and side samples ``samples``) nearer than
     hit[H_T]; updates ``hit``.
     The ray descends the patch's 1-to-4 splits nearest first into the nodes whose boxes it
-    enters; a node is split (its six points and its children's boxes stored) once per
+    enters; a node is split (its six points, its children's boxes and slabs stored) once per
     thread, in the thread's memo ``mem`` (``trace/bezier.py``); when a store is full the ray
     goes on splitting per ray (:func:`descend_tri`). Returns the micro-triangles built:
     cells this ray was the first of its thread to test, and those it tested per ray."""
@@ -684,7 +685,7 @@ def intersect_tri(ray, it, nets, nk, depth, fr, sides, samples, slack, hit, code
         nx, ny, nz, slo, shi = _net_slab(root, nk)
         if cnt[M_NODES] + 1 > len(child):  # a full store: the item split per ray
             cnt[M_FULL] = 1
-            t0 = _slab_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, lo0, lo1, lo2, hi0, hi1, hi2,
+            t0 = slab_cut_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, lo0, lo1, lo2, hi0, hi1, hi2,
                              nx, ny, nz, slo, shi, hit[H_T])
             if t0 == np.inf:
                 return 0
@@ -699,7 +700,7 @@ def intersect_tri(ray, it, nets, nk, depth, fr, sides, samples, slack, hit, code
         slab[node, 0], slab[node, 1], slab[node, 2], slab[node, 3], slab[node, 4] = (
             nx, ny, nz, slo, shi)
         root_m[it] = node
-    t0 = _slab_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, box[node, 0], box[node, 1],
+    t0 = slab_cut_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, box[node, 0], box[node, 1],
                      box[node, 2], box[node, 3], box[node, 4], box[node, 5], slab[node, 0],
                      slab[node, 1], slab[node, 2], slab[node, 3], slab[node, 4], hit[H_T])
     if t0 == np.inf:  # the ray misses the patch's slab
