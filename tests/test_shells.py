@@ -64,6 +64,20 @@ def test_shells_contain_limit_grids(name):
         assert np.median(ray / (table.shell_max - table.shell_min).sum(axis=1)) < 0.85
 
 
+@needs_shared
+def test_regular_loop_triangles_are_found_by_their_nets_boxes():
+    """A regular Loop triangle's box for the rays is also cut to its quartic net's box: on
+    the torus (every triangle regular) the boxes' sides are about half the shells' and the
+    limit grids stay inside."""
+    cage = subtrace.load_cage(MODELS / "torus.obj")
+    table = build_patch_table([cage])
+    o = table.objects[0]
+    P, _ = build_grids(o.level, o.points, cage.options, table.face, 2)
+    _assert_inside(P, table)
+    ray = (table.ray_max - table.ray_min).sum(axis=1)
+    assert np.median(ray / (table.shell_max - table.shell_min).sum(axis=1)) < 0.45
+
+
 def _assert_inside(P, table):
     for lo, hi in ((table.shell_min, table.shell_max), (table.ray_min, table.ray_max)):
         assert np.all(lo <= hi)
