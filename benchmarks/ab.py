@@ -1,6 +1,6 @@
 """A/B: one change measured against a base, side by side, with its images checked.
 
-    python benchmarks/ab.py [--base REV] [--rounds 5] [--threads 2] SCENE.toml ...
+    python benchmarks/ab.py [--base REV] [--rounds 5] [--threads 2] [--picture] SCENE.toml ...
                             [-- extra render options]
 
 *A* is the commit ``--base`` (default ``HEAD``) checked out into a temporary git worktree;
@@ -19,7 +19,8 @@ with their count of differing pixels and largest difference. A speed change shou
 the images the same; a change that moves them needs its own reason.
 
 Default render options: ``--threads 2 --samples 1 --no-shadows --ao 0`` (the primary rays
-alone); options after ``--`` are appended (later ones win).
+alone); ``--picture`` leaves out all but ``--threads`` (the scenes' own shadows,
+anti-aliasing and AO); options after ``--`` are appended (later ones win).
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ from pathlib import Path
 
 from _common import REPO  # benchmarks/ is on sys.path when run as a script
 
-TIMES = ("total", "refine", "trace", "shade")
+TIMES = ("total", "refine", "trace", "shade", "shadows", "ao")
 
 
 def run_render(tree: Path, cache: Path, scene: str, out: Path, options: list[str]):
@@ -118,8 +119,11 @@ def main(argv=None) -> int:
     ap.add_argument("--base", default="HEAD", help="the commit A is (default HEAD)")
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--picture", action="store_true",
+                    help="render the scenes' own picture (shadows, anti-aliasing, AO)")
     args = ap.parse_args(argv)
-    options = ["--threads", str(args.threads), "--samples", "1", "--no-shadows", "--ao", "0",
+    options = ["--threads", str(args.threads),
+               *([] if args.picture else ["--samples", "1", "--no-shadows", "--ao", "0"]),
                *extra]
     scenes = [str(Path(s).resolve()) for s in args.scenes]
     base = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", args.base],

@@ -221,6 +221,13 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
         cands.wanted[:] = 0
         build_requested(table, new, depths, edge_depth, iso, round_no, stats, frame[0], tol_rad,
                         chosen.record)
+        # a built patch's shell shrinks to its items' boxes (all that rays test of it):
+        # later rounds, and the secondary rays' BVH, enter it less often
+        built = new[iso.patch_iso[new] >= 0]
+        if len(built):
+            lo, hi = iso.item_boxes(built)
+            chosen.shell_min[built] = np.maximum(chosen.shell_min[built], lo)
+            chosen.shell_max[built] = np.minimum(chosen.shell_max[built], hi)
         stats.time_refine += time.perf_counter() - t0
         round_no += 1
     stats.rounds = round_no + 1

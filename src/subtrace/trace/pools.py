@@ -340,6 +340,16 @@ class Pieces(Growable):
         rows["orient"][group] = 1
         return self.put("items", **rows), first, count
 
+    def item_boxes(self, patches):
+        """(lo (n,3), hi (n,3)): per built patch of ``patches``, the union of its items'
+        boxes, which hold everything a ray tests of it."""
+        slot = self.patch_iso[patches]
+        first, count = self.a["first"][slot], self.a["count"][slot]
+        starts = np.cumsum(count) - count
+        rows = np.repeat(first - starts, count) + np.arange(int(count.sum()))
+        return (np.minimum.reduceat(self.a["lo"][rows], starts),
+                np.maximum.reduceat(self.a["hi"][rows], starts))
+
     def view(self) -> PieceArrays:
         a = self.a
         return PieceArrays(self.patch_iso, a["first"], a["count"], a["round"], a["depth_i"],
