@@ -66,15 +66,19 @@ def test_shells_contain_limit_grids(name):
 
 @needs_shared
 def test_regular_loop_triangles_are_found_by_their_nets_boxes():
-    """A regular Loop triangle's box for the rays is also cut to its quartic net's box: on
-    the torus (every triangle regular) the boxes' sides are about half the shells' and the
-    limit grids stay inside."""
+    """The renderer also cuts a regular Loop triangle's box for the rays to its quartic
+    net's box (``trace.build.cut_to_loop_nets``): on the torus (every triangle regular) the
+    boxes' sides are about a third of the shells' and the limit grids stay inside."""
+    from subtrace.trace.build import cut_to_loop_nets
+
     cage = subtrace.load_cage(MODELS / "torus.obj")
     table = build_patch_table([cage])
+    lo, hi = table.ray_min.copy(), table.ray_max.copy()
+    cut_to_loop_nets(table, lo, hi)
     o = table.objects[0]
     P, _ = build_grids(o.level, o.points, cage.options, table.face, 2)
-    _assert_inside(P, table)
-    ray = (table.ray_max - table.ray_min).sum(axis=1)
+    assert np.all(P >= lo[:, None, :] - 1e-12) and np.all(P <= hi[:, None, :] + 1e-12)
+    ray = (hi - lo).sum(axis=1)
     assert np.median(ray / (table.shell_max - table.shell_min).sum(axis=1)) < 0.45
 
 

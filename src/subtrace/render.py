@@ -45,7 +45,7 @@ from subtrace.shade import (C_OBJECT, C_R, CHANNELS, background_rows, deepest_le
 from subtrace.subdiv.limit import limit_points
 from subtrace.tiles import check_crop
 from subtrace.trace.budget import check_memory, choose_within_budget, warn_tiles
-from subtrace.trace.build import build_loop_regular, build_requested
+from subtrace.trace.build import build_loop_regular, build_requested, cut_to_loop_nets
 from subtrace.trace.kernels import trace_round
 from subtrace.trace.pools import Memos, Pieces, candidate_lists, hit_arrays
 from subtrace.trace.rays import compile_kernel as compile_secondary
@@ -164,6 +164,7 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
                                   stats)
     stats.time_refine += time.perf_counter() - t0
     t0 = time.perf_counter()
+    cut_to_loop_nets(table, chosen.shell_min, chosen.shell_max)
     tiles, bvh = _shell_walk(chosen, frame, W, H, accel, max_memory, stats,
                              None if image is camera else (image.width, image.height))
     stats.time_preprocess += time.perf_counter() - t0

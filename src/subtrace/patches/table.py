@@ -19,8 +19,8 @@ Loop patches into grids of exact limit points (:mod:`subtrace.patches.grids`), o
 * ``ray_min``/``ray_max`` (P,3): the boxes the rays find the patches by (the image tiles'
   and the BVH's, :mod:`subtrace.trace.budget`): the shells, but for a Loop triangle the
   part of its shell in the union of its four children's one-ring boxes one level down
-  (the triangle's surface is theirs, so it lies there too) and, for a regular one, in its
-  quartic net's box (``lines.items.box_nets``). A Loop cage's patches are its
+  (the triangle's surface is theirs, so it lies there too; the renderer also cuts a regular
+  one's to its quartic net's box, ``trace.build.cut_to_loop_nets``). A Loop cage's patches are its
   own triangles, whose one-rings reach a whole ring of neighbours out: on a coarse cage
   (an icosahedron, a lathe's rings) a ray entered a dozen of them for the one it hits.
   The depths still take their distances from the shells (``patches/criterion.py``);
@@ -48,7 +48,7 @@ import numpy as np
 
 from subtrace import config
 from subtrace.mesh.topology import gather
-from subtrace.patches.basis import BOX_PAD, TO_BEZIER, net_summary, to_bezier
+from subtrace.patches.basis import TO_BEZIER, net_summary, to_bezier
 from subtrace.patches.bspline import phantom_grids, regular_mask
 from subtrace.patches.criterion import subdominant
 from subtrace.patches.evaluate import ptex_layout
@@ -177,26 +177,15 @@ def cage_face_shells(cage):
 def _ray_shells(cage, lev, pts, faces, smin, smax, quad):
     """The rays' boxes of the patches ``faces`` of ``lev`` (module doc): for Loop triangles
     their shells ``smin, smax`` cut to the union of their children's one-ring boxes in the
-    level below (:func:`~subtrace.patches.shells.split_ring_boxes`), a regular one's also to
-    its quartic net's box (half as wide again); the others' their shells."""
+    level below (:func:`~subtrace.patches.shells.split_ring_boxes`), the others' their
+    shells."""
     if quad or not len(faces):
         return smin, smax
-    # (lines.items imports this module)
-    from subtrace.lines.items import box_nets, loop_regular
-
     ref = refine_level(lev, cage.options)
     lo, hi = split_ring_boxes(lev, refine_points(ref, pts))
     lo, hi = lo[faces], hi[faces]
     _chaikin_margin(ref.child, cage.options, lo, hi)
-    lo, hi = np.maximum(smin, lo), np.minimum(smax, hi)
-    reg = np.nonzero(loop_regular(lev, cage.options, faces))[0]
-    if len(reg):
-        nets = box_nets(lev, pts, faces[reg])
-        nlo, nhi = nets.min(axis=1), nets.max(axis=1)
-        pad = BOX_PAD * np.maximum(np.abs(nlo), np.abs(nhi)).max(axis=1, keepdims=True)
-        lo[reg] = np.maximum(lo[reg], nlo - pad)
-        hi[reg] = np.minimum(hi[reg], nhi + pad)
-    return lo, hi
+    return np.maximum(smin, lo), np.minimum(smax, hi)
 
 
 def _chaikin_margin(level, options, lo, hi):

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from subtrace.lines.items import box_nets, loop_regular
+from subtrace.patches.basis import BOX_PAD
 from subtrace.patches.isolate import build_isolated
 from subtrace.patches.isolate_loop import build_loop_isolated
 from subtrace.trace.tris import tri_nets_as_pieces
@@ -67,6 +68,24 @@ def _sides(table, ids, edge_depth):
     (-1: no edge)."""
     e = table.edges[ids, :3]
     return np.where(e >= 0, edge_depth[np.maximum(e, 0)], -1)
+
+
+def cut_to_loop_nets(table, lo, hi):
+    """Cut the boxes ``lo``, ``hi`` (P,3) of the table's regular Loop triangles, in place, to
+    their quartic nets' boxes (padded as the pieces' are): about half as wide as the union
+    of their children's one-ring boxes that the table gives the rays (``table.ray_min``)."""
+    for o in table.objects:
+        if o.cage.scheme != "loop" or not len(o.patch_faces):
+            continue
+        ids = o.first_patch + np.nonzero(
+            loop_regular(o.level, o.cage.options, o.patch_faces))[0]
+        if not len(ids):
+            continue
+        nets = box_nets(o.level, o.points, table.face[ids])
+        nlo, nhi = nets.min(axis=1), nets.max(axis=1)
+        pad = BOX_PAD * np.maximum(np.abs(nlo), np.abs(nhi)).max(axis=1, keepdims=True)
+        lo[ids] = np.maximum(lo[ids], nlo - pad)
+        hi[ids] = np.minimum(hi[ids], nhi + pad)
 
 
 def build_loop_regular(table, depths, edge_depth, iso):
