@@ -334,7 +334,7 @@ from subtrace.runtime import threads as tasks, warmup
 from subtrace.trace import kernels
 from subtrace.io.scene import scene_from_dict
 from subtrace.render import render_scene
-warmup.compile_kernels({tasks.max_threads()})
+warmup.compile_kernels({tasks.max_threads()}, ["catmark"])
 sigs = lambda: (len(kernels._trace_task.signatures), len(shade._shade_task.signatures))
 before = sigs()
 scene = scene_from_dict({{"object": [{{"mesh": {str(MODELS / "spot_control_mesh.obj")!r}}}],

@@ -44,6 +44,7 @@ from subtrace.shade import (C_OBJECT, C_R, CHANNELS, background_rows, deepest_le
                             miss_values, patch_shading, shade)
 from subtrace.subdiv.limit import limit_points
 from subtrace.tiles import check_crop
+from subtrace.trace.bezier import table_loop_flag
 from subtrace.trace.budget import check_memory, choose_within_budget, warn_tiles
 from subtrace.trace.build import build_loop_regular, build_requested, cut_to_loop_nets
 from subtrace.trace.kernels import trace_round
@@ -177,7 +178,8 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
         for o in table.objects[:1]:
             limit_points(o.level, o.points, o.cage.options, which=np.zeros(0, np.int64))
         if not compiling.secondary:  # (else a third process compiles them)
-            compile_secondary()  # shadow and extra anti-aliasing rays
+            # shadow and extra anti-aliasing rays
+            compile_secondary([o.cage.scheme for o in table.objects])
     warmup.wait(compiling)
     return _rounds(table, frame, W, W * H, tol_rad, chosen, tiles, bvh,
                    Memos(n_threads, memo_bytes), stats, progress, keep)
@@ -206,11 +208,12 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
     cands = candidate_lists(n_rays, table.n_patches)
     rays = np.arange(n_rays, dtype=np.int64)
     round_no = 0
+    loop = table_loop_flag(table)  # (None: a kernel without the Loop descents)
     while len(rays):
         t0 = time.perf_counter()
         trace_round(rays, frame, width, round_no, bvh, tiles, chosen.shell_min,
                     chosen.shell_max, iso.view(), memos.views(len(iso.a["kind"])), cands,
-                    config.TRI_SLACK, hits, request, tested)
+                    config.TRI_SLACK, hits, request, tested, loop)
         stats.time_trace += time.perf_counter() - t0
         rays = rays[request[rays] >= 0]  # the rays that asked: traced again
         if progress is not None:
@@ -326,15 +329,17 @@ def table_in_view(cages, camera, sweeps=()):
     return build_patch_table(cages, keep, _view_test(camera, sweeps)), keep
 
 
-def _prepare(scene, cages, stats, nurbs=None, crop=None):
+def _prepare(scene, cages, stats, nurbs=None, crop=None, compiling=None):
     """Load and check the cages, frame the camera (around the free-form surfaces ``nurbs``
     too), build the patch table of the cage faces in view, check the budget against the
     pixels traced (the image's, or the window of its ``crop``: :func:`crop_window`):
     (cages, table (None without cages), camera, the camera or its window, tolerance in
-    radians, budget in bytes)."""
+    radians, budget in bytes). ``compiling``: the processes compiling the trace kernels
+    (``warmup.start``), told the cages' schemes once they are loaded."""
     t_start = time.perf_counter()
     if cages is None:
         cages = load_objects(scene)
+    warmup.tell(compiling, [c.scheme for c in cages])
     if not cages:
         lo, hi = nurbs.bounds()
         camera = scene.make_camera(lo, hi)
@@ -426,7 +431,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
         owners = cage_objects(scene) if cages is None else list(range(len(cages)))
         nurbs = load_nurbs(scene) if cages is None else None  # free-form surfaces
         cages, table, camera, view, tol_rad, budget = _prepare(scene, cages, stats, nurbs,
-                                                               crop)
+                                                               crop, compiling)
         if crop is not None:
             crop = check_crop(crop, camera.width, camera.height)
         if progress is not None:

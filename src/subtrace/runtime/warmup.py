@@ -54,7 +54,10 @@ class Helpers:
 def start(threads: int):
     """Start compiling the trace and shade kernels for ``threads`` threads in a second
     process if the cache lacks them, and on a machine of three cores or more the
-    secondary-ray kernels in a third; returns the :class:`Helpers` (or None)."""
+    secondary-ray kernels in a third; returns the :class:`Helpers` (or None). The helpers
+    import what they compile at once, then wait for the cages' schemes (:func:`tell`): the
+    kernels of a render without Loop cages are compiled without the Loop descents
+    (``trace.bezier.loop_flag``)."""
     if _cached("_trace_task") and _cached("_shade_task"):
         return None
     from subtrace.runtime.jit import compiling
@@ -67,7 +70,7 @@ def start(threads: int):
     for args in jobs:
         try:
             proc = subprocess.Popen([sys.executable, "-m", "subtrace.runtime.warmup", *args],
-                                    stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                    stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
                                     stderr=subprocess.DEVNULL)
         except OSError:  # no helper: the kernels compile when first called
             break
@@ -85,11 +88,32 @@ def _cores() -> int:
     return os.cpu_count() or 1
 
 
-def wait(helpers) -> None:
-    """Wait for the processes from :func:`start` (whatever their outcome: a kernel they did
-    not store is compiled by the caller when first called)."""
+def tell(helpers, schemes) -> None:
+    """Tell the processes from :func:`start` the schemes of the render's cages ("catmark",
+    "loop"): they compile the kernels for those."""
     if helpers is not None:
         for proc in helpers.procs:
+            _close(proc, " ".join(schemes))
+
+
+def _close(proc, line: str = "") -> None:
+    """Send ``line`` (once) and close the helper's input; a helper that had no line exits."""
+    try:
+        if not proc.stdin.closed:
+            if line:
+                proc.stdin.write(line.encode() + b"\n")
+            proc.stdin.close()
+    except OSError:  # it ended: its kernels compile when first called
+        pass
+
+
+def wait(helpers) -> None:
+    """Wait for the processes from :func:`start` (whatever their outcome: a kernel they did
+    not store is compiled by the caller when first called); one not told the schemes
+    (:func:`tell`) compiles nothing."""
+    if helpers is not None:
+        for proc in helpers.procs:
+            _close(proc)
             proc.wait()
             signals.forget_child(proc)
 
@@ -99,14 +123,23 @@ def stop(helpers) -> None:
     if helpers is not None:
         for proc in helpers.procs:
             proc.kill()
+            _close(proc)
             proc.wait()
             signals.forget_child(proc)
 
 
-def compile_kernels(threads: int) -> None:
-    """Compile ``trace.kernels._trace_task`` and ``shade._shade_task`` with the argument
-    types of a render on ``threads`` threads: the bundles a render passes
-    (``trace/pools.py``), empty, so nothing is traced."""
+def _schemes() -> list[str] | None:
+    """The schemes :func:`tell` sends on this helper's input (None: it sent none)."""
+    line = sys.stdin.readline()
+    return line.split() or None
+
+
+def compile_kernels(threads: int, schemes=None) -> None:
+    """Compile ``shade._shade_task`` and ``trace.kernels._trace_task`` with the argument
+    types of a render on ``threads`` threads of cages of these ``schemes`` (None: read them
+    from the input, :func:`tell`, once the shading kernel is compiled; none there: compile
+    no trace kernel): the bundles a render passes (``trace/pools.py``), empty, so nothing is
+    traced."""
     import numpy as np
 
     from subtrace import config
@@ -114,6 +147,7 @@ def compile_kernels(threads: int) -> None:
     from subtrace.accel.projection import no_tiles
     from subtrace.runtime import threads as tasks
     from subtrace.shade import CHANNELS, PatchShading, miss_values, shade
+    from subtrace.trace.bezier import loop_flag
     from subtrace.trace.kernels import trace_round
     from subtrace.trace.pools import Memos, Pieces, candidate_lists, hit_arrays
 
@@ -122,9 +156,6 @@ def compile_kernels(threads: int) -> None:
     iso = Pieces(0).view()
     tasks.set_threads(threads)
     try:
-        trace_round(i64, frame, 1, 0, no_bvh(), no_tiles(), np.zeros((0, 3)), np.zeros((0, 3)),
-                    iso, Memos(threads).views(0), candidate_lists(0), config.TRI_SLACK,
-                    hit_arrays(0), i64, i64)
         misses = hit_arrays(2)  # two pixels, both missed: the output planes' layout
         misses.t[:] = np.inf
         patches = PatchShading(np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros((0, 2)),
@@ -133,19 +164,29 @@ def compile_kernels(threads: int) -> None:
         shade(frame, 1, misses, iso, patches, miss_values((0.0, 0.0, 0.0)),
               np.zeros((len(CHANNELS), 2), np.float32), np.zeros((2, 3)),
               np.zeros(2, np.int64), np.zeros(threads, np.int64))
+        # (the shading first: the render's process is still reading the cages)
+        schemes = _schemes() if schemes is None else schemes
+        if schemes is None:
+            return
+        trace_round(i64, frame, 1, 0, no_bvh(), no_tiles(), np.zeros((0, 3)), np.zeros((0, 3)),
+                    iso, Memos(threads).views(0), candidate_lists(0), config.TRI_SLACK,
+                    hit_arrays(0), i64, i64, loop_flag(schemes))
     finally:
         tasks.set_threads(None)
 
 
 def compile_secondary(threads: int) -> None:
     """Compile the secondary-ray kernel for ``threads`` threads
-    (``trace.rays.compile_kernel``)."""
+    (``trace.rays.compile_kernel``) and the schemes read from the input (:func:`tell`)."""
     from subtrace.runtime import threads as tasks
     from subtrace.trace.rays import compile_kernel
 
+    schemes = _schemes()
+    if schemes is None:
+        return
     tasks.set_threads(threads)
     try:
-        compile_kernel()
+        compile_kernel(schemes)
     finally:
         tasks.set_threads(None)
 

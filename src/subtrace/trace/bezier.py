@@ -324,11 +324,22 @@ def _expand(node, parent, ci, cj, lev, pd, mem, work):
     return first
 
 
+def loop_flag(schemes) -> bool | None:
+    """The ``loop`` argument of :func:`intersect_patch` for a render of cages of these
+    ``schemes`` ("catmark" or "loop"): None when none is Loop, else True."""
+    return None if all(s == "catmark" for s in schemes) else True
+
+
+def table_loop_flag(table) -> bool | None:
+    """:func:`loop_flag` of the cages of a patch table (``patches.table.PatchTable``)."""
+    return loop_flag(o.cage.scheme for o in table.objects)
+
+
 # intersect_patch (about 120 lines) is not split: it is inlined into the trace kernel once
 # (see kernels._trace_task), and its quadtree descent keeps the ray, the stack and the memo
 # in locals that helpers would have to take and return at every node.
 @inline_njit
-def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch):
+def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop):
     """Closest hit on the pieces of Catmull-Clark patch ``p`` (slot ``s`` of ``iso``, a
     :class:`~subtrace.trace.pools.PieceArrays`) nearer than hit[H_T]; updates ``hit``. Returns the
     number of micro-triangles built: the cells this ray was the first of its thread to
@@ -345,6 +356,11 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch):
     parameters) are the thread's ``scratch``. (Calls with more than 30 arguments are
     compiled by Python as calls with ``*args``, which Numba cannot inline: hence the
     bundles.)
+
+    ``loop``: None when no patch of the render is a Loop triangle (:func:`loop_flag`): the
+    kernel that inlines this is then compiled without the Loop items' descents (Numba
+    prunes a branch on an argument that is None before typing it), about half of its
+    compile; True otherwise.
     """
     ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz = ray
     work, st, st_t, tmp_t, order, lv, lp = scratch
@@ -368,14 +384,16 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch):
         depth = item_depth[it]  # its grid, in the patch's units
         inv = 1.0 / (1 << depth)
         if kind[it] == TRI:  # a Loop patch or piece: its triangular net (trace/tris.py)
-            sh = depth - level[it]
-            fr = (np.int64(iso.orient[it]), i0[it] << sh, j0[it] << sh, sh)
-            tested += intersect_tri(ray, it, nets, ref[it], depth, fr, item_side, iso.samples,
-                                    slack, hit, code, mem, scratch)
+            if loop is not None:
+                sh = depth - level[it]
+                fr = (np.int64(iso.orient[it]), i0[it] << sh, j0[it] << sh, sh)
+                tested += intersect_tri(ray, it, nets, ref[it], depth, fr, item_side,
+                                        iso.samples, slack, hit, code, mem, scratch)
             continue
         if kind[it] == LOOP_CELL:  # an isolated Loop patch's cell (counted when built)
-            intersect_tri_cell(ray, cells, ref[it], i0[it], j0[it], np.int64(iso.orient[it]),
-                               depth, slack, hit, code, it)
+            if loop is not None:
+                intersect_tri_cell(ray, cells, ref[it], i0[it], j0[it],
+                                   np.int64(iso.orient[it]), depth, slack, hit, code, it)
             continue
         if kind[it] == 1:  # an irregular cell: its exact corners
             c = ref[it]

@@ -45,7 +45,7 @@ BAND_CHUNK = 2  # bands a thread takes at a time (the next free ones, as it fini
 
 
 def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, iso, mems,
-                cands, slack, hits, request, tested):
+                cands, slack, hits, request, tested, loop):
     """One round for the rays ``rays`` (sorted pixel indices): update ``hits`` (a
     :class:`~subtrace.trace.pools.Hits` over all pixels) and set ``request[r]`` to the
     nearest unbuilt patch the ray reaches first (or -1). Round 0 starts every ray afresh: it
@@ -64,7 +64,8 @@ def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, 
     of a band share their splits. What a memo holds changes the work, never a hit, so the
     image does not depend on the threads. ``cands``
     (:class:`~subtrace.trace.pools.Candidates`) carries each ray's unbuilt shells to the
-    next round.
+    next round. ``loop``: ``bezier.loop_flag`` of the patches (None: no Loop patch, and a
+    kernel compiled without the Loop descents).
     """
     max_d = int(iso.depth_i.max(initial=0))
     band_rows = BAND_ROWS * int(width)
@@ -76,7 +77,7 @@ def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, 
     # 9 us a call, measured; a render of the sword makes about 320 calls)
     args = (float(frame[0, 0]), float(frame[0, 1]), float(frame[0, 2]), frame, int(width),
             int(round_no), tuple(bvh), tuple(tiles), shell_min, shell_max, tuple(iso), tuple(tuple(m) for m in mems), scratch, tuple(cands), float(slack),
-            tuple(hits), request, tested)
+            tuple(hits), request, tested, loop)
 
     def work(t, a, b):
         _trace_task(t, rays, bands[a:b + 1], *args)
@@ -142,7 +143,7 @@ def _sort_candidates(cands, r):
 
 
 @inline_njit
-def _visit(p, r, ray, round_no, iso, mem, slack, hit, scratch, tested):
+def _visit(p, r, ray, round_no, iso, mem, slack, hit, scratch, tested, loop):
     """Intersect patch ``p`` for ray ``r`` if it was built in the previous round; False if
     it is unbuilt. (A function, not a closure of the kernel: a closure over the bundles
     named inside the kernel lost its writes, with Numba 0.68.)"""
@@ -151,7 +152,7 @@ def _visit(p, r, ray, round_no, iso, mem, slack, hit, scratch, tested):
         if iso.round[s] == round_no - 1:
             if iso.touched[s] == 0:  # (a store, even of the same value, takes the cache
                 iso.touched[s] = 1   # line from the other threads reading it)
-            tested[r] += intersect_patch(ray, p, s, iso, mem, slack, hit, scratch)
+            tested[r] += intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop)
         return True
     return False
 
@@ -159,7 +160,7 @@ def _visit(p, r, ray, round_no, iso, mem, slack, hit, scratch, tested):
 @nb.njit(cache=True, nogil=True, _nrt=False, error_model="numpy")  # see jit.leaf_njit
 def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, tiles_t,
                 shell_min, shell_max, iso_t, mems_t, scratches, cands_t, slack, hits_t,
-                request, tested):
+                request, tested, loop):
     """The bands of rays ``bands`` (band k: rays[bands[k]:bands[k+1]]) on thread ``task``,
     with its memo and scratch buffers; the ``*_t`` are :func:`trace_round`'s bundles as
     plain tuples, named again here."""
@@ -224,7 +225,7 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
                                    hit[H_T])
                 j += 1
                 if te < np.inf and not _visit(p, r, ray, round_no, iso, mem, slack, hit, scratch,
-                                              tested):
+                                              tested, loop):
                     # unbuilt: a candidate (rewritten in place when remembered: n_c < j), the
                     # nearest one the request
                     if n_c < CANDIDATES:

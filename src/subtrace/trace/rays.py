@@ -41,7 +41,7 @@ from subtrace import config
 from subtrace.accel.bvh import BVH, box_entry, bvh_next_leaf, bvh_start
 from subtrace.runtime import threads as tasks
 from subtrace.runtime.jit import nb
-from subtrace.trace.bezier import intersect_patch
+from subtrace.trace.bezier import intersect_patch, table_loop_flag
 from subtrace.trace.build import build_requested
 from subtrace.trace.kernels import scratch_buffers
 from subtrace.trace.pools import CANDIDATES, Hits, Memo, Memos, PieceArrays, hit_arrays
@@ -107,6 +107,7 @@ def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
     built = np.zeros(n_threads, np.int64)
     req_ts = np.empty((n_threads, CANDIDATES))  # each thread's entry distances of req
     rays = np.arange(n, dtype=np.int64)
+    loop = table_loop_flag(pools.table)
     first_round = pools.round_no
     first = True
     while len(rays) or first:  # (no rays still run the kernel once: compile_kernel)
@@ -118,7 +119,7 @@ def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
         args = (rays, origins, dirs, tmax, bool(any_hit), tuple(pools.bvh), pools.shell_min,
                 pools.shell_max, tuple(iso.view()),
                 mems, scratch, float(config.TRI_SLACK), tuple(hits), blocked, req, req_n,
-                req_ts, built)
+                req_ts, built, loop)
 
         def work(t, a, b):
             _rays_task(t, a, b, *args)
@@ -159,18 +160,19 @@ def _deepest(pools, hits, tmax, first_round) -> None:
     pools.stats.max_depth = max(pools.stats.max_depth, deepest)
 
 
-def compile_kernel() -> None:
+def compile_kernel(schemes=("catmark",)) -> None:
     """Compile the secondary-ray kernel for the current thread
-    count (``runtime.threads``) by tracing no rays through empty pools of the types a
-    render passes (a cold cache: ``render.trace_hits`` does it while the trace kernels
-    compile in another process)."""
+    count (``runtime.threads``) and cages of these ``schemes`` (``bezier.loop_flag``) by
+    tracing no rays through empty pools of the types a render passes (a cold cache:
+    ``render.trace_hits`` does it while the trace kernels compile in another process)."""
     from types import SimpleNamespace
 
     from subtrace.accel.bvh import no_bvh
     from subtrace.trace.pools import Pieces
 
     none = np.zeros((0, 3))
-    pools = Pools(table=None, depths=None, edge_depth=None, iso=Pieces(0), record={},
+    cages = tuple(SimpleNamespace(cage=SimpleNamespace(scheme=s)) for s in schemes)
+    pools = Pools(table=SimpleNamespace(objects=cages), depths=None, edge_depth=None, iso=Pieces(0), record={},
                   shell_min=none, shell_max=none, bvh=no_bvh(), eye=np.zeros(3), tol_rad=1.0,
                   stats=SimpleNamespace(micro_triangles=0), round_no=0)
     trace_rays(pools, none, none, np.zeros(0), True)
@@ -185,7 +187,8 @@ def run_chunks(work, n_rays):
 
 @nb.njit(cache=True, nogil=True, _nrt=False, error_model="numpy")  # see jit.leaf_njit
 def _rays_task(task, a, b, rays, origins, dirs, tmax, any_hit, bvh_t, shell_min, shell_max,
-               iso_t, mems_t, scratches, slack, hits_t, blocked, req, req_n, req_ts, built):
+               iso_t, mems_t, scratches, slack, hits_t, blocked, req, req_n, req_ts, built,
+               loop):
     """Rays ``rays[a:b]`` on thread ``task`` (see :func:`trace_rays`): each walks the BVH
     of the shells from scratch, intersects the built patches whose shells it enters before
     its best hit and lists (in ``req``, count ``req_n``) the unbuilt ones, nearest kept
@@ -224,7 +227,7 @@ def _rays_task(task, a, b, rays, origins, dirs, tmax, any_hit, bvh_t, shell_min,
                     continue
                 s = iso.patch_iso[p]
                 if s >= 0:
-                    n_built += intersect_patch(ray, p, s, iso, mem, slack, hit, scratch)
+                    n_built += intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop)
                 else:
                     # unbuilt: keep the CANDIDATES nearest
                     m = n_req if n_req < CANDIDATES else CANDIDATES - 1
