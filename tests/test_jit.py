@@ -226,3 +226,61 @@ def test_object_symbols_are_what_the_object_code_defines():
     assert defined <= names and "elsewhere" not in names
     assert jit.object_symbols(b"not an object file") is None
     assert jit.object_symbols(b"\x7fELF\x01\x01" + bytes(100)) is None  # 32-bit: not read
+
+
+def test_inlined_callees_copy_their_scope_once_and_compute_the_same():
+    """The inliner's copy (jit._inline_copies_scope_once) is applied on this Numba, shares one
+    scope among a copy's blocks, and an inlined callee of many blocks, inlined at two call
+    sites, computes what plain Python does."""
+    import copy
+
+    from numba.core import inline_closurecall as icc
+
+    assert jit.INLINE_PATCHED and icc.copy is not copy
+
+    @numba.njit(inline="always")
+    def clamp_sum(x, lo, hi):
+        s = 0.0
+        for k in range(len(x)):
+            v = x[k]
+            if v < lo:
+                v = lo
+            elif v > hi:
+                v = hi
+            s += v
+        return s
+
+    @numba.njit
+    def twice(x):
+        return clamp_sum(x, -1.0, 1.0) + 10 * clamp_sum(x, 0.0, 0.5)
+
+    import numpy as np
+
+    x = np.array([-3.0, -0.5, 0.25, 0.75, 4.0])
+    expected = sum(min(max(v, -1.0), 1.0) for v in x) + 10 * sum(min(max(v, 0.0), 0.5)
+                                                                 for v in x)
+    assert twice(x) == pytest.approx(expected, abs=1e-12)
+
+    # a copy of a function's blocks under the patch: one scope, as the original has
+    from numba.core import compiler
+
+    func_ir = compiler.run_frontend(clamp_sum.py_func)
+    assert len({id(b.scope) for b in func_ir.blocks.values()}) == 1 and len(func_ir.blocks) > 3
+    seen = []
+    original = icc.InlineWorker.inline_ir
+    try:
+        def spy(self, caller_ir, block, i, callee_ir, *args, **kwargs):
+            out = original(self, caller_ir, block, i, callee_ir, *args, **kwargs)
+            seen.append({id(b.scope) for b in out[0].blocks.values()})
+            return out
+
+        icc.InlineWorker.inline_ir = spy
+
+        @numba.njit
+        def once(x):
+            return clamp_sum(x, 0.0, 1.0)
+
+        assert once(x) == pytest.approx(sum(min(max(v, 0.0), 1.0) for v in x))
+    finally:
+        icc.InlineWorker.inline_ir = original
+    assert seen and all(len(scopes) == 1 for scopes in seen)  # (one per block without it)
