@@ -381,6 +381,25 @@ print(before, sigs())
     assert out == ["1", "1"], out
 
 
+def test_a_render_of_other_schemes_compiles_their_trace_kernel_in_a_helper(monkeypatch):
+    """The trace kernel has a variant without the Loop descents (``bezier.loop_flag``): a
+    render whose cages' variant the cache lacks starts a helper for it (told the schemes at
+    once), one whose variant is cached starts none; the cache's index is read for it."""
+    from subtrace.runtime import threads as tasks
+    from subtrace.runtime import warmup
+
+    warmup.compile_kernels(tasks.max_threads(), ["catmark"])  # (loaded if cached)
+    assert warmup._trace_variant_cached(None)
+    monkeypatch.setattr(warmup, "_trace_variant_cached", lambda loop: loop is None)
+    assert warmup.start_for(tasks.max_threads(), ["catmark", "catmark"]) is None
+    helpers = warmup.start_for(tasks.max_threads(), ["catmark", "loop"])
+    assert helpers is not None and len(helpers.procs) >= 1
+    warmup.wait(helpers)
+    assert all(proc.returncode == 0 for proc in helpers.procs)
+    monkeypatch.undo()
+    assert warmup._trace_variant_cached(True)  # what the helper compiled (or found)
+
+
 @needs_shared
 @pytest.mark.parametrize("accel", ["projection", "bvh"])
 def test_patches_are_built_only_for_rays_that_reach_them_first(accel):

@@ -432,6 +432,8 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
         nurbs = load_nurbs(scene) if cages is None else None  # free-form surfaces
         cages, table, camera, view, tol_rad, budget = _prepare(scene, cages, stats, nurbs,
                                                                crop, compiling)
+        if compiling is None and table is not None:  # the kernel for other schemes only
+            compiling = warmup.start_for(tasks.thread_count(), [c.scheme for c in cages])
         if crop is not None:
             crop = check_crop(crop, camera.width, camera.height)
         if progress is not None:

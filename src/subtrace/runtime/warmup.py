@@ -51,14 +51,14 @@ class Helpers:
         self.secondary = secondary
 
 
-def start(threads: int):
+def start(threads: int, check: bool = True):
     """Start compiling the trace and shade kernels for ``threads`` threads in a second
     process if the cache lacks them, and on a machine of three cores or more the
     secondary-ray kernels in a third; returns the :class:`Helpers` (or None). The helpers
     import what they compile at once, then wait for the cages' schemes (:func:`tell`): the
     kernels of a render without Loop cages are compiled without the Loop descents
     (``trace.bezier.loop_flag``)."""
-    if _cached("_trace_task") and _cached("_shade_task"):
+    if check and _cached("_trace_task") and _cached("_shade_task"):
         return None
     from subtrace.runtime.jit import compiling
 
@@ -77,6 +77,41 @@ def start(threads: int):
         signals.register_child(proc)  # ended with this process if it is interrupted
         procs.append(proc)
     return Helpers(procs, secondary=len(procs) == 2) if procs else None
+
+
+def start_for(threads: int, schemes):
+    """:func:`start`, told these ``schemes`` at once, where the cache holds the trace kernel
+    but not for these schemes (a Loop render after Catmull-Clark ones compiles the kernel
+    with the Loop descents: ``trace.bezier.loop_flag``); else None."""
+    from subtrace.trace.bezier import loop_flag
+
+    if not _cached("_trace_task") or _trace_variant_cached(loop_flag(schemes)):
+        return None
+    helpers = start(threads, check=False)
+    tell(helpers, schemes)
+    return helpers
+
+
+def _trace_variant_cached(loop) -> bool:
+    """Whether the trace kernel's index lists a signature compiled for ``loop`` (its last
+    argument: None, or a bool); True where the index cannot be read (then the kernel
+    compiles where it is first called, as before)."""
+    import pickle
+
+    from numba.core import types
+
+    from subtrace.runtime.jit import KERNEL_DIR
+
+    want = types.none if loop is None else types.boolean
+    for path in KERNEL_DIR.rglob("*_trace_task-*.nbi"):
+        try:
+            with open(path, "rb") as f:
+                pickle.load(f)  # the Numba version that wrote it
+                _, overloads = pickle.loads(f.read())
+            return any(key[0][-1] == want for key in overloads)
+        except Exception:  # noqa: BLE001 - another Numba's index: not a reason to fail
+            return True
+    return False
 
 
 def _cores() -> int:
