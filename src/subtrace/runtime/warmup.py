@@ -98,11 +98,9 @@ def _trace_variant_cached(loop) -> bool:
     compiles where it is first called, as before)."""
     import pickle
 
-    from numba.core import types
+    from subtrace.runtime.jit import KERNEL_DIR, nb
 
-    from subtrace.runtime.jit import KERNEL_DIR
-
-    want = types.none if loop is None else types.boolean
+    want = nb.types.none if loop is None else nb.types.boolean
     for path in KERNEL_DIR.rglob("*_trace_task-*.nbi"):
         try:
             with open(path, "rb") as f:
