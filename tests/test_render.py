@@ -381,6 +381,38 @@ print(before, sigs())
     assert out == ["1", "1"], out
 
 
+def test_warmup_compiles_the_picture_kernels_a_render_uses():
+    """The helper compiles the picture's kernels (lights, background, ground with shadow rays,
+    anti-aliasing flags: ``warmup.compile_picture``) from a few pixels; that only helps if
+    their types are a render's: in a fresh process, a render with a light, shadows, a
+    shadow-catching ground and anti-aliasing adds no signature to any of them."""
+    import subprocess
+    import sys
+
+    code = f"""
+from subtrace import shade
+from subtrace.runtime import warmup
+from subtrace.io.scene import scene_from_dict
+from subtrace.render import render_scene
+warmup.compile_picture(2)
+kernels = (shade._light_task, shade._background_task, shade._ground_first, shade._ground_rays,
+           shade._ground_last, shade._edge_flags)
+sigs = lambda: [len(k.signatures) for k in kernels]
+before = sigs()
+scene = scene_from_dict({{"object": [{{"mesh": {str(MODELS / "spot_control_mesh.obj")!r}}}],
+    "camera": {{"eye": [1.2, 0.6, 2.2], "target": [0.0, 0.3, 0.0], "width": 48,
+                "height": 36}},
+    "render": {{"samples": 4, "background": [[0.4, 0.4, 0.5], [0.1, 0.1, 0.1]]}},
+    "light": [{{"direction": [-0.4, -1.0, -0.5]}}], "ground": {{}}}})
+stats = render_scene(scene, threads=2).stats
+assert stats.shadow_rays > 0 and stats.aa_pixels > 0, stats
+print(before, sigs())
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == "[1, 1, 1, 1, 1, 1] [1, 1, 1, 1, 1, 1]", out
+
+
 def test_a_render_of_other_schemes_compiles_their_trace_kernel_in_a_helper(monkeypatch):
     """The trace kernel has a variant without the Loop descents (``bezier.loop_flag``): a
     render whose cages' variant the cache lacks starts a helper for it (told the schemes at

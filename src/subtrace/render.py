@@ -180,7 +180,7 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
         if not compiling.secondary:  # (else a third process compiles them)
             # shadow and extra anti-aliasing rays
             compile_secondary([o.cage.scheme for o in table.objects])
-    warmup.wait(compiling)
+    warmup.wait_traced(compiling)
     return _rounds(table, frame, W, W * H, tol_rad, chosen, tiles, bvh,
                    Memos(n_threads, memo_bytes), stats, progress, keep)
 
@@ -448,43 +448,52 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
     except BaseException:
         warmup.stop(compiling)
         raise
-    t0 = time.perf_counter()
-    W, H = view.width, view.height
-    frame = view.frame()
-    # the channels as float32 planes, written in place by the kernel (no conversion pass)
-    planes = np.empty((len(CHANNELS), W * H), dtype=np.float32)
-    normals = np.empty((W * H, 3))
-    pix_patch = np.empty(W * H, np.int64)
-    covered = np.zeros(tasks.thread_count(), np.int64)
-    miss = miss_values(scene.render.background)
-    patches = None
-    if table is None:  # free-form surfaces only: the background, then the NURBS pass
-        planes[:] = miss[:, None]
-        y0 = getattr(view, "y0", 0)  # (a window's rows of the image's gradient)
-        rows = background_rows(scene.render.background, scene.render.background_bottom,
-                               camera.height)[y0:y0 + H]
-        for k in range(3):
-            planes[C_R + k] = np.repeat(rows[:, k], W)
-        built = np.zeros(0, np.int64)
-        pix_patch[:] = -1
-        t = np.full(W * H, np.inf)
-    else:
-        patches = patch_shading(table, [scene.objects[k] for k in owners])
-        shade(frame, W, hits, iso.view(), patches, miss, planes, normals, pix_patch, covered)
-        if owners != list(range(len(owners))):  # objects without a cage: scene indices
-            hit = planes[C_OBJECT] >= 0
-            index = planes[C_OBJECT][hit].astype(np.int64)
-            planes[C_OBJECT][hit] = np.array(owners, np.float32)[index]
-        t = hits.t.copy()
-    offset = 0
-    if nurbs is not None:
-        t_trace = stats.time_trace
-        t, patches, offset = _nurbs_hits(scene, nurbs, frame, W, H, tol_rad, table, t, normals,
-                                         pix_patch, patches, planes, stats)
-        t0 += stats.time_trace - t_trace  # (the NURBS pass counts as trace)
-        if progress is not None and table is None:
-            progress(stats.rays, stats.rays, "NURBS")
-    # the colour: shadows, ambient occlusion, lighting, anti-aliasing (picture.py)
+    try:  # (a helper may still be compiling the picture's kernels)
+        t0 = time.perf_counter()
+        W, H = view.width, view.height
+        frame = view.frame()
+        # the channels as float32 planes, written in place by the kernel (no conversion pass)
+        planes = np.empty((len(CHANNELS), W * H), dtype=np.float32)
+        normals = np.empty((W * H, 3))
+        pix_patch = np.empty(W * H, np.int64)
+        covered = np.zeros(tasks.thread_count(), np.int64)
+        miss = miss_values(scene.render.background)
+        patches = None
+        if table is None:  # free-form surfaces only: the background, then the NURBS pass
+            planes[:] = miss[:, None]
+            y0 = getattr(view, "y0", 0)  # (a window's rows of the image's gradient)
+            rows = background_rows(scene.render.background, scene.render.background_bottom,
+                                   camera.height)[y0:y0 + H]
+            for k in range(3):
+                planes[C_R + k] = np.repeat(rows[:, k], W)
+            built = np.zeros(0, np.int64)
+            pix_patch[:] = -1
+            t = np.full(W * H, np.inf)
+        else:
+            patches = patch_shading(table, [scene.objects[k] for k in owners])
+            shade(frame, W, hits, iso.view(), patches, miss, planes, normals, pix_patch, covered)
+            if owners != list(range(len(owners))):  # objects without a cage: scene indices
+                hit = planes[C_OBJECT] >= 0
+                index = planes[C_OBJECT][hit].astype(np.int64)
+                planes[C_OBJECT][hit] = np.array(owners, np.float32)[index]
+            t = hits.t.copy()
+        offset = 0
+        if nurbs is not None:
+            t_trace = stats.time_trace
+            t, patches, offset = _nurbs_hits(scene, nurbs, frame, W, H, tol_rad, table, t, normals,
+                                             pix_patch, patches, planes, stats)
+            t0 += stats.time_trace - t_trace  # (the NURBS pass counts as trace)
+            if progress is not None and table is None:
+                progress(stats.rays, stats.rays, "NURBS")
+    except BaseException:
+        warmup.stop(compiling)
+        raise
+    # the colour: shadows, ambient occlusion, lighting, anti-aliasing (picture.py), with
+    # the kernels a helper compiled meanwhile (a cold cache: warmup.compile_picture; the
+    # secondary rays' BVH build compiles here while it finishes)
+    if compiling is not None and compiling.procs and keep:
+        build_bvh(np.zeros((2, 3)), np.ones((2, 3)))
+    warmup.wait(compiling)
     paint(scene, cages, view, keep, t, normals, pix_patch, patches, planes, stats, nurbs,
           offset)
     stats.time_shade = time.perf_counter() - t0

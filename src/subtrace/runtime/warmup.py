@@ -2,14 +2,21 @@
 cold Numba cache, and every kernel of every command for ``subtrace warmup``.
 
 The first render with an empty cache spends most of its time compiling: the kernels of
-loading and preprocessing, then the trace and shade kernels. The two groups do not depend
-on each other, so while the first process compiles (and runs) the loading and
-preprocessing, a second process compiles the trace and shade kernels on the other core, by
-calling them on empty inputs of exactly the types a render passes, and stores them in the
-shared cache; the first process waits for it before tracing and then loads them from the
-cache. The secondary-ray kernel (shadow and anti-aliasing rays) compiles in a third
-process where the machine has three cores or more, else in the first
-process while it waits (``render.trace_hits``). On a warm cache nothing is started.
+loading and preprocessing, then the trace and shade kernels, then the picture's. The
+groups do not depend on each other, so while the first process compiles (and runs) the
+loading and preprocessing, a second process compiles the others on the other core, by
+calling them on small inputs of exactly the types a render passes, and stores them in the
+shared cache: the shading kernel first (while the first process reads the cages), then,
+told the cages' schemes (:func:`tell`), the trace kernel for them (without the Loop
+descents where no cage is Loop), then the picture's (:func:`compile_picture`: lights,
+background, ground, anti-aliasing flags). The first process waits for the trace kernel
+before its rounds (:func:`wait_traced`) and for the rest before the picture (:func:`wait`)
+and loads them from the cache. The secondary-ray kernel (shadow and anti-aliasing rays)
+compiles in a third process where the machine has three cores or more, else in the first
+process while it waits (``render.trace_hits``), as does the BVH build of the secondary rays
+(``render.render_scene``). On a warm cache nothing is started; a cache that holds the trace
+kernel only for other schemes starts a helper for it once the cages are read
+(:func:`start_for`).
 
 :func:`compile_all` (``subtrace warmup``) runs small commands of every kind (the default
 render, which compiles in two processes itself; then, side by side, renders of a Loop cage
@@ -70,7 +77,7 @@ def start(threads: int, check: bool = True):
     for args in jobs:
         try:
             proc = subprocess.Popen([sys.executable, "-m", "subtrace.runtime.warmup", *args],
-                                    stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                                    stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                     stderr=subprocess.DEVNULL)
         except OSError:  # no helper: the kernels compile when first called
             break
@@ -140,6 +147,19 @@ def _close(proc, line: str = "") -> None:
         pass
 
 
+def wait_traced(helpers) -> None:
+    """Wait until the processes from :func:`start` have compiled the trace and shading
+    kernels (or ended); the trace helper goes on with the picture's kernels
+    (:func:`compile_picture`), which :func:`wait` waits for."""
+    if helpers is not None:
+        for proc in helpers.procs:
+            _close(proc)
+            try:
+                proc.stdout.readline()  # "traced", or nothing when it ended
+            except (OSError, ValueError):
+                pass
+
+
 def wait(helpers) -> None:
     """Wait for the processes from :func:`start` (whatever their outcome: a kernel they did
     not store is compiled by the caller when first called); one not told the schemes
@@ -148,7 +168,9 @@ def wait(helpers) -> None:
         for proc in helpers.procs:
             _close(proc)
             proc.wait()
+            proc.stdout.close()
             signals.forget_child(proc)
+        helpers.procs = []
 
 
 def stop(helpers) -> None:
@@ -158,7 +180,9 @@ def stop(helpers) -> None:
             proc.kill()
             _close(proc)
             proc.wait()
+            proc.stdout.close()
             signals.forget_child(proc)
+        helpers.procs = []
 
 
 def _schemes() -> list[str] | None:
@@ -204,6 +228,44 @@ def compile_kernels(threads: int, schemes=None) -> None:
         trace_round(i64, frame, 1, 0, no_bvh(), no_tiles(), np.zeros((0, 3)), np.zeros((0, 3)),
                     iso, Memos(threads).views(0), candidate_lists(0), config.TRI_SLACK,
                     hit_arrays(0), i64, i64, loop_flag(schemes))
+    finally:
+        tasks.set_threads(None)
+
+
+def compile_picture(threads: int) -> None:
+    """Compile the kernels that colour a picture (lights, background, the ground with and
+    without shadow rays, the anti-aliasing's edge flags) with the argument types of a
+    render on ``threads`` threads, on a few pixels of a camera looking down at the ground
+    (tests/test_render.py checks that a render adds no signature to them)."""
+    import numpy as np
+
+    from subtrace.runtime import threads as tasks
+    from subtrace.shade import (CHANNELS, PatchShading, background_pixels, edge_pixels,
+                                ground_pixels, light)
+
+    n, width = 4, 2
+    frame = np.array([[0.0, 1.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.0, 0.1], [0.0, -1.0, 0.0]])
+    planes = np.zeros((len(CHANNELS), n), np.float32)
+    pix = np.full(n, -1, np.int64)
+    lights = np.array([[0.0, 0.0, -1.0, 0.0, 1.0, 1.0, 1.0]])  # directional, straight down
+    patches = PatchShading(np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros((0, 2)),
+                           np.zeros(0), np.zeros(0, np.int8), np.zeros((0, 3)),
+                           np.zeros((0, 3)), np.zeros(0))
+
+    def trace(origins, dirs, tmax):  # every shadow ray blocked
+        return np.ones(len(tmax), np.uint8)
+
+    trace.bounds = (np.full(3, -10.0), np.full(3, 10.0))
+    rows = np.zeros((2, 3))
+    tasks.set_threads(threads)
+    try:
+        light(frame, width, np.full(n, np.inf), np.zeros((n, 3)), pix, patches, lights,
+              np.array([0.5]), np.ones((1, n), np.float32), planes)
+        background_pixels(np.arange(n), rows, width, planes)
+        for shadows in (None, trace):
+            ground_pixels(frame, width, pix, (0.0, 1.0, 0.0), 0.0, shadows, lights, 0.5, None,
+                          rows, planes)
+        edge_pixels(planes, width, n // width)
     finally:
         tasks.set_threads(None)
 
@@ -361,3 +423,5 @@ if __name__ == "__main__":
         compile_secondary(int(sys.argv[2]))
     else:
         compile_kernels(int(sys.argv[1]))
+        print("traced", flush=True)  # (wait_traced) the render may start its rounds
+        compile_picture(int(sys.argv[1]))
