@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from subtrace.runtime.jit import nb
-from subtrace.runtime.threads import run_tasks
+from subtrace.runtime.threads import run_tasks, thread_count
 
 
 def box_distance(bmin, bmax, p):
@@ -31,9 +31,13 @@ def one_ring_shells(level, faces, pts):
     hi = np.empty((len(faces), 3))
     bound = np.empty(len(faces))
     valence = np.empty(len(faces), dtype=np.int64)
-    _shells(faces, level.face_offsets, level.face_verts, level.vert_face_offsets,
-            level.vert_faces, pts, lo, hi, bound, valence)
+    run_tasks(_shells, np.ascontiguousarray(faces, dtype=np.int64), level.face_offsets,
+              level.face_verts, level.vert_face_offsets, level.vert_faces, pts, lo, hi, bound,
+              valence, n=thread_count() if len(faces) >= _SHELLS_PER_THREAD else 1)
     return lo, hi, bound, valence
+
+
+_SHELLS_PER_THREAD = 4096  # (fewer faces: one thread, not worth starting the others)
 
 
 def face_ring_boxes(level, pts):
@@ -120,11 +124,13 @@ def _face_boxes(task, n_tasks, face_offsets, face_verts, vlo, vhi, lo, hi):
                 hi[f, k] = max(hi[f, k], vhi[v, k])
 
 
-@nb.njit(cache=True)
-def _shells(faces, face_offsets, face_verts, vert_face_offsets, vert_faces, pts, smin, smax,
-            ebound, valence):
-    """Box of the one-ring faces' points, longest edge among them, largest corner valence."""
-    for i in range(len(faces)):
+@nb.njit(cache=True, nogil=True)
+def _shells(task, n_tasks, faces, face_offsets, face_verts, vert_face_offsets, vert_faces, pts,
+            smin, smax, ebound, valence):
+    """Box of the one-ring faces' points, longest edge among them, largest corner valence
+    (task ``task`` of ``n_tasks`` takes a contiguous share of the faces)."""
+    n = len(faces)
+    for i in range(task * n // n_tasks, (task + 1) * n // n_tasks):
         f = faces[i]
         lo0, lo1, lo2 = np.inf, np.inf, np.inf
         hi0, hi1, hi2 = -np.inf, -np.inf, -np.inf
