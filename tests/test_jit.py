@@ -236,8 +236,6 @@ def test_inlined_callees_copy_their_scope_once_and_compute_the_same():
 
     from numba.core import inline_closurecall as icc
 
-    assert jit.INLINE_PATCHED and icc.copy is not copy
-
     @numba.njit(inline="always")
     def clamp_sum(x, lo, hi):
         s = 0.0
@@ -260,6 +258,7 @@ def test_inlined_callees_copy_their_scope_once_and_compute_the_same():
     expected = sum(min(max(v, -1.0), 1.0) for v in x) + 10 * sum(min(max(v, 0.0), 0.5)
                                                                  for v in x)
     assert twice(x) == pytest.approx(expected, abs=1e-12)
+    assert jit.INLINE_PATCHED and icc.copy is not copy  # (applied at the first compile)
 
     # a copy of a function's blocks under the patch: one scope, as the original has
     from numba.core import compiler

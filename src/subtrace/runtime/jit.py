@@ -264,7 +264,22 @@ def _inline_copies_scope_once() -> bool:
     return True
 
 
-INLINE_PATCHED = _inline_copies_scope_once()
+class _PatchInliningOnCompile(_event.Listener):
+    """Numba's "numba:compile" event (a cache miss, before compiling): the inliner's fix
+    (:func:`_inline_copies_scope_once`) is applied at the process's first compile, so a
+    command whose kernels are all cached does not import Numba's inliner for it."""
+
+    def on_start(self, event):
+        global INLINE_PATCHED
+        if INLINE_PATCHED is None:
+            INLINE_PATCHED = _inline_copies_scope_once()
+
+    def on_end(self, event):
+        pass
+
+
+INLINE_PATCHED = None  # True once applied (the process's first compile), False: not here
+_event.register("numba:compile", _PatchInliningOnCompile())
 
 
 # What the first-run notice says the compile takes (benchmarks/startup.py: a cold render of
