@@ -203,8 +203,8 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
                        table.shell_max[reg])
     build_loop_regular(table, depths, edge_depth, iso)
     hits = hit_arrays(n_rays)
-    request = np.empty(n_rays, dtype=np.int64)
-    tested = np.empty(n_rays, dtype=np.int64)  # (round 0 writes every ray's entries)
+    request = np.empty(n_rays, dtype=np.int32)
+    tested = np.empty(n_rays, dtype=np.int32)  # (round 0 writes every ray's entries)
     cands = candidate_lists(n_rays, table.n_patches)
     rays = np.arange(n_rays, dtype=np.int64)
     round_no = 0

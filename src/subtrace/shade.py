@@ -155,11 +155,11 @@ def _shade_task(task, n_tasks, frame, width, hits, iso, patches, miss, planes, n
             planes[C_P + 1, r] = frame[0, 1] + t * dy
             planes[C_P + 2, r] = frame[0, 2] + t * dz
             # the patch and item hit, (a, b) the patch parameter
-            p = -hits.prim[r] - 2
+            p = -np.int64(hits.prim[r]) - 2
             u = hits.a[r]
             v = hits.b[r]
-            depth = hits.leaf[r]
-            it = hits.item[r]
+            depth = np.int64(hits.leaf[r])  # (1 << depth: in 64 bits)
+            it = np.int64(hits.item[r])
             c = iso.ref[it]
             if iso.kind[it] == TRI:
                 # a Loop patch or piece: the normal of its triangular net at its own

@@ -121,10 +121,10 @@ def _store_hit(hit, hits, r):
     """Store the ray's record (a miss writes only its t and prim: what the shading reads of
     the misses stays contiguous)."""
     hits.t[r] = hit[H_T]
-    hits.prim[r] = np.int64(hit[H_SLOT])
+    hits.prim[r] = np.int32(hit[H_SLOT])
     if hit[H_T] < np.inf:
-        hits.leaf[r] = np.int64(hit[H_LEAF])
-        hits.item[r] = np.int64(hit[H_TRI])
+        hits.leaf[r] = np.int32(hit[H_LEAF])
+        hits.item[r] = np.int32(hit[H_TRI])
         hits.a[r] = hit[H_B1]
         hits.b[r] = hit[H_B2]
 

@@ -252,9 +252,9 @@ def _rays_task(task, a, b, rays, origins, dirs, tmax, any_hit, bvh_t, shell_min,
                     n_keep += 1
         req_n[r] = n_keep
         hits.t[r] = hit[H_T]
-        hits.prim[r] = np.int64(hit[H_SLOT])
-        hits.leaf[r] = np.int64(hit[H_LEAF])
-        hits.item[r] = np.int64(hit[H_TRI])
+        hits.prim[r] = np.int32(hit[H_SLOT])
+        hits.leaf[r] = np.int32(hit[H_LEAF])
+        hits.item[r] = np.int32(hit[H_TRI])
         hits.a[r] = hit[H_B1]
         hits.b[r] = hit[H_B2]
     built[task] += n_built
