@@ -476,7 +476,9 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
                 hit = planes[C_OBJECT] >= 0
                 index = planes[C_OBJECT][hit].astype(np.int64)
                 planes[C_OBJECT][hit] = np.array(owners, np.float32)[index]
-            t = hits.t.copy()
+            # each pixel's hit distance for the picture (read only; the NURBS pass writes
+            # its nearer hits into a copy)
+            t = hits.t if nurbs is None else hits.t.copy()
         offset = 0
         if nurbs is not None:
             t_trace = stats.time_trace
