@@ -494,7 +494,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
     # the kernels a helper compiled meanwhile (a cold cache: warmup.compile_picture; the
     # secondary rays' BVH build compiles here while it finishes)
     if compiling is not None and compiling.procs and keep:
-        build_bvh(np.zeros((2, 3)), np.ones((2, 3)))
+        warmup.compile_bvh()
     warmup.wait(compiling)
     paint(scene, cages, view, keep, t, normals, pix_patch, patches, planes, stats, nurbs,
           offset)

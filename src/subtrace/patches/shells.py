@@ -24,6 +24,9 @@ def box_distance(bmin, bmax, p):
     return np.sqrt((q * q).sum(axis=1))
 
 
+_SHELLS_PER_THREAD = 4096  # (fewer faces: one thread, not worth starting the others)
+
+
 def one_ring_shells(level, faces, pts):
     """(box min (n,3), box max (n,3), length bound (n,), largest corner valence (n,)) of the
     one-ring control points of ``faces`` of ``level`` at ``pts`` (see :func:`_shells`)."""
@@ -35,9 +38,6 @@ def one_ring_shells(level, faces, pts):
               level.face_verts, level.vert_face_offsets, level.vert_faces, pts, lo, hi, bound,
               valence, n=thread_count() if len(faces) >= _SHELLS_PER_THREAD else 1)
     return lo, hi, bound, valence
-
-
-_SHELLS_PER_THREAD = 4096  # (fewer faces: one thread, not worth starting the others)
 
 
 def face_ring_boxes(level, pts):

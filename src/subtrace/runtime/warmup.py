@@ -203,7 +203,7 @@ def compile_kernels(threads: int, schemes=None) -> None:
     from subtrace.accel.bvh import no_bvh
     from subtrace.accel.projection import no_tiles
     from subtrace.runtime import threads as tasks
-    from subtrace.shade import CHANNELS, PatchShading, miss_values, shade
+    from subtrace.shade import CHANNELS, miss_values, shade
     from subtrace.trace.bezier import loop_flag
     from subtrace.trace.kernels import trace_round
     from subtrace.trace.pools import Memos, Pieces, candidate_lists, hit_arrays
@@ -216,10 +216,7 @@ def compile_kernels(threads: int, schemes=None) -> None:
     try:
         misses = hit_arrays(2)  # two pixels, both missed: the output planes' layout
         misses.t[:] = np.inf
-        patches = PatchShading(np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros((0, 2)),
-                               np.zeros(0), np.zeros(0, np.int8), np.zeros((0, 3)),
-                               np.zeros((0, 3)), np.zeros(0))
-        shade(frame, 1, misses, iso, patches, miss_values((0.0, 0.0, 0.0)),
+        shade(frame, 1, misses, iso, _no_patches(), miss_values((0.0, 0.0, 0.0)),
               np.zeros((len(CHANNELS), 2), np.float32), np.zeros((2, 3)),
               np.zeros(2, np.int64), np.zeros(threads, np.int64))
         # (the shading first: the render's process is still reading the cages)
@@ -241,17 +238,13 @@ def compile_picture(threads: int) -> None:
     import numpy as np
 
     from subtrace.runtime import threads as tasks
-    from subtrace.shade import (CHANNELS, PatchShading, background_pixels, edge_pixels,
-                                ground_pixels, light)
+    from subtrace.shade import CHANNELS, background_pixels, edge_pixels, ground_pixels, light
 
     n, width = 4, 2
     frame = np.array([[0.0, 1.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.0, 0.1], [0.0, -1.0, 0.0]])
     planes = np.zeros((len(CHANNELS), n), np.float32)
     pix = np.full(n, -1, np.int64)
     lights = np.array([[0.0, 0.0, -1.0, 0.0, 1.0, 1.0, 1.0]])  # directional, straight down
-    patches = PatchShading(np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros((0, 2)),
-                           np.zeros(0), np.zeros(0, np.int8), np.zeros((0, 3)),
-                           np.zeros((0, 3)), np.zeros(0))
 
     def trace(origins, dirs, tmax):  # every shadow ray blocked
         return np.ones(len(tmax), np.uint8)
@@ -260,7 +253,7 @@ def compile_picture(threads: int) -> None:
     rows = np.zeros((2, 3))
     tasks.set_threads(threads)
     try:
-        light(frame, width, np.full(n, np.inf), np.zeros((n, 3)), pix, patches, lights,
+        light(frame, width, np.full(n, np.inf), np.zeros((n, 3)), pix, _no_patches(), lights,
               np.array([0.5]), np.ones((1, n), np.float32), planes)
         background_pixels(np.arange(n), rows, width, planes)
         for shadows in (None, trace):
@@ -269,6 +262,27 @@ def compile_picture(threads: int) -> None:
         edge_pixels(planes, width, n // width)
     finally:
         tasks.set_threads(None)
+
+
+def compile_bvh() -> None:
+    """Compile the BVH build of the secondary rays (``accel.bvh.build_bvh``) on two boxes
+    of the types a render passes (the shells, (P,3) float64)."""
+    import numpy as np
+
+    from subtrace.accel.bvh import build_bvh
+
+    build_bvh(np.zeros((2, 3)), np.ones((2, 3)))
+
+
+def _no_patches():
+    """A ``shade.PatchShading`` of no patches, with the field types of a render's."""
+    import numpy as np
+
+    from subtrace.shade import PatchShading
+
+    return PatchShading(np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros((0, 2)),
+                        np.zeros(0), np.zeros(0, np.int8), np.zeros((0, 3)), np.zeros((0, 3)),
+                        np.zeros(0))
 
 
 def compile_secondary(threads: int) -> None:

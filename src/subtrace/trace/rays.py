@@ -172,7 +172,8 @@ def compile_kernel(schemes=("catmark",)) -> None:
 
     none = np.zeros((0, 3))
     cages = tuple(SimpleNamespace(cage=SimpleNamespace(scheme=s)) for s in schemes)
-    pools = Pools(table=SimpleNamespace(objects=cages), depths=None, edge_depth=None, iso=Pieces(0), record={},
+    pools = Pools(table=SimpleNamespace(objects=cages), depths=None, edge_depth=None,
+                  iso=Pieces(0), record={},
                   shell_min=none, shell_max=none, bvh=no_bvh(), eye=np.zeros(3), tol_rad=1.0,
                   stats=SimpleNamespace(micro_triangles=0), round_no=0)
     trace_rays(pools, none, none, np.zeros(0), True)
