@@ -283,3 +283,30 @@ def test_inlined_callees_copy_their_scope_once_and_compute_the_same():
     finally:
         icc.InlineWorker.inline_ir = original
     assert seen and all(len(scopes) == 1 for scopes in seen)  # (one per block without it)
+
+
+def test_subtrace_callees_compile_for_plain_types_not_the_call_sites_constants():
+    """jit._calls_without_literals: a jitted function of subtrace's, called from a kernel
+    with constants (two call sites, 0 and 1), compiles one specialisation, for int64, and
+    computes the same; a function of another module still gets Numba's literal ones."""
+    from numba.core import types
+
+    def make(module):
+        fn = lambda x, k: x[k] * 2.0 + k  # noqa: E731  (a fresh function object per module)
+        fn.__module__ = module
+        return numba.njit(fn)
+
+    ours, theirs = make("subtrace._calls_probe"), make("elsewhere._calls_probe")
+
+    @numba.njit
+    def caller(x):
+        return ours(x, 0) + ours(x, 1) + theirs(x, 0) + theirs(x, 1)
+
+    import numpy as np
+
+    x = np.array([1.5, -2.0])
+    assert caller(x) == 2 * ((1.5 * 2.0) + (-2.0 * 2.0 + 1))
+    assert jit.INLINE_PATCHED  # (applied at the process's first compile)
+    assert [s.args[1] for s in ours.nopython_signatures] == [types.int64]
+    assert all(isinstance(s.args[1], types.IntegerLiteral) for s in theirs.nopython_signatures)
+    assert len(theirs.nopython_signatures) == 2

@@ -264,15 +264,49 @@ def _inline_copies_scope_once() -> bool:
     return True
 
 
+def _calls_without_literals() -> bool:
+    """Make a call from one of subtrace's kernels to another compile the callee for the
+    arguments' plain types, not for the constants written at the call site; True when
+    applied.
+
+    Numba types a constant argument (``quadrant(net, ..., 0)``) as a literal and, calling a
+    jitted function, compiles a specialisation of the callee for that literal: besides the
+    one for ``int64``, another per constant and call site. A cold render of the default
+    scene compiled 13 such copies (the Bezier quadrant three times, the BVH's split, the
+    ray-triangle test, the memo's nodes: about 3 s of its compile). None of subtrace's
+    functions asks for a literal (no ``numba.literally``, and the branches Numba prunes on
+    arguments are on None). Functions of other modules (Numba's own overloads) are left
+    as they are."""
+    try:
+        from numba.core import dispatcher, types
+    except ImportError:  # pragma: no cover - another Numba
+        return False
+    base = getattr(dispatcher, "_DispatcherBase", None)
+    get_call_template = getattr(base, "get_call_template", None)
+    if get_call_template is None:
+        return False  # pragma: no cover - another Numba
+
+    def plain_call_template(self, args, kws):
+        if getattr(self.py_func, "__module__", "").startswith("subtrace."):
+            args = tuple(types.unliteral(a) for a in args)
+            kws = {k: types.unliteral(v) for k, v in kws.items()}
+        return get_call_template(self, args, kws)
+
+    base.get_call_template = plain_call_template
+    return True
+
+
 class _PatchInliningOnCompile(_event.Listener):
     """Numba's "numba:compile" event (a cache miss, before compiling): the inliner's fix
-    (:func:`_inline_copies_scope_once`) is applied at the process's first compile, so a
+    (:func:`_inline_copies_scope_once`) and the calls' plain argument types
+    (:func:`_calls_without_literals`) are applied at the process's first compile, so a
     command whose kernels are all cached does not import Numba's inliner for it."""
 
     def on_start(self, event):
         global INLINE_PATCHED
         if INLINE_PATCHED is None:
             INLINE_PATCHED = _inline_copies_scope_once()
+            _calls_without_literals()
 
     def on_end(self, event):
         pass
