@@ -310,3 +310,17 @@ def test_subtrace_callees_compile_for_plain_types_not_the_call_sites_constants()
     assert [s.args[1] for s in ours.nopython_signatures] == [types.int64]
     assert all(isinstance(s.args[1], types.IntegerLiteral) for s in theirs.nopython_signatures)
     assert len(theirs.nopython_signatures) == 2
+
+
+def test_kernels_compile_no_c_callable_wrapper():
+    """jit.nb.njit compiles without the C-callable wrapper (kept by numba.njit), and the
+    function still runs from Python and from other kernels."""
+    plain = numba.njit(lambda x: x + 1)
+    ours = jit.nb.njit(lambda x: x + 1)
+    twice = jit.nb.njit(lambda x: 2 * ours(x))
+    assert plain(1) == ours(1) == 2 and twice(1) == 4
+    for fn, wrapped in ((plain, True), (ours, False)):
+        cres = fn.overloads[fn.signatures[0]]
+        assert cres.library.get_pointer_to_function(cres.fndesc.llvm_cpython_wrapper_name)
+        assert bool(cres.library.get_pointer_to_function(
+            cres.fndesc.llvm_cfunc_wrapper_name)) == wrapped
