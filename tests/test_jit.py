@@ -324,3 +324,44 @@ def test_kernels_compile_no_c_callable_wrapper():
         assert cres.library.get_pointer_to_function(cres.fndesc.llvm_cpython_wrapper_name)
         assert bool(cres.library.get_pointer_to_function(
             cres.fndesc.llvm_cfunc_wrapper_name)) == wrapped
+
+
+_ENV_PROBE = """
+import json, sys
+from subtrace.runtime import jit
+if sys.argv[1] == "trimmed":
+    jit.trim_loader()
+from subtrace.accel.bvh import STACK_SIZE, traversal_stack  # allocates (numba.np.arrayobj)
+ids, ts = traversal_stack()
+ids[:] = 7
+ts[:] = 0.5
+st = traversal_stack.stats
+from numba.core import environment
+print(json.dumps({"hits": sum(st.cache_hits.values()), "sizes": [len(ids), len(ts)],
+                  "restored": environment._rebuild_env.__module__ == environment.__name__,
+                  "sums": [int(ids.sum()), float(ts.sum())], "size": STACK_SIZE,
+                  "arrayobj": "numba.np.arrayobj" in sys.modules}))
+"""
+
+
+def test_a_trimmed_load_rebuilds_numbas_environments_without_importing_them(tmp_path):
+    """jit._NumbaEnvironmentsUnimported: a command's process (jit.trim_loader) loads a
+    cached kernel that allocates arrays without importing numba.np.arrayobj, whose
+    functions it links, and the kernel runs; an untrimmed process imports it, as Numba
+    does; after the load Numba's own rebuild is back in place (a compile pickles
+    environments that name it)."""
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(SUBTRACE_CACHE_DIR=str(tmp_path / "cache"), PYTHONDONTWRITEBYTECODE="1")
+
+    def probe(mode):
+        proc = subprocess.run([sys.executable, "-c", _ENV_PROBE, mode], capture_output=True,
+                              text=True, env=env, timeout=600)
+        assert proc.returncode == 0, proc.stderr
+        return json.loads(proc.stdout)
+
+    probe("plain")  # compiles and caches it
+    for mode, imported in (("trimmed", False), ("plain", True)):
+        out = probe(mode)
+        assert out["hits"] == 1 and out["arrayobj"] == imported and out["restored"]
+        n = out["size"]
+        assert out["sizes"] == [n, n] and out["sums"] == [7 * n, 0.5 * n]

@@ -431,7 +431,11 @@ def trim_loader() -> None:
     * a cached kernel's names are read from its object code's symbol table (ELF) instead of
       from the bitcode Numba keeps beside it, which is parsed only when a kernel compiled
       later links against it (:func:`_lazy_bitcode`): parsing it was about half of every
-      load's time.
+      load's time;
+    * the environments of Numba's own functions inlined in a kernel (array allocation, math)
+      are rebuilt without importing the modules that define them
+      (:class:`_NumbaEnvironmentsUnimported`): importing numba.np.arrayobj and arraymath
+      for them took about 22 ms of every render.
 
     Numbas whose loader is organised differently are left alone (the command is then just
     slower); tests run the command in fresh processes on warm and cold caches.
@@ -447,6 +451,7 @@ def trim_loader() -> None:
         return  # pragma: no cover - a Numba whose cache loader is organised differently
     _drop_llvm_lock_events()
     _lazy_bitcode()
+    unimported = _NumbaEnvironmentsUnimported()
     context = cpu_target.target_context
 
     def start():
@@ -464,7 +469,7 @@ def trim_loader() -> None:
 
     def load_overload(self, sig, target_context):
         runtime_ready(target_context)  # loaded code calls into the runtime
-        with _without_scipy_linalg(), self._guard_against_spurious_io_errors():
+        with _without_scipy_linalg(), unimported, self._guard_against_spurious_io_errors():
             return self._load_overload(sig, target_context)
         # None (a miss: the kernel compiles) when the guard swallowed an I/O error
 
@@ -551,6 +556,51 @@ def object_symbols(data: bytes) -> set[str] | None:
         return names
     except (ValueError, IndexError, UnicodeDecodeError):
         return None
+
+
+class _NumbaEnvironmentsUnimported:
+    """Inside the block (a cached kernel's load, under Numba's compiler lock), rebuild the
+    environments of Numba's own functions (``numba.*``: array allocation, math) without
+    importing their modules, where these are not imported yet.
+
+    Every function a kernel links has an environment: its module's globals and constants,
+    read at run time only by object mode and by the wrapper that boxes a kernel's results
+    for Python. Numba's loader imports each one's module to take its globals; for the array
+    functions of numba.np.arrayobj and numba.np.arraymath that import was most of a warm
+    render's kernel loading (about 22 ms). Those functions are compiled without a Python
+    wrapper and never in object mode, so their environments get the module's name alone; a
+    later compile that needs the module imports it as usual (its functions get environments
+    of their own names). Outside the block Numba's own rebuild is in place, so what a
+    compile pickles names it, not this one. A Numba organised otherwise is left alone."""
+
+    def __init__(self):
+        try:
+            from numba.core import environment
+            self._module = environment
+            self._rebuild = environment._rebuild_env
+            self._memo = environment.Environment._memo
+        except (ImportError, AttributeError):  # pragma: no cover - another Numba
+            self._module = None
+
+    def _rebuild_env(self, modname, consts, env_name):
+        if not (isinstance(modname, str) and modname.startswith("numba.")
+                and modname not in sys.modules):
+            return self._rebuild(modname, consts, env_name)
+        env = self._memo.get(env_name)
+        if env is None:
+            env = self._module.Environment({"__name__": modname})
+            env.consts[:] = consts
+            env.env_name = env_name
+            self._memo[env_name] = env
+        return env
+
+    def __enter__(self):
+        if self._module is not None:
+            self._module._rebuild_env = self._rebuild_env
+
+    def __exit__(self, *exc):
+        if self._module is not None:
+            self._module._rebuild_env = self._rebuild
 
 
 def _drop_llvm_lock_events() -> None:
