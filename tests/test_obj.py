@@ -646,13 +646,22 @@ def test_errors_carry_path_and_line(tmp_path):
 
 
 def _both_readers(path: Path):
-    """(read_fast result or None, read result or the ObjError it raised) for one file."""
+    """(read_fast result or None, read result or the ObjError it raised) for one file, the
+    byte scanner compiled if the cache lacks it (small files otherwise go to the statement
+    reader on a cold cache: obj_scan.COLD_STATEMENT_BYTES)."""
+    from subtrace.io import obj_scan
     from subtrace.io.obj import ObjReader, decode_obj
 
     raw = path.read_bytes()
+    cold, obj_scan.COLD_STATEMENT_BYTES = obj_scan.COLD_STATEMENT_BYTES, 0
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", SubtraceWarning)
+            fast = ObjReader(str(path)).read_fast(raw)
+    finally:
+        obj_scan.COLD_STATEMENT_BYTES = cold
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SubtraceWarning)
-        fast = ObjReader(str(path)).read_fast(raw)
         try:
             slow = ObjReader(str(path)).read(decode_obj(str(path), raw))
         except ObjError as err:
@@ -754,3 +763,38 @@ def test_byte_scanner_agrees_with_the_statement_reader(tmp_path, data):
     if fast is not None:
         assert isinstance(slow, ObjData), f"the scanner read what is an error: {slow}"
         assert_same_data(fast, slow)
+
+
+_COLD_READ = """
+import json, sys
+from subtrace.io import obj_scan
+from subtrace.io.obj import read_obj
+first = read_obj(sys.argv[1])
+compiled = [len(obj_scan.scan_bytes.signatures)]
+obj_scan.COLD_STATEMENT_BYTES = 0
+second = read_obj(sys.argv[1])
+compiled.append(len(obj_scan.scan_bytes.signatures))
+print(json.dumps({"compiled": compiled, "same": [first.points.tobytes() == second.points.tobytes(),
+                  first.face_verts.tolist() == second.face_verts.tolist(),
+                  first.face_sizes.tolist() == second.face_sizes.tolist()]}))
+"""
+
+
+def test_a_cold_cache_reads_a_small_file_without_compiling_the_scanner(tmp_path):
+    """On an empty kernel cache a small OBJ goes to the statement reader (the scanner's
+    compile would take far longer than reading it so): nothing compiles; with the limit at
+    0 (as `subtrace warmup` sets it) the scanner compiles and reads the same cage."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    from subtrace.data import sample_cage_path
+
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(SUBTRACE_CACHE_DIR=str(tmp_path / "cache"), PYTHONDONTWRITEBYTECODE="1")
+    proc = subprocess.run([sys.executable, "-c", _COLD_READ, str(sample_cage_path())],
+                          capture_output=True, text=True, env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    assert out["compiled"] == [0, 1] and all(out["same"])

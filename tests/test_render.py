@@ -432,6 +432,43 @@ def test_a_render_of_other_schemes_compiles_their_trace_kernel_in_a_helper(monke
     assert warmup._trace_variant_cached(True)  # what the helper compiled (or found)
 
 
+def test_the_picture_kernels_compile_here_only_while_the_trace_kernel_is_not_ready(monkeypatch):
+    """warmup.traced tells, without reading it, whether a helper has said "traced" (or
+    ended); warmup.picture_while_tracing compiles the picture's groups other than the
+    ground's one at a time until then, and none once it is."""
+    import select
+    import subprocess
+    import sys
+
+    from subtrace.runtime import warmup
+
+    said = "import sys, time; time.sleep({}); print('traced', flush=True); sys.stdin.read()"
+    compiled = []
+    monkeypatch.setattr(warmup, "compile_picture",
+                        lambda threads, parts: compiled.append(parts))
+    slow = subprocess.Popen([sys.executable, "-c", said.format(60)], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE)
+    try:
+        helpers = warmup.Helpers([slow], False)
+        assert not warmup.traced(helpers)
+        warmup.picture_while_tracing(helpers, 2)
+        assert compiled == [(part,) for part in warmup.PICTURE if part != "ground"]
+    finally:
+        slow.kill()
+        slow.wait()
+    quick = subprocess.Popen([sys.executable, "-c", said.format(0)], stdin=subprocess.PIPE,
+                             stdout=subprocess.PIPE)
+    helpers = warmup.Helpers([quick], False)
+    assert select.select([quick.stdout], [], [], 60)[0]  # (it has said it)
+    assert warmup.traced(helpers) and warmup.traced(helpers)  # (nothing read)
+    compiled.clear()
+    warmup.picture_while_tracing(helpers, 2)
+    assert compiled == []
+    warmup.wait_traced(helpers)
+    warmup.wait(helpers)
+    assert quick.returncode == 0 and warmup.traced(warmup.Helpers([], False))
+
+
 @needs_shared
 @pytest.mark.parametrize("accel", ["projection", "bvh"])
 def test_patches_are_built_only_for_rays_that_reach_them_first(accel):

@@ -180,6 +180,8 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
         if not compiling.secondary:  # (else a third process compiles them)
             # shadow and extra anti-aliasing rays
             compile_secondary([o.cage.scheme for o in table.objects])
+        # the picture's lights, edge flags and background until the trace kernel is ready
+        warmup.picture_while_tracing(compiling, tasks.thread_count())
     warmup.wait_traced(compiling)
     return _rounds(table, frame, W, W * H, tol_rad, chosen, tiles, bvh,
                    Memos(n_threads, memo_bytes), stats, progress, keep)

@@ -8,15 +8,18 @@ loading and preprocessing, a second process compiles the others on the other cor
 calling them on small inputs of exactly the types a render passes, and stores them in the
 shared cache: the shading kernel first (while the first process reads the cages), then,
 told the cages' schemes (:func:`tell`), the trace kernel for them (without the Loop
-descents where no cage is Loop), then the picture's (:func:`compile_picture`: lights,
-background, ground, anti-aliasing flags). The first process waits for the trace kernel
+descents where no cage is Loop), then the picture's (:func:`compile_picture`: the ground,
+lights, anti-aliasing flags, background). The first process waits for the trace kernel
 before its rounds (:func:`wait_traced`) and for the rest before the picture (:func:`wait`)
 and loads them from the cache. The secondary-ray kernel (shadow and anti-aliasing rays)
 compiles in a third process where the machine has three cores or more, else in the first
-process while it waits (``render.trace_hits``), as does the BVH build of the secondary rays
-(``render.render_scene``). On a warm cache nothing is started; a cache that holds the trace
-kernel only for other schemes starts a helper for it once the cages are read
-(:func:`start_for`).
+process while it waits (``render.trace_hits``); so do the picture's kernels other than the
+ground's, for as long as the trace kernel is not ready (:func:`picture_while_tracing`), and
+the BVH build of the secondary rays (``render.render_scene``). A cold render of a small
+OBJ cage reads it with the statement reader instead of compiling the byte scanner
+(``io.obj_scan.COLD_STATEMENT_BYTES``), which leaves the first process time for those.
+On a warm cache nothing is started; a cache that holds the trace kernel only for other
+schemes starts a helper for it once the cages are read (:func:`start_for`).
 
 :func:`compile_all` (``subtrace warmup``) runs small commands of every kind (the default
 render, which compiles in two processes itself; then, side by side, renders of a Loop cage
@@ -230,11 +233,18 @@ def compile_kernels(threads: int, schemes=None) -> None:
         tasks.set_threads(None)
 
 
-def compile_picture(threads: int) -> None:
-    """Compile the kernels that colour a picture (lights, background, the ground with and
-    without shadow rays, the anti-aliasing's edge flags) with the argument types of a
-    render on ``threads`` threads, on a few pixels of a camera looking down at the ground
-    (tests/test_render.py checks that a render adds no signature to them)."""
+PICTURE = ("ground", "light", "edges", "background")  # compile_picture's kernel groups
+
+
+def compile_picture(threads: int, parts=PICTURE) -> None:
+    """Compile the kernels that colour a picture, by group (``parts``, of :data:`PICTURE`:
+    the ground with and without shadow rays, the lights, the anti-aliasing's edge flags,
+    the background), with the argument types of a render on ``threads`` threads, on a few
+    pixels of a camera looking down at the ground (tests/test_render.py checks that a
+    render adds no signature to them). A cold render's helper compiles them all, the ground
+    first; the render's own process compiles the others while it waits for the trace
+    kernel (``render.trace_hits``, :func:`picture_while_tracing`), and the helper then
+    finds them in the cache."""
     import numpy as np
 
     from subtrace.runtime import threads as tasks
@@ -253,15 +263,45 @@ def compile_picture(threads: int) -> None:
     rows = np.zeros((2, 3))
     tasks.set_threads(threads)
     try:
-        light(frame, width, np.full(n, np.inf), np.zeros((n, 3)), pix, _no_patches(), lights,
-              np.array([0.5]), np.ones((1, n), np.float32), planes)
-        background_pixels(np.arange(n), rows, width, planes)
-        for shadows in (None, trace):
-            ground_pixels(frame, width, pix, (0.0, 1.0, 0.0), 0.0, shadows, lights, 0.5, None,
-                          rows, planes)
-        edge_pixels(planes, width, n // width)
+        for part in parts:
+            if part == "ground":
+                for shadows in (None, trace):
+                    ground_pixels(frame, width, pix, (0.0, 1.0, 0.0), 0.0, shadows, lights,
+                                  0.5, None, rows, planes)
+            elif part == "light":
+                light(frame, width, np.full(n, np.inf), np.zeros((n, 3)), pix, _no_patches(),
+                      lights, np.array([0.5]), np.ones((1, n), np.float32), planes)
+            elif part == "edges":
+                edge_pixels(planes, width, n // width)
+            else:
+                background_pixels(np.arange(n), rows, width, planes)
     finally:
         tasks.set_threads(None)
+
+
+def picture_while_tracing(helpers, threads: int) -> None:
+    """In the render's own process, before it waits for the trace kernel: compile the
+    picture's groups other than the ground's (:func:`compile_picture`), one at a time, while
+    the helpers have not said that the trace kernel is ready (:func:`traced`)."""
+    for part in PICTURE[1:]:
+        if traced(helpers):
+            return
+        compile_picture(threads, (part,))
+
+
+def traced(helpers) -> bool:
+    """Whether every process from :func:`start` has said that the trace kernel is compiled
+    (or ended), without reading what it said (:func:`wait_traced` reads it)."""
+    import select
+
+    for proc in helpers.procs:
+        try:
+            ready = proc.poll() is not None or select.select([proc.stdout], [], [], 0)[0]
+        except (OSError, ValueError):
+            ready = True
+        if not ready:
+            return False
+    return True
 
 
 def compile_bvh() -> None:
@@ -421,7 +461,9 @@ def _run_commands(chain: list[list[str]]) -> int:
     """Run the ``subtrace`` commands of ``chain`` in this process, in order; the first
     failure's exit code (its error line is on stderr, followed by the command), else 0."""
     from subtrace.cli import main
+    from subtrace.io import obj_scan
 
+    obj_scan.COLD_STATEMENT_BYTES = 0  # (the OBJ scanner compiles too, whatever the size)
     for argv in chain:
         code = main(argv)
         if code != 0:
