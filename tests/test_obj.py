@@ -30,6 +30,16 @@ needs_oracle = pytest.mark.skipif(
 needs_models = pytest.mark.skipif(not MODEL_FILES, reason=f"models not found at {MODELS}")
 
 
+@pytest.fixture(autouse=True)
+def _scanner_for_every_size(monkeypatch):
+    """The tests here read small files through the byte scanner too (with the statement
+    reader behind it), as larger files are read; the default for small files is the
+    statement reader alone (test_a_small_file_is_read_without_compiling_the_scanner)."""
+    from subtrace.io import obj_scan
+
+    monkeypatch.setattr(obj_scan, "STATEMENT_READER_BYTES", 0)
+
+
 def read_quiet(path) -> ObjData:
     """read_obj with its SubtraceWarnings silenced (they stay in data.warnings)."""
     with warnings.catch_warnings():
@@ -646,22 +656,13 @@ def test_errors_carry_path_and_line(tmp_path):
 
 
 def _both_readers(path: Path):
-    """(read_fast result or None, read result or the ObjError it raised) for one file, the
-    byte scanner compiled if the cache lacks it (small files otherwise go to the statement
-    reader on a cold cache: obj_scan.COLD_STATEMENT_BYTES)."""
-    from subtrace.io import obj_scan
+    """(read_fast result or None, read result or the ObjError it raised) for one file."""
     from subtrace.io.obj import ObjReader, decode_obj
 
     raw = path.read_bytes()
-    cold, obj_scan.COLD_STATEMENT_BYTES = obj_scan.COLD_STATEMENT_BYTES, 0
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", SubtraceWarning)
-            fast = ObjReader(str(path)).read_fast(raw)
-    finally:
-        obj_scan.COLD_STATEMENT_BYTES = cold
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SubtraceWarning)
+        fast = ObjReader(str(path)).read_fast(raw)
         try:
             slow = ObjReader(str(path)).read(decode_obj(str(path), raw))
         except ObjError as err:
@@ -771,7 +772,7 @@ from subtrace.io import obj_scan
 from subtrace.io.obj import read_obj
 first = read_obj(sys.argv[1])
 compiled = [len(obj_scan.scan_bytes.signatures)]
-obj_scan.COLD_STATEMENT_BYTES = 0
+obj_scan.STATEMENT_READER_BYTES = 0
 second = read_obj(sys.argv[1])
 compiled.append(len(obj_scan.scan_bytes.signatures))
 print(json.dumps({"compiled": compiled, "same": [first.points.tobytes() == second.points.tobytes(),
@@ -780,10 +781,10 @@ print(json.dumps({"compiled": compiled, "same": [first.points.tobytes() == secon
 """
 
 
-def test_a_cold_cache_reads_a_small_file_without_compiling_the_scanner(tmp_path):
-    """On an empty kernel cache a small OBJ goes to the statement reader (the scanner's
-    compile would take far longer than reading it so): nothing compiles; with the limit at
-    0 (as `subtrace warmup` sets it) the scanner compiles and reads the same cage."""
+def test_a_small_file_is_read_without_compiling_the_scanner(tmp_path):
+    """A small OBJ goes to the statement reader (as fast as loading the scanner, and on an
+    empty kernel cache far faster than compiling it): nothing compiles; with the limit at 0
+    (as `subtrace warmup` sets it) the scanner compiles and reads the same cage."""
     import json
     import os
     import subprocess

@@ -15,14 +15,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from subtrace.runtime.jit import kernel_cached, nb
+from subtrace.runtime.jit import nb
 
 MAX_INDEX = 2**31 - 1  # indices are stored as int32
 
-# Files of at most this many bytes go to the statement reader while the scanner is not
-# compiled (a cold kernel cache): it reads about 30 MB/s (Spot's cage in 6 ms, a 1.2 MB cage
-# in 45 ms), and the scanner's compile takes about 1.2 s. `subtrace warmup` sets it to 0.
-COLD_STATEMENT_BYTES = 4 << 20
+# Files of at most this many bytes go to the statement reader: it reads about 30 KB a
+# millisecond, as fast as the scanner's kernel loads (Spot's 16 KB cage: `load` 0.015 s in
+# a render's header either way; the 1.2 MB sword: 0.067 s against 0.025 s), and a cold
+# render of a small cage then does not compile the scanner (about 1.2 s). `subtrace warmup`
+# sets it to 0, so that the scanner compiles too.
+STATEMENT_READER_BYTES = 64 << 10
 
 _FAST_MAX_DIGITS = 18  # significant digits kept in an int64 mantissa (< 10^18)
 _FAST_MAX_POW10 = 22  # 10^22 is the largest power of ten a double holds exactly
@@ -279,9 +281,9 @@ def scan(data: bytes):
     the worst case; returns (points, uvs, normals, face_sizes, corners, other, slow, counts)
     as the module comment lays them out (counts: the numbers of points, uvs, normals, faces,
     corners, other statements and slow numbers), or None where the statement reader must
-    read the file: also a file of at most COLD_STATEMENT_BYTES while :func:`scan_bytes` is
-    not compiled (it reads the same, :mod:`tests.test_obj`)."""
-    if len(data) <= COLD_STATEMENT_BYTES and not kernel_cached(scan_bytes):
+    read the file, as for a file of at most STATEMENT_READER_BYTES (which it reads the same:
+    tests/test_obj.py)."""
+    if len(data) <= STATEMENT_READER_BYTES:
         return None
     start = 3 if data.startswith(b"\xef\xbb\xbf") else 0
     max_lines = data.count(b"\n") + (data.count(b"\r") if b"\r" in data else 0) + 1

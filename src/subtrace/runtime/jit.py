@@ -388,19 +388,6 @@ class _CompileListener(_event.Listener):
         pass
 
 
-def kernel_cached(dispatcher) -> bool:
-    """Whether ``dispatcher`` (a kernel with ``cache=True``) can run without compiling: it
-    has a compiled signature in this process, or the kernel cache holds its index. True
-    where that cannot be told (a Numba organised otherwise)."""
-    if dispatcher.signatures:
-        return True
-    try:
-        index = dispatcher._cache._cache_file._index_path
-    except AttributeError:  # pragma: no cover - another Numba
-        return True
-    return os.path.exists(index)
-
-
 def leaf_njit(fn):
     """Compile a helper of the per-ray path without Numba's reference counting (``_nrt=False``).
 

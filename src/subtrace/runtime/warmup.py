@@ -15,9 +15,9 @@ and loads them from the cache. The secondary-ray kernel (shadow and anti-aliasin
 compiles in a third process where the machine has three cores or more, else in the first
 process while it waits (``render.trace_hits``); so do the picture's kernels other than the
 ground's, for as long as the trace kernel is not ready (:func:`picture_while_tracing`), and
-the BVH build of the secondary rays (``render.render_scene``). A cold render of a small
-OBJ cage reads it with the statement reader instead of compiling the byte scanner
-(``io.obj_scan.COLD_STATEMENT_BYTES``), which leaves the first process time for those.
+the BVH build of the secondary rays (``render.render_scene``). A small OBJ cage is read
+by the statement reader, not the byte scanner (``io.obj_scan.STATEMENT_READER_BYTES``): a
+cold render of one (the default scene's) leaves the first process time for those.
 On a warm cache nothing is started; a cache that holds the trace kernel only for other
 schemes starts a helper for it once the cages are read (:func:`start_for`).
 
@@ -463,7 +463,7 @@ def _run_commands(chain: list[list[str]]) -> int:
     from subtrace.cli import main
     from subtrace.io import obj_scan
 
-    obj_scan.COLD_STATEMENT_BYTES = 0  # (the OBJ scanner compiles too, whatever the size)
+    obj_scan.STATEMENT_READER_BYTES = 0  # (the OBJ scanner compiles too, whatever the size)
     for argv in chain:
         code = main(argv)
         if code != 0:
