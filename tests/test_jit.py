@@ -365,3 +365,44 @@ def test_a_trimmed_load_rebuilds_numbas_environments_without_importing_them(tmp_
         assert out["hits"] == 1 and out["arrayobj"] == imported and out["restored"]
         n = out["size"]
         assert out["sizes"] == [n, n] and out["sums"] == [7 * n, 0.5 * n]
+
+
+_COMPILES = """
+import json, sys
+from numba.core import event
+
+compiled = []
+
+
+class Listener(event.Listener):
+    def on_start(self, ev):
+        func = getattr(ev.data.get("dispatcher"), "py_func", None)
+        compiled.append(getattr(func, "__qualname__", "?"))
+
+    def on_end(self, ev):
+        pass
+
+
+event.register("numba:compile", Listener())
+from subtrace.cli.main import main
+
+code = main(["render", "--width", "48", "--height", "32", "--quiet", "-o", sys.argv[1]])
+print(json.dumps({"code": code, "compiled": compiled}))
+"""
+
+
+def test_a_warm_render_compiles_nothing(tmp_path):
+    """Once the kernel cache holds a render's kernels, a render of the default scene (with
+    its shadows, ground and anti-aliasing) in a fresh process compiles nothing: no helper
+    that subtrace's own Python code calls may lack the wrapper Python calls it through
+    (jit.leaf_njit's ``python=True``), or it would compile a call of its own every time."""
+    def render():
+        proc = subprocess.run([sys.executable, "-c", _COMPILES, str(tmp_path / "x.exr")],
+                              capture_output=True, text=True, timeout=900)
+        assert proc.returncode == 0, proc.stderr
+        out = json.loads(proc.stdout.strip().splitlines()[-1])
+        assert out["code"] == 0
+        return out["compiled"]
+
+    render()  # (fills the cache where it lacks a kernel)
+    assert render() == []

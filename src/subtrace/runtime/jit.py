@@ -114,6 +114,7 @@ _set_numba_cache_dir()
 
 import numba as _numba  # noqa: E402  (after the cache folder is set)
 from numba.core import event as _event  # noqa: E402
+from numba.core.registry import CPUDispatcher as _CPUDispatcher  # noqa: E402
 
 
 class _Numba:
@@ -388,7 +389,7 @@ class _CompileListener(_event.Listener):
         pass
 
 
-def leaf_njit(fn):
+def leaf_njit(fn=None, *, python: bool = False):
     """Compile a helper of the per-ray path without Numba's reference counting (``_nrt=False``).
 
     A helper that takes arrays would otherwise count references to each array it is passed
@@ -396,8 +397,38 @@ def leaf_njit(fn):
     quarter of the trace time. These helpers only read and write the arrays they are given,
     never allocate or keep them, so the counts are not needed. Division follows IEEE
     (``error_model="numpy"``: 1/0 is inf for axis-parallel rays, no check per division).
+
+    Kernels call these; tests call some of them too. They compile without the wrapper that
+    lets Python call compiled code (its generation and compile were about a tenth of a cold
+    render's compile, for 70-odd helpers that Python never calls): a call from Python goes
+    through a small jitted function that calls the helper (:class:`_Helper`), compiled on
+    the first such call of each process and not cached. ``python=True`` (``@leaf_njit(
+    python=True)``): a helper that subtrace's own Python code calls, compiled with the
+    wrapper (tests/test_jit.py checks that a warm render compiles nothing).
     """
-    return nb.njit(cache=True, _nrt=False, error_model="numpy")(fn)
+    if fn is None:
+        return lambda f: leaf_njit(f, python=python)
+    if python:
+        return nb.njit(cache=True, _nrt=False, error_model="numpy")(fn)
+    helper = _Helper(py_func=fn, locals={}, targetoptions={
+        "nopython": True, "boundscheck": None, "_nrt": False, "error_model": "numpy",
+        "no_cfunc_wrapper": True, "no_cpython_wrapper": True})
+    helper.enable_caching()
+    return helper
+
+
+class _Helper(_CPUDispatcher):
+    """A :func:`leaf_njit` helper: compiled without the wrapper that Python calls through,
+    called from Python through a jitted function that calls it (:meth:`__call__`)."""
+
+    _from_python = None
+
+    def __call__(self, *args):
+        call = self._from_python
+        if call is None:
+            helper = self
+            call = self._from_python = _numba.njit(lambda *a: helper(*a))
+        return call(*args)
 
 
 def inline_njit(fn):

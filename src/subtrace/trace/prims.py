@@ -25,7 +25,7 @@ M_COUNTS = 8
 NOT_YET = -1
 
 
-@leaf_njit
+@leaf_njit(python=True)  # (also from Python: pools.Memos.finish)
 def memo_restart(root, cnt):
     """Empty a memo (its item ``root`` s and counts ``cnt``) for the next chunk of rays,
     folding what it held into the totals and peaks of ``cnt``. A memo serves one chunk of
