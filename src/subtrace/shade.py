@@ -32,7 +32,7 @@ from subtrace.accel.bvh import slab_entry
 from subtrace.camera import window_offset
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material
 from subtrace.patches.basis import bez_normal
-from subtrace.runtime.jit import inline_njit, leaf_njit, nb
+from subtrace.runtime.jit import callee_njit, inline_njit, leaf_njit, nb
 from subtrace.runtime.threads import run_tasks, thread_count
 from subtrace.trace.prims import ray_setup
 from subtrace.trace.tris import LOOP_CELL, TRI, tri_normal
@@ -282,7 +282,7 @@ def _incoming(lights, k, frame, t, dx, dy, dz):
     return lx * inv, ly * inv, lz * inv, 1.0 / d2
 
 
-@nb.njit(cache=True)
+@callee_njit
 def _blinn(fx, fy, fz, lx, ly, lz, dx, dy, dz, shininess):
     """Blinn-Phong's (N.H)^Ns for light travelling along l seen along d (H: the unit half
     vector of -l and -d)."""

@@ -29,7 +29,7 @@ from typing import NamedTuple
 import numpy as np
 
 from subtrace import config
-from subtrace.runtime.jit import inline_njit, leaf_njit, nb
+from subtrace.runtime.jit import callee_njit, inline_njit, leaf_njit, nb
 
 _BINS = 16
 STACK_SIZE = config.STACK_SIZE  # (a global the jitted build reads as a constant)
@@ -178,13 +178,13 @@ def _area(lo, hi):
     return d0 * d1 + d1 * d2 + d2 * d0
 
 
-@nb.njit(cache=True)
+@callee_njit
 def _bin(c, lo, scale):
     """The SAH bin of a centroid coordinate ``c`` (``lo``: the node's least)."""
     return min(_BINS - 1, int((c - lo) * scale))
 
 
-@nb.njit(cache=True)
+@callee_njit
 def _sah_split(bmin, bmax, prims, cent, s, e, ax, clo, scale, bins):
     """The last bin of the left side of the cheapest binned-SAH split of ``prims[s:e]``
     along axis ``ax`` (-1: none); ``bins``: scratch (bin boxes and counts, the areas and
@@ -233,7 +233,7 @@ def _sah_split(bmin, bmax, prims, cent, s, e, ax, clo, scale, bins):
     return split
 
 
-@nb.njit(cache=True)
+@callee_njit
 def _partition(prims, cent, s, e, ax, clo, scale, split, tmp):
     """Put ``prims[s:e]`` in bins up to ``split`` before the others, each side in its
     order (stable: the build is deterministic); returns where the right side starts."""

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from subtrace import config
-from subtrace.runtime.jit import nb
+from subtrace.runtime.jit import callee_njit, nb
 
 INF_SHARP = np.float32(config.SHARPNESS_INFINITE)
 
@@ -308,7 +308,7 @@ def _relations(face_offsets, face_verts, face_edges, edge_verts, face_edge_forwa
                  vert_edge_offsets, vert_edges, edge_nonmanifold, vert_manifold)
 
 
-@nb.njit(cache=True)
+@callee_njit
 def _offsets(face_verts, face_edges, edge_verts, edge_face_offsets, vert_face_offsets,
              vert_edge_offsets):
     """The offsets of the edge -> faces, vertex -> faces and vertex -> edges lists (zeroed
@@ -329,7 +329,7 @@ def _offsets(face_verts, face_edges, edge_verts, edge_face_offsets, vert_face_of
         vert_edge_offsets[v + 1] += vert_edge_offsets[v]
 
 
-@nb.njit(cache=True)
+@callee_njit
 def _entries(face_offsets, face_verts, face_edges, edge_verts, edge_face_offsets, edge_faces,
              edge_face_corner, vert_face_offsets, vert_edge_offsets, vert_edges):
     """Fill edge -> faces and vertex -> edges in corner / edge order; return each vertex's
@@ -374,7 +374,7 @@ def _entries(face_offsets, face_verts, face_edges, edge_verts, edge_face_offsets
     return slot
 
 
-@nb.njit(cache=True)
+@callee_njit
 def _nonmanifold_edges(face_offsets, edge_verts, face_edge_forward, edge_face_offsets,
                        edge_faces, edge_face_corner, edge_nonmanifold):
     """Flag the edges used by more than two faces or none, joining a vertex to itself, or
@@ -393,7 +393,7 @@ def _nonmanifold_edges(face_offsets, edge_verts, face_edge_forward, edge_face_of
         edge_nonmanifold[e] = bad
 
 
-@nb.njit(cache=True)
+@callee_njit
 def _order_rings(slot, edge_face_offsets, vert_face_offsets, vert_faces, vert_face_corner,
                  vert_edge_offsets, vert_edges, edge_nonmanifold, vert_manifold):
     """Order each vertex's faces and edges counter-clockwise (see :func:`_relations`) from

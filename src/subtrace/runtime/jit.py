@@ -410,16 +410,31 @@ def leaf_njit(fn=None, *, python: bool = False):
         return lambda f: leaf_njit(f, python=python)
     if python:
         return nb.njit(cache=True, _nrt=False, error_model="numpy")(fn)
+    return _helper(fn, _nrt=False, error_model="numpy")
+
+
+def callee_njit(fn):
+    """Compile a helper that kernels call and that may allocate (so with Numba's reference
+    counting, unlike :func:`leaf_njit`): without the wrapper Python calls compiled code
+    through, as :func:`leaf_njit`'s helpers (tests call some; subtrace's own Python code
+    calls none of them)."""
+    return _helper(fn)
+
+
+def _helper(fn, **options):
+    """A :class:`_Helper` of ``fn``: cached, compiled with ``options`` and neither the
+    Python nor the C-callable wrapper."""
     helper = _Helper(py_func=fn, locals={}, targetoptions={
-        "nopython": True, "boundscheck": None, "_nrt": False, "error_model": "numpy",
-        "no_cfunc_wrapper": True, "no_cpython_wrapper": True})
+        "nopython": True, "boundscheck": None, **options, "no_cfunc_wrapper": True,
+        "no_cpython_wrapper": True})
     helper.enable_caching()
     return helper
 
 
 class _Helper(_CPUDispatcher):
-    """A :func:`leaf_njit` helper: compiled without the wrapper that Python calls through,
-    called from Python through a jitted function that calls it (:meth:`__call__`)."""
+    """A :func:`leaf_njit` or :func:`callee_njit` helper: compiled without the wrapper that
+    Python calls through, called from Python through a jitted function that calls it
+    (:meth:`__call__`)."""
 
     _from_python = None
 

@@ -11,14 +11,14 @@ import math
 
 import numpy as np
 
-from subtrace.runtime.jit import nb
+from subtrace.runtime.jit import callee_njit, nb
 
 REGULAR_VALENCE = 4
 # OpenSubdiv's weight for edges next to triangles under "smoothtriangles smooth" (a float).
 _TRI_EDGE_WEIGHT = 0.47
 
 
-@nb.njit(cache=True)
+@callee_njit
 def smooth_edge_weights(n_faces, tri0, tri1, smooth_triangles):
     """(endpoint weight, weight of each face point) of a smooth edge point."""
     if smooth_triangles and n_faces == 2 and (tri0 or tri1):
@@ -31,14 +31,14 @@ def smooth_edge_weights(n_faces, tri0, tri1, smooth_triangles):
     return 0.25, 0.5 / n_faces
 
 
-@nb.njit(cache=True)
+@callee_njit
 def smooth_vertex_weights(valence):
     """(vertex, each edge end, each face point) weights of the smooth vertex rule."""
     n = float(valence)
     return (n - 2.0) / n, 1.0 / (n * n), 1.0 / (n * n)
 
 
-@nb.njit(cache=True)
+@callee_njit
 def smooth_limit_weights(valence):
     """(vertex, each edge end, each diagonal vertex) weights of the smooth limit position."""
     if valence == 4:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from subtrace.mesh.topology import INF_SHARP
-from subtrace.runtime.jit import nb
+from subtrace.runtime.jit import callee_njit, nb
 
 RULE_SMOOTH = 1
 RULE_DART = 2
@@ -62,7 +62,7 @@ def child_edge_sharpness_at_vertex(s, around, chaikin):
     return F0
 
 
-@nb.njit(cache=True)
+@callee_njit
 def rule_of(vert_sharp, edge_sharp_around):
     """Sdc vertex rule from a vertex sharpness and its incident edges' sharpness."""
     if vert_sharp > F0:
@@ -76,7 +76,7 @@ def rule_of(vert_sharp, edge_sharp_around):
     return 1 << n_sharp
 
 
-@nb.njit(cache=True)
+@callee_njit
 def fractional_weight(p_vert, c_vert, p_edges, c_edges, chaikin):
     """Weight of the parent rule when a vertex's rule changes between levels (float32)."""
     count = 0

@@ -32,7 +32,7 @@ import numpy as np
 from subtrace.mesh.topology import (
     INF_SHARP, Level, Options, build_level, compact, gather, gather_index,
 )
-from subtrace.runtime.jit import leaf_njit, nb
+from subtrace.runtime.jit import callee_njit, leaf_njit, nb
 from subtrace.subdiv import catmark, loop
 from subtrace.subdiv.creases import F0, RULE_CORNER, RULE_CREASE, RULE_SMOOTH, rule_of
 from subtrace.subdiv.refine import refine_level, refine_points
@@ -343,7 +343,7 @@ def _closed_form_kernel(
 # --------------------------------------------------------------------------------------
 
 
-@nb.njit(cache=True)
+@callee_njit
 def _catmark_cross_tangent(m):
     if m == 1:  # a single face: from the vertex to the average of the crease ends
         return -6.0, 3.0, 0.0
@@ -356,7 +356,7 @@ def _catmark_cross_tangent(m):
     return 4.0 * r * (c - 1.0) * denom, -r * (1.0 + 2.0 * c) * denom, denom
 
 
-@nb.njit(cache=True)
+@callee_njit
 def _loop_cross_tangent(m):
     if m == 1:  # a single face
         return -6.0, 3.0, 0.0
@@ -369,7 +369,7 @@ def _loop_cross_tangent(m):
     return 0.0, -3.0 * math.sin(theta), 6.0 * (1.0 - math.cos(theta))
 
 
-@nb.njit(cache=True)
+@callee_njit
 def _cross_edge_weight(is_loop, m, i):
     """Relative weight of interior edge i of an m-face span (see the masks above)."""
     if is_loop:
@@ -379,7 +379,7 @@ def _cross_edge_weight(is_loop, m, i):
     return 4.0 * math.sin(i * math.pi / m)
 
 
-@nb.njit(cache=True)
+@callee_njit
 def _catmark_cross_face_weight(m, i):
     """Relative weight of the diagonal vertex of face i of an m-face span (m >= 2)."""
     if m == 2:

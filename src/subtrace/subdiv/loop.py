@@ -11,12 +11,12 @@ import math
 
 import numpy as np
 
-from subtrace.runtime.jit import nb
+from subtrace.runtime.jit import callee_njit, nb
 
 REGULAR_VALENCE = 6
 
 
-@nb.njit(cache=True)
+@callee_njit
 def _beta(valence):
     # OpenSubdiv evaluates this cosine in single precision (cosf)
     inv = 1.0 / valence
@@ -30,7 +30,7 @@ def subdominant_eigenvalue(valence):
     return 3.0 / 8.0 + np.cos(2.0 * np.pi / np.asarray(valence, dtype=np.float64)) / 4.0
 
 
-@nb.njit(cache=True)
+@callee_njit
 def smooth_edge_weights(n_faces, tri0, tri1, smooth_triangles):
     """(endpoint weight, weight of each opposite vertex) of a smooth edge point."""
     if n_faces == 2:
@@ -38,7 +38,7 @@ def smooth_edge_weights(n_faces, tri0, tri1, smooth_triangles):
     return 0.375, 0.125 * 2.0 / n_faces
 
 
-@nb.njit(cache=True)
+@callee_njit
 def smooth_vertex_weights(valence):
     """(vertex, each edge end, face point = 0) weights of the smooth vertex rule."""
     if valence == 6:
@@ -48,7 +48,7 @@ def smooth_vertex_weights(valence):
     return 1.0 - ew * valence, ew, 0.0
 
 
-@nb.njit(cache=True)
+@callee_njit
 def smooth_limit_weights(valence):
     """(vertex, each edge end, 0) weights of the smooth limit position."""
     if valence == 6:

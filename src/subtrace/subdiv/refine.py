@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from subtrace.mesh.topology import INF_SHARP, Level, Options, build_level
-from subtrace.runtime.jit import nb
+from subtrace.runtime.jit import callee_njit, nb
 from subtrace.subdiv import catmark, loop
 from subtrace.subdiv.creases import (
     F0,
@@ -250,13 +250,13 @@ def _split_triangles(p: Level, edge_child: np.ndarray, vert_child: np.ndarray) -
 # --------------------------------------------------------------------------------------
 
 
-@nb.njit(cache=True)
+@callee_njit
 def _other_end(edge_verts, e, v):
     a = edge_verts[e, 0]
     return edge_verts[e, 1] if a == v else a
 
 
-@nb.njit(cache=True)
+@callee_njit
 def _crease_ends(edge_sharp_around):
     """Positions of the first and last sharp edge around a vertex (Sdc's crease pair)."""
     n = len(edge_sharp_around)
@@ -309,7 +309,7 @@ def _refine_points_kernel(
                    vert_child_sharp, P, Q, face_base)
 
 
-@nb.njit(cache=True)
+@callee_njit
 def _face_points(face_offsets, face_verts, P, Q, face_base):
     """Catmull-Clark face points (centroids) into ``Q[face_base + f]``."""
     n_f = len(face_offsets) - 1
@@ -326,7 +326,7 @@ def _face_points(face_offsets, face_verts, P, Q, face_base):
             Q[face_base + f, c] = acc * w
 
 
-@nb.njit(cache=True)
+@callee_njit
 def _edge_points(is_loop, smooth_triangles, face_offsets, face_verts, edge_verts,
                  edge_face_offsets, edge_faces, edge_face_corner, edge_sharp, edge_child_sharp,
                  P, Q, face_base, edge_base):
@@ -379,7 +379,7 @@ def _edge_points(is_loop, smooth_triangles, face_offsets, face_verts, edge_verts
             Q[q, c] = acc
 
 
-@nb.njit(cache=True)
+@callee_njit
 def _vertex_points(is_loop, chaikin, edge_verts, edge_sharp, edge_child_sharp,
                    vert_face_offsets, vert_faces, vert_edge_offsets, vert_edges, vert_sharp,
                    vert_child_sharp, P, Q, face_base):
