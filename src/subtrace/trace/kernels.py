@@ -176,6 +176,17 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
             r = rays[q]
             row = r // width
             col = r - row * width
+            if projected and round_no == 0:
+                tile = (row // TILE) * tiles.per_row + col // TILE
+                if tiles.off[tile] == tiles.off[tile + 1]:
+                    # no shell projects onto its tile: a miss, recorded as the loop below
+                    # records one (without the ray's set-up)
+                    tested[r] = 0
+                    request[r] = -1
+                    cands.count[r] = 0
+                    hits.t[r] = np.inf
+                    hits.prim[r] = -1
+                    continue
             dx, dy, dz = ray_setup(frame, row, col)
             ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
             kx, ky, kz, sx, sy, sz = shear(dx, dy, dz)
