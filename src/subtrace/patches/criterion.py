@@ -81,8 +81,12 @@ def choose_depths(table, eye: np.ndarray, tol_rad: float, max_depth,
             boxes = None
             if shells is not None:
                 boxes = (np.full((len(sel), 3), np.inf), np.full((len(sel), 3), -np.inf))
+            # (the record holds what the depth choice refines, no more: a patch raised
+            # later, to a neighbour's depth, is refined further only when a ray asks for
+            # it, ``build_isolated``; refining every irregular patch for the record down to
+            # the deepest depth made sword's refine 0.049 s, 0.041 s without)
             depths[sel] = isolated_depths(o, table.face[sel], depths[sel], eye, tol_rad, rec,
-                                          int(depths[sel].max()), boxes, max_faces)
+                                          0, boxes, max_faces)
             if shells is not None:
                 done = np.isfinite(boxes[0]).all(axis=1)
                 at = sel[done]
