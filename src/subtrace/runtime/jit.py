@@ -442,7 +442,7 @@ class _Helper(_CPUDispatcher):
         call = self._from_python
         if call is None:
             helper = self
-            call = self._from_python = _numba.njit(lambda *a: helper(*a))
+            call = self._from_python = nb.njit(lambda *a: helper(*a))
         return call(*args)
 
 
