@@ -296,12 +296,11 @@ def _store_cell(m_cells, cnt, nets, nk, ci, cj, depth):
 
 
 @leaf_njit
-def _expand(node, parent, ci, cj, lev, pd, mem, work):
+def _expand(node, parent, ci, cj, lev, pd, child, box, slab, data, m_nets, cnt, work):
     """Split ``node`` (cell (ci, cj) of level ``lev`` of a piece of depth ``pd``): get its
     net (stored, or the quadrant of its parent's) and create its four children with their
     boxes; its net is kept if its children will be split in turn. Returns the first child,
     or -1 when a store is full."""
-    root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
     if cnt[M_NODES] + 4 > len(child) or cnt[M_NETS] + 1 > len(m_nets):
         cnt[M_FULL] = 1
         return -1
@@ -456,7 +455,8 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop):
                 continue
             c = child[node]
             if c < 0:
-                c = _expand(node, parent, ci, cj, lev, pd, mem, work)
+                c = _expand(node, parent, ci, cj, lev, pd, child, box, slab, data, m_nets, cnt,
+                            work)
                 if c < 0:  # a store is full: split per ray below this node
                     tested += _descend_node(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, node,
                                             parent, lev, ci, cj, nets, nk, pd, oi, oj, depth,
