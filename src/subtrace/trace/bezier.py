@@ -406,17 +406,20 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop):
         oj = j0[it] << pd
         node = root_m[it]
         if node < 0:
-            if cnt[M_NODES] + 1 > len(child) or cnt[M_NETS] + 1 > len(m_nets) or pd == 0:
-                if pd > 0:
-                    cnt[M_FULL] = 1
-                zero = np.int64(0)  # (literal arguments would compile another _descend)
-                n_t = _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, nets, nk, zero,
-                               zero, zero, nets, nk, pd, oi, oj, depth, item_side, it, slack,
-                               hit, code, it, work, st, st_t, zero, tmp_t, order, lv, lp)
-                if pd > 0 or node == NOT_YET:  # a one-cell piece counts once per thread
+            if pd == 0:  # a one-cell piece: its cell (counted once per thread)
+                n_t = _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, 0, 0, 0, oi, oj, depth,
+                            item_side, it, slack, hit, code, it, lv, lp)
+                if node == NOT_YET:
                     tested += n_t
-                    if pd == 0:
-                        root_m[it] = COUNTED
+                    root_m[it] = COUNTED
+                continue
+            if cnt[M_NODES] + 1 > len(child) or cnt[M_NETS] + 1 > len(m_nets):
+                cnt[M_FULL] = 1
+                zero = np.int64(0)  # (literal arguments would compile another _descend)
+                tested += _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, nets, nk,
+                                   zero, zero, zero, nets, nk, pd, oi, oj, depth, item_side, it,
+                                   slack, hit, code, it, work, st, st_t, zero, tmp_t, order, lv,
+                                   lp)
                 continue
             lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(nets, nk)
             node = new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2,

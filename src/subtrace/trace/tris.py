@@ -565,10 +565,9 @@ def descend_tri(ray, g0, i0, j0, lev0, t0, lev_item, nets, nk, depth, fr, sides,
 
 
 @leaf_njit
-def _block(mem):
-    """A block of 8 rows of the memo's cell store (two cells' room), as its first row; -1
-    when the store is full."""
-    root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
+def _block(m_cells, cnt):
+    """A block of 8 rows of the memo's cell store ``m_cells`` (two cells' room), as its
+    first row; -1 when the store is full."""
     if cnt[M_CELLS] + 2 > len(m_cells) // 4:
         cnt[M_FULL] = 1
         return -1
@@ -578,10 +577,9 @@ def _block(mem):
 
 
 @leaf_njit
-def _parent_corners(node, parent, mem, pts, r):
+def _parent_corners(node, parent, child, data, m_cells, pts, r):
     """The corners of memo node ``node`` into ``pts[r:r+3]``: three of the six points of its
-    ``parent`` (which was split)."""
-    root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
+    ``parent`` (which was split; the memo's ``child``, ``data`` and cells ``m_cells``)."""
     q = node - child[parent]
     for c in range(3):
         k = data[parent] + _CELL_CORNER[q][c]
@@ -590,25 +588,24 @@ def _parent_corners(node, parent, mem, pts, r):
 
 @leaf_njit
 def _expand_node(node, parent, g, i, j, lev, lev_item, depth, net, nk, fr, sides, srow,
-                 samples, mem):
+                 samples, child, box, slab, data, m_cells, cnt):
     """Split memo node ``node`` (g, i, j, lev < depth - 1; a child of ``parent``, -1 for the
     item's root) into its four children: its six points (:func:`_node_points`; the corners
     its parent's) into a block of the cell store (:func:`_block`; its data) with its
     children's deviation bound in row 6 (a quarter of its parent's; the item's root
     computes it from the net), its children's boxes and slabs (:func:`_child_box`,
-    :func:`_node_slab`). No net is split. Returns the first child, or -1 when a store is
-    full."""
-    root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
+    :func:`_node_slab`). No net is split (``child`` .. ``cnt``: the memo's arrays it
+    writes). Returns the first child, or -1 when a store is full."""
     if cnt[M_NODES] + 4 > len(child):
         cnt[M_FULL] = 1
         return -1
-    r = _block(mem)
+    r = _block(m_cells, cnt)
     if r < 0:
         return -1
     if parent < 0:
         _corner_points(net, nk, g, i, j, lev, depth, fr, sides, srow, samples, m_cells, r)
     else:
-        _parent_corners(node, parent, mem, m_cells, r)
+        _parent_corners(node, parent, child, data, m_cells, m_cells, r)
     _node_points(net, nk, g, i, j, lev, depth, fr, sides, srow, samples, m_cells, r)
     if parent < 0:
         e0, e1, e2 = _level_deviation(tri_deviation(net, nk), lev + 1, lev_item)
@@ -721,7 +718,7 @@ def intersect_tri(ray, it, nets, nk, depth, fr, sides, samples, slack, hit, code
         c = data[node] if cells else child[node]
         if c < 0:  # not yet split (a cells' parent: its points not yet evaluated)
             if cells:
-                c = _block(mem)
+                c = _block(m_cells, cnt)
                 if c >= 0:
                     _node_points(root, nk, g, i, j, lev, depth, fr, sides, it, samples, m_cells,
                                  c)
@@ -730,13 +727,13 @@ def intersect_tri(ray, it, nets, nk, depth, fr, sides, samples, slack, hit, code
                     data[node] = c
             else:
                 c = _expand_node(node, parent, g, i, j, lev, lev_item, depth, root, nk, fr,
-                                 sides, it, samples, mem)
+                                 sides, it, samples, child, box, slab, data, m_cells, cnt)
             if c < 0:  # a store is full: split per ray below this node
                 pts = work.reshape((-1, 3))
                 if parent < 0:
                     _corner_points(root, nk, g, i, j, lev, depth, fr, sides, it, samples, pts, 0)
                 else:
-                    _parent_corners(node, parent, mem, pts, 0)
+                    _parent_corners(node, parent, child, data, m_cells, pts, 0)
                 for k in range(3):
                     pts[3, k] = box[node, k]
                     pts[4, k] = box[node, 3 + k]
