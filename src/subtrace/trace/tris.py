@@ -255,7 +255,7 @@ def tri_deviation(net, q):
     return DEVIATION * e0, DEVIATION * e1, DEVIATION * e2
 
 
-@leaf_njit
+@inline_njit
 def _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, pts, ra, rb, rc, gi, gj, g, depth, slack, hit,
              code, item):
     """Intersect the micro-triangle of rows ``ra, rb, rc`` of ``pts``: the grid vertices
