@@ -49,38 +49,43 @@ def regular_mask(level, options, faces) -> np.ndarray:
     fo = level.face_offsets
     quad = (fo[faces + 1] - fo[faces]) == 4
     corners = level.face_verts[np.minimum(fo[faces][:, None] + np.arange(4), len(level.face_verts) - 1)]
+    # per vertex, not per corner (the conditions are the vertex's): the level's vertices at
+    # once, or the corners' alone when they are few (classify's entries for the others are
+    # undefined, and so are theirs here: only the corners' are read)
     cls = classify(level, options, corners)
-    ne = np.diff(level.vert_edge_offsets)[corners]
-    ok = (cls[corners] == SMOOTH) & (ne == 4)
+    if corners.size < level.n_verts:
+        verts = np.unique(corners)
+    else:
+        verts = np.arange(level.n_verts)
+    ok = np.zeros(level.n_verts, dtype=bool)
+    c = cls[verts]
+    ne = np.diff(level.vert_edge_offsets)[verts]
+    nf = np.diff(level.vert_face_offsets)[verts]
+    good = (c == SMOOTH) & (ne == 4)
     # boundary and crease vertices, sharp corners
-    nf = np.diff(level.vert_face_offsets)[corners]
-    manifold = level.vert_manifold[corners]
-    crease = (cls[corners] == CREASE) & manifold
-    ok |= crease & (nf == 2) & (ne == 3)
+    manifold = level.vert_manifold[verts]
+    crease = (c == CREASE) & manifold
+    good |= crease & (nf == 2) & (ne == 3)
     four = crease & (nf == 4) & (ne == 4)
     if four.any():
-        ring = level.vert_edges[level.vert_edge_offsets[corners[four]][:, None] + np.arange(4)]
+        ring = level.vert_edges[level.vert_edge_offsets[verts[four]][:, None] + np.arange(4)]
         sharp = level.edge_sharpness[ring] >= INF_SHARP
-        ok[four] |= (sharp[:, 0] == sharp[:, 2]) & (sharp[:, 1] == sharp[:, 3])
-    ok |= (cls[corners] == CORNER) & manifold & (nf == 1) & (ne == 2)
-    return quad & ok.all(axis=1)
+        good[four] |= (sharp[:, 0] == sharp[:, 2]) & (sharp[:, 1] == sharp[:, 3])
+    good |= (c == CORNER) & manifold & (nf == 1) & (ne == 2)
+    ok[verts] = good
+    return quad & ok[corners].all(axis=1)
 
 
 def smooth_mask(level, faces) -> np.ndarray:
     """(len(faces),) bool: which of the regular quads ``faces`` have no boundary or
-    infinitely sharp edge at a corner (their 16 control points are all points of ``level``)."""
+    infinitely sharp edge at a corner (their 16 control points are all points of ``level``):
+    each corner has four edges and four faces, none of the edges sharp."""
     faces = np.asarray(faces, dtype=np.int64)
     fo = level.face_offsets
     corners = level.face_verts[fo[faces][:, None] + np.arange(4)]
-    ring = level.vert_edge_offsets
-    out = np.ones(len(faces), dtype=bool)
-    for k in range(4):
-        c = corners[:, k]
-        out &= (ring[c + 1] - ring[c]) == 4
-        out &= np.diff(level.vert_face_offsets)[c] == 4
-        for j in range(4):
-            out &= level.edge_sharpness[level.vert_edges[np.minimum(ring[c] + j, len(level.vert_edges) - 1)]] <= 0
-    return out
+    ok = ((np.diff(level.vert_edge_offsets) == 4) & (np.diff(level.vert_face_offsets) == 4))
+    ok[level.edge_verts[level.edge_sharpness > 0].ravel()] = False
+    return ok[corners].all(axis=1)
 
 
 def control_points(level, faces, points) -> np.ndarray:
