@@ -406,3 +406,62 @@ def test_a_warm_render_compiles_nothing(tmp_path):
 
     render()  # (fills the cache where it lacks a kernel)
     assert render() == []
+
+
+_MASKED = """
+import json, sys
+import numpy as np
+from numba import typeof
+from subtrace.runtime import jit
+
+jit._arrays_typed_without_numpy_ma()
+ro = np.zeros(3)
+ro.flags.writeable = False
+arrays = [np.zeros(3), np.zeros((2, 3), np.float32), np.zeros((2, 3)).T,
+          np.zeros((4, 4))[::2], np.zeros(5, np.int8), np.zeros((2, 2, 2), np.int64), ro,
+          np.zeros(0, np.uint8), np.zeros(2, bool)]
+ours = [str(typeof(a)) for a in arrays]
+imported = "numpy.ma" in sys.modules
+import numpy.ma
+numbas = [str(typeof(a)) for a in arrays]
+try:
+    typeof(np.ma.zeros(3))
+    masked = None
+except Exception as e:
+    masked = type(e).__name__
+print(json.dumps({"ours": ours, "numbas": numbas, "imported": imported, "masked": masked}))
+"""
+
+_WARM_MODULES = """
+import json, sys
+from subtrace.cli.main import main
+
+codes = [main(["render", "--width", "48", "--height", "32", "--quiet", "-o", sys.argv[1]],
+              own_process=True) for _ in range(2)]
+print(json.dumps({"codes": codes, "ma": "numpy.ma" in sys.modules}))
+"""
+
+
+def test_arrays_are_typed_as_numba_types_them_without_importing_numpy_ma():
+    """jit._arrays_typed_without_numpy_ma: until numpy.ma is imported, arrays of several
+    dtypes, dimensions, layouts and writeabilities get the very types Numba's own typing
+    gives them afterwards, and nothing has imported numpy.ma; once it is imported, a masked
+    array is still refused as Numba refuses it."""
+    proc = subprocess.run([sys.executable, "-c", _MASKED], capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert out["ours"] == out["numbas"]
+    assert not out["imported"]
+    assert out["masked"] is not None
+
+
+def test_a_command_imports_no_numpy_ma(tmp_path):
+    """A render command (the default scene, with its shadows, ground and anti-aliasing) in
+    a process of its own imports no numpy.ma: neither Numba's typing of arrays nor
+    np.unique / np.isin on the render's path (each would import it, about 5 ms)."""
+    proc = subprocess.run([sys.executable, "-c", _WARM_MODULES, str(tmp_path / "x.exr")],
+                          capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert out["codes"] == [0, 0] and not out["ma"]

@@ -29,7 +29,7 @@ import numpy as np
 from subtrace.patches.basis import B_CORNER, LEAD, TRAIL
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
-from subtrace.mesh.topology import INF_SHARP
+from subtrace.mesh.topology import INF_SHARP, compact
 from subtrace.subdiv.limit import CORNER, CREASE, SMOOTH, classify
 
 
@@ -54,7 +54,7 @@ def regular_mask(level, options, faces) -> np.ndarray:
     # undefined, and so are theirs here: only the corners' are read)
     cls = classify(level, options, corners)
     if corners.size < level.n_verts:
-        verts = np.unique(corners)
+        verts = compact(corners.ravel(), level.n_verts)[0]
     else:
         verts = np.arange(level.n_verts)
     ok = np.zeros(level.n_verts, dtype=bool)

@@ -47,7 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from subtrace import config
-from subtrace.mesh.topology import gather
+from subtrace.mesh.topology import compact, gather
 from subtrace.patches.basis import TO_BEZIER, net_summary, to_bezier
 from subtrace.patches.bspline import phantom_grids, regular_mask
 from subtrace.patches.criterion import subdominant
@@ -222,7 +222,7 @@ def _patch_level(cage, L0, keep):
         return base, cage.points, *(np.zeros(0, np.int64),) * 3
     else:
         kept = np.nonzero(keep)[0].astype(np.int64)
-        verts = np.unique(gather(base.face_offsets, base.face_verts, kept))
+        verts = compact(gather(base.face_offsets, base.face_verts, kept), base.n_verts)[0]
         lev, sub_to_base, _, cut_face = extract(base, verts, rings=_CUT_RINGS)
         pts = cage.points[sub_to_base]
         for _ in range(L0):

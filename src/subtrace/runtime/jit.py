@@ -481,7 +481,10 @@ def trim_loader() -> None:
     * the environments of Numba's own functions inlined in a kernel (array allocation, math)
       are rebuilt without importing the modules that define them
       (:class:`_NumbaEnvironmentsUnimported`): importing numba.np.arrayobj and arraymath
-      for them took about 22 ms of every render.
+      for them took about 22 ms of every render;
+    * an array is typed without importing numpy.ma (:func:`_arrays_typed_without_numpy_ma`):
+      Numba asks whether each new kind of array is a masked array, and the question imported
+      numpy.ma, about 5 ms of every render.
 
     Numbas whose loader is organised differently are left alone (the command is then just
     slower); tests run the command in fresh processes on warm and cold caches.
@@ -497,6 +500,7 @@ def trim_loader() -> None:
         return  # pragma: no cover - a Numba whose cache loader is organised differently
     _drop_llvm_lock_events()
     _lazy_bitcode()
+    _arrays_typed_without_numpy_ma()
     unimported = _NumbaEnvironmentsUnimported()
     context = cpu_target.target_context
 
@@ -528,6 +532,34 @@ def trim_loader() -> None:
 
     Cache.load_overload = load_overload
     context.refresh = refresh
+
+
+def _arrays_typed_without_numpy_ma() -> None:
+    """Type NumPy arrays for Numba's dispatchers without importing numpy.ma (see
+    :func:`trim_loader`). Numba's typing of an array first rejects masked arrays, and naming
+    their class imports numpy.ma. No masked array exists before numpy.ma is imported, so
+    until then an array is typed here from its dtype, dimensions, layout and writeability
+    (what Numba's own typing reads); afterwards Numba's typing answers as before."""
+    try:
+        from numba.core import types
+        from numba.core.typing.typeof import typeof_impl
+        from numba.np.numpy_support import from_dtype, map_layout
+    except ImportError:  # pragma: no cover - another Numba
+        return
+    import numpy as np
+
+    numba_typeof = typeof_impl.dispatch(np.ndarray)
+
+    def typeof_array(val, c):
+        if "numpy.ma" in sys.modules:
+            return numba_typeof(val, c)
+        try:
+            dtype = from_dtype(val.dtype)
+        except Exception:  # noqa: BLE001 - an unsupported dtype: Numba's own message
+            return numba_typeof(val, c)
+        return types.Array(dtype, val.ndim, map_layout(val), readonly=not val.flags.writeable)
+
+    typeof_impl.register(np.ndarray)(typeof_array)
 
 
 def _lazy_bitcode() -> None:

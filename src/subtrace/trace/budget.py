@@ -148,6 +148,12 @@ LIMIT_REASONS = ("precision", "size", "depth", "isolation")
 ISOLATION_REASON = 3  # an isolation's frontier would pass its share of the memory budget
 
 
+def _reasons(codes) -> list:
+    """The distinct ``LIMIT_REASONS`` of ``codes`` (indices into it), in its order (a count
+    per code: np.unique would import numpy.ma, about 5 ms of a render)."""
+    return [LIMIT_REASONS[k] for k in np.flatnonzero(np.bincount(codes, minlength=1))]
+
+
 def choose_within_budget(table, eye, tol_rad, max_depth, max_memory, n_pixels,
                          stats) -> DepthChoice:
     """Each patch's grid depth (isolating irregular patches, which also tightens their
@@ -181,7 +187,7 @@ def choose_within_budget(table, eye, tol_rad, max_depth, max_memory, n_pixels,
     depths, record, (shell_min, shell_max) = choose(limit)
     # held below the tolerance's depth (an isolated patch at its limit counts as held)
     held = (wanted > limit) & (depths >= limit)
-    reasons = [LIMIT_REASONS[k] for k in np.unique(why[held])]
+    reasons = _reasons(why[held])
     left = None
     budget_cap = estimate = None
     if max_memory is not None:
@@ -194,7 +200,7 @@ def choose_within_budget(table, eye, tol_rad, max_depth, max_memory, n_pixels,
             depths, record, (shell_min, shell_max) = choose(limit)
             held = (wanted > limit) & (depths >= limit)
             reasons = sorted(set((["memory"] if (held & by_memory).any() else [])
-                                 + [LIMIT_REASONS[k] for k in np.unique(why[held & ~by_memory])]),
+                                 + _reasons(why[held & ~by_memory])),
                              key=(("memory",) + LIMIT_REASONS).index)
         left = max(left - memory_estimate(table, depths, n_pixels, isolated), 0)
     if held.any():

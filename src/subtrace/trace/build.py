@@ -98,7 +98,7 @@ def build_loop_regular(table, depths, edge_depth, iso):
     ids = np.nonzero(~table.is_quad)[0]
     built = 0
     obj = table.object_id[ids]
-    for k in np.unique(obj):
+    for k in np.flatnonzero(np.bincount(obj)):  # (np.unique would import numpy.ma)
         o = table.objects[int(k)]
         sel = ids[obj == k]
         reg = sel[loop_regular(o.level, o.cage.options, table.face[sel])]
