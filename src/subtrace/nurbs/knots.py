@@ -126,7 +126,7 @@ def bezier_segments(knots, ctrl, degree: int, lo: float | None = None,
     lo = knots[p] if lo is None else float(lo)
     hi = knots[n] if hi is None else float(hi)
     inner = knots[(knots > lo) & (knots < hi)]
-    for t in np.concatenate(([lo], np.unique(inner), [hi])):
+    for t in [lo, *sorted(set(inner.tolist())), hi]:  # (np.unique would import numpy.ma)
         have = int(np.count_nonzero(knots == t))
         for _ in range(p - have):
             knots, ctrl = insert_knot(knots, ctrl, p, t)

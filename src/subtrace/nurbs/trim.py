@@ -257,7 +257,7 @@ def extrema(ctrl: np.ndarray) -> np.ndarray:
             if not (np.all(steps[:, axis] >= 0) or np.all(steps[:, axis] <= 0))]
     roots = [t for axis in axes for t in bernstein_roots(derivative_numerator(ctrl, axis))
              if _ROOT_EDGE < t < 1.0 - _ROOT_EDGE]
-    roots = np.unique(roots)
+    roots = np.array(sorted(set(roots)), dtype=np.float64)  # (np.unique: numpy.ma)
     if len(roots) > 1:
         roots = roots[np.concatenate(([True], np.diff(roots) > _ROOT_EDGE))]
     return roots
