@@ -258,12 +258,16 @@ def test_cells_subtend_at_most_the_tolerance():
 
 @needs_shared
 @pytest.mark.parametrize("record_depth", [0, 6])
-def test_isolation_taken_from_the_depth_choice_equals_a_fresh_one(record_depth):
+def test_isolation_taken_from_the_depth_choice_equals_a_fresh_one(record_depth, monkeypatch):
     """``build_isolated`` with the record of ``isolated_depths`` gives the same pieces and
     cells as refining the requested patches afresh, also where a patch's depth was raised
     beyond what the record reaches (it then refines further itself); recording deeper
-    (``record_depth``) does not change the depths chosen."""
+    (``record_depth``) does not change the depths chosen. (Every patch by local topology,
+    which the record serves: the maps of patches/stencil.py need none, test_stencil.py.)"""
+    from subtrace import config
     from subtrace.patches.isolate import build_isolated, isolated_depths
+
+    monkeypatch.setattr(config, "STENCIL_ISOLATION", False)
 
     cage = subtrace.load_cage(MODELS / "spot_control_mesh.obj")
     table = build_patch_table([cage])

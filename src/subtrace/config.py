@@ -27,6 +27,10 @@ SHELL_CHAIKIN_MARGIN = 0.25
 # from this multiple of its bound (lines/items.py).
 IRREGULAR_MARGIN = 1.25
 
+# Isolate smooth patches of one extraordinary vertex by fixed linear maps
+# (patches/stencil.py) instead of local topology; False: every patch by topology
+STENCIL_ISOLATION = True
+
 # Largest coordinate magnitude a render accepts (io/limits.py: check_coordinates): the
 # renderer squares distances and multiplies up to three coordinates (1e100^3 = 1e300 is
 # still below the largest double, 1.8e308); a cage at 1e100 renders (tested), one at 1e300

@@ -40,6 +40,12 @@ def run(argv=None):
     temporary file (:mod:`subtrace.runtime.signals`)."""
     from subtrace.runtime import signals  # standard library only: start-up stays fast
 
+    # numpy's BLAS on one thread: subtrace's own threads do the heavy work, and BLAS
+    # workers that a small matrix product wakes spin on the cores for a while after it
+    # (the isolation's maps, patches/stencil.py: the trace that followed them took 0.116
+    # s on Spot with two BLAS threads, 0.090 s with one); set before numpy is imported
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    os.environ.setdefault("MKL_NUM_THREADS", "1")
     signals.install()
     # The cyclic collector keeps collecting the young generation (short-lived cycles), but
     # the older ones only every 1000 young collections: importing Numba and loading kernels

@@ -47,7 +47,8 @@ from subtrace.patches.basis import (
     BOX_POINTS, BOX_TO_TRI, CHILD_ORIGIN, CHILD_SCALE, FLAT_TO_TRI, LATTICE_DIRS, N_TRI,
     TRI_CORNER, TRI_LEAD,
 )
-from subtrace.patches.isolate import build_isolated, refine_children
+from subtrace.patches.grids import refine_children
+from subtrace.patches.isolate import build_isolated
 from subtrace.patches.shells import one_ring_shells
 from subtrace.patches.table import build_patch_table
 from subtrace.runtime.jit import leaf_njit, nb

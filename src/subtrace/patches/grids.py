@@ -30,6 +30,7 @@ from subtrace import config
 from subtrace.mesh.topology import Level, Options, compact as _compact, gather as _gather
 from subtrace.subdiv.limit import extract, limit_points
 from subtrace.subdiv.refine import refine_level, refine_points
+from subtrace.patches.bspline import regular_mask
 
 
 def grid_size(n: int, quad: bool) -> int:
@@ -137,3 +138,23 @@ def cut_around(level: Level, points: np.ndarray, start: np.ndarray, m: int):
     verts = _compact(_gather(level.face_offsets, level.face_verts, blocks), level.n_verts)[0]
     sub, sub_to_cur, _, sub_faces = extract(level, verts, rings=config.GRID_RINGS)
     return sub, points[sub_to_cur], np.searchsorted(sub_faces, start)
+
+
+def levels_needed(bound, dist, tol_rad):
+    """Smallest n >= 0 with ``bound * 2^-n <= tol_rad * dist`` (elementwise)."""
+    allowed = tol_rad * dist
+    with np.errstate(divide="ignore", invalid="ignore"):
+        n = np.ceil(np.log2(bound / allowed) - 1e-9)
+    n = np.where(bound <= allowed, 0.0, n)
+    return np.where(np.isfinite(n), n, 1e9)
+
+
+def refine_children(level, points, faces, options):
+    """Cut the neighbourhood of ``faces`` out of ``level``, refine it once; return the refined
+    cut, its points, the faces' four children each (in the cut) and which of those are
+    regular bicubic patches."""
+    cur, cur_pts, start = cut_around(level, points, faces, 1)
+    ref = refine_level(cur, options)
+    cur_pts = refine_points(ref, cur_pts)
+    kids = (4 * start[:, None] + np.arange(4)).ravel()
+    return ref.child, cur_pts, kids, regular_mask(ref.child, options, kids)
