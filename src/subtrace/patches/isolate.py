@@ -13,6 +13,12 @@ regular are bicubic patches whose own Bezier bound says how many more levels the
 is within the tolerance at depth 0 (they become single grid cells) or ``k`` reaches the
 conservative depth. The patch's depth is the largest need found, never more than the
 conservative depth. Its grid is still uniform, so every cell satisfies the criterion.
+
+A patch (or, from the level where it becomes one, a patch's frontier face) that is smooth
+with one extraordinary vertex refines the same way at every level: it goes on by fixed
+linear maps instead of local topology (:mod:`subtrace.patches.stencil`; the same depths,
+pieces and cells to rounding, at a fraction of the cost), where at least
+``stencil.MIN_LEVELS`` levels remain below it.
 """
 
 from __future__ import annotations
