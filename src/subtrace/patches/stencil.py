@@ -11,10 +11,10 @@ the limit point and tangents of each corner of the last irregular cell.
 
 :mod:`subtrace.patches.isolate` refines such patches through local topology, level after
 level (a cut around the frontier, its refinement, the children's control grids), which costs
-far more than the arithmetic. :func:`stencil_isolation` does the same refinement with the
-maps, derived here once per valence (:func:`stencil`) by running subtrace's own refinement,
-control grids and limit masks on a synthetic cage of that valence, with one ring point at a
-time set to 1: the rules are subtrace's, only applied once. The ``K`` points of a patch are
+far more than the arithmetic. :func:`stencil_depths` and :func:`stencil_pieces` do the same
+refinement with the maps, derived once per valence (:func:`stencil`) by running subtrace's
+own refinement, control grids and limit masks on a synthetic cage of that valence, with
+one ring point at a time set to 1: the rules are subtrace's, only applied once. The ``K`` points of a patch are
 gathered in one canonical order (:func:`ev_rings`): the faces around each corner of the
 patch, counter-clockwise from the patch, corners from the extraordinary one on, each face's
 points from that corner on; the child at the extraordinary vertex lists its one-ring in the
