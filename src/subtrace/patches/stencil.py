@@ -384,17 +384,14 @@ def stencil_pieces(level, points, options, faces, corner, valence, depth, eye=No
                 rows, cor, pts, gi, gj = rows[keep], cor[keep], pts[:, keep], gi[keep], gj[keep]
                 if not len(rows):
                     break
+            # the children in the order of their corners, as the topological path lists them
             nets = np.empty((len(rows), 3, 4, 4, 3))
             for c in np.flatnonzero(np.bincount(cor)):  # (the grids follow the corners)
                 at = cor == c
-                nets[at] = _nets(st.grids[c].reshape(48, -1), pts[:, at]).reshape(-1, 3, 4, 4,
-                                                                                 3)
-            # the children in the order of their corners, as the topological path lists them
-            kid_corner = (cor[:, None] + st.kids[None, :]) % 4
-            order = np.argsort(kid_corner, axis=1)
-            nets = np.take_along_axis(nets, order[:, :, None, None, None], axis=1)
+                grids = st.grids[c][np.argsort((c + st.kids) % 4)]
+                nets[at] = _nets(grids.reshape(48, -1), pts[:, at]).reshape(-1, 3, 4, 4, 3)
             nets = nets.reshape(-1, 4, 4, 3)
-            kid_corner = np.take_along_axis(kid_corner, order, axis=1).ravel()
+            kid_corner = np.sort((cor[:, None] + st.kids[None, :]) % 4, axis=1).ravel()
             ki, kj = _kid_origin(np.repeat(gi, 3), np.repeat(gj, 3), kid_corner)
             root = np.repeat(rows, 3)
             own = depth[root]
