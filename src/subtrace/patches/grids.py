@@ -114,10 +114,7 @@ def build_grids(level: Level, points: np.ndarray, options: Options, faces, depth
     verts, rank = _compact(corners.ravel(), cur.n_verts)
     inverse = rank[corners]
     P, du, dv = limit_points(cur, cur_pts, options, which=verts)
-    nrm = np.cross(du, dv)
-    length = np.linalg.norm(nrm, axis=1, keepdims=True)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        nrm = np.where(length > 0, nrm / length, np.nan)
+    nrm = unit_normals(du, dv)
     G = grid_size(depth, quad)
     slot = leaf_corners(depth, quad)  # (4^n, k) grid index of each leaf corner
     gi = np.broadcast_to(slot[None], corners.shape)
@@ -128,6 +125,14 @@ def build_grids(level: Level, points: np.ndarray, options: Options, faces, depth
     outP[rows, gi] = P[inv]
     outN[rows, gi] = nrm[inv]
     return outP, outN
+
+
+def unit_normals(du, dv):
+    """The unit normals ``du x dv`` (..., 3) of limit tangents, NaN where undefined."""
+    nrm = np.cross(du, dv)
+    length = np.linalg.norm(nrm, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(length > 0, nrm / length, np.nan)
 
 
 def cut_around(level: Level, points: np.ndarray, start: np.ndarray, m: int):

@@ -30,7 +30,7 @@ from subtrace import config
 from subtrace.config import IRREGULAR_MARGIN
 from subtrace.patches.basis import bezier_nets, net_bounds
 from subtrace.patches.bspline import control_points
-from subtrace.patches.grids import levels_needed, refine_children
+from subtrace.patches.grids import levels_needed, refine_children, unit_normals
 from subtrace.patches.shells import box_distance, one_ring_shells
 from subtrace.patches.stencil import stencil_depths, stencil_pieces, stencil_where
 from subtrace.runtime.jit import nb
@@ -325,11 +325,7 @@ def corner_limits(level, points, options, faces, n):
     fo = level.face_offsets
     corners = level.face_verts[fo[faces][:, None] + np.arange(n)]
     P, du, dv = limit_points(level, points, options, which=corners.ravel())
-    nrm = np.cross(du, dv)
-    length = np.linalg.norm(nrm, axis=1, keepdims=True)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        nrm = np.where(length > 0, nrm / length, np.nan)
-    return corners, P.reshape(-1, n, 3), nrm.reshape(-1, n, 3)
+    return corners, P.reshape(-1, n, 3), unit_normals(du, dv).reshape(-1, n, 3)
 
 
 def _add_cells(cells, level, points, options, faces, root, i0, j0):

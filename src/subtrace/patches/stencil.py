@@ -35,7 +35,7 @@ from subtrace import config
 from subtrace.config import IRREGULAR_MARGIN
 from subtrace.mesh.topology import Options, gather_index
 from subtrace.patches.basis import bezier_nets, net_bounds
-from subtrace.patches.grids import levels_needed, refine_children
+from subtrace.patches.grids import levels_needed, refine_children, unit_normals
 from subtrace.patches.shells import box_distance
 
 MAX_VALENCE = 32  # extraordinary vertices of higher valence take the topological path
@@ -415,11 +415,7 @@ def _corner_cells(cells, st, pts, corner, root, i0, j0):
     turn = (np.arange(4)[None, :] - corner[:, None]) % 4  # (m,4)
     cols = np.arange(len(root))[:, None]
     P, du, dv = (_times(a, pts)[turn, cols] for a in (st.P, st.du, st.dv))  # (m,4,3)
-    nrm = np.cross(du, dv)
-    length = np.linalg.norm(nrm, axis=2, keepdims=True)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        nrm = np.where(length > 0, nrm / length, np.nan)
-    for lst, a in zip(cells, (root, i0, j0, P, nrm)):
+    for lst, a in zip(cells, (root, i0, j0, P, unit_normals(du, dv))):
         lst.append(a)
     if len(cells) > 5:
         cells[5].append(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0), axis=1))
