@@ -250,12 +250,19 @@ def _by_stencils(group, k, options, depth, eye, tol_rad, ring, subs, cells):
     ok, corner, valence = stencil_where(cur, options, start, depth[root] - k)
     if not ok.any():
         return group
-    s_subs, s_cells = stencil_pieces(cur, cur_pts, options, start[ok], corner[ok], valence[ok],
-                                     depth[root[ok]], eye, tol_rad, ring, k, i0[ok], j0[ok])
-    for out, got in ((subs, s_subs), (cells, s_cells)):
-        for j, arrays in enumerate(got):
-            out[j].extend(root[ok][a] if j == 0 else a for a in arrays)
+    _add_part(subs, cells, stencil_pieces(cur, cur_pts, options, start[ok], corner[ok],
+                                          valence[ok], depth[root[ok]], eye, tol_rad, ring, k,
+                                          i0[ok], j0[ok]), root[ok])
     return cur, cur_pts, root[~ok], start[~ok], i0[~ok], j0[~ok], recorded
+
+
+def _add_part(subs, cells, part, roots):
+    """Add ``part`` = (subs, cells) of :func:`build_isolated`'s layout (lists of arrays, or
+    arrays) to the lists ``subs``, ``cells``, its root indices mapped through ``roots``."""
+    for out, got in zip((subs, cells), part):
+        for j, a in enumerate(got):
+            arrays = a if isinstance(a, list) else [a]
+            out[j].extend(roots[x] if j == 0 else x for x in arrays)
 
 
 def _merged(parts, rows, ring):
@@ -264,11 +271,8 @@ def _merged(parts, rows, ring):
     then the topological path's arrays."""
     subs = [[] for _ in range(6)]
     cells = [[] for _ in range(7 if ring else 5)]
-    for (p_subs, p_cells), at in zip(parts, rows):
-        for out, got in ((subs, p_subs), (cells, p_cells)):
-            for j, a in enumerate(got):
-                arrays = a if isinstance(a, list) else [a]
-                out[j].extend(at[x] if j == 0 else x for x in arrays)
+    for part, at in zip(parts, rows):
+        _add_part(subs, cells, part, at)
     return _packed(subs, cells, ring)
 
 
