@@ -35,6 +35,7 @@ from subtrace.io.limits import check_coordinates
 from subtrace.io.meshes import is_mesh_file
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material, read_obj, read_obj_bytes
 from subtrace.io.usd import is_usd
+from subtrace.mesh.topology import compact
 from subtrace.nurbs.model import NurbsModel, build_model
 from subtrace.nurbs.trace import (
     NurbsHits,
@@ -153,8 +154,8 @@ def nurbs_pass(nurbs: NurbsScene, frame, width, height, tol_rad, other_t, lights
                          planes)
     stats.patches += nurbs.model.n_patches
     stats.max_depth = max(stats.max_depth, int(hits.level.max(initial=0)))
-    # (per ray; counted, as np.unique would import numpy.ma)
-    stats.patches_refined += int(np.count_nonzero(np.bincount(hits.patch[hits.patch >= 0])))
+    # (per ray; np.unique would import numpy.ma)
+    stats.patches_refined += len(compact(hits.patch[hits.patch >= 0], nurbs.model.n_patches)[0])
     if hits.capped:
         warnings.warn(f"{hits.capped} NURBS sub-patches held at {config.NURBS_MAX_LEVEL} "
                       "halvings above the tolerance", SubtraceWarning, stacklevel=3)

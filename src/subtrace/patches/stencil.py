@@ -33,7 +33,7 @@ import numpy as np
 
 from subtrace import config
 from subtrace.config import IRREGULAR_MARGIN
-from subtrace.mesh.topology import Options, gather_index
+from subtrace.mesh.topology import Options, compact, gather_index
 from subtrace.patches.basis import bezier_nets, net_bounds
 from subtrace.patches.grids import levels_needed, refine_children, unit_normals
 from subtrace.patches.shells import box_distance
@@ -287,16 +287,24 @@ def _groups(level, points, faces, corner, valence):
     four sides, ring points (K,m,3))``, points first: each level's maps are then one
     matrix product for the whole group."""
     points = np.asarray(points, dtype=np.float64)
-    for n in np.flatnonzero(np.bincount(valence)):  # (np.unique would import numpy.ma)
+    for n in compact(valence, MAX_VALENCE + 1)[0]:  # (np.unique would import numpy.ma)
         n = int(n)
         rows = np.nonzero(valence == n)[0]
-        st = stencil(n)
-        edges = np.concatenate([st.edges, st.own])
-        sides = np.zeros((len(edges), 2 * n + 8))
-        sides[np.arange(len(edges)), edges[:, 1]] += 1.0
-        sides[np.arange(len(edges)), edges[:, 0]] -= 1.0
         ids = ev_rings(level, faces[rows], corner[rows], n)
-        yield rows, corner[rows], st, sides, np.ascontiguousarray(points[ids.T])
+        yield (rows, corner[rows], stencil(n), _sides(n),
+               np.ascontiguousarray(points[ids.T]))
+
+
+@lru_cache(maxsize=None)
+def _sides(n: int) -> np.ndarray:
+    """(E+4, K) the differences along the ring's edges, then along the face's own four
+    sides, of valence ``n``'s rings (:func:`_ring_shells`)."""
+    st = stencil(n)
+    edges = np.concatenate([st.edges, st.own])
+    sides = np.zeros((len(edges), 2 * n + 8))
+    sides[np.arange(len(edges)), edges[:, 1]] += 1.0
+    sides[np.arange(len(edges)), edges[:, 0]] -= 1.0
+    return sides
 
 
 def _times(m, pts):
@@ -386,7 +394,7 @@ def stencil_pieces(level, points, options, faces, corner, valence, depth, eye=No
                     break
             # the children in the order of their corners, as the topological path lists them
             nets = np.empty((len(rows), 3, 4, 4, 3))
-            for c in np.flatnonzero(np.bincount(cor)):  # (the grids follow the corners)
+            for c in compact(cor, 4)[0]:  # (the grids follow the corners)
                 at = cor == c
                 grids = st.grids[c][np.argsort((c + st.kids) % 4)]
                 nets[at] = _nets(grids.reshape(48, -1), pts[:, at]).reshape(-1, 3, 4, 4, 3)

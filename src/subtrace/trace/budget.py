@@ -12,6 +12,7 @@ import numpy as np
 from subtrace import config
 from subtrace.errors import SceneError, SubtraceWarning
 from subtrace.lines.items import loop_regular
+from subtrace.mesh.topology import compact
 from subtrace.patches.criterion import (choose_depths, depth_cap, memory_estimate,
                                         precision_depths, wanted_depths)
 from subtrace.patches.isolate import IsolationTooLarge
@@ -149,9 +150,9 @@ ISOLATION_REASON = 3  # an isolation's frontier would pass its share of the memo
 
 
 def _reasons(codes) -> list:
-    """The distinct ``LIMIT_REASONS`` of ``codes`` (indices into it), in its order (a count
-    per code: np.unique would import numpy.ma, about 5 ms of a render)."""
-    return [LIMIT_REASONS[k] for k in np.flatnonzero(np.bincount(codes, minlength=1))]
+    """The distinct ``LIMIT_REASONS`` of ``codes`` (indices into it), in its order
+    (``topology.compact``: np.unique would import numpy.ma, about 5 ms of a render)."""
+    return [LIMIT_REASONS[k] for k in compact(codes, len(LIMIT_REASONS))[0]]
 
 
 def choose_within_budget(table, eye, tol_rad, max_depth, max_memory, n_pixels,

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from subtrace.lines.items import box_nets, loop_regular
+from subtrace.mesh.topology import compact
 from subtrace.patches.basis import BOX_PAD
 from subtrace.patches.isolate import build_isolated
 from subtrace.patches.isolate_loop import build_loop_isolated
@@ -98,7 +99,7 @@ def build_loop_regular(table, depths, edge_depth, iso):
     ids = np.nonzero(~table.is_quad)[0]
     built = 0
     obj = table.object_id[ids]
-    for k in np.flatnonzero(np.bincount(obj)):  # (np.unique would import numpy.ma)
+    for k in compact(obj, len(table.objects))[0]:  # (np.unique would import numpy.ma)
         o = table.objects[int(k)]
         sel = ids[obj == k]
         reg = sel[loop_regular(o.level, o.cage.options, table.face[sel])]
