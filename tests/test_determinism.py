@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from subtrace.io.scene import apply_overrides, load_scene
 from subtrace.render import render_scene
@@ -61,3 +63,27 @@ def test_counts_whatever_the_threads_and_the_run(name):
     assert first["micro_triangles"] > 0
     for st in runs[1:]:
         assert {k: getattr(st, k) for k in keys} == first
+
+
+@settings(max_examples=60, deadline=None)
+@given(n_items=st.integers(1, 120), chunk=st.integers(1, 6), threads=st.integers(1, 4),
+       delays=st.lists(st.sampled_from([0.0, 0.0, 0.0005]), min_size=1, max_size=8))
+def test_chunks_are_the_same_on_any_number_of_threads(n_items, chunk, threads, delays):
+    """run_chunks hands out the chunks [k chunk, (k+1) chunk) whatever the threads and
+    whoever steals from whom (uneven work, made by sleeping): what a chunk of rays shares
+    (its memo) and counts is then the same on any thread."""
+    import threading
+    import time
+
+    from subtrace.runtime.threads import run_chunks
+
+    seen, lock = [], threading.Lock()
+
+    def work(t, a, b):
+        time.sleep(delays[a % len(delays)])
+        with lock:
+            seen.append((a, b))
+
+    run_chunks(work, n_items, chunk, n=threads)
+    expected = [(a, min(a + chunk, n_items)) for a in range(0, n_items, chunk)]
+    assert sorted(seen) == expected

@@ -80,10 +80,14 @@ def run_chunks(work, n_items: int, chunk: int, n: int | None = None) -> None:
     segment with the most left. So a thread with cheaper chunks takes more of them, and
     each thread's items stay mostly contiguous: neighbouring image rows, whose rays reuse
     what the thread's memo split for the rows before (with chunks handed out in turn, both
-    threads split most patches)."""
+    threads split most patches). The chunks are the same on any number of threads,
+    [k chunk, (k+1) chunk): the segments start at multiples of ``chunk`` and a thread takes
+    whole ones from either end, so what a chunk's rays share (a memo each) does not depend
+    on the threads."""
     n = thread_count() if n is None else n
     lock = threading.Lock()
-    front = [n_items * t // n for t in range(n)]
+    n_chunks = -(-n_items // chunk)
+    front = [n_chunks * t // n * chunk for t in range(n)]
     back = front[1:] + [n_items]
 
     def worker(t):
@@ -97,7 +101,7 @@ def run_chunks(work, n_items: int, chunk: int, n: int | None = None) -> None:
                     if back[v] <= front[v]:
                         return
                     b = back[v]
-                    a = back[v] = max(front[v], b - chunk)
+                    a = back[v] = max(front[v], (b - 1) // chunk * chunk)
             work(t, a, b)
 
     if n == 1:
