@@ -507,14 +507,16 @@ def test_catmark_micro_triangles_grow_with_the_tolerance_until_the_pixels_bound_
     """Coarse tolerances: each halving multiplies the micro-triangles built by 1.5-4.5 (cells
     a quarter the area, 4x, where whole cells are met; less where a ray meets only part of
     a cell), and fans count once, not once per ray. Fine tolerances: cells are below a
-    pixel, each ray builds the few it meets, and the count stops growing."""
+    pixel, each ray builds the few blocks of 2 x 2 cells it meets (eight triangles each:
+    measured 13.3 and 15.1 per covered pixel at 1 and 0.5 px), and the count stops
+    growing."""
     counts = {}
     for tol in (16.0, 8.0, 4.0, 1.0, 0.5):
         scene = small_scene([MODELS / "spot_control_mesh.obj"], (1.2, 0.6, 2.2), (0.0, 0.3, 0.0),
                        width=160, height=120, tolerance=tol)
         st = render_scene(scene).stats
         counts[tol] = st.micro_triangles
-        assert st.micro_triangles <= 8 * st.pixels_covered
+        assert st.micro_triangles <= 24 * st.pixels_covered
     for coarse, fine in ((16.0, 8.0), (8.0, 4.0)):
         assert 1.5 <= counts[fine] / counts[coarse] <= 4.5, counts
     assert counts[0.5] <= 1.3 * counts[1.0], counts
