@@ -78,8 +78,7 @@ def traversal_stack():
     return np.empty(STACK_SIZE, np.int64), np.empty(STACK_SIZE)
 
 
-@leaf_njit
-def slab_range(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tlo, thi):
+def _slab_range(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tlo, thi):
     """Entry and exit distances of the line ``o + t d`` (``i`` = 1/d) in the box [lo, hi]
     clipped to [tlo, thi], or (inf, inf) if it misses it there. IEEE infinities handle zero
     direction components; where one meets a slab plane (0 * inf: NaN) the box counts as
@@ -103,6 +102,11 @@ def slab_range(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tlo, thi):
     if tn <= min(tf, thi):
         return tn, tf
     return np.inf, np.inf
+
+
+slab_range = leaf_njit(_slab_range)
+# the same, inlined by Numba where LLVM left the call (the Loop nodes' entries, per child)
+slab_range_inlined = inline_njit(_slab_range)
 
 
 @leaf_njit
