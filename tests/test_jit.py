@@ -465,3 +465,32 @@ def test_a_command_imports_no_numpy_ma(tmp_path):
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     assert out["codes"] == [0, 0] and not out["ma"]
+
+
+def test_compiler_flags_list_the_same_values_from_the_defaults_table():
+    """_flag_values_from_defaults: a flags object's values (what Numba hashes and compares
+    to find an overload's implementation) are the dict Numba's own properties give, for
+    flags with nothing set, some options set, set to their defaults, copied and unset."""
+    from numba.core.compiler import Flags
+
+    def by_properties(flags):
+        return {k: getattr(flags, k) for k in type(flags).options}
+
+    assert jit._flag_values_from_defaults()
+    plain = Flags()
+    some = Flags()
+    some.nrt = True
+    some.error_model = "numpy"
+    some.boundscheck = False
+    as_default = Flags()
+    for name in ("nrt", "error_model", "boundscheck", "fastmath", "no_cpython_wrapper"):
+        setattr(as_default, name, Flags.options[name].default)
+    copied = Flags(copy_from=some)
+    unset = Flags(copy_from=some)
+    del unset.nrt
+    for flags in (plain, some, as_default, copied, unset):
+        assert flags.values() == by_properties(flags)
+        assert list(flags.values()) == list(by_properties(flags))  # the same order
+    assert plain == as_default and hash(plain) == hash(as_default)
+    assert some == copied and hash(some) == hash(copied)
+    assert some != plain and unset != some

@@ -30,6 +30,7 @@ import os
 import re
 import sys
 import threading
+from collections.abc import Mapping
 from pathlib import Path
 
 from subtrace.version import VERSION
@@ -108,6 +109,11 @@ def _set_numba_cache_dir() -> None:
     # processes (the warm-up, workers) inherit the base.
     if not os.environ.get("NUMBA_CACHE_DIR"):
         os.environ["NUMBA_CACHE_DIR"] = str(cache_base())
+    # Numba colours its error messages through colorama, which wraps the standard streams
+    # anew for every message it formats, and typing formats one for every overload it
+    # tries and rejects: about 23,000 in a cold render of the default scene (0.2-0.3 s of
+    # its compile). Subtrace never shows Numba's messages to its users.
+    os.environ.setdefault("NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING", "1")
 
 
 _set_numba_cache_dir()
@@ -319,17 +325,52 @@ def _calls_without_literals() -> bool:
     return True
 
 
+def _flag_values_from_defaults() -> bool:
+    """Make Numba's compiler flags list their values from a table of the defaults; True
+    when applied.
+
+    Typing a call to one of Numba's own functions (``np.empty``, ``min``, ...) looks its
+    implementation up in a cache keyed on the compiler's flags, which hashes and compares
+    them as the dict of every option's value, read one property at a time (about 40
+    options): a cold render of the default scene made about 100,000 such dicts. Here the
+    dict is the class's defaults updated with the values set, the same dict. A Numba whose
+    flags are organised differently is left alone."""
+    try:
+        from numba.core import targetconfig
+    except ImportError:  # pragma: no cover - another Numba
+        return False
+    config_class = getattr(targetconfig, "TargetConfig", None)
+    if not isinstance(getattr(config_class, "options", None), Mapping) or \
+            "_values" not in getattr(config_class, "__slots__", ()):
+        return False  # pragma: no cover - another Numba
+    defaults = {}
+
+    def values(self):
+        kind = type(self)
+        d = defaults.get(kind)
+        if d is None:
+            d = defaults[kind] = {k: option.default for k, option in kind.options.items()}
+        d = dict(d)
+        d.update(self._values)  # (only options are ever set: their properties' setters)
+        return d
+
+    config_class.values = values
+    return True
+
+
 class _PatchInliningOnCompile(_event.Listener):
     """Numba's "numba:compile" event (a cache miss, before compiling): the inliner's fix
-    (:func:`_inline_copies_scope_once`) and the calls' plain argument types
-    (:func:`_calls_without_literals`) are applied at the process's first compile, so a
-    command whose kernels are all cached does not import Numba's inliner for it."""
+    (:func:`_inline_copies_scope_once`), the calls' plain argument types
+    (:func:`_calls_without_literals`) and the flags' values (:func:`_flag_values_from_defaults`)
+    are applied at the process's first compile, so a command whose kernels are all cached
+    does not import Numba's inliner for it."""
 
     def on_start(self, event):
         global INLINE_PATCHED
         if INLINE_PATCHED is None:
             INLINE_PATCHED = _inline_copies_scope_once()
             _calls_without_literals()
+            _flag_values_from_defaults()
 
     def on_end(self, event):
         pass
