@@ -44,7 +44,7 @@ import math
 
 import numpy as np
 
-from subtrace.runtime.jit import leaf_njit, nb
+from subtrace.runtime.jit import inline_njit, leaf_njit, nb
 
 # ------------------------------------------------------------------------------------------
 # bicubic nets
@@ -70,23 +70,52 @@ TRAIL = np.array([[0, 1], [-1, 0], [0, -1], [1, 0]], dtype=np.int64)
 @leaf_njit
 def bez_point(nets, k, u, v):
     """Point of the Bezier patch ``nets[k]`` (4,4,3) at (u, v): one code path for every
-    caller, so a point shared by cells is computed bit-identically by each."""
-    su = 1.0 - u
+    caller, so a point shared by cells is computed bit-identically by each (its rows at v,
+    :func:`bez_rows`, then their sum at u, :func:`bez_across`: points of one v may share
+    the rows)."""
+    return bez_across(bez_rows(nets, k, v), u)
+
+
+@inline_njit
+def bez_rows(nets, k, v):
+    """The four rows of ``nets[k]`` as cubic curves in v, at v: 12 numbers, (x, y, z) of
+    row 0, then 1, 2, 3 (for :func:`bez_across`)."""
     sv = 1.0 - v
+    b0, b1, b2, b3 = sv * sv * sv, 3.0 * v * sv * sv, 3.0 * v * v * sv, v * v * v
+    n = nets
+    return (b0 * n[k, 0, 0, 0] + b1 * n[k, 0, 1, 0] + b2 * n[k, 0, 2, 0] + b3 * n[k, 0, 3, 0],
+            b0 * n[k, 0, 0, 1] + b1 * n[k, 0, 1, 1] + b2 * n[k, 0, 2, 1] + b3 * n[k, 0, 3, 1],
+            b0 * n[k, 0, 0, 2] + b1 * n[k, 0, 1, 2] + b2 * n[k, 0, 2, 2] + b3 * n[k, 0, 3, 2],
+            b0 * n[k, 1, 0, 0] + b1 * n[k, 1, 1, 0] + b2 * n[k, 1, 2, 0] + b3 * n[k, 1, 3, 0],
+            b0 * n[k, 1, 0, 1] + b1 * n[k, 1, 1, 1] + b2 * n[k, 1, 2, 1] + b3 * n[k, 1, 3, 1],
+            b0 * n[k, 1, 0, 2] + b1 * n[k, 1, 1, 2] + b2 * n[k, 1, 2, 2] + b3 * n[k, 1, 3, 2],
+            b0 * n[k, 2, 0, 0] + b1 * n[k, 2, 1, 0] + b2 * n[k, 2, 2, 0] + b3 * n[k, 2, 3, 0],
+            b0 * n[k, 2, 0, 1] + b1 * n[k, 2, 1, 1] + b2 * n[k, 2, 2, 1] + b3 * n[k, 2, 3, 1],
+            b0 * n[k, 2, 0, 2] + b1 * n[k, 2, 1, 2] + b2 * n[k, 2, 2, 2] + b3 * n[k, 2, 3, 2],
+            b0 * n[k, 3, 0, 0] + b1 * n[k, 3, 1, 0] + b2 * n[k, 3, 2, 0] + b3 * n[k, 3, 3, 0],
+            b0 * n[k, 3, 0, 1] + b1 * n[k, 3, 1, 1] + b2 * n[k, 3, 2, 1] + b3 * n[k, 3, 3, 1],
+            b0 * n[k, 3, 0, 2] + b1 * n[k, 3, 1, 2] + b2 * n[k, 3, 2, 2] + b3 * n[k, 3, 3, 2])
+
+
+@inline_njit
+def bez_across(c, u):
+    """The point at u of the curve whose four control points are the rows ``c`` at some v
+    (:func:`bez_rows`)."""
+    su = 1.0 - u
     bu0, bu1, bu2, bu3 = su * su * su, 3.0 * u * su * su, 3.0 * u * u * su, u * u * u
-    bv0, bv1, bv2, bv3 = sv * sv * sv, 3.0 * v * sv * sv, 3.0 * v * v * sv, v * v * v
     x = y = z = 0.0
-    for a in range(4):
-        ba = bu0 if a == 0 else (bu1 if a == 1 else (bu2 if a == 2 else bu3))
-        cx = (bv0 * nets[k, a, 0, 0] + bv1 * nets[k, a, 1, 0] + bv2 * nets[k, a, 2, 0]
-              + bv3 * nets[k, a, 3, 0])
-        cy = (bv0 * nets[k, a, 0, 1] + bv1 * nets[k, a, 1, 1] + bv2 * nets[k, a, 2, 1]
-              + bv3 * nets[k, a, 3, 1])
-        cz = (bv0 * nets[k, a, 0, 2] + bv1 * nets[k, a, 1, 2] + bv2 * nets[k, a, 2, 2]
-              + bv3 * nets[k, a, 3, 2])
-        x += ba * cx
-        y += ba * cy
-        z += ba * cz
+    x += bu0 * c[0]
+    y += bu0 * c[1]
+    z += bu0 * c[2]
+    x += bu1 * c[3]
+    y += bu1 * c[4]
+    z += bu1 * c[5]
+    x += bu2 * c[6]
+    y += bu2 * c[7]
+    z += bu2 * c[8]
+    x += bu3 * c[9]
+    y += bu3 * c[10]
+    z += bu3 * c[11]
     return x, y, z
 
 

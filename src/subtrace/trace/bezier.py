@@ -25,8 +25,8 @@ from subtrace import config
 from subtrace.accel.bvh import box_entry, slab_entry
 from subtrace.runtime.jit import inline_njit, leaf_njit
 from subtrace.patches.basis import (
-    copy_net as _copy_net, bez_point as _bez_point, net_box as _net_box, quadrant as _quadrant,
-    split_net as _split,
+    bez_across as _bez_across, bez_point as _bez_point, bez_rows as _bez_rows,
+    copy_net as _copy_net, net_box as _net_box, quadrant as _quadrant, split_net as _split,
 )
 from subtrace.trace.prims import (
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, M_CELLS, M_FULL, M_NETS, M_NODES, NOT_YET,
@@ -299,8 +299,9 @@ def _store_block(m_cells, cnt, nets, nk, bi, bj, depth):
     r = 4 * u
     inv = 1.0 / (1 << depth)
     for b in range(3):
+        rows = _bez_rows(nets, nk, (2 * bj + b) * inv)  # (shared by the three points)
         for a in range(3):
-            x, y, z = _bez_point(nets, nk, (2 * bi + a) * inv, (2 * bj + b) * inv)
+            x, y, z = _bez_across(rows, (2 * bi + a) * inv)
             m_cells[r + a + 3 * b, 0] = x
             m_cells[r + a + 3 * b, 1] = y
             m_cells[r + a + 3 * b, 2] = z
