@@ -384,8 +384,9 @@ def slab_cut_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, lo0, lo1, lo2, hi0, hi1, 
     no = nx * ox + ny * oy + nz * oz
     if dn == 0.0:
         return tn if slo <= no <= shi else np.inf
-    ta = (slo - no) / dn
-    tb = (shi - no) / dn
+    inv = 1.0 / dn  # (one division: the stretch is widened below far beyond its rounding)
+    ta = (slo - no) * inv
+    tb = (shi - no) * inv
     if ta > tb:
         ta, tb = tb, ta
     ta -= 1e-9 * abs(ta)
