@@ -405,7 +405,7 @@ def _level_deviation(dev, lev, lev0):
     return dev[0] * s, dev[1] * s, dev[2] * s
 
 
-@leaf_njit
+@inline_njit
 def _snapped_node(i, j, h, lev, depth, sides, srow):
     """Whether the level-``lev`` node with corners (i, j), (i + h, j), (i, j + h) may hold
     snapped grid vertices: it touches a side sampled at a depth ``de`` < ``lev``. Its
