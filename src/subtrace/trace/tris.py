@@ -474,7 +474,7 @@ def _child_entry(ray, lo0, lo1, lo2, hi0, hi1, hi2, nx, ny, nz, slo, shi, cg, ci
                        ny, nz, slo, shi, tmax)
 
 
-@leaf_njit
+@inline_njit
 def _child(g, i, j, lev, depth, q):
     """Orientation and origin of child ``q`` of node (g, i, j, lev) (Loop's child order)."""
     hh = g * (1 << (depth - lev - 1))
