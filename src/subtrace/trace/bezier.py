@@ -30,7 +30,7 @@ from subtrace.patches.basis import (
 )
 from subtrace.trace.prims import (
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, M_CELLS, M_FULL, M_NETS, M_NODES, NOT_YET,
-    new_node, push_sorted, ray_triangle, ray_triangle_inlined,
+    new_node, push_sorted, ray_triangle,
 )
 from subtrace.patches.groups import GROUP
 from subtrace.trace.tris import (
@@ -200,9 +200,8 @@ def tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, v0, v1, v2, v3, lp, slack, 
     for tri in range(2):
         b = 1 + tri
         c = 2 + tri
-        t, ba, bb, bc = ray_triangle_inlined(px, py, pz, kx, ky, kz, sx, sy, sz, v0,
-                                             v2 if tri else v1, v3 if tri else v2, lv,
-                                             hit[H_T], slack)
+        t, ba, bb, bc = ray_triangle(px, py, pz, kx, ky, kz, sx, sy, sz, v0, v2 if tri else v1,
+                                     v3 if tri else v2, lv, hit[H_T], slack)
         if t < hit[H_T]:
             _record(hit, t, code, item, depth, lp, 0, b, c, ba, bb, bc)
     return 2

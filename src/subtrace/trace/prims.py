@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from subtrace.runtime.jit import inline_njit, leaf_njit
+from subtrace.runtime.jit import leaf_njit, llvm_inline_njit
 
 # a ray's working hit record while it is traced (float64 (HIT_FIELDS,) in the thread's
 # scratch), stored per ray at the end as :class:`subtrace.trace.pools.Hits`' fields t, prim,
@@ -69,7 +69,8 @@ def push_sorted(ent_t, ent_i, n, te, item):
     return n + 1
 
 
-def _ray_triangle(ox, oy, oz, kx, ky, kz, sx, sy, sz, a, b, c, verts, tmax, slack):
+@llvm_inline_njit
+def ray_triangle(ox, oy, oz, kx, ky, kz, sx, sy, sz, a, b, c, verts, tmax, slack):
     """Watertight ray / triangle test (Woop, Benthin and Wald 2013) on vertices ``a, b, c``
     of ``verts``; ``ox, oy, oz`` is the ray origin's (kx, ky, kz) components. Returns (t, b_a, b_b, b_c) with t = inf on a miss. Edge functions of a
     shared edge are computed identically from both triangles, so no ray slips between them;
@@ -101,10 +102,6 @@ def _ray_triangle(ox, oy, oz, kx, ky, kz, sx, sy, sz, a, b, c, verts, tmax, slac
         return np.inf, 0.0, 0.0, 0.0
     return t, u / det, v / det, w / det
 
-
-ray_triangle = leaf_njit(_ray_triangle)
-# the same, inlined by Numba into the Catmull-Clark cells' triangle pairs (bezier.tri_pair)
-ray_triangle_inlined = inline_njit(_ray_triangle)
 
 
 @leaf_njit
