@@ -32,7 +32,7 @@ from subtrace.accel.bvh import slab_entry
 from subtrace.camera import window_offset
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material
 from subtrace.patches.basis import bez_normal
-from subtrace.runtime.jit import callee_njit, inline_njit, leaf_njit, nb
+from subtrace.runtime.jit import callee_njit, inline_njit, leaf_njit, llvm_inline_njit, nb
 from subtrace.runtime.threads import run_tasks, thread_count
 from subtrace.trace.prims import ray_setup
 from subtrace.trace.tris import LOOP_CELL, TRI, tri_normal
@@ -727,7 +727,7 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
     return int(counts[:, 0].sum())
 
 
-@inline_njit
+@llvm_inline_njit
 def _ground_hit(frame, width, dirs, r, up, e_up, height):
     """Where ray r meets the ground plane going down: (hit, point x, y, z, d . up)."""
     dx, dy, dz = _direction(frame, width, dirs, r)
@@ -740,7 +740,7 @@ def _ground_hit(frame, width, dirs, r, up, e_up, height):
     return True, frame[0, 0] + t * dx, frame[0, 1] + t * dy, frame[0, 2] + t * dz, dn
 
 
-@inline_njit
+@llvm_inline_njit
 def _ground_irradiance(lights, k, x, y, z, up):
     """Light k at the ground point (x, y, z): the unit direction towards it, its distance
     (inf: directional) and its irradiance there, the cosine with ``up`` times
@@ -759,7 +759,7 @@ def _ground_irradiance(lights, k, x, y, z, up):
 
 # (1 / 0: inf, as the ray kernels take it; inlined, it takes its callers' error model, so
 # theirs is numpy's too)
-@inline_njit
+@llvm_inline_njit
 def _ground_ray(lights, k, x, y, z, up, shadows, cull, lo, hi):
     """Light k at the ground point (:func:`_ground_irradiance`) and whether its shadow ray
     is to be traced: shadows on, the light faces the ground, and (``cull``) the ray's
@@ -778,7 +778,7 @@ def _segment(task, n_tasks, n):
     return n * task // n_tasks, n * (task + 1) // n_tasks
 
 
-@inline_njit
+@llvm_inline_njit
 def _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, color, catcher,
                   rows, shadows, cull, lo, hi, planes, occ, blocked, b):
     """The colour of ground pixel r (point (x, y, z), ``dn`` its ray's d . up) into
