@@ -29,7 +29,7 @@ from typing import NamedTuple
 import numpy as np
 
 from subtrace import config
-from subtrace.runtime.jit import callee_njit, inline_njit, leaf_njit, nb
+from subtrace.runtime.jit import callee_njit, inline_njit, leaf_njit, llvm_inline_njit, nb
 
 _BINS = 16
 STACK_SIZE = config.STACK_SIZE  # (a global the jitted build reads as a constant)
@@ -130,7 +130,7 @@ def padded(bvh: BVH, pad: float) -> BVH:
     return bvh._replace(node_min=bvh.node_min - pad, node_max=bvh.node_max + pad)
 
 
-@inline_njit
+@llvm_inline_njit
 def bvh_start(ox, oy, oz, ix, iy, iz, bvh, tlo, thi, stack, stack_t):
     """Start a traversal: the root on the stack if the line enters it; returns the stack
     size."""
@@ -144,7 +144,7 @@ def bvh_start(ox, oy, oz, ix, iy, iz, bvh, tlo, thi, stack, stack_t):
     return 1
 
 
-@inline_njit
+@llvm_inline_njit
 def bvh_next_leaf(ox, oy, oz, ix, iy, iz, bvh, tlo, thi, stack, stack_t, sp):
     """Pop nodes (nearer child first) until a leaf the line enters within [tlo, thi];
     returns (first, end, sp): its range of ``bvh.prims`` and the new stack size, or
