@@ -23,7 +23,7 @@ import numpy as np
 
 from subtrace import config
 from subtrace.accel.bvh import box_entry, slab_entry
-from subtrace.runtime.jit import inline_njit, leaf_njit
+from subtrace.runtime.jit import inline_njit, leaf_njit, llvm_inline_njit
 from subtrace.patches.basis import (
     bez_across as _bez_across, bez_point as _bez_point, bez_rows as _bez_rows,
     copy_net as _copy_net, net_box as _net_box, quadrant as _quadrant, split_net as _split,
@@ -89,7 +89,7 @@ def _cell_slab(net, s, slab, m):
     slab[m, 3], slab[m, 4] = lo - pad, hi + pad
 
 
-@inline_njit
+@llvm_inline_njit
 def _cell_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, box, slab, c, tmax):
     """Entry distance of the ray into the box of cell node ``c`` cut by its slab; inf when
     the ray misses either before ``tmax`` (``tris.slab_cut_entry``, as Loop nodes are cut)."""
@@ -190,7 +190,7 @@ def _record(hit, t, code, item, depth, lp, a, b, c, ba, bb, bc):
     hit[H_B2] = ba * lp[a, 1] + bb * lp[b, 1] + bc * lp[c, 1]
 
 
-@inline_njit
+@llvm_inline_njit
 def tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, v0, v1, v2, v3, lp, slack, hit, code, item,
              depth):
     """The two triangles (0,1,2), (0,2,3) of the cell whose corners are the rows v0, v1,

@@ -67,11 +67,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from subtrace.accel.bvh import slab_entry, slab_range, slab_range_inlined
+from subtrace.accel.bvh import slab_entry, slab_range_inlined
 from subtrace.patches.basis import (
     DEGREE, N_TRI, NORMAL_STEP, NORMAL_TRIES, pad_box, tri_box, unit_normal,
 )
-from subtrace.runtime.jit import inline_njit, leaf_njit
+from subtrace.runtime.jit import inline_njit, leaf_njit, llvm_inline_njit
 from subtrace.trace.prims import (
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, M_CELLS, M_FULL, M_NODES, NOT_YET,
     new_node, push_sorted, ray_triangle,
@@ -369,7 +369,7 @@ def _net_slab(net, q):
     return nx, ny, nz, lo - w, hi + w
 
 
-@inline_njit
+@llvm_inline_njit
 def slab_cut_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, lo0, lo1, lo2, hi0, hi1, hi2, nx, ny, nz,
                 slo, shi, tmax):
     """Entry distance of the ray into the box ``lo, hi`` cut by the slab ``slo <= n . x <=
