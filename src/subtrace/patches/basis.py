@@ -44,7 +44,7 @@ import math
 
 import numpy as np
 
-from subtrace.runtime.jit import inline_njit, leaf_njit, nb
+from subtrace.runtime.jit import leaf_njit, llvm_inline_njit, nb
 
 # ------------------------------------------------------------------------------------------
 # bicubic nets
@@ -76,7 +76,7 @@ def bez_point(nets, k, u, v):
     return bez_across(bez_rows(nets, k, v), u)
 
 
-@inline_njit
+@llvm_inline_njit
 def bez_rows(nets, k, v):
     """The four rows of ``nets[k]`` as cubic curves in v, at v: 12 numbers, (x, y, z) of
     row 0, then 1, 2, 3 (for :func:`bez_across`)."""
@@ -97,7 +97,7 @@ def bez_rows(nets, k, v):
             b0 * n[k, 3, 0, 2] + b1 * n[k, 3, 1, 2] + b2 * n[k, 3, 2, 2] + b3 * n[k, 3, 3, 2])
 
 
-@inline_njit
+@llvm_inline_njit
 def bez_across(c, u):
     """The point at u of the curve whose four control points are the rows ``c`` at some v
     (:func:`bez_rows`)."""
