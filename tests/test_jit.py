@@ -494,3 +494,62 @@ def test_compiler_flags_list_the_same_values_from_the_defaults_table():
     assert plain == as_default and hash(plain) == hash(as_default)
     assert some == copied and hash(some) == hash(copied)
     assert some != plain and unset != some
+
+
+# a helper too large for LLVM to inline at three call sites of its own accord
+LLVM_INLINE_MODULE = "\n".join([
+    "from subtrace.runtime.jit import llvm_inline_njit, nb",
+    "",
+    "@llvm_inline_njit",
+    "def scaled_sum(a, x):",
+    "    s = 0.0",
+    "    for k in range(len(a)):",
+    "        s += a[k] * x",
+    *[f"    s = s * 1.000001 + (x * {i}.5 if s > {i} else s / (1.0 + x * {i}))" for i in range(60)],
+    "    return s",
+    "",
+    "@nb.njit(cache=False)",
+    "def caller(a, n):",
+    "    t = 0.0",
+    "    for i in range(n):",
+    "        t += scaled_sum(a, 1.5 + i) - scaled_sum(a, 0.5 + i) * scaled_sum(a, 2.5)",
+    "    return t",
+])
+
+
+def _probe_sum(a, x):
+    s = 0.0
+    for v in a:
+        s += v * x
+    for i in range(60):
+        s = s * 1.000001 + (x * (i + 0.5) if s > i else s / (1.0 + x * i))
+    return s
+
+
+def test_llvm_inlined_helpers_leave_no_call_in_their_callers(tmp_path, monkeypatch):
+    """jit.llvm_inline_njit: the helper's compiled name is marked (its prefix, then the ABI
+    tags), and a kernel that calls it computes the same as Python with no call to it left
+    in its optimized code (LLVM inlined it)."""
+    import importlib
+    import re
+
+    import numpy as np
+
+    import subtrace.trace.prims  # noqa: F401  (its import marks ray_triangle)
+
+    assert jit._mangled_prefix("subtrace.trace.prims", "ray_triangle") == \
+        "_ZN8subtrace5trace5prims12ray_triangle"
+    assert jit._marked("_ZN8subtrace5trace5prims12ray_triangleB2v2B38xyzE")
+    assert not jit._marked("_ZN8subtrace5trace5prims14ray_triangle_xB2v2E")  # another name
+    (tmp_path / "llvm_inline_probe.py").write_text(LLVM_INLINE_MODULE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    probe = importlib.import_module("llvm_inline_probe")
+    a = np.arange(5.0)
+    expected = sum(_probe_sum(a, 1.5 + i) - _probe_sum(a, 0.5 + i) * _probe_sum(a, 2.5)
+                   for i in range(7))
+    assert probe.caller(a, 7) == pytest.approx(expected, rel=1e-9)
+    assert jit._marked(jit._mangled_prefix("llvm_inline_probe", "scaled_sum") + "B2v2E")
+    llvm = probe.caller.inspect_llvm(probe.caller.signatures[0])
+    calls = re.findall(r"call [^@\n]*@\"?([\w.$]+)", llvm)
+    assert calls, "the kernel's code calls nothing at all: the probe checks nothing"
+    assert not [c for c in calls if "scaled_sum" in c], calls

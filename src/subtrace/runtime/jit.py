@@ -368,6 +368,13 @@ def _mangled_prefix(module: str, qualname: str) -> str:
     return "_ZN" + "".join(f"{len(part)}{part}" for part in f"{module}.{qualname}".split("."))
 
 
+def _marked(name: str) -> bool:
+    """Whether the compiled function ``name`` is a version of a :func:`llvm_inline_njit`
+    helper: one of the prefixes, then its ABI tags (``B``) or the name's end (``E``)."""
+    return any(name.startswith(p) and name[len(p):len(p) + 1] in ("B", "E")
+               for p in _LLVM_INLINED)
+
+
 def _inline_marked_functions() -> bool:
     """Give the functions of :func:`llvm_inline_njit` LLVM's ``alwaysinline`` attribute as
     Numba lowers them; True when applied. The attribute travels with the function's code
@@ -384,7 +391,7 @@ def _inline_marked_functions() -> bool:
 
     def marking_post_lowering(self, mod, library):
         for fn in mod.functions:
-            if not fn.is_declaration and fn.name.startswith(tuple(_LLVM_INLINED)):
+            if not fn.is_declaration and _marked(fn.name):
                 fn.attributes.add("alwaysinline")
         return post_lowering(self, mod, library)
 
