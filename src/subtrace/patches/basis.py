@@ -102,20 +102,12 @@ def bez_across(c, u):
     """The point at u of the curve whose four control points are the rows ``c`` at some v
     (:func:`bez_rows`)."""
     su = 1.0 - u
-    bu0, bu1, bu2, bu3 = su * su * su, 3.0 * u * su * su, 3.0 * u * u * su, u * u * u
+    bu = (su * su * su, 3.0 * u * su * su, 3.0 * u * u * su, u * u * u)
     x = y = z = 0.0
-    x += bu0 * c[0]
-    y += bu0 * c[1]
-    z += bu0 * c[2]
-    x += bu1 * c[3]
-    y += bu1 * c[4]
-    z += bu1 * c[5]
-    x += bu2 * c[6]
-    y += bu2 * c[7]
-    z += bu2 * c[8]
-    x += bu3 * c[9]
-    y += bu3 * c[10]
-    z += bu3 * c[11]
+    for a in range(4):
+        x += bu[a] * c[3 * a]
+        y += bu[a] * c[3 * a + 1]
+        z += bu[a] * c[3 * a + 2]
     return x, y, z
 
 
