@@ -255,7 +255,7 @@ def tri_deviation(net, q):
     return DEVIATION * e0, DEVIATION * e1, DEVIATION * e2
 
 
-@inline_njit
+@llvm_inline_njit
 def _tri_hit(ox, oy, oz, kx, ky, kz, sx, sy, sz, pts, ra, rb, rc, gi, gj, g, depth, slack, hit,
              code, item):
     """Intersect the micro-triangle of rows ``ra, rb, rc`` of ``pts``: the grid vertices
@@ -310,7 +310,7 @@ def _node_points(net, q, g, i, j, lev, depth, fr, sides, srow, samples, pts, r):
         pts[r + k, 0], pts[r + k, 1], pts[r + k, 2] = x, y, z
 
 
-@inline_njit
+@llvm_inline_njit
 def _child_box(pts, r, q, e0, e1, e2, plo0, plo1, plo2, phi0, phi1, phi2):
     """Box of child ``q`` of a node whose six points are ``pts[r:r+6]``: its corners' box
     grown by the deviation bound ``e`` of its level (zero for a cell: the micro-triangle
@@ -324,7 +324,7 @@ def _child_box(pts, r, q, e0, e1, e2, plo0, plo1, plo2, phi0, phi1, phi2):
             min(hi2, phi2))
 
 
-@inline_njit
+@llvm_inline_njit
 def _node_slab(pts, a, b, c, e0, e1, e2):
     """The slab of a node whose corners are rows ``a, b, c`` of ``pts`` and whose deviation
     bound is ``e``: the normal ``n`` of its corners' plane and the range of ``n . P`` over
@@ -405,7 +405,7 @@ def _level_deviation(dev, lev, lev0):
     return dev[0] * s, dev[1] * s, dev[2] * s
 
 
-@inline_njit
+@llvm_inline_njit
 def _snapped_node(i, j, h, lev, depth, sides, srow):
     """Whether the level-``lev`` node with corners (i, j), (i + h, j), (i, j + h) may hold
     snapped grid vertices: it touches a side sampled at a depth ``de`` < ``lev``. Its
@@ -456,7 +456,7 @@ def _snapped_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, i, j, h
     return slab_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, 0.0, tmax)
 
 
-@inline_njit
+@llvm_inline_njit
 def _child_entry(ray, lo0, lo1, lo2, hi0, hi1, hi2, nx, ny, nz, slo, shi, cg, ci, cj, h, lev,
                  depth, sides, srow, samples, t_parent, tmax):
     """Entry distance of the ray into child (cg, ci, cj) of level ``lev`` < ``depth`` (side
@@ -474,7 +474,7 @@ def _child_entry(ray, lo0, lo1, lo2, hi0, hi1, hi2, nx, ny, nz, slo, shi, cg, ci
                        ny, nz, slo, shi, tmax)
 
 
-@inline_njit
+@llvm_inline_njit
 def _child(g, i, j, lev, depth, q):
     """Orientation and origin of child ``q`` of node (g, i, j, lev) (Loop's child order)."""
     hh = g * (1 << (depth - lev - 1))
@@ -629,7 +629,7 @@ def _expand_node(node, parent, g, i, j, lev, lev_item, depth, net, nk, fr, sides
     return first
 
 
-@inline_njit
+@llvm_inline_njit
 def _cell_box(pts, r, q):
     """Box of cell ``q`` of a cells' parent whose six grid points are ``pts[r:r+6]``: its
     micro-triangle's, padded (not within its parent's: its snapped corners may lie outside
