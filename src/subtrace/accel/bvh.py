@@ -29,7 +29,7 @@ from typing import NamedTuple
 import numpy as np
 
 from subtrace import config
-from subtrace.runtime.jit import callee_njit, inline_njit, leaf_njit, llvm_inline_njit, nb
+from subtrace.runtime.jit import callee_njit, leaf_njit, llvm_inline_njit, nb
 
 _BINS = 16
 STACK_SIZE = config.STACK_SIZE  # (a global the jitted build reads as a constant)
@@ -78,7 +78,8 @@ def traversal_stack():
     return np.empty(STACK_SIZE, np.int64), np.empty(STACK_SIZE)
 
 
-def _slab_range(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tlo, thi):
+@llvm_inline_njit
+def slab_range(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tlo, thi):
     """Entry and exit distances of the line ``o + t d`` (``i`` = 1/d) in the box [lo, hi]
     clipped to [tlo, thi], or (inf, inf) if it misses it there. IEEE infinities handle zero
     direction components; where one meets a slab plane (0 * inf: NaN) the box counts as
@@ -104,12 +105,7 @@ def _slab_range(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tlo, thi):
     return np.inf, np.inf
 
 
-slab_range = leaf_njit(_slab_range)
-# the same, inlined by Numba where LLVM left the call (the Loop nodes' entries, per child)
-slab_range_inlined = inline_njit(_slab_range)
-
-
-@leaf_njit
+@llvm_inline_njit
 def slab_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tlo, thi):
     """Entry distance of :func:`slab_range` (inf: a miss)."""
     return slab_range(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, tlo, thi)[0]

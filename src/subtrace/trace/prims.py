@@ -103,7 +103,6 @@ def ray_triangle(ox, oy, oz, kx, ky, kz, sx, sy, sz, a, b, c, verts, tmax, slack
     return t, u / det, v / det, w / det
 
 
-
 @leaf_njit
 def ray_setup(frame, row, col):
     """Unit direction of the ray through the centre of pixel (row, col); a window's frame

@@ -67,7 +67,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from subtrace.accel.bvh import slab_entry, slab_range_inlined
+from subtrace.accel.bvh import slab_entry, slab_range
 from subtrace.patches.basis import (
     DEGREE, N_TRI, NORMAL_STEP, NORMAL_TRIES, pad_box, tri_box, unit_normal,
 )
@@ -376,8 +376,7 @@ def slab_cut_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, lo0, lo1, lo2, hi0, hi1, 
     shi``; inf when it misses either before ``tmax``. (The ray's stretch between the planes
     is widened by a relative 1e-9 for rounding.) Catmull-Clark cells are cut alike
     (``bezier._cell_entry``)."""
-    tn, tf = slab_range_inlined(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, 0.0,
-                                tmax)
+    tn, tf = slab_range(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, 0.0, tmax)
     if tn == np.inf:
         return np.inf
     dn = nx * dx + ny * dy + nz * dz
@@ -747,8 +746,8 @@ def intersect_tri(ray, it, nets, nk, depth, fr, sides, samples, slack, hit, code
             n = 0  # yet), the ones the ray enters nearest first
             for q in range(4):
                 lo0, lo1, lo2, hi0, hi1, hi2 = _cell_box(m_cells, c, q)
-                te = slab_range_inlined(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2,
-                                        0.0, hit[H_T])[0]
+                te = slab_entry(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2, 0.0,
+                                hit[H_T])
                 if te < np.inf:
                     n = push_sorted(tmp_t, order, n, te, q)
             for e in range(n - 1, -1, -1):
