@@ -496,6 +496,46 @@ def test_compiler_flags_list_the_same_values_from_the_defaults_table():
     assert some != plain and unset != some
 
 
+def test_numbas_overloads_compile_once_for_callers_whose_inherited_flags_agree():
+    """jit._overloads_shared_across_flags: ``np.empty`` for the same argument types, typed
+    inside two functions whose flags differ only where an overload does not inherit them
+    (``nogil``, the Python wrapper), is compiled once; a caller with another
+    ``error_model`` (an inherited flag) gets its own; every caller computes the same."""
+    import numpy as np
+    from numba.core import event
+
+    compiled = []
+
+    class Impls(event.Listener):
+        def on_start(self, ev):
+            fn = getattr(ev.data["dispatcher"], "py_func", None)
+            if getattr(fn, "__qualname__", "").startswith("ol_np_empty."):
+                compiled.append((str(ev.data["args"]), ev.data["dispatcher"]))
+
+        def on_end(self, ev):
+            pass
+
+    def fill(n):  # a shape and dtype no kernel of subtrace allocates: uncompiled so far
+        a = np.empty((n, 2, 1, 1, 1, 1), np.uint16)
+        a[:] = 7
+        return a.sum()
+
+    plain = numba.njit(fill)
+    released = numba.njit(nogil=True)(fill)
+    as_numpy = numba.njit(error_model="numpy")(fill)
+    listener = Impls()
+    event.register("numba:compile", listener)
+    try:
+        results = [f(3) for f in (plain, released, as_numpy)]
+    finally:
+        event.unregister("numba:compile", listener)
+    assert jit.INLINE_PATCHED  # (applied at the process's first compile)
+    assert results == [42, 42, 42]
+    shaped = [args for args, _ in compiled if "UniTuple(int64, 6)" in args]
+    assert len(shaped) == 2, compiled  # plain and nogil share one; error_model="numpy" not
+    assert len({id(d) for args, d in compiled if "UniTuple(int64, 6)" in args}) == 2
+
+
 # a helper too large for LLVM to inline at three call sites of its own accord
 LLVM_INLINE_MODULE = "\n".join([
     "from subtrace.runtime.jit import llvm_inline_njit, nb",

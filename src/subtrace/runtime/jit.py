@@ -358,6 +358,62 @@ def _flag_values_from_defaults() -> bool:
     return True
 
 
+# The compiler flags a function compiled inside another's compile takes from it (Numba's
+# CPUTargetOptions.finalize: inherit_if_not_set); the others are the caller's own
+INHERITED_FLAGS = ("nrt", "fastmath", "error_model", "forceinline")
+
+
+def _overloads_shared_across_flags() -> bool:
+    """Key the implementations of Numba's own functions (``np.empty``, ``min``, ...) on the
+    compiler flags they inherit from the function being compiled, not on all of its flags;
+    True when applied.
+
+    Numba compiles such an implementation once per argument types and flags of the caller.
+    The flags differ between kernels (a kernel's ``nogil``, a callee's missing Python
+    wrapper), though the implementation inherits only :data:`INHERITED_FLAGS` from them and
+    is compiled the same way under each: a cold render of the default scene compiled
+    ``np.empty(int64, int64)`` six times and ``min(int64, int64)`` five. Here one compiled
+    implementation serves every caller whose inherited flags are equal. A Numba whose
+    overload templates are organised differently is left alone."""
+    try:
+        from numba.core import targetconfig
+        from numba.core.typing import templates
+    except ImportError:  # pragma: no cover - another Numba
+        return False
+    template = getattr(templates, "_OverloadFunctionTemplate", None)
+    stack = getattr(targetconfig, "ConfigStack", None)
+    if template is None or not hasattr(template, "_build_impl") or \
+            not hasattr(stack, "top_or_none"):
+        return False  # pragma: no cover - another Numba
+    try:
+        from numba.core.compiler import Flags
+    except ImportError:  # pragma: no cover - another Numba
+        return False
+    if not all(name in Flags.options for name in INHERITED_FLAGS):
+        return False  # pragma: no cover - another Numba
+
+    def get_impl(self, args, kws):
+        flags = stack.top_or_none()
+        inherited = None if flags is None else tuple(
+            _hashable(getattr(flags, name)) for name in INHERITED_FLAGS)
+        cache_key = self.context, tuple(args), tuple(kws.items()), inherited
+        try:
+            return self._impl_cache[cache_key]
+        except KeyError:  # (built outside the handler: no nested KeyError in its errors)
+            pass
+        return self._build_impl(cache_key, args, kws)
+
+    template._get_impl = get_impl
+    return True
+
+
+def _hashable(value):
+    """A flag's value as a key: option objects (fastmath's set of flags) by their sorted
+    flags, others as they are."""
+    flags = getattr(value, "flags", None)
+    return ("flags", tuple(sorted(flags))) if isinstance(flags, (set, frozenset)) else value
+
+
 # Mangled-name prefixes of the functions LLVM must inline at every call (llvm_inline_njit)
 _LLVM_INLINED: set[str] = set()
 
@@ -412,6 +468,7 @@ class _PatchInliningOnCompile(_event.Listener):
             INLINE_PATCHED = _inline_copies_scope_once()
             _calls_without_literals()
             _flag_values_from_defaults()
+            _overloads_shared_across_flags()
             _inline_marked_functions()
 
     def on_end(self, event):
