@@ -367,6 +367,56 @@ def test_a_trimmed_load_rebuilds_numbas_environments_without_importing_them(tmp_
         assert out["sizes"] == [n, n] and out["sums"] == [7 * n, 0.5 * n]
 
 
+_RUNTIME_PROBE = """
+import json, sys
+from subtrace.runtime import jit
+from numba.core.runtime import nrtdynmod
+made = []
+create = nrtdynmod.create_nrt_module
+nrtdynmod.create_nrt_module = lambda ctx: made.append(1) or create(ctx)
+jit.trim_loader()
+from subtrace.accel.bvh import traversal_stack  # a cached kernel that allocates
+ids, ts = traversal_stack()
+ids[:] = 3
+import numba, numpy as np
+
+@numba.njit(cache=False)
+def shared(n):  # compiled here: links the runtime, counts references on its arrays
+    a = np.ones(n)
+    b = a
+    return a, b.sum()
+
+a, total = shared(5)
+path = jit.KERNEL_DIR / "runtime" / f"nrt-{numba.__version__}.pkl"
+print(json.dumps({"made": len(made), "stored": path.is_file(), "sums": [int(ids.sum()),
+                  float(total), float(a.sum())], "size": len(ids), "path": str(path)}))
+"""
+
+
+def test_the_runtime_is_compiled_once_and_loaded_from_the_kernel_folder(tmp_path):
+    """jit._runtime_from_the_kernel_folder: a command's process (jit.trim_loader) compiles
+    Numba's runtime functions once and stores them beside the kernels; the next process
+    loads them (compiles none) and both a cached kernel and a fresh compile that links
+    them run; a damaged file is compiled again and replaced."""
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(SUBTRACE_CACHE_DIR=str(tmp_path / "cache"), PYTHONDONTWRITEBYTECODE="1")
+
+    def probe():
+        proc = subprocess.run([sys.executable, "-c", _RUNTIME_PROBE], capture_output=True,
+                              text=True, env=env, timeout=600)
+        assert proc.returncode == 0, proc.stderr
+        out = json.loads(proc.stdout)
+        assert out["stored"] and out["sums"] == [3 * out["size"], 5.0, 5.0]
+        return out
+
+    first = probe()
+    assert first["made"] == 1
+    assert probe()["made"] == 0
+    Path(first["path"]).write_bytes(b"not a pickle")
+    assert probe()["made"] == 1
+    assert probe()["made"] == 0  # (rewritten whole)
+
+
 _COMPILES = """
 import json, sys
 from numba.core import event

@@ -618,9 +618,12 @@ def trim_loader() -> None:
       target up for a kernel that is not in the cache; a kernel that needs BLAS still
       imports scipy.linalg when it is compiled.
 
-    * the runtime is started on a thread of its own at once (compiling its few functions
-      takes about 50 ms, mostly in LLVM, which releases the GIL), while this thread goes on
-      importing the renderer; the first kernel load or compile waits for it;
+    * the runtime is started on a thread of its own at once, while this thread goes on
+      importing the renderer; the first kernel load or compile waits for it. Its few
+      compiled functions are stored beside the kernels by the first process and loaded
+      from there by the next (:func:`_runtime_from_the_kernel_folder`): compiling them took
+      about 28 ms, and the first kernel load of a small cage's render waited about 10 ms
+      for it;
     * Numba's hooks on LLVM's lock, which only time the lock for Numba's compile events, are
       removed: a kernel load makes thousands of LLVM calls (its symbols, one by one), each
       of which ran them twice;
@@ -649,6 +652,7 @@ def trim_loader() -> None:
                                                    "_guard_against_spurious_io_errors")):
         return  # pragma: no cover - a Numba whose cache loader is organised differently
     _drop_llvm_lock_events()
+    _runtime_from_the_kernel_folder()
     _lazy_bitcode()
     _arrays_typed_without_numpy_ma()
     unimported = _NumbaEnvironmentsUnimported()
@@ -682,6 +686,50 @@ def trim_loader() -> None:
 
     Cache.load_overload = load_overload
     context.refresh = refresh
+
+
+def _runtime_from_the_kernel_folder() -> bool:
+    """Make Numba's runtime load its compiled functions (atomic reference counts, the
+    memory-info accessors) from :data:`KERNEL_DIR` when a previous process stored them
+    there, and store them when it compiles them; True when applied (see
+    :func:`trim_loader`). They are the runtime's LLVM module, compiled as Numba compiles
+    it, kept as object code and bitcode as a cached kernel is (the folder's key holds the
+    Numba version and the CPU), and loaded the same way. A stored file that cannot be read
+    back is compiled again. A Numba organised otherwise is left alone."""
+    try:
+        from numba.core.runtime import nrtdynmod
+    except ImportError:  # pragma: no cover - another Numba
+        return False
+    create = getattr(nrtdynmod, "create_nrt_module", None)
+    if create is None or not hasattr(nrtdynmod, "compile_nrt_functions"):
+        return False  # pragma: no cover - another Numba
+    import pickle
+
+    path = KERNEL_DIR / "runtime" / f"nrt-{_numba.__version__}.pkl"
+
+    def compile_or_load(ctx):
+        codegen = ctx.codegen()
+        try:
+            state = pickle.loads(path.read_bytes())
+            return codegen.unserialize_library(state)
+        except Exception:  # noqa: BLE001 - absent, partial or foreign: compiled below
+            pass
+        module, library = create(ctx)
+        library.enable_object_caching()
+        library.add_ir_module(module)
+        library.finalize()
+        try:  # (atomically: processes storing it at once each write a whole file)
+            data = pickle.dumps(library.serialize_using_object_code(), protocol=4)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp")
+            tmp.write_bytes(data)
+            os.replace(tmp, path)
+        except (OSError, RuntimeError, pickle.PicklingError):
+            pass
+        return library
+
+    nrtdynmod.compile_nrt_functions = compile_or_load
+    return True
 
 
 def _arrays_typed_without_numpy_ma() -> None:
