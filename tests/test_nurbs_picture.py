@@ -10,6 +10,8 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from subtrace.io.scene import apply_overrides, load_scene, scene_from_dict
 from subtrace.render import render_scene
@@ -154,3 +156,19 @@ def test_ray_cones_refine_shadow_rays_no_finer():
     assert np.all(cone.level[both] <= plain.level[both])
     assert cone.level[both].mean() < plain.level[both].mean() - 1
     np.testing.assert_allclose(cone.t[both], plain.t[both], rtol=1e-6)
+
+
+@given(st.lists(st.sampled_from([b"surf", b"f", b" ", b"\t", b"\n", b"\r\n", b"x", b"#",
+                                 b"v 1 2 3", b"s"]), max_size=24))
+@settings(max_examples=400, deadline=None)
+def test_the_statement_scan_finds_what_a_line_anchored_pattern_does(parts):
+    """nurbs.scene._has_statement (``find`` and a check in place) answers as the regular
+    expression ``^[ \\t]*KEYWORD[ \\t]`` (multi-line) does, for ``surf`` and ``f``."""
+    import re
+
+    from subtrace.nurbs.scene import _has_statement
+
+    raw = b"".join(parts)
+    for keyword in (b"surf", b"f"):
+        pattern = re.compile(rb"^[ \t]*" + keyword + rb"[ \t]", re.MULTILINE)
+        assert _has_statement(raw, keyword) == (pattern.search(raw) is not None), raw

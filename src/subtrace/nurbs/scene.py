@@ -51,8 +51,22 @@ from subtrace.shade import (C_A, C_LEVEL, C_N, C_OBJECT, C_P, C_PATCH, C_R, C_U,
                             PatchShading, pixel_rays)
 from subtrace.trace.prims import ray_setup
 
-_SURF = re.compile(rb"^[ \t]*surf[ \t]", re.MULTILINE)  # a free-form surface statement
-_FACE = re.compile(rb"^[ \t]*f[ \t]", re.MULTILINE)  # a polygon face statement
+_LINE_START = re.compile(rb"[ \t]*")  # what may precede a statement's keyword on its line
+
+
+def _has_statement(raw: bytes, keyword: bytes) -> bool:
+    """Whether a line of ``raw`` starts (after blanks) with ``keyword`` then a blank: the
+    keyword's occurrences found with ``bytes.find``, each checked in place (a regular
+    expression anchored at line starts walked the sword's 1.2 MB cage in 4-7 ms looking
+    for a ``surf`` it lacks; ``find`` takes 0.6 ms)."""
+    at = raw.find(keyword)
+    while at >= 0:
+        start = raw.rfind(b"\n", 0, at) + 1
+        after = raw[at + len(keyword):at + len(keyword) + 1]
+        if after in (b" ", b"\t") and _LINE_START.fullmatch(raw, start, at):
+            return True
+        at = raw.find(keyword, at + 1)
+    return False
 
 
 def _is_obj(path) -> bool:
@@ -65,7 +79,7 @@ def _scan(path: str, mtime_ns: int, size: int) -> tuple[bool, bool]:
     """(has a ``surf`` statement, has an ``f`` statement) of the OBJ file (one read per
     version of the file: a render asks several times)."""
     raw = read_obj_bytes(path)
-    return _SURF.search(raw) is not None, _FACE.search(raw) is not None
+    return _has_statement(raw, b"surf"), _has_statement(raw, b"f")
 
 
 def _kinds(path) -> tuple[bool, bool]:
