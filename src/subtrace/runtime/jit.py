@@ -622,8 +622,8 @@ def trim_loader() -> None:
       importing the renderer; the first kernel load or compile waits for it. Its few
       compiled functions are stored beside the kernels by the first process and loaded
       from there by the next (:func:`_runtime_from_the_kernel_folder`): compiling them took
-      about 28 ms, and the first kernel load of a small cage's render waited about 10 ms
-      for it;
+      about 28 ms of CPU and brought up LLVM's optimiser and code generator, whose memory
+      (22-25 MB of a warm render's peak) a command that compiles nothing no longer holds;
     * Numba's hooks on LLVM's lock, which only time the lock for Numba's compile events, are
       removed: a kernel load makes thousands of LLVM calls (its symbols, one by one), each
       of which ran them twice;
