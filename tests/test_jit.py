@@ -417,6 +417,37 @@ def test_the_runtime_is_compiled_once_and_loaded_from_the_kernel_folder(tmp_path
     assert probe()["made"] == 0  # (rewritten whole)
 
 
+_EXTENSIONS_PROBE = """
+import json, sys
+from importlib import metadata
+searched = []
+entry_points = metadata.entry_points
+metadata.entry_points = lambda *a, **k: searched.append(1) or entry_points(*a, **k)
+from subtrace.runtime import jit
+if sys.argv[1] == "trimmed":
+    jit.trim_loader()
+from subtrace.accel.bvh import traversal_stack
+ids, ts = traversal_stack()
+print(json.dumps({"searched": len(searched), "size": len(ids)}))
+"""
+
+
+def test_a_command_does_not_search_the_installed_packages_for_numba_extensions(tmp_path):
+    """jit._no_extension_search: a command's process (jit.trim_loader) calls a kernel
+    without Numba reading every installed distribution's entry points; an untrimmed
+    process reads them, as Numba does."""
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(SUBTRACE_CACHE_DIR=str(tmp_path / "cache"), PYTHONDONTWRITEBYTECODE="1")
+    out = {}
+    for mode in ("plain", "trimmed", "plain"):  # (the first compiles the kernel)
+        proc = subprocess.run([sys.executable, "-c", _EXTENSIONS_PROBE, mode],
+                              capture_output=True, text=True, env=env, timeout=600)
+        assert proc.returncode == 0, proc.stderr
+        out[mode] = json.loads(proc.stdout)
+    assert out["trimmed"]["searched"] == 0 and out["trimmed"]["size"] > 0
+    assert out["plain"]["searched"] >= 1
+
+
 _COMPILES = """
 import json, sys
 from numba.core import event
