@@ -74,3 +74,22 @@ print(f(np.array([1.0, 4.0, 9.0])), "scipy.linalg" in sys.modules)
 """
     out = _python(code, NUMBA_CACHE_DIR=str(tmp_path / "cold")).split()
     assert out == ["12.0", "False"]
+
+
+def test_the_warm_up_looks_for_the_index_files_numba_writes():
+    """runtime.warmup._index_files looks in the folder, and for the names, where Numba's
+    cache keeps each warm-up kernel's index (so a warm cache is recognised and no helper
+    process starts)."""
+    import fnmatch
+
+    from subtrace.runtime import warmup
+    from subtrace.shade import _shade_task
+    from subtrace.trace.kernels import _trace_task
+    from subtrace.trace.rays import _rays_task
+
+    kernels = {"_trace_task": _trace_task, "_shade_task": _shade_task, "_rays_task": _rays_task}
+    assert set(kernels) == set(warmup._KERNEL_MODULES)
+    for name, kernel in kernels.items():
+        index = Path(kernel._cache._cache_file._index_path)
+        folder, pattern = warmup._index_pattern(name)
+        assert index.parent == folder and fnmatch.fnmatch(index.name, pattern), (name, index)
