@@ -92,7 +92,7 @@ def scratch_buffers(max_d):
     distances, child order, a cell's points and parameters (fans included), the ray's hit
     record."""
     n = 6 * max_d + 8
-    stack, stack_t = traversal_stack()
+    stack, stack_t = traversal_stack.py_func()  # (numpy's: no kernel to load for it)
     return (stack, stack_t, np.empty((3 * max_d + 10, 4, 4, 3)),
             np.empty((n, 6), np.int64), np.empty(n), np.empty(4), np.empty(4, np.int64),
             np.empty((4 * MAX_SIDE_SAMPLES + 8, 3)), np.empty((4 * MAX_SIDE_SAMPLES + 8, 2)),

@@ -436,7 +436,8 @@ class Memos:
         every chunk of rays), memo_bytes (the most each memo held at once, summed over the
         threads), memo_full."""
         for m in self.m:
-            memo_restart(m.root, m.cnt)  # (folds what the last chunk held)
+            # (folds what the last chunk held; the function's Python, not a kernel to load)
+            memo_restart.py_func(m.root, m.cnt)
         stats.memo_nodes = int(sum(m.cnt[M_MADE] for m in self.m))
         stats.memo_bytes = int(sum(
             m.cnt[M_PEAK_NODES] * self.ROW_BYTES["child"]
