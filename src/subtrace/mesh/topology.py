@@ -156,7 +156,9 @@ def _base_edges(face_offsets, face_verts, n_verts, edge_verts, face_edges, forwa
     """
     n_faces = len(face_offsets) - 1
     # the edges seen so far from each lower vertex: a bucket per vertex, at most its uses
-    start = np.zeros(n_verts + 1, dtype=np.int64)
+    # (np.empty and a loop, not np.zeros: a cold render compiles one allocator fewer)
+    start = np.empty(n_verts + 1, dtype=np.int64)
+    start[:] = 0
     for f in range(n_faces):
         f0 = face_offsets[f]
         n = face_offsets[f + 1] - f0
@@ -166,7 +168,8 @@ def _base_edges(face_offsets, face_verts, n_verts, edge_verts, face_edges, forwa
             start[min(a, b) + 1] += 1
     for v in range(n_verts):
         start[v + 1] += start[v]
-    filled = np.zeros(n_verts, dtype=np.int64)
+    filled = np.empty(n_verts, dtype=np.int64)
+    filled[:] = 0
     bucket_hi = np.empty(start[n_verts], dtype=np.int32)
     bucket_edge = np.empty(start[n_verts], dtype=np.int32)
     last_face = np.empty(start[n_verts], dtype=np.int64)  # of each bucket entry's edge

@@ -20,6 +20,9 @@ from subtrace.runtime.jit import nb
 from subtrace.subdiv import catmark, loop
 
 
+INT32_MAX = 2**31 - 1  # np.iinfo(np.int32).max
+
+
 def subdominant(valence: np.ndarray, quad: bool) -> np.ndarray:
     """Per-level contraction of control edges at a vertex of this valence (at least 1/2)."""
     scheme = catmark if quad else loop
@@ -160,7 +163,10 @@ def _sample_edges(edges, depths, iso, regular, fan_levels, nb_max, edge_depth):
     """Raise the ``iso`` patches to their neighbours' depths and the ``regular`` ones to
     within ``fan_levels`` of them until none changes (in place); fill the deepest patch on
     each side's edge (``nb_max``) and the shallowest per edge."""
-    best = np.full(len(edge_depth), -1, np.int64)
+    # (np.empty and a fill, a constant for int32's largest: a cold render compiles neither
+    # np.full nor np.iinfo for this kernel alone)
+    best = np.empty(len(edge_depth), np.int64)
+    best[:] = -1
     for p in range(len(depths)):
         for k in range(4):
             e = edges[p, k]
@@ -184,7 +190,7 @@ def _sample_edges(edges, depths, iso, regular, fan_levels, nb_max, edge_depth):
                     e = edges[p, k]
                     if e >= 0:
                         best[e] = max(best[e], m)
-    edge_depth[:] = np.iinfo(np.int32).max
+    edge_depth[:] = INT32_MAX
     for p in range(len(depths)):
         for k in range(4):
             e = edges[p, k]
