@@ -59,7 +59,7 @@ def precision_depths(table, eye: np.ndarray) -> np.ndarray:
 
 
 def choose_depths(table, eye: np.ndarray, tol_rad: float, max_depth,
-                  record=None, shells=None, max_faces=None):
+                  record=None, shells=None, max_faces=None, wanted=None):
     """Grid depth of every patch: the smallest n with ``edge_bound * rate^n`` at most
     ``tol_rad`` times the distance from the eye to the patch's shell (:func:`wanted_depths`),
     capped at ``max_depth`` (an int, or (P,) per patch: :func:`precision_depths`); irregular
@@ -69,8 +69,9 @@ def choose_depths(table, eye: np.ndarray, tol_rad: float, max_depth,
     the shells to tighten: an isolated patch's shell becomes the box of what its isolation
     ended in (intersected with its own shell); the others' are left as they are.
     ``max_faces``: the isolations' limit (:func:`~subtrace.patches.isolate.isolated_depths`,
-    each object's; :class:`~subtrace.patches.isolate.IsolationTooLarge` past it)."""
-    n = wanted_depths(table, eye, tol_rad)
+    each object's; :class:`~subtrace.patches.isolate.IsolationTooLarge` past it).
+    ``wanted``: :func:`wanted_depths` of these arguments where the caller has them."""
+    n = wanted_depths(table, eye, tol_rad) if wanted is None else wanted
     n = np.where(np.isfinite(n), n, max_depth)
     depths = np.clip(n, 0, max_depth).astype(np.int32)
     for oid, o in enumerate(table.objects):

@@ -175,8 +175,8 @@ def choose_within_budget(table, eye, tol_rad, max_depth, max_memory, n_pixels,
             record = {}
             shells = table.ray_min.copy(), table.ray_max.copy()
             try:
-                return (choose_depths(table, eye, tol_rad, cap, record, shells, max_faces),
-                        record, shells)
+                return (choose_depths(table, eye, tol_rad, cap, record, shells, max_faces,
+                                      wanted), record, shells)
             except IsolationTooLarge as err:  # (one cap for all: neighbours raise depths)
                 low = cap > err.level
                 cap[low] = err.level
