@@ -30,7 +30,7 @@ def test_cross_tangent_masks_annihilate_constants(is_loop, m):
         total = wv + 2 * wc + wi * sum(limit._cross_edge_weight(True, m, i) for i in range(1, m))
     else:
         wv, wc, wi = limit._catmark_cross_tangent(m)
-        total = wv + 2 * wc + wi * sum(limit._cross_edge_weight(False, m, i) for i in range(1, m))
+        total = wv + 2 * wc + wi * sum(limit._cross_edge_weight(None, m, i) for i in range(1, m))
         if m >= 2:
             total += wi * sum(limit._catmark_cross_face_weight(m, i) for i in range(m))
     # 1e-14: a dozen float64 sines and cosines summed
@@ -220,3 +220,56 @@ def test_corner_normals_are_the_limit_normals(spec, seed):
     if f is not None:
         _, dPdu, dPdv = cage.evaluate(f, uv)
         assert np.all(np.isfinite(dPdu)) and np.all(np.isfinite(dPdv))
+
+
+_SCHEME_PROBE = """
+import json, sys
+from numba.core import event
+compiled = []
+
+
+class Listener(event.Listener):
+    def on_start(self, ev):
+        fn = getattr(ev.data.get("dispatcher"), "py_func", None)
+        compiled.append(getattr(fn, "__module__", "") + "." + getattr(fn, "__qualname__", ""))
+
+    def on_end(self, ev):
+        pass
+
+
+event.register("numba:compile", Listener())
+import numpy as np
+from subtrace import make_cage
+from subtrace.subdiv.limit import limit_points
+from subtrace.subdiv.refine import refine_level, refine_points
+faces = {"catmark": [[0, 1, 2, 3], [3, 2, 4, 5]], "loop": [[0, 1, 2], [0, 2, 3], [2, 4, 3]]}
+pts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0.2], [0, 1, 0], [1, 2, 0.1], [0, 2, 0.3]], float)
+f = faces[sys.argv[1]]
+cage = make_cage(pts, [len(x) for x in f], np.concatenate(f), scheme=sys.argv[1])
+ref = refine_level(cage.base, cage.options)
+q = refine_points(ref, cage.points)
+P, du, dv = limit_points(ref.child, q, cage.options)
+print(json.dumps({"compiled": compiled, "finite": bool(np.isfinite(P).all())}))
+"""
+
+
+@pytest.mark.parametrize("scheme, other", [("catmark", "loop"), ("loop", None)])
+def test_a_catmark_cage_compiles_none_of_loops_masks(tmp_path, scheme, other):
+    """subdiv.refine.scheme_flag: refining and taking limits of a Catmull-Clark cage, in a
+    fresh process on an empty cache, compiles none of Loop's weight functions (the kernels'
+    branches on the scheme are pruned before typing); a Loop cage compiles Loop's."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(SUBTRACE_CACHE_DIR=str(tmp_path / "cache"), PYTHONDONTWRITEBYTECODE="1")
+    proc = subprocess.run([sys.executable, "-c", _SCHEME_PROBE, scheme], capture_output=True,
+                          text=True, env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    assert out["finite"]
+    ours = [c for c in out["compiled"] if c.startswith(f"subtrace.subdiv.{scheme}.")]
+    theirs = [c for c in out["compiled"] if other and c.startswith(f"subtrace.subdiv.{other}.")]
+    assert ours and not theirs, out["compiled"]

@@ -35,7 +35,7 @@ from subtrace.mesh.topology import (
 from subtrace.runtime.jit import callee_njit, leaf_njit, nb
 from subtrace.subdiv import catmark, loop
 from subtrace.subdiv.creases import F0, RULE_CORNER, RULE_CREASE, RULE_SMOOTH, rule_of
-from subtrace.subdiv.refine import refine_level, refine_points
+from subtrace.subdiv.refine import refine_level, refine_points, scheme_flag
 
 # vertex classes
 ISOLATED = 0
@@ -154,7 +154,7 @@ def _closed_form(level, points, options, cls, which, dest, P, du, dv):
         if f is not None:
             fw[n, :n] = f
     _closed_form_kernel(
-        is_loop,
+        scheme_flag(options.scheme),
         level.face_offsets,
         level.face_verts,
         level.edge_verts,
@@ -258,7 +258,7 @@ def _closed_form_kernel(
                 P[r, k] = X[v, k]
             if ne >= 2:
                 # along the first two edges (OpenSubdiv scales Loop's by 3)
-                s = 3.0 if is_loop else 1.0
+                s = 3.0 if is_loop is not None else 1.0
                 a = _far(edge_verts, vert_edges[ea], v)
                 b = _far(edge_verts, vert_edges[ea + 1], v)
                 for k in range(3):
@@ -278,7 +278,7 @@ def _closed_form_kernel(
             for k in range(3):
                 P[r, k] = (4.0 * X[v, k] + X[a, k] + X[b, k]) / 6.0
             # along the crease, towards the leading edge
-            s = 1.5 if is_loop else 0.5
+            s = 1.5 if is_loop is not None else 0.5
             for k in range(3):
                 du[r, k] = s * (X[a, k] - X[b, k])
                 dv[r, k] = 0.0
@@ -286,7 +286,7 @@ def _closed_form_kernel(
             # weights them); an unordered non-manifold ring may list fewer faces than the
             # span claims: those faces are left out
             m = i1 - i0  # faces in the span
-            if is_loop:
+            if is_loop is not None:
                 wv, wc, wi = _loop_cross_tangent(m)
             else:
                 wv, wc, wi = _catmark_cross_tangent(m)
@@ -297,7 +297,7 @@ def _closed_form_kernel(
                 w = wi * _cross_edge_weight(is_loop, m, i)
                 for k in range(3):
                     dv[r, k] += w * X[e, k]
-            if not is_loop and m >= 2:
+            if is_loop is None and m >= 2:
                 for i in range(m):
                     if fa + i0 + i >= fb:
                         break
@@ -310,7 +310,7 @@ def _closed_form_kernel(
                         dv[r, k] += w * X[q, k]
         elif c == SMOOTH:
             n = ne
-            if is_loop:
+            if is_loop is not None:
                 vw, ew, dw = loop.smooth_limit_weights(n)
             else:
                 vw, ew, dw = catmark.smooth_limit_weights(n)
@@ -322,7 +322,7 @@ def _closed_form_kernel(
                 e = _far(edge_verts, vert_edges[ea + i], v)
                 # the second tangent mask is the first rotated by one ring position
                 _add3(P, du, dv, r, X, e, ew, tw[n, i], tw[n, (i - 1 + n) % n])
-                if not is_loop:
+                if is_loop is None:
                     f = vert_faces[fa + i]
                     kk = vert_face_corner[fa + i]
                     off = face_offsets[f]
@@ -372,7 +372,7 @@ def _loop_cross_tangent(m):
 @callee_njit
 def _cross_edge_weight(is_loop, m, i):
     """Relative weight of interior edge i of an m-face span (see the masks above)."""
-    if is_loop:
+    if is_loop is not None:
         return 1.0 if m <= 3 else math.sin(i * math.pi / m)
     if m == 2:
         return 4.0

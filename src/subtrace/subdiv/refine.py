@@ -56,6 +56,14 @@ def refine_level(parent: Level, options: Options) -> Refinement:
     return Refinement(parent, child, options, edge_child, vert_child)
 
 
+def scheme_flag(scheme: str):
+    """The scheme as the subdivision kernels take it: True for Loop, None for Catmull-Clark.
+    Not a bool: Numba prunes a branch on an argument that is None before typing it, so a
+    Catmull-Clark render compiles these kernels without Loop's masks (as
+    ``trace.bezier.loop_flag`` does for the trace kernel); a Loop render compiles both."""
+    return True if scheme == "loop" else None
+
+
 def refine_points(ref: Refinement, points: np.ndarray) -> np.ndarray:
     """Child points of ``ref.child`` from parent ``points`` (n, d) float64."""
     p = ref.parent
@@ -65,7 +73,7 @@ def refine_points(ref: Refinement, points: np.ndarray) -> np.ndarray:
         pts = pts[:, None]
     out = np.empty((ref.child.n_verts, pts.shape[1]), dtype=np.float64)
     _refine_points_kernel(
-        ref.options.scheme == "loop",
+        scheme_flag(ref.options.scheme),
         ref.options.smooth_triangles,
         ref.options.chaikin,
         p.face_offsets,
@@ -294,12 +302,12 @@ def _refine_points_kernel(
     """Child points ``Q`` (child verts, d) from parent points ``P`` (parent verts, d): vertex
     points first (rows 0 .. n_v - 1), then face points (Catmull-Clark), then edge points, as
     OpenSubdiv numbers the child vertices. Face points come first: edge and vertex points
-    use them."""
+    use them. ``is_loop``: :func:`scheme_flag` (True or None)."""
     n_v = len(vert_face_offsets) - 1
     n_f = len(face_offsets) - 1
     face_base = n_v
-    edge_base = n_v if is_loop else n_v + n_f
-    if not is_loop:
+    edge_base = n_v if is_loop is not None else n_v + n_f
+    if is_loop is None:
         _face_points(face_offsets, face_verts, P, Q, face_base)
     _edge_points(is_loop, smooth_triangles, face_offsets, face_verts, edge_verts,
                  edge_face_offsets, edge_faces, edge_face_corner, edge_sharp, edge_child_sharp,
@@ -357,7 +365,7 @@ def _edge_points(is_loop, smooth_triangles, face_offsets, face_verts, edge_verts
             f1 = edge_faces[ua + 1]
             tri0 = face_offsets[f0 + 1] - face_offsets[f0] == 3
             tri1 = face_offsets[f1 + 1] - face_offsets[f1] == 3
-        if is_loop:
+        if is_loop is not None:
             vw, fw = loop.smooth_edge_weights(nfe, tri0, tri1, smooth_triangles)
         else:
             vw, fw = catmark.smooth_edge_weights(nfe, tri0, tri1, smooth_triangles)
@@ -370,7 +378,7 @@ def _edge_points(is_loop, smooth_triangles, face_offsets, face_verts, edge_verts
             acc = vw * (P[v0, c] + P[v1, c])
             for u in range(ua, ub):
                 f = edge_faces[u]
-                if is_loop:
+                if is_loop is not None:
                     k = edge_face_corner[u]
                     opp = face_verts[face_offsets[f] + (k + 2) % 3]
                     acc += fw * P[opp, c]
@@ -422,7 +430,7 @@ def _vertex_points(is_loop, chaikin, edge_verts, edge_sharp, edge_child_sharp,
                 break
             if rule == RULE_SMOOTH or rule == RULE_DART:
                 nfv = fb - fa
-                if is_loop:
+                if is_loop is not None:
                     vw, ew, fw = loop.smooth_vertex_weights(nfv)
                 else:
                     vw, ew, fw = catmark.smooth_vertex_weights(nfv)
@@ -430,7 +438,7 @@ def _vertex_points(is_loop, chaikin, edge_verts, edge_sharp, edge_child_sharp,
                     acc = vw * P[v, c]
                     for i in range(ea, eb):
                         acc += ew * P[_other_end(edge_verts, vert_edges[i], v), c]
-                    if not is_loop:
+                    if is_loop is None:
                         for i in range(fa, fb):
                             acc += fw * Q[face_base + vert_faces[i], c]
                     Q[v, c] += w * acc
