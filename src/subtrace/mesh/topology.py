@@ -156,7 +156,7 @@ def _base_edges(face_offsets, face_verts, n_verts, edge_verts, face_edges, forwa
     """
     n_faces = len(face_offsets) - 1
     # the edges seen so far from each lower vertex: a bucket per vertex, at most its uses
-    # (np.empty and a loop, not np.zeros: a cold render compiles one allocator fewer)
+    # (np.empty and a fill, not np.zeros: a cold render compiles one allocator fewer)
     start = np.empty(n_verts + 1, dtype=np.int64)
     start[:] = 0
     for f in range(n_faces):
