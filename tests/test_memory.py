@@ -176,7 +176,7 @@ def test_tile_lists_over_the_budget_fall_back_to_the_bvh(capsys, tmp_path):
     lists = tiles_bytes(len(tiles.items), len(tiles.off) - 1)
     need = (memory_estimate(table, depths, 160 * 120)
             + config.MEMORY_MEMO_MIN_BYTES * tasks.thread_count())
-    assert lists > 1 << 20
+    assert lists > 1 << 19
     budget = (need + lists // 2) // 1024
     code, err, tight = render(capsys, tmp_path, *argv, "--max-memory", f"{budget}K",
                               name="tight.exr")

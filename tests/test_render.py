@@ -69,8 +69,14 @@ def test_watertight_from_inside_creased_box(tmp_path, tolerance, monkeypatch):
     from subtrace.patches.bspline import smooth_mask
 
     table = build_patch_table([cage])
-    lev = table.objects[0].level
-    assert not smooth_mask(lev, table.face[table.regular]).all()
+    o = table.objects[0]
+    assert not all(smooth_mask(level, faces[table.regular[rows]]).all()
+                   for level, _, rows, faces in o.parts())
+    # the middle quads of the sides and those along the creases are patches of the cage
+    # (level 0) beside the corners' level-1 patches: their shared cage edges are sampled
+    # alike from both levels (``criterion.edge_sampling``)
+    assert len(o.cage_quads) == 6 * 5 and (table.side_shift == 1).any()
+    assert not smooth_mask(cage.base, o.cage_quads).all()
     _check_watertight(mesh, (0.5 * n, 0.45 * n, 0.55 * n), tolerance, monkeypatch)
 
 

@@ -56,8 +56,7 @@ def test_shells_contain_limit_grids(name):
     from its children's one-rings, ``patches/table.py``)."""
     cage = load_shape(name)
     table = build_patch_table([cage])
-    o = table.objects[0]
-    P, _ = build_grids(o.level, o.points, cage.options, table.face, 3)
+    P = _limit_grids(table, 3)
     _assert_inside(P, table)
     if cage.scheme == "loop":  # (the cut is real: the boxes' sides are shorter)
         ray = (table.ray_max - table.ray_min).sum(axis=1)
@@ -75,18 +74,42 @@ def test_regular_loop_triangles_are_found_by_their_nets_boxes():
     table = build_patch_table([cage])
     lo, hi = table.ray_min.copy(), table.ray_max.copy()
     cut_to_loop_nets(table, lo, hi)
-    o = table.objects[0]
-    P, _ = build_grids(o.level, o.points, cage.options, table.face, 2)
-    assert np.all(P >= lo[:, None, :] - 1e-12) and np.all(P <= hi[:, None, :] + 1e-12)
+    _assert_inside(_limit_grids(table, 2), table, (lo, hi))
     ray = (hi - lo).sum(axis=1)
     assert np.median(ray / (table.shell_max - table.shell_min).sum(axis=1)) < 0.45
 
 
-def _assert_inside(P, table):
-    for lo, hi in ((table.shell_min, table.shell_max), (table.ray_min, table.ray_max)):
+def _limit_grids(table, depth):
+    """(points (N,3), patch of each (N,)): the exact limit points of the depth-``depth``
+    grid of every patch of a one-object table; a cage quad patch's from its four level-1
+    children's grids one level less deep (the same points; grids are built at the patch
+    level, where every face is a quad)."""
+    o = table.objects[0]
+    cage = o.cage
+    out, owner = [], []
+    for level, points, rows, faces in o.parts():
+        patches = np.arange(rows.start, rows.stop)
+        if level is cage.base and cage.scheme == "catmark":
+            level, points = cage.level_topology(1), cage.refine(1).points
+            faces = (cage.base.face_offsets[faces][:, None] + np.arange(4)).ravel()
+            patches, depth_here = np.repeat(patches, 4), depth - 1
+        else:
+            depth_here = depth
+        P, _ = build_grids(level, points, cage.options, faces, depth_here)
+        out.append(P.reshape(-1, 3))
+        owner.append(np.repeat(patches, P.shape[1]))
+    return np.concatenate(out), np.concatenate(owner)
+
+
+def _assert_inside(P, table, boxes=None):
+    """The points ``P`` = (points, patch of each) lie in their patches' ``boxes`` (lo, hi),
+    or (None) in both their shells and their rays' boxes."""
+    pts, owner = P
+    for lo, hi in ([boxes] if boxes is not None else
+                   ((table.shell_min, table.shell_max), (table.ray_min, table.ray_max))):
         assert np.all(lo <= hi)
-        assert np.all(P >= lo[:, None, :] - 1e-12)
-        assert np.all(P <= hi[:, None, :] + 1e-12)
+        assert np.all(pts >= lo[owner] - 1e-12)
+        assert np.all(pts <= hi[owner] + 1e-12)
 
 
 def _perturbed(name, seed):
@@ -107,8 +130,7 @@ def test_shells_contain_limit_of_perturbed_cages(seed, name):
     """Same, for random perturbations of the cage points (any positions are valid)."""
     cage = _perturbed(name, seed)
     table = build_patch_table([cage])
-    o = table.objects[0]
-    P, _ = build_grids(o.level, o.points, cage.options, table.face, 2)
+    P = _limit_grids(table, 2)
     _assert_inside(P, table)
 
 
@@ -139,10 +161,7 @@ def test_isolated_shells_contain_limit_grids(name):
     cage = load_shape(name)
     table, lo, hi, changed = _isolated_shells(cage, 1e-4)
     assert changed.any() == bool((~table.regular).any())
-    o = table.objects[0]
-    P, _ = build_grids(o.level, o.points, cage.options, table.face, 5)
-    assert np.all(P >= lo[:, None, :] - 1e-12)
-    assert np.all(P <= hi[:, None, :] + 1e-12)
+    _assert_inside(_limit_grids(table, 5), table, (lo, hi))
     if changed.any():
         old = np.prod(table.shell_max[changed] - table.shell_min[changed], axis=1)
         new = np.prod(hi[changed] - lo[changed], axis=1)
@@ -158,10 +177,7 @@ def test_isolated_shells_contain_limit_of_perturbed_cages(seed, name, tol_exp):
     stops the isolation at other levels, so other boxes end the union)."""
     cage = _perturbed(name, seed)
     table, lo, hi, _ = _isolated_shells(cage, 10.0**tol_exp)
-    o = table.objects[0]
-    P, _ = build_grids(o.level, o.points, cage.options, table.face, 4)
-    assert np.all(P >= lo[:, None, :] - 1e-12)
-    assert np.all(P <= hi[:, None, :] + 1e-12)
+    _assert_inside(_limit_grids(table, 4), table, (lo, hi))
 
 
 @needs_shared
@@ -170,7 +186,4 @@ def test_isolated_shells_contain_spot():
     cage = subtrace.load_cage(MODELS / "spot_control_mesh.obj")
     table, lo, hi, changed = _isolated_shells(cage, 1e-3)
     assert changed.sum() > 100
-    o = table.objects[0]
-    P, _ = build_grids(o.level, o.points, cage.options, table.face, 4)
-    assert np.all(P >= lo[:, None, :] - 1e-12)
-    assert np.all(P <= hi[:, None, :] + 1e-12)
+    _assert_inside(_limit_grids(table, 4), table, (lo, hi))

@@ -341,7 +341,7 @@ def patch_shading(table, overrides) -> PatchShading:
     specular = np.empty((table.n_patches, 3))
     shininess = np.empty(table.n_patches)
     for oid, o in enumerate(table.objects):
-        sl = slice(o.first_patch, o.first_patch + len(o.patch_faces))
+        sl = slice(o.first_patch, o.first_patch + o.n_patches)
         mats = list(o.cage.materials) + [Material("", DEFAULT_DIFFUSE)]
         mat = table.material[sl]
         pick = np.where(mat >= 0, mat, len(mats) - 1)

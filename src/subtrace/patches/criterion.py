@@ -148,22 +148,27 @@ def edge_sampling(table, depths):
       within ``config.FAN_LEVELS`` of its finest neighbour, so a cell side carries at most
       ``2^FAN_LEVELS`` samples.
     * Loop grids snap a side to the coarsest depth on its edge (``edge_depth``, per edge).
+
+    Depths compare in the units of the edge: a patch of level 1 whose side lies on a side
+    of a cage quad patch (``table.side_shift`` 1) samples half of that cage edge, so its
+    depth ``d`` samples the edge as depth ``d + 1`` of the cage quad does.
     """
     n_e = max(table.n_edges, 1)
     iso = table.is_quad & ~table.regular
     nb_max = np.empty(table.edges.shape, dtype=np.int64)
     edge_depth = np.empty(n_e, dtype=np.int64)
-    _sample_edges(table.edges, depths, iso, table.regular, config.FAN_LEVELS, nb_max,
-                  edge_depth)
+    _sample_edges(table.edges, table.side_shift, depths, iso, table.regular,
+                  config.FAN_LEVELS, nb_max, edge_depth)
     reg_side = np.maximum(depths[table.regular][:, None], nb_max[table.regular])
     return edge_depth, np.ascontiguousarray(reg_side, dtype=np.int64)
 
 
 @nb.njit(cache=True)
-def _sample_edges(edges, depths, iso, regular, fan_levels, nb_max, edge_depth):
+def _sample_edges(edges, shift, depths, iso, regular, fan_levels, nb_max, edge_depth):
     """Raise the ``iso`` patches to their neighbours' depths and the ``regular`` ones to
     within ``fan_levels`` of them until none changes (in place); fill the deepest patch on
-    each side's edge (``nb_max``) and the shallowest per edge."""
+    each side's edge (``nb_max``, in the patch's units) and the shallowest per edge (in
+    the edge's: a patch's depth plus its side's ``shift``)."""
     # (np.empty and a fill, a constant for int32's largest: a cold render compiles neither
     # np.full nor np.iinfo for this kernel alone)
     best = np.empty(len(edge_depth), np.int64)
@@ -172,7 +177,7 @@ def _sample_edges(edges, depths, iso, regular, fan_levels, nb_max, edge_depth):
         for k in range(4):
             e = edges[p, k]
             if e >= 0:
-                best[e] = max(best[e], depths[p])
+                best[e] = max(best[e], depths[p] + shift[p, k])
     changed = True
     while changed:
         changed = False
@@ -183,18 +188,19 @@ def _sample_edges(edges, depths, iso, regular, fan_levels, nb_max, edge_depth):
             for k in range(4):
                 e = edges[p, k]
                 if e >= 0:
-                    m = max(m, best[e] if iso[p] else best[e] - fan_levels)
+                    b = best[e] - shift[p, k]
+                    m = max(m, b if iso[p] else b - fan_levels)
             if m > depths[p]:
                 depths[p] = m
                 changed = True
                 for k in range(4):
                     e = edges[p, k]
                     if e >= 0:
-                        best[e] = max(best[e], m)
+                        best[e] = max(best[e], m + shift[p, k])
     edge_depth[:] = INT32_MAX
     for p in range(len(depths)):
         for k in range(4):
             e = edges[p, k]
-            nb_max[p, k] = best[e] if e >= 0 else -1
+            nb_max[p, k] = best[e] - shift[p, k] if e >= 0 else -1
             if e >= 0:
-                edge_depth[e] = min(edge_depth[e], depths[p])
+                edge_depth[e] = min(edge_depth[e], depths[p] + shift[p, k])

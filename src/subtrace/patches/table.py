@@ -5,7 +5,10 @@ the renderer keeps the faces whose one-ring box reaches the image, ``render.face
 only they and three rings of faces around them are refined to L0.
 
 A patch is a face of level ``L0`` (Catmull-Clark: level 1, where all faces are quads; Loop:
-the cage). The renderer intersects regular patches through their Bezier nets, splits
+the cage), or, on a Catmull-Clark cage, a regular quad of the cage itself
+(:func:`regular_cage_quads`: one bicubic patch where level 1 would make four, as
+OpenSubdiv's adaptive tables do; only the cage's other faces and the rings around them are
+refined to level 1). The renderer intersects regular patches through their Bezier nets, splits
 irregular Catmull-Clark patches into pieces (:mod:`subtrace.patches.isolate`) and refines
 Loop patches into grids of exact limit points (:mod:`subtrace.patches.grids`), on demand. Per patch, flat arrays (P = number of patches):
 
@@ -36,18 +39,21 @@ Loop patches into grids of exact limit points (:mod:`subtrace.patches.grids`), o
   ``rate`` 1/2. The nets are the first rows of a larger store (``nets.base``,
   :func:`net_room`) that the renderer's pieces take over instead of copying them
   (``trace.pools.Growable.adopt``);
-* ``edges`` (P,4) int64 (-1 pads triangles): global id of the L0 edge on each side (side k joins corners k, k+1),
-  used to give both patches of an edge the same sampling.
+* ``edges`` (P,4) int64 (-1 pads triangles): global id of the edge on each side (side k
+  joins corners k, k+1), used to give both patches of an edge the same sampling: the
+  patch level's edge, or the cage's edge for the sides of cage quad patches and for the
+  level-1 sides that lie on one of their edges (``side_shift`` (P,4) int8 is then 1 for
+  the level-1 side: it samples half of the cage edge, ``criterion.edge_sampling``).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from subtrace import config
-from subtrace.mesh.topology import compact, gather
+from subtrace.mesh.topology import compact, gather, gather_index
 from subtrace.patches.basis import TO_BEZIER, net_summary, to_bezier
 from subtrace.patches.bspline import phantom_grids, regular_mask
 from subtrace.patches.criterion import subdominant
@@ -73,6 +79,26 @@ class ObjectPatches:
     patch_faces: np.ndarray  # (p,) int64 faces of L0 that are patches (holes excluded)
     first_patch: int  # global id of this object's first patch
     first_edge: int  # global id of this object's first L0 edge
+    # (Catmull-Clark) the regular quads of the cage that are patches themselves
+    # (:func:`regular_cage_quads`), after those of ``patch_faces``: ``level0`` 0, ``face``
+    # a face of the cage
+    cage_quads: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+    @property
+    def n_patches(self) -> int:
+        return len(self.patch_faces) + len(self.cage_quads)
+
+    def parts(self):
+        """The object's patches by level: [(level, points, slice of the table's patches,
+        their faces in that level)], the patch level's first, then the cage quads'."""
+        n = len(self.patch_faces)
+        out = [(self.level, self.points, slice(self.first_patch, self.first_patch + n),
+                self.patch_faces)]
+        if len(self.cage_quads):
+            out.append((self.cage.base, self.cage.points,
+                        slice(self.first_patch + n, self.first_patch + self.n_patches),
+                        self.cage_quads))
+        return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -91,7 +117,8 @@ class PatchTable:
     rate: np.ndarray  # (P,) float64
     regular: np.ndarray  # (P,) bool: a regular bicubic patch
     nets: np.ndarray  # (R,4,4,3) float64 Bezier nets of the regular patches, in patch order
-    edges: np.ndarray  # (P,4) int64 global L0 edge ids (-1 pads a triangle's 4th side)
+    edges: np.ndarray  # (P,4) int64 global edge ids (-1 pads a triangle's 4th side)
+    side_shift: np.ndarray  # (P,4) int8: the patch's level less its side's edge's level
     is_quad: np.ndarray  # (P,) bool: Catmull-Clark quad (else Loop triangle)
     n_edges: int
     level0: np.ndarray  # (P,) int8: L0 of the patch's object
@@ -122,8 +149,14 @@ def build_patch_table(cages, keep=None, in_view=None) -> PatchTable:
     first_patch = first_edge = 0
     for oid, cage in enumerate(cages):
         L0 = patch_level(cage)
-        lev, pts, faces, base_face, corner = _patch_level(
-            cage, L0, None if keep is None else keep[oid])
+        kept = None if keep is None else keep[oid]
+        quad = cage.scheme == "catmark"
+        # Catmull-Clark: the regular quads of the cage are patches themselves (level 0,
+        # as OpenSubdiv's adaptive patches); only the others are refined to level 1
+        quad_mask = regular_cage_quads(cage) if quad else None
+        if quad_mask is not None and quad_mask.any():
+            kept = ~quad_mask if kept is None else kept & ~quad_mask
+        lev, pts, faces, base_face, corner, parent_edge = _patch_level(cage, L0, kept)
         if in_view is not None and L0 > 0 and len(faces):
             # (every face's at once: each vertex ring's box made once, about 4x faster
             # than a ring per face on the sword's 89,512 patches)
@@ -132,12 +165,26 @@ def build_patch_table(cages, keep=None, in_view=None) -> PatchTable:
             _chaikin_margin(lev, cage.options, lo, hi)
             seen = in_view(lo, hi)
             faces, base_face, corner = faces[seen], base_face[seen], corner[seen]
-        objs.append(ObjectPatches(cage, L0, lev, pts, faces, first_patch, first_edge))
-        quad = cage.scheme == "catmark"
-        parts.append(_object_arrays(cage, L0, lev, pts, faces, base_face, corner, oid,
-                                    first_edge, quad))
-        first_patch += len(faces)
-        first_edge += lev.n_edges
+        part = _object_arrays(cage, L0, lev, pts, faces, base_face, corner, oid, first_edge,
+                              quad)
+        n_edges = lev.n_edges
+        faces0 = np.zeros(0, np.int64)
+        if quad_mask is not None and quad_mask.any():
+            # (a quad of the cage kept: its one-ring box is in view, as its face's)
+            faces0 = np.nonzero(quad_mask & ~cage.base.face_hole if keep is None
+                                else quad_mask & keep[oid] & ~cage.base.face_hole)[0]
+            part0 = _object_arrays(cage, 0, cage.base, cage.points, faces0, faces0,
+                                   np.full(len(faces0), -1, np.int64), oid,
+                                   first_edge + n_edges, quad, regular=True)
+            _share_cage_edges(cage.base, faces0, part, lev, parent_edge, first_edge + n_edges)
+            nets = [part["nets"], part0["nets"]]
+            part = {k: np.concatenate([part[k], part0[k]]) for k in part if k != "nets"}
+            part["nets"] = _with_room(nets, part["is_quad"], part["regular"])
+            n_edges += cage.base.n_edges
+        objs.append(ObjectPatches(cage, L0, lev, pts, faces, first_patch, first_edge, faces0))
+        parts.append(part)
+        first_patch += len(part["face"])
+        first_edge += n_edges
     if len(parts) == 1:
         cat = parts[0]  # already contiguous: no copy of the nets
     else:
@@ -209,7 +256,8 @@ _CUT_RINGS = config.GRID_RINGS + 1
 def _patch_level(cage, L0, keep):
     """The patch level of ``cage`` where the faces ``keep`` (a (F,) bool mask of cage faces,
     or None for all) are: (level, points, patch faces in it, the cage face of each patch,
-    its corner there (-1: the face itself is the patch)). With some faces left out, the
+    its corner there (-1: the face itself is the patch), the cage edge of each edge of the
+    level (-1 inside a cage face; None when L0 is 0)). With some faces left out, the
     level is that of a cut of the cage around the kept faces (``_CUT_RINGS`` rings, the
     faces' relative order kept), refined to L0."""
     base = cage.base
@@ -218,18 +266,30 @@ def _patch_level(cage, L0, keep):
         pts = cage.refine(L0).points
         cut_face = None
         kept = np.arange(base.n_faces, dtype=np.int64)
+        sub_edge = np.arange(base.n_edges, dtype=np.int64)
+        n_corners = len(base.face_verts)
     elif not np.any(keep):
-        return base, cage.points, *(np.zeros(0, np.int64),) * 3
+        return base, cage.points, *(np.zeros(0, np.int64),) * 3, None
     else:
         kept = np.nonzero(keep)[0].astype(np.int64)
         verts = compact(gather(base.face_offsets, base.face_verts, kept), base.n_verts)[0]
         lev, sub_to_base, _, cut_face = extract(base, verts, rings=_CUT_RINGS)
+        # the cage edge of each edge of the cut (its faces' corners are the cage's, in order)
+        sub_edge = np.empty(lev.n_edges, np.int64)
+        sub_edge[lev.face_edges] = base.face_edges[gather_index(base.face_offsets, cut_face)]
+        n_corners = len(lev.face_verts)
         pts = cage.points[sub_to_base]
         for _ in range(L0):
             ref = refine_level(lev, cage.options)
             pts = refine_points(ref, pts)
             lev = ref.child
         kept = np.searchsorted(cut_face, kept)  # in the cut
+    parent_edge = None
+    if L0 == 1:
+        # (refine._split_quads: the halves of edge e of the level above are edges
+        # corners + 2 e and corners + 2 e + 1, the edges before them lie inside faces)
+        parent_edge = np.full(lev.n_edges, -1, np.int64)
+        parent_edge[n_corners:] = np.repeat(sub_edge, 2)
     if L0 == 1:
         # the level-1 children of face c of the cut (or cage) are its corners, in order
         fo = (base.face_offsets if cut_face is None else
@@ -243,7 +303,7 @@ def _patch_level(cage, L0, keep):
         parent, corner, faces = kept, np.full(len(kept), -1, np.int64), kept
     base_face = parent if cut_face is None else cut_face[parent]
     live = ~lev.face_hole[faces]
-    return lev, pts, faces[live], base_face[live], corner[live]
+    return lev, pts, faces[live], base_face[live], corner[live], parent_edge
 
 
 # regular patches converted to Bezier nets per call of _regular_shells' inner kernels: their
@@ -251,9 +311,50 @@ def _patch_level(cage, L0, keep):
 _NET_CHUNK = 64
 
 
-def _object_arrays(cage, L0, lev, pts, faces, F, j, oid, first_edge, quad):
+def regular_cage_quads(cage) -> np.ndarray:
+    """(F,) bool: the faces of a Catmull-Clark cage that are regular bicubic patches as they
+    are (:func:`~subtrace.patches.bspline.regular_mask` on the cage, each corner's faces all
+    quads, as the 16-point grid needs). The limit surface over such a face is the B-spline
+    patch of its 16 points (with phantom points beyond sharp sides), equal to its four
+    level-1 children's: the table takes it as one patch of level 0."""
+    base = cage.base
+    faces = np.arange(base.n_faces, dtype=np.int64)
+    regular = regular_mask(base, cage.options, faces)
+    if not regular.any():
+        return regular
+    quad_face = np.diff(base.face_offsets) == 4
+    around = np.diff(base.vert_face_offsets)
+    # vertices whose faces are all quads
+    quads_around = np.bincount(np.repeat(np.arange(base.n_verts), around),
+                               weights=quad_face[base.vert_faces], minlength=base.n_verts)
+    all_quads = quads_around == around
+    corners = base.face_verts[base.face_offsets[faces[regular]][:, None] + np.arange(4)]
+    regular[regular] = all_quads[corners].all(axis=1)
+    return regular
+
+
+def _share_cage_edges(base, faces0, part, lev, parent_edge, first_cage_edge):
+    """Sides of level-1 patches (``part``, patches of ``lev``) on a cage edge that is also a
+    side of a cage quad patch (``faces0``): given that cage edge's id (``first_cage_edge`` +
+    its index) and a ``side_shift`` of 1, so both sides sample the whole edge alike
+    (``criterion.edge_sampling``; the halves of such an edge are sampled alike too)."""
+    if not len(part["face"]) or parent_edge is None:
+        return
+    shared = np.zeros(base.n_edges, bool)
+    shared[base.face_edges[gather_index(base.face_offsets, faces0)]] = True
+    starts = lev.face_offsets[part["face"]]
+    for side in range(4):
+        cage_edge = parent_edge[lev.face_edges.take(starts + side)]
+        on = cage_edge >= 0
+        on[on] = shared[cage_edge[on]]
+        part["edges"][on, side] = first_cage_edge + cage_edge[on]
+        part["side_shift"][on, side] = 1
+
+
+def _object_arrays(cage, L0, lev, pts, faces, F, j, oid, first_edge, quad, regular=None):
     """The table's per-patch arrays of one object (its patches ``faces`` of level ``lev``,
-    each the child at corner ``j`` of cage face ``F``; see :func:`_patch_level`)."""
+    each the child at corner ``j`` of cage face ``F``; see :func:`_patch_level`).
+    ``regular``: True when every patch is known to be a regular quad (the cage's own)."""
     k = 4 if quad else 3
     n = len(faces)
     # ptex mapping of each patch
@@ -280,7 +381,8 @@ def _object_arrays(cage, L0, lev, pts, faces, F, j, oid, first_edge, quad):
     ebound = np.empty(n)
     rate = np.empty(n)
     # regular quads: bicubic patches with a tight hull and an exact derivative bound
-    regular = regular_mask(lev, cage.options, faces)
+    regular = (np.ones(n, bool) if regular is True else
+               regular_mask(lev, cage.options, faces))
     rows = np.nonzero(regular)[0]
     room = net_room(np.full(n, quad), regular)
     nets = np.empty((len(rows) + room, 4, 4, 3))[: len(rows)]  # (see _with_room)
@@ -318,6 +420,7 @@ def _object_arrays(cage, L0, lev, pts, faces, F, j, oid, first_edge, quad):
         regular=regular,
         nets=nets,
         edges=edges,
+        side_shift=np.zeros((n, 4), np.int8),
         is_quad=np.full(n, quad, dtype=bool),
         level0=np.full(n, L0, np.int8),
         material=material,
