@@ -766,6 +766,30 @@ def test_byte_scanner_agrees_with_the_statement_reader(tmp_path, data):
         assert_same_data(fast, slow)
 
 
+def test_slow_numbers_round_as_float_does():
+    """The numbers the scanner leaves over (more digits than it keeps, large exponents) are
+    converted in chunks of byte strings: bit for bit float()'s, across a chunk's end, with
+    widths that differ within a chunk; None for a token that is not a number."""
+    from subtrace.io import obj as obj_module
+
+    rng = np.random.default_rng(7)
+    bits = rng.integers(0, 2**63 - 1, 40000, dtype=np.int64)
+    doubles = bits.view(np.float64)
+    doubles = doubles[np.isfinite(doubles)]
+    tokens = [repr(x) for x in doubles.tolist()] + [f"{x:.25e}" for x in doubles[:5000]]
+    tokens += ["0." + "9" * 40, "-" + "1" * 30 + "e-330", "4.9406564584124654e-324",
+               "2.4703282292062328e-324", "2.4703282292062327e-324", "1.7976931348623157e308",
+               "+1.5", ".5", "5.", "-.5e3", "1E5", "0.00072475878906250006"]
+    data = " ".join(tokens).encode()
+    ends = np.cumsum([len(t) + 1 for t in tokens]) - 1
+    spans = np.stack([ends - [len(t) for t in tokens], ends], axis=1).astype(np.int64)
+    assert len(tokens) > obj_module._SLOW_CHUNK
+    got = obj_module.slow_numbers(data, spans)
+    want = np.array([float(t) for t in tokens])
+    assert got.view(np.int64).tolist() == want.view(np.int64).tolist()
+    assert obj_module.slow_numbers(b"1.5 x", np.array([[0, 3], [4, 5]])) is None
+
+
 _COLD_READ = """
 import json, sys
 from subtrace.io import obj_scan

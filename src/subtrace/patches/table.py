@@ -12,7 +12,7 @@ refined to level 1). The renderer intersects regular patches through their Bezie
 irregular Catmull-Clark patches into pieces (:mod:`subtrace.patches.isolate`) and refines
 Loop patches into grids of exact limit points (:mod:`subtrace.patches.grids`), on demand. Per patch, flat arrays (P = number of patches):
 
-* ``object_id``, ``face`` (face of the object's L0 level), ``ptex`` with ``ptex_uv0`` (P,2)
+* ``object_id``, ``face`` (face of the object's L0 level, or of the cage for a cage quad), ``ptex`` with ``ptex_uv0`` (P,2)
   and ``ptex_scale``: patch parameter ``(s, t)`` is ptex ``uv0 + scale * (s, t)``;
 * ``shell_min``/``shell_max`` (P,3): the axis-aligned box of the control points of the faces
   sharing a vertex with the patch. The limit surface over a face depends only on those
@@ -105,7 +105,7 @@ class ObjectPatches:
 class PatchTable:
     objects: tuple  # ObjectPatches per object
     object_id: np.ndarray  # (P,) int32
-    face: np.ndarray  # (P,) int64 face in the object's L0
+    face: np.ndarray  # (P,) int64 face in the object's L0 (a cage quad patch's: of the cage)
     ptex: np.ndarray  # (P,) int32
     ptex_uv0: np.ndarray  # (P,2) float64
     ptex_scale: np.ndarray  # (P,) float64
