@@ -8,7 +8,6 @@ import pytest
 from shared_data import MODELS, SHAPES, needs_shared, small_scene
 
 import subtrace
-from subtrace import config
 from subtrace.patches.table import build_patch_table
 from subtrace.render import render_scene
 

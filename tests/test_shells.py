@@ -10,7 +10,6 @@ from hypothesis import strategies as st
 from shared_data import MODELS, load_shape, needs_shared
 
 import subtrace
-from subtrace import config
 from subtrace.patches.grids import build_grids, leaf_corners
 from subtrace.patches.table import build_patch_table
 
