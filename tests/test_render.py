@@ -142,6 +142,8 @@ def test_hidden_object_is_not_refined(tmp_path):
     cages[1] = subtrace.make_cage(
         cages[1].points - [0.0, 0.0, 3.0], cages[1].face_sizes, cages[1].face_verts
     )
+    # (Spot's patches include quads of the cage itself, level 0, beside level-1 ones)
+    assert len(build_patch_table([cages[1]]).objects[0].cage_quads) > 0
     res = render_scene(scene, cages=cages)
     assert np.all(res.channels["object_id"] == 0)
     assert res.refined_objects.size > 0
