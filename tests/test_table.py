@@ -163,3 +163,22 @@ def test_control_grids_on_two_tasks_equal_one(monkeypatch):
     finally:
         tasks.set_threads(None)
     np.testing.assert_array_equal(two, one)
+
+
+def test_cut_and_cage_quads_made_once_per_cage():
+    """A table of the same faces again (a turntable's next frame) takes the level-1 cut
+    and the cage quads the cage keeps, and is the same table; other faces make a new cut."""
+    cage = _load("catmark_hole_test2")
+    first = build_patch_table([cage])
+    assert len(first.objects[0].cage_quads) and len(first.objects[0].patch_faces)
+    again = build_patch_table([cage])
+    assert again.objects[0].level is first.objects[0].level
+    for name in ("face", "edges", "side_shift", "shell_min", "nets", "ptex_uv0"):
+        assert getattr(again, name).tobytes() == getattr(first, name).tobytes(), name
+    keep = np.ones(cage.n_faces, bool)
+    keep[0] = False
+    other = build_patch_table([cage], [keep])
+    assert other.objects[0].level is not first.objects[0].level
+    fresh = build_patch_table([_load("catmark_hole_test2")], [keep])
+    for name in ("face", "edges", "shell_min", "nets"):
+        assert getattr(other, name).tobytes() == getattr(fresh, name).tobytes(), name

@@ -48,6 +48,7 @@ Loop patches into grids of exact limit points (:mod:`subtrace.patches.grids`), o
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -272,17 +273,7 @@ def _patch_level(cage, L0, keep):
         return base, cage.points, *(np.zeros(0, np.int64),) * 3, None
     else:
         kept = np.nonzero(keep)[0].astype(np.int64)
-        verts = compact(gather(base.face_offsets, base.face_verts, kept), base.n_verts)[0]
-        lev, sub_to_base, _, cut_face = extract(base, verts, rings=_CUT_RINGS)
-        # the cage edge of each edge of the cut (its faces' corners are the cage's, in order)
-        sub_edge = np.empty(lev.n_edges, np.int64)
-        sub_edge[lev.face_edges] = base.face_edges[gather_index(base.face_offsets, cut_face)]
-        n_corners = len(lev.face_verts)
-        pts = cage.points[sub_to_base]
-        for _ in range(L0):
-            ref = refine_level(lev, cage.options)
-            pts = refine_points(ref, pts)
-            lev = ref.child
+        lev, pts, sub_edge, n_corners, cut_face = _cut_level(cage, L0, kept)
         kept = np.searchsorted(cut_face, kept)  # in the cut
     parent_edge = None
     if L0 == 1:
@@ -306,6 +297,32 @@ def _patch_level(cage, L0, keep):
     return lev, pts, faces[live], base_face[live], corner[live], parent_edge
 
 
+def _cut_level(cage, L0, kept):
+    """The cut of ``cage`` around its faces ``kept`` (``_CUT_RINGS`` rings) refined to
+    ``L0``: (level, points, the cage edge of each edge of the cut before refinement, the
+    cut's corners, the cage face of each face of the cut). The last cut made is kept on the
+    cage (its cache, as its uniform levels are): the frames of a turntable that keep the
+    same faces, as a whole cage in view with its regular quads left out does, make it once."""
+    key = (L0, hashlib.blake2b(kept.tobytes(), digest_size=16).digest())
+    last = cage._cache.get("cut")
+    if last is not None and last[0] == key:
+        return last[1]
+    base = cage.base
+    verts = compact(gather(base.face_offsets, base.face_verts, kept), base.n_verts)[0]
+    lev, sub_to_base, _, cut_face = extract(base, verts, rings=_CUT_RINGS)
+    # the cage edge of each edge of the cut (its faces' corners are the cage's, in order)
+    sub_edge = np.empty(lev.n_edges, np.int64)
+    sub_edge[lev.face_edges] = base.face_edges[gather_index(base.face_offsets, cut_face)]
+    n_corners = len(lev.face_verts)
+    pts = cage.points[sub_to_base]
+    for _ in range(L0):
+        ref = refine_level(lev, cage.options)
+        pts = refine_points(ref, pts)
+        lev = ref.child
+    cage._cache["cut"] = (key, (lev, pts, sub_edge, n_corners, cut_face))
+    return lev, pts, sub_edge, n_corners, cut_face
+
+
 # regular patches converted to Bezier nets per call of _regular_shells' inner kernels: their
 # B-spline points stay in cache
 _NET_CHUNK = 64
@@ -316,7 +333,14 @@ def regular_cage_quads(cage) -> np.ndarray:
     are (:func:`~subtrace.patches.bspline.regular_mask` on the cage, each corner's faces all
     quads, as the 16-point grid needs). The limit surface over such a face is the B-spline
     patch of its 16 points (with phantom points beyond sharp sides), equal to its four
-    level-1 children's: the table takes it as one patch of level 0."""
+    level-1 children's: the table takes it as one patch of level 0. Made once per cage
+    (kept in its cache; not to be written)."""
+    if "cage_quads" not in cage._cache:
+        cage._cache["cage_quads"] = _regular_cage_quads(cage)
+    return cage._cache["cage_quads"]
+
+
+def _regular_cage_quads(cage) -> np.ndarray:
     base = cage.base
     faces = np.arange(base.n_faces, dtype=np.int64)
     regular = regular_mask(base, cage.options, faces)
