@@ -82,3 +82,83 @@ def test_relations_match_the_oracle_on_models_and_shapes(path):
     if len(offsets) > 3000:
         pytest.skip("the ring oracle is plain Python: large meshes take too long")
     check_level(len(data.points), offsets, data.face_verts)
+
+
+def _tags_with_the_kernel(level, boundary):
+    """What tag_base_level makes of ``level`` with no tags, the tagging kernel always run."""
+    from subtrace.mesh.topology import _tag_kernel
+
+    edge_sharp = np.zeros(level.n_edges, np.float32)
+    vert_sharp = np.zeros(level.n_verts, np.float32)
+    face_hole = np.zeros(level.n_faces, bool)
+    vert_nonman = ~level.vert_manifold & (np.diff(level.vert_face_offsets) > 0)
+    vert_nonman |= np.diff(level.vert_face_offsets) == 0
+    _tag_kernel(level.vert_face_offsets, level.vert_faces, level.vert_edge_offsets,
+                level.vert_edges, np.diff(level.edge_face_offsets).astype(np.int64),
+                level.edge_nonmanifold, vert_nonman, edge_sharp, vert_sharp, face_hole, boundary)
+    return edge_sharp, vert_sharp, face_hole, level.vert_manifold & ~vert_nonman
+
+
+def _untagged_level(n_verts, face_offsets, face_verts):
+    edge_verts, face_edges, forward = base_edges(face_offsets, face_verts, n_verts)
+    return build_level(n_verts, face_offsets, face_verts, edge_verts, face_edges, forward,
+                       np.zeros(len(edge_verts), np.float32), np.zeros(n_verts, np.float32),
+                       np.zeros(len(face_offsets) - 1, bool))
+
+
+def _check_tags(level):
+    from subtrace.mesh.topology import Options, tag_base_level
+
+    empty = np.zeros(0, np.int64)
+    for boundary in (0, 1, 2):
+        got = tag_base_level(level, Options(boundary=boundary), empty.reshape(0, 2),
+                             np.zeros(0, np.float32), empty, np.zeros(0, np.float32), empty)
+        want = _tags_with_the_kernel(level, boundary)
+        for name, array in zip(("edge_sharpness", "vert_sharpness", "face_hole",
+                                "vert_manifold"), want):
+            assert np.array_equal(getattr(got, name), array), (boundary, name)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(mesh=face_lists())
+def test_tags_without_the_kernel_only_where_it_changes_nothing(mesh):
+    """tag_base_level leaves its kernel out on a closed manifold level (every edge between
+    two faces): on random face lists, open, non-manifold or closed, in every boundary
+    mode, it gives what the kernel gives."""
+    _check_tags(_untagged_level(*mesh))
+
+
+def test_tags_of_closed_and_open_cages():
+    """The same on a closed cube (the kernel left out) and the cube with a face removed
+    (boundary edges made infinitely sharp by the kernel)."""
+    cube = np.array([[0, 1, 2, 3], [4, 7, 6, 5], [0, 4, 5, 1], [1, 5, 6, 2], [2, 6, 7, 3],
+                     [3, 7, 4, 0]], np.int32)
+    for faces in (cube, cube[1:]):
+        offsets = np.arange(0, 4 * len(faces) + 1, 4, dtype=np.int64)
+        level = _untagged_level(8, offsets, faces.ravel())
+        _check_tags(level)
+    assert (_tags_with_the_kernel(level, 2)[0] > 0).any()  # the open one was sharpened
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(mesh=face_lists(), data=st.data())
+def test_child_sharpness_without_semi_sharp_edges_is_the_kernels(mesh, data):
+    """Refinement leaves its sharpness kernel out when no edge is semi-sharp (every edge 0
+    or infinitely sharp): the halves are then what the kernel gives, under either crease
+    rule; with a semi-sharp edge the kernel runs."""
+    import dataclasses
+
+    from subtrace.mesh.topology import INF_SHARP
+    from subtrace.subdiv.refine import _child_edge_sharpness, _child_edge_sharpness_kernel
+
+    level = _untagged_level(*mesh)
+    values = [0.0, float(INF_SHARP), 12.0] + ([1.5] if data.draw(st.booleans()) else [])
+    sharp = np.array(data.draw(st.lists(st.sampled_from(values), min_size=level.n_edges,
+                                        max_size=level.n_edges)), np.float32)
+    level = dataclasses.replace(level, edge_sharpness=sharp)
+    for chaikin in (False, True):
+        want = np.empty((level.n_edges, 2), np.float32)
+        _child_edge_sharpness_kernel(level.edge_verts, sharp, level.vert_edge_offsets,
+                                     level.vert_edges, chaikin, want)
+        got = _child_edge_sharpness(level, chaikin)
+        assert got.dtype == np.float32 and np.array_equal(got, want), chaikin

@@ -504,19 +504,24 @@ def tag_base_level(
     vert_nonman = ~level.vert_manifold & (np.diff(level.vert_face_offsets) > 0)
     # isolated vertices (no faces) are non-manifold in OpenSubdiv too
     vert_nonman |= np.diff(level.vert_face_offsets) == 0
-    _tag_kernel(
-        level.vert_face_offsets,
-        level.vert_faces,
-        level.vert_edge_offsets,
-        level.vert_edges,
-        n_uses.astype(np.int64),
-        level.edge_nonmanifold,
-        vert_nonman,
-        edge_sharp,
-        vert_sharp,
-        face_hole,
-        options.boundary,
-    )
+    # (a closed manifold cage, every edge between two faces: the kernel would change
+    # nothing, so it is not run, loaded or, on a cold cache, compiled)
+    closed = (np.all(n_uses == 2) and not np.any(level.edge_nonmanifold)
+              and not np.any(vert_nonman))
+    if not closed:
+        _tag_kernel(
+            level.vert_face_offsets,
+            level.vert_faces,
+            level.vert_edge_offsets,
+            level.vert_edges,
+            n_uses.astype(np.int64),
+            level.edge_nonmanifold,
+            vert_nonman,
+            edge_sharp,
+            vert_sharp,
+            face_hole,
+            options.boundary,
+        )
     return Level(
         **{
             **{f: getattr(level, f) for f in level.__dataclass_fields__},

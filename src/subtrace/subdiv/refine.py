@@ -126,8 +126,13 @@ def _child_edge_sharpness_kernel(edge_verts, edge_sharp, vert_edge_offsets, vert
 
 def _child_edge_sharpness(level: Level, chaikin: bool) -> np.ndarray:
     out = np.empty((level.n_edges, 2), dtype=np.float32)
-    if not np.any(level.edge_sharpness > 0):
-        out[:] = 0
+    s = level.edge_sharpness
+    if not np.any((s > 0) & (s < INF_SHARP)):
+        # no semi-sharp edge: under either rule an infinitely sharp edge's halves stay so
+        # and the others smooth (creases.child_edge_sharpness_at_vertex), with no kernel
+        # to run, load or (on a cold cache) compile: cages with boundaries or infinitely
+        # sharp creases alone, and the isolation's stencil meshes
+        out[:] = np.where(s >= INF_SHARP, INF_SHARP, np.float32(0.0))[:, None]
         return out
     _child_edge_sharpness_kernel(
         level.edge_verts,
