@@ -84,12 +84,12 @@ def test_relations_match_the_oracle_on_models_and_shapes(path):
     check_level(len(data.points), offsets, data.face_verts)
 
 
-def _tags_with_the_kernel(level, boundary):
-    """What tag_base_level makes of ``level`` with no tags, the tagging kernel always run."""
+def _tags_with_the_kernel(level, boundary, edge_sharp, vert_sharp):
+    """What tag_base_level makes of ``level`` tagged with these sharpnesses (per edge, per
+    vertex), the tagging kernel always run."""
     from subtrace.mesh.topology import _tag_kernel
 
-    edge_sharp = np.zeros(level.n_edges, np.float32)
-    vert_sharp = np.zeros(level.n_verts, np.float32)
+    edge_sharp, vert_sharp = edge_sharp.copy(), vert_sharp.copy()
     face_hole = np.zeros(level.n_faces, bool)
     vert_nonman = ~level.vert_manifold & (np.diff(level.vert_face_offsets) > 0)
     vert_nonman |= np.diff(level.vert_face_offsets) == 0
@@ -106,38 +106,72 @@ def _untagged_level(n_verts, face_offsets, face_verts):
                        np.zeros(len(face_offsets) - 1, bool))
 
 
-def _check_tags(level):
+def _check_tags(level, seed=0):
+    """tag_base_level equals the kernel's tagging in every boundary mode, with crease and
+    corner tags on random edges and vertices (boundary ones included)."""
     from subtrace.mesh.topology import Options, tag_base_level
 
-    empty = np.zeros(0, np.int64)
+    rng = np.random.default_rng(seed)
+    # (tags name an edge by its two vertices: only edges whose pair is their own)
+    pairs = np.sort(level.edge_verts, axis=1)
+    _, first, count = np.unique(pairs, axis=0, return_index=True, return_counts=True)
+    own = np.zeros(level.n_edges, bool)
+    own[first[count == 1]] = True
+    creased = np.nonzero((rng.random(level.n_edges) < 0.3) & own)[0]
+    cornered = np.nonzero(rng.random(level.n_verts) < 0.3)[0]
+    crease_s = rng.choice([0.5, 2.0, 10.0], len(creased)).astype(np.float32)
+    corner_s = rng.choice([1.0, 10.0], len(cornered)).astype(np.float32)
+    edge_sharp = np.zeros(level.n_edges, np.float32)
+    edge_sharp[creased] = crease_s
+    vert_sharp = np.zeros(level.n_verts, np.float32)
+    vert_sharp[cornered] = corner_s
     for boundary in (0, 1, 2):
-        got = tag_base_level(level, Options(boundary=boundary), empty.reshape(0, 2),
-                             np.zeros(0, np.float32), empty, np.zeros(0, np.float32), empty)
-        want = _tags_with_the_kernel(level, boundary)
+        got = tag_base_level(level, Options(boundary=boundary), level.edge_verts[creased],
+                             crease_s, cornered, corner_s, np.zeros(0, np.int64))
+        want = _tags_with_the_kernel(level, boundary, edge_sharp, vert_sharp)
         for name, array in zip(("edge_sharpness", "vert_sharpness", "face_hole",
                                 "vert_manifold"), want):
             assert np.array_equal(getattr(got, name), array), (boundary, name)
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(mesh=face_lists())
-def test_tags_without_the_kernel_only_where_it_changes_nothing(mesh):
-    """tag_base_level leaves its kernel out on a closed manifold level (every edge between
-    two faces): on random face lists, open, non-manifold or closed, in every boundary
-    mode, it gives what the kernel gives."""
-    _check_tags(_untagged_level(*mesh))
+@given(mesh=face_lists(), seed=st.integers(0, 2**32 - 1))
+def test_tags_without_the_kernel_are_the_kernels(mesh, seed):
+    """tag_base_level leaves its kernel out on manifold cages outside boundary mode "none"
+    (it sharpens their boundary edges and, in edge-and-corner mode, their one-face corners
+    itself): on random face lists, manifold or not, open or closed, with random crease and
+    corner tags, in every boundary mode, it gives what the kernel gives."""
+    _check_tags(_untagged_level(*mesh), seed)
 
 
 def test_tags_of_closed_and_open_cages():
-    """The same on a closed cube (the kernel left out) and the cube with a face removed
-    (boundary edges made infinitely sharp by the kernel)."""
+    """The same on a closed cube and on the cube with a face removed (its boundary edges
+    made infinitely sharp, its corners too in edge-and-corner mode), and the shortcut is
+    taken there: the kernel does not run."""
+    from unittest import mock
+
+    from subtrace.mesh import topology
+
     cube = np.array([[0, 1, 2, 3], [4, 7, 6, 5], [0, 4, 5, 1], [1, 5, 6, 2], [2, 6, 7, 3],
                      [3, 7, 4, 0]], np.int32)
-    for faces in (cube, cube[1:]):
+    strip = np.array([[0, 1, 4, 3], [1, 2, 5, 4]], np.int32)  # a corner of one face: 0
+    for n_verts, faces in ((8, cube), (8, cube[1:]), (6, strip)):
         offsets = np.arange(0, 4 * len(faces) + 1, 4, dtype=np.int64)
-        level = _untagged_level(8, offsets, faces.ravel())
+        level = _untagged_level(n_verts, offsets, faces.ravel())
         _check_tags(level)
-    assert (_tags_with_the_kernel(level, 2)[0] > 0).any()  # the open one was sharpened
+        with mock.patch.object(topology, "_tag_kernel", side_effect=AssertionError):
+            for boundary in (1, 2):
+                tagged = topology.tag_base_level(
+                    level, topology.Options(boundary=boundary), np.zeros((0, 2), np.int64),
+                    np.zeros(0, np.float32), np.zeros(0, np.int64), np.zeros(0, np.float32),
+                    np.zeros(0, np.int64))
+        assert (tagged.edge_sharpness > 0).any() == (len(faces) < 6)
+    # in edge-and-corner mode the strip's one-face corners are sharpened
+    tagged = topology.tag_base_level(level, topology.Options(boundary=1),
+                                     np.zeros((0, 2), np.int64), np.zeros(0, np.float32),
+                                     np.zeros(0, np.int64), np.zeros(0, np.float32),
+                                     np.zeros(0, np.int64))
+    assert np.count_nonzero(tagged.vert_sharpness) == 4
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -504,11 +504,17 @@ def tag_base_level(
     vert_nonman = ~level.vert_manifold & (np.diff(level.vert_face_offsets) > 0)
     # isolated vertices (no faces) are non-manifold in OpenSubdiv too
     vert_nonman |= np.diff(level.vert_face_offsets) == 0
-    # (a closed manifold cage, every edge between two faces: the kernel would change
-    # nothing, so it is not run, loaded or, on a cold cache, compiled)
-    closed = (np.all(n_uses == 2) and not np.any(level.edge_nonmanifold)
-              and not np.any(vert_nonman))
-    if not closed:
+    if (options.boundary != BOUNDARY_NONE and not np.any(level.edge_nonmanifold)
+            and not np.any(vert_nonman)):
+        # a manifold cage outside boundary mode "none": what the kernel does comes to
+        # its steps 2 and 3 below for boundary edges and one-face corners, done here
+        # without the kernel being run, loaded or, on a cold cache, compiled
+        edge_sharp[n_uses < 2] = INF_SHARP
+        if options.boundary == BOUNDARY_EDGE_AND_CORNER:
+            corner = ((np.diff(level.vert_face_offsets) == 1)
+                      & (np.diff(level.vert_edge_offsets) == 2))
+            vert_sharp[corner] = INF_SHARP
+    else:
         _tag_kernel(
             level.vert_face_offsets,
             level.vert_faces,
