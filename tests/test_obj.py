@@ -779,7 +779,8 @@ def test_slow_numbers_round_as_float_does():
     tokens = [repr(x) for x in doubles.tolist()] + [f"{x:.25e}" for x in doubles[:5000]]
     tokens += ["0." + "9" * 40, "-" + "1" * 30 + "e-330", "4.9406564584124654e-324",
                "2.4703282292062328e-324", "2.4703282292062327e-324", "1.7976931348623157e308",
-               "+1.5", ".5", "5.", "-.5e3", "1E5", "0.00072475878906250006"]
+               "+1.5", ".5", "5.", "-.5e3", "1E5", "0.00072475878906250006",
+               "0." + "3" * 500 + "e2", "1" * 400]  # (tokens longer than a chunk's width)
     data = " ".join(tokens).encode()
     ends = np.cumsum([len(t) + 1 for t in tokens]) - 1
     spans = np.stack([ends - [len(t) for t in tokens], ends], axis=1).astype(np.int64)

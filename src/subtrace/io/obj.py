@@ -220,8 +220,10 @@ def _runs_to_array(runs: list, num_faces: int, ids: dict) -> np.ndarray:
     return out
 
 
-# numbers converted per pass of :func:`slow_numbers` (its byte matrix and index stay small)
+# numbers converted per pass of :func:`slow_numbers` (its byte matrix and index stay small),
+# and the longest converted so (longer ones, rare, one by one)
 _SLOW_CHUNK = 1 << 15
+_SLOW_WIDTH = 64
 
 
 def slow_numbers(data: bytes, spans: np.ndarray):
@@ -232,16 +234,22 @@ def slow_numbers(data: bytes, spans: np.ndarray):
     converts in a fraction of a second and a few MB, where a list of them took 0.2 GB."""
     buf = np.frombuffer(data, dtype=np.uint8)
     out = np.empty(len(spans))
-    for s in range(0, len(spans), _SLOW_CHUNK):
-        a, b = spans[s:s + _SLOW_CHUNK, 0], spans[s:s + _SLOW_CHUNK, 1]
-        width = int((b - a).max())
-        cols = np.arange(width)
-        chars = buf[np.minimum(a[:, None] + cols, len(buf) - 1)]
-        chars[cols >= (b - a)[:, None]] = 0  # (a byte string ends at its first NUL)
-        try:
-            out[s:s + len(a)] = chars.view(f"S{width}").ravel().astype(np.float64)
-        except ValueError:
-            return None
+    starts, ends = spans[:, 0], spans[:, 1]
+    long = np.nonzero(ends - starts > _SLOW_WIDTH)[0]
+    try:
+        for k in long.tolist():
+            out[k] = float(data[starts[k]:ends[k]])
+        short = np.nonzero(ends - starts <= _SLOW_WIDTH)[0]
+        for s in range(0, len(short), _SLOW_CHUNK):
+            rows = short[s:s + _SLOW_CHUNK]
+            a, b = starts[rows], ends[rows]
+            width = int((b - a).max())
+            cols = np.arange(width)
+            chars = buf[np.minimum(a[:, None] + cols, len(buf) - 1)]
+            chars[cols >= (b - a)[:, None]] = 0  # (a byte string ends at its first NUL)
+            out[rows] = chars.view(f"S{width}").ravel().astype(np.float64)
+    except ValueError:
+        return None
     return out
 
 
