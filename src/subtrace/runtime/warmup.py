@@ -400,7 +400,9 @@ def _stages(folder: Path) -> list[list[list[list[str]]]]:
 
     first = [["render", *small, "-o", str(folder / "default.exr")]]
     queries = [*intersect(sample_cage_path()), *intersect(tris),
-               ["info", str(tris), "--level", "1"], ["info", str(creased), "--level", "2"]]
+               ["info", str(tris), "--level", "1"],
+               # (boundary "none": the tagging kernel, which cages of the other modes skip)
+               ["info", str(creased), "--level", "2", "--boundary", "none"]]
     renders = [["render", str(tris), *small, "--ao", "4", "-o", str(folder / "loop.exr")],
                ["render", str(creased), *small, "-o", str(folder / "creased.exr")],
                ["render", *small, "--accel", "bvh", "--ao", "4", "-o", str(folder / "bvh.exr")],
