@@ -205,19 +205,22 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
                        table.shell_max[reg])
     build_loop_regular(table, depths, edge_depth, iso)
     hits = hit_arrays(n_rays)
-    request = np.empty(n_rays, dtype=np.int32)
-    tested = np.empty(n_rays, dtype=np.int32)  # (round 0 writes every ray's entries)
+    request = np.empty(n_rays, dtype=np.int32)  # (round 0 writes every ray's entry)
+    # the micro-triangles each thread's rays built (each chunk of rays counts what its own
+    # memo built: the sum is the same on any threads)
+    tested = np.zeros(len(memos.m), np.int64)
     cands = candidate_lists(n_rays, table.n_patches)
-    rays = np.arange(n_rays, dtype=np.int64)
+    rays = None  # round 0: every pixel's ray
     round_no = 0
     loop = table_loop_flag(table)  # (None: a kernel without the Loop descents)
-    while len(rays):
+    while rays is None or len(rays):
         t0 = time.perf_counter()
         trace_round(rays, frame, width, round_no, bvh, tiles, chosen.shell_min,
                     chosen.shell_max, iso.view(), memos.views(len(iso.a["kind"])), cands,
                     config.TRI_SLACK, hits, request, tested, loop)
         stats.time_trace += time.perf_counter() - t0
-        rays = rays[request[rays] >= 0]  # the rays that asked: traced again
+        # the rays that asked: traced again
+        rays = np.flatnonzero(request >= 0) if rays is None else rays[request[rays] >= 0]
         if progress is not None:
             progress(n_rays - len(rays), n_rays, f"round {round_no + 1}")
         if not len(rays):
@@ -238,7 +241,6 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
         round_no += 1
     stats.rounds = round_no + 1
     memos.finish(stats)
-    # (each chunk of rays counts what its own memo built: the same on any thread)
     stats.micro_triangles += int(tested.sum())
     # regular patches count as refined once a ray has descended into them
     first = (iso.a["round"] < 0) & (iso.a["touched"] > 0)

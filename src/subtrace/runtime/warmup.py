@@ -233,7 +233,7 @@ def compile_kernels(threads: int, schemes=None) -> None:
     from subtrace.trace.pools import Memos, Pieces, candidate_lists, hit_arrays
 
     i64 = np.zeros(0, np.int64)
-    i32 = np.zeros(0, np.int32)  # (the rounds' requests and counts)
+    i32 = np.zeros(0, np.int32)  # (the rounds' requests)
     frame = np.zeros((4, 3))
     iso = Pieces(0).view()
     tasks.set_threads(threads)
@@ -249,7 +249,7 @@ def compile_kernels(threads: int, schemes=None) -> None:
             return
         trace_round(i64, frame, 1, 0, no_bvh(), no_tiles(), np.zeros((0, 3)), np.zeros((0, 3)),
                     iso, Memos(threads).views(0), candidate_lists(0), config.TRI_SLACK,
-                    hit_arrays(0), i32, i32, loop_flag(schemes))
+                    hit_arrays(0), i32, np.zeros(threads, np.int64), loop_flag(schemes))
     finally:
         tasks.set_threads(None)
 

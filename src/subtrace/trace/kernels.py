@@ -46,18 +46,18 @@ BAND_CHUNK = 2  # bands a thread takes at a time (the next free ones, as it fini
 
 def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, iso, mems,
                 cands, slack, hits, request, tested, loop):
-    """One round for the rays ``rays`` (sorted pixel indices): update ``hits`` (a
-    :class:`~subtrace.trace.pools.Hits` over all pixels) and set ``request[r]`` to the
-    nearest unbuilt patch the ray reaches first (or -1). Round 0 starts every ray afresh: it
-    writes ``hits``, ``tested``, ``request`` and the candidates of each ray without reading
+    """One round for the rays ``rays`` (sorted pixel indices; None: every pixel's): update
+    ``hits`` (a :class:`~subtrace.trace.pools.Hits` over all pixels) and set ``request[r]``
+    to the nearest unbuilt patch the ray reaches first (or -1). Round 0 starts every ray
+    afresh: it writes ``hits``, ``request`` and the candidates of each ray without reading
     them (they need no initial values).
 
     The ray finds the shells ``[shell_min, shell_max]`` (P,3) it enters in its tile of
     ``tiles`` (:class:`~subtrace.accel.projection.Tiles`, nearest box first) or, when the
     tiles are empty, by walking ``bvh`` (:class:`~subtrace.accel.bvh.BVH`). Patches are
     intersected per ray through their items, ``iso``
-    (:class:`~subtrace.trace.pools.PieceArrays`). ``tested[r]`` counts the micro-triangles
-    built for ray r. The rays are cut into bands of ``BAND_ROWS`` image rows; each of n
+    (:class:`~subtrace.trace.pools.PieceArrays`). ``tested[t]`` (one per thread, added to)
+    counts the micro-triangles the rays of thread t built. The rays are cut into bands of ``BAND_ROWS`` image rows; each of n
     threads (n = len(mems)) takes the next ``BAND_CHUNK`` bands whenever it is free
     (``runtime.threads.run_chunks``), with its own memo of split Bezier nets ``mems[t]`` (a
     :class:`~subtrace.trace.pools.Memo`, see ``bezier.intersect_patch``): neighbouring rays
@@ -69,8 +69,14 @@ def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, 
     """
     max_d = int(iso.depth_i.max(initial=0))
     band_rows = BAND_ROWS * int(width)
-    n_bands = -(-(int(rays[-1]) + 1) // band_rows) if len(rays) else 0
-    bands = np.searchsorted(rays, np.arange(n_bands + 1) * band_rows).astype(np.int64)
+    if rays is None:  # every pixel's ray (round 0): bands of pixels, no list of them
+        n_rays = len(hits.t)
+        n_bands = -(-n_rays // band_rows)
+        bands = np.minimum(np.arange(n_bands + 1, dtype=np.int64) * band_rows, n_rays)
+        rays = _ALL_RAYS
+    else:
+        n_bands = -(-(int(rays[-1]) + 1) // band_rows) if len(rays) else 0
+        bands = np.searchsorted(rays, np.arange(n_bands + 1) * band_rows).astype(np.int64)
     scratch = tuple(scratch_buffers(max_d) for _ in mems)
     # the bundles cross into the kernel as plain tuples and are named again inside: Numba's
     # dispatcher types plain tuples of arrays in C but named tuples in Python (28 against
@@ -84,6 +90,10 @@ def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, 
 
     # (at least one call: the warm-up compiles the kernel by tracing no rays)
     run_chunks(work, max(n_bands, 1), BAND_CHUNK, n=len(mems))
+
+
+# ``rays`` of a round that traces every pixel's ray: the bands index the pixels themselves
+_ALL_RAYS = np.zeros(0, np.int64)
 
 
 def scratch_buffers(max_d):
@@ -143,16 +153,17 @@ def _sort_candidates(cands, r):
 
 
 @inline_njit
-def _visit(p, r, ray, round_no, iso, mem, slack, hit, scratch, tested, loop):
-    """Intersect patch ``p`` for ray ``r`` if it was built in the previous round; False if
-    it is unbuilt. (A function, not a closure of the kernel: a closure over the bundles
-    named inside the kernel lost its writes, with Numba 0.68.)"""
+def _visit(p, task, ray, round_no, iso, mem, slack, hit, scratch, tested, loop):
+    """Intersect patch ``p`` for the ray if it was built in the previous round (counting
+    the micro-triangles built into ``tested[task]``); False if it is unbuilt. (A function,
+    not a closure of the kernel: a closure over the bundles named inside the kernel lost
+    its writes, with Numba 0.68.)"""
     s = iso.patch_iso[p]
     if s >= 0:
         if iso.round[s] == round_no - 1:
             if iso.touched[s] == 0:  # (a store, even of the same value, takes the cache
                 iso.touched[s] = 1   # line from the other threads reading it)
-            tested[r] += intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop)
+            tested[task] += intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop)
         return True
     return False
 
@@ -173,7 +184,7 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
     projected = len(tiles.off) > 1
     for band in range(len(bands) - 1):
         for q in range(bands[band], bands[band + 1]):
-            r = rays[q]
+            r = q if len(rays) == 0 else rays[q]
             row = r // width
             col = r - row * width
             if projected and round_no == 0:
@@ -181,7 +192,6 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
                 if tiles.off[tile] == tiles.off[tile + 1]:
                     # no shell projects onto its tile: a miss, recorded as the loop below
                     # records one (without the ray's set-up)
-                    tested[r] = 0
                     request[r] = -1
                     cands.count[r] = 0
                     hits.t[r] = np.inf
@@ -190,9 +200,7 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
             dx, dy, dz = ray_setup(frame, row, col)
             ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
             kx, ky, kz, sx, sy, sz = shear(dx, dy, dz)
-            if round_no == 0:  # a fresh ray: ``hits`` and ``tested`` are not initialised
-                tested[r] = 0
-            _load_hit(hit, hits, r, round_no == 0)
+            _load_hit(hit, hits, r, round_no == 0)  # (round 0: ``hits`` not initialised)
             ray = (ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz)
             # the shells the ray may enter, one at a time, from one of three sources: the
             # unbuilt shells it remembers from its last round (nearest first: no traversal),
@@ -235,8 +243,8 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
                     te = box_entry(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, 0.0,
                                    hit[H_T])
                 j += 1
-                if te < np.inf and not _visit(p, r, ray, round_no, iso, mem, slack, hit, scratch,
-                                              tested, loop):
+                if te < np.inf and not _visit(p, task, ray, round_no, iso, mem, slack, hit,
+                                              scratch, tested, loop):
                     # unbuilt: a candidate (rewritten in place when remembered: n_c < j), the
                     # nearest one the request
                     if n_c < CANDIDATES:
