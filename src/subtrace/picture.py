@@ -251,8 +251,7 @@ def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights,
     occlusion (``ao``: None, or (trace, rays per hit, distance, the image's width); ``ids``:
     each ray's key for its AO pattern, :func:`shade.ambient_occlusion`), lighting, the
     background (``rows``: per image row, or per ray with ``dirs``) and the ground."""
-    n = len(pix_patch)
-    visible = np.ones((len(lights), n), np.float32)
+    visible = np.ones((len(lights), 0), np.float32)  # (no columns: every pixel lit)
     if len(lights) and scene.render.shadows:
         visible = shadow_visibility(trace_shadows, frame, width, t, normals, pix_patch, lights,
                                     tol_rad, dirs)

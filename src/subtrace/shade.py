@@ -76,9 +76,9 @@ def light(frame, width, t, normals, pix_patch, patches, lights, headlight, visib
     """The colour (R, G, B of ``planes``) of every hit pixel: two-sided Lambert plus the
     material's Blinn-Phong lobe (``Ks (N.H)^Ns``, MTL's) under a headlight at the eye
     (``headlight`` (1,): its intensity) and ``lights`` (L,7) (:func:`light_array`), each
-    scaled by ``visible`` (L, n_pixels) float32 (1 lit, 0 in shadow). ``t`` (n_pixels,)
-    float64: the hits' distances; ``normals``, ``pix_patch``, ``dirs``: as for
-    :func:`shade`. ``occlusion``: None, or (n_pixels,) float32 ambient occlusion
+    scaled by ``visible`` (L, n_pixels) float32 (1 lit, 0 in shadow; (L, 0): all lit).
+    ``t`` (n_pixels,) float64: the hits' distances; ``normals``, ``pix_patch``, ``dirs``:
+    as for :func:`shade`. ``occlusion``: None, or (n_pixels,) float32 ambient occlusion
     (:func:`ambient_occlusion`: the share of the hemisphere open) scaling the diffuse
     (Lambert) part of every light; the specular lobe keeps its own visibility."""
     dirs = _no_dirs() if dirs is None else dirs
@@ -232,14 +232,15 @@ def _light_task(task, n_tasks, frame, width, t, normals, pix_patch, patches, lig
                 # (lx, ly, lz): the direction the light arrives along; e: its irradiance
                 lx, ly, lz, e = _incoming(lights, k, frame, t[r], dx, dy, dz)
                 c = -(fx * lx + fy * ly + fz * lz) * e
-                if c > 0.0 and visible[k, r] > 0.0:
-                    c *= visible[k, r]
+                v = visible[k, r] if visible.shape[1] else 1.0  # (no columns: all lit)
+                if c > 0.0 and v > 0.0:
+                    c *= v
                     lr += c * lights[k, 4]
                     lg += c * lights[k, 5]
                     lb += c * lights[k, 6]
                     if shiny:
                         h = _blinn(fx, fy, fz, lx, ly, lz, dx, dy, dz, patches.shininess[p])
-                        h *= e * visible[k, r]
+                        h *= e * v
                         sr += h * lights[k, 4]
                         sg += h * lights[k, 5]
                         sb += h * lights[k, 6]
