@@ -202,7 +202,7 @@ def _closest(pools, nurbs, frame, width, patches, scene, tol_rad, offset):
         n = len(dirs)
         sub = np.empty((len(CHANNELS), n), np.float32)
         normals = np.empty((n, 3))
-        pix_patch = np.full(n, -1, np.int64)
+        pix_patch = np.full(n, -1, np.int32)
         miss = miss_values(scene.render.background)
         if pools is None:
             sub[:] = miss[:, None]

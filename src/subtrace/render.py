@@ -459,7 +459,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
         # the channels as float32 planes, written in place by the kernel (no conversion pass)
         planes = np.empty((len(CHANNELS), W * H), dtype=np.float32)
         normals = np.empty((W * H, 3))
-        pix_patch = np.empty(W * H, np.int64)
+        pix_patch = np.empty(W * H, np.int32)  # (patches number far fewer than 2^31)
         covered = np.zeros(tasks.thread_count(), np.int64)
         miss = miss_values(scene.render.background)
         patches = None

@@ -58,7 +58,7 @@ def shade(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, co
     ``iso``: the built patches' items (:class:`~subtrace.trace.pools.PieceArrays`);
     ``patches``: per patch, its ids and material (:class:`PatchShading`); ``miss``
     (:func:`miss_values`); ``normals`` (n_pixels,3) float64 receives each hit's unit normal
-    turned towards the eye, ``pix_patch`` (n_pixels,) int64 its patch (-1: a miss);
+    turned towards the eye, ``pix_patch`` (n_pixels,) int32 its patch (-1: a miss);
     ``covered`` (threads,) int64 receives the hits each thread shaded. ``dirs``: None (ray
     r is pixel r's centre ray), or the (n,3) unit directions of rays from the eye (extra
     samples): then ``hits`` and the outputs are per ray."""
@@ -196,7 +196,7 @@ def _shade_task(task, n_tasks, frame, width, hits, iso, patches, miss, planes, n
             normals[r, 0] = sgn * nx
             normals[r, 1] = sgn * ny
             normals[r, 2] = sgn * nz
-            pix_patch[r] = p
+            pix_patch[r] = np.int32(p)
     covered[task] = n_hit
 
 

@@ -242,7 +242,7 @@ def compile_kernels(threads: int, schemes=None) -> None:
         misses.t[:] = np.inf
         shade(frame, 1, misses, iso, _no_patches(), miss_values((0.0, 0.0, 0.0)),
               np.zeros((len(CHANNELS), 2), np.float32), np.zeros((2, 3)),
-              np.zeros(2, np.int64), np.zeros(threads, np.int64))
+              np.zeros(2, np.int32), np.zeros(threads, np.int64))
         # (the shading first: the render's process is still reading the cages)
         schemes = _schemes() if schemes is None else schemes
         if schemes is None:
@@ -274,7 +274,7 @@ def compile_picture(threads: int, parts=PICTURE) -> None:
     n, width = 4, 2
     frame = np.array([[0.0, 1.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.0, 0.1], [0.0, -1.0, 0.0]])
     planes = np.zeros((len(CHANNELS), n), np.float32)
-    pix = np.full(n, -1, np.int64)
+    pix = np.full(n, -1, np.int32)
     lights = np.array([[0.0, 0.0, -1.0, 0.0, 1.0, 1.0, 1.0]])  # directional, straight down
 
     def trace(origins, dirs, tmax):  # every shadow ray blocked
