@@ -8,12 +8,14 @@ A patch is a face of level ``L0`` (Catmull-Clark: level 1, where all faces are q
 the cage), or, on a Catmull-Clark cage, a regular quad of the cage itself
 (:func:`regular_cage_quads`: one bicubic patch where level 1 would make four, as
 OpenSubdiv's adaptive tables do; only the cage's other faces and the rings around them are
-refined to level 1). The renderer intersects regular patches through their Bezier nets, splits
-irregular Catmull-Clark patches into pieces (:mod:`subtrace.patches.isolate`) and refines
-Loop patches into grids of exact limit points (:mod:`subtrace.patches.grids`), on demand. Per patch, flat arrays (P = number of patches):
+refined to level 1). The renderer intersects regular patches through their Bezier nets,
+splits irregular Catmull-Clark patches into pieces (:mod:`subtrace.patches.isolate`) and
+refines Loop patches into grids of exact limit points (:mod:`subtrace.patches.grids`), on
+demand. Per patch, flat arrays (P = number of patches):
 
-* ``object_id``, ``face`` (face of the object's L0 level, or of the cage for a cage quad), ``ptex`` with ``ptex_uv0`` (P,2)
-  and ``ptex_scale``: patch parameter ``(s, t)`` is ptex ``uv0 + scale * (s, t)``;
+* ``object_id``, ``face`` (face of the object's L0 level, or of the cage for a cage quad),
+  ``ptex`` with ``ptex_uv0`` (P,2) and ``ptex_scale``: patch parameter ``(s, t)`` is ptex
+  ``uv0 + scale * (s, t)``;
 * ``shell_min``/``shell_max`` (P,3): the axis-aligned box of the control points of the faces
   sharing a vertex with the patch. The limit surface over a face depends only on those
   points, with non-negative weights, so it lies in their convex hull and in this box

@@ -57,8 +57,9 @@ def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, 
     tiles are empty, by walking ``bvh`` (:class:`~subtrace.accel.bvh.BVH`). Patches are
     intersected per ray through their items, ``iso``
     (:class:`~subtrace.trace.pools.PieceArrays`). ``tested[t]`` (one per thread, added to)
-    counts the micro-triangles the rays of thread t built. The rays are cut into bands of ``BAND_ROWS`` image rows; each of n
-    threads (n = len(mems)) takes the next ``BAND_CHUNK`` bands whenever it is free
+    counts the micro-triangles the rays of thread t built. The rays are cut into bands of
+    ``BAND_ROWS`` image rows; each of n threads (n = len(mems)) takes the next
+    ``BAND_CHUNK`` bands whenever it is free
     (``runtime.threads.run_chunks``), with its own memo of split Bezier nets ``mems[t]`` (a
     :class:`~subtrace.trace.pools.Memo`, see ``bezier.intersect_patch``): neighbouring rays
     of a band share their splits. What a memo holds changes the work, never a hit, so the
