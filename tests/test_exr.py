@@ -12,7 +12,7 @@ import pytest
 import subtrace
 from subtrace.errors import SubtraceError
 from subtrace.io import exr
-from subtrace.io.atomic import atomic_paths, write_text
+from subtrace.io.atomic import atomic_paths, write_bytes, write_text
 from subtrace.io.exr import CHANNEL_ORDER, read_exr, srgb8, write_exr, write_png
 
 H, W = 7, 9
@@ -289,6 +289,40 @@ def test_interrupt_while_writing_leaves_existing_file_intact(tmp_path):
     write_text(path, "new\n")
     assert path.read_text() == "new\n"
     assert listing(tmp_path) == ["hits.csv"]
+
+
+def test_bytes_writer_replaces_whole_files(tmp_path):
+    """write_bytes (the kernel cache's stored runtime and stencil maps) writes the bytes as
+    given through a temporary, replaces an existing file, and leaves no temporary; a
+    missing folder is named."""
+    path = tmp_path / "maps.npy"
+    write_bytes(path, b"\x00first\xff")
+    assert path.read_bytes() == b"\x00first\xff"
+    write_bytes(path, b"second")
+    assert path.read_bytes() == b"second"
+    assert listing(tmp_path) == ["maps.npy"]
+    with pytest.raises(SubtraceError, match="does not exist"):
+        write_bytes(tmp_path / "no" / "maps.npy", b"x")
+    assert listing(tmp_path) == ["maps.npy"]
+
+
+def test_stencil_maps_stored_whole_and_read_back(tmp_path, monkeypatch):
+    """The maps of a valence are stored in the kernel cache's folder through the atomic
+    writer (one file, no temporary left) and read back as derived."""
+    from subtrace.patches import stencil
+    from subtrace.runtime import jit
+
+    monkeypatch.setattr(jit, "KERNEL_DIR", tmp_path)
+    stencil.stencil.cache_clear()
+    try:
+        derived = stencil.stencil(7)
+        assert listing(tmp_path / "stencils") == ["valence-7.npy"]
+        stencil.stencil.cache_clear()
+        read = stencil.stencil(7)
+    finally:
+        stencil.stencil.cache_clear()
+    for name in stencil._STORED:
+        assert np.array_equal(getattr(read, name), getattr(derived, name)), name
 
 
 def test_text_writer_names_a_missing_folder(tmp_path):

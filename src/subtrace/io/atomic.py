@@ -123,13 +123,22 @@ def open_temp(temp: str, mode: str = "wb", **kwargs):
 
 def write_text(path, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` through a temporary (module comment)."""
+    _write(path, text, "w", encoding="utf-8")
+
+
+def write_bytes(path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary (module comment)."""
+    _write(path, data, "wb")
+
+
+def _write(path, data, mode: str, **kwargs) -> None:
     with atomic_paths([path]) as (temp,):
         try:
-            with open_temp(temp, "w", encoding="utf-8") as fh:
-                fh.write(text)
+            with open_temp(temp, mode, **kwargs) as fh:
+                fh.write(data)
         except OSError as err:
             raise SubtraceError(
                 f"{path_str(path)}: cannot write the file: {reason(err)}") from None
 
 
-__all__ = ["atomic_paths", "write_text", "check_writable", "make_temp", "remove_temp", "path_str", "reason"]
+__all__ = ["atomic_paths", "write_text", "write_bytes", "check_writable", "make_temp", "remove_temp", "path_str", "reason"]

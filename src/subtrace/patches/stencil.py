@@ -25,7 +25,7 @@ same order, and its corner there is the patch's (children keep their parent's or
 
 from __future__ import annotations
 
-import os
+import io
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -33,6 +33,8 @@ import numpy as np
 
 from subtrace import config
 from subtrace.config import IRREGULAR_MARGIN
+from subtrace.errors import SubtraceError
+from subtrace.io.atomic import write_bytes
 from subtrace.mesh.topology import Options, compact, gather_index
 from subtrace.patches.basis import bezier_nets, net_bounds
 from subtrace.patches.grids import levels_needed, refine_children, unit_normals
@@ -201,13 +203,13 @@ def stencil(n: int) -> Stencil:
     except (OSError, ValueError):
         pass
     s = derive_stencil(n)
+    flat = io.BytesIO()
+    np.save(flat, np.concatenate([np.ravel(getattr(s, name)).astype(np.float64)
+                                  for name in _STORED]))
     try:  # (atomically: processes deriving it at once each write a whole file)
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npy")
-        np.save(tmp, np.concatenate([np.ravel(getattr(s, name)).astype(np.float64)
-                                     for name in _STORED]))
-        os.replace(tmp, path)
-    except OSError:
+        write_bytes(path, flat.getvalue())
+    except (OSError, SubtraceError):
         pass
     return s
 

@@ -724,13 +724,14 @@ def _runtime_from_the_kernel_folder() -> bool:
         library.enable_object_caching()
         library.add_ir_module(module)
         library.finalize()
+        from subtrace.errors import SubtraceError
+        from subtrace.io.atomic import write_bytes
+
         try:  # (atomically: processes storing it at once each write a whole file)
             data = pickle.dumps(library.serialize_using_object_code(), protocol=4)
             path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp")
-            tmp.write_bytes(data)
-            os.replace(tmp, path)
-        except (OSError, RuntimeError, pickle.PicklingError):
+            write_bytes(path, data)
+        except (OSError, RuntimeError, pickle.PicklingError, SubtraceError):
             pass
         return library
 
