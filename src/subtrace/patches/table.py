@@ -155,10 +155,15 @@ def build_patch_table(cages, keep=None, in_view=None) -> PatchTable:
         kept = None if keep is None else keep[oid]
         quad = cage.scheme == "catmark"
         # Catmull-Clark: the regular quads of the cage are patches themselves (level 0,
-        # as OpenSubdiv's adaptive patches); only the others are refined to level 1
-        quad_mask = regular_cage_quads(cage) if quad else None
-        if quad_mask is not None and quad_mask.any():
-            kept = ~quad_mask if kept is None else kept & ~quad_mask
+        # as OpenSubdiv's adaptive patches); only the others are refined to level 1. (A
+        # cage quad kept: its one-ring box is in view, as its face's.)
+        faces0 = np.zeros(0, np.int64)
+        if quad:
+            quad_mask = regular_cage_quads(cage)
+            if quad_mask.any():
+                take = quad_mask & ~cage.base.face_hole
+                faces0 = np.nonzero(take if kept is None else take & kept)[0]
+                kept = ~quad_mask if kept is None else kept & ~quad_mask
         lev, pts, faces, base_face, corner, parent_edge = _patch_level(cage, L0, kept)
         if in_view is not None and L0 > 0 and len(faces):
             # (every face's at once: each vertex ring's box made once, about 4x faster
@@ -170,23 +175,16 @@ def build_patch_table(cages, keep=None, in_view=None) -> PatchTable:
             faces, base_face, corner = faces[seen], base_face[seen], corner[seen]
         part = _object_arrays(cage, L0, lev, pts, faces, base_face, corner, oid, first_edge,
                               quad)
+        parts.append(part)
         n_edges = lev.n_edges
-        faces0 = np.zeros(0, np.int64)
-        if quad_mask is not None and quad_mask.any():
-            # (a quad of the cage kept: its one-ring box is in view, as its face's)
-            faces0 = np.nonzero(quad_mask & ~cage.base.face_hole if keep is None
-                                else quad_mask & keep[oid] & ~cage.base.face_hole)[0]
-            part0 = _object_arrays(cage, 0, cage.base, cage.points, faces0, faces0,
-                                   np.full(len(faces0), -1, np.int64), oid,
-                                   first_edge + n_edges, quad, regular=True)
+        if len(faces0):  # (after the patch level's patches and edges)
+            parts.append(_object_arrays(cage, 0, cage.base, cage.points, faces0, faces0,
+                                        np.full(len(faces0), -1, np.int64), oid,
+                                        first_edge + n_edges, quad, regular=True))
             _share_cage_edges(cage.base, faces0, part, lev, parent_edge, first_edge + n_edges)
-            nets = [part["nets"], part0["nets"]]
-            part = {k: np.concatenate([part[k], part0[k]]) for k in part if k != "nets"}
-            part["nets"] = _with_room(nets, part["is_quad"], part["regular"])
             n_edges += cage.base.n_edges
         objs.append(ObjectPatches(cage, L0, lev, pts, faces, first_patch, first_edge, faces0))
-        parts.append(part)
-        first_patch += len(part["face"])
+        first_patch += len(faces) + len(faces0)
         first_edge += n_edges
     if len(parts) == 1:
         cat = parts[0]  # already contiguous: no copy of the nets
