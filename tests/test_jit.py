@@ -674,3 +674,59 @@ def test_llvm_inlined_helpers_leave_no_call_in_their_callers(tmp_path, monkeypat
     calls = re.findall(r"call [^@\n]*@\"?([\w.$]+)", llvm)
     assert calls, "the kernel's code calls nothing at all: the probe checks nothing"
     assert not [c for c in calls if "scaled_sum" in c], calls
+
+
+_LINKED_ONLY_PROBE = """
+import json, sys
+from subtrace.runtime import jit
+if sys.argv[1] == "trimmed":
+    jit.trim_loader()
+from numba.core import event
+compiled = []
+
+class Compiles(event.Listener):
+    def on_start(self, ev):
+        compiled.append(getattr(ev.data["dispatcher"].py_func, "__qualname__", "?"))
+
+    def on_end(self, ev):
+        pass
+
+event.register("numba:compile", Compiles())
+import numba
+from subtrace.trace.prims import shear  # a leaf_njit helper: no wrapper, cached
+
+caller = numba.njit(cache=False)(lambda x, y, z: shear(x, y, z))
+got = [list(caller(*d)) for d in ((0.3, -2.0, 0.5), (1.0, 0.2, -0.1), (-0.1, 0.2, -3.0))]
+want = [list(shear.py_func(*d)) for d in ((0.3, -2.0, 0.5), (1.0, 0.2, -0.1), (-0.1, 0.2, -3.0))]
+(sig,) = shear.signatures
+lib = shear.overloads[sig].library
+name = shear.overloads[sig].fndesc.mangled_name
+engine = lib.codegen._engine
+index = list((jit.KERNEL_DIR / "subtrace" / "trace").glob("prims.shear-*.nbi"))
+print(json.dumps({"got": got, "want": want, "compiled": compiled,
+                  "linked_only": bool(getattr(lib, "_subtrace_linked_only", False)),
+                  "code": bool(engine.is_symbol_defined(name)), "cached": len(index),
+                  "applied": jit.HELPERS_LINKED_ONLY}))
+"""
+
+
+@pytest.mark.parametrize("mode", ["trimmed", "plain"])
+def test_helpers_are_kept_as_bitcode_and_linked_from_the_cache(tmp_path, mode):
+    """jit._helpers_linked_only: a helper without wrappers is compiled to bitcode, not to
+    machine code of its own, and cached so; a caller compiled in this process and one in
+    the next process (which loads the helper from the cache, compiling only the caller)
+    link it and compute what the helper's Python computes."""
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(SUBTRACE_CACHE_DIR=str(tmp_path / "cache"), PYTHONDONTWRITEBYTECODE="1")
+
+    def probe():
+        proc = subprocess.run([sys.executable, "-c", _LINKED_ONLY_PROBE, mode],
+                              capture_output=True, text=True, env=env, timeout=600)
+        assert proc.returncode == 0, proc.stderr
+        out = json.loads(proc.stdout)
+        assert out["applied"] and out["got"] == out["want"]
+        assert out["linked_only"] and not out["code"] and out["cached"] == 1
+        return out["compiled"]
+
+    assert "shear" in probe()  # compiled and stored
+    assert probe() == ["<lambda>"]  # only the caller: the helper's bitcode came from the cache

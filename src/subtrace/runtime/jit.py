@@ -455,6 +455,99 @@ def _inline_marked_functions() -> bool:
     return True
 
 
+# The cache's kind of a helper kept as bitcode alone (:func:`_helpers_linked_only`)
+LINKED_ONLY = "subtrace-linked-only"
+
+
+def _helpers_linked_only() -> bool:
+    """Make the helpers of :func:`leaf_njit` and :func:`callee_njit` compile to optimised
+    LLVM bitcode only, never to machine code; True when applied.
+
+    Numba finalises every compiled function as if Python were to call it: it optimises the
+    function's module, then has the execution engine generate its machine code, and the
+    cache stores that object code beside the bitcode. A helper without the Python and the
+    C-callable wrappers is never called that way: every kernel that calls it links its
+    bitcode in and generates the helper's code again, inlined or not, as part of its own.
+    The helper's own machine code was about 0.9 s of CPU in a cold render of the default
+    scene (70-odd helpers: 0.4 s in the render's process, 0.5 s in the helper process).
+    Here such a library (one of subtrace's functions, neither wrapper defined) is finalised
+    without the engine, and the cache keeps its bitcode alone (kind :data:`LINKED_ONLY`),
+    which a kernel compiled later in another process links as before. The kernels' code is
+    the same: they link the same optimised bitcode. A Numba whose code libraries are
+    organised differently is left alone."""
+    try:
+        import llvmlite.binding as ll
+        from numba.core import codegen, cpu
+    except ImportError:  # pragma: no cover - another Numba
+        return False
+    library = getattr(codegen, "CPUCodeLibrary", None)
+    needed = ("_finalize_final_module", "_finalize_dynamic_globals",
+              "_verify_declare_only_symbols", "serialize_using_object_code", "_unserialize",
+              "_get_module_for_linking")
+    jit_codegen = getattr(codegen, "JITCPUCodegen", None)
+    if library is None or not all(hasattr(library, name) for name in needed) or \
+            not hasattr(cpu.CPUContext, "get_executable") or \
+            not hasattr(jit_codegen, "set_env"):
+        return False  # pragma: no cover - another Numba
+    set_environment = jit_codegen.set_env
+    get_executable = cpu.CPUContext.get_executable
+    finalize_final_module = library._finalize_final_module
+    serialize = library.serialize_using_object_code
+    unserialize = library._unserialize.__func__
+
+    def defines(lib, name):
+        try:
+            return not lib._final_module.get_function(name).is_declaration
+        except NameError:
+            return False
+
+    def executable(self, lib, fndesc, env):
+        # (called once lowered, before the library is finalised, and on a load)
+        if not lib._finalized and fndesc.modname.startswith("subtrace.") and \
+                not defines(lib, fndesc.llvm_cpython_wrapper_name) and \
+                not defines(lib, fndesc.llvm_cfunc_wrapper_name):
+            lib._subtrace_linked_only = True
+        return get_executable(self, lib, fndesc, env)
+
+    def set_env(self, env_name, env):
+        # (a helper's environment: no code of its own to point at it)
+        if self._engine.get_global_value_address(env_name):
+            set_environment(self, env_name, env)
+
+    def finalize_final(self):
+        if not getattr(self, "_subtrace_linked_only", False):
+            return finalize_final_module(self)
+        self._finalize_dynamic_globals()
+        self._verify_declare_only_symbols()
+        self._finalized = True
+
+    def serialize_linked_only(self):
+        if not getattr(self, "_subtrace_linked_only", False):
+            return serialize(self)
+        return self.name, LINKED_ONLY, self._get_module_for_linking().as_bitcode()
+
+    def unserialize_linked_only(cls, gen, state):
+        name, kind, data = state
+        if kind != LINKED_ONLY:
+            return unserialize(cls, gen, state)
+        self = gen.create_library(name)
+        self._subtrace_linked_only = True
+        self._shared_module = ll.parse_bitcode(data)
+        self._finalized = True
+        return self
+
+    cpu.CPUContext.get_executable = executable
+    jit_codegen.set_env = set_env
+    library._finalize_final_module = finalize_final
+    library.serialize_using_object_code = serialize_linked_only
+    library._unserialize = classmethod(unserialize_linked_only)
+    return True
+
+
+# (at import: a process that may load a helper from the cache reads the kind it is kept as)
+HELPERS_LINKED_ONLY = _helpers_linked_only()
+
+
 class _PatchInliningOnCompile(_event.Listener):
     """Numba's "numba:compile" event (a cache miss, before compiling): the inliner's fix
     (:func:`_inline_copies_scope_once`), the calls' plain argument types
