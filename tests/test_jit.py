@@ -730,3 +730,43 @@ def test_helpers_are_kept_as_bitcode_and_linked_from_the_cache(tmp_path, mode):
 
     assert "shear" in probe()  # compiled and stored
     assert probe() == ["<lambda>"]  # only the caller: the helper's bitcode came from the cache
+
+
+def _numba_listing(val):
+    """Numba's own recursion for an instruction's variables (the reference)."""
+    from numba.core import ir
+
+    if isinstance(val, ir.Var):
+        return [val]
+    if isinstance(val, ir.Inst):
+        return _numba_listing(val._kws if isinstance(val, ir.Expr) else val.__dict__)
+    if isinstance(val, (list, tuple)):
+        return [v for item in val for v in _numba_listing(item)]
+    if isinstance(val, dict):
+        return [v for item in val.values() for v in _numba_listing(item)]
+    return []
+
+
+def test_ir_variables_are_listed_as_numbas_recursion_lists_them():
+    """jit._ir_variables_listed_directly: every statement and expression of the IR of real
+    kernels (the trace, the secondary rays, the refinement, shading) lists the same
+    variables in the same order as Numba's recursion."""
+    from numba.core import ir
+    from numba.core.compiler import run_frontend
+
+    from subtrace import shade
+    from subtrace.subdiv import refine
+    from subtrace.trace import kernels, rays
+
+    assert jit._ir_variables_listed_directly()
+    count = 0
+    for fn in (kernels._trace_task, rays._rays_task, refine._refine_points_kernel,
+               shade._shade_task):
+        func_ir = run_frontend(fn.py_func)
+        for block in func_ir.blocks.values():
+            for stmt in block.body:
+                values = [stmt] + [v for v in stmt.__dict__.values() if isinstance(v, ir.Expr)]
+                for inst in values:
+                    assert inst.list_vars() == _numba_listing(inst), inst
+                    count += 1
+    assert count > 1000
