@@ -528,9 +528,15 @@ def _helpers_linked_only() -> bool:
     scene (70-odd helpers: 0.4 s in the render's process, 0.5 s in the helper process).
     Here such a library (one of subtrace's functions, neither wrapper defined) is finalised
     without the engine, and the cache keeps its bitcode alone (kind :data:`LINKED_ONLY`),
-    which a kernel compiled later in another process links as before. The kernels' code is
-    the same: they link the same optimised bitcode. A Numba whose code libraries are
-    organised differently is left alone."""
+    which a kernel compiled later in another process links as before.
+
+    Nor is the helper's module optimised as a whole: its functions are optimised one by one
+    as Numba adds them (as before), and the kernel that links the helper optimises its
+    whole module, the helper's code included, after linking (as before). The module pass
+    of each helper (about 0.8 s of CPU in a cold render) only did that work ahead. The
+    kernels' code differs a little (LLVM inlines from less simplified helpers), the images
+    not at all; their speed is the same within the spread (``benchmarks/ab.py``, nine
+    rounds). A Numba whose code libraries are organised differently is left alone."""
     try:
         import llvmlite.binding as ll
         from numba.core import codegen, cpu
@@ -548,6 +554,7 @@ def _helpers_linked_only() -> bool:
     set_environment = jit_codegen.set_env
     get_executable = cpu.CPUContext.get_executable
     finalize_final_module = library._finalize_final_module
+    optimize_final_module = library._optimize_final_module
     serialize = library.serialize_using_object_code
     unserialize = library._unserialize.__func__
 
@@ -569,6 +576,10 @@ def _helpers_linked_only() -> bool:
         # (a helper's environment: no code of its own to point at it)
         if self._engine.get_global_value_address(env_name):
             set_environment(self, env_name, env)
+
+    def optimize_final(self):
+        if not getattr(self, "_subtrace_linked_only", False):
+            optimize_final_module(self)
 
     def finalize_final(self):
         if not getattr(self, "_subtrace_linked_only", False):
@@ -595,6 +606,7 @@ def _helpers_linked_only() -> bool:
     cpu.CPUContext.get_executable = executable
     jit_codegen.set_env = set_env
     library._finalize_final_module = finalize_final
+    library._optimize_final_module = optimize_final
     library.serialize_using_object_code = serialize_linked_only
     library._unserialize = classmethod(unserialize_linked_only)
     return True
