@@ -770,3 +770,35 @@ def test_ir_variables_are_listed_as_numbas_recursion_lists_them():
                     assert inst.list_vars() == _numba_listing(inst), inst
                     count += 1
     assert count > 1000
+
+
+def test_function_types_resolve_as_numba_does_and_failures_still_raise():
+    """jit._function_types_resolved_once: a call of one of Numba's function types resolves
+    to the signature Numba's own resolution gives, from the memo the second time; a call
+    no template accepts raises every time (failures are not kept)."""
+    import operator
+
+    import numpy as np
+    from numba.core import errors, types
+    from numba.core.registry import cpu_target
+
+    assert jit._function_types_resolved_once()
+    ctx = cpu_target.typing_context
+    ctx.refresh()
+    f64, i64 = types.float64, types.int64
+    arr = types.Array(f64, 2, "C")
+    calls = [(operator.add, (f64, f64)), (operator.add, (i64, f64)), (operator.add, (arr, f64)),
+             (operator.lt, (i64, i64)), (operator.truediv, (i64, i64)), (abs, (i64,)),
+             (min, (f64, i64)), (np.sqrt, (arr,)), (operator.getitem, (arr, types.UniTuple(i64, 2))),
+             (np.empty, (i64, types.NumberClass(f64)))]
+    for fn, args in calls:
+        fnty = ctx.resolve_value_type(fn)
+        first = fnty.get_call_type(ctx, args, {})
+        again = fnty.get_call_type(ctx, args, {})
+        numbas = fnty.get_call_type.__wrapped__(fnty, ctx, args, {})
+        assert first is again  # (the memo's)
+        assert first == numbas and first.return_type == numbas.return_type, (fn, args)
+    fnty = ctx.resolve_value_type(operator.add)
+    for _ in range(2):
+        with pytest.raises(errors.TypingError):
+            fnty.get_call_type(ctx, (types.unicode_type, i64), {})

@@ -407,6 +407,58 @@ def _overloads_shared_across_flags() -> bool:
     return True
 
 
+def _function_types_resolved_once() -> bool:
+    """Make Numba resolve a call of one of its function types (an operator, a builtin, a
+    NumPy function) once per argument types and inherited compiler flags, not at every call
+    site; True when applied.
+
+    Typing a call tries the function's templates one after another until one accepts the
+    arguments (``a + b`` on two floats: the templates of integers, complex numbers, arrays,
+    tuples, ... first, each failure recorded with its message). Kernels make the same calls
+    thousands of times over. Here the signature the templates gave is kept, keyed on the
+    function type, the target, the arguments and the flags a compiled implementation
+    inherits (:data:`INHERITED_FLAGS`), and given again to the next call of those types;
+    the implementation key it registered stays registered. Failures are not kept (each
+    raises as before). A Numba whose function types are organised differently is left
+    alone."""
+    try:
+        from numba.core import targetconfig
+        from numba.core.target_extension import get_local_target
+        from numba.core.types import functions
+    except ImportError:  # pragma: no cover - another Numba
+        return False
+    base = getattr(functions, "BaseFunction", None)
+    stack = getattr(targetconfig, "ConfigStack", None)
+    if base is None or not hasattr(base, "get_call_type") or \
+            not hasattr(stack, "top_or_none"):
+        return False  # pragma: no cover - another Numba
+    if hasattr(base.get_call_type, "__wrapped__"):
+        return True  # (applied before)
+    resolve = base.get_call_type
+    resolved = {}
+
+    def get_call_type(self, context, args, kws):
+        flags = stack.top_or_none()
+        inherited = None if flags is None else tuple(
+            _hashable(getattr(flags, name)) for name in INHERITED_FLAGS)
+        try:
+            key = (self, context, get_local_target(context), tuple(args),
+                   tuple(sorted(kws.items())), inherited)
+            hash(key)
+        except TypeError:  # (an unhashable argument type: typed as before)
+            return resolve(self, context, args, kws)
+        sig = resolved.get(key)
+        if sig is None:
+            sig = resolve(self, context, args, kws)
+            if sig is not None:
+                resolved[key] = sig
+        return sig
+
+    get_call_type.__wrapped__ = resolve
+    base.get_call_type = get_call_type
+    return True
+
+
 def _hashable(value):
     """A flag's value as a key: option objects (fastmath's set of flags) by their sorted
     flags, others as they are."""
@@ -633,6 +685,7 @@ class _PatchInliningOnCompile(_event.Listener):
             _overloads_shared_across_flags()
             _inline_marked_functions()
             _ir_variables_listed_directly()
+            _function_types_resolved_once()
 
     def on_end(self, event):
         pass
