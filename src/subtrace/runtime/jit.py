@@ -697,7 +697,7 @@ _event.register("numba:compile", _PatchInliningOnCompile())
 
 # What the first-run notice says the compile takes (benchmarks/startup.py: a cold render of
 # the default scene on 2 cores)
-COLD_COMPILE = "about 15-25 s on 2 cores"
+COLD_COMPILE = "about 10-15 s on 2 cores"
 _notice = {"stream": None, "said": False, "listening": False}
 
 
