@@ -15,12 +15,11 @@ Each command lives in ``subtrace.cli.<command>`` and is imported only when it ru
 :func:`run` trims three fixed costs of a short process that :func:`main`, which tests call
 in-process, leaves alone: Numba's loader (:func:`subtrace.cli.common.set_up_numba`, taken by
 the commands), the cyclic collector's passes over old objects, and the interpreter's
-teardown (:func:`_exit_now`).
+teardown (:func:`subtrace.runtime.signals.exit_now`).
 """
 
 from __future__ import annotations
 
-import atexit
 import gc
 import importlib
 import os
@@ -52,7 +51,7 @@ def run(argv=None):
     # made 15 middle and one full collection of a million long-lived objects, 0.045-0.06 s
     # of a render process (0.017 s left, gc.callbacks timings on spot and gen_vase_loop).
     gc.set_threshold(gc.get_threshold()[0], OLD_COLLECTIONS_EVERY, OLD_COLLECTIONS_EVERY)
-    _exit_now(main(argv, own_process=True))
+    signals.exit_now(main(argv, own_process=True))
 
 
 def main(argv=None, own_process: bool = False) -> int:
@@ -86,17 +85,6 @@ def main(argv=None, own_process: bool = False) -> int:
         return 1
 
 
-def _exit_now(code: int):
-    """End the process with ``code`` once output is flushed and the exit handlers have run,
-    skipping the interpreter's teardown of every module (Numba's typing registries alone
-    take about 0.2 s to free). Everything written was closed before this point."""
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):  # closed or broken pipe: nothing more can be said
-            pass
-    atexit._run_exitfuncs()
-    os._exit(code)
 
 
 class _OneLineWarnings:

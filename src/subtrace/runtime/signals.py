@@ -24,8 +24,10 @@ API) keep Python's usual KeyboardInterrupt; nothing here is installed for them, 
 
 from __future__ import annotations
 
+import atexit
 import os
 import signal
+import sys
 import threading
 
 EXIT_CODES = {signal.SIGINT: 130, signal.SIGTERM: 143}  # 128 + the signal's number
@@ -136,4 +138,17 @@ def _watch(taken) -> None:
 
 
 __all__ = ["install", "unblock", "temp_lock", "register_temp", "forget_temp",
-           "register_child", "forget_child", "EXIT_CODES"]
+           "register_child", "forget_child", "exit_now", "EXIT_CODES"]
+
+
+def exit_now(code: int):
+    """End the process with ``code`` once output is flushed and the exit handlers have run,
+    skipping the interpreter's teardown of every module (Numba's typing registries alone
+    take about 0.2 s to free). Everything written was closed before this point."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # closed or broken pipe: nothing more can be said
+            pass
+    atexit._run_exitfuncs()
+    os._exit(code)

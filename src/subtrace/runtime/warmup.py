@@ -508,6 +508,4 @@ if __name__ == "__main__":
     # (the kernels are in the cache: end without the interpreter's teardown of Numba's
     # registries, which the render waiting for this process (:func:`wait`) would wait for;
     # 0.2-0.5 s of a cold render while the render's process competed for the cores)
-    from subtrace.cli.main import _exit_now
-
-    _exit_now(0)
+    signals.exit_now(0)
