@@ -802,3 +802,28 @@ def test_function_types_resolve_as_numba_does_and_failures_still_raise():
     for _ in range(2):
         with pytest.raises(errors.TypingError):
             fnty.get_call_type(ctx, (types.unicode_type, i64), {})
+
+
+_TRIM_PROBE = """
+import json
+import llvmlite.binding.ffi as ffi
+import numba.core.base  # noqa: F401  (registers its hooks on LLVM's lock)
+from subtrace.runtime import jit
+
+def numbas():
+    return sum(getattr(a, "__module__", "") == "numba.core.base" for a, _ in ffi.lib._lock._cblist)
+
+before = numbas()
+jit.trim_compiler()
+print(json.dumps([before, numbas()]))
+"""
+
+
+def test_a_compiling_process_drops_numbas_hooks_on_llvms_lock():
+    """jit.trim_compiler (the render's helper process): the callbacks Numba hangs on
+    llvmlite's lock, which only time compile events, are removed."""
+    proc = subprocess.run([sys.executable, "-c", _TRIM_PROBE], capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    before, after = json.loads(proc.stdout)
+    assert before >= 1 and after == 0

@@ -1115,6 +1115,14 @@ class _NumbaEnvironmentsUnimported:
             self._module._rebuild_env = self._rebuild
 
 
+def trim_compiler() -> None:
+    """Trim Numba's set-up for a process of its own that compiles kernels (the render's
+    helper, ``runtime.warmup``): Numba's hooks on LLVM's lock are removed
+    (:func:`_drop_llvm_lock_events`); they time the lock for Numba's compile events only,
+    and a cold render's helper makes about 26,000 LLVM calls, each of which ran them."""
+    _drop_llvm_lock_events()
+
+
 def _drop_llvm_lock_events() -> None:
     """Remove the callbacks Numba hangs on llvmlite's lock (they record "numba:llvm_lock"
     events, which only time compiles); any other callback stays."""

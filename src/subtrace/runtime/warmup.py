@@ -499,6 +499,9 @@ if __name__ == "__main__":
     signals.unblock()  # the mask of a parent that hands its signals to a watcher thread
     if sys.argv[1] == "--commands":  # subtrace warmup: a chain of commands (JSON)
         sys.exit(_run_commands(json.loads(sys.argv[2])))
+    from subtrace.runtime.jit import trim_compiler
+
+    trim_compiler()
     if sys.argv[1] == "--secondary":  # the secondary-ray kernels, a third process
         compile_secondary(int(sys.argv[2]))
     else:
