@@ -273,3 +273,52 @@ def test_a_catmark_cage_compiles_none_of_loops_masks(tmp_path, scheme, other):
     ours = [c for c in out["compiled"] if c.startswith(f"subtrace.subdiv.{scheme}.")]
     theirs = [c for c in out["compiled"] if other and c.startswith(f"subtrace.subdiv.{other}.")]
     assert ours and not theirs, out["compiled"]
+
+
+_CREASE_PROBE = """
+import json, sys
+from numba.core import event
+compiled = []
+
+
+class Listener(event.Listener):
+    def on_start(self, ev):
+        fn = getattr(ev.data.get("dispatcher"), "py_func", None)
+        compiled.append(getattr(fn, "__qualname__", ""))
+
+    def on_end(self, ev):
+        pass
+
+
+event.register("numba:compile", Listener())
+import numpy as np
+from subtrace import make_cage
+from subtrace.subdiv.limit import limit_points
+pts = np.array([[x, y, z] for x in (0.0, 1.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
+cube = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+faces = cube if sys.argv[1] == "closed" else cube[:5]  # (open: a box without its lid)
+cage = make_cage(pts, [4] * len(faces), np.concatenate(faces))
+P, du, dv = limit_points(cage.base, cage.points, cage.options)
+print(json.dumps({"compiled": compiled, "finite": bool(np.isfinite(P).all())}))
+"""
+
+
+@pytest.mark.parametrize("shape, creases", [("closed", False), ("open", True)])
+def test_a_cage_without_crease_vertices_compiles_no_crease_rule(tmp_path, shape, creases):
+    """subdiv.limit._closed_form: the closed-form limits of a closed smooth cage, in a fresh
+    process on an empty cache, compile none of the crease rule's cross-tangent weights (the
+    kernel's crease branch is pruned before typing); an open one (its boundary vertices
+    are creases) compiles them."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(SUBTRACE_CACHE_DIR=str(tmp_path / "cache"), PYTHONDONTWRITEBYTECODE="1")
+    proc = subprocess.run([sys.executable, "-c", _CREASE_PROBE, shape], capture_output=True,
+                          text=True, env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    assert out["finite"] and "_closed_form_kernel" in out["compiled"], out["compiled"]
+    assert ("_catmark_cross_face_weight" in out["compiled"]) == creases, out["compiled"]

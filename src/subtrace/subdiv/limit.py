@@ -153,8 +153,12 @@ def _closed_form(level, points, options, cls, which, dest, P, du, dv):
         tw[n, :n] = e
         if f is not None:
             fw[n, :n] = f
+    which = np.ascontiguousarray(which, dtype=np.int64)
+    # (None: no crease vertex among them, whose rule the kernel then compiles without)
+    crease = True if np.any(np.asarray(cls)[which] == CREASE) else None
     _closed_form_kernel(
         scheme_flag(options.scheme),
+        crease,
         level.face_offsets,
         level.face_verts,
         level.edge_verts,
@@ -165,7 +169,7 @@ def _closed_form(level, points, options, cls, which, dest, P, du, dv):
         level.vert_edges,
         level.edge_sharpness,
         cls,
-        np.ascontiguousarray(which, dtype=np.int64),
+        which,
         np.ascontiguousarray(dest, dtype=np.int64),
         tw,
         fw,
@@ -222,6 +226,7 @@ def _add3(P, du, dv, r, X, q, w, w1, w2):
 @nb.njit(cache=True)
 def _closed_form_kernel(
     is_loop,
+    crease,
     face_offsets,
     face_verts,
     edge_verts,
@@ -265,49 +270,50 @@ def _closed_form_kernel(
                     du[r, k] = s * (X[a, k] - X[v, k])
                     dv[r, k] = s * (X[b, k] - X[v, k])
         elif c == CREASE:
-            # the first two sharp edges in ring order lead and trail the span of faces
-            # i0 .. i1-1 that the tangents describe (OpenSubdiv's "crease ends")
-            i0 = 0
-            while edge_sharp[vert_edges[ea + i0]] <= F0:
-                i0 += 1
-            i1 = i0 + 1
-            while edge_sharp[vert_edges[ea + i1]] <= F0:
-                i1 += 1
-            a = _far(edge_verts, vert_edges[ea + i0], v)
-            b = _far(edge_verts, vert_edges[ea + i1], v)
-            for k in range(3):
-                P[r, k] = (4.0 * X[v, k] + X[a, k] + X[b, k]) / 6.0
-            # along the crease, towards the leading edge
-            s = 1.5 if is_loop is not None else 0.5
-            for k in range(3):
-                du[r, k] = s * (X[a, k] - X[b, k])
-                dv[r, k] = 0.0
-            # across the span, pointing into it (Biermann et al.'s masks as OpenSubdiv
-            # weights them); an unordered non-manifold ring may list fewer faces than the
-            # span claims: those faces are left out
-            m = i1 - i0  # faces in the span
-            if is_loop is not None:
-                wv, wc, wi = _loop_cross_tangent(m)
-            else:
-                wv, wc, wi = _catmark_cross_tangent(m)
-            for k in range(3):
-                dv[r, k] = wv * X[v, k] + wc * (X[a, k] + X[b, k])
-            for i in range(1, m):
-                e = _far(edge_verts, vert_edges[ea + i0 + i], v)
-                w = wi * _cross_edge_weight(is_loop, m, i)
+            if crease is not None:  # (None: the caller found no crease vertex)
+                # the first two sharp edges in ring order lead and trail the span of faces
+                # i0 .. i1-1 that the tangents describe (OpenSubdiv's "crease ends")
+                i0 = 0
+                while edge_sharp[vert_edges[ea + i0]] <= F0:
+                    i0 += 1
+                i1 = i0 + 1
+                while edge_sharp[vert_edges[ea + i1]] <= F0:
+                    i1 += 1
+                a = _far(edge_verts, vert_edges[ea + i0], v)
+                b = _far(edge_verts, vert_edges[ea + i1], v)
                 for k in range(3):
-                    dv[r, k] += w * X[e, k]
-            if is_loop is None and m >= 2:
-                for i in range(m):
-                    if fa + i0 + i >= fb:
-                        break
-                    f = vert_faces[fa + i0 + i]
-                    kk = vert_face_corner[fa + i0 + i]
-                    off = face_offsets[f]
-                    q = face_verts[off + (kk + 2) % (face_offsets[f + 1] - off)]
-                    w = wi * _catmark_cross_face_weight(m, i)
+                    P[r, k] = (4.0 * X[v, k] + X[a, k] + X[b, k]) / 6.0
+                # along the crease, towards the leading edge
+                s = 1.5 if is_loop is not None else 0.5
+                for k in range(3):
+                    du[r, k] = s * (X[a, k] - X[b, k])
+                    dv[r, k] = 0.0
+                # across the span, pointing into it (Biermann et al.'s masks as OpenSubdiv
+                # weights them); an unordered non-manifold ring may list fewer faces than the
+                # span claims: those faces are left out
+                m = i1 - i0  # faces in the span
+                if is_loop is not None:
+                    wv, wc, wi = _loop_cross_tangent(m)
+                else:
+                    wv, wc, wi = _catmark_cross_tangent(m)
+                for k in range(3):
+                    dv[r, k] = wv * X[v, k] + wc * (X[a, k] + X[b, k])
+                for i in range(1, m):
+                    e = _far(edge_verts, vert_edges[ea + i0 + i], v)
+                    w = wi * _cross_edge_weight(is_loop, m, i)
                     for k in range(3):
-                        dv[r, k] += w * X[q, k]
+                        dv[r, k] += w * X[e, k]
+                if is_loop is None and m >= 2:
+                    for i in range(m):
+                        if fa + i0 + i >= fb:
+                            break
+                        f = vert_faces[fa + i0 + i]
+                        kk = vert_face_corner[fa + i0 + i]
+                        off = face_offsets[f]
+                        q = face_verts[off + (kk + 2) % (face_offsets[f + 1] - off)]
+                        w = wi * _catmark_cross_face_weight(m, i)
+                        for k in range(3):
+                            dv[r, k] += w * X[q, k]
         elif c == SMOOTH:
             n = ne
             if is_loop is not None:
