@@ -527,3 +527,46 @@ def test_catmark_micro_triangles_grow_with_the_tolerance_until_the_pixels_bound_
     for coarse, fine in ((16.0, 8.0), (8.0, 4.0)):
         assert 1.5 <= counts[fine] / counts[coarse] <= 4.5, counts
     assert counts[0.5] <= 1.3 * counts[1.0], counts
+
+
+_SHADING_PROBE = """
+import json, sys
+from numba.core import event
+compiled = []
+
+
+class Listener(event.Listener):
+    def on_start(self, ev):
+        compiled.append(getattr(ev.data["dispatcher"].py_func, "__qualname__", "?"))
+
+    def on_end(self, ev):
+        pass
+
+
+event.register("numba:compile", Listener())
+from subtrace.runtime import warmup
+warmup.compile_shading(1, None if sys.argv[1] == "catmark" else True)
+print(json.dumps(compiled))
+"""
+
+
+@pytest.mark.parametrize("scheme", ["catmark", "loop"])
+def test_the_shading_of_catmull_clark_cages_compiles_no_loop_normals(tmp_path, scheme):
+    """shade.shade: the normals of hits on Loop items are a pass of their own, so the
+    shading of Catmull-Clark cages (``loop`` None), in a fresh process on an empty cache,
+    compiles neither that pass nor the Loop nets' normal; with Loop cages it compiles both
+    (the golden Loop scenes check their numbers)."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(SUBTRACE_CACHE_DIR=str(tmp_path / "cache"), PYTHONDONTWRITEBYTECODE="1")
+    proc = subprocess.run([sys.executable, "-c", _SHADING_PROBE, scheme], capture_output=True,
+                          text=True, env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    compiled = json.loads(proc.stdout)
+    assert "_shade_task" in compiled, compiled
+    loop = {"_loop_normals_task", "tri_normal"} & set(compiled)
+    assert loop == (set() if scheme == "catmark" else {"_loop_normals_task", "tri_normal"})

@@ -51,6 +51,7 @@ from subtrace.shade import (C_A, C_R, CHANNELS, ambient_occlusion, background_pi
                             background_rows, edge_pixels, ground_occlusion, ground_pixels,
                             ground_points, light, light_array, miss_values, shade,
                             shadow_visibility, smooth_occlusion)
+from subtrace.trace.bezier import table_loop_flag
 from subtrace.trace.rays import Pools, trace_rays
 
 # the R2 sequence's steps (the plastic number's powers): well-spread points in a square
@@ -212,7 +213,7 @@ def _closest(pools, nurbs, frame, width, patches, scene, tol_rad, offset):
             _, hits = trace_rays(pools, origins, dirs, np.full(n, np.inf), any_hit=False)
             covered = np.zeros(tasks.thread_count(), np.int64)
             shade(frame, width, hits, pools.iso.view(), patches, miss, sub, normals,
-                  pix_patch, covered, dirs)
+                  pix_patch, covered, dirs, table_loop_flag(pools.table))
             t = hits.t.copy()
         if nurbs is not None:
             shade_rays(nurbs, frame, dirs, tol_rad, offset, t, normals, pix_patch, sub)

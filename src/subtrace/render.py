@@ -475,7 +475,8 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
             t = np.full(W * H, np.inf)
         else:
             patches = patch_shading(table, [scene.objects[k] for k in owners])
-            shade(frame, W, hits, iso.view(), patches, miss, planes, normals, pix_patch, covered)
+            shade(frame, W, hits, iso.view(), patches, miss, planes, normals, pix_patch, covered,
+                  loop=table_loop_flag(table))
             if owners != list(range(len(owners))):  # objects without a cage: scene indices
                 hit = planes[C_OBJECT] >= 0
                 index = planes[C_OBJECT][hit].astype(np.int64)

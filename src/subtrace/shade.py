@@ -50,7 +50,7 @@ MISS = (0.0, 0.0, 0.0, 0.0, np.inf, 0.0, 0.0, 0.0, -1.0, -1.0, -1.0, 0.0, 0.0, n
 
 
 def shade(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, covered,
-          dirs=None):
+          dirs=None, loop=None):
     """Fill ``planes`` (len(CHANNELS), n_pixels) float32 from ``hits``
     (:class:`~subtrace.trace.pools.Hits`) on every thread (blocks of pixels in turn): every
     channel but the colour, which :func:`light` adds.
@@ -61,10 +61,15 @@ def shade(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, co
     turned towards the eye, ``pix_patch`` (n_pixels,) int32 its patch (-1: a miss);
     ``covered`` (threads,) int64 receives the hits each thread shaded. ``dirs``: None (ray
     r is pixel r's centre ray), or the (n,3) unit directions of rays from the eye (extra
-    samples): then ``hits`` and the outputs are per ray."""
+    samples): then ``hits`` and the outputs are per ray. ``loop``: whether any cage is a
+    Loop cage (``trace.bezier.loop_flag``: True or None); the normals of hits on Loop items
+    are a second pass of their own (:func:`_loop_normals_task`), which a render of
+    Catmull-Clark cages neither runs nor compiles."""
     dirs = _no_dirs() if dirs is None else dirs
     run_tasks(_shade_task, frame, width, hits, iso, patches, miss, planes, normals, pix_patch,
               covered, dirs)
+    if loop is not None:
+        run_tasks(_loop_normals_task, frame, width, hits, iso, planes, normals, dirs)
 
 
 def _no_dirs():
@@ -161,19 +166,8 @@ def _shade_task(task, n_tasks, frame, width, hits, iso, patches, miss, planes, n
             depth = np.int64(hits.leaf[r])  # (1 << depth: in 64 bits)
             it = np.int64(hits.item[r])
             c = iso.ref[it]
-            if iso.kind[it] == TRI:
-                # a Loop patch or piece: the normal of its triangular net at its own
-                # (s, t) (trace/tris.py: the patch's (u, v) = (A + g (s, t)) 2^-level)
-                sc = 1 << iso.level[it]
-                g = np.float64(iso.orient[it])
-                nx, ny, nz = tri_normal(iso.nets.reshape((len(iso.nets), 16, 3)), c,
-                                        g * (u * sc - iso.i0[it]), g * (v * sc - iso.j0[it]))
-            elif iso.kind[it] == LOOP_CELL:
-                g = np.float64(iso.orient[it])
-                nx, ny, nz = _tri_cell_normal(iso.cells[4 * c:4 * c + 3],
-                                              iso.cell_normals[c],
-                                              g * (u * (1 << depth) - iso.i0[it]),
-                                              g * (v * (1 << depth) - iso.j0[it]))
+            if iso.kind[it] == TRI or iso.kind[it] == LOOP_CELL:
+                nx = ny = nz = 0.0  # (a Loop item: its normal's pass, _loop_normals_task)
             elif iso.kind[it] == 0:
                 # a Bezier piece over a dyadic square of the patch (the whole of a regular one)
                 sc = 1 << iso.level[it]
@@ -255,6 +249,46 @@ def _light_task(task, n_tasks, frame, width, t, normals, pix_patch, patches, lig
                 planes[C_R, r] += ks[0] * sr
                 planes[C_R + 1, r] += ks[1] * sg
                 planes[C_R + 2, r] += ks[2] * sb
+
+
+@nb.njit(cache=True, nogil=True, _nrt=False)
+def _loop_normals_task(task, n_tasks, frame, width, hits, iso, planes, normals, dirs):
+    """The normals of the hits on Loop items in the blocks of :func:`_shade_task`'s task
+    ``task``, which left them zero: the normal (N) channel and ``normals``, turned towards
+    the eye."""
+    n_pix = len(hits.t)
+    n_blocks = (n_pix + SHADE_BLOCK - 1) // SHADE_BLOCK
+    for blk in range(task, n_blocks, n_tasks):
+        for r in range(blk * SHADE_BLOCK, min(n_pix, (blk + 1) * SHADE_BLOCK)):
+            if not (hits.t[r] < np.inf):
+                continue
+            it = np.int64(hits.item[r])
+            if iso.kind[it] != TRI and iso.kind[it] != LOOP_CELL:
+                continue
+            u = hits.a[r]
+            v = hits.b[r]
+            c = iso.ref[it]
+            g = np.float64(iso.orient[it])
+            if iso.kind[it] == TRI:
+                # a Loop patch or piece: the normal of its triangular net at its own
+                # (s, t) (trace/tris.py: the patch's (u, v) = (A + g (s, t)) 2^-level)
+                sc = 1 << iso.level[it]
+                nx, ny, nz = tri_normal(iso.nets.reshape((len(iso.nets), 16, 3)), c,
+                                        g * (u * sc - iso.i0[it]), g * (v * sc - iso.j0[it]))
+            else:
+                depth = np.int64(hits.leaf[r])  # (1 << depth: in 64 bits)
+                nx, ny, nz = _tri_cell_normal(iso.cells[4 * c:4 * c + 3],
+                                              iso.cell_normals[c],
+                                              g * (u * (1 << depth) - iso.i0[it]),
+                                              g * (v * (1 << depth) - iso.j0[it]))
+            planes[C_N, r] = nx
+            planes[C_N + 1, r] = ny
+            planes[C_N + 2, r] = nz
+            dx, dy, dz = _direction(frame, width, dirs, r)
+            sgn = -1.0 if nx * dx + ny * dy + nz * dz > 0.0 else 1.0
+            normals[r, 0] = sgn * nx
+            normals[r, 1] = sgn * ny
+            normals[r, 2] = sgn * nz
 
 
 @leaf_njit

@@ -227,29 +227,47 @@ def compile_kernels(threads: int, schemes=None) -> None:
     from subtrace.accel.bvh import no_bvh
     from subtrace.accel.projection import no_tiles
     from subtrace.runtime import threads as tasks
-    from subtrace.shade import CHANNELS, miss_values, shade
     from subtrace.trace.bezier import loop_flag
     from subtrace.trace.kernels import trace_round
     from subtrace.trace.pools import Memos, Pieces, candidate_lists, hit_arrays
 
+    compile_shading(threads, None)
+    # (the shading first: the render's process is still reading the cages)
+    schemes = _schemes() if schemes is None else schemes
+    if schemes is None:
+        return
+    if loop_flag(schemes) is not None:
+        compile_shading(threads, True)  # (and the Loop items' normals)
     i64 = np.zeros(0, np.int64)
     i32 = np.zeros(0, np.int32)  # (the rounds' requests)
     frame = np.zeros((4, 3))
     iso = Pieces(0).view()
     tasks.set_threads(threads)
     try:
-        misses = hit_arrays(2)  # two pixels, both missed: the output planes' layout
-        misses.t[:] = np.inf
-        shade(frame, 1, misses, iso, _no_patches(), miss_values((0.0, 0.0, 0.0)),
-              np.zeros((len(CHANNELS), 2), np.float32), np.zeros((2, 3)),
-              np.zeros(2, np.int32), np.zeros(threads, np.int64))
-        # (the shading first: the render's process is still reading the cages)
-        schemes = _schemes() if schemes is None else schemes
-        if schemes is None:
-            return
         trace_round(i64, frame, 1, 0, no_bvh(), no_tiles(), np.zeros((0, 3)), np.zeros((0, 3)),
                     iso, Memos(threads).views(0), candidate_lists(0), config.TRI_SLACK,
                     hit_arrays(0), i32, np.zeros(threads, np.int64), loop_flag(schemes))
+    finally:
+        tasks.set_threads(None)
+
+
+def compile_shading(threads: int, loop) -> None:
+    """Compile ``shade._shade_task`` (and with ``loop`` True the Loop items' normals,
+    ``shade._loop_normals_task``) with the argument types of a render on ``threads``
+    threads, on two pixels that missed."""
+    import numpy as np
+
+    from subtrace.runtime import threads as tasks
+    from subtrace.shade import CHANNELS, miss_values, shade
+    from subtrace.trace.pools import Pieces, hit_arrays
+
+    misses = hit_arrays(2)  # two pixels, both missed: the output planes' layout
+    misses.t[:] = np.inf
+    tasks.set_threads(threads)
+    try:
+        shade(np.zeros((4, 3)), 1, misses, Pieces(0).view(), _no_patches(),
+              miss_values((0.0, 0.0, 0.0)), np.zeros((len(CHANNELS), 2), np.float32),
+              np.zeros((2, 3)), np.zeros(2, np.int32), np.zeros(threads, np.int64), loop=loop)
     finally:
         tasks.set_threads(None)
 
