@@ -3,6 +3,9 @@ builders shared by the renderer's tests."""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -39,3 +42,34 @@ def small_scene(meshes, eye, target, width=64, height=48, fov=60.0, tolerance=1.
             "render": {"tolerance": tolerance},
         }
     )
+
+
+# The start of a program for :func:`run_fresh`: from then on the list ``compiled`` receives
+# the name (``module.qualname``) of every function Numba compiles (not what it loads)
+COMPILE_LISTENER = """
+from numba.core import event
+compiled = []
+
+
+class _Compiles(event.Listener):
+    def on_start(self, ev):
+        func = getattr(ev.data.get("dispatcher"), "py_func", None)
+        compiled.append(getattr(func, "__module__", "") + "." + getattr(func, "__qualname__", "?"))
+
+    def on_end(self, ev):
+        pass
+
+
+event.register("numba:compile", _Compiles())
+"""
+
+
+def run_fresh(code, *args, cache):
+    """Run the Python program ``code`` with ``args`` in a fresh process whose kernel cache is
+    the folder ``cache``; its standard output (the test fails with its errors if it fails)."""
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(SUBTRACE_CACHE_DIR=str(cache), PYTHONDONTWRITEBYTECODE="1")
+    proc = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True,
+                          env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    return proc.stdout

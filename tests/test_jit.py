@@ -14,6 +14,7 @@ from pathlib import Path
 import numba
 import pytest
 
+from shared_data import COMPILE_LISTENER, run_fresh
 from subtrace.runtime import jit
 
 CPU = ("x86_64-unknown-linux-gnu", "generic", "")  # any fixed target: the key's other inputs
@@ -681,17 +682,7 @@ import json, sys
 from subtrace.runtime import jit
 if sys.argv[1] == "trimmed":
     jit.trim_loader()
-from numba.core import event
-compiled = []
-
-class Compiles(event.Listener):
-    def on_start(self, ev):
-        compiled.append(getattr(ev.data["dispatcher"].py_func, "__qualname__", "?"))
-
-    def on_end(self, ev):
-        pass
-
-event.register("numba:compile", Compiles())
+""" + COMPILE_LISTENER + """
 import numba
 from subtrace.trace.prims import shear  # a leaf_njit helper: no wrapper, cached
 
@@ -716,17 +707,11 @@ def test_helpers_are_kept_as_bitcode_and_linked_from_the_cache(tmp_path, mode):
     machine code of its own, and cached so; a caller compiled in this process and one in
     the next process (which loads the helper from the cache, compiling only the caller)
     link it and compute what the helper's Python computes."""
-    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
-    env.update(SUBTRACE_CACHE_DIR=str(tmp_path / "cache"), PYTHONDONTWRITEBYTECODE="1")
-
     def probe():
-        proc = subprocess.run([sys.executable, "-c", _LINKED_ONLY_PROBE, mode],
-                              capture_output=True, text=True, env=env, timeout=600)
-        assert proc.returncode == 0, proc.stderr
-        out = json.loads(proc.stdout)
+        out = json.loads(run_fresh(_LINKED_ONLY_PROBE, mode, cache=tmp_path / "cache"))
         assert out["applied"] and out["got"] == out["want"]
         assert out["linked_only"] and not out["code"] and out["cached"] == 1
-        return out["compiled"]
+        return [c.rpartition(".")[2] for c in out["compiled"]]
 
     assert "shear" in probe()  # compiled and stored
     assert probe() == ["<lambda>"]  # only the caller: the helper's bitcode came from the cache
@@ -789,7 +774,8 @@ def test_function_types_resolve_as_numba_does_and_failures_still_raise():
     arr = types.Array(f64, 2, "C")
     calls = [(operator.add, (f64, f64)), (operator.add, (i64, f64)), (operator.add, (arr, f64)),
              (operator.lt, (i64, i64)), (operator.truediv, (i64, i64)), (abs, (i64,)),
-             (min, (f64, i64)), (np.sqrt, (arr,)), (operator.getitem, (arr, types.UniTuple(i64, 2))),
+             (min, (f64, i64)), (np.sqrt, (arr,)),
+             (operator.getitem, (arr, types.UniTuple(i64, 2))),
              (np.empty, (i64, types.NumberClass(f64)))]
     for fn, args in calls:
         fnty = ctx.resolve_value_type(fn)

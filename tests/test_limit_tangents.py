@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from shared_data import COMPILE_LISTENER, run_fresh
 from subtrace import make_cage
 from subtrace.patches import basis, evaluate as ev
 from subtrace.subdiv import limit
@@ -222,22 +223,8 @@ def test_corner_normals_are_the_limit_normals(spec, seed):
         assert np.all(np.isfinite(dPdu)) and np.all(np.isfinite(dPdv))
 
 
-_SCHEME_PROBE = """
+_SCHEME_PROBE = COMPILE_LISTENER + """
 import json, sys
-from numba.core import event
-compiled = []
-
-
-class Listener(event.Listener):
-    def on_start(self, ev):
-        fn = getattr(ev.data.get("dispatcher"), "py_func", None)
-        compiled.append(getattr(fn, "__module__", "") + "." + getattr(fn, "__qualname__", ""))
-
-    def on_end(self, ev):
-        pass
-
-
-event.register("numba:compile", Listener())
 import numpy as np
 from subtrace import make_cage
 from subtrace.subdiv.limit import limit_points
@@ -259,38 +246,16 @@ def test_a_catmark_cage_compiles_none_of_loops_masks(tmp_path, scheme, other):
     fresh process on an empty cache, compiles none of Loop's weight functions (the kernels'
     branches on the scheme are pruned before typing); a Loop cage compiles Loop's."""
     import json
-    import os
-    import subprocess
-    import sys
 
-    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
-    env.update(SUBTRACE_CACHE_DIR=str(tmp_path / "cache"), PYTHONDONTWRITEBYTECODE="1")
-    proc = subprocess.run([sys.executable, "-c", _SCHEME_PROBE, scheme], capture_output=True,
-                          text=True, env=env, timeout=600)
-    assert proc.returncode == 0, proc.stderr
-    out = json.loads(proc.stdout)
+    out = json.loads(run_fresh(_SCHEME_PROBE, scheme, cache=tmp_path / "cache"))
     assert out["finite"]
     ours = [c for c in out["compiled"] if c.startswith(f"subtrace.subdiv.{scheme}.")]
     theirs = [c for c in out["compiled"] if other and c.startswith(f"subtrace.subdiv.{other}.")]
     assert ours and not theirs, out["compiled"]
 
 
-_CREASE_PROBE = """
+_CREASE_PROBE = COMPILE_LISTENER + """
 import json, sys
-from numba.core import event
-compiled = []
-
-
-class Listener(event.Listener):
-    def on_start(self, ev):
-        fn = getattr(ev.data.get("dispatcher"), "py_func", None)
-        compiled.append(getattr(fn, "__qualname__", ""))
-
-    def on_end(self, ev):
-        pass
-
-
-event.register("numba:compile", Listener())
 import numpy as np
 from subtrace import make_cage
 from subtrace.subdiv.limit import limit_points
@@ -310,15 +275,8 @@ def test_a_cage_without_crease_vertices_compiles_no_crease_rule(tmp_path, shape,
     kernel's crease branch is pruned before typing); an open one (its boundary vertices
     are creases) compiles them."""
     import json
-    import os
-    import subprocess
-    import sys
 
-    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
-    env.update(SUBTRACE_CACHE_DIR=str(tmp_path / "cache"), PYTHONDONTWRITEBYTECODE="1")
-    proc = subprocess.run([sys.executable, "-c", _CREASE_PROBE, shape], capture_output=True,
-                          text=True, env=env, timeout=600)
-    assert proc.returncode == 0, proc.stderr
-    out = json.loads(proc.stdout)
-    assert out["finite"] and "_closed_form_kernel" in out["compiled"], out["compiled"]
-    assert ("_catmark_cross_face_weight" in out["compiled"]) == creases, out["compiled"]
+    out = json.loads(run_fresh(_CREASE_PROBE, shape, cache=tmp_path / "cache"))
+    names = {c.rpartition(".")[2] for c in out["compiled"]}
+    assert out["finite"] and "_closed_form_kernel" in names, out["compiled"]
+    assert ("_catmark_cross_face_weight" in names) == creases, out["compiled"]

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from shared_data import MODELS, SHAPES, needs_shared, small_scene
+from shared_data import COMPILE_LISTENER, MODELS, SHAPES, needs_shared, run_fresh, small_scene
 
 import subtrace
 from subtrace.patches.table import build_patch_table
@@ -529,21 +529,8 @@ def test_catmark_micro_triangles_grow_with_the_tolerance_until_the_pixels_bound_
     assert counts[0.5] <= 1.3 * counts[1.0], counts
 
 
-_SHADING_PROBE = """
+_SHADING_PROBE = COMPILE_LISTENER + """
 import json, sys
-from numba.core import event
-compiled = []
-
-
-class Listener(event.Listener):
-    def on_start(self, ev):
-        compiled.append(getattr(ev.data["dispatcher"].py_func, "__qualname__", "?"))
-
-    def on_end(self, ev):
-        pass
-
-
-event.register("numba:compile", Listener())
 from subtrace.runtime import warmup
 warmup.compile_shading(1, None if sys.argv[1] == "catmark" else True)
 print(json.dumps(compiled))
@@ -557,16 +544,9 @@ def test_the_shading_of_catmull_clark_cages_compiles_no_loop_normals(tmp_path, s
     compiles neither that pass nor the Loop nets' normal; with Loop cages it compiles both
     (the golden Loop scenes check their numbers)."""
     import json
-    import os
-    import subprocess
-    import sys
 
-    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
-    env.update(SUBTRACE_CACHE_DIR=str(tmp_path / "cache"), PYTHONDONTWRITEBYTECODE="1")
-    proc = subprocess.run([sys.executable, "-c", _SHADING_PROBE, scheme], capture_output=True,
-                          text=True, env=env, timeout=600)
-    assert proc.returncode == 0, proc.stderr
-    compiled = json.loads(proc.stdout)
-    assert "_shade_task" in compiled, compiled
-    loop = {"_loop_normals_task", "tri_normal"} & set(compiled)
+    compiled = json.loads(run_fresh(_SHADING_PROBE, scheme, cache=tmp_path / "cache"))
+    names = {c.rpartition(".")[2] for c in compiled}
+    assert "_shade_task" in names, compiled
+    loop = {"_loop_normals_task", "tri_normal"} & names
     assert loop == (set() if scheme == "catmark" else {"_loop_normals_task", "tri_normal"})

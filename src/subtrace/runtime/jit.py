@@ -393,10 +393,7 @@ def _overloads_shared_across_flags() -> bool:
         return False  # pragma: no cover - another Numba
 
     def get_impl(self, args, kws):
-        flags = stack.top_or_none()
-        inherited = None if flags is None else tuple(
-            _hashable(getattr(flags, name)) for name in INHERITED_FLAGS)
-        cache_key = self.context, tuple(args), tuple(kws.items()), inherited
+        cache_key = self.context, tuple(args), tuple(kws.items()), _inherited(stack)
         try:
             return self._impl_cache[cache_key]
         except KeyError:  # (built outside the handler: no nested KeyError in its errors)
@@ -438,12 +435,9 @@ def _function_types_resolved_once() -> bool:
     resolved = {}
 
     def get_call_type(self, context, args, kws):
-        flags = stack.top_or_none()
-        inherited = None if flags is None else tuple(
-            _hashable(getattr(flags, name)) for name in INHERITED_FLAGS)
         try:
             key = (self, context, get_local_target(context), tuple(args),
-                   tuple(sorted(kws.items())), inherited)
+                   tuple(sorted(kws.items())), _inherited(stack))
             hash(key)
         except TypeError:  # (an unhashable argument type: typed as before)
             return resolve(self, context, args, kws)
@@ -457,6 +451,14 @@ def _function_types_resolved_once() -> bool:
     get_call_type.__wrapped__ = resolve
     base.get_call_type = get_call_type
     return True
+
+
+def _inherited(stack):
+    """The values of :data:`INHERITED_FLAGS` of the function being compiled (the top of
+    Numba's ``ConfigStack``), as a key; None outside a compile."""
+    flags = stack.top_or_none()
+    return None if flags is None else tuple(
+        _hashable(getattr(flags, name)) for name in INHERITED_FLAGS)
 
 
 def _hashable(value):
