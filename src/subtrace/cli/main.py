@@ -85,8 +85,6 @@ def main(argv=None, own_process: bool = False) -> int:
         return 1
 
 
-
-
 class _OneLineWarnings:
     """Show a SubtraceWarning as ``subtrace: warning: <message>`` (one line, no source)."""
 

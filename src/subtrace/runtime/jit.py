@@ -597,7 +597,7 @@ def _helpers_linked_only() -> bool:
     except ImportError:  # pragma: no cover - another Numba
         return False
     library = getattr(codegen, "CPUCodeLibrary", None)
-    needed = ("_finalize_final_module", "_finalize_dynamic_globals",
+    needed = ("_finalize_final_module", "_optimize_final_module", "_finalize_dynamic_globals",
               "_verify_declare_only_symbols", "serialize_using_object_code", "_unserialize",
               "_get_module_for_linking")
     jit_codegen = getattr(codegen, "JITCPUCodegen", None)
