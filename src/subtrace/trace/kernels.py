@@ -154,19 +154,19 @@ def _sort_candidates(cands, r):
 
 
 @inline_njit
-def _visit(p, task, ray, round_no, iso, mem, slack, hit, scratch, tested, loop):
-    """Intersect patch ``p`` for the ray if it was built in the previous round (counting
-    the micro-triangles built into ``tested[task]``); False if it is unbuilt. (A function,
+def _visit(p, ray, round_no, iso, mem, slack, hit, scratch, loop):
+    """Intersect patch ``p`` for the ray if it was built in the previous round: the
+    micro-triangles that built (0 for an older patch), or -1 if it is unbuilt. (A function,
     not a closure of the kernel: a closure over the bundles named inside the kernel lost
     its writes, with Numba 0.68.)"""
     s = iso.patch_iso[p]
-    if s >= 0:
-        if iso.round[s] == round_no - 1:
-            if iso.touched[s] == 0:  # (a store, even of the same value, takes the cache
-                iso.touched[s] = 1   # line from the other threads reading it)
-            tested[task] += intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop)
-        return True
-    return False
+    if s < 0:
+        return -1
+    if iso.round[s] != round_no - 1:
+        return 0
+    if iso.touched[s] == 0:  # (a store, even of the same value, takes the cache line from
+        iso.touched[s] = 1   # the other threads reading it)
+    return intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop)
 
 
 @nb.njit(cache=True, nogil=True, _nrt=False, error_model="numpy")  # see jit.leaf_njit
@@ -183,6 +183,9 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
     stack, stack_t, work, st, st_t, ent_t, ent_i, lv, lp, hit = scratches[task]
     scratch = (work, st, st_t, ent_t, ent_i, lv, lp)
     projected = len(tiles.off) > 1
+    # the micro-triangles this thread's rays built, added to ``tested[task]`` at the end
+    # (added to per patch there, the threads' counts shared a cache line)
+    n_tested = 0
     for band in range(len(bands) - 1):
         for q in range(bands[band], bands[band + 1]):
             r = q if len(rays) == 0 else rays[q]
@@ -244,8 +247,12 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
                     te = box_entry(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, 0.0,
                                    hit[H_T])
                 j += 1
-                if te < np.inf and not _visit(p, task, ray, round_no, iso, mem, slack, hit,
-                                              scratch, tested, loop):
+                if te == np.inf:
+                    continue
+                built = _visit(p, ray, round_no, iso, mem, slack, hit, scratch, loop)
+                if built >= 0:
+                    n_tested += built
+                else:
                     # unbuilt: a candidate (rewritten in place when remembered: n_c < j), the
                     # nearest one the request
                     if n_c < CANDIDATES:
@@ -273,3 +280,4 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
                         cands.wanted[cands.patch[r, k]] = 1
             cands.count[r] = n_c if n_c <= CANDIDATES else -1
             _store_hit(hit, hits, r)
+    tested[task] += n_tested
