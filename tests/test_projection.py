@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from subtrace.accel.projection import TILE, project_shells
 from subtrace.io.scene import scene_from_dict
 from subtrace.render import render_scene
+from subtrace.trace.pools import candidate_lists
 from subtrace.camera import Camera, camera_frame
 
 MODELS = Path(__file__).resolve().parents[2] / "shared" / "models"
@@ -62,6 +63,33 @@ def test_every_box_a_ray_enters_is_in_its_tile(seed, width, height, fov):
         assert np.all(np.diff(tiles.key[listed]) >= 0)
     hit = enters & np.isfinite(near)
     assert np.all((tiles.key[None].repeat(len(near), 0) <= near * (1 + 1e-12))[hit])
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 40), st.integers(1, 30))
+def test_candidate_rows_are_the_listed_tiles_pixels(seed, width, height):
+    """The rounds' candidate lists have a row for each pixel of a tile that lists a shell,
+    and for no other: distinct rows, all of them used, none for a pixel of a tile that
+    lists none (a tile's pixels beyond the image's edge keep their rows unused)."""
+    rng = np.random.default_rng(seed)
+    cam = Camera(eye=(0.0, 0.0, 0.0), target=(0.0, 1.0, 0.0), up=(0.0, 0.0, 1.0), fov_deg=60.0,
+                 width=width, height=height)
+    frame = camera_frame(cam)
+    c = rng.normal(0, 1, (int(rng.integers(0, 6)), 3)) * (1.0, 0.2, 1.0) + (0.0, 4.0, 0.0)
+    half = np.abs(rng.normal(0, 0.3, c.shape))
+    tiles = project_shells(c - half, c + half, frame, width, height)
+    cands = candidate_lists(width * height, len(c), tiles.off)
+    listed = tiles.off[1:] > tiles.off[:-1]
+    assert len(cands.t) == TILE * TILE * np.count_nonzero(listed) == len(cands.patch)
+    assert np.all((cands.tile_row >= 0) == listed)
+    rows = []
+    per_row = -(-width // TILE)
+    for ty, tx in np.ndindex(-(-height // TILE), per_row):
+        k = ty * per_row + tx
+        if listed[k]:
+            rows += [cands.tile_row[k] + a * TILE + b for a in range(TILE) for b in range(TILE)]
+    assert sorted(rows) == list(range(len(cands.t)))
+    assert len(candidate_lists(width * height).t) == width * height  # (the BVH's rays)
 
 
 def _scene(mesh, eye, target, fov=50.0, width=72, height=54, tolerance=1.0):

@@ -39,6 +39,7 @@ from subtrace.patches.criterion import edge_sampling
 from subtrace.patches.table import build_patch_table, cage_face_shells
 from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
+from subtrace.runtime.memory import one_block
 from subtrace.picture import paint
 from subtrace.shade import (C_OBJECT, C_R, CHANNELS, background_rows, deepest_level,
                             miss_values, patch_shading, shade)
@@ -204,12 +205,12 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
     iso.append_regular(reg, depths[reg], reg_side, None, table.shell_min[reg],
                        table.shell_max[reg])
     build_loop_regular(table, depths, edge_depth, iso)
-    hits = hit_arrays(n_rays)
-    request = np.empty(n_rays, dtype=np.int32)  # (round 0 writes every ray's entry)
+    # (round 0 writes every ray's request)
+    hits, request = hit_arrays(n_rays, request=True)
     # the micro-triangles each thread's rays built (each chunk of rays counts what its own
     # memo built: the sum is the same on any threads)
     tested = np.zeros(len(memos.m), np.int64)
-    cands = candidate_lists(n_rays, table.n_patches)
+    cands = candidate_lists(n_rays, table.n_patches, tiles.off if len(tiles.off) > 1 else None)
     rays = None  # round 0: every pixel's ray
     round_no = 0
     loop = table_loop_flag(table)  # (None: a kernel without the Loop descents)
@@ -458,8 +459,8 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
         frame = view.frame()
         # the channels as float32 planes, written in place by the kernel (no conversion pass)
         planes = np.empty((len(CHANNELS), W * H), dtype=np.float32)
-        normals = np.empty((W * H, 3))
-        pix_patch = np.empty(W * H, np.int32)  # (patches number far fewer than 2^31)
+        # (patches number far fewer than 2^31: int32 ids)
+        normals, pix_patch = one_block(((W * H, 3), np.float64), ((W * H,), np.int32))
         covered = np.zeros(tasks.thread_count(), np.int64)
         miss = miss_values(scene.render.background)
         patches = None

@@ -195,12 +195,15 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
                 tile = (row // TILE) * tiles.per_row + col // TILE
                 if tiles.off[tile] == tiles.off[tile + 1]:
                     # no shell projects onto its tile: a miss, recorded as the loop below
-                    # records one (without the ray's set-up)
+                    # records one (without the ray's set-up; its tile has no candidate rows)
                     request[r] = -1
-                    cands.count[r] = 0
                     hits.t[r] = np.inf
                     hits.prim[r] = -1
                     continue
+            cr = r  # the ray's row of the candidate lists (pools.Candidates)
+            if len(cands.tile_row):
+                cr = (cands.tile_row[(row // TILE) * tiles.per_row + col // TILE]
+                      + (row % TILE) * TILE + col % TILE)
             dx, dy, dz = ray_setup(frame, row, col)
             ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
             kx, ky, kz, sx, sy, sz = shear(dx, dy, dz)
@@ -214,9 +217,9 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
             src = 2
             sp = 0
             j = j_end = np.int64(0)
-            if round_no > 0 and cands.count[r] >= 0:
+            if round_no > 0 and cands.count[cr] >= 0:
                 src = 0
-                j_end = _sort_candidates(cands, r)
+                j_end = _sort_candidates(cands, cr)
             elif projected:
                 src = 1
                 tile = (row // TILE) * tiles.per_row + col // TILE
@@ -233,8 +236,8 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
                     if j == j_end:
                         break
                 if src == 0:
-                    p = np.int64(cands.patch[r, j])
-                    te = cands.t[r, j]
+                    p = np.int64(cands.patch[cr, j])
+                    te = cands.t[cr, j]
                     if te >= hit[H_T]:  # it and every later one lie beyond the hit
                         break
                 else:
@@ -256,8 +259,8 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
                     # unbuilt: a candidate (rewritten in place when remembered: n_c < j), the
                     # nearest one the request
                     if n_c < CANDIDATES:
-                        cands.patch[r, n_c] = p
-                        cands.t[r, n_c] = te
+                        cands.patch[cr, n_c] = p
+                        cands.t[cr, n_c] = te
                         n_c += 1
                     else:
                         n_c = CANDIDATES + 1
@@ -276,8 +279,8 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
                 cands.wanted[req] = 1
                 reach = min(req_x, hit[H_T])
                 for k in range(min(n_c, CANDIDATES)):
-                    if cands.t[r, k] < reach:
-                        cands.wanted[cands.patch[r, k]] = 1
-            cands.count[r] = n_c if n_c <= CANDIDATES else -1
+                    if cands.t[cr, k] < reach:
+                        cands.wanted[cands.patch[cr, k]] = 1
+            cands.count[cr] = n_c if n_c <= CANDIDATES else -1
             _store_hit(hit, hits, r)
     tested[task] += n_tested

@@ -25,6 +25,7 @@ from typing import NamedTuple
 import numpy as np
 
 from subtrace import config
+from subtrace.accel.projection import TILE
 from subtrace.patches.basis import BOX_PAD, net_bounds
 from subtrace.patches.groups import GROUP, grouped_layout
 from subtrace.patches.isolate import item_sides
@@ -32,6 +33,7 @@ from subtrace.trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
 from subtrace.trace.prims import (
     M_COUNTS, M_MADE, M_PEAK_CELLS, M_PEAK_NETS, M_PEAK_NODES, memo_restart,
 )
+from subtrace.runtime.memory import one_block
 from subtrace.patches.isolate_loop import sample_ranges, side_samples
 from subtrace.trace.tris import LOOP_CELL, TRI, tri_nets_as_pieces
 
@@ -80,7 +82,15 @@ class Memo(NamedTuple):
 
 class Candidates(NamedTuple):
     """Per ray, the unbuilt shells it entered before its best hit: a ray traced again after
-    they are built tests just those instead of traversing again."""
+    they are built tests just those instead of traversing again.
+
+    Only a ray that enters a shell has a list. With projection tiles (``accel/projection``)
+    those are the rays of tiles that list a shell, so the lists have rows for those tiles
+    alone: ``tile_row[k]`` is tile k's first row (its ``TILE`` x ``TILE`` pixels row by row
+    from there), -1 for a tile that lists none. Without tiles (``tile_row`` empty) ray r's
+    row is r. (A view of a few objects lists shells in a fraction of the tiles: rows for
+    every pixel were most of the memory a render touched first, and this machine's first
+    touch of a page costs more than the rays' work on it.)"""
 
     patch: np.ndarray  # (R, CANDIDATES) int32
     t: np.ndarray  # (R, CANDIDATES) float64: entry distances
@@ -88,6 +98,7 @@ class Candidates(NamedTuple):
     # (P,) uint8: 1 for each patch to build after the round (``trace/kernels.py``): the
     # rays' requests and the unbuilt shells they enter within their requests' reach
     wanted: np.ndarray
+    tile_row: np.ndarray  # (T,) int64: each tile's first row, or -1; empty: ray r's row is r
 
 
 class Hits(NamedTuple):
@@ -102,20 +113,31 @@ class Hits(NamedTuple):
     b: np.ndarray  # (R,) float64: the patch parameter v
 
 
-def candidate_lists(n_rays: int, n_patches: int = 0) -> Candidates:
-    """Empty candidate lists for ``n_rays`` rays (round 0 sets every ray's) among
-    ``n_patches`` patches."""
+def candidate_lists(n_rays: int, n_patches: int = 0, tiles_off=None) -> Candidates:
+    """Empty candidate lists (round 0 sets every list it uses) among ``n_patches`` patches:
+    for ``n_rays`` rays, or with ``tiles_off`` (the projection tiles' ``off``), for the
+    pixels of the tiles that list a shell (:class:`Candidates`)."""
+    tile_row = np.zeros(0, np.int64)
+    if tiles_off is not None and len(tiles_off) > 1:
+        listed = tiles_off[1:] != tiles_off[:-1]
+        tile_row = np.cumsum(listed) - 1
+        n_rays = (int(tile_row[-1]) + 1) * TILE * TILE
+        tile_row *= TILE * TILE
+        tile_row[~listed] = -1
     return Candidates(np.empty((n_rays, CANDIDATES), np.int32),
                       np.empty((n_rays, CANDIDATES)), np.empty(n_rays, np.int8),
-                      np.zeros(n_patches, np.uint8))
+                      np.zeros(n_patches, np.uint8), tile_row)
 
 
-def hit_arrays(n_rays: int) -> Hits:
+def hit_arrays(n_rays: int, request: bool = False):
     """Hit records for ``n_rays`` rays (round 0 sets every ray's); the ids and the depth
     as int32 (patches and items number far fewer than 2^31): 12 bytes a pixel fewer to
-    touch than int64 (readers widen them before arithmetic)."""
-    return Hits(np.empty(n_rays), np.empty(n_rays, np.int32), np.empty(n_rays, np.int32),
-                np.empty(n_rays, np.int32), np.empty(n_rays), np.empty(n_rays))
+    touch than int64 (readers widen them before arithmetic). With ``request``: (the
+    :class:`Hits`, the rounds' int32 request per ray), in one allocation
+    (``runtime.memory.one_block``)."""
+    f8, i4 = ((n_rays,), np.float64), ((n_rays,), np.int32)
+    arrays = one_block(f8, i4, i4, i4, f8, f8, *((i4,) if request else ()))
+    return (Hits(*arrays[:6]), arrays[6]) if request else Hits(*arrays)
 
 
 def grown(a, n_used, size):
