@@ -273,7 +273,7 @@ def _loop_normals_task(task, n_tasks, frame, width, hits, iso, planes, normals, 
                 # a Loop patch or piece: the normal of its triangular net at its own
                 # (s, t) (trace/tris.py: the patch's (u, v) = (A + g (s, t)) 2^-level)
                 sc = 1 << iso.level[it]
-                nx, ny, nz = tri_normal(iso.nets.reshape((len(iso.nets), 16, 3)), c,
+                nx, ny, nz = tri_normal(iso.tri_nets, c,
                                         g * (u * sc - iso.i0[it]), g * (v * sc - iso.j0[it]))
             else:
                 depth = np.int64(hits.leaf[r])  # (1 << depth: in 64 bits)

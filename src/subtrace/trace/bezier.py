@@ -398,7 +398,7 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop):
             if loop is not None:
                 sh = depth - level[it]
                 fr = (np.int64(iso.orient[it]), i0[it] << sh, j0[it] << sh, sh)
-                tested += intersect_tri(ray, it, nets, ref[it], depth, fr, item_side,
+                tested += intersect_tri(ray, it, iso.tri_nets, ref[it], depth, fr, item_side,
                                         iso.samples, slack, hit, code, mem, scratch)
             continue
         if kind[it] == LOOP_CELL:  # an isolated Loop patch's cell (counted when built)

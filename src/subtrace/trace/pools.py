@@ -65,6 +65,10 @@ class PieceArrays(NamedTuple):
     touched: np.ndarray  # (S,) uint8: set when a ray tests the slot
     orient: np.ndarray  # (I,) int8: a Loop item's orientation, +1 upright, -1 turned
     samples: np.ndarray  # (., 3) float64: exact samples of isolated Loop patches' sides
+    # (., 16, 3) float64: ``nets`` read as Loop items' triangular nets (trace/tris.py),
+    # a view made once (a reshape in a kernel calls into Numba's runtime: about 2 % of the
+    # trace of a Loop cage when made per ray)
+    tri_nets: np.ndarray
 
 
 class Memo(NamedTuple):
@@ -383,7 +387,7 @@ class Pieces(Growable):
                            a["side"], a["kind"], a["ref"], a["level"], a["i0"], a["j0"],
                            a["lo"], a["hi"], a["nets"],
                            a["cells"].reshape(-1, 3), a["normals"], a["touched"], a["orient"],
-                           a["samples"])
+                           a["samples"], a["nets"].reshape(-1, 16, 3))
 
 
 class Memos:

@@ -651,7 +651,8 @@ _CELL_CORNER = ((0, 3, 4), (3, 1, 5), (4, 5, 2), (5, 4, 3))
 @inline_njit
 def intersect_tri(ray, it, nets, nk, depth, fr, sides, samples, slack, hit, code, mem,
                   scratch):
-    """Closest hit on the Loop item ``it`` (its quartic net ``nets[nk]``, grid depth
+    """Closest hit on the Loop item ``it`` (its quartic net ``nets[nk]``, ``nets`` the
+    pieces' nets read as (., 16, 3) triangular nets: ``PieceArrays.tri_nets``; grid depth
     ``depth``, frame ``fr`` = (g, oi, oj, sh), :func:`grid_point`: a regular patch is
     (1, 0, 0, depth); side sampling ``sides[it]`` and side samples ``samples``) nearer than
     hit[H_T]; updates ``hit``.
@@ -663,7 +664,7 @@ def intersect_tri(ray, it, nets, nk, depth, fr, sides, samples, slack, hit, code
     ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz = ray
     work, st, st_t, tmp_t, order, lv, lp = scratch
     root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
-    root = nets.reshape((nets.shape[0], 16, 3))
+    root = nets  # (., 16, 3)
     lev_item = depth - fr[3]
     node = root_m[it]
     if node < 0:
