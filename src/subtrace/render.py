@@ -210,7 +210,7 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
     # the micro-triangles each thread's rays built (each chunk of rays counts what its own
     # memo built: the sum is the same on any threads)
     tested = np.zeros(len(memos.m), np.int64)
-    cands = candidate_lists(n_rays, table.n_patches, tiles.off if len(tiles.off) > 1 else None)
+    cands = candidate_lists(n_rays, table.n_patches, tiles.off)  # (rows: pools.Candidates)
     rays = None  # round 0: every pixel's ray
     round_no = 0
     loop = table_loop_flag(table)  # (None: a kernel without the Loop descents)

@@ -3,11 +3,11 @@
 NumPy asks Linux for transparent huge pages (``madvise(MADV_HUGEPAGE)``) on an allocation
 of 4 MB or more, so touching it faults once per 2 MB instead of once per 4 kB page. A
 render's per-pixel arrays of 4 bytes a pixel (a patch id, a ray's request) are 3.7 MB at
-1280x720, just below that, and the trace writes them in scattered rows: on this project's
-virtual machines each of those faults is a trap to the host, and a render of a small cage
-spent more time in them than in its rays (the hit records' faults: 10 ms of the trace of
-``osd_catmark_nonquads``, whose rays take about 40). :func:`one_block` cuts the arrays a
-render uses together from one allocation instead.
+1280x720, just below that, and the trace writes them in scattered rows. On the machine
+measured (a virtual machine, 2 cores) those faults cost the trace of osd_catmark_nonquads
+about 10 ms, against about 40 ms for its rays' work (BENCHMARKS.md, "Per-pixel arrays in
+huge pages"). :func:`one_block` cuts the arrays a render uses together from one allocation
+instead.
 """
 
 from __future__ import annotations
