@@ -501,8 +501,10 @@ ro = np.zeros(3)
 ro.flags.writeable = False
 arrays = [np.zeros(3), np.zeros((2, 3), np.float32), np.zeros((2, 3)).T,
           np.zeros((4, 4))[::2], np.zeros(5, np.int8), np.zeros((2, 2, 2), np.int64), ro,
-          np.zeros(0, np.uint8), np.zeros(2, bool)]
+          np.zeros(0, np.uint8), np.zeros(2, bool), np.zeros((2, 3)), np.zeros((1, 3)),
+          np.zeros((3, 1)).T, np.zeros(3, np.float32)]
 ours = [str(typeof(a)) for a in arrays]
+again = [str(typeof(a)) for a in arrays]  # (from the kinds typed already)
 imported = "numpy.ma" in sys.modules
 import numpy.ma
 numbas = [str(typeof(a)) for a in arrays]
@@ -511,7 +513,8 @@ try:
     masked = None
 except Exception as e:
     masked = type(e).__name__
-print(json.dumps({"ours": ours, "numbas": numbas, "imported": imported, "masked": masked}))
+print(json.dumps({"ours": ours, "again": again, "numbas": numbas, "imported": imported,
+                  "masked": masked}))
 """
 
 _WARM_MODULES = """
@@ -527,13 +530,16 @@ print(json.dumps({"codes": codes, "ma": "numpy.ma" in sys.modules}))
 def test_arrays_are_typed_as_numba_types_them_without_importing_numpy_ma():
     """jit._arrays_typed_without_numpy_ma: until numpy.ma is imported, arrays of several
     dtypes, dimensions, layouts and writeabilities get the very types Numba's own typing
-    gives them afterwards, and nothing has imported numpy.ma; once it is imported, a masked
-    array is still refused as Numba refuses it."""
+    gives them afterwards, the first time and again (each kind is typed once: arrays of one
+    dtype and dimension that differ in layout or writeability are not confused), and
+    nothing has imported numpy.ma; once it is imported, a masked array is still refused as
+    Numba refuses it."""
     proc = subprocess.run([sys.executable, "-c", _MASKED], capture_output=True, text=True,
                           timeout=300)
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert out["ours"] == out["numbas"]
+    assert out["ours"] == out["numbas"] == out["again"]
+    assert len(set(out["ours"])) >= 9  # (C, F, A, read-only, 1, 2 and 3 dimensions, dtypes)
     assert not out["imported"]
     assert out["masked"] is not None
 

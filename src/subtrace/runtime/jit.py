@@ -975,7 +975,10 @@ def _arrays_typed_without_numpy_ma() -> None:
     :func:`trim_loader`). Numba's typing of an array first rejects masked arrays, and naming
     their class imports numpy.ma. No masked array exists before numpy.ma is imported, so
     until then an array is typed here from its dtype, dimensions, layout and writeability
-    (what Numba's own typing reads); afterwards Numba's typing answers as before."""
+    (what Numba's own typing reads), each kind once: Numba builds a new type object and
+    then looks up its interned twin for every array of every call it types (about 10 us an
+    array; a render's first calls type some 370 arrays); afterwards Numba's typing answers
+    as before."""
     try:
         from numba.core import types
         from numba.core.typing.typeof import typeof_impl
@@ -986,14 +989,22 @@ def _arrays_typed_without_numpy_ma() -> None:
 
     numba_typeof = typeof_impl.dispatch(np.ndarray)
 
+    known = {}  # (dtype, ndim, C and F contiguity, writeable) -> the array's type
+
     def typeof_array(val, c):
         if "numpy.ma" in sys.modules:
             return numba_typeof(val, c)
-        try:
-            dtype = from_dtype(val.dtype)
-        except Exception:  # noqa: BLE001 - an unsupported dtype: Numba's own message
-            return numba_typeof(val, c)
-        return types.Array(dtype, val.ndim, map_layout(val), readonly=not val.flags.writeable)
+        flags = val.flags
+        key = (val.dtype, val.ndim, flags.c_contiguous, flags.f_contiguous, flags.writeable)
+        typ = known.get(key)
+        if typ is None:
+            try:
+                dtype = from_dtype(val.dtype)
+            except Exception:  # noqa: BLE001 - an unsupported dtype: Numba's own message
+                return numba_typeof(val, c)
+            typ = known[key] = types.Array(dtype, val.ndim, map_layout(val),
+                                           readonly=not flags.writeable)
+        return typ
 
     typeof_impl.register(np.ndarray)(typeof_array)
 
