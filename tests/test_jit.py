@@ -819,3 +819,31 @@ def test_a_compiling_process_drops_numbas_hooks_on_llvms_lock():
     assert proc.returncode == 0, proc.stderr
     before, after = json.loads(proc.stdout)
     assert before >= 1 and after == 0
+
+
+_TARGET_PROBE = """
+import json
+import llvmlite.binding as ll
+from numba.core.registry import cpu_target
+from subtrace.runtime import jit
+
+codegen = cpu_target.target_context.codegen()
+plain = codegen.magic_tuple()
+jit._target_described_once()
+asked = []
+host = ll.get_host_cpu_name
+ll.get_host_cpu_name = lambda: asked.append(1) or host()
+first, second = codegen.magic_tuple(), codegen.magic_tuple()
+print(json.dumps([repr(plain), repr(first), repr(second), len(asked)]))
+"""
+
+
+def test_the_target_is_described_once_and_as_numba_describes_it():
+    """jit._target_described_once: the code generator's target description (in every
+    kernel's cache key) is the one Numba gives, asked of LLVM at most once however often a
+    load needs it."""
+    proc = subprocess.run([sys.executable, "-c", _TARGET_PROBE], capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    plain, first, second, asked = json.loads(proc.stdout)
+    assert plain == first == second and asked <= 1

@@ -836,6 +836,8 @@ def trim_loader() -> None:
       target up for a kernel that is not in the cache; a kernel that needs BLAS still
       imports scipy.linalg when it is compiled.
 
+    * the code generator's description of its target, part of every kernel's cache key,
+      is made once (:func:`_target_described_once`);
     * the runtime is started on a thread of its own at once, while this thread goes on
       importing the renderer; the first kernel load or compile waits for it. Its few
       compiled functions are stored beside the kernels by the first process and loaded
@@ -875,6 +877,7 @@ def trim_loader() -> None:
                                                    "_guard_against_spurious_io_errors")):
         return  # pragma: no cover - a Numba whose cache loader is organised differently
     _drop_llvm_lock_events()
+    _target_described_once()
     _runtime_from_the_kernel_folder()
     _lazy_bitcode()
     _arrays_typed_without_numpy_ma()
@@ -1007,6 +1010,30 @@ def _arrays_typed_without_numpy_ma() -> None:
         return typ
 
     typeof_impl.register(np.ndarray)(typeof_array)
+
+
+def _target_described_once() -> None:
+    """Numba's code generator describes its target (triple, CPU name, CPU features: the
+    ``magic_tuple`` of every cache key) once per process instead of at every kernel load:
+    each description asked LLVM for the host's CPU name and the module's triple again,
+    about 75 us a load (20 loads in a render of a small cage). Nothing in a process changes
+    them."""
+    try:
+        from numba.core.codegen import CPUCodegen
+    except ImportError:  # pragma: no cover - another Numba
+        return
+    describe = getattr(CPUCodegen, "magic_tuple", None)
+    if describe is None or getattr(describe, "__wrapped__", None) is not None:
+        return
+
+    def magic_tuple(self):
+        told = self.__dict__.get("_subtrace_magic_tuple")
+        if told is None:
+            told = self._subtrace_magic_tuple = describe(self)
+        return told
+
+    magic_tuple.__wrapped__ = describe
+    CPUCodegen.magic_tuple = magic_tuple
 
 
 def _lazy_bitcode() -> None:
