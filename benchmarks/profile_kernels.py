@@ -120,7 +120,10 @@ def main() -> int:
     for share, where, name in rows[:args.top]:
         print(f"| {share:.1f} | {'kernel' if where == 'k' else 'user'} | `{name}` |")
     code = 0
-    if args.annotate:
+    if args.annotate and shutil.which("objdump") is None:
+        print("profile_kernels: error: --annotate needs objdump (binutils)", file=sys.stderr)
+        code = 2
+    elif args.annotate:
         code = annotate(data, args.annotate, args.bucket)
     if args.keep is None:
         shutil.rmtree(folder, ignore_errors=True)
