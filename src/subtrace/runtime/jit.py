@@ -376,14 +376,12 @@ def _overloads_shared_across_flags() -> bool:
     implementation serves every caller whose inherited flags are equal. A Numba whose
     overload templates are organised differently is left alone."""
     try:
-        from numba.core import targetconfig
         from numba.core.typing import templates
     except ImportError:  # pragma: no cover - another Numba
         return False
     template = getattr(templates, "_OverloadFunctionTemplate", None)
-    stack = getattr(targetconfig, "ConfigStack", None)
-    if template is None or not hasattr(template, "_build_impl") or \
-            not hasattr(stack, "top_or_none"):
+    stack = _flag_stack()
+    if template is None or not hasattr(template, "_build_impl") or stack is None:
         return False  # pragma: no cover - another Numba
     try:
         from numba.core.compiler import Flags
@@ -419,15 +417,13 @@ def _function_types_resolved_once() -> bool:
     raises as before). A Numba whose function types are organised differently is left
     alone."""
     try:
-        from numba.core import targetconfig
         from numba.core.target_extension import get_local_target
         from numba.core.types import functions
     except ImportError:  # pragma: no cover - another Numba
         return False
     base = getattr(functions, "BaseFunction", None)
-    stack = getattr(targetconfig, "ConfigStack", None)
-    if base is None or not hasattr(base, "get_call_type") or \
-            not hasattr(stack, "top_or_none"):
+    stack = _flag_stack()
+    if base is None or not hasattr(base, "get_call_type") or stack is None:
         return False  # pragma: no cover - another Numba
     if hasattr(base.get_call_type, "__wrapped__"):
         return True  # (applied before)
@@ -451,6 +447,18 @@ def _function_types_resolved_once() -> bool:
     get_call_type.__wrapped__ = resolve
     base.get_call_type = get_call_type
     return True
+
+
+def _flag_stack():
+    """Numba's stack of the compiler flags of the functions being compiled
+    (``targetconfig.ConfigStack``, read by :func:`_inherited`), or None in a Numba
+    organised otherwise."""
+    try:
+        from numba.core import targetconfig
+    except ImportError:  # pragma: no cover - another Numba
+        return None
+    stack = getattr(targetconfig, "ConfigStack", None)
+    return stack if hasattr(stack, "top_or_none") else None
 
 
 def _inherited(stack):
