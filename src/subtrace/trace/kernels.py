@@ -191,19 +191,17 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
             r = q if len(rays) == 0 else rays[q]
             row = r // width
             col = r - row * width
-            if projected and round_no == 0:
-                tile = (row // TILE) * tiles.per_row + col // TILE
-                if tiles.off[tile] == tiles.off[tile + 1]:
-                    # no shell projects onto its tile: a miss, recorded as the loop below
-                    # records one (without the ray's set-up; its tile has no candidate rows)
-                    request[r] = -1
-                    hits.t[r] = np.inf
-                    hits.prim[r] = -1
-                    continue
+            tile = (row // TILE) * tiles.per_row + col // TILE if projected else 0
+            if projected and round_no == 0 and tiles.off[tile] == tiles.off[tile + 1]:
+                # no shell projects onto its tile: a miss, recorded as the loop below
+                # records one (without the ray's set-up; its tile has no candidate rows)
+                request[r] = -1
+                hits.t[r] = np.inf
+                hits.prim[r] = -1
+                continue
             cr = r  # the ray's row of the candidate lists (pools.Candidates)
             if len(cands.tile_row):
-                cr = (cands.tile_row[(row // TILE) * tiles.per_row + col // TILE]
-                      + (row % TILE) * TILE + col % TILE)
+                cr = cands.tile_row[tile] + (row % TILE) * TILE + col % TILE
             dx, dy, dz = ray_setup(frame, row, col)
             ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
             kx, ky, kz, sx, sy, sz = shear(dx, dy, dz)
@@ -222,7 +220,6 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
                 j_end = _sort_candidates(cands, cr)
             elif projected:
                 src = 1
-                tile = (row // TILE) * tiles.per_row + col // TILE
                 j, j_end = tiles.off[tile], tiles.off[tile + 1]
             else:
                 sp = bvh_start(ox, oy, oz, ix, iy, iz, bvh, 0.0, hit[H_T], stack, stack_t)
