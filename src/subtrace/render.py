@@ -49,7 +49,7 @@ from subtrace.trace.bezier import table_loop_flag
 from subtrace.trace.budget import check_memory, choose_within_budget, warn_tiles
 from subtrace.trace.build import build_loop_regular, build_requested, cut_to_loop_nets
 from subtrace.trace.kernels import trace_round
-from subtrace.trace.pools import Memos, Pieces, candidate_lists, hit_arrays
+from subtrace.trace.pools import Memos, Pieces, candidate_lists, round_arrays
 from subtrace.trace.rays import compile_kernel as compile_secondary
 from subtrace.trace.tris import TRI
 
@@ -206,7 +206,7 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
                        table.shell_max[reg])
     build_loop_regular(table, depths, edge_depth, iso)
     # (round 0 writes every ray's request)
-    hits, request = hit_arrays(n_rays, request=True)
+    hits, request = round_arrays(n_rays)
     # the micro-triangles each thread's rays built (each chunk of rays counts what its own
     # memo built: the sum is the same on any threads)
     tested = np.zeros(len(memos.m), np.int64)

@@ -131,15 +131,23 @@ def candidate_lists(n_rays: int, n_patches: int = 0, tiles_off=None) -> Candidat
                       np.zeros(n_patches, np.uint8), tile_row)
 
 
-def hit_arrays(n_rays: int, request: bool = False):
-    """Hit records for ``n_rays`` rays (round 0 sets every ray's); the ids and the depth
-    as int32 (patches and items number far fewer than 2^31): 12 bytes a pixel fewer to
-    touch than int64 (readers widen them before arithmetic). With ``request``: (the
-    :class:`Hits`, the rounds' int32 request per ray), in one allocation
+# the dtypes of :class:`Hits`' fields: the ids and the depth as int32 (patches and items
+# number far fewer than 2^31), 12 bytes a pixel fewer to touch than int64 (readers widen
+# them before arithmetic)
+_HIT_DTYPES = (np.float64, np.int32, np.int32, np.int32, np.float64, np.float64)
+
+
+def hit_arrays(n_rays: int) -> Hits:
+    """Hit records for ``n_rays`` rays (round 0 sets every ray's), in one allocation
     (``runtime.memory.one_block``)."""
-    f8, i4 = ((n_rays,), np.float64), ((n_rays,), np.int32)
-    arrays = one_block(f8, i4, i4, i4, f8, f8, *((i4,) if request else ()))
-    return (Hits(*arrays[:6]), arrays[6]) if request else Hits(*arrays)
+    return Hits(*one_block(*(((n_rays,), d) for d in _HIT_DTYPES)))
+
+
+def round_arrays(n_rays: int) -> tuple[Hits, np.ndarray]:
+    """The rounds' per-ray arrays: the hit records (:func:`hit_arrays`) and the int32
+    request of each ray, in one allocation."""
+    *fields, request = one_block(*(((n_rays,), d) for d in _HIT_DTYPES + (np.int32,)))
+    return Hits(*fields), request
 
 
 def grown(a, n_used, size):
