@@ -137,10 +137,6 @@ def _watch(taken) -> None:
     os._exit(EXIT_CODES.get(sig, 128 + int(sig)))
 
 
-__all__ = ["install", "unblock", "temp_lock", "register_temp", "forget_temp",
-           "register_child", "forget_child", "exit_now", "EXIT_CODES"]
-
-
 def exit_now(code: int):
     """End the process with ``code`` once output is flushed and the exit handlers have run,
     skipping the interpreter's teardown of every module (Numba's typing registries alone
@@ -152,3 +148,7 @@ def exit_now(code: int):
             pass
     atexit._run_exitfuncs()
     os._exit(code)
+
+
+__all__ = ["install", "unblock", "temp_lock", "register_temp", "forget_temp",
+           "register_child", "forget_child", "exit_now", "EXIT_CODES"]
