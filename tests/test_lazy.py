@@ -1,6 +1,8 @@
 """The lazy patch table (``render.table_in_view``, ``patches.table.build_patch_table``
 with ``keep`` and ``in_view``): only the patches a primary ray may reach are built, they
-are exactly the whole cage's patches, and the image does not change."""
+are exactly the whole cage's patches, and the image does not change. A large cage seen in
+part builds its topology only around those (``patches.table.restrict``,
+``Cage.restricted``), with the same patches and image."""
 
 from __future__ import annotations
 
@@ -11,8 +13,11 @@ from shared_data import MODELS, SHAPES, needs_shared, small_scene
 import subtrace
 from subtrace import config
 from subtrace.camera import camera_frame
-from subtrace.patches.shells import face_ring_boxes, one_ring_shells
-from subtrace.patches.table import build_patch_table, cage_face_shells
+from subtrace.mesh.cage import face_rings
+from subtrace.patches.shells import face_ring_boxes, face_star_boxes, one_ring_shells
+from subtrace.patches.table import RESTRICT_RINGS, build_patch_table, cage_face_shells
+from subtrace.patches.evaluate import ptex_starts
+from subtrace.patches.table import restrict
 from subtrace.render import faces_in_view, render_scene, table_in_view
 
 SWORD = MODELS / "sword_quad_dominant.obj"
@@ -50,14 +55,101 @@ def _tip_scene(width=96, height=54):
     return small_scene([SWORD], TIP_EYE, TIP_TARGET, width=width, height=height, fov=TIP_FOV)
 
 
+_BOX_CAGES = ("sword_quad_dominant", "hole_capsule", "catmark_edgecorner",
+              "catmark_nonman_edges", "loop_triangle_edgeonly")
+
+
+def _shared_cage(name):
+    path = MODELS / f"{name}.obj"
+    return subtrace.load_cage(path if path.exists() else SHAPES / f"{name}.obj")
+
+
 @needs_shared
-def test_face_ring_boxes_are_the_one_ring_shells():
-    """The per-vertex construction of the cage faces' boxes gives the one-ring boxes."""
-    for path in (SWORD, MODELS / "hole_capsule.obj", SHAPES / "catmark_edgecorner.obj"):
-        cage = subtrace.load_cage(path)
-        lo, hi = face_ring_boxes(cage.base, cage.points)
-        lo2, hi2, _, _ = one_ring_shells(cage.base, np.arange(cage.n_faces), cage.points)
-        assert np.array_equal(lo, lo2) and np.array_equal(hi, hi2)
+@pytest.mark.parametrize("name", _BOX_CAGES)
+def test_face_ring_boxes_are_the_one_ring_shells(name):
+    """The per-vertex construction of the cage faces' boxes gives the one-ring boxes, and
+    so does the one from the face lists alone (no topology: what a large cage seen in part
+    culls by), on manifold, holed, non-manifold and Loop cages."""
+    cage = _shared_cage(name)
+    offsets = np.r_[0, np.cumsum(cage.face_sizes)].astype(np.int64)
+    lo0, hi0 = face_star_boxes(offsets, cage.face_verts, cage.points)
+    assert not cage.has_topology
+    lo, hi = face_ring_boxes(cage.base, cage.points)
+    lo2, hi2, _, _ = one_ring_shells(cage.base, np.arange(cage.n_faces), cage.points)
+    assert np.array_equal(lo, lo2) and np.array_equal(hi, hi2)
+    assert np.array_equal(lo0, lo) and np.array_equal(hi0, hi)
+
+
+def _rings_naive(cage, faces, rings):
+    """Faces within ``rings`` rings of ``faces``, one face and vertex at a time."""
+    sizes = cage.face_sizes.tolist()
+    starts = np.r_[0, np.cumsum(sizes)]
+    verts = [set(cage.face_verts[a:b].tolist()) for a, b in zip(starts[:-1], starts[1:])]
+    sel = set(np.nonzero(faces)[0].tolist())
+    for _ in range(rings):
+        mark = set().union(*(verts[f] for f in sel)) if sel else set()
+        sel = {f for f in range(len(sizes)) if verts[f] & mark}
+    out = np.zeros(len(sizes), bool)
+    out[list(sel)] = True
+    return out
+
+
+@needs_shared
+@pytest.mark.parametrize("name", _BOX_CAGES[1:])
+def test_face_rings_are_the_faces_around(name):
+    """``face_rings`` (from the face lists) against a plain set construction."""
+    cage = _shared_cage(name)
+    rng = np.random.default_rng(len(name))
+    for rings in (0, 1, RESTRICT_RINGS):
+        faces = rng.random(cage.n_faces) < 0.05
+        assert np.array_equal(face_rings(cage, faces, rings), _rings_naive(cage, faces, rings))
+
+
+def _restricting(monkeypatch):
+    """Restrict every cage seen in part, whatever its size and share in view."""
+    monkeypatch.setattr(config, "LAZY_TOPOLOGY_FACES", 0)
+    monkeypatch.setattr(config, "LAZY_TOPOLOGY_SHARE", 1.0)
+
+
+@pytest.mark.parametrize("tris,ngons,boundary", [(False, False, 1), (False, True, 0),
+                                                 (False, True, 2), (True, False, 2),
+                                                 (True, False, 1)],
+                         ids=["catmark", "ngons-none", "ngons-edgeonly", "loop", "loop-corner"])
+def test_a_restricted_cage_has_the_whole_cages_patches(tmp_path, monkeypatch, tris, ngons,
+                                                      boundary):
+    """A cage cut to the faces on one side of a plane and ``RESTRICT_RINGS`` rings around
+    them: the table of those faces is the whole cage's (same ptex ids, shells, length
+    bounds, rates, nets, materials), and the cage's own topology is never built. Grids with
+    boundaries, semi-sharp and infinitely sharp creases, a corner, a hole, n-gons and
+    extraordinary vertices, in each boundary mode, Catmull-Clark and Loop."""
+    _restricting(monkeypatch)
+    path = _feature_grid(tmp_path / "grid.obj", 40, tris, False, ngons, boundary)
+    full = build_patch_table([subtrace.load_cage(path)])
+    cage = subtrace.load_cage(path)
+    assert (cage.face_sizes > 4).any() == ngons
+    starts = np.r_[0, np.cumsum(cage.face_sizes)[:-1]]
+    centre = np.array([cage.points[cage.face_verts[a:a + n]].mean(axis=0)
+                       for a, n in zip(starts, cage.face_sizes)])
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        d = centre @ rng.standard_normal(3)
+        keep = d < np.quantile(d, rng.uniform(0.1, 0.4))
+        sub, sub_keep = restrict(cage, keep)
+        assert sub.n_faces == np.count_nonzero(face_rings(cage, keep, RESTRICT_RINGS))
+        assert sub.n_faces < cage.n_faces and np.count_nonzero(sub_keep) == keep.sum()
+        table = build_patch_table([sub], [sub_keep])
+        assert table.n_patches > 0
+        rows = _rows_in(full, table)
+        for field in ("shell_min", "shell_max", "edge_bound", "rate", "regular", "is_quad",
+                      "material", "ptex_scale"):
+            assert np.array_equal(getattr(table, field), getattr(full, field)[rows]), field
+        reg_rank = np.cumsum(full.regular) - 1
+        assert np.array_equal(table.nets, full.nets[reg_rank[rows[table.regular]]])
+        # every patch of the kept faces (and no other): the whole table's of those faces
+        full_face = np.repeat(np.arange(cage.n_faces), np.diff(
+            ptex_starts(cage)))[full.ptex]
+        assert np.array_equal(np.sort(rows), np.nonzero(keep[full_face])[0])
+    assert not cage.has_topology
 
 
 @needs_shared
@@ -119,10 +211,12 @@ def _same_image_without_cull(scene, cages, res):
         np.testing.assert_array_equal(res.channels[name], plane, err_msg=name)
 
 
-def _feature_grid(path, n, tris, chaikin):
+def _feature_grid(path, n, tris, chaikin, ngons=False, boundary=1):
     """An n x n bumpy grid (quads, or each split into two triangles) with boundaries, a
     semi-sharp crease line across it (sharpness 2.5, Chaikin or uniform decay), an
-    infinitely sharp one, a sharp corner and a hole, as an OBJ with OpenSubdiv tags."""
+    infinitely sharp one, a sharp corner and a hole, as an OBJ with OpenSubdiv tags.
+    ``ngons``: every fifth pair of quads in a row merged into a hexagon (two vertices of
+    valence 3 each); ``boundary``: the interpolateboundary mode."""
     rng = np.random.default_rng(n)
     lines = []
     idx = lambda i, j: i * (n + 1) + j  # noqa: E731
@@ -133,13 +227,18 @@ def _feature_grid(path, n, tris, chaikin):
     for i in range(n):
         for j in range(n):
             a, b, c, d = idx(i, j), idx(i, j + 1), idx(i + 1, j + 1), idx(i + 1, j)
-            faces += [(a, b, c), (a, c, d)] if tris else [(a, b, c, d)]
+            if ngons and j % 5 == 1 and j + 1 < n:
+                faces.append((a, b, idx(i, j + 2), idx(i + 1, j + 2), c, d))
+            elif ngons and j % 5 == 2 and j > 0:
+                continue
+            else:
+                faces += [(a, b, c), (a, c, d)] if tris else [(a, b, c, d)]
     lines += ["f " + " ".join(str(v + 1) for v in f) for f in faces]
     row = n // 3
     lines += [f"t crease 2/1/0 {idx(row, j)} {idx(row, j + 1)} 2.5" for j in range(n)]
     lines += [f"t crease 2/1/0 {idx(i, row)} {idx(i + 1, row)} 10" for i in range(n)]
     lines += [f"t corner 1/1/0 {idx(n // 2, n // 2)} 3", f"t hole 1/0/0 {len(faces) // 2 + 3}",
-              "t interpolateboundary 1/0/0 1"]
+              f"t interpolateboundary 1/0/0 {boundary}"]
     if chaikin:
         lines.append("t creasemethod 0/0/1 chaikin")
     path.write_text("\n".join(lines) + "\n")
@@ -149,10 +248,16 @@ def _feature_grid(path, n, tris, chaikin):
 @pytest.mark.parametrize("tris", [False, True], ids=["catmark", "loop"])
 @pytest.mark.parametrize("chaikin", [False, True], ids=["uniform", "chaikin"])
 @pytest.mark.parametrize("target", [(0.33, 0.33), (0.5, 0.5), (0.0, 0.0), (0.95, 0.6)])
-def test_partial_views_of_feature_cages_are_unchanged(tmp_path, tris, chaikin, target):
+@pytest.mark.parametrize("restricted", [False, True], ids=["whole", "restricted"])
+def test_partial_views_of_feature_cages_are_unchanged(tmp_path, monkeypatch, tris, chaikin,
+                                                      target, restricted):
     """Creases (semi-sharp, Chaikin or not, and infinitely sharp), a corner, boundaries and
     a hole, in Catmull-Clark and Loop cages seen in part: some faces are culled and the
-    image is the one of the whole table."""
+    image is the one of the whole table, with the cage's topology built whole or only
+    around the faces in view (``restricted``; a Chaikin cage is never restricted: its
+    cull's margin needs its edges' sharpness)."""
+    if restricted:
+        _restricting(monkeypatch)
     mesh = _feature_grid(tmp_path / "grid.obj", 24, tris, chaikin)
     cage = subtrace.load_cage(mesh)
     assert cage.scheme == ("loop" if tris else "catmark")
@@ -161,7 +266,8 @@ def test_partial_views_of_feature_cages_are_unchanged(tmp_path, tris, chaikin, t
     res = render_scene(scene, cages=[cage])
     assert 0 < res.stats.faces_culled < cage.n_faces
     assert res.stats.pixels_covered > 0
-    _same_image_without_cull(scene, [cage], res)
+    assert cage.has_topology == (chaikin or not restricted)
+    _same_image_without_cull(scene, [subtrace.load_cage(mesh)], res)
 
 
 @needs_shared

@@ -32,11 +32,11 @@ from subtrace.accel.projection import (TILE, boxes_in_view, no_tiles, project_sh
 from subtrace.camera import CameraWindow, camera_frame, whole_image
 from subtrace.errors import SceneError
 from subtrace.io.limits import check_coordinates, check_valences
-from subtrace.mesh.cage import load_cage
+from subtrace.mesh.cage import load_cage, valence_bound
 from subtrace.nurbs.scene import (has_faces, has_surfaces, load_nurbs, nurbs_pass,
                                   picture_hits, with_surfaces)
 from subtrace.patches.criterion import edge_sampling
-from subtrace.patches.table import build_patch_table, cage_face_shells
+from subtrace.patches.table import build_patch_table, cage_face_shells, restrict
 from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
 from subtrace.runtime.memory import one_block
@@ -331,7 +331,18 @@ def table_in_view(cages, camera, sweeps=()):
     reach: the patches of the cage faces in view (:func:`faces_in_view`) whose own
     one-ring box is in view too. Returns (table, the per-cage masks of the faces kept)."""
     keep = faces_in_view(cages, camera, sweeps)
-    return build_patch_table(cages, keep, _view_test(camera, sweeps)), keep
+    # (a large cage seen in part: its topology built around the faces kept alone)
+    cut = [restrict(c, k) for c, k in zip(cages, keep)]
+    return build_patch_table([c for c, _ in cut], [k for _, k in cut],
+                             _view_test(camera, sweeps)), keep
+
+
+def _valences(cage):
+    """Each vertex's valence for ``check_valences``: a bound from the face lists where it
+    is within ``config.MAX_VALENCE`` (no topology built for it), else the exact ones."""
+    bound = valence_bound(cage)
+    return bound if bound.max(initial=0) <= config.MAX_VALENCE else np.diff(
+        cage.base.vert_edge_offsets)
 
 
 def _prepare(scene, cages, stats, nurbs=None, crop=None, compiling=None):
@@ -354,7 +365,7 @@ def _prepare(scene, cages, stats, nurbs=None, crop=None, compiling=None):
         return cages, None, camera, view, scene.render.tolerance_rad(camera), None
     for c in cages:
         check_coordinates(c.path, c.points, config.MAX_COORDINATE)
-        check_valences(c.path, c.face_sizes, np.diff(c.base.vert_edge_offsets),
+        check_valences(c.path, c.face_sizes, _valences(c),
                        config.MAX_VALENCE, c.scheme == "catmark")
     stats.time_load = time.perf_counter() - t_start
     t0 = time.perf_counter()

@@ -4,6 +4,14 @@ A :class:`Cage` is immutable. ``refine(level)`` gives a uniformly refined :class
 ``limit(level)`` the exact limit positions and tangents of the level's vertices, and
 ``evaluate(ptex_face, uv)`` the exact limit surface at parametric points (OpenSubdiv's ptex
 numbering and orientation). Refined levels are cached per cage.
+
+The topology of the cage itself (``base``, a :class:`~subtrace.mesh.topology.Level` with
+its tags) is built when first asked for, not when the cage is read: a render that sees part
+of a large cage builds it only for :meth:`Cage.restricted`, the faces around those in view
+(``render.table_in_view``), so its memory and time follow what is seen. The limit surface
+over a face depends on the faces that share a vertex with it and on their tags alone, so
+a restriction that keeps enough rings of faces around the faces it is for
+(:func:`face_rings`) gives them exactly the whole cage's surface.
 """
 
 from __future__ import annotations
@@ -23,7 +31,7 @@ from subtrace.mesh.topology import (
     build_level,
     tag_base_level,
 )
-from subtrace.patches.evaluate import evaluate
+from subtrace.patches.evaluate import evaluate, ptex_starts
 from subtrace.subdiv.limit import limit_points
 from subtrace.subdiv.refine import refine_level, refine_points
 
@@ -53,22 +61,92 @@ class Mesh:
 
 
 @dataclass(frozen=True, eq=False)
+class Tags:
+    """A cage's tags as given (OpenSubdiv's OBJ tags): creases as vertex pairs (k,2) int64
+    with their sharpness (k,) float32, corners (m,) int64 with theirs (m,) float32, and the
+    hole faces (h,) int64. :func:`~subtrace.mesh.topology.tag_base_level` applies them."""
+
+    crease_edges: np.ndarray
+    crease_sharpness: np.ndarray
+    corner_verts: np.ndarray
+    corner_sharpness: np.ndarray
+    hole_faces: np.ndarray
+
+    @classmethod
+    def of(cls, crease_edges=(), crease_sharpness=(), corner_verts=(), corner_sharpness=(),
+           hole_faces=()):
+        return cls(np.asarray(crease_edges, dtype=np.int64).reshape(-1, 2),
+                   np.asarray(crease_sharpness, dtype=np.float32).ravel(),
+                   np.asarray(corner_verts, dtype=np.int64).ravel(),
+                   np.asarray(corner_sharpness, dtype=np.float32).ravel(),
+                   np.asarray(hole_faces, dtype=np.int64).ravel())
+
+
+@dataclass(frozen=True, eq=False)
 class Cage:
-    """A control cage ready for subdivision (build it with :func:`subtrace.load_cage`)."""
+    """A control cage ready for subdivision (build it with :func:`subtrace.load_cage`).
+
+    ``ptex_first``: None, or for a :meth:`restricted` cage the ptex id each of its faces has
+    in the cage it was cut from (so its patches keep the whole cage's ids)."""
 
     points: np.ndarray  # (n,3) float64
     face_sizes: np.ndarray  # (F,) int32
     face_verts: np.ndarray  # (sum,) int32
     options: Options
-    base: Level
+    tags: Tags
     path: str | None = None
     face_material: np.ndarray | None = None
     materials: tuple = ()
+    ptex_first: np.ndarray | None = None
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def scheme(self) -> str:
         return self.options.scheme
+
+    @property
+    def base(self) -> Level:
+        """The cage's own topology and tags, built on first use (module comment)."""
+        level = self._cache.get("base")
+        if level is None:
+            level = self._cache["base"] = _base_level(self)
+        return level
+
+    @property
+    def has_topology(self) -> bool:
+        """Whether :attr:`base` has been built."""
+        return "base" in self._cache
+
+    def restricted(self, faces: np.ndarray) -> Cage:
+        """The cage of the faces ``faces`` ((F,) bool) alone, in their order, with the
+        vertices they use (renumbered in order), the tags among those, their materials and
+        their ptex ids in this cage (``ptex_first``). Its faces that keep every face around
+        their vertices and edges (:func:`face_rings`) have this cage's limit surface."""
+        faces = np.asarray(faces, dtype=bool)
+        corners = np.repeat(faces, self.face_sizes)
+        used = np.zeros(len(self.points), bool)
+        used[self.face_verts[corners]] = True
+        new_vert = np.cumsum(used, dtype=np.int64) - 1
+        t = self.tags
+        both = used[t.crease_edges].all(axis=1) if len(t.crease_edges) else np.zeros(0, bool)
+        corner_kept = used[t.corner_verts]
+        new_face = np.cumsum(faces, dtype=np.int64) - 1
+        hole_kept = faces[t.hole_faces]
+        first = ptex_starts(self)[:-1] if self.ptex_first is None else self.ptex_first
+        return Cage(
+            points=self.points[used],
+            face_sizes=self.face_sizes[faces],
+            face_verts=new_vert[self.face_verts[corners]].astype(np.int32),
+            options=self.options,
+            tags=Tags(new_vert[t.crease_edges[both]], t.crease_sharpness[both],
+                      new_vert[t.corner_verts[corner_kept]], t.corner_sharpness[corner_kept],
+                      new_face[t.hole_faces[hole_kept]]),
+            path=self.path,
+            face_material=None if self.face_material is None else
+            np.asarray(self.face_material)[faces],
+            materials=self.materials,
+            ptex_first=first[faces],
+        )
 
     @property
     def n_faces(self) -> int:
@@ -199,47 +277,72 @@ def make_cage(
         chaikin=bool(chaikin),
         smooth_triangles=bool(smooth_triangles),
     )
-    offsets = np.zeros(len(face_sizes) + 1, dtype=np.int64)
-    np.cumsum(face_sizes, out=offsets[1:])
-    edge_verts, face_edges, forward = base_edges(offsets, face_verts, len(points))
-    level = build_level(
-        len(points),
-        offsets,
-        face_verts,
-        edge_verts,
-        face_edges,
-        forward,
-        np.zeros(len(edge_verts), np.float32),
-        np.zeros(len(points), np.float32),
-        np.zeros(len(face_sizes), bool),
-    )
-    level = tag_base_level(
-        level,
-        options,
-        np.asarray(crease_edges, dtype=np.int64).reshape(-1, 2),
-        np.asarray(crease_sharpness, dtype=np.float32).ravel(),
-        np.asarray(corner_verts, dtype=np.int64).ravel(),
-        np.asarray(corner_sharpness, dtype=np.float32).ravel(),
-        np.asarray(hole_faces, dtype=np.int64).ravel(),
-    )
     return Cage(
         points=points,
         face_sizes=face_sizes,
         face_verts=face_verts,
         options=options,
-        base=level,
+        tags=Tags.of(crease_edges, crease_sharpness, corner_verts, corner_sharpness,
+                     hole_faces),
         path=None if path is None else str(path),
         face_material=face_material,
         materials=tuple(materials),
     )
 
 
+def _base_level(cage: Cage) -> Level:
+    """The topology of ``cage``'s faces with its tags applied."""
+    offsets = np.zeros(len(cage.face_sizes) + 1, dtype=np.int64)
+    np.cumsum(cage.face_sizes, out=offsets[1:])
+    n_verts = len(cage.points)
+    edge_verts, face_edges, forward = base_edges(offsets, cage.face_verts, n_verts)
+    level = build_level(
+        n_verts,
+        offsets,
+        cage.face_verts,
+        edge_verts,
+        face_edges,
+        forward,
+        np.zeros(len(edge_verts), np.float32),
+        np.zeros(n_verts, np.float32),
+        np.zeros(len(cage.face_sizes), bool),
+    )
+    t = cage.tags
+    return tag_base_level(level, cage.options, t.crease_edges, t.crease_sharpness,
+                          t.corner_verts, t.corner_sharpness, t.hole_faces)
+
+
+def face_rings(cage: Cage, faces: np.ndarray, rings: int) -> np.ndarray:
+    """(F,) bool: the faces ``faces`` ((F,) bool) and every face within ``rings`` rings of
+    them (a ring: the faces sharing a vertex with those before), from the face lists alone
+    (no topology)."""
+    sel = np.asarray(faces, dtype=bool)
+    if not len(sel):
+        return sel
+    starts = np.zeros(len(cage.face_sizes), np.int64)
+    np.cumsum(cage.face_sizes[:-1], out=starts[1:])
+    mark = np.zeros(len(cage.points), bool)
+    for _ in range(rings):
+        mark[cage.face_verts[np.repeat(sel, cage.face_sizes)]] = True
+        sel = np.logical_or.reduceat(mark[cage.face_verts], starts)
+    return sel
+
+
+def valence_bound(cage: Cage) -> np.ndarray:
+    """(n,) int64: each vertex's valence (its edges) where the topology is built, else an
+    upper bound from the face lists alone: two edges for each face at the vertex."""
+    if cage.has_topology:
+        return np.diff(cage.base.vert_edge_offsets)
+    return 2 * np.bincount(cage.face_verts, minlength=len(cage.points))
+
+
 def load_cage(path, scheme: str | None = None, boundary: int | None = None,
               prim: str | None = None, time: float | None = None) -> Cage:
     """Read an OBJ control cage (with OpenSubdiv ``t`` tags), a mesh of a USD stage
     (``subtrace.io.usd``: the mesh ``prim``, or all its meshes as one), or a PLY, STL, OFF or
-    glTF mesh (``subtrace.io.meshes``), and prepare it for subdivision. ``boundary`` (0 none, 1 edge-and-corner, 2 edge-only) overrides the file's
-    ``interpolateboundary`` tag or attribute; ``time``: a USD stage's time code (None:
+    glTF mesh (``subtrace.io.meshes``), and prepare it for subdivision. ``boundary`` (0
+    none, 1 edge-and-corner, 2 edge-only) overrides the file's ``interpolateboundary`` tag
+    or attribute; ``time``: a USD stage's time code (None:
     its still)."""
     from subtrace.io.meshes import is_mesh_file
     from subtrace.io.usd import is_usd

@@ -34,13 +34,22 @@ from subtrace.subdiv.limit import SMOOTH, classify, extract, limit_points, smoot
 from subtrace.subdiv.refine import refine_level, refine_points
 
 
+def ptex_starts(cage):
+    """(F+1,) int64: the first ptex id of each face of ``cage`` in its own numbering (a
+    regular face is one ptex face, another of n sides n), and the count at the end."""
+    sizes = cage.face_sizes
+    counts = np.where(sizes == cage.options.regular_face_size, 1, sizes)
+    first = np.zeros(len(sizes) + 1, dtype=np.int64)
+    np.cumsum(counts, out=first[1:])
+    return first
+
+
 def ptex_layout(cage):
     """(base face of each ptex face, sub-face (-1 for regular faces), first ptex id per face)."""
     reg = cage.options.regular_face_size
     sizes = cage.face_sizes
-    counts = np.where(sizes == reg, 1, sizes)
-    first = np.zeros(len(sizes) + 1, dtype=np.int64)
-    np.cumsum(counts, out=first[1:])
+    first = ptex_starts(cage)
+    counts = np.diff(first)
     base = np.repeat(np.arange(len(sizes)), counts)
     sub = np.arange(first[-1]) - first[base]
     sub = np.where(sizes[base] == reg, -1, sub)

@@ -54,6 +54,20 @@ def face_ring_boxes(level, pts):
     return lo, hi
 
 
+def face_star_boxes(face_offsets, face_verts, pts):
+    """:func:`face_ring_boxes` from the face lists alone (``face_offsets`` (F+1,) int64,
+    ``face_verts`` int32), without the topology: each vertex's box is the union of the
+    boxes of the faces that list it, the same points as its ring's, so the same boxes."""
+    n_faces = len(face_offsets) - 1
+    vlo = np.full((len(pts), 3), np.inf)
+    vhi = np.full((len(pts), 3), -np.inf)
+    lo = np.empty((n_faces, 3))
+    hi = np.empty((n_faces, 3))
+    _vertex_star_boxes(face_offsets, face_verts, pts, vlo, vhi)
+    run_tasks(_face_boxes, face_offsets, face_verts, vlo, vhi, lo, hi)
+    return lo, hi
+
+
 def split_ring_boxes(level, child_pts):
     """(box min (F,3), box max (F,3)): per face of ``level`` (a Loop level), the box of the
     points of the next level that its four children's one-rings hold, ``child_pts`` being
@@ -108,6 +122,25 @@ def _vertex_ring_boxes(task, n_tasks, vert_face_offsets, vert_faces, face_offset
                 hi0, hi1, hi2 = max(hi0, x), max(hi1, y), max(hi2, z)
         vlo[v, 0], vlo[v, 1], vlo[v, 2] = lo0, lo1, lo2
         vhi[v, 0], vhi[v, 1], vhi[v, 2] = hi0, hi1, hi2
+
+
+@nb.njit(cache=True, nogil=True)
+def _vertex_star_boxes(face_offsets, face_verts, pts, vlo, vhi):
+    """Per vertex, the box of the points of the faces that list it (``vlo``, ``vhi``
+    start at +inf / -inf): each face's box, widened into its corners' boxes."""
+    for f in range(len(face_offsets) - 1):
+        lo0, lo1, lo2 = np.inf, np.inf, np.inf
+        hi0, hi1, hi2 = -np.inf, -np.inf, -np.inf
+        for c in range(face_offsets[f], face_offsets[f + 1]):
+            p = face_verts[c]
+            x, y, z = pts[p, 0], pts[p, 1], pts[p, 2]
+            lo0, lo1, lo2 = min(lo0, x), min(lo1, y), min(lo2, z)
+            hi0, hi1, hi2 = max(hi0, x), max(hi1, y), max(hi2, z)
+        for c in range(face_offsets[f], face_offsets[f + 1]):
+            v = face_verts[c]
+            vlo[v, 0], vhi[v, 0] = min(vlo[v, 0], lo0), max(vhi[v, 0], hi0)
+            vlo[v, 1], vhi[v, 1] = min(vlo[v, 1], lo1), max(vhi[v, 1], hi1)
+            vlo[v, 2], vhi[v, 2] = min(vlo[v, 2], lo2), max(vhi[v, 2], hi2)
 
 
 @nb.njit(cache=True, nogil=True)

@@ -56,12 +56,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from subtrace import config
+from subtrace.mesh.cage import face_rings
 from subtrace.mesh.topology import compact, gather, gather_index
 from subtrace.patches.basis import TO_BEZIER, net_summary, to_bezier
 from subtrace.patches.bspline import phantom_grids, regular_mask
 from subtrace.patches.criterion import subdominant
-from subtrace.patches.evaluate import ptex_layout
-from subtrace.patches.shells import face_ring_boxes, one_ring_shells, split_ring_boxes
+from subtrace.patches.evaluate import ptex_starts
+from subtrace.patches.shells import (face_ring_boxes, face_star_boxes, one_ring_shells,
+                                     split_ring_boxes)
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
 from subtrace.subdiv.limit import extract
@@ -219,7 +221,15 @@ def _with_room(nets_list, is_quad, regular):
 def cage_face_shells(cage):
     """(lo, hi), each (F,3) float64: per face of the cage, a box that holds the limit
     surface over it (the box of its one-ring's control points, widened for Chaikin creases
-    as the patches' shells are). Cheap: no refinement."""
+    as the patches' shells are). Cheap: no refinement. A cage of at least
+    ``config.LAZY_TOPOLOGY_FACES`` faces whose topology is not built yet gets the same boxes
+    from its face lists (:func:`~subtrace.patches.shells.face_star_boxes`; the Chaikin
+    margin needs the edges' sharpness, so not for Chaikin cages)."""
+    if (not cage.has_topology and not cage.options.chaikin
+            and cage.n_faces >= config.LAZY_TOPOLOGY_FACES):
+        offsets = np.zeros(cage.n_faces + 1, np.int64)
+        np.cumsum(cage.face_sizes, out=offsets[1:])
+        return face_star_boxes(offsets, cage.face_verts, cage.points)
     lo, hi = face_ring_boxes(cage.base, cage.points)
     _chaikin_margin(cage.base, cage.options, lo, hi)
     return lo, hi
@@ -252,6 +262,26 @@ def _chaikin_margin(level, options, lo, hi):
 # config.GRID_RINGS rings of the patch level (what isolation and grids cut) must be refined
 # exactly, and a face is refined exactly when every face around its vertices is in the cut
 _CUT_RINGS = config.GRID_RINGS + 1
+# rings a restricted cage keeps around the kept faces: the cut's and one more, so that
+# every face of the cut has all the faces around its vertices, hence the whole cage's
+# topology and tags (the faces beyond see a boundary that is not the cage's)
+RESTRICT_RINGS = _CUT_RINGS + 1
+
+
+def restrict(cage, keep):
+    """``(cage, keep)`` to build the patches of ``cage``'s faces ``keep`` ((F,) bool) from:
+    a cage of at least ``config.LAZY_TOPOLOGY_FACES`` faces whose topology is not built yet
+    is cut to the kept faces and ``RESTRICT_RINGS`` rings around them
+    (:meth:`~subtrace.mesh.cage.Cage.restricted`, face order and ptex ids kept) when those
+    are at most ``config.LAZY_TOPOLOGY_SHARE`` of its faces; the kept faces' patches,
+    shells and nets are the whole cage's. Otherwise ``cage`` and ``keep`` as they are."""
+    if (cage.has_topology or cage.n_faces < config.LAZY_TOPOLOGY_FACES or keep is None
+            or keep.all()):
+        return cage, keep
+    around = face_rings(cage, keep, RESTRICT_RINGS)
+    if np.count_nonzero(around) > config.LAZY_TOPOLOGY_SHARE * cage.n_faces:
+        return cage, keep
+    return cage.restricted(around), keep[around]
 
 
 def _patch_level(cage, L0, keep):
@@ -381,8 +411,8 @@ def _object_arrays(cage, L0, lev, pts, faces, F, j, oid, first_edge, quad, regul
     ``regular``: True when every patch is known to be a regular quad (the cage's own)."""
     k = 4 if quad else 3
     n = len(faces)
-    # ptex mapping of each patch
-    base, sub, first = ptex_layout(cage)
+    # ptex mapping of each patch (a restricted cage's faces keep their whole cage's ids)
+    first = ptex_starts(cage) if cage.ptex_first is None else cage.ptex_first
     if L0 == 1:
         # level-1 face c is the child of base face F at corner j, numbered by base corner
         sizes = np.diff(cage.base.face_offsets)
