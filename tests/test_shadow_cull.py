@@ -1,11 +1,16 @@
-"""Culling to the view keeps what casts a shadow into it (render.faces_in_view's sweeps): an
-object outside the picture whose shadow falls on the visible ground renders the same with
-the lazy table as with the full one."""
+"""Culling to the view keeps what secondary rays from the view may meet (render.faces_in_view
+with accel.cull's reach): an object outside the picture whose shadow falls on the visible
+ground, or on an object in view, and what ambient occlusion rays meet, render the same with
+the lazy table as with the full one; what shadows nothing in view is left out."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
-import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from shared_data import MODELS, needs_shared
 
 from subtrace import config
 from subtrace.io.scene import scene_from_dict
@@ -44,3 +49,99 @@ def test_offscreen_caster_keeps_its_shadow(tmp_path, monkeypatch):
     # and the shadow is there: darker ground pixels than without shadows
     lit = render_scene(_scene(tmp_path, shadows=False))
     assert np.count_nonzero(full.channels["R"] < lit.channels["R"] - 1e-3) > 20
+
+
+def _cubes(tmp_path, offsets):
+    """An OBJ of unit-radius cubes at ``offsets`` (one cage)."""
+    lines, faces = [], []
+    for k, (ox, oy, oz) in enumerate(offsets):
+        for ln in CUBE.splitlines():
+            if ln.startswith("v "):
+                x, y, z = (float(c) for c in ln.split()[1:4])
+                lines.append(f"v {x + ox} {y + oy} {z + oz}")
+            else:
+                faces.append("f " + " ".join(str(int(i) + 8 * k) for i in ln.split()[1:]))
+    path = tmp_path / "cubes.obj"
+    path.write_text("\n".join(lines + faces) + "\n")
+    return path
+
+
+def test_offscreen_caster_without_ground_is_kept_and_the_rest_culled(tmp_path, monkeypatch):
+    """No ground: the points in view are the objects' own. A cube in view, a second out of
+    the picture between it and the light (it shadows the first), a third out of the picture
+    on the far side (it shadows nothing in view): the second is kept, the third culled (its
+    box swept along the light would reach the view), and the image is the full table's."""
+    mesh = _cubes(tmp_path, [(0, 0, 0), (-6.0, 6.0, 0.0), (6.0, -6.0, 0.0)])
+
+    def scene(shadows):
+        return scene_from_dict({
+            "object": [{"mesh": str(mesh)}],
+            "camera": {"eye": [0.0, 0.5, 7.0], "target": [0.0, 0.0, 0.0], "fov": 25.0,
+                       "width": 64, "height": 48},
+            "render": {"shadows": shadows, "samples": 1},
+            "light": [{"direction": [1.0, -1.0, -0.05]}]})
+
+    lazy = render_scene(scene(True))
+    assert lazy.stats.faces_culled == 6  # the third cube
+    assert set(np.unique(lazy.channels["object_id"])) == {-1.0, 0.0}
+    monkeypatch.setattr(config, "CULL_TO_VIEW", False)
+    full = render_scene(scene(True))
+    for name, plane in full.channels.items():
+        np.testing.assert_array_equal(lazy.channels[name], plane, err_msg=name)
+    lit = render_scene(scene(False))
+    assert np.count_nonzero(full.channels["R"] < lit.channels["R"] - 1e-3) > 20
+
+
+@needs_shared
+def test_ambient_occlusion_keeps_what_occludes_the_view(monkeypatch):
+    """Ambient occlusion rays from points in view reach config.AO_DISTANCE of the scene's
+    diagonal: Spot seen close, with AO, renders as with the full table (the faces beside the
+    picture that occlude its points are kept; they were not, and 47 % of the pixels were
+    lighter)."""
+    mesh = MODELS / "spot_control_mesh.obj"
+    scene = scene_from_dict({
+        "object": [{"mesh": str(mesh)}],
+        "camera": {"eye": [0.3, 0.45, 1.0], "target": [0.0, 0.3, 0.2], "fov": 12.0,
+                   "width": 80, "height": 45},
+        "render": {"ao": 8, "samples": 1, "shadows": False}})
+    lazy = render_scene(scene)
+    monkeypatch.setattr(config, "CULL_TO_VIEW", False)
+    full = render_scene(scene)
+    for name, plane in full.channels.items():
+        np.testing.assert_array_equal(lazy.channels[name], plane, err_msg=name)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_a_box_that_blocks_a_shadow_ray_from_the_view_is_kept(seed):
+    """Property: for a random camera and directional light (no ground), a small box around
+    a point q - s d, q a point in view inside the scene's box and d the light's travel,
+    is kept by the cull's view test, wherever the box lies."""
+    from subtrace.accel.cull import secondary_reach, view_test
+    from subtrace.camera import Camera
+
+    rng = np.random.default_rng(seed)
+    eye = rng.uniform(-5, 5, 3)
+    target = eye + rng.standard_normal(3)
+    cam = Camera(eye=tuple(eye), target=tuple(target), up=(0.0, 1.0, 0.0),
+                 fov_deg=float(rng.uniform(5, 60)), width=int(rng.integers(8, 64)),
+                 height=int(rng.integers(8, 64)))
+    d = rng.standard_normal(3)
+    d /= np.linalg.norm(d)
+    frame = cam.frame()
+    n = 40
+    cols = rng.uniform(-0.5, cam.width - 0.5, n)
+    rows = rng.uniform(-0.5, cam.height - 0.5, n)
+    depth = rng.uniform(0.05, 6.0, n)
+    q = frame[0] + depth[:, None] * (frame[3] + cols[:, None] * frame[1]
+                                     + rows[:, None] * frame[2])
+    p = q - rng.uniform(0.01, 4.0, n)[:, None] * d
+    r = rng.uniform(1e-4, 0.05, n)[:, None]
+    lo, hi = p - r, p + r
+    # the scene's box holds every receiver and caster
+    bounds = (np.minimum(q, lo).min(axis=0), np.maximum(q, hi).max(axis=0))
+    scene = SimpleNamespace(render=SimpleNamespace(ao=0, shadows=True), ground=None,
+                            lights=[SimpleNamespace(position=None, direction=d)])
+    reach = secondary_reach(scene, bounds, cam)
+    assert reach is not None and reach.light_frames is not None
+    assert view_test(cam, reach)(lo, hi).all()

@@ -42,6 +42,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from subtrace.accel.bvh import build_bvh
+from subtrace.accel.cull import casting_bounds
 from subtrace.camera import whole_image, window_offset
 from subtrace.nurbs.scene import blocked as nurbs_blocked
 from subtrace.nurbs.scene import shade_rays
@@ -132,7 +133,7 @@ def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, st
     trace_ao.bounds = any_hit.bounds  # (for the ground: :func:`shade.ground_occlusion`)
 
     image = whole_image(camera)  # (a window's pixels are its image's: rows, AO patterns)
-    lo, hi = _bounds(cages, nurbs)
+    lo, hi = casting_bounds(cages, nurbs)
     ao = ids = None
     if scene.render.ao > 0:
         ao = (trace_ao, scene.render.ao, config.AO_DISTANCE * float(np.linalg.norm(hi - lo)),
@@ -220,15 +221,6 @@ def _closest(pools, nurbs, frame, width, patches, scene, tol_rad, offset):
         return t, normals, pix_patch, sub
 
     return closest
-
-
-def _bounds(cages, nurbs):
-    """(lo, hi): the box of the cages' control points (which holds their limit surfaces)
-    and of the free-form surfaces' patches."""
-    boxes = [(c.points.min(axis=0), c.points.max(axis=0)) for c in cages]
-    if nurbs is not None:
-        boxes.append(nurbs.bounds())
-    return np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
 
 
 def _ground(scene, cages, camera, nurbs=None):

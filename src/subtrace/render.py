@@ -27,9 +27,9 @@ import numpy as np
 
 from subtrace import config
 from subtrace.accel.bvh import build_bvh, no_bvh
-from subtrace.accel.projection import (TILE, boxes_in_view, no_tiles, project_shells,
-                                      tiles_bytes)
-from subtrace.camera import CameraWindow, camera_frame, whole_image
+from subtrace.accel.cull import casting_bounds, secondary_reach, view_test
+from subtrace.accel.projection import TILE, no_tiles, project_shells, tiles_bytes
+from subtrace.camera import CameraWindow, whole_image
 from subtrace.errors import SceneError
 from subtrace.io.limits import check_coordinates, check_valences
 from subtrace.mesh.cage import load_cage, valence_bound
@@ -285,56 +285,27 @@ def scene_bounds(cages, nurbs=None):
     return np.min([b[0] for b in bounds], axis=0), np.max([b[1] for b in bounds], axis=0)
 
 
-def faces_in_view(cages, camera, sweeps=()):
+def faces_in_view(cages, camera, reach=None):
     """Per cage, a (F,) bool mask of the faces whose limit surface a primary ray may reach:
     the box that holds it (``patches.table.cage_face_shells``) projects into the image
     (``accel.projection.boxes_in_view``, the test the tile lists make). The patches of the
-    other faces are never built (design invariant 5). ``sweeps``: vectors (the travel of a
-    directional light across the scene) along which each box is also swept: a face that
-    may shadow a point in view lies on that point's ray towards the light, so its box
-    swept along the light's travel reaches the view."""
-    in_view = _view_test(camera, sweeps)
+    other faces are never built (design invariant 5). ``reach``: None, or the
+    :class:`~subtrace.accel.cull.Reach` of the scene's shadow and ambient occlusion rays
+    (:func:`~subtrace.accel.cull.secondary_reach`): the faces those may meet from a point
+    in view are kept too."""
+    in_view = view_test(camera, reach)
     return [in_view(*cage_face_shells(c)) for c in cages]
 
 
-def _view_test(camera, sweeps):
-    """``in_view(lo, hi)`` -> (N,) bool of :func:`faces_in_view` (boxes, or their sweeps
-    along any of ``sweeps``, that reach the image)."""
-    frame = camera_frame(camera)
-
-    def in_view(lo, hi):
-        seen = boxes_in_view(lo, hi, frame, camera.width, camera.height)
-        for v in sweeps:
-            seen |= boxes_in_view(np.minimum(lo, lo + v), np.maximum(hi, hi + v), frame,
-                                  camera.width, camera.height)
-        return seen
-
-    return in_view
-
-
-def shadow_sweeps(scene, cages):
-    """The sweeps :func:`faces_in_view` needs for the scene's shadows: per directional
-    light, its direction times twice the diagonal of the cages' bounds; None where culling
-    to the view would lose a shadow it cannot bound so (a point light)."""
-    if not (scene.lights and scene.render.shadows):
-        return ()
-    if any(l.position is not None for l in scene.lights):
-        return None
-    lo = np.min([c.points.min(axis=0) for c in cages], axis=0)
-    hi = np.max([c.points.max(axis=0) for c in cages], axis=0)
-    span = 2.0 * float(np.linalg.norm(hi - lo))
-    return [span * np.asarray(l.direction, np.float64) for l in scene.lights]
-
-
-def table_in_view(cages, camera, sweeps=()):
-    """The patch table of what a ray of ``camera`` (or a shadow ray, with ``sweeps``) may
+def table_in_view(cages, camera, reach=None):
+    """The patch table of what a ray of ``camera`` (or a secondary ray, with ``reach``) may
     reach: the patches of the cage faces in view (:func:`faces_in_view`) whose own
     one-ring box is in view too. Returns (table, the per-cage masks of the faces kept)."""
-    keep = faces_in_view(cages, camera, sweeps)
+    keep = faces_in_view(cages, camera, reach)
     # (a large cage seen in part: its topology built around the faces kept alone)
     cut = [restrict(c, k) for c, k in zip(cages, keep)]
     return build_patch_table([c for c, _ in cut], [k for _, k in cut],
-                             _view_test(camera, sweeps)), keep
+                             view_test(camera, reach)), keep
 
 
 def _valences(cage):
@@ -383,10 +354,10 @@ def _prepare(scene, cages, stats, nurbs=None, crop=None, compiling=None):
                                          else 0)[0] for c in cages] + extra)
         lo, hi = points.min(axis=0), points.max(axis=0)
     camera = scene.make_camera(lo, hi, points)
-    # (shadow rays may meet what the camera does not see: the boxes swept towards the view)
-    sweeps = shadow_sweeps(scene, cages)
-    if config.CULL_TO_VIEW and sweeps is not None:
-        table, keep = table_in_view(cages, camera, sweeps)
+    # (shadow and ambient occlusion rays may meet what the camera does not see)
+    reach = secondary_reach(scene, casting_bounds(cages, nurbs), camera)
+    if config.CULL_TO_VIEW and reach is not None:
+        table, keep = table_in_view(cages, camera, reach)
         stats.faces_culled = int(sum(np.count_nonzero(~k) for k in keep))
     else:
         table = build_patch_table(cages)
