@@ -1,6 +1,7 @@
 """Benchmark: a large cage seen whole and seen in part (the lazy patch table).
 
     python benchmarks/lazy.py [--rounds 3] [--width 1280 --height 720] [--levels 2]
+                              [--light none|sun|point]
 
 The sword (``models/sword_quad_dominant.obj``, 22,465 faces) refined ``--levels`` times
 (twice: 358,048 quads, 1.43 million patches) is written once to a temporary OBJ. Each round
@@ -31,6 +32,10 @@ from _common import REPO, import_subtrace  # benchmarks/ is on sys.path when run
 SWORD = REPO / "models" / "sword_quad_dominant.obj"
 EYE = [1.543, 0.6184, 0.4523]
 VIEWS = {"whole": ([0.0009113, 0.001393, -0.01046], 30.0), "tip": ([0.0, 0.0, -0.4], 2.6)}
+# --light: none (the headlight), the sword scene's sun, or a point light above the blade;
+# with shadows, which the cull keeps what may cast into the view for (accel/cull.py)
+LIGHTS = {"none": [], "sun": [{"direction": [-0.4, -1.0, -0.5], "intensity": 0.5}],
+          "point": [{"position": [0.6, 1.5, 0.8], "intensity": 2.0}]}
 
 
 def write_refined(path, levels: int) -> int:
@@ -51,7 +56,7 @@ def write_refined(path, levels: int) -> int:
     return len(sizes)
 
 
-def worker(obj: str, view: str, width: int, height: int) -> dict:
+def worker(obj: str, view: str, width: int, height: int, light: str = "none") -> dict:
     import_subtrace()
     from subtrace.io.scene import scene_from_dict
     from subtrace.mesh.cage import load_cage
@@ -64,7 +69,7 @@ def worker(obj: str, view: str, width: int, height: int) -> dict:
         return scene_from_dict({"object": [{"mesh": str(mesh)}],
                                 "camera": {"eye": EYE, "target": target, "fov": fov,
                                            "width": w, "height": h},
-                                "render": {"tolerance": 1.0}})
+                                "render": {"tolerance": 1.0}, "light": LIGHTS[light]})
 
     render_scene(scene(SWORD, 32, 18))  # kernels loaded (or compiled) before the baseline
     probe = PeakMemory()
@@ -95,22 +100,25 @@ def main(argv=None) -> int:
     ap.add_argument("--width", type=int, default=1280)
     ap.add_argument("--height", type=int, default=720)
     ap.add_argument("--levels", type=int, default=2)
-    ap.add_argument("--worker", nargs=4, help=argparse.SUPPRESS)
+    ap.add_argument("--light", choices=sorted(LIGHTS), default="none",
+                    help="the lights, with shadows (default: none, the headlight alone)")
+    ap.add_argument("--worker", nargs=5, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker:
-        obj, view, w, h = args.worker
-        print(json.dumps(worker(obj, view, int(w), int(h))))
+        obj, view, w, h, light = args.worker
+        print(json.dumps(worker(obj, view, int(w), int(h), light)))
         return 0
     runs = {v: [] for v in VIEWS}
     with tempfile.TemporaryDirectory() as tmp:
         obj = os.path.join(tmp, "sword_refined.obj")
         n = write_refined(obj, args.levels)
         print(f"sword refined {args.levels}x: {n} faces; {args.width}x{args.height}, 1 px, "
-              f"{args.rounds} alternated rounds (medians), cpus {os.cpu_count()}")
+              f"lights: {args.light}; {args.rounds} alternated rounds (medians), "
+              f"cpus {os.cpu_count()}")
         for _ in range(args.rounds):
             for view in VIEWS:
                 out = subprocess.run([sys.executable, __file__, "--worker", obj, view,
-                                      str(args.width), str(args.height)],
+                                      str(args.width), str(args.height), args.light],
                                      check=True, capture_output=True, text=True).stdout
                 runs[view].append(json.loads(out.strip().splitlines()[-1]))
     cols = ("view", "load s", "prep s", "refine s", "prep+ref s", "trace s", "wall s",

@@ -8,6 +8,7 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from shared_data import MODELS, needs_shared
@@ -66,11 +67,16 @@ def _cubes(tmp_path, offsets):
     return path
 
 
-def test_offscreen_caster_without_ground_is_kept_and_the_rest_culled(tmp_path, monkeypatch):
+@pytest.mark.parametrize("light", [{"direction": [1.0, -1.0, -0.05]},
+                                   {"position": [-12.0, 12.0, 0.3]}],
+                         ids=["directional", "point"])
+def test_offscreen_caster_without_ground_is_kept_and_the_rest_culled(tmp_path, monkeypatch,
+                                                                     light):
     """No ground: the points in view are the objects' own. A cube in view, a second out of
     the picture between it and the light (it shadows the first), a third out of the picture
-    on the far side (it shadows nothing in view): the second is kept, the third culled (its
-    box swept along the light would reach the view), and the image is the full table's."""
+    on the far side (it shadows nothing in view): the second is kept, the third culled (for
+    the directional light, its box swept along the light would reach the view), and the
+    image is the full table's."""
     mesh = _cubes(tmp_path, [(0, 0, 0), (-6.0, 6.0, 0.0), (6.0, -6.0, 0.0)])
 
     def scene(shadows):
@@ -79,7 +85,7 @@ def test_offscreen_caster_without_ground_is_kept_and_the_rest_culled(tmp_path, m
             "camera": {"eye": [0.0, 0.5, 7.0], "target": [0.0, 0.0, 0.0], "fov": 25.0,
                        "width": 64, "height": 48},
             "render": {"shadows": shadows, "samples": 1},
-            "light": [{"direction": [1.0, -1.0, -0.05]}]})
+            "light": [{**light, "intensity": 1.0 if "direction" in light else 300.0}]})
 
     lazy = render_scene(scene(True))
     assert lazy.stats.faces_culled == 6  # the third cube
@@ -144,4 +150,40 @@ def test_a_box_that_blocks_a_shadow_ray_from_the_view_is_kept(seed):
                             lights=[SimpleNamespace(position=None, direction=d)])
     reach = secondary_reach(scene, bounds, cam)
     assert reach is not None and reach.light_frames is not None
+    assert view_test(cam, reach)(lo, hi).all()
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_a_box_that_blocks_a_point_lights_shadow_ray_from_the_view_is_kept(seed):
+    """Property: for a random camera and a point light L outside the scene's box (no
+    ground), a small box around q + t (L - q), q a point in view inside the scene's box and
+    0 < t < 1, is kept by the cull's view test; a light inside that box turns the cull
+    off."""
+    from subtrace.accel.cull import secondary_reach, view_test
+    from subtrace.camera import Camera
+
+    rng = np.random.default_rng(seed)
+    eye = rng.uniform(-5, 5, 3)
+    cam = Camera(eye=tuple(eye), target=tuple(eye + rng.standard_normal(3)),
+                 up=(0.0, 1.0, 0.0), fov_deg=float(rng.uniform(5, 60)),
+                 width=int(rng.integers(8, 64)), height=int(rng.integers(8, 64)))
+    frame = cam.frame()
+    n = 40
+    cols = rng.uniform(-0.5, cam.width - 0.5, n)
+    rows = rng.uniform(-0.5, cam.height - 0.5, n)
+    q = frame[0] + rng.uniform(0.05, 6.0, n)[:, None] * (
+        frame[3] + cols[:, None] * frame[1] + rows[:, None] * frame[2])
+    light = q.mean(axis=0) + rng.standard_normal(3) * rng.uniform(1.0, 30.0)
+    p = q + rng.uniform(0.0, 1.0, n)[:, None] * (light - q)
+    r = rng.uniform(1e-4, 0.05, n)[:, None]
+    lo, hi = p - r, p + r
+    bounds = (np.minimum(q, lo).min(axis=0), np.maximum(q, hi).max(axis=0))
+    scene = SimpleNamespace(render=SimpleNamespace(ao=0, shadows=True), ground=None,
+                            lights=[SimpleNamespace(position=light, direction=None)])
+    reach = secondary_reach(scene, bounds, cam)
+    inside = np.all((light >= bounds[0]) & (light <= bounds[1]))
+    if reach is None:
+        assert inside  # (outside the box, the box's projection from the light bounds it)
+        return
     assert view_test(cam, reach)(lo, hi).all()
