@@ -120,8 +120,9 @@ class Cage:
     def restricted(self, faces: np.ndarray) -> Cage:
         """The cage of the faces ``faces`` ((F,) bool) alone, in their order, with the
         vertices they use (renumbered in order), the tags among those, their materials and
-        their ptex ids in this cage (``ptex_first``). Its faces that keep every face around
-        their vertices and edges (:func:`face_rings`) have this cage's limit surface."""
+        their ptex ids in this cage (``ptex_first``, which the patch table reads; its own
+        :meth:`evaluate` numbers its ptex faces afresh). Its faces that keep every face
+        around their vertices (:func:`face_rings`) have this cage's limit surface."""
         faces = np.asarray(faces, dtype=bool)
         corners = np.repeat(faces, self.face_sizes)
         used = np.zeros(len(self.points), bool)
