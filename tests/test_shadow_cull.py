@@ -117,40 +117,51 @@ def test_ambient_occlusion_keeps_what_occludes_the_view(monkeypatch):
         np.testing.assert_array_equal(lazy.channels[name], plane, err_msg=name)
 
 
+def _points_in_view(rng, n=40):
+    """A random camera and ``n`` random points in its view (depths 0.05 to 6)."""
+    from subtrace.camera import Camera
+
+    eye = rng.uniform(-5, 5, 3)
+    cam = Camera(eye=tuple(eye), target=tuple(eye + rng.standard_normal(3)),
+                 up=(0.0, 1.0, 0.0), fov_deg=float(rng.uniform(5, 60)),
+                 width=int(rng.integers(8, 64)), height=int(rng.integers(8, 64)))
+    frame = cam.frame()
+    cols = rng.uniform(-0.5, cam.width - 0.5, n)
+    rows = rng.uniform(-0.5, cam.height - 0.5, n)
+    q = frame[0] + rng.uniform(0.05, 6.0, n)[:, None] * (
+        frame[3] + cols[:, None] * frame[1] + rows[:, None] * frame[2])
+    return cam, q
+
+
+def _blockers_kept(rng, cam, q, p, light):
+    """Small boxes around the points ``p`` of shadow rays from ``q`` towards ``light`` (a
+    light with ``position`` and ``direction``), the scene's box holding them and ``q``: the
+    cull's reach (None: no cull) and whether its view test keeps every box."""
+    from subtrace.accel.cull import secondary_reach, view_test
+
+    r = rng.uniform(1e-4, 0.05, len(p))[:, None]
+    lo, hi = p - r, p + r
+    bounds = (np.minimum(q, lo).min(axis=0), np.maximum(q, hi).max(axis=0))
+    scene = SimpleNamespace(render=SimpleNamespace(ao=0, shadows=True), ground=None,
+                            lights=[light])
+    reach = secondary_reach(scene, bounds, cam)
+    return reach, bounds, reach is not None and view_test(cam, reach)(lo, hi).all()
+
+
 @settings(max_examples=60, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_a_box_that_blocks_a_shadow_ray_from_the_view_is_kept(seed):
     """Property: for a random camera and directional light (no ground), a small box around
     a point q - s d, q a point in view inside the scene's box and d the light's travel,
     is kept by the cull's view test, wherever the box lies."""
-    from subtrace.accel.cull import secondary_reach, view_test
-    from subtrace.camera import Camera
-
     rng = np.random.default_rng(seed)
-    eye = rng.uniform(-5, 5, 3)
-    target = eye + rng.standard_normal(3)
-    cam = Camera(eye=tuple(eye), target=tuple(target), up=(0.0, 1.0, 0.0),
-                 fov_deg=float(rng.uniform(5, 60)), width=int(rng.integers(8, 64)),
-                 height=int(rng.integers(8, 64)))
+    cam, q = _points_in_view(rng)
     d = rng.standard_normal(3)
     d /= np.linalg.norm(d)
-    frame = cam.frame()
-    n = 40
-    cols = rng.uniform(-0.5, cam.width - 0.5, n)
-    rows = rng.uniform(-0.5, cam.height - 0.5, n)
-    depth = rng.uniform(0.05, 6.0, n)
-    q = frame[0] + depth[:, None] * (frame[3] + cols[:, None] * frame[1]
-                                     + rows[:, None] * frame[2])
-    p = q - rng.uniform(0.01, 4.0, n)[:, None] * d
-    r = rng.uniform(1e-4, 0.05, n)[:, None]
-    lo, hi = p - r, p + r
-    # the scene's box holds every receiver and caster
-    bounds = (np.minimum(q, lo).min(axis=0), np.maximum(q, hi).max(axis=0))
-    scene = SimpleNamespace(render=SimpleNamespace(ao=0, shadows=True), ground=None,
-                            lights=[SimpleNamespace(position=None, direction=d)])
-    reach = secondary_reach(scene, bounds, cam)
+    p = q - rng.uniform(0.01, 4.0, len(q))[:, None] * d
+    reach, _, kept = _blockers_kept(rng, cam, q, p, SimpleNamespace(position=None, direction=d))
     assert reach is not None and reach.light_frames is not None
-    assert view_test(cam, reach)(lo, hi).all()
+    assert kept
 
 
 @settings(max_examples=60, deadline=None)
@@ -160,30 +171,13 @@ def test_a_box_that_blocks_a_point_lights_shadow_ray_from_the_view_is_kept(seed)
     ground), a small box around q + t (L - q), q a point in view inside the scene's box and
     0 < t < 1, is kept by the cull's view test; a light inside that box turns the cull
     off."""
-    from subtrace.accel.cull import secondary_reach, view_test
-    from subtrace.camera import Camera
-
     rng = np.random.default_rng(seed)
-    eye = rng.uniform(-5, 5, 3)
-    cam = Camera(eye=tuple(eye), target=tuple(eye + rng.standard_normal(3)),
-                 up=(0.0, 1.0, 0.0), fov_deg=float(rng.uniform(5, 60)),
-                 width=int(rng.integers(8, 64)), height=int(rng.integers(8, 64)))
-    frame = cam.frame()
-    n = 40
-    cols = rng.uniform(-0.5, cam.width - 0.5, n)
-    rows = rng.uniform(-0.5, cam.height - 0.5, n)
-    q = frame[0] + rng.uniform(0.05, 6.0, n)[:, None] * (
-        frame[3] + cols[:, None] * frame[1] + rows[:, None] * frame[2])
+    cam, q = _points_in_view(rng)
     light = q.mean(axis=0) + rng.standard_normal(3) * rng.uniform(1.0, 30.0)
-    p = q + rng.uniform(0.0, 1.0, n)[:, None] * (light - q)
-    r = rng.uniform(1e-4, 0.05, n)[:, None]
-    lo, hi = p - r, p + r
-    bounds = (np.minimum(q, lo).min(axis=0), np.maximum(q, hi).max(axis=0))
-    scene = SimpleNamespace(render=SimpleNamespace(ao=0, shadows=True), ground=None,
-                            lights=[SimpleNamespace(position=light, direction=None)])
-    reach = secondary_reach(scene, bounds, cam)
-    inside = np.all((light >= bounds[0]) & (light <= bounds[1]))
-    if reach is None:
-        assert inside  # (outside the box, the box's projection from the light bounds it)
-        return
-    assert view_test(cam, reach)(lo, hi).all()
+    p = q + rng.uniform(0.0, 1.0, len(q))[:, None] * (light - q)
+    reach, bounds, kept = _blockers_kept(rng, cam, q, p,
+                                         SimpleNamespace(position=light, direction=None))
+    if reach is None:  # (outside the box, the box's projection from the light bounds it)
+        assert np.all((light >= bounds[0]) & (light <= bounds[1]))
+    else:
+        assert kept

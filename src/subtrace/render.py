@@ -464,9 +464,11 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
                 hit = planes[C_OBJECT] >= 0
                 index = planes[C_OBJECT][hit].astype(np.int64)
                 planes[C_OBJECT][hit] = np.array(owners, np.float32)[index]
-            # each pixel's hit distance for the picture (read only; the NURBS pass writes
-            # its nearer hits into a copy)
-            t = hits.t if nurbs is None else hits.t.copy()
+            # each pixel's hit distance for the picture, copied out of the hit records (one
+            # block with the rounds' requests, 40 bytes a ray), which are let go before the
+            # picture makes its own arrays (the NURBS pass writes its nearer hits into it)
+            t = hits.t.copy()
+            hits = None
         offset = 0
         if nurbs is not None:
             t_trace = stats.time_trace
