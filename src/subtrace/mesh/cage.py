@@ -129,7 +129,11 @@ class Cage:
         used[self.face_verts[corners]] = True
         new_vert = np.cumsum(used, dtype=np.int64) - 1
         t = self.tags
-        both = used[t.crease_edges].all(axis=1) if len(t.crease_edges) else np.zeros(0, bool)
+        # (a crease naming a vertex the cage does not have names no edge: ignored, as
+        # tag_base_level ignores it)
+        ce = t.crease_edges
+        both = ((ce >= 0) & (ce < len(used))).all(axis=1)
+        both[both] = used[ce[both]].all(axis=1)
         corner_kept = used[t.corner_verts]
         new_face = np.cumsum(faces, dtype=np.int64) - 1
         hole_kept = faces[t.hole_faces]
