@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from subtrace import config
 from subtrace.accel.projection import boxes_in_view
 from subtrace.camera import camera_frame
 
@@ -84,8 +85,6 @@ def secondary_reach(scene, bounds, camera) -> Reach | None:
     diagonal = float(np.linalg.norm(hi - lo))
     reach = Reach()
     if scene.render.ao > 0:
-        from subtrace import config
-
         reach.grow = config.AO_DISTANCE * diagonal
     if not (scene.lights and scene.render.shadows):
         return reach
