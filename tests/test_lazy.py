@@ -13,9 +13,9 @@ from shared_data import MODELS, SHAPES, needs_shared, small_scene
 import subtrace
 from subtrace import config
 from subtrace.camera import camera_frame
-from subtrace.mesh.cage import face_rings
+from subtrace.mesh.cage import RESTRICT_RINGS, face_rings, lowest_limit
 from subtrace.patches.shells import face_ring_boxes, face_star_boxes, one_ring_shells
-from subtrace.patches.table import RESTRICT_RINGS, build_patch_table, cage_face_shells
+from subtrace.patches.table import build_patch_table, cage_face_shells
 from subtrace.patches.evaluate import ptex_starts
 from subtrace.patches.table import restrict
 from subtrace.render import faces_in_view, render_scene, table_in_view
@@ -311,3 +311,62 @@ def test_level_one_patches_out_of_view_are_left_out():
     assert 0 < kept < cage.n_faces
     assert 0 < res.stats.patches < quads_kept  # (a kept face has one patch per corner)
     _same_image_without_cull(scene, [cage], res)
+
+
+@pytest.mark.parametrize("tris,ngons,boundary", [(False, True, 1), (False, False, 0),
+                                                 (True, False, 2)],
+                         ids=["catmark", "catmark-none", "loop"])
+def test_the_lowest_limit_point_is_found_around_the_lowest_faces(tmp_path, monkeypatch, tris,
+                                                                  ngons, boundary):
+    """``lowest_limit`` (the automatic ground's height) is the least of the level-1 limit
+    points along ``up``, bit for bit, made from a cut of the cage around its lowest faces;
+    for several directions on grids with creases, a corner, a hole, n-gons, boundaries."""
+    _restricting(monkeypatch)
+    path = _feature_grid(tmp_path / "grid.obj", 30, tris, False, ngons, boundary)
+    whole = subtrace.load_cage(path).limit(1)[0]
+    rng = np.random.default_rng(3)
+    for up in [(0.0, 0.0, 1.0), (0.0, 0.0, -1.0), (1.0, 0.0, 0.0), *rng.standard_normal((4, 3))]:
+        up = np.asarray(up) / np.linalg.norm(up)
+        cage = subtrace.load_cage(path)
+        assert lowest_limit(cage, up) == float((whole @ up).min())
+        assert not cage.has_topology  # (the cut's, not the cage's)
+
+
+@needs_shared
+def test_a_ground_under_a_partial_view_builds_no_whole_topology():
+    """The sword seen at its tip above an automatic ground: the ground's height comes from
+    a cut around the sword's lowest faces, the cage's own topology is never built (before,
+    the whole cage was refined once for it), and the image is the full table's."""
+    from dataclasses import replace
+
+    from subtrace.io.scene import Ground
+
+    cage = subtrace.load_cage(SWORD)
+    scene = replace(small_scene([SWORD], TIP_EYE, TIP_TARGET, width=64, height=36,
+                                fov=TIP_FOV), ground=Ground(height=None, color=(0.6, 0.6, 0.6)))
+    res = render_scene(scene, cages=[cage])
+    assert res.stats.faces_culled > 0.8 * cage.n_faces
+    assert not cage.has_topology
+    _same_image_without_cull(scene, [subtrace.load_cage(SWORD)], res)
+
+
+def test_the_lowest_limit_point_is_not_taken_at_the_lowest_control_point(monkeypatch):
+    """A flat grid with one control point pulled far down (its limit surface dips to
+    about 4/9 of it) and, far from it, a broad valley half as deep (its limit surface
+    reaches the valley's floor): the lowest limit point is the valley's, found although
+    the faces around the pulled point have the lowest boxes."""
+    _restricting(monkeypatch)
+    n = 40
+    xs, ys = np.meshgrid(np.arange(n + 1) / n, np.arange(n + 1) / n, indexing="ij")
+    z = np.zeros((n + 1, n + 1))
+    z[5, 5] = -1.0
+    z[26:34, 26:34] = -0.5
+    points = np.c_[xs.ravel(), ys.ravel(), z.ravel()]
+    quads = [(i * (n + 1) + j, i * (n + 1) + j + 1, (i + 1) * (n + 1) + j + 1,
+              (i + 1) * (n + 1) + j) for i in range(n) for j in range(n)]
+    cage = subtrace.make_cage(points, [4] * len(quads), np.ravel(quads))
+    up = np.array([0.0, 0.0, 1.0])
+    low = lowest_limit(cage, up)
+    assert low == float((subtrace.make_cage(points, [4] * len(quads),
+                                            np.ravel(quads)).limit(1)[0] @ up).min())
+    assert abs(low + 0.5) < 1e-12  # the valley's floor (the pulled point dips to -0.44)

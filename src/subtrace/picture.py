@@ -43,6 +43,7 @@ import numpy as np
 
 from subtrace.accel.bvh import build_bvh
 from subtrace.accel.cull import casting_bounds
+from subtrace.mesh.cage import lowest_limit
 from subtrace.camera import whole_image, window_offset
 from subtrace.nurbs.scene import blocked as nurbs_blocked
 from subtrace.nurbs.scene import shade_rays
@@ -230,7 +231,7 @@ def _ground(scene, cages, camera, nurbs=None):
     up = np.asarray(camera.up, np.float64) / np.linalg.norm(camera.up)
     height = scene.ground.height
     if height is None:  # the objects' lowest limit point along up
-        lows = [float((c.limit(1)[0] @ up).min()) for c in cages]
+        lows = [lowest_limit(c, up) for c in cages]
         if nurbs is not None:  # (the lowest corner of the box of the surfaces' patches)
             lo, hi = nurbs.bounds()
             lows.append(float(np.minimum(lo * up, hi * up).sum()))

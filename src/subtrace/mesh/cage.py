@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from subtrace import config
 from subtrace.errors import TopologyError
 from subtrace.io.obj import read_obj
 from subtrace.mesh.topology import (
@@ -32,6 +33,7 @@ from subtrace.mesh.topology import (
     tag_base_level,
 )
 from subtrace.patches.evaluate import evaluate, ptex_starts
+from subtrace.patches.shells import face_star_boxes
 from subtrace.subdiv.limit import limit_points
 from subtrace.subdiv.refine import refine_level, refine_points
 
@@ -317,6 +319,13 @@ def _base_level(cage: Cage) -> Level:
                           t.corner_verts, t.corner_sharpness, t.hole_faces)
 
 
+# rings of faces a restricted cage keeps around the faces it is for: the patch table's cut
+# (``patches/table.py``: config.GRID_RINGS + 1 rings, refined to the patch level) and one
+# more, so that every face of the cut has all the faces around its vertices, hence the whole
+# cage's topology and tags (the faces beyond see a boundary that is not the cage's)
+RESTRICT_RINGS = config.GRID_RINGS + 2
+
+
 def face_rings(cage: Cage, faces: np.ndarray, rings: int) -> np.ndarray:
     """(F,) bool: the faces ``faces`` ((F,) bool) and every face within ``rings`` rings of
     them (a ring: the faces sharing a vertex with those before), from the face lists alone
@@ -331,6 +340,34 @@ def face_rings(cage: Cage, faces: np.ndarray, rings: int) -> np.ndarray:
         mark[cage.face_verts[np.repeat(sel, cage.face_sizes)]] = True
         sel = np.logical_or.reduceat(mark[cage.face_verts], starts)
     return sel
+
+
+def lowest_limit(cage: Cage, up) -> float:
+    """The least ``P . up`` over the limit points of ``cage``'s level-1 vertices: exactly
+    ``(cage.limit(1)[0] @ up).min()``, made from the faces that can hold it alone on a large
+    cage (at least ``config.LAZY_TOPOLOGY_FACES`` faces).
+
+    Every level-1 vertex lies on a face whose one-ring box holds its limit point (a convex
+    combination of that ring's points), and each face's surface reaches no higher than the
+    top of its box, so the least point is on a face whose box's bottom is below the lowest
+    box top. Those faces, with ``RESTRICT_RINGS`` rings around them, are cut out
+    (:meth:`Cage.restricted`) and refined: their own level-1 limit points are the whole
+    cage's, and the cut's other points, whatever the cut's boundary makes of them, are
+    still combinations of points above that lowest top. Chaikin creases (which may leave
+    the box) and the smooth triangle rule take the whole cage."""
+    up = np.asarray(up, np.float64)
+    if (cage.n_faces < config.LAZY_TOPOLOGY_FACES or cage.options.chaikin
+            or cage.options.smooth_triangles):
+        return float((cage.limit(1)[0] @ up).min())
+    height = cage.points @ up
+    offsets = np.zeros(cage.n_faces + 1, np.int64)
+    np.cumsum(cage.face_sizes, out=offsets[1:])
+    lo, hi = face_star_boxes(offsets, cage.face_verts,
+                             np.ascontiguousarray(np.repeat(height[:, None], 3, axis=1)))
+    # (a margin for the rounding of the limit masks' sums: far above it, far below a cell)
+    top = hi[:, 0].min() + 1e-9 * (np.abs(height).max() + 1.0)
+    near = face_rings(cage, lo[:, 0] <= top, RESTRICT_RINGS)
+    return float((cage.restricted(near).limit(1)[0] @ up).min())
 
 
 def valence_bound(cage: Cage) -> np.ndarray:

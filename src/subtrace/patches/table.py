@@ -56,7 +56,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from subtrace import config
-from subtrace.mesh.cage import face_rings
+from subtrace.mesh.cage import RESTRICT_RINGS, face_rings
 from subtrace.mesh.topology import compact, gather, gather_index
 from subtrace.patches.basis import TO_BEZIER, net_summary, to_bezier
 from subtrace.patches.bspline import phantom_grids, regular_mask
@@ -261,11 +261,8 @@ def _chaikin_margin(level, options, lo, hi):
 # cage rings cut around the kept faces: their children's neighbourhoods out to
 # config.GRID_RINGS rings of the patch level (what isolation and grids cut) must be refined
 # exactly, and a face is refined exactly when every face around its vertices is in the cut
-_CUT_RINGS = config.GRID_RINGS + 1
-# rings a restricted cage keeps around the kept faces: the cut's and one more, so that
-# every face of the cut has all the faces around its vertices, hence the whole cage's
-# topology and tags (the faces beyond see a boundary that is not the cage's)
-RESTRICT_RINGS = _CUT_RINGS + 1
+# (config.GRID_RINGS + 1; a restricted cage, mesh/cage.py, keeps one ring more)
+_CUT_RINGS = RESTRICT_RINGS - 1
 
 
 def restrict(cage, keep):
