@@ -181,3 +181,63 @@ def test_a_box_that_blocks_a_point_lights_shadow_ray_from_the_view_is_kept(seed)
         assert np.all((light >= bounds[0]) & (light <= bounds[1]))
     else:
         assert kept
+
+
+def test_with_a_ground_a_caster_whose_shadow_misses_the_view_is_culled(tmp_path, monkeypatch):
+    """The ground in view under a low sun: a cube out of the picture whose shadow falls on
+    the visible ground is kept; a second one whose shadow falls beyond the picture, though
+    its box swept along the light reaches the view, is culled (the ground's points in view
+    lie in the scene box's shadow on the ground, clipped to the view); the image is the
+    full table's."""
+    mesh = _cubes(tmp_path, [(6.0, 4.0, 0.0), (6.0, 4.0, -10.0)])
+    scene = scene_from_dict({
+        "object": [{"mesh": str(mesh)}],
+        "camera": {"eye": [0.0, 6.0, 6.0], "target": [0.0, 0.0, 0.0], "fov": 30.0,
+                   "width": 64, "height": 48},
+        "render": {"shadows": True, "samples": 1},
+        "light": [{"direction": [-6.0, -4.0, 0.0]}],
+        "ground": {"height": 0.0, "color": [0.6, 0.6, 0.6]}})
+    lazy = render_scene(scene)
+    assert lazy.stats.faces_culled == 6  # the second cube
+    assert np.all(lazy.channels["object_id"] < 0)  # (neither is in the picture)
+    monkeypatch.setattr(config, "CULL_TO_VIEW", False)
+    full = render_scene(scene)
+    for name, plane in full.channels.items():
+        np.testing.assert_array_equal(lazy.channels[name], plane, err_msg=name)
+    assert np.count_nonzero(full.channels["R"] < full.channels["R"].max() - 0.05) > 20
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_a_box_that_blocks_a_shadow_ray_from_the_ground_in_view_is_kept(seed):
+    """Property: a ground plane, a random camera and a light travelling down onto it; for
+    points x of the scene's box above the plane whose shadow q = x + s d on the plane is in
+    view, a small box around a point between x and q is kept by the cull's view test."""
+    from subtrace.accel.cull import secondary_reach, view_test
+
+    rng = np.random.default_rng(seed)
+    cam, _ = _points_in_view(rng, 1)
+    up = np.array([0.0, 1.0, 0.0])
+    height = float(rng.uniform(-3, 3))
+    d = rng.standard_normal(3)
+    d[1] = -abs(d[1]) - 0.05
+    d /= np.linalg.norm(d)
+    x = rng.uniform(-6, 6, (400, 3))
+    x[:, 1] = height + rng.uniform(0.01, 4.0, len(x))
+    q = x + ((height - x @ up) / (d @ up))[:, None] * d
+    frame = cam.frame()
+    a = np.linalg.solve(np.stack([frame[3], frame[1], frame[2]], axis=1), (q - frame[0]).T).T
+    seen = ((a[:, 0] > 0) & (np.abs(a[:, 1] / a[:, 0] - (cam.width - 1) / 2) <= cam.width / 2)
+            & (np.abs(a[:, 2] / a[:, 0] - (cam.height - 1) / 2) <= cam.height / 2))
+    if not seen.any():
+        return
+    x, q = x[seen], q[seen]
+    p = x + rng.uniform(0.0, 1.0, len(x))[:, None] * (q - x)
+    r = rng.uniform(1e-4, 0.05, len(p))[:, None]
+    lo, hi = p - r, p + r
+    bounds = (np.minimum(x, lo).min(axis=0), np.maximum(x, hi).max(axis=0))
+    scene = SimpleNamespace(render=SimpleNamespace(ao=0, shadows=True), ground=object(),
+                            lights=[SimpleNamespace(position=None, direction=d)])
+    reach = secondary_reach(scene, bounds, cam, (up, height))
+    assert reach is not None and reach.light_frames is not None
+    assert view_test(cam, reach)(lo, hi).all()

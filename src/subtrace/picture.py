@@ -142,7 +142,7 @@ def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, st
         col0, row0 = window_offset(frame)
         row, col = np.divmod(np.arange(W * H, dtype=np.int64), W)
         ids = (row + row0) * image.width + col + col0
-    ground = _ground(scene, cages, camera, nurbs)
+    ground = ground_plane(scene, cages, camera, nurbs)
     y0 = getattr(camera, "y0", 0)
     rows = background_rows(scene.render.background, scene.render.background_bottom,
                            image.height)[y0:y0 + H]
@@ -224,7 +224,7 @@ def _closest(pools, nurbs, frame, width, patches, scene, tol_rad, offset):
     return closest
 
 
-def _ground(scene, cages, camera, nurbs=None):
+def ground_plane(scene, cages, camera, nurbs=None):
     """(unit up, height) of the scene's ground plane, or None."""
     if scene.ground is None:
         return None

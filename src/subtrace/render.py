@@ -40,7 +40,7 @@ from subtrace.patches.table import build_patch_table, cage_face_shells, restrict
 from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
 from subtrace.runtime.memory import one_block
-from subtrace.picture import paint
+from subtrace.picture import ground_plane, paint
 from subtrace.shade import (C_OBJECT, C_R, CHANNELS, background_rows, deepest_level,
                             miss_values, patch_shading, shade)
 from subtrace.subdiv.limit import limit_points
@@ -354,8 +354,11 @@ def _prepare(scene, cages, stats, nurbs=None, crop=None, compiling=None):
                                          else 0)[0] for c in cages] + extra)
         lo, hi = points.min(axis=0), points.max(axis=0)
     camera = scene.make_camera(lo, hi, points)
-    # (shadow and ambient occlusion rays may meet what the camera does not see)
-    reach = secondary_reach(scene, casting_bounds(cages, nurbs), camera)
+    # (shadow and ambient occlusion rays may meet what the camera does not see; the
+    # ground's shadows are bounded by where the ground is)
+    ground = (ground_plane(scene, cages, camera, nurbs)
+              if scene.lights and scene.render.shadows else None)
+    reach = secondary_reach(scene, casting_bounds(cages, nurbs), camera, ground)
     if config.CULL_TO_VIEW and reach is not None:
         table, keep = table_in_view(cages, camera, reach)
         stats.faces_culled = int(sum(np.count_nonzero(~k) for k in keep))

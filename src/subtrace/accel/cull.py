@@ -12,26 +12,26 @@ test the tile lists make) or when a secondary ray from a point in view may reach
 
   - swept along ``d`` over twice the scene's diagonal (the longest way between an object and
     a point it shades), it reaches the view (the box of the sweep is tested); and
-  - without a ground plane (the points in view are then surface points of the objects, in
-    the box ``B`` of the scene), seen along ``d`` it overlaps the points in view: those lie
-    in the camera's pyramid cut to the depths of ``B``'s corners, whose eight corners bound
-    them, and in ``B``. In a frame ``(e1, e2, d)`` the box's extent along ``e1`` and
-    ``e2`` must meet both the pyramid's and ``B``'s, and its least ``d`` must not exceed
-    the pyramid's greatest (a shadow ray leaves towards the light, so what blocks it is
-    nearer the light). A ground plane in view may reach the horizon: its points are not
-    bounded so, and the sweep alone decides.
+  - seen along ``d`` it overlaps the points in view, and does not lie wholly beyond them
+    from the light. Those are the objects' (in the part of the scene's box ``B`` inside
+    the camera's pyramid: a polytope, whose corners are found by clipping ``B``'s faces by
+    the pyramid's planes) and a ground plane's (the part of it in view that lies in
+    ``B``'s shadow along ``d``: ``B``'s corners carried along ``d`` onto the plane, their
+    hull clipped by the pyramid). In a frame ``(e1, e2, d)`` the box's extent along ``e1``
+    and ``e2`` must meet theirs, and its least ``d`` must not exceed their greatest.
 
 * **shadow rays** towards a point light at ``L`` leave ``q`` towards ``L``: a box that
   blocks one holds a point of the segment, which the light sees in the same direction as
-  ``q`` and nearer. Without a ground plane, the light's view of the points in view is
-  bounded by the central projections of the pyramid's and ``B``'s corners (of those lying
-  wholly in front of the light, along its axis towards them): a box is kept when it
-  projects into that view (``projection.boxes_in_view`` with the light as the eye; a box
-  reaching the light's plane is kept) and is not wholly deeper than those corners.
+  ``q`` and nearer. Without a ground plane, the light's view of the points in view is the
+  central projection of the polytope's corners (when they lie wholly in front of the light
+  along an axis): a box is kept when it projects into that view (``projection.boxes_in_view``
+  with the light as the eye; a box reaching the light's plane is kept) and is not wholly
+  deeper than those corners.
 
-A point light above a ground plane, or one among the points in view (neither projection
-lies in front of it), is not bounded so: such scenes are not culled (:func:`secondary_reach`
-gives None).
+A point light above a ground plane, or one among the points in view (in front of it along
+no axis tried), is not bounded so: such scenes are not culled (:func:`secondary_reach`
+gives None). Neither is a ground plane along which a directional light runs (its sweep
+alone decides then).
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ from subtrace import config
 from subtrace.accel.projection import boxes_in_view
 from subtrace.camera import camera_frame
 
-# pixels of margin around the image for the pyramid's corners (the tile lists widen a box's
+# pixels of margin around the image for the pyramid's sides (the tile lists widen a box's
 # rectangle by one pixel for rounding; half a pixel more reaches the pixels' outer edges)
 _PYRAMID_MARGIN = 2.0
 
@@ -75,12 +75,13 @@ def casting_bounds(cages, nurbs=None):
     return np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
 
 
-def secondary_reach(scene, bounds, camera) -> Reach | None:
+def secondary_reach(scene, bounds, camera, ground=None) -> Reach | None:
     """The :class:`Reach` of ``scene``'s shadow and ambient occlusion rays seen by
     ``camera``; ``bounds`` (lo, hi): the box of everything that casts or receives (the
-    cages' control points, the free-form surfaces' patches). None: what a light's shadow
-    rays may meet is not bounded (a point light above a ground plane, or among the points
-    in view): no cull."""
+    cages' control points, the free-form surfaces' patches); ``ground``: the scene's ground
+    plane as (unit up, height), or None (none, or not known: then a directional light's
+    sweep alone decides). None: what a light's shadow rays may meet is not bounded (a point
+    light above a ground plane, or among the points in view): no cull."""
     lo, hi = (np.asarray(b, np.float64) for b in bounds)
     diagonal = float(np.linalg.norm(hi - lo))
     reach = Reach()
@@ -91,9 +92,9 @@ def secondary_reach(scene, bounds, camera) -> Reach | None:
     points = [l for l in scene.lights if l.position is not None]
     if points and scene.ground is not None:
         return None
-    corners = _pyramid_corners(camera, lo, hi)
+    seen = _seen_in_box(camera, lo, hi)  # (the objects' points in view lie in its hull)
     for light in points:
-        view = _point_view(np.asarray(light.position, np.float64), corners, lo, hi)
+        view = _point_view(np.asarray(light.position, np.float64), seen, lo, hi)
         if view is None:
             return None
         reach.point_views.append(view)
@@ -101,7 +102,12 @@ def secondary_reach(scene, bounds, camera) -> Reach | None:
     dirs = [d / np.linalg.norm(d) for d in dirs]
     reach.sweeps = [2.0 * diagonal * d for d in dirs]
     if scene.ground is None:
-        reach.light_frames = [_light_extent(d, corners, lo, hi) for d in dirs]
+        reach.light_frames = [_light_extent(d, seen) for d in dirs]
+    elif ground is not None:
+        grounds = [_ground_in_view(camera, lo, hi, d, *ground) for d in dirs]
+        if all(g is not None for g in grounds):
+            reach.light_frames = [_light_extent(d, np.concatenate([seen, g]))
+                                  for d, g in zip(dirs, grounds)]
     return reach
 
 
@@ -110,25 +116,46 @@ def _box_corners(lo, hi):
     return np.array([[(hi if (k >> a) & 1 else lo)[a] for a in range(3)] for k in range(8)])
 
 
-def _pyramid_corners(camera, lo, hi):
-    """(8,3): the corners of the camera's pyramid (the image widened by
-    ``_PYRAMID_MARGIN`` pixels) between the least and greatest depth of the box's corners
-    (depth 0 at the eye when the box reaches behind it); None when the box is wholly
-    behind the eye (nothing in view)."""
-    frame = camera_frame(camera)
-    eye, dx, dy, p00 = frame
-    forward = camera.basis()[2]
-    depth = (_box_corners(lo, hi) - eye) @ forward
-    far = float(depth.max())
-    if far <= 0.0:
-        return None
-    near = max(float(depth.min()), 0.0)
+def _pyramid_planes(camera):
+    """The camera's pyramid (its image widened by ``_PYRAMID_MARGIN`` pixels) as planes
+    (point (3,), normal (3,)) whose normals face its inside: its four sides, through the
+    eye, and the eye's own plane (what is in view lies in front of the eye)."""
+    eye, dx, dy, p00 = camera_frame(camera)
     m = _PYRAMID_MARGIN
-    cols = (-0.5 - m, camera.width - 0.5 + m)
-    rows = (-0.5 - m, camera.height - 0.5 + m)
-    # p00 + c dx + r dy has unit depth (dx, dy are across the view): z times it is at depth z
-    rays = np.array([p00 + c * dx + r * dy for c in cols for r in rows])
-    return np.concatenate([eye + near * rays, eye + far * rays])
+    c0, c1 = -0.5 - m, camera.width - 0.5 + m
+    r0, r1 = -0.5 - m, camera.height - 0.5 + m
+    rays = [p00 + c * dx + r * dy for c, r in ((c0, r0), (c1, r0), (c1, r1), (c0, r1))]
+    forward = camera.basis()[2]
+    planes = []
+    for k in range(4):
+        normal = np.cross(rays[k], rays[(k + 1) % 4])
+        planes.append((eye, normal if normal @ forward > 0.0 else -normal))
+    return planes + [(eye, forward)]
+
+
+def _seen_in_box(camera, lo, hi):
+    """(k,3): the corners of the part of the box [lo, hi] in the camera's pyramid (each of
+    the box's faces clipped by the pyramid: the part's corners lie on them, but for the eye
+    when the box holds it); (0,3) when none is."""
+    planes = _pyramid_planes(camera)
+    box = _box_corners(lo, hi)
+    corners = []
+    for axis in range(3):
+        for side in (0, 1):
+            # the face at lo or hi along this axis, its corners in order around it
+            a, b = (axis + 1) % 3, (axis + 2) % 3
+            face = []
+            for u, v in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                k = (side << axis) | (u << a) | (v << b)
+                face.append(box[k])
+            poly = np.array(face)
+            for point, normal in planes:
+                poly = _clip(poly, point, normal)
+            corners.append(poly)
+    eye = np.asarray(camera.eye, np.float64)
+    if (eye >= lo).all() and (eye <= hi).all():
+        corners.append(eye[None])
+    return np.concatenate(corners).reshape(-1, 3)
 
 
 def _perpendicular(d):
@@ -143,61 +170,102 @@ def _perpendicular(d):
 _POINT_VIEW_PIXELS = 64
 
 
-def _point_view(light, corners, lo, hi):
+def _point_view(light, seen, lo, hi):
     """The ``point_views`` entry of a point light at ``light`` (module comment): seen from
-    the light, the points in view lie in the central projections of the pyramid
-    ``corners`` and of the box [lo, hi] (of each that lies wholly in front of the light
-    along its axis: the first of three for which one does), and no deeper than their
-    corners. None when neither does for any (the light is in the box, among the points in
-    view); an empty view when nothing is in view."""
+    the light, the points in view lie in the central projection of the corners ``seen``
+    (:func:`_seen_in_box`) when those lie wholly in front of it along its axis (towards the
+    box [lo, hi]'s nearest point, which puts the whole box in front of a light outside it,
+    or else towards their middle), and no deeper than they are. None when neither axis
+    puts them in front (the light is among the points in view); an empty view when there
+    are none."""
     n = _POINT_VIEW_PIXELS
-    box = _box_corners(lo, hi)
-    if corners is None:  # nothing in view: a view no box meets
+    if not len(seen):  # nothing in view: a view no box meets
         return np.array([light, [1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0]]), n, np.ones(3), -np.inf
-    # axes to try: towards the box's nearest point (the whole box lies in front of the
-    # light along it, when the light is outside), the middle of the two, the pyramid's
-    mid = 0.5 * (np.maximum(corners.min(axis=0), lo) + np.minimum(corners.max(axis=0), hi))
-    for target in (np.clip(light, lo, hi), mid, corners.mean(axis=0)):
+    for target in (np.clip(light, lo, hi), seen.mean(axis=0)):
         axis = target - light
         if not np.linalg.norm(axis) > 0.0:
             continue
         axis = axis / np.linalg.norm(axis)
-        e1, e2 = _perpendicular(axis)
-        rect = [-np.inf, np.inf, -np.inf, np.inf]
-        depth, bounded = np.inf, False
-        for pts in (corners, box):
-            rel = pts - light
-            z = rel @ axis
-            if not (z > 0.0).all():
-                continue
-            u, v = (rel @ e1) / z, (rel @ e2) / z
-            rect = [max(rect[0], u.min()), min(rect[1], u.max()),
-                    max(rect[2], v.min()), min(rect[3], v.max())]
-            depth, bounded = min(depth, float(z.max())), True
-        if bounded:
+        rel = seen - light
+        z = rel @ axis
+        if (z > 0.0).all():
             break
     else:
         return None
-    if rect[0] > rect[1] or rect[2] > rect[3]:  # the two do not meet: nothing in view
-        return np.array([light, e1, e2, axis]), n, axis, -np.inf
-    su = max((rect[1] - rect[0]) / n, 1e-300)
-    sv = max((rect[3] - rect[2]) / n, 1e-300)
-    p00 = axis + (rect[0] + 0.5 * su) * e1 + (rect[2] + 0.5 * sv) * e2
-    return np.array([light, su * e1, sv * e2, p00]), n, axis, depth
+    e1, e2 = _perpendicular(axis)
+    u, v = (rel @ e1) / z, (rel @ e2) / z
+    su = max((u.max() - u.min()) / n, 1e-300)
+    sv = max((v.max() - v.min()) / n, 1e-300)
+    p00 = axis + (u.min() + 0.5 * su) * e1 + (v.min() + 0.5 * sv) * e2
+    return np.array([light, su * e1, sv * e2, p00]), n, axis, float(z.max())
 
 
-def _light_extent(d, corners, lo, hi):
+def _light_extent(d, points):
     """(rows e1, e2, d; lo, hi) of :class:`Reach`'s ``light_frames`` for the light
-    travelling along ``d`` (unit): the points in view lie in the pyramid ``corners`` (None:
-    there are none, an empty extent) and in the box [lo, hi]."""
+    travelling along ``d`` (unit): the extent of the points in view, whose hull's corners
+    are ``points`` (k,3) (the objects' and the ground's); an empty one when there are none."""
     axes = np.array([*_perpendicular(d), d])
-    if corners is None:
+    if not len(points):
         return axes, np.full(3, np.inf), np.full(3, -np.inf)
-    along = corners @ axes.T  # (8,3)
-    blo, bhi = _box_extent(axes, lo[None], hi[None])
-    elo = np.maximum(along.min(axis=0), blo[0])
-    ehi = np.minimum(along.max(axis=0), bhi[0])
-    return axes, elo, ehi
+    along = points @ axes.T
+    return axes, along.min(axis=0), along.max(axis=0)
+
+
+def _ground_in_view(camera, lo, hi, d, up, height):
+    """(k,3): the corners of the part of the ground plane (``up`` . x = ``height``) that
+    lies in the box [lo, hi]'s shadow along ``d`` (the box's corners carried along ``d``
+    onto the plane: what the box holds can shadow no ground point outside their hull) and
+    in the camera's pyramid (:func:`_pyramid_planes`); (0,3) when none does. None when the light runs along the plane (its shadows there are unbounded)."""
+    up = np.asarray(up, np.float64)
+    across = float(d @ up)
+    if abs(across) < 1e-9:
+        return None
+    box = _box_corners(lo, hi)
+    on_plane = box - ((box @ up - height) / across)[:, None] * d
+    poly = _hull_on_plane(on_plane, up)
+    for point, normal in _pyramid_planes(camera):
+        poly = _clip(poly, point, normal)
+    return poly
+
+
+def _hull_on_plane(points, up):
+    """``points`` (n,3), all on a plane facing ``up``, reduced to their convex hull's
+    corners, in order around it."""
+    b1, b2 = _perpendicular(up / np.linalg.norm(up))
+    xy = np.stack([points @ b1, points @ b2], axis=1)
+    order = sorted(range(len(points)), key=lambda i: (xy[i, 0], xy[i, 1]))
+
+    def turn(o, a, b):  # > 0: o, a, b turn counter-clockwise
+        (ax, ay), (bx, by) = xy[a] - xy[o], xy[b] - xy[o]
+        return ax * by - ay * bx
+
+    def half(seq):  # Andrew's monotone chain
+        chain = []
+        for i in seq:
+            while len(chain) >= 2 and turn(chain[-2], chain[-1], i) <= 0.0:
+                chain.pop()
+            chain.append(i)
+        return chain[:-1]
+
+    corners = half(order) + half(order[::-1])
+    return points[corners] if corners else points[:1]
+
+
+def _clip(poly, point, normal):
+    """The part of the convex polygon ``poly`` (k,3), corners in order, on the side of the
+    plane through ``point`` that ``normal`` faces (Sutherland and Hodgman's step)."""
+    if not len(poly):
+        return poly
+    side = (poly - point) @ normal
+    out = []
+    for k in range(len(poly)):
+        a, b = poly[k], poly[(k + 1) % len(poly)]
+        sa, sb = side[k], side[(k + 1) % len(poly)]
+        if sa >= 0.0:
+            out.append(a)
+        if (sa >= 0.0) != (sb >= 0.0):
+            out.append(a + (sa / (sa - sb)) * (b - a))
+    return np.array(out).reshape(-1, 3)
 
 
 def _box_extent(axes, lo, hi):

@@ -356,6 +356,13 @@ def lowest_limit(cage: Cage, up) -> float:
     still combinations of points above that lowest top. Chaikin creases (which may leave
     the box) and the smooth triangle rule take the whole cage."""
     up = np.asarray(up, np.float64)
+    key = ("lowest", up.tobytes())  # (the cull and the picture both ask)
+    if key not in cage._cache:
+        cage._cache[key] = _lowest_limit(cage, up)
+    return cage._cache[key]
+
+
+def _lowest_limit(cage: Cage, up: np.ndarray) -> float:
     if (cage.n_faces < config.LAZY_TOPOLOGY_FACES or cage.options.chaikin
             or cage.options.smooth_triangles):
         return float((cage.limit(1)[0] @ up).min())
