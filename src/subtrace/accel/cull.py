@@ -215,7 +215,8 @@ def _ground_in_view(camera, lo, hi, d, up, height):
     """(k,3): the corners of the part of the ground plane (``up`` . x = ``height``) that
     lies in the box [lo, hi]'s shadow along ``d`` (the box's corners carried along ``d``
     onto the plane: what the box holds can shadow no ground point outside their hull) and
-    in the camera's pyramid (:func:`_pyramid_planes`); (0,3) when none does. None when the light runs along the plane (its shadows there are unbounded)."""
+    in the camera's pyramid (:func:`_pyramid_planes`); (0,3) when none does. None when the
+    light runs along the plane (its shadows there are unbounded)."""
     up = np.asarray(up, np.float64)
     across = float(d @ up)
     if abs(across) < 1e-9:
