@@ -53,9 +53,10 @@ _PYRAMID_MARGIN = 2.0
 class Reach:
     """How far secondary rays from the points in view may go (module comment): ``grow``
     the ambient occlusion distance (0: none); per directional light, ``sweeps`` (3,) its
-    travel over twice the scene's diagonal and ``light_frames`` (None: a ground plane)
+    travel over twice the scene's diagonal and ``light_frames`` (None: the sweeps alone
+    decide, a ground plane's height not given or a light running along it)
     ``(axes (3,3): rows e1, e2, d; lo (3,), hi (3,))``, the extent of the points in view
-    along e1 and e2 and the greatest along d; per point light, ``point_views``
+    along e1, e2 and d; per point light, ``point_views``
     ``(frame (4,3), n, axis (3,), depth)``: the light's view of the points in view as an
     n x n image (``projection.boxes_in_view``'s frame) and their greatest depth along its
     axis."""
