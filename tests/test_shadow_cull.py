@@ -241,3 +241,28 @@ def test_a_box_that_blocks_a_shadow_ray_from_the_ground_in_view_is_kept(seed):
     reach = secondary_reach(scene, bounds, cam, (up, height))
     assert reach is not None and reach.light_frames is not None
     assert view_test(cam, reach)(lo, hi).all()
+
+
+def test_a_low_suns_long_shadow_on_the_ground_keeps_its_caster(tmp_path, monkeypatch):
+    """A low sun carries a cube's shadow along the ground much further than the scene's
+    diagonal: the cube, out of the picture, is kept for the ground in view, and the image is
+    the full table's (the sweep once stopped at twice the diagonal and lost the shadow)."""
+    mesh = _cubes(tmp_path, [(30.0, 1.5, 0.0)])
+
+    def scene(shadows):
+        return scene_from_dict({
+            "object": [{"mesh": str(mesh)}],
+            "camera": {"eye": [10.0, 6.0, 8.0], "target": [10.0, 0.0, 0.0], "fov": 40.0,
+                       "width": 64, "height": 48},
+            "render": {"shadows": shadows, "samples": 1},
+            "light": [{"direction": [-1.0, -0.1, 0.0]}],
+            "ground": {"height": 0.0, "color": [0.6, 0.6, 0.6]}})
+
+    lazy = render_scene(scene(True))
+    assert np.all(lazy.channels["object_id"] < 0)  # (the cube is not in the picture)
+    monkeypatch.setattr(config, "CULL_TO_VIEW", False)
+    full = render_scene(scene(True))
+    for name, plane in full.channels.items():
+        np.testing.assert_array_equal(lazy.channels[name], plane, err_msg=name)
+    lit = render_scene(scene(False))
+    assert np.count_nonzero(full.channels["R"] < lit.channels["R"] - 1e-3) > 20

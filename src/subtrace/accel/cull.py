@@ -102,6 +102,19 @@ def secondary_reach(scene, bounds, camera, ground=None) -> Reach | None:
     dirs = [np.asarray(l.direction, np.float64) for l in scene.lights if l.position is None]
     dirs = [d / np.linalg.norm(d) for d in dirs]
     reach.sweeps = [2.0 * diagonal * d for d in dirs]
+    if ground is not None:
+        # (a low sun carries a shadow on the ground further than the scene's diagonal: as
+        # far as the box's corners travel along the light to the plane)
+        box = _box_corners(lo, hi)
+        up, height = np.asarray(ground[0], np.float64), float(ground[1])
+        for k, d in enumerate(dirs):
+            across = abs(float(d @ up))
+            if across < 1e-9:
+                return None  # (the light runs along the ground: no bound)
+            travel = float(np.abs(box @ up - height).max()) / across
+            reach.sweeps[k] = max(2.0 * diagonal, 1.01 * travel) * d
+    elif scene.ground is not None:
+        return None  # (a ground whose height is not given: its shadows are not bounded)
     if scene.ground is None:
         reach.light_frames = [_light_extent(d, seen) for d in dirs]
     elif ground is not None:
