@@ -10,8 +10,10 @@ test the tile lists make) or when a secondary ray from a point in view may reach
 * **shadow rays** towards a directional light leave a point ``q`` in view along the light's
   reverse travel ``-d``. A box that blocks one holds a point ``q - s d`` (``0 < s``), so
 
-  - swept along ``d`` over twice the scene's diagonal (the longest way between an object and
-    a point it shades), it reaches the view (the box of the sweep is tested); and
+  - swept along ``d`` as far as a shadow can fall (twice the scene's diagonal between
+    objects; with a ground plane, as far as the scene box's corners travel along ``d`` to
+    it, which a low sun makes long), it reaches the view (the box of the sweep is
+    tested); and
   - seen along ``d`` it overlaps the points in view, and does not lie wholly beyond them
     from the light. Those are the objects' (in the part of the scene's box ``B`` inside
     the camera's pyramid: a polytope, whose corners are found by clipping ``B``'s faces by
@@ -53,8 +55,7 @@ _PYRAMID_MARGIN = 2.0
 class Reach:
     """How far secondary rays from the points in view may go (module comment): ``grow``
     the ambient occlusion distance (0: none); per directional light, ``sweeps`` (3,) its
-    travel over twice the scene's diagonal and ``light_frames`` (None: the sweeps alone
-    decide, a ground plane's height not given or a light running along it)
+    travel as far as a shadow can fall and ``light_frames`` (None: the sweeps alone decide)
     ``(axes (3,3): rows e1, e2, d; lo (3,), hi (3,))``, the extent of the points in view
     along e1, e2 and d; per point light, ``point_views``
     ``(frame (4,3), n, axis (3,), depth)``: the light's view of the points in view as an
