@@ -39,7 +39,7 @@ from subtrace.patches.criterion import edge_sampling
 from subtrace.patches.table import build_patch_table, cage_face_shells, restrict
 from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
-from subtrace.runtime.memory import one_block
+from subtrace.runtime.memory import let_go, one_block
 from subtrace.picture import ground_plane, paint
 from subtrace.shade import (C_OBJECT, C_R, CHANNELS, background_rows, deepest_level,
                             miss_values, patch_shading, shade)
@@ -467,10 +467,11 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
                 hit = planes[C_OBJECT] >= 0
                 index = planes[C_OBJECT][hit].astype(np.int64)
                 planes[C_OBJECT][hit] = np.array(owners, np.float32)[index]
-            # each pixel's hit distance for the picture, copied out of the hit records (one
-            # block with the rounds' requests, 40 bytes a ray), which are let go before the
-            # picture makes its own arrays (the NURBS pass writes its nearer hits into it)
-            t = hits.t.copy()
+            # each pixel's hit distance for the picture (the NURBS pass writes its nearer
+            # hits into a copy); the rest of the hit records (one block with the rounds'
+            # requests, 40 bytes a ray) is given back before the picture makes its own arrays
+            t = hits.t if nurbs is None else hits.t.copy()
+            let_go(hits[1:])
             hits = None
         offset = 0
         if nurbs is not None:

@@ -7,10 +7,14 @@ render's per-pixel arrays of 4 bytes a pixel (a patch id, a ray's request) are 3
 measured (a virtual machine, 2 cores) those faults cost the trace of osd_catmark_nonquads
 about 10 ms, against about 40 ms for its rays' work (BENCHMARKS.md, "Per-pixel arrays in
 huge pages"). :func:`one_block` cuts the arrays a render uses together from one allocation
-instead.
+instead, and :func:`let_go` gives back the memory of some of them while a view of the same
+allocation stays in use (the hit records but their distances, once shaded).
 """
 
 from __future__ import annotations
+
+import ctypes
+import mmap
 
 import numpy as np
 
@@ -27,3 +31,43 @@ def one_block(*specs) -> list[np.ndarray]:
     skip = -block.ctypes.data % _ALIGN
     return [block[skip + s:skip + s + b].view(dtype).reshape(shape)
             for s, b, (shape, dtype) in zip(starts, sizes, specs)]
+
+
+# what let_go gives back: whole transparent huge pages (2 MB on x86-64 and arm64 with 4 kB
+# pages), so that none is split into small ones (splitting them, when a band of hit records
+# was let go at a time, made shading slower: BENCHMARKS.md, "Shading in bands")
+_GRANULE = 2 * 1024 * 1024
+
+
+def _madvise():
+    """libc's ``madvise`` and ``MADV_DONTNEED``, or None where either is missing."""
+    advice = getattr(mmap, "MADV_DONTNEED", None)
+    try:
+        fn = ctypes.CDLL(None, use_errno=True).madvise
+    except (OSError, AttributeError, TypeError):
+        return None
+    if advice is None:
+        return None
+    fn.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int]
+    fn.restype = ctypes.c_int
+    return fn, advice
+
+
+_MADVISE = _madvise()
+
+
+def let_go(arrays) -> int:
+    """Give the memory of the arrays ``arrays`` back to the system while a view of the
+    same allocation stays in use (``madvise(MADV_DONTNEED)`` on the whole 2 MB granules
+    inside each): their contents are lost (read as zeros), so only for arrays that are
+    never read again. Returns the bytes given back (0 where the call does not exist)."""
+    if _MADVISE is None:
+        return 0
+    fn, advice = _MADVISE
+    total = 0
+    for a in arrays:
+        lo = -(-a.ctypes.data // _GRANULE) * _GRANULE
+        hi = (a.ctypes.data + a.nbytes) // _GRANULE * _GRANULE
+        if hi > lo and fn(lo, hi - lo, advice) == 0:
+            total += hi - lo
+    return total
