@@ -67,6 +67,21 @@ def _cubes(tmp_path, offsets):
     return path
 
 
+def _culled_as_full(scene_of, monkeypatch):
+    """``scene_of(shadows)`` rendered with shadows, culled and not: the same image, in which
+    shadows darken more than 20 pixels (against ``scene_of(False)``). Returns the culled
+    render."""
+    lazy = render_scene(scene_of(True))
+    with monkeypatch.context() as m:
+        m.setattr(config, "CULL_TO_VIEW", False)
+        full = render_scene(scene_of(True))
+    for name, plane in full.channels.items():
+        np.testing.assert_array_equal(lazy.channels[name], plane, err_msg=name)
+    lit = render_scene(scene_of(False))
+    assert np.count_nonzero(full.channels["R"] < lit.channels["R"] - 1e-3) > 20
+    return lazy
+
+
 @pytest.mark.parametrize("light", [{"direction": [1.0, -1.0, -0.05]},
                                    {"position": [-12.0, 12.0, 0.3]}],
                          ids=["directional", "point"])
@@ -87,15 +102,9 @@ def test_offscreen_caster_without_ground_is_kept_and_the_rest_culled(tmp_path, m
             "render": {"shadows": shadows, "samples": 1},
             "light": [{**light, "intensity": 1.0 if "direction" in light else 300.0}]})
 
-    lazy = render_scene(scene(True))
+    lazy = _culled_as_full(scene, monkeypatch)
     assert lazy.stats.faces_culled == 6  # the third cube
     assert set(np.unique(lazy.channels["object_id"])) == {-1.0, 0.0}
-    monkeypatch.setattr(config, "CULL_TO_VIEW", False)
-    full = render_scene(scene(True))
-    for name, plane in full.channels.items():
-        np.testing.assert_array_equal(lazy.channels[name], plane, err_msg=name)
-    lit = render_scene(scene(False))
-    assert np.count_nonzero(full.channels["R"] < lit.channels["R"] - 1e-3) > 20
 
 
 @needs_shared
@@ -190,21 +199,19 @@ def test_with_a_ground_a_caster_whose_shadow_misses_the_view_is_culled(tmp_path,
     lie in the scene box's shadow on the ground, clipped to the view); the image is the
     full table's."""
     mesh = _cubes(tmp_path, [(6.0, 4.0, 0.0), (6.0, 4.0, -10.0)])
-    scene = scene_from_dict({
-        "object": [{"mesh": str(mesh)}],
-        "camera": {"eye": [0.0, 6.0, 6.0], "target": [0.0, 0.0, 0.0], "fov": 30.0,
-                   "width": 64, "height": 48},
-        "render": {"shadows": True, "samples": 1},
-        "light": [{"direction": [-6.0, -4.0, 0.0]}],
-        "ground": {"height": 0.0, "color": [0.6, 0.6, 0.6]}})
-    lazy = render_scene(scene)
+
+    def scene(shadows):
+        return scene_from_dict({
+            "object": [{"mesh": str(mesh)}],
+            "camera": {"eye": [0.0, 6.0, 6.0], "target": [0.0, 0.0, 0.0], "fov": 30.0,
+                       "width": 64, "height": 48},
+            "render": {"shadows": shadows, "samples": 1},
+            "light": [{"direction": [-6.0, -4.0, 0.0]}],
+            "ground": {"height": 0.0, "color": [0.6, 0.6, 0.6]}})
+
+    lazy = _culled_as_full(scene, monkeypatch)
     assert lazy.stats.faces_culled == 6  # the second cube
     assert np.all(lazy.channels["object_id"] < 0)  # (neither is in the picture)
-    monkeypatch.setattr(config, "CULL_TO_VIEW", False)
-    full = render_scene(scene)
-    for name, plane in full.channels.items():
-        np.testing.assert_array_equal(lazy.channels[name], plane, err_msg=name)
-    assert np.count_nonzero(full.channels["R"] < full.channels["R"].max() - 0.05) > 20
 
 
 @settings(max_examples=60, deadline=None)
@@ -258,11 +265,5 @@ def test_a_low_suns_long_shadow_on_the_ground_keeps_its_caster(tmp_path, monkeyp
             "light": [{"direction": [-1.0, -0.1, 0.0]}],
             "ground": {"height": 0.0, "color": [0.6, 0.6, 0.6]}})
 
-    lazy = render_scene(scene(True))
+    lazy = _culled_as_full(scene, monkeypatch)
     assert np.all(lazy.channels["object_id"] < 0)  # (the cube is not in the picture)
-    monkeypatch.setattr(config, "CULL_TO_VIEW", False)
-    full = render_scene(scene(True))
-    for name, plane in full.channels.items():
-        np.testing.assert_array_equal(lazy.channels[name], plane, err_msg=name)
-    lit = render_scene(scene(False))
-    assert np.count_nonzero(full.channels["R"] < lit.channels["R"] - 1e-3) > 20
