@@ -43,8 +43,8 @@ import numpy as np
 
 from subtrace.accel.bvh import build_bvh
 from subtrace.accel.cull import casting_bounds
-from subtrace.mesh.cage import lowest_limit
 from subtrace.camera import whole_image, window_offset
+from subtrace.mesh.cage import lowest_limit
 from subtrace.nurbs.scene import blocked as nurbs_blocked
 from subtrace.nurbs.scene import shade_rays
 from subtrace.runtime import threads as tasks

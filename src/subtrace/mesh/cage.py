@@ -115,6 +115,16 @@ class Cage:
         return level
 
     @property
+    def face_offsets(self) -> np.ndarray:
+        """(F+1,) int64: where each face's corners start in ``face_verts`` (the face lists'
+        offsets, as the topology's; made once, without it)."""
+        offsets = self._cache.get("face_offsets")
+        if offsets is None:
+            offsets = self._cache["face_offsets"] = np.zeros(self.n_faces + 1, np.int64)
+            np.cumsum(self.face_sizes, out=offsets[1:])
+        return offsets
+
+    @property
     def has_topology(self) -> bool:
         """Whether :attr:`base` has been built."""
         return "base" in self._cache
@@ -299,8 +309,7 @@ def make_cage(
 
 def _base_level(cage: Cage) -> Level:
     """The topology of ``cage``'s faces with its tags applied."""
-    offsets = np.zeros(len(cage.face_sizes) + 1, dtype=np.int64)
-    np.cumsum(cage.face_sizes, out=offsets[1:])
+    offsets = cage.face_offsets
     n_verts = len(cage.points)
     edge_verts, face_edges, forward = base_edges(offsets, cage.face_verts, n_verts)
     level = build_level(
@@ -333,8 +342,7 @@ def face_rings(cage: Cage, faces: np.ndarray, rings: int) -> np.ndarray:
     sel = np.asarray(faces, dtype=bool)
     if not len(sel):
         return sel
-    starts = np.zeros(len(cage.face_sizes), np.int64)
-    np.cumsum(cage.face_sizes[:-1], out=starts[1:])
+    starts = cage.face_offsets[:-1]
     mark = np.zeros(len(cage.points), bool)
     for _ in range(rings):
         mark[cage.face_verts[np.repeat(sel, cage.face_sizes)]] = True
@@ -367,9 +375,7 @@ def _lowest_limit(cage: Cage, up: np.ndarray) -> float:
             or cage.options.smooth_triangles):
         return float((cage.limit(1)[0] @ up).min())
     height = cage.points @ up
-    offsets = np.zeros(cage.n_faces + 1, np.int64)
-    np.cumsum(cage.face_sizes, out=offsets[1:])
-    lo, hi = face_star_boxes(offsets, cage.face_verts,
+    lo, hi = face_star_boxes(cage.face_offsets, cage.face_verts,
                              np.ascontiguousarray(np.repeat(height[:, None], 3, axis=1)))
     # (a margin for the rounding of the limit masks' sums: far above it, far below a cell)
     top = hi[:, 0].min() + 1e-9 * (np.abs(height).max() + 1.0)

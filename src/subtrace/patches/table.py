@@ -227,9 +227,7 @@ def cage_face_shells(cage):
     margin needs the edges' sharpness, so not for Chaikin cages)."""
     if (not cage.has_topology and not cage.options.chaikin
             and cage.n_faces >= config.LAZY_TOPOLOGY_FACES):
-        offsets = np.zeros(cage.n_faces + 1, np.int64)
-        np.cumsum(cage.face_sizes, out=offsets[1:])
-        return face_star_boxes(offsets, cage.face_verts, cage.points)
+        return face_star_boxes(cage.face_offsets, cage.face_verts, cage.points)
     lo, hi = face_ring_boxes(cage.base, cage.points)
     _chaikin_margin(cage.base, cage.options, lo, hi)
     return lo, hi
