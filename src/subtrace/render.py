@@ -27,7 +27,7 @@ import numpy as np
 
 from subtrace import config
 from subtrace.accel.bvh import build_bvh, no_bvh
-from subtrace.accel.cull import casting_bounds, secondary_reach, view_test
+from subtrace.accel.cull import casting_bounds, secondary_origins, secondary_reach, view_test
 from subtrace.accel.projection import TILE, no_tiles, project_shells, tiles_bytes
 from subtrace.camera import CameraWindow, whole_image
 from subtrace.errors import SceneError
@@ -36,6 +36,7 @@ from subtrace.mesh.cage import load_cage, valence_bound
 from subtrace.nurbs.scene import (has_faces, has_surfaces, load_nurbs, nurbs_pass,
                                   picture_hits, with_surfaces)
 from subtrace.patches.criterion import edge_sampling
+from subtrace.patches.shells import Sight
 from subtrace.patches.table import build_patch_table, cage_face_shells, restrict
 from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
@@ -137,7 +138,7 @@ def _shell_walk(chosen, frame, width, height, accel, max_memory, stats, image=No
 
 
 def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, accel=None,
-               progress=None, max_memory=None, keep=None):
+               progress=None, max_memory=None, keep=None, seen=None):
     """Run the refinement rounds; returns (hits (:class:`~subtrace.trace.pools.Hits`), the
     built patches (:class:`~subtrace.trace.pools.Pieces`), every patch refined). ``compiling``: the
     processes compiling the trace kernels (``warmup.start``), waited for before the first
@@ -153,7 +154,9 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     The pieces take over the table's net store (``patches.table.net_room``) and append to
     it past the table's nets: a table serves one call at a time.
     ``keep``: None, or a dict that receives what secondary rays need of the pools
-    (``trace.rays.Pools``' fields)."""
+    (``trace.rays.Pools``' fields). ``seen``: None (primary rays alone), or where the
+    secondary rays start (``accel.cull.secondary_origins``): depths are then chosen for
+    the narrowest cone that may reach each patch (``patches.shells.Sight``)."""
     accel = config.PRIMARY_ACCEL if accel is None else accel
     if accel not in ("projection", "bvh"):
         raise ValueError(f"unknown acceleration {accel!r}")
@@ -162,8 +165,8 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     # (a window, ``camera.CameraWindow``, budgets for its own pixels)
     image = whole_image(camera)
     t0 = time.perf_counter()
-    chosen = choose_within_budget(table, frame[0], tol_rad, max_depth, max_memory, W * H,
-                                  stats)
+    eye = frame[0] if seen is None else Sight(frame[0], *seen)
+    chosen = choose_within_budget(table, eye, tol_rad, max_depth, max_memory, W * H, stats)
     stats.time_refine += time.perf_counter() - t0
     t0 = time.perf_counter()
     cut_to_loop_nets(table, chosen.shell_min, chosen.shell_max)
@@ -185,13 +188,15 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
         warmup.picture_while_tracing(compiling, tasks.thread_count())
     warmup.wait_traced(compiling)
     return _rounds(table, frame, W, W * H, tol_rad, chosen, tiles, bvh,
-                   Memos(n_threads, memo_bytes), stats, progress, keep)
+                   Memos(n_threads, memo_bytes), stats, progress, keep, eye)
 
 
 def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, stats, progress,
-            keep=None):
+            keep=None, eye=None):
     """The rounds of :func:`trace_hits`: trace the rays that asked, build what they asked
-    for, until no ray asks."""
+    for, until no ray asks. ``eye``: what the depths were chosen from (``frame``'s eye,
+    or a ``patches.shells.Sight``)."""
+    eye = frame[0] if eye is None else eye
     depths = chosen.depths
     edge_depth, reg_side = edge_sampling(table, depths)
     iso = Pieces(table.n_patches)
@@ -229,7 +234,7 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
         t0 = time.perf_counter()
         new = np.nonzero(cands.wanted)[0]  # (kernels.py: requests and what they overlap)
         cands.wanted[:] = 0
-        build_requested(table, new, depths, edge_depth, iso, round_no, stats, frame[0], tol_rad,
+        build_requested(table, new, depths, edge_depth, iso, round_no, stats, eye, tol_rad,
                         chosen.record)
         # a built patch's shell shrinks to its items' boxes (all that rays test of it):
         # later rounds, and the secondary rays' BVH, enter it less often
@@ -255,7 +260,7 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
     if keep is not None:  # for secondary rays (trace/rays.py)
         keep.update(table=table, depths=depths, edge_depth=edge_depth, iso=iso,
                     record=chosen.record, shell_min=chosen.shell_min,
-                    shell_max=chosen.shell_max, bvh=bvh, eye=frame[0], tol_rad=tol_rad,
+                    shell_max=chosen.shell_max, bvh=bvh, eye=eye, tol_rad=tol_rad,
                     stats=stats, round_no=round_no + 1, memo_bytes=memos.max_bytes)
     return hits, iso, built
 
@@ -333,7 +338,7 @@ def _prepare(scene, cages, stats, nurbs=None, crop=None, compiling=None):
         view = camera if crop is None else crop_window(camera, crop, apron(scene))
         stats.rays = view.width * view.height
         stats.time_load = time.perf_counter() - t_start
-        return cages, None, camera, view, scene.render.tolerance_rad(camera), None
+        return cages, None, camera, view, scene.render.tolerance_rad(camera), None, None
     for c in cages:
         check_coordinates(c.path, c.points, config.MAX_COORDINATE)
         check_valences(c.path, c.face_sizes, _valences(c),
@@ -356,9 +361,10 @@ def _prepare(scene, cages, stats, nurbs=None, crop=None, compiling=None):
     camera = scene.make_camera(lo, hi, points)
     # (shadow and ambient occlusion rays may meet what the camera does not see; the
     # ground's shadows are bounded by where the ground is)
-    ground = (ground_plane(scene, cages, camera, nurbs)
-              if scene.lights and scene.render.shadows else None)
-    reach = secondary_reach(scene, casting_bounds(cages, nurbs), camera, ground)
+    secondary = bool(scene.lights and scene.render.shadows) or scene.render.ao > 0
+    ground = ground_plane(scene, cages, camera, nurbs) if secondary else None
+    reach = secondary_reach(scene, casting_bounds(cages, nurbs), camera,
+                            ground if scene.lights and scene.render.shadows else None)
     if config.CULL_TO_VIEW and reach is not None:
         table, keep = table_in_view(cages, camera, reach)
         stats.faces_culled = int(sum(np.count_nonzero(~k) for k in keep))
@@ -370,8 +376,16 @@ def _prepare(scene, cages, stats, nurbs=None, crop=None, compiling=None):
     check_memory(table, view.width * view.height, budget, view.width, view.height)
     stats.patches = table.n_patches
     stats.rays = view.width * view.height
+    # where shadow and ambient occlusion rays start: their cones refine what they reach
+    # (patches.shells.Sight), from the whole image's camera (a crop's tiles alike)
+    # (the boxes hold a patch's shell and the shell its rays test: a patch in view is
+    # then no nearer the eye than ``near``, and keeps the eye's depth)
+    seen = (secondary_origins(camera, np.minimum(table.shell_min, table.ray_min),
+                              np.maximum(table.shell_max, table.ray_max), ground,
+                              None if nurbs is None else nurbs.bounds())
+            if secondary else None)
     stats.time_preprocess = time.perf_counter() - t0
-    return cages, table, camera, view, scene.render.tolerance_rad(camera), budget
+    return cages, table, camera, view, scene.render.tolerance_rad(camera), budget, seen
 
 
 def crop_window(camera, crop, margin=1) -> CameraWindow:
@@ -420,8 +434,8 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
     try:
         owners = cage_objects(scene) if cages is None else list(range(len(cages)))
         nurbs = load_nurbs(scene) if cages is None else None  # free-form surfaces
-        cages, table, camera, view, tol_rad, budget = _prepare(scene, cages, stats, nurbs,
-                                                               crop, compiling)
+        cages, table, camera, view, tol_rad, budget, seen = _prepare(scene, cages, stats,
+                                                                     nurbs, crop, compiling)
         if compiling is None and table is not None:  # the kernel for other schemes only
             compiling = warmup.start_for(tasks.thread_count(), [c.scheme for c in cages])
         if crop is not None:
@@ -434,7 +448,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
         else:
             hits, iso, built = trace_hits(table, view, tol_rad, stats, compiling=compiling,
                                           accel=accel, progress=progress, max_memory=budget,
-                                          keep=keep)
+                                          keep=keep, seen=seen)
     except BaseException:
         warmup.stop(compiling)
         raise

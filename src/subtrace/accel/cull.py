@@ -34,6 +34,10 @@ A point light above a ground plane, or one among the points in view (in front of
 no axis tried), is not bounded so: such scenes are not culled (:func:`secondary_reach`
 gives None). Neither is a ground plane along which a directional light runs (its sweep
 alone decides then).
+
+Where the secondary rays start bounds their cones too (:func:`secondary_origins`, for the
+refinement's ``patches.shells.Sight``): a box around the points in view, and their least
+distance from the eye.
 """
 
 from __future__ import annotations
@@ -124,6 +128,74 @@ def secondary_reach(scene, bounds, camera, ground=None) -> Reach | None:
             reach.light_frames = [_light_extent(d, np.concatenate([seen, g]))
                                   for d, g in zip(dirs, grounds)]
     return reach
+
+
+def secondary_origins(camera, lo, hi, ground=None, extra=None):
+    """Where the secondary rays of ``camera``'s picture may start, for the refinement's
+    :class:`~subtrace.patches.shells.Sight`: (near, seen_min (3,), seen_max (3,)), a
+    box holding every such point and their least distance from the eye; None when no
+    point is in view. They are the hits of rays through the image: on the surfaces of
+    patches whose boxes (``lo``, ``hi``: (n,3), holding what the rays test) project into
+    it (``projection.boxes_in_view``, as the tile lists; an anti-aliasing ray passes
+    within a pixel's rectangle), on free-form surfaces within the box ``extra`` = (lo,
+    hi), and on the ground plane ``ground`` = (unit up, height) where it is in view (the
+    plane's box is the plane along an axis it faces, else everything)."""
+    eye = np.asarray(camera.eye, np.float64)
+    inside = boxes_in_view(lo, hi, camera_frame(camera), camera.width, camera.height)
+    boxes = [(lo[inside], hi[inside])]
+    if extra is not None:
+        boxes.append(tuple(np.asarray(b, np.float64).reshape(1, 3) for b in extra))
+    near = np.inf
+    seen_min, seen_max = np.full(3, np.inf), np.full(3, -np.inf)
+    for a, b in boxes:
+        if len(a):
+            q = np.maximum(np.maximum(a - eye, 0.0), eye - b)
+            near = min(near, float(np.sqrt((q * q).sum(axis=1)).min()))
+            seen_min = np.minimum(seen_min, a.min(axis=0))
+            seen_max = np.maximum(seen_max, b.max(axis=0))
+    ground_near = None if ground is None else _plane_in_view(camera, *ground)
+    if ground_near is not None:
+        up, height = np.asarray(ground[0], np.float64), float(ground[1])
+        near = min(near, ground_near)
+        axis = np.nonzero(up != 0.0)[0]
+        plane_min, plane_max = np.full(3, -np.inf), np.full(3, np.inf)
+        if len(axis) == 1:  # (a plane facing an axis: one coordinate, the others any)
+            a = axis[0]
+            plane_min[a] = plane_max[a] = height / up[a]
+        seen_min, seen_max = np.minimum(seen_min, plane_min), np.maximum(seen_max, plane_max)
+    if not np.isfinite(near):
+        return None
+    return near, seen_min, seen_max
+
+
+def _plane_in_view(camera, up, height):
+    """The least distance from the eye to the part of the plane ``up`` . x = ``height`` in
+    the camera's pyramid (:func:`_pyramid_planes`), or None when no part is. The part is
+    a square of the plane around the eye's foot, wide enough that every point beyond it is
+    farther than the square's nearest point, clipped by the pyramid."""
+    up = np.asarray(up, np.float64) / np.linalg.norm(up)
+    eye = np.asarray(camera.eye, np.float64)
+    above = float(up @ eye) - float(height)
+    foot = eye - above * up
+    e1, e2 = _perpendicular(up)
+    r = 1e6 * max(1.0, abs(above), float(np.abs(eye).max()))
+    poly = np.array([foot + a * e1 + b * e2 for a, b in ((-r, -r), (r, -r), (r, r), (-r, r))])
+    for point, normal in _pyramid_planes(camera):
+        poly = _clip(poly, point, normal)
+    if not len(poly):
+        return None
+    # the nearest point: the foot where the part holds it, else on one of its sides
+    rel = poly - foot
+    turns = [float(np.cross(rel[k], rel[(k + 1) % len(poly)]) @ up) for k in range(len(poly))]
+    if len(poly) >= 3 and (min(turns) >= 0.0 or max(turns) <= 0.0):
+        return abs(above)
+    best = np.inf
+    for k in range(len(poly)):
+        a, b = poly[k], poly[(k + 1) % len(poly)]
+        ab = b - a
+        f = 0.0 if not ab @ ab > 0.0 else min(max(float((eye - a) @ ab / (ab @ ab)), 0.0), 1.0)
+        best = min(best, float(np.linalg.norm(eye - (a + f * ab))))
+    return best
 
 
 def _box_corners(lo, hi):

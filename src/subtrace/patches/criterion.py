@@ -15,7 +15,7 @@ import numpy as np
 
 from subtrace import config
 from subtrace.patches.isolate import isolated_depths
-from subtrace.patches.shells import box_distance
+from subtrace.patches.shells import eye_point, sight_distance
 from subtrace.runtime.jit import nb
 from subtrace.subdiv import catmark, loop
 
@@ -29,11 +29,12 @@ def subdominant(valence: np.ndarray, quad: bool) -> np.ndarray:
     return np.maximum(scheme.subdominant_eigenvalue(np.maximum(valence, 3)), 0.5)
 
 
-def wanted_depths(table, eye: np.ndarray, tol_rad: float) -> np.ndarray:
+def wanted_depths(table, eye, tol_rad: float) -> np.ndarray:
     """(P,) float64: the conservative depth each patch's tolerance asks for, uncapped (the
     smallest n with ``edge_bound * rate^n`` at most ``tol_rad`` times the distance from
-    the eye to the shell); inf where the eye is inside the shell."""
-    d = box_distance(table.shell_min, table.shell_max, eye)
+    the eye to the shell: ``shells.sight_distance``, ``eye`` a point or a ``Sight``); inf
+    where the eye is inside the shell."""
+    d = sight_distance(table.shell_min, table.shell_max, eye)
     allowed = d * tol_rad
     with np.errstate(divide="ignore", invalid="ignore"):
         n = np.log(allowed / table.edge_bound) / np.log(table.rate)
@@ -51,7 +52,7 @@ def precision_depths(table, eye: np.ndarray) -> np.ndarray:
     lo, hi = table.shell_min, table.shell_max
     extent = np.linalg.norm(hi - lo, axis=1)
     scale = np.maximum(np.maximum(np.abs(lo), np.abs(hi)).max(axis=1, initial=0.0),
-                       np.abs(np.asarray(eye, dtype=np.float64)).max())
+                       np.abs(np.asarray(eye_point(eye), dtype=np.float64)).max())
     with np.errstate(divide="ignore", invalid="ignore"):
         n = config.PRECISION_BITS + np.floor(np.log2(extent / scale))
     n = np.where(np.isfinite(n), n, 0.0)

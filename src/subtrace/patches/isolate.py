@@ -31,7 +31,7 @@ from subtrace.config import IRREGULAR_MARGIN
 from subtrace.patches.basis import bezier_nets, net_bounds
 from subtrace.patches.bspline import control_points
 from subtrace.patches.grids import levels_needed, refine_children, unit_normals
-from subtrace.patches.shells import box_distance, one_ring_shells
+from subtrace.patches.shells import one_ring_shells, sight_distance
 from subtrace.patches.stencil import stencil_depths, stencil_pieces, stencil_where
 from subtrace.runtime.jit import nb
 from subtrace.subdiv.limit import limit_points
@@ -113,7 +113,7 @@ def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0, 
         if reg.any():
             bez = bezier_nets(control_points(cur, kids[reg], cur_pts))
             lo, hi, bound = net_bounds(bez)
-            n = levels_needed(bound, box_distance(lo, hi, eye), tol_rad)
+            n = levels_needed(bound, sight_distance(lo, hi, eye), tol_rad)
             if boxes is not None:
                 np.minimum.at(boxes[0], kid_root[reg], lo)
                 np.maximum.at(boxes[1], kid_root[reg], hi)
@@ -123,7 +123,7 @@ def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0, 
             levels.append(_Level(parent_start, cur, cur_pts, kids, reg, bez, n))
         irr = np.nonzero(~reg)[0]
         smin, smax, ebound, _ = one_ring_shells(cur, kids[irr], cur_pts)
-        flat = IRREGULAR_MARGIN * ebound <= tol_rad * box_distance(smin, smax, eye)
+        flat = IRREGULAR_MARGIN * ebound <= tol_rad * sight_distance(smin, smax, eye)
         np.maximum.at(need, kid_root[irr][kid_active[irr]], k)
         more = kid_active[irr] & ~flat & (k < cap[kid_root[irr]])
         keep = more | (k < record_depth if record is not None else False)
@@ -316,7 +316,7 @@ def _next_level(subs, k, cur, cur_pts, kids, reg, root, i0, j0, depth, eye, tol_
         if eye is not None:
             if n is None:
                 lo, hi, bound = net_bounds(bez)
-                n = levels_needed(bound, box_distance(lo, hi, eye), tol_rad)
+                n = levels_needed(bound, sight_distance(lo, hi, eye), tol_rad)
             own = np.clip(k + n, k, own).astype(np.int64)
         subs[5].append(own)
     irr = ~reg

@@ -5,12 +5,14 @@ with it (its one-ring), with non-negative weights, so it lies in their convex hu
 their axis-aligned box (design invariant 2). Per face, flat arrays: box min / max (n,3)
 float64, a length bound on its iso-curves (n,) and its largest corner valence (n,) int64.
 :func:`face_ring_boxes` makes the boxes alone for every face of a level at once (the view
-cull of cage faces, ``patches/table.py``).
+cull of cage faces, ``patches/table.py``). :func:`sight_distance` is the distance the
+refinement criterion takes the tolerance at, from the eye or a :class:`Sight`.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -22,6 +24,45 @@ def box_distance(bmin, bmax, p):
     """(n,) distance from point ``p`` (3,) to each box ``[bmin, bmax]`` (n,3) (0 inside)."""
     q = np.maximum(np.maximum(bmin - p, 0.0), p - bmax)
     return np.sqrt((q * q).sum(axis=1))
+
+
+@dataclass(frozen=True)
+class Sight:
+    """Where the rays that refine the patches come from, for the angular criterion
+    (design invariants 3 and 8): rays from the eye ``eye`` (3,), and secondary rays (shadow,
+    ambient occlusion) leaving the points their hits see. Those points lie in the box
+    ``[seen_min, seen_max]`` (either may be infinite) and at least ``near`` from the eye.
+
+    A secondary ray leaving such a point ``x`` carries the pixel's cone: at a point ``q``
+    a distance ``s`` along it, its width is the tolerance times ``|x - eye| + s``, and
+    ``s >= |q - x|``. So every ray reaching a box has a cone there at least as wide as the
+    tolerance times :func:`sight_distance`: the larger of the box's distance from the eye
+    (the triangle inequality, and a primary ray's own length) and ``near`` plus its gap
+    to the box of the points in view. A patch refined by that distance is refined as
+    finely as the narrowest cone that can reach it asks, and no finer, within the bound:
+    a caster out of view, nearer the eye than anything in view, is not refined as if a
+    pixel looked at it from there."""
+
+    eye: np.ndarray
+    near: float
+    seen_min: np.ndarray
+    seen_max: np.ndarray
+
+
+def sight_distance(bmin, bmax, eye):
+    """(n,) the distance the tolerance is taken at for each box ``[bmin, bmax]`` (n,3)
+    seen from ``eye``: a point (3,), its :func:`box_distance`, or a :class:`Sight`, the
+    least length of the cone of a ray that can reach the box (see there)."""
+    if not isinstance(eye, Sight):
+        return box_distance(bmin, bmax, eye)
+    d = box_distance(bmin, bmax, eye.eye)
+    gap = np.maximum(np.maximum(bmin - eye.seen_max, eye.seen_min - bmax), 0.0)
+    return np.maximum(d, eye.near + np.sqrt((gap * gap).sum(axis=1)))
+
+
+def eye_point(eye) -> np.ndarray:
+    """The eye's position (3,) of ``eye``: a point, or a :class:`Sight`."""
+    return eye.eye if isinstance(eye, Sight) else eye
 
 
 _SHELLS_PER_THREAD = 4096  # (fewer faces: one thread, not worth starting the others)

@@ -38,7 +38,7 @@ from subtrace.io.atomic import write_bytes
 from subtrace.mesh.topology import Options, compact, gather_index
 from subtrace.patches.basis import bezier_nets, net_bounds
 from subtrace.patches.grids import levels_needed, refine_children, unit_normals
-from subtrace.patches.shells import box_distance
+from subtrace.patches.shells import sight_distance
 
 MAX_VALENCE = 32  # extraordinary vertices of higher valence take the topological path
 # the fewest levels below a patch for which the maps pay for their set-up (a patch isolated
@@ -351,14 +351,14 @@ def stencil_depths(level, points, faces, corner, valence, cap, eye, tol_rad, box
             k += 1
             # (the nets' bounds do not depend on their orientation: corner 0's grids)
             lo, hi, bound = net_bounds(_nets(st.grids[0].reshape(48, -1), pts))
-            n = levels_needed(bound, box_distance(lo, hi, eye), tol_rad).reshape(-1, 3)
+            n = levels_needed(bound, sight_distance(lo, hi, eye), tol_rad).reshape(-1, 3)
             need[rows] = np.maximum(need[rows], k + n.max(axis=1).astype(np.int64))
             if boxes is not None:
                 boxes[0][rows] = np.minimum(boxes[0][rows], lo.reshape(-1, 3, 3).min(axis=1))
                 boxes[1][rows] = np.maximum(boxes[1][rows], hi.reshape(-1, 3, 3).max(axis=1))
             pts = _times(st.ring, pts)  # the child at the extraordinary vertex
             smin, smax, ebound = _ring_shells(pts, sides)
-            flat = IRREGULAR_MARGIN * ebound <= tol_rad * box_distance(smin, smax, eye)
+            flat = IRREGULAR_MARGIN * ebound <= tol_rad * sight_distance(smin, smax, eye)
             need[rows] = np.maximum(need[rows], k)
             more = ~flat & (k < cap[rows])
             if boxes is not None:  # the irregular children refined no further
@@ -407,7 +407,7 @@ def stencil_pieces(level, points, options, faces, corner, valence, depth, eye=No
             own = depth[root]
             if eye is not None:
                 lo, hi, bound = net_bounds(nets)
-                n = levels_needed(bound, box_distance(lo, hi, eye), tol_rad)
+                n = levels_needed(bound, sight_distance(lo, hi, eye), tol_rad)
                 own = np.clip(k + 1 + n, k + 1, own).astype(np.int64)
             for lst, a in zip(subs, (root, np.full(len(root), k + 1), ki, kj, nets, own)):
                 lst.append(np.asarray(a))

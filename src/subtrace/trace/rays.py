@@ -8,20 +8,22 @@ primary rays (the same per-item function, ``bezier.intersect_patch``, at the sam
 shadow ray leaving a hit cannot meet a differently tessellated copy of its own surface.
 Patches no primary ray reached (the underside of a model that casts the ground shadow, say)
 are built when a secondary ray first enters their shell before any closer hit, in rounds as
-for primary rays, at the depth the angular criterion chose for them: the depth at which each
-cell subtends at most the tolerance from the eye. A secondary ray leaves a surface point
-whose own footprint (its ray cone from the eye) is the same tolerance at that distance, so a
-secondary ray never asks for a patch finer than what a pixel would need there.
+for primary rays, at the depth the angular criterion chose for them.
 
 Ray cones: a shadow or ambient occlusion ray leaving a hit at distance t carries the
 pixel's cone (spread: the tolerance angle; width t * tol_rad at its origin), whose width
-at a point q a distance s along it is tol_rad (t + s) >= tol_rad |q - eye| (triangle
-inequality). The depth chosen from the eye is therefore never coarser than the cone asks,
-and never finer than a pixel of the image asks at q: what secondary rays build is bounded
-by the primary criterion (``secondary_max_depth`` in the render's statistics reports the
-deepest grid they reached; tests/test_shadows.py). Patches are not coarsened below the
-eye's depth for wide cones: a patch's depth is shared by every ray, and its sides must
-sample the edges its neighbours already built alike (design invariant 4).
+at a point q a distance s along it is tol_rad (t + s). With secondary rays, each patch's
+depth is chosen for the narrowest cone that can reach it (``patches.shells.Sight``): every
+point a secondary ray leaves lies in a box (the shells in view, the ground plane) at least
+``near`` from the eye, so at a box a gap g from that one, t + s >= near + g, and also
+t + s >= |q - eye| (triangle inequality). The larger of the two is the distance the
+tolerance is taken at: a patch in view gets the eye's depth, as for its pixels; a caster
+out of view, nearer the eye than what is in view, is refined no finer than the cones of
+the rays that may reach it ask (``secondary_max_depth`` in the render's statistics reports
+the deepest grid those rays reached; tests/test_shadows.py, tests/test_cones.py). The
+depth is shared by every ray, not cut per ray: a patch's sides must sample the edges its
+neighbours built alike (design invariant 4), and a narrower cone reaching it later must
+find the surface as fine as it needs.
 
 ``any_hit`` rays (shadow rays) stop at the first occluder found before ``tmax``: built
 patches are intersected first, and unbuilt ones are built only when no built one occludes.
@@ -56,7 +58,8 @@ class Pools:
     """What a finished primary trace leaves for secondary rays: the patch table, each
     patch's grid depth and edge sampling, the pools built so far (``iso``: Pieces), the
     isolation records, the shells and
-    their BVH, the eye, the tolerance (radians), the render's statistics, the next
+    their BVH, the eye (a point, or the ``patches.shells.Sight`` the depths were chosen
+    from), the tolerance (radians), the render's statistics, the next
     round number and each thread's memo budget (bytes; None: none), the primary trace's.
     :func:`trace_rays` builds into the pools what its rays ask for."""
 
@@ -68,7 +71,7 @@ class Pools:
     shell_min: np.ndarray
     shell_max: np.ndarray
     bvh: BVH
-    eye: np.ndarray
+    eye: object
     tol_rad: float
     stats: object
     round_no: int
