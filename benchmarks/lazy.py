@@ -1,7 +1,7 @@
 """Benchmark: a large cage seen whole and seen in part (the lazy patch table).
 
     python benchmarks/lazy.py [--rounds 3] [--width 1280 --height 720] [--levels 2]
-                              [--light none|sun|point]
+                              [--light none|sun|point] [--ground]
 
 The sword (``models/sword_quad_dominant.obj``, 22,465 faces) refined ``--levels`` times
 (twice: 358,048 quads, 1.43 million patches) is written once to a temporary OBJ. Each round
@@ -13,7 +13,8 @@ loading the OBJ and rendering it, the time split (``subtrace:time_*``), the patc
 the cage faces culled, and the peak of the resident set above the baseline
 (``sweep.PeakMemory``: VmHWM reset through /proc/self/clear_refs), of which ``cage MiB`` is
 the loaded cage's resident set. The figures are medians over the rounds; the last row
-gives tip / whole.
+gives tip / whole. ``--ground``: a ground plane (a shadow catcher at the automatic height,
+the sword's lowest limit point) under the lights.
 """
 
 from __future__ import annotations
@@ -56,7 +57,8 @@ def write_refined(path, levels: int) -> int:
     return len(sizes)
 
 
-def worker(obj: str, view: str, width: int, height: int, light: str = "none") -> dict:
+def worker(obj: str, view: str, width: int, height: int, light: str = "none",
+           ground: str = "no") -> dict:
     import_subtrace()
     from subtrace.io.scene import scene_from_dict
     from subtrace.mesh.cage import load_cage
@@ -69,7 +71,8 @@ def worker(obj: str, view: str, width: int, height: int, light: str = "none") ->
         return scene_from_dict({"object": [{"mesh": str(mesh)}],
                                 "camera": {"eye": EYE, "target": target, "fov": fov,
                                            "width": w, "height": h},
-                                "render": {"tolerance": 1.0}, "light": LIGHTS[light]})
+                                "render": {"tolerance": 1.0}, "light": LIGHTS[light],
+                                **({"ground": {}} if ground == "yes" else {})})
 
     render_scene(scene(SWORD, 32, 18))  # kernels loaded (or compiled) before the baseline
     probe = PeakMemory()
@@ -102,23 +105,26 @@ def main(argv=None) -> int:
     ap.add_argument("--levels", type=int, default=2)
     ap.add_argument("--light", choices=sorted(LIGHTS), default="none",
                     help="the lights, with shadows (default: none, the headlight alone)")
-    ap.add_argument("--worker", nargs=5, help=argparse.SUPPRESS)
+    ap.add_argument("--ground", action="store_true", help="a ground plane under the lights")
+    ap.add_argument("--worker", nargs=6, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker:
-        obj, view, w, h, light = args.worker
-        print(json.dumps(worker(obj, view, int(w), int(h), light)))
+        obj, view, w, h, light, ground = args.worker
+        print(json.dumps(worker(obj, view, int(w), int(h), light, ground)))
         return 0
     runs = {v: [] for v in VIEWS}
     with tempfile.TemporaryDirectory() as tmp:
         obj = os.path.join(tmp, "sword_refined.obj")
         n = write_refined(obj, args.levels)
         print(f"sword refined {args.levels}x: {n} faces; {args.width}x{args.height}, 1 px, "
-              f"lights: {args.light}; {args.rounds} alternated rounds (medians), "
+              f"lights: {args.light}{', ground' if args.ground else ''}; {args.rounds} "
+              "alternated rounds (medians), "
               f"cpus {os.cpu_count()}")
         for _ in range(args.rounds):
             for view in VIEWS:
                 out = subprocess.run([sys.executable, __file__, "--worker", obj, view,
-                                      str(args.width), str(args.height), args.light],
+                                      str(args.width), str(args.height), args.light,
+                                      "yes" if args.ground else "no"],
                                      check=True, capture_output=True, text=True).stdout
                 runs[view].append(json.loads(out.strip().splitlines()[-1]))
     cols = ("view", "load s", "prep s", "refine s", "prep+ref s", "trace s", "wall s",

@@ -267,3 +267,64 @@ def test_a_low_suns_long_shadow_on_the_ground_keeps_its_caster(tmp_path, monkeyp
 
     lazy = _culled_as_full(scene, monkeypatch)
     assert np.all(lazy.channels["object_id"] < 0)  # (the cube is not in the picture)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_a_box_that_blocks_a_point_lights_shadow_ray_from_the_ground_is_kept(seed):
+    """Property: a ground plane, a random camera and a point light L above it; for points x
+    of the scene's box between the plane and L's height whose shadow q (the ray from L
+    through x, on the plane) is in view, a small box around a point between x and q is
+    kept by the cull's view test; a box reaching L's height turns the cull off."""
+    from subtrace.accel.cull import secondary_reach, view_test
+
+    rng = np.random.default_rng(seed)
+    cam, _ = _points_in_view(rng, 1)
+    up = np.array([0.0, 1.0, 0.0])
+    height = float(rng.uniform(-3, 3))
+    light = np.array([rng.uniform(-8, 8), height + rng.uniform(0.5, 12.0), rng.uniform(-8, 8)])
+    x = rng.uniform(-6, 6, (400, 3))
+    x[:, 1] = height + rng.uniform(0.0, 1.0, len(x)) * (light[1] - height)
+    q = light + ((height - light[1]) / (x[:, 1] - light[1]))[:, None] * (x - light)
+    frame = cam.frame()
+    a = np.linalg.solve(np.stack([frame[3], frame[1], frame[2]], axis=1), (q - frame[0]).T).T
+    seen = ((a[:, 0] > 0) & (np.abs(a[:, 1] / a[:, 0] - (cam.width - 1) / 2) <= cam.width / 2)
+            & (np.abs(a[:, 2] / a[:, 0] - (cam.height - 1) / 2) <= cam.height / 2))
+    if not seen.any():
+        return
+    x, q = x[seen], q[seen]
+    p = x + rng.uniform(0.0, 1.0, len(x))[:, None] * (q - x)
+    r = rng.uniform(1e-4, 0.05, len(p))[:, None]
+    lo, hi = p - r, p + r
+    bounds = (np.minimum(x, lo).min(axis=0), np.maximum(x, hi).max(axis=0))
+    scene = SimpleNamespace(render=SimpleNamespace(ao=0, shadows=True), ground=object(),
+                            lights=[SimpleNamespace(position=light, direction=None)])
+    reach = secondary_reach(scene, bounds, cam, (up, height))
+    if bounds[1][1] >= light[1]:
+        assert reach is None
+        return
+    assert reach is not None and len(reach.point_views) == 1
+    assert view_test(cam, reach)(lo, hi).all()
+
+
+def test_a_point_light_over_a_ground_keeps_the_casters_of_its_shadows_in_view(tmp_path,
+                                                                                monkeypatch):
+    """A lamp above the ground in view: a cube out of the picture whose shadow the lamp
+    throws onto the visible ground is kept; a second one, as far out of the picture but
+    behind the lamp, whose shadow falls away from the view, is culled (it was not bounded
+    before: a point light above a ground turned the cull off); the image is the full
+    table's."""
+    mesh = _cubes(tmp_path, [(4.0, 2.0, 0.0), (14.0, 2.0, 0.0)])
+
+    def scene(shadows):
+        return scene_from_dict({
+            "object": [{"mesh": str(mesh)}],
+            "camera": {"eye": [0.0, 6.0, 6.0], "target": [0.0, 0.0, 0.0], "fov": 30.0,
+                       "width": 64, "height": 48},
+            "render": {"shadows": shadows, "samples": 1},
+            "light": [{"position": [8.0, 6.0, 0.0], "intensity": 80.0}],
+            "ground": {"height": 0.0, "color": [0.6, 0.6, 0.6]}})
+
+    lazy = _culled_as_full(scene, monkeypatch)
+    assert lazy.stats.faces_culled == 6  # the second cube
+    assert np.all(lazy.channels["object_id"] < 0)  # (neither is in the picture)

@@ -24,16 +24,19 @@ test the tile lists make) or when a secondary ray from a point in view may reach
 
 * **shadow rays** towards a point light at ``L`` leave ``q`` towards ``L``: a box that
   blocks one holds a point of the segment, which the light sees in the same direction as
-  ``q`` and nearer. Without a ground plane, the light's view of the points in view is the
-  central projection of the polytope's corners (when they lie wholly in front of the light
-  along an axis): a box is kept when it projects into that view (``projection.boxes_in_view``
-  with the light as the eye; a box reaching the light's plane is kept) and is not wholly
-  deeper than those corners.
+  ``q`` and nearer. The light's view of the points in view is the central projection of
+  their corners (when they lie wholly in front of the light along an axis): the
+  polytope's, and under a ground plane those of the part of the ground in view that ``B``
+  can shadow (``B``'s corners carried from ``L`` onto the plane, their hull clipped by the
+  pyramid; ``L`` must stand above ``B``, else that shadow runs to the horizon). A box is
+  kept when it projects into that view (``projection.boxes_in_view`` with the light as the
+  eye; a box reaching the light's plane is kept) and is not wholly deeper than those
+  corners.
 
-A point light above a ground plane, or one among the points in view (in front of it along
-no axis tried), is not bounded so: such scenes are not culled (:func:`secondary_reach`
-gives None). Neither is a ground plane along which a directional light runs (its sweep
-alone decides then).
+A point light among the points in view (in front of it along no axis tried), or under a
+ground plane one not above the scene's box, is not bounded so: such scenes are not culled
+(:func:`secondary_reach` gives None). Neither is a ground plane along which a directional
+light runs (its sweep alone decides then).
 
 Where the secondary rays start bounds their cones too (:func:`secondary_origins`, for the
 refinement's ``patches.shells.Sight``): a box around the points in view, and their least
@@ -96,11 +99,18 @@ def secondary_reach(scene, bounds, camera, ground=None) -> Reach | None:
     if not (scene.lights and scene.render.shadows):
         return reach
     points = [l for l in scene.lights if l.position is not None]
-    if points and scene.ground is not None:
-        return None
+    if points and scene.ground is not None and ground is None:
+        return None  # (a ground whose height is not given: its shadows are not bounded)
     seen = _seen_in_box(camera, lo, hi)  # (the objects' points in view lie in its hull)
     for light in points:
-        view = _point_view(np.asarray(light.position, np.float64), seen, lo, hi)
+        position = np.asarray(light.position, np.float64)
+        where = seen
+        if ground is not None:
+            shadow = _ground_under_point(camera, lo, hi, position, *ground)
+            if shadow is None:
+                return None
+            where = np.concatenate([seen, shadow])
+        view = _point_view(position, where, lo, hi)
         if view is None:
             return None
         reach.point_views.append(view)
@@ -309,7 +319,28 @@ def _ground_in_view(camera, lo, hi, d, up, height):
     if abs(across) < 1e-9:
         return None
     box = _box_corners(lo, hi)
-    on_plane = box - ((box @ up - height) / across)[:, None] * d
+    return _in_view_on_plane(camera, box - ((box @ up - height) / across)[:, None] * d, up)
+
+
+def _ground_under_point(camera, lo, hi, light, up, height):
+    """(k,3): the corners of the part of the ground plane (``up`` . x = ``height``) that
+    lies in the box [lo, hi]'s shadow from a point light at ``light`` (the box's corners
+    carried from the light onto the plane: a ray from a ground point to the light meets
+    the box only inside their hull) and in the camera's pyramid; (0,3) when none does.
+    None when the box reaches the light's height above the plane (its shadow there runs
+    to the horizon) or the light is not above the plane."""
+    up = np.asarray(up, np.float64)
+    box = _box_corners(lo, hi)
+    level = float(light @ up)
+    if not (level > height and (box @ up).max() < level):
+        return None
+    s = (height - level) / (box @ up - level)
+    return _in_view_on_plane(camera, light + s[:, None] * (box - light), up)
+
+
+def _in_view_on_plane(camera, on_plane, up):
+    """(k,3): the corners of the hull of ``on_plane`` (n,3), points of a plane facing
+    ``up``, clipped by the camera's pyramid (:func:`_pyramid_planes`)."""
     poly = _hull_on_plane(on_plane, up)
     for point, normal in _pyramid_planes(camera):
         poly = _clip(poly, point, normal)
