@@ -152,10 +152,10 @@ def side_by_side(paths, rounds: int) -> None:
     with_cones, traced = render.secondary_origins, picture.trace_rays
     last = {}
 
-    def spy(pools, *args):  # (the depths the render chose, for the last object's row)
+    def spy(pools, *args, **kwargs):  # (the depths the render chose: the last object's)
         obj = pools.table.object_id == pools.table.object_id.max()
         last["depths"] = pools.depths[obj]
-        return traced(pools, *args)
+        return traced(pools, *args, **kwargs)
 
     def once(path, cones):
         render.secondary_origins = with_cones if cones else (lambda *a, **k: None)
