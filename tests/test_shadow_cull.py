@@ -214,13 +214,41 @@ def test_with_a_ground_a_caster_whose_shadow_misses_the_view_is_culled(tmp_path,
     assert np.all(lazy.channels["object_id"] < 0)  # (neither is in the picture)
 
 
+def _ground_blockers(rng, cam, x, q):
+    """Of the points ``x`` (n,3) of casters and their shadows ``q`` on the ground, those
+    whose shadow ``cam`` sees: small boxes around random points between each and its
+    shadow, and the box of them and those casters (the scene's): (lo, hi, bounds), or None
+    when no shadow is in view."""
+    frame = cam.frame()
+    a = np.linalg.solve(np.stack([frame[3], frame[1], frame[2]], axis=1), (q - frame[0]).T).T
+    seen = ((a[:, 0] > 0) & (np.abs(a[:, 1] / a[:, 0] - (cam.width - 1) / 2) <= cam.width / 2)
+            & (np.abs(a[:, 2] / a[:, 0] - (cam.height - 1) / 2) <= cam.height / 2))
+    if not seen.any():
+        return None
+    x, q = x[seen], q[seen]
+    p = x + rng.uniform(0.0, 1.0, len(x))[:, None] * (q - x)
+    r = rng.uniform(1e-4, 0.05, len(p))[:, None]
+    lo, hi = p - r, p + r
+    return lo, hi, (np.minimum(x, lo).min(axis=0), np.maximum(x, hi).max(axis=0))
+
+
+def _reach_over_ground(cam, bounds, light, ground):
+    """The cull's reach for ``light``'s shadows over the ground plane ``ground`` = (up,
+    height), the scene's box ``bounds``."""
+    from subtrace.accel.cull import secondary_reach
+
+    scene = SimpleNamespace(render=SimpleNamespace(ao=0, shadows=True), ground=object(),
+                            lights=[light])
+    return secondary_reach(scene, bounds, cam, ground)
+
+
 @settings(max_examples=60, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_a_box_that_blocks_a_shadow_ray_from_the_ground_in_view_is_kept(seed):
     """Property: a ground plane, a random camera and a light travelling down onto it; for
     points x of the scene's box above the plane whose shadow q = x + s d on the plane is in
     view, a small box around a point between x and q is kept by the cull's view test."""
-    from subtrace.accel.cull import secondary_reach, view_test
+    from subtrace.accel.cull import view_test
 
     rng = np.random.default_rng(seed)
     cam, _ = _points_in_view(rng, 1)
@@ -232,20 +260,12 @@ def test_a_box_that_blocks_a_shadow_ray_from_the_ground_in_view_is_kept(seed):
     x = rng.uniform(-6, 6, (400, 3))
     x[:, 1] = height + rng.uniform(0.01, 4.0, len(x))
     q = x + ((height - x @ up) / (d @ up))[:, None] * d
-    frame = cam.frame()
-    a = np.linalg.solve(np.stack([frame[3], frame[1], frame[2]], axis=1), (q - frame[0]).T).T
-    seen = ((a[:, 0] > 0) & (np.abs(a[:, 1] / a[:, 0] - (cam.width - 1) / 2) <= cam.width / 2)
-            & (np.abs(a[:, 2] / a[:, 0] - (cam.height - 1) / 2) <= cam.height / 2))
-    if not seen.any():
+    boxes = _ground_blockers(rng, cam, x, q)
+    if boxes is None:
         return
-    x, q = x[seen], q[seen]
-    p = x + rng.uniform(0.0, 1.0, len(x))[:, None] * (q - x)
-    r = rng.uniform(1e-4, 0.05, len(p))[:, None]
-    lo, hi = p - r, p + r
-    bounds = (np.minimum(x, lo).min(axis=0), np.maximum(x, hi).max(axis=0))
-    scene = SimpleNamespace(render=SimpleNamespace(ao=0, shadows=True), ground=object(),
-                            lights=[SimpleNamespace(position=None, direction=d)])
-    reach = secondary_reach(scene, bounds, cam, (up, height))
+    lo, hi, bounds = boxes
+    reach = _reach_over_ground(cam, bounds, SimpleNamespace(position=None, direction=d),
+                               (up, height))
     assert reach is not None and reach.light_frames is not None
     assert view_test(cam, reach)(lo, hi).all()
 
@@ -276,7 +296,7 @@ def test_a_box_that_blocks_a_point_lights_shadow_ray_from_the_ground_is_kept(see
     of the scene's box between the plane and L's height whose shadow q (the ray from L
     through x, on the plane) is in view, a small box around a point between x and q is
     kept by the cull's view test; a box reaching L's height turns the cull off."""
-    from subtrace.accel.cull import secondary_reach, view_test
+    from subtrace.accel.cull import view_test
 
     rng = np.random.default_rng(seed)
     cam, _ = _points_in_view(rng, 1)
@@ -286,20 +306,12 @@ def test_a_box_that_blocks_a_point_lights_shadow_ray_from_the_ground_is_kept(see
     x = rng.uniform(-6, 6, (400, 3))
     x[:, 1] = height + rng.uniform(0.0, 1.0, len(x)) * (light[1] - height)
     q = light + ((height - light[1]) / (x[:, 1] - light[1]))[:, None] * (x - light)
-    frame = cam.frame()
-    a = np.linalg.solve(np.stack([frame[3], frame[1], frame[2]], axis=1), (q - frame[0]).T).T
-    seen = ((a[:, 0] > 0) & (np.abs(a[:, 1] / a[:, 0] - (cam.width - 1) / 2) <= cam.width / 2)
-            & (np.abs(a[:, 2] / a[:, 0] - (cam.height - 1) / 2) <= cam.height / 2))
-    if not seen.any():
+    boxes = _ground_blockers(rng, cam, x, q)
+    if boxes is None:
         return
-    x, q = x[seen], q[seen]
-    p = x + rng.uniform(0.0, 1.0, len(x))[:, None] * (q - x)
-    r = rng.uniform(1e-4, 0.05, len(p))[:, None]
-    lo, hi = p - r, p + r
-    bounds = (np.minimum(x, lo).min(axis=0), np.maximum(x, hi).max(axis=0))
-    scene = SimpleNamespace(render=SimpleNamespace(ao=0, shadows=True), ground=object(),
-                            lights=[SimpleNamespace(position=light, direction=None)])
-    reach = secondary_reach(scene, bounds, cam, (up, height))
+    lo, hi, bounds = boxes
+    reach = _reach_over_ground(cam, bounds, SimpleNamespace(position=light, direction=None),
+                               (up, height))
     if bounds[1][1] >= light[1]:
         assert reach is None
         return
