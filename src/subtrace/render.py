@@ -326,8 +326,9 @@ def _prepare(scene, cages, stats, nurbs=None, crop=None, compiling=None):
     too), build the patch table of the cage faces in view, check the budget against the
     pixels traced (the image's, or the window of its ``crop``: :func:`crop_window`):
     (cages, table (None without cages), camera, the camera or its window, tolerance in
-    radians, budget in bytes). ``compiling``: the processes compiling the trace kernels
-    (``warmup.start``), told the cages' schemes once they are loaded."""
+    radians, budget in bytes, where secondary rays start: ``accel.cull.secondary_origins``,
+    None without shadows or ambient occlusion). ``compiling``: the processes compiling the
+    trace kernels (``warmup.start``), told the cages' schemes once they are loaded."""
     t_start = time.perf_counter()
     if cages is None:
         cages = load_objects(scene)
