@@ -148,8 +148,8 @@ def secondary_origins(camera, lo, hi, ground=None, extra=None):
     patches whose boxes (``lo``, ``hi``: (n,3), holding what the rays test) project into
     it (``projection.boxes_in_view``, as the tile lists; an anti-aliasing ray passes
     within a pixel's rectangle), on free-form surfaces within the box ``extra`` = (lo,
-    hi), and on the ground plane ``ground`` = (unit up, height) where it is in view (the
-    plane's box is the plane along an axis it faces, else everything)."""
+    hi), and on the ground plane ``ground`` = (unit up, height) where it is in view
+    (:func:`_plane_in_view`)."""
     eye = np.asarray(camera.eye, np.float64)
     inside = boxes_in_view(lo, hi, camera_frame(camera), camera.width, camera.height)
     boxes = [(lo[inside], hi[inside])]
@@ -163,32 +163,40 @@ def secondary_origins(camera, lo, hi, ground=None, extra=None):
             near = min(near, float(np.sqrt((q * q).sum(axis=1)).min()))
             seen_min = np.minimum(seen_min, a.min(axis=0))
             seen_max = np.maximum(seen_max, b.max(axis=0))
-    ground_near = None if ground is None else _plane_in_view(camera, *ground)
-    if ground_near is not None:
-        up, height = np.asarray(ground[0], np.float64), float(ground[1])
+    # (the magnitude of every coordinate that matters: the eye's, the boxes')
+    extent = max(float(np.abs(eye).max()), float(np.abs(lo).max(initial=0.0)),
+                 float(np.abs(hi).max(initial=0.0)))
+    on_ground = None if ground is None else _plane_in_view(camera, *ground, extent)
+    if on_ground is not None:
+        ground_near, part = on_ground
         near = min(near, ground_near)
-        axis = np.nonzero(up != 0.0)[0]
-        plane_min, plane_max = np.full(3, -np.inf), np.full(3, np.inf)
-        if len(axis) == 1:  # (a plane facing an axis: one coordinate, the others any)
-            a = axis[0]
-            plane_min[a] = plane_max[a] = height / up[a]
-        seen_min, seen_max = np.minimum(seen_min, plane_min), np.maximum(seen_max, plane_max)
+        seen_min, seen_max = np.minimum(seen_min, part[0]), np.maximum(seen_max, part[1])
     if not np.isfinite(near):
         return None
     return near, seen_min, seen_max
 
 
-def _plane_in_view(camera, up, height):
-    """The least distance from the eye to the part of the plane ``up`` . x = ``height`` in
-    the camera's pyramid (:func:`_pyramid_planes`), or None when no part is. The part is
-    a square of the plane around the eye's foot, wide enough that every point beyond it is
-    farther than the square's nearest point, clipped by the pyramid."""
+def _plane_in_view(camera, up, height, extent):
+    """(the least distance from the eye to the part of the plane ``up`` . x = ``height``
+    in the camera's pyramid (:func:`_pyramid_planes`), (lo (3,), hi (3,)) a box holding
+    the points of that part that matter), or None when no part is in view.
+
+    The part is taken within a square of the plane around the eye's foot, of half-side
+    ``r`` a million times the coordinates' magnitude ``extent`` (the eye's and every box
+    a secondary ray may reach), clipped by the pyramid. A ground point X beyond it is at
+    least ``r`` from the eye; with P the part's nearest point, a box point Y is reached
+    from X by a cone no shorter than from the points between P and X (the cone's length
+    from X, |X - eye| + |Y - X|, is convex along that segment), the last of which in the
+    square counts, when P's cone is no longer than X's: |P - eye| + |Y - P| <= 2 |P - eye|
+    + |Y - eye| <= 2 |P - eye| + 4 extent <= r <= |X - eye|. Where that holds the square's
+    part is the box; otherwise the plane's box (the plane along an axis it faces, else
+    everything)."""
     up = np.asarray(up, np.float64) / np.linalg.norm(up)
     eye = np.asarray(camera.eye, np.float64)
     above = float(up @ eye) - float(height)
     foot = eye - above * up
     e1, e2 = _perpendicular(up)
-    r = 1e6 * max(1.0, abs(above), float(np.abs(eye).max()))
+    r = 1e6 * max(1.0, abs(above), extent)
     poly = np.array([foot + a * e1 + b * e2 for a, b in ((-r, -r), (r, -r), (r, r), (-r, r))])
     for point, normal in _pyramid_planes(camera):
         poly = _clip(poly, point, normal)
@@ -198,14 +206,22 @@ def _plane_in_view(camera, up, height):
     rel = poly - foot
     turns = [float(np.cross(rel[k], rel[(k + 1) % len(poly)]) @ up) for k in range(len(poly))]
     if len(poly) >= 3 and (min(turns) >= 0.0 or max(turns) <= 0.0):
-        return abs(above)
-    best = np.inf
-    for k in range(len(poly)):
-        a, b = poly[k], poly[(k + 1) % len(poly)]
-        ab = b - a
-        f = 0.0 if not ab @ ab > 0.0 else min(max(float((eye - a) @ ab / (ab @ ab)), 0.0), 1.0)
-        best = min(best, float(np.linalg.norm(eye - (a + f * ab))))
-    return best
+        best = abs(above)
+    else:
+        best = np.inf
+        for k in range(len(poly)):
+            a, b = poly[k], poly[(k + 1) % len(poly)]
+            ab = b - a
+            f = (0.0 if not ab @ ab > 0.0
+                 else min(max(float((eye - a) @ ab / (ab @ ab)), 0.0), 1.0))
+            best = min(best, float(np.linalg.norm(eye - (a + f * ab))))
+    if 2.0 * best + 4.0 * max(extent, 1.0) <= r:
+        return best, (poly.min(axis=0), poly.max(axis=0))
+    lo, hi = np.full(3, -np.inf), np.full(3, np.inf)
+    axis = np.nonzero(up != 0.0)[0]
+    if len(axis) == 1:  # (a plane facing an axis: one coordinate, the others any)
+        lo[axis[0]] = hi[axis[0]] = height / up[axis[0]]
+    return best, (lo, hi)
 
 
 def _box_corners(lo, hi):
