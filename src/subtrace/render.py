@@ -379,10 +379,9 @@ def _prepare(scene, cages, stats, nurbs=None, crop=None, compiling=None):
     stats.rays = view.width * view.height
     # where shadow and ambient occlusion rays start: their cones refine what they reach
     # (patches.shells.Sight), from the whole image's camera (a crop's tiles alike)
-    # (the boxes hold a patch's shell and the shell its rays test: a patch in view is
-    # then no nearer the eye than ``near``, and keeps the eye's depth)
-    seen = (secondary_origins(camera, np.minimum(table.shell_min, table.ray_min),
-                              np.maximum(table.shell_max, table.ray_max), ground,
+    # (the shells: they hold the boxes the rays test, patches.table._ray_shells, so a
+    # patch in view is no nearer the eye than ``near``, and keeps the eye's depth)
+    seen = (secondary_origins(camera, table.shell_min, table.shell_max, ground,
                               None if nurbs is None else nurbs.bounds())
             if secondary else None)
     stats.time_preprocess = time.perf_counter() - t0
