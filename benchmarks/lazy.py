@@ -4,7 +4,7 @@
                               [--light none|sun|point] [--ground]
 
 The sword (``models/sword_quad_dominant.obj``, 22,465 faces) refined ``--levels`` times
-(twice: 358,048 quads, 1.43 million patches) is written once to a temporary OBJ. Each round
+(twice: 358,048 quads, 366,532 patches) is written once to a temporary OBJ. Each round
 renders it in two fresh processes, alternated: *whole*, the sword scene's camera (the whole
 sword in view), and *tip*, the same eye looking at the blade's tip through a 2.6 degree
 field of view (about a tenth of the cage faces reach the image). Each process first renders
