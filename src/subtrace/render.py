@@ -341,7 +341,7 @@ def _prepare(scene, cages, stats, nurbs=None, crop=None, compiling=None):
         stats.time_load = time.perf_counter() - t_start
         return cages, None, camera, view, scene.render.tolerance_rad(camera), None, None
     for c in cages:
-        check_coordinates(c.path, c.points, config.MAX_COORDINATE)
+        check_coordinates(c.path, c.points, config.MAX_COORDINATE, c.points_box)
         check_valences(c.path, c.face_sizes, _valences(c),
                        config.MAX_VALENCE, c.scheme == "catmark")
     stats.time_load = time.perf_counter() - t_start

@@ -78,7 +78,7 @@ class Reach:
 def casting_bounds(cages, nurbs=None):
     """(lo, hi): the box of the cages' control points (which holds their limit surfaces)
     and of the free-form surfaces ``nurbs``' patches: all that casts or receives."""
-    boxes = [(c.points.min(axis=0), c.points.max(axis=0)) for c in cages]
+    boxes = [c.points_box for c in cages]
     if nurbs is not None:
         boxes.append(nurbs.bounds())
     return np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
@@ -406,10 +406,11 @@ def _clip(poly, point, normal):
 def _box_extent(axes, lo, hi):
     """(lo (N,3), hi (N,3)): each box's least and greatest coordinate along each of
     ``axes`` (3,3) (a linear function's extremes over a box are at its corners: per
-    coordinate, the smaller or larger of its two ends)."""
-    a = axes.T[None]  # (1, 3 coords, 3 axes)
-    p, q = lo[:, :, None] * a, hi[:, :, None] * a
-    return np.minimum(p, q).sum(axis=1), np.maximum(p, q).sum(axis=1)
+    coordinate, the smaller or larger of its two ends: the low end where the axis
+    grows with the coordinate, else the high one). Two products of (N,3) by (3,3): the
+    (N,3,3) products and their sums took 0.11 s on the sword refined twice's 358,048 faces."""
+    grows, falls = np.maximum(axes, 0.0).T, np.minimum(axes, 0.0).T
+    return lo @ grows + hi @ falls, hi @ grows + lo @ falls
 
 
 def view_test(camera, reach: Reach | None = None):

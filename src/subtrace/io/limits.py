@@ -14,9 +14,13 @@ from subtrace.errors import ObjError
 from subtrace.io.obj import statement_line
 
 
-def check_coordinates(path, points, limit: float) -> None:
+def check_coordinates(path, points, limit: float, box=None) -> None:
     """Raise ObjError naming the line of the first vertex of ``points`` (V,3) with a
-    coordinate of magnitude above ``limit`` (``config.MAX_COORDINATE``)."""
+    coordinate of magnitude above ``limit`` (``config.MAX_COORDINATE``). ``box``: the box
+    of ``points`` where the caller has it (``Cage.points_box``): within the limit, no
+    vertex is looked at."""
+    if box is not None and max(np.abs(box[0]).max(), np.abs(box[1]).max()) <= limit:
+        return
     big = np.nonzero(np.abs(points).max(axis=1, initial=0.0) > limit)[0] if len(points) else []
     if len(big):
         i = int(big[0])

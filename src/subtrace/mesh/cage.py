@@ -125,6 +125,18 @@ class Cage:
         return offsets
 
     @property
+    def points_box(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo (3,), hi (3,)): the box of the control points (which holds the limit
+        surface), made once (the cull and the coordinate check ask for it on every render;
+        two reductions of the sword refined twice's points took 13 ms)."""
+        box = self._cache.get("points_box")
+        if box is None:
+            box = self._cache["points_box"] = (
+                (self.points.min(axis=0), self.points.max(axis=0)) if len(self.points)
+                else (np.zeros(3), np.zeros(3)))
+        return box
+
+    @property
     def has_topology(self) -> bool:
         """Whether :attr:`base` has been built."""
         return "base" in self._cache
