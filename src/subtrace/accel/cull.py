@@ -437,13 +437,12 @@ def view_test(camera, reach: Reach | None = None):
                 seen[idx] = boxes_in_view(np.minimum(a, a + v), np.maximum(b, b + v), frame,
                                           camera.width, camera.height)
         for light_frame, n, axis, depth in reach.point_views:
-            idx = np.nonzero(~seen)[0]
+            # the boxes not kept yet whose least depth along the light's axis is no deeper
+            # than the points' (as _box_extent: the low end where the axis grows)
+            least = lo @ np.maximum(axis, 0.0) + hi @ np.minimum(axis, 0.0)
+            idx = np.nonzero(~seen & (least <= depth + float(light_frame[0] @ axis)))[0]
             if len(idx):
-                a, b = lo[idx], hi[idx]
-                # (the box's least depth along the light's axis: no deeper than the points)
-                light = light_frame[0]
-                near = np.minimum((a - light) * axis, (b - light) * axis).sum(axis=1) <= depth
-                seen[idx[near]] = boxes_in_view(a[near], b[near], light_frame, n, n)
+                seen[idx] = boxes_in_view(lo[idx], hi[idx], light_frame, n, n)
         return seen
 
     return in_view
