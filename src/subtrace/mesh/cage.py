@@ -34,6 +34,7 @@ from subtrace.mesh.topology import (
 )
 from subtrace.patches.evaluate import evaluate, ptex_starts
 from subtrace.patches.shells import face_star_boxes
+from subtrace.runtime.jit import nb
 from subtrace.subdiv.limit import limit_points
 from subtrace.subdiv.refine import refine_level, refine_points
 
@@ -351,15 +352,31 @@ def face_rings(cage: Cage, faces: np.ndarray, rings: int) -> np.ndarray:
     """(F,) bool: the faces ``faces`` ((F,) bool) and every face within ``rings`` rings of
     them (a ring: the faces sharing a vertex with those before), from the face lists alone
     (no topology)."""
-    sel = np.asarray(faces, dtype=bool)
+    sel = np.array(faces, dtype=bool)
     if not len(sel):
         return sel
-    starts = cage.face_offsets[:-1]
     mark = np.zeros(len(cage.points), bool)
-    for _ in range(rings):
-        mark[cage.face_verts[np.repeat(sel, cage.face_sizes)]] = True
-        sel = np.logical_or.reduceat(mark[cage.face_verts], starts)
+    _grow_rings(cage.face_offsets, cage.face_verts, rings, sel, mark)
     return sel
+
+
+@nb.njit(cache=True, nogil=True)
+def _grow_rings(offsets, verts, rings, sel, mark):
+    """Grow the faces ``sel`` ((F,) bool, in place) by ``rings`` rings: each ring marks the
+    vertices of the faces selected (``mark``, (V,) bool, all False on entry) and selects
+    every face with a marked vertex. (NumPy's repeat, gathers and reduceat over the face
+    lists took 29 ms for four rings on the sword refined twice.)"""
+    for _ in range(rings):
+        for f in range(len(sel)):
+            if sel[f]:
+                for k in range(offsets[f], offsets[f + 1]):
+                    mark[verts[k]] = True
+        for f in range(len(sel)):
+            if not sel[f]:
+                for k in range(offsets[f], offsets[f + 1]):
+                    if mark[verts[k]]:
+                        sel[f] = True
+                        break
 
 
 def lowest_limit(cage: Cage, up) -> float:
