@@ -26,7 +26,7 @@ def box_distance(bmin, bmax, p):
     return np.sqrt((q * q).sum(axis=1))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Sight:
     """Where the rays that refine the patches come from, for the angular criterion
     (design invariants 3 and 8): rays from the eye ``eye`` (3,), and secondary rays (shadow,
