@@ -192,11 +192,10 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
 
 
 def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, stats, progress,
-            keep=None, eye=None):
+            keep, eye):
     """The rounds of :func:`trace_hits`: trace the rays that asked, build what they asked
     for, until no ray asks. ``eye``: what the depths were chosen from (``frame``'s eye,
     or a ``patches.shells.Sight``)."""
-    eye = frame[0] if eye is None else eye
     depths = chosen.depths
     edge_depth, reg_side = edge_sampling(table, depths)
     iso = Pieces(table.n_patches)

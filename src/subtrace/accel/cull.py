@@ -52,6 +52,7 @@ import numpy as np
 from subtrace import config
 from subtrace.accel.projection import boxes_in_view
 from subtrace.camera import camera_frame
+from subtrace.patches.shells import box_distance
 
 # pixels of margin around the image for the pyramid's sides (the tile lists widen a box's
 # rectangle by one pixel for rounding; half a pixel more reaches the pixels' outer edges)
@@ -159,8 +160,7 @@ def secondary_origins(camera, lo, hi, ground=None, extra=None):
     seen_min, seen_max = np.full(3, np.inf), np.full(3, -np.inf)
     for a, b in boxes:
         if len(a):
-            q = np.maximum(np.maximum(a - eye, 0.0), eye - b)
-            near = min(near, float(np.sqrt((q * q).sum(axis=1)).min()))
+            near = min(near, float(box_distance(a, b, eye).min()))
             seen_min = np.minimum(seen_min, a.min(axis=0))
             seen_max = np.maximum(seen_max, b.max(axis=0))
     # (the magnitude of every coordinate that matters: the eye's, the boxes')
@@ -409,8 +409,13 @@ def _box_extent(axes, lo, hi):
     coordinate, the smaller or larger of its two ends: the low end where the axis
     grows with the coordinate, else the high one). Two products of (N,3) by (3,3): the
     (N,3,3) products and their sums took 0.11 s on the sword refined twice's 358,048 faces."""
-    grows, falls = np.maximum(axes, 0.0).T, np.minimum(axes, 0.0).T
-    return lo @ grows + hi @ falls, hi @ grows + lo @ falls
+    return _box_least(axes, lo, hi), _box_least(axes, hi, lo)
+
+
+def _box_least(axes, lo, hi):
+    """(N,k): each box's least coordinate along each of ``axes`` (k,3) (:func:`_box_extent`;
+    with ``lo`` and ``hi`` swapped, the greatest)."""
+    return lo @ np.maximum(axes, 0.0).T + hi @ np.minimum(axes, 0.0).T
 
 
 def view_test(camera, reach: Reach | None = None):
@@ -438,8 +443,8 @@ def view_test(camera, reach: Reach | None = None):
                                           camera.width, camera.height)
         for light_frame, n, axis, depth in reach.point_views:
             # the boxes not kept yet whose least depth along the light's axis is no deeper
-            # than the points' (as _box_extent: the low end where the axis grows)
-            least = lo @ np.maximum(axis, 0.0) + hi @ np.minimum(axis, 0.0)
+            # than the points'
+            least = _box_least(axis[None], lo, hi)[:, 0]
             idx = np.nonzero(~seen & (least <= depth + float(light_frame[0] @ axis)))[0]
             if len(idx):
                 seen[idx] = boxes_in_view(lo[idx], hi[idx], light_frame, n, n)

@@ -190,13 +190,13 @@ def build_patch_table(cages, keep=None, in_view=None) -> PatchTable:
     # every object's nets written into one store, with the renderer's room after them
     # (np.empty: the room costs nothing until written): concatenating them took 0.29 s
     # and a second copy of them on the sword refined twice seen whole (366,532 patches)
-    n_nets = sum(int(np.count_nonzero(regular)) for _, regular, _ in plans)
+    counts = [int(np.count_nonzero(regular)) for _, regular, _ in plans]
+    n_nets = sum(counts)
     room = sum(net_room(np.full(len(regular), args[-1]), regular) for args, regular, _ in plans)
     store = np.empty((n_nets + room, 4, 4, 3))
     parts = []
     at = 0
-    for args, regular, share in plans:
-        r = int(np.count_nonzero(regular))
+    for (args, regular, share), r in zip(plans, counts):
         parts.append(_object_arrays(*args, regular=regular, nets=store[at:at + r]))
         at += r
         if share is not None:  # (the cage quads' part: its object's level-1 part before)
