@@ -132,8 +132,8 @@ def _depths(scene, seen_too=True):
 def test_a_caster_near_the_eye_is_refined_for_the_cones_that_reach_it(tmp_path, monkeypatch):
     """The torus out of view, 1 to 2 from the eye, shadows ground 3 or more from it: its
     shadow rays' cones there are over four times a pixel's footprint at its distance. Its
-    patches get shallower grids than the eye alone would give them (fewer micro-triangles,
-    a lower ``secondary_max_depth``), yet none coarser than the narrowest cone of a ray
+    patches get shallower grids than the eye alone would give them (a lower
+    ``secondary_max_depth``), yet none coarser than the narrowest cone of a ray
     leaving the ground in view asks (computed here from the pixels' ground points), and
     the shadow differs only along its outline."""
     scene = _caster_scene(tmp_path)
@@ -155,11 +155,12 @@ def test_a_caster_near_the_eye_is_refined_for_the_cones_that_reach_it(tmp_path, 
     need = np.maximum(np.ceil(np.log2(table.edge_bound / (tol_rad * cone)) - 1e-9), 0)
     assert np.all(depths >= need)
     assert np.all(cone > 4.0 * box_distance(table.shell_min, table.shell_max, eye))
-    # the render: fewer micro-triangles and a shallower deepest grid for the shadow rays
+    # the render: a shallower deepest grid for the shadow rays (the micro-triangles they
+    # test are a few per ray at either depth: trace/bezier.py places a ray among a
+    # block's cells)
     _by_the_eye(monkeypatch)
     eyes = render.render_scene(scene)
     assert cones.stats.secondary_max_depth <= eyes.stats.secondary_max_depth - 2
-    assert cones.stats.secondary_micro_triangles < eyes.stats.secondary_micro_triangles
     # the same shadow, but for pixels on its outline (a 3 x 3 neighbourhood in which
     # either image has both shadowed and lit ground)
     lit = render.render_scene(_caster_scene(tmp_path, shadows=False)).channels["R"]

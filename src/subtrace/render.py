@@ -66,7 +66,8 @@ class RenderStats:
     patches: int = 0  # patches built into the table (those in view, of cage faces in view)
     faces_culled: int = 0  # cage faces outside the view, whose patches were never built
     patches_refined: int = 0
-    # built: 2 per cell a thread evaluated first (kept, or a fan counted once) or isolated
+    # built: 2 per cell a thread tested first (its corners evaluated and kept, or a fan
+    # counted once) or isolated
     # (threads take bands as they are free, so with several threads the count may differ
     # slightly between runs)
     micro_triangles: int = 0

@@ -89,6 +89,138 @@ def _cell_slab(net, s, slab, m):
     slab[m, 3], slab[m, 4] = lo - pad, hi + pad
 
 
+# What places a ray among a block's cells (:func:`_block_cells`) is the block's *frame*: its
+# four corners (exact points of the surface) and a bound ``delta`` on how far, in any
+# coordinate, its surface leaves their bilinear interpolant (:func:`_interpolation_bound`).
+# The frames of a node's four blocks are made when the node is split: the 3 x 3 corners of
+# its children (its grid at 0, 1/2, 1) and one bound, kept in the cell store, three units
+# (corner (a, b) in row a + 3 b, delta in row 9); the node's data then points to them. A
+# root that is a block has its net's corners and the bound in its slab row.
+FRAME_UNITS = 3
+# a block's data: the first unit of its corner rows in the cell store, shifted left by
+# BLOCK_FLAGS, over flags: bits 0 .. 2 set once row b of its 3 x 3 corners is stored, bits
+# 3 .. 6 once cell q has been tested (its triangles counted), or NOT_YET
+BLOCK_FLAGS = 7
+LOCATE_PAD = 1e-11  # widens delta by this much of the coordinates' magnitude (rounding)
+
+
+@leaf_njit
+def _interpolation_bound(net, s, side):
+    """A bound, in every coordinate, on the distance between the patch of net ``net[s]``
+    and the bilinear interpolant of its corners over any square of side ``side`` (1: the
+    whole patch) of its parameters, widened by ``LOCATE_PAD`` of the net's largest
+    coordinate.
+
+    Bilinear interpolation is linear interpolation in u, then in v, so over an a x b
+    rectangle it errs by at most ``(a^2 max|S_uu| + b^2 max|S_vv|) / 8``; a bicubic Bezier
+    patch's ``S_uu`` is 6 times a convex combination of its net's second differences in u
+    (``S_vv`` likewise). The corners a cell's triangles use are evaluated from the piece's
+    own net (:func:`_store_row`), equal to the surface's to rounding, which the widening
+    covers."""
+    dev = 0.0
+    big = 0.0
+    for k in range(3):
+        muu = 0.0
+        mvv = 0.0
+        for i in range(4):
+            for j in range(4):
+                big = max(big, abs(net[s, i, j, k]))
+                if i < 2:
+                    muu = max(muu, abs(net[s, i + 2, j, k] - 2.0 * net[s, i + 1, j, k]
+                                       + net[s, i, j, k]))
+                if j < 2:
+                    mvv = max(mvv, abs(net[s, i, j + 2, k] - 2.0 * net[s, i, j + 1, k]
+                                       + net[s, i, j, k]))
+        dev = max(dev, 6.0 * (muu + mvv) * side * side / 8.0)
+    return dev + LOCATE_PAD * big
+
+
+@leaf_njit
+def _store_frame(net, s, children, c0, m_cells, cnt):
+    """The frames of the four blocks of net ``net[s]`` (split into ``children[c0 .. c0 +
+    3]``) into three new units of the cell store: the 3 x 3 corners of the children, then
+    the bound of :func:`_interpolation_bound` over a quarter. Returns its first row."""
+    r = 4 * cnt[M_CELLS]
+    cnt[M_CELLS] += FRAME_UNITS
+    for b in range(3):
+        for a in range(3):
+            q = (1 if a == 2 else 0) + (2 if b == 2 else 0)  # a child with that corner
+            i = 0 if a == 0 else 3
+            j = 0 if b == 0 else 3
+            m_cells[r + a + 3 * b, 0] = children[c0 + q, i, j, 0]
+            m_cells[r + a + 3 * b, 1] = children[c0 + q, i, j, 1]
+            m_cells[r + a + 3 * b, 2] = children[c0 + q, i, j, 2]
+    m_cells[r + 9, 0] = _interpolation_bound(net, s, 0.5)
+    return r
+
+
+@llvm_inline_njit
+def _block_cells(px, py, pz, kx, ky, kz, sx, sy, c00, c10, c01, c11, dlt):
+    """Which of the four cells of a block the ray may hit: a mask, bit ``a + 2 b`` for cell
+    (a, b) (half a in u, b in v). The block's frame: its corners ``c00, c10, c01, c11``
+    (3-tuples at (u, v) = (0, 0), (1, 0), (0, 1), (1, 1)) and bound ``dlt`` (widened for
+    the ray's origin ``px, py, pz``, its (kx, ky, kz) coordinates).
+
+    In the ray's sheared frame (that of ``prims.ray_triangle``: the ray is the origin of the
+    (X, Y) plane) a cell's triangles have their corners within ``dlt`` (per coordinate:
+    ``dlt (1 + |s|)`` after the shear) of the interpolant ``L`` at points of the cell, so
+    within that of the hull of ``L``'s projections at the cell's corners, which are
+    averages of the block's. A ray that a direction separates from that widened hull
+    cannot hit them."""
+    pad_x = dlt * (1.0 + abs(sx))
+    pad_y = dlt * (1.0 + abs(sy))
+    z = c00[kz] - pz
+    a0, e0 = c00[kx] - px - sx * z, c00[ky] - py - sy * z
+    z = c10[kz] - pz
+    a2, e2 = c10[kx] - px - sx * z, c10[ky] - py - sy * z
+    z = c01[kz] - pz
+    c0, g0 = c01[kx] - px - sx * z, c01[ky] - py - sy * z
+    z = c11[kz] - pz
+    c2, g2 = c11[kx] - px - sx * z, c11[ky] - py - sy * z
+    # the interpolant at the block's 3 x 3 grid, projected: rows a (v = 0), b, c (v = 1)
+    a1, e1 = 0.5 * (a0 + a2), 0.5 * (e0 + e2)
+    c1, g1 = 0.5 * (c0 + c2), 0.5 * (g0 + g2)
+    b0, f0 = 0.5 * (a0 + c0), 0.5 * (e0 + g0)
+    b2, f2 = 0.5 * (a2 + c2), 0.5 * (e2 + g2)
+    b1, f1 = 0.5 * (b0 + b2), 0.5 * (f0 + f2)
+    # a cell's points lie in the hull of its projected corners, widened: the ray misses
+    # them if some direction n separates 0 from it (max of n . corners + |n_x| pad_x +
+    # |n_y| pad_y below 0). The directions: across the frame's u and v sides (a cell of a
+    # parallelogram frame is then tested exactly), and the axes
+    ux, uy = 0.5 * (a2 - a0 + c2 - c0), 0.5 * (e2 - e0 + g2 - g0)
+    vx, vy = 0.5 * (c0 - a0 + c2 - a2), 0.5 * (g0 - e0 + g2 - e2)
+    nx, ny = -uy, ux  # across u: sorts by v
+    mx, my = -vy, vx  # across v: sorts by u
+    pad_n = abs(nx) * pad_x + abs(ny) * pad_y
+    pad_m = abs(mx) * pad_x + abs(my) * pad_y
+    s0, s1, s2 = nx * a0 + ny * e0, nx * a1 + ny * e1, nx * a2 + ny * e2
+    t0, t1, t2 = nx * b0 + ny * f0, nx * b1 + ny * f1, nx * b2 + ny * f2
+    w0, w1, w2 = nx * c0 + ny * g0, nx * c1 + ny * g1, nx * c2 + ny * g2
+    i0, i1, i2 = mx * a0 + my * e0, mx * a1 + my * e1, mx * a2 + my * e2
+    j0, j1, j2 = mx * b0 + my * f0, mx * b1 + my * f1, mx * b2 + my * f2
+    k0, k1, k2 = mx * c0 + my * g0, mx * c1 + my * g1, mx * c2 + my * g2
+    mask = 0
+    if (_spans(s0, s1, t0, t1, pad_n) and _spans(i0, i1, j0, j1, pad_m)
+            and _spans(a0, a1, b0, b1, pad_x) and _spans(e0, e1, f0, f1, pad_y)):
+        mask |= 1
+    if (_spans(s1, s2, t1, t2, pad_n) and _spans(i1, i2, j1, j2, pad_m)
+            and _spans(a1, a2, b1, b2, pad_x) and _spans(e1, e2, f1, f2, pad_y)):
+        mask |= 2
+    if (_spans(t0, t1, w0, w1, pad_n) and _spans(j0, j1, k0, k1, pad_m)
+            and _spans(b0, b1, c0, c1, pad_x) and _spans(f0, f1, g0, g1, pad_y)):
+        mask |= 4
+    if (_spans(t1, t2, w1, w2, pad_n) and _spans(j1, j2, k1, k2, pad_m)
+            and _spans(b1, b2, c1, c2, pad_x) and _spans(f1, f2, g1, g2, pad_y)):
+        mask |= 8
+    return mask
+
+
+@llvm_inline_njit
+def _spans(a, b, c, d, pad):
+    """Whether [min, max] of the four values, widened by ``pad``, holds 0."""
+    return min(min(a, b), min(c, d)) <= pad and max(max(a, b), max(c, d)) >= -pad
+
+
 @llvm_inline_njit
 def _cell_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, box, slab, c, tmax):
     """Entry distance of the ray into the box of cell node ``c`` cut by its slab; inf when
@@ -259,21 +391,28 @@ def _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, src, s, lev0, ci0, 
 # what its rays split: ``mem`` = (root node of each item (I,) or -1, first of the four
 # children of each node (N,) or -1, each node's padded box (N,6), a block's slab (N,5): a
 # normal and the range of the normal coordinate of its net (see :func:`_cell_slab`), each
-# node's row (N,) in the net store (an inner node whose children are split in turn) or the
-# corner store (a block that a ray reached), or -1 (not yet), the net store (.,4,4,3), the
-# corner store ((.,3), in units of 4 rows), counts (4,): nodes, nets and corner units used,
-# and a flag set when a store ran out (the descent then goes on without storing; the driver
-# grows the stores for the next round)).
+# node's row (N,) in the net store (an inner node whose children are split in turn), in
+# the cell store (a node whose children are blocks: their frames; a block: its corners and
+# flags, ``BLOCK_FLAGS``), or -1 (not yet), the net store (.,4,4,3), the cell store ((.,3),
+# in units of 4 rows), counts (4,): nodes, nets and cell units used, and a flag set when a
+# store ran out (the descent then goes on without storing; the driver grows the stores for
+# the next round)).
 #
 # The quadtree stops one level above the cells: a node of level pd - 1 is a *block* of 2 x
-# 2 cells, never split. The first ray to reach a block stores its 3 x 3 corners (evaluated
-# from the piece's own net, as :func:`_leaf` does) and every ray that enters its box and
-# slab tests its eight triangles; a cell whose side is sampled more finely (a fan) is
-# evaluated per ray. Splitting a block into four cells with boxes and slabs cost more than
-# testing the four cells' triangles (the same triangles, so the same hits: the trace of
-# Spot at 1280x720, 0.100 -> 0.082 s). Everything is made lazily: a node's box when its
-# parent is split, its net when it is split itself, a block's corners when a ray first
-# reaches it; so what is stored is what the thread's rays needed.
+# 2 cells, never split. A ray that enters a block's box and slab is placed among its cells
+# by the block's frame (:func:`_block_cells`: the hull of its corners, widened by how far
+# the surface leaves their bilinear interpolant): it tests the triangles of the cells it
+# may hit, not the block's eight, and a cell's corners are evaluated (from the piece's own
+# net, as :func:`_leaf` does: a row of three at a time, stored) when a ray first tests it.
+# That is what a micro-triangle costs and what is counted: two per cell a thread tested
+# (Spot at 1280x720 and 1 px: 2.8 a covered pixel, against 10.8 when every ray that
+# entered a block evaluated and tested all eight, at the same trace time). A cell whose
+# side is sampled more finely (a fan) is evaluated per ray. Splitting a block into four
+# cells with boxes and slabs cost more than testing the four cells' triangles (the trace
+# of Spot, 0.100 -> 0.082 s). Everything is made lazily: a node's box when its parent is
+# split, its net (or its blocks' frames) when it is split itself, a row of a block's
+# corners when a ray first tests a cell of it; so what is stored is what the thread's
+# rays needed.
 
 COUNTED = -3  # an item root: a one-cell piece (evaluated per ray) whose triangles counted
 
@@ -287,33 +426,30 @@ def _store_net(m_nets, cnt, src, s):
 
 
 @leaf_njit
-def _store_block(m_cells, cnt, nets, nk, bi, bj, depth):
-    """Store the 3 x 3 corners of the four cells (2 bi + a, 2 bj + b), a, b in {0, 1}, of
-    the depth-``depth`` grid of ``nets[nk]`` (evaluated from the patch's own net, as
-    :func:`_leaf` does: a corner is the same number in every cell that has it); returns
-    the first of their nine rows, corner (a, b) at row + a + 3 b (a block takes three
-    units of four rows of the cell store)."""
-    u = cnt[M_CELLS]
-    cnt[M_CELLS] = u + 3
-    r = 4 * u
+def _store_row(m_cells, r, nets, nk, bi, bj, b, depth):
+    """Store row ``b`` (0 .. 2, in v) of the 3 x 3 corners of the four cells (2 bi + a,
+    2 bj + b), a, b in {0, 1}, of the depth-``depth`` grid of ``nets[nk]`` (evaluated from
+    the patch's own net, as :func:`_leaf` does: a corner is the same number in every cell
+    that has it): corner (a, b) at row ``r + a + 3 b`` of the cell store (a block takes
+    three units of four rows)."""
     inv = 1.0 / (1 << depth)
-    for b in range(3):
-        rows = _bez_rows(nets, nk, (2 * bj + b) * inv)  # (shared by the three points)
-        for a in range(3):
-            x, y, z = _bez_across(rows, (2 * bi + a) * inv)
-            m_cells[r + a + 3 * b, 0] = x
-            m_cells[r + a + 3 * b, 1] = y
-            m_cells[r + a + 3 * b, 2] = z
-    return r
+    rows = _bez_rows(nets, nk, (2 * bj + b) * inv)  # (shared by the three points)
+    for a in range(3):
+        x, y, z = _bez_across(rows, (2 * bi + a) * inv)
+        m_cells[r + a + 3 * b, 0] = x
+        m_cells[r + a + 3 * b, 1] = y
+        m_cells[r + a + 3 * b, 2] = z
 
 
 @leaf_njit
-def _expand(node, parent, ci, cj, lev, pd, child, box, slab, data, m_nets, cnt, work):
+def _expand(node, parent, ci, cj, lev, pd, child, box, slab, data, m_nets, m_cells, cnt, work):
     """Split ``node`` (cell (ci, cj) of level ``lev`` < pd - 1 of a piece of depth ``pd``):
     get its net (stored, or the quadrant of its parent's) and create its four children with
     their boxes (and slabs, for blocks: level pd - 1); its net is kept if its children will
-    be split in turn. Returns the first child, or -1 when a store is full."""
-    if cnt[M_NODES] + 4 > len(child) or cnt[M_NETS] + 1 > len(m_nets):
+    be split in turn, else its blocks' frames (:func:`_store_frame`). Returns the first
+    child, or -1 when a store is full."""
+    if (cnt[M_NODES] + 4 > len(child) or cnt[M_NETS] + 1 > len(m_nets)
+            or cnt[M_CELLS] + FRAME_UNITS > len(m_cells) // 4):
         cnt[M_FULL] = 1
         return -1
     base = work.shape[0] - 4
@@ -325,6 +461,8 @@ def _expand(node, parent, ci, cj, lev, pd, child, box, slab, data, m_nets, cnt, 
         else:  # its children are blocks: their corners come from the piece's own net
             src, s = work, 0
     _split(src, s, work, base)
+    if lev + 2 == pd:  # (its net is not needed again: its data holds the frames)
+        data[node] = _store_frame(src, s, work, base, m_cells, cnt)
     first = cnt[M_NODES]
     for q in range(4):
         lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(work, base + q)
@@ -353,16 +491,17 @@ def table_loop_flag(table) -> bool | None:
 def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop):
     """Closest hit on the pieces of Catmull-Clark patch ``p`` (slot ``s`` of ``iso``, a
     :class:`~subtrace.trace.pools.PieceArrays`) nearer than hit[H_T]; updates ``hit``. Returns the
-    number of micro-triangles built: the cells this ray was the first of its thread to
-    evaluate (stored in the memo ``mem``, or fans and one-cell pieces, evaluated on the spot
-    by every ray but counted once), and any it split on the spot when the memo was full. ``ray`` = (ox, oy, oz, ix, iy, iz, kx, ky, kz,
+    number of micro-triangles built: those of the cells this ray was the first of its
+    thread to test (stored in the memo ``mem``, or fans and one-cell pieces, evaluated on
+    the spot by every ray but counted once), and any it split on the spot when the memo was
+    full. ``ray`` = (ox, oy, oz, ix, iy, iz, kx, ky, kz,
     sx, sy, sz, dx, dy, dz): origin, inverse direction, shear constants and direction.
 
     A Bezier piece (item ``it``; a regular patch is one) is refined to its own grid depth
-    (``item_depth``, in the patch's units): the ray descends its quadtree, nearest child first, into the nodes whose boxes it
-    enters before its best hit; a node is split (its children's boxes stored) once per
-    thread, a cell's corners are evaluated once (see the memo above). ``work`` (>=
-    3*depth+10, 4,4,3), the stack ``st`` (>= 6*depth+8, 5) with entry distances ``st_t``,
+    (``item_depth``, in the patch's units): the ray descends its quadtree, nearest child
+    first, into the nodes whose boxes it enters before its best hit; a node is split (its
+    children's boxes stored) once per thread, and a cell's corners are evaluated once, when
+    a ray may hit the cell (see the memo above). ``work`` (>= 3*depth+10, 4,4,3), the stack ``st`` (>= 6*depth+8, 5) with entry distances ``st_t``,
     ``tmp_t`` / ``order`` (4,) and ``lv`` (K,3) / ``lp`` (K,2) (a cell's points and
     parameters) are the thread's ``scratch``. (Calls with more than 30 arguments are
     compiled by Python as calls with ``*args``, which Numba cannot inline: hence the
@@ -382,6 +521,10 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop):
     first, count = iso.first[s], iso.count[s]
     code = -2.0 - p
     tested = 0
+    # (for _block_cells: the origin's coordinates in the ray's frame, and its rounding)
+    o = (ox, oy, oz)
+    px, py, pz = o[kx], o[ky], o[kz]
+    pad_o = LOCATE_PAD * max(abs(ox), max(abs(oy), abs(oz)))
     nxt, end = first, first + count
     while nxt < end:  # the rows depth first; a group missed is skipped whole
         it = nxt
@@ -437,6 +580,8 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop):
             # (a root that is a block keeps no net: its corners come from nets[nk])
             node = new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2,
                              _store_net(m_nets, cnt, nets, nk) if pd > 1 else NOT_YET)
+            if pd == 1:  # a block: its frame is its net's corners and this bound
+                slab[node, 0] = _interpolation_bound(nets, nk, 1.0)
             root_m[it] = node
         # stack rows: node, parent, i, j, level; st_t: entry distance when pushed
         st[0, 0], st[0, 1], st[0, 2], st[0, 3], st[0, 4] = node, -1, 0, 0, 0
@@ -447,33 +592,64 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop):
             if st_t[sp] >= hit[H_T]:  # a nearer hit was found since it was pushed
                 continue
             node, parent, ci, cj, lev = st[sp, 0], st[sp, 1], st[sp, 2], st[sp, 3], st[sp, 4]
-            if lev == pd - 1:  # a block of 2 x 2 cells: their triangles
-                r = data[node]
-                first = r == NOT_YET
-                if first:
+            if lev == pd - 1:  # a block of 2 x 2 cells: the triangles of those near the ray
+                # its frame: a root's own (its net's corners, its slab row), or from its
+                # parent's split (kept in the cell store)
+                if lev == 0:
+                    dlt = slab[node, 0]
+                    c00 = (nets[nk, 0, 0, 0], nets[nk, 0, 0, 1], nets[nk, 0, 0, 2])
+                    c10 = (nets[nk, 3, 0, 0], nets[nk, 3, 0, 1], nets[nk, 3, 0, 2])
+                    c01 = (nets[nk, 0, 3, 0], nets[nk, 0, 3, 1], nets[nk, 0, 3, 2])
+                    c11 = (nets[nk, 3, 3, 0], nets[nk, 3, 3, 1], nets[nk, 3, 3, 2])
+                else:
+                    f = data[parent] + (ci & 1) + 3 * (cj & 1)
+                    dlt = m_cells[data[parent] + 9, 0]
+                    c00 = (m_cells[f, 0], m_cells[f, 1], m_cells[f, 2])
+                    c10 = (m_cells[f + 1, 0], m_cells[f + 1, 1], m_cells[f + 1, 2])
+                    c01 = (m_cells[f + 3, 0], m_cells[f + 3, 1], m_cells[f + 3, 2])
+                    c11 = (m_cells[f + 4, 0], m_cells[f + 4, 1], m_cells[f + 4, 2])
+                near = _block_cells(px, py, pz, kx, ky, kz, sx, sy, c00, c10, c01, c11,
+                                    dlt + pad_o)
+                if near == 0:
+                    continue
+                d = data[node]
+                if d == NOT_YET:  # its corner rows, filled as its cells are first tested
                     if cnt[M_CELLS] + 3 <= len(m_cells) // 4:
-                        r = data[node] = _store_block(m_cells, cnt, nets, nk, ci, cj, pd)
+                        d = cnt[M_CELLS] << BLOCK_FLAGS
+                        cnt[M_CELLS] += 3
                     else:
                         cnt[M_FULL] = 1
+                r = 4 * (d >> BLOCK_FLAGS)
                 for q in range(4):
+                    if not (near >> q) & 1:
+                        continue
                     a, b = q & 1, q >> 1
                     gi, gj = 2 * ci + a, 2 * cj + b
-                    if r < 0 or _fan_samples(gi, gj, pd, depth, item_side, it):
+                    if d < 0 or _fan_samples(gi, gj, pd, depth, item_side, it):
                         # evaluated on the spot (a fan's triangles count once per thread)
                         n_t = _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, gi, gj, pd,
                                     oi, oj, depth, item_side, it, slack, hit, code, it, lv, lp)
                     else:
+                        for row in range(b, b + 2):
+                            if not (d >> row) & 1:
+                                _store_row(m_cells, r, nets, nk, ci, cj, row, pd)
+                                d |= 1 << row
                         _corner_params(lp, oi + gi, oj + gj, inv)
                         v = r + a + 3 * b
                         n_t = tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, m_cells, v, v + 1,
                                        v + 4, v + 3, lp, slack, hit, code, it, depth)
-                    if first:
+                    if d < 0:  # (not stored: counted by every ray)
                         tested += n_t
+                    elif not (d >> (3 + q)) & 1:
+                        tested += n_t
+                        d |= 1 << (3 + q)
+                if d >= 0:
+                    data[node] = d
                 continue
             c = child[node]
             if c < 0:
-                c = _expand(node, parent, ci, cj, lev, pd, child, box, slab, data, m_nets, cnt,
-                            work)
+                c = _expand(node, parent, ci, cj, lev, pd, child, box, slab, data, m_nets,
+                            m_cells, cnt, work)
                 if c < 0:  # a store is full: split per ray below this node
                     tested += _descend_node(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, node,
                                             parent, lev, ci, cj, nets, nk, pd, oi, oj, depth,

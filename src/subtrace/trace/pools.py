@@ -403,7 +403,8 @@ class Memos:
     went on without storing) is doubled before the next."""
 
     # virtual: touched as used. A Catmull-Clark memo keeps the net of every node its rays
-    # split and the corners of its blocks of 2 x 2 cells (trace/bezier.py); a Loop memo
+    # split but those whose children are blocks (their blocks' frames instead) and the
+    # corners of its blocks of 2 x 2 cells (trace/bezier.py); a Loop memo
     # the six points of every node split (two cells' room in the cell store, trace/tris.py)
     START = {"child": 1 << 22, "nets": 1 << 21, "cells": 1 << 20}
     # rows per unit of START (a cell has 4 corner rows) and bytes per row: a node (child,
