@@ -350,6 +350,40 @@ def test_a_ground_under_a_partial_view_builds_no_whole_topology():
     _same_image_without_cull(scene, [subtrace.load_cage(SWORD)], res)
 
 
+@needs_shared
+def test_the_ground_and_the_cull_share_one_computation_of_the_face_boxes(monkeypatch):
+    """The sword's tip under a sun over an automatic ground: the ground's height (its
+    lowest faces) and the cull (the faces in view) both need every face's star box; they
+    are made once per render, read-only, and not kept after the render's set-up."""
+    from dataclasses import replace
+
+    import subtrace.mesh.cage as cage_module
+    from subtrace.io.scene import Ground, Light
+
+    made = []
+
+    def counted(*args):
+        made.append(1)
+        return face_star_boxes(*args)
+
+    monkeypatch.setattr(cage_module, "face_star_boxes", counted)
+    cage = subtrace.load_cage(SWORD)
+    scene = replace(small_scene([SWORD], TIP_EYE, TIP_TARGET, width=64, height=36,
+                                fov=TIP_FOV), ground=Ground(height=None, color=(0.6, 0.6, 0.6)),
+                    lights=(Light(direction=(-0.4, -1.0, -0.5), intensity=0.5),))
+    res = render_scene(scene, cages=[cage])
+    assert res.stats.faces_culled > 0.8 * cage.n_faces and res.stats.shadow_rays > 0
+    assert len(made) == 1
+    assert "star_boxes" not in cage._cache and "sharing" not in cage._cache
+    with cage.sharing_star_boxes():
+        lo, hi = cage.star_boxes
+        assert cage.star_boxes[0] is lo and not lo.flags.writeable
+        with pytest.raises(ValueError):
+            hi[0, 0] = 0.0
+    assert cage.star_boxes[0] is not lo  # (made again: not kept)
+    assert np.array_equal(cage.star_boxes[0], lo)
+
+
 def test_the_lowest_limit_point_is_not_taken_at_the_lowest_control_point(monkeypatch):
     """A flat grid with one control point pulled far down (its limit surface dips to
     about 4/9 of it) and, far from it, a broad valley half as deep (its limit surface

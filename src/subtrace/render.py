@@ -19,6 +19,7 @@ hit is nearer.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -363,14 +364,17 @@ def _prepare(scene, cages, stats, nurbs=None, crop=None, compiling=None):
     # (shadow and ambient occlusion rays may meet what the camera does not see; the
     # ground's shadows are bounded by where the ground is)
     secondary = bool(scene.lights and scene.render.shadows) or scene.render.ao > 0
-    ground = ground_plane(scene, cages, camera, nurbs) if secondary else None
-    reach = secondary_reach(scene, casting_bounds(cages, nurbs), camera,
-                            ground if scene.lights and scene.render.shadows else None)
-    if config.CULL_TO_VIEW and reach is not None:
-        table, keep = table_in_view(cages, camera, reach)
-        stats.faces_culled = int(sum(np.count_nonzero(~k) for k in keep))
-    else:
-        table = build_patch_table(cages)
+    with contextlib.ExitStack() as stack:  # (the ground's height and the cull share them)
+        for c in cages:
+            stack.enter_context(c.sharing_star_boxes())
+        ground = ground_plane(scene, cages, camera, nurbs) if secondary else None
+        reach = secondary_reach(scene, casting_bounds(cages, nurbs), camera,
+                                ground if scene.lights and scene.render.shadows else None)
+        if config.CULL_TO_VIEW and reach is not None:
+            table, keep = table_in_view(cages, camera, reach)
+            stats.faces_culled = int(sum(np.count_nonzero(~k) for k in keep))
+        else:
+            table = build_patch_table(cages)
     budget = scene.render.max_memory
     budget = config.default_max_memory() if budget is None else budget
     view = camera if crop is None else crop_window(camera, crop, apron(scene))

@@ -16,6 +16,7 @@ a restriction that keeps enough rings of faces around the faces it is for
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -136,6 +137,32 @@ class Cage:
                 (self.points.min(axis=0), self.points.max(axis=0)) if len(self.points)
                 else (np.zeros(3), np.zeros(3)))
         return box
+
+    @property
+    def star_boxes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo (F,3), hi (F,3)), read-only: per face, the box of the points of the faces
+        around its corners (its one-ring's points: a box that holds its limit surface), from
+        the face lists alone (``patches.shells.face_star_boxes``). Within
+        :meth:`sharing_star_boxes` they are made once (the cull and the ground's height
+        both ask on a large cage: 13 ms each on the sword refined twice)."""
+        boxes = self._cache.get("star_boxes")
+        if boxes is None:
+            boxes = face_star_boxes(self.face_offsets, self.face_verts, self.points)
+            for b in boxes:
+                b.flags.writeable = False  # (shared: a caller widening them must copy)
+            if "sharing" in self._cache:
+                self._cache["star_boxes"] = boxes
+        return boxes
+
+    @contextlib.contextmanager
+    def sharing_star_boxes(self):
+        """Keep :attr:`star_boxes` once made, until the block ends (48 bytes a face)."""
+        self._cache["sharing"] = True
+        try:
+            yield self
+        finally:
+            self._cache.pop("sharing", None)
+            self._cache.pop("star_boxes", None)
 
     @property
     def has_topology(self) -> bool:
@@ -403,12 +430,15 @@ def _lowest_limit(cage: Cage, up: np.ndarray) -> float:
     if (cage.n_faces < config.LAZY_TOPOLOGY_FACES or cage.options.chaikin
             or cage.options.smooth_triangles):
         return float((cage.limit(1)[0] @ up).min())
-    height = cage.points @ up
-    lo, hi = face_star_boxes(cage.face_offsets, cage.face_verts,
-                             np.ascontiguousarray(np.repeat(height[:, None], 3, axis=1)))
+    # each face's range of heights from its star box (exact for an axis as ``up``, else
+    # wider, which only keeps more faces)
+    lo, hi = cage.star_boxes
+    plus, minus = np.maximum(up, 0.0), np.minimum(up, 0.0)
+    bottom = lo @ plus + hi @ minus
+    top = (hi @ plus + lo @ minus).min()
     # (a margin for the rounding of the limit masks' sums: far above it, far below a cell)
-    top = hi[:, 0].min() + 1e-9 * (np.abs(height).max() + 1.0)
-    near = face_rings(cage, lo[:, 0] <= top, RESTRICT_RINGS)
+    top += 1e-9 * (np.abs(cage.points @ up).max() + 1.0)
+    near = face_rings(cage, bottom <= top, RESTRICT_RINGS)
     return float((cage.restricted(near).limit(1)[0] @ up).min())
 
 

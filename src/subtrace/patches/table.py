@@ -62,8 +62,7 @@ from subtrace.patches.basis import TO_BEZIER, net_summary, to_bezier
 from subtrace.patches.bspline import phantom_grids, regular_mask
 from subtrace.patches.criterion import subdominant
 from subtrace.patches.evaluate import ptex_starts
-from subtrace.patches.shells import (face_ring_boxes, face_star_boxes, one_ring_shells,
-                                     split_ring_boxes)
+from subtrace.patches.shells import face_ring_boxes, one_ring_shells, split_ring_boxes
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
 from subtrace.subdiv.limit import extract
@@ -229,11 +228,11 @@ def cage_face_shells(cage):
     surface over it (the box of its one-ring's control points, widened for Chaikin creases
     as the patches' shells are). Cheap: no refinement. A cage of at least
     ``config.LAZY_TOPOLOGY_FACES`` faces whose topology is not built yet gets the same boxes
-    from its face lists (:func:`~subtrace.patches.shells.face_star_boxes`; the Chaikin
-    margin needs the edges' sharpness, so not for Chaikin cages)."""
+    from its face lists (:attr:`~subtrace.mesh.cage.Cage.star_boxes`, read-only; the
+    Chaikin margin needs the edges' sharpness, so not for Chaikin cages)."""
     if (not cage.has_topology and not cage.options.chaikin
             and cage.n_faces >= config.LAZY_TOPOLOGY_FACES):
-        return face_star_boxes(cage.face_offsets, cage.face_verts, cage.points)
+        return cage.star_boxes
     lo, hi = face_ring_boxes(cage.base, cage.points)
     _chaikin_margin(cage.base, cage.options, lo, hi)
     return lo, hi
