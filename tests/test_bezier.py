@@ -29,14 +29,18 @@ def _sub_net(root, depth, i, j):
     return work[:1].copy()
 
 
+def _wavy_net(rng, scale):
+    """A wavy random bicubic net (4,4,3), away from the origin, ``scale`` in size."""
+    g = np.stack(np.meshgrid(np.arange(4.0), np.arange(4.0), indexing="ij"), -1)
+    root = np.concatenate([g, rng.normal(0, 0.7, (4, 4, 1))], -1) + rng.normal(0, 0.2, (4, 4, 3))
+    return (root + rng.normal(0, 5, 3)) * scale
+
+
 @settings(max_examples=60, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(1, 6), st.sampled_from([1e-3, 1.0, 1e3]))
 def test_cell_slab_lets_through_rays_that_meet_the_cell(seed, depth, scale):
     rng = np.random.default_rng(seed)
-    # a wavy random bicubic patch, away from the origin
-    g = np.stack(np.meshgrid(np.arange(4.0), np.arange(4.0), indexing="ij"), -1)
-    root = np.concatenate([g, rng.normal(0, 0.7, (4, 4, 1))], -1) + rng.normal(0, 0.2, (4, 4, 3))
-    root = (root + rng.normal(0, 5, 3)) * scale
+    root = _wavy_net(rng, scale)
     nets = root[None]
     n = 1 << depth
     i, j = (int(x) for x in rng.integers(0, n, 2))
@@ -134,9 +138,7 @@ def test_block_frame_keeps_every_cell_a_ray_meets(seed, pd, scale):
 
 def _rays_meet_their_cells(seed, pd, scale, shrink=1.0):
     rng = np.random.default_rng(seed)
-    g = np.stack(np.meshgrid(np.arange(4.0), np.arange(4.0), indexing="ij"), -1)
-    root = np.concatenate([g, rng.normal(0, 0.7, (4, 4, 1))], -1) + rng.normal(0, 0.2, (4, 4, 3))
-    root = (root + rng.normal(0, 5, 3)) * scale
+    root = _wavy_net(rng, scale)
     nets = root[None]
     n = 1 << pd
     bi, bj = (int(x) for x in rng.integers(0, n >> 1, 2))

@@ -193,25 +193,23 @@ def _block_cells(px, py, pz, kx, ky, kz, sx, sy, c00, c10, c01, c11, dlt):
     mx, my = -vy, vx  # across v: sorts by u
     pad_n = abs(nx) * pad_x + abs(ny) * pad_y
     pad_m = abs(mx) * pad_x + abs(my) * pad_y
-    s0, s1, s2 = nx * a0 + ny * e0, nx * a1 + ny * e1, nx * a2 + ny * e2
-    t0, t1, t2 = nx * b0 + ny * f0, nx * b1 + ny * f1, nx * b2 + ny * f2
-    w0, w1, w2 = nx * c0 + ny * g0, nx * c1 + ny * g1, nx * c2 + ny * g2
-    i0, i1, i2 = mx * a0 + my * e0, mx * a1 + my * e1, mx * a2 + my * e2
-    j0, j1, j2 = mx * b0 + my * f0, mx * b1 + my * f1, mx * b2 + my * f2
-    k0, k1, k2 = mx * c0 + my * g0, mx * c1 + my * g1, mx * c2 + my * g2
+    # the grid's 3 x 3 values, row by row (v), in each of the four directions
+    X = (a0, a1, a2, b0, b1, b2, c0, c1, c2)
+    Y = (e0, e1, e2, f0, f1, f2, g0, g1, g2)
+    N = (nx * a0 + ny * e0, nx * a1 + ny * e1, nx * a2 + ny * e2,
+         nx * b0 + ny * f0, nx * b1 + ny * f1, nx * b2 + ny * f2,
+         nx * c0 + ny * g0, nx * c1 + ny * g1, nx * c2 + ny * g2)
+    M = (mx * a0 + my * e0, mx * a1 + my * e1, mx * a2 + my * e2,
+         mx * b0 + my * f0, mx * b1 + my * f1, mx * b2 + my * f2,
+         mx * c0 + my * g0, mx * c1 + my * g1, mx * c2 + my * g2)
     mask = 0
-    if (_spans(s0, s1, t0, t1, pad_n) and _spans(i0, i1, j0, j1, pad_m)
-            and _spans(a0, a1, b0, b1, pad_x) and _spans(e0, e1, f0, f1, pad_y)):
-        mask |= 1
-    if (_spans(s1, s2, t1, t2, pad_n) and _spans(i1, i2, j1, j2, pad_m)
-            and _spans(a1, a2, b1, b2, pad_x) and _spans(e1, e2, f1, f2, pad_y)):
-        mask |= 2
-    if (_spans(t0, t1, w0, w1, pad_n) and _spans(j0, j1, k0, k1, pad_m)
-            and _spans(b0, b1, c0, c1, pad_x) and _spans(f0, f1, g0, g1, pad_y)):
-        mask |= 4
-    if (_spans(t1, t2, w1, w2, pad_n) and _spans(j1, j2, k1, k2, pad_m)
-            and _spans(b1, b2, c1, c2, pad_x) and _spans(f1, f2, g1, g2, pad_y)):
-        mask |= 8
+    for q in range(4):
+        g = (q & 1) + 3 * (q >> 1)  # the cell's corners: g, g + 1, g + 3, g + 4
+        if (_spans(N[g], N[g + 1], N[g + 3], N[g + 4], pad_n)
+                and _spans(M[g], M[g + 1], M[g + 3], M[g + 4], pad_m)
+                and _spans(X[g], X[g + 1], X[g + 3], X[g + 4], pad_x)
+                and _spans(Y[g], Y[g + 1], Y[g + 3], Y[g + 4], pad_y)):
+            mask |= 1 << q
     return mask
 
 
