@@ -384,6 +384,23 @@ def test_the_ground_and_the_cull_share_one_computation_of_the_face_boxes(monkeyp
     assert np.array_equal(cage.star_boxes[0], lo)
 
 
+@pytest.mark.parametrize("n", [1, 1000, 60_000])
+def test_the_points_box_is_numpys_min_and_max(n):
+    """``Cage.points_box`` (one pass of a kernel on a large cage) equals NumPy's reductions,
+    NaN where a coordinate is NaN."""
+    from subtrace.mesh.cage import _points_box
+
+    rng = np.random.default_rng(n)
+    pts = rng.standard_normal((n, 3)) * 10.0 ** rng.integers(-3, 4, (n, 1))
+    for p in (pts, np.asfortranarray(pts)):
+        lo, hi = _points_box(p)
+        assert np.array_equal(lo, p.min(axis=0)) and np.array_equal(hi, p.max(axis=0))
+    pts[n // 2, 1] = np.nan
+    lo, hi = _points_box(pts)
+    assert np.array_equal(lo, pts.min(axis=0), equal_nan=True) and np.isnan(hi[1])
+    assert not np.isnan(lo[0]) and not np.isnan(hi[2])
+
+
 def test_the_lowest_limit_point_is_not_taken_at_the_lowest_control_point(monkeypatch):
     """A flat grid with one control point pulled far down (its limit surface dips to
     about 4/9 of it) and, far from it, a broad valley half as deep (its limit surface

@@ -133,9 +133,7 @@ class Cage:
         two reductions of the sword refined twice's points took 13 ms)."""
         box = self._cache.get("points_box")
         if box is None:
-            box = self._cache["points_box"] = (
-                (self.points.min(axis=0), self.points.max(axis=0)) if len(self.points)
-                else (np.zeros(3), np.zeros(3)))
+            box = self._cache["points_box"] = _points_box(self.points)
         return box
 
     @property
@@ -385,6 +383,39 @@ def face_rings(cage: Cage, faces: np.ndarray, rings: int) -> np.ndarray:
     mark = np.zeros(len(cage.points), bool)
     _grow_rings(cage.face_offsets, cage.face_verts, rings, sel, mark)
     return sel
+
+
+# points from which the box is one pass of a kernel: NumPy's reductions along the first
+# axis of an (n, 3) array take 7 ms each on 400,000 points
+BOX_KERNEL_POINTS = 50_000
+
+
+def _points_box(points) -> tuple[np.ndarray, np.ndarray]:
+    """(lo (3,), hi (3,)) of ``points`` (n,3), as ``points.min(axis=0)``, ``.max(axis=0)``
+    (NaN where a coordinate is; zeros for no points)."""
+    if not len(points):
+        return np.zeros(3), np.zeros(3)
+    if len(points) < BOX_KERNEL_POINTS:
+        return points.min(axis=0), points.max(axis=0)
+    lo, hi = np.empty(3), np.empty(3)
+    if _box_kernel(np.ascontiguousarray(points, dtype=np.float64), lo, hi):
+        return points.min(axis=0), points.max(axis=0)  # (a NaN: NumPy's answer)
+    return lo, hi
+
+
+@nb.njit(cache=True, nogil=True)
+def _box_kernel(points, lo, hi):
+    """The box of ``points`` into ``lo``, ``hi``; True when a coordinate is NaN."""
+    lo[:] = np.inf
+    hi[:] = -np.inf
+    nan = False
+    for i in range(points.shape[0]):
+        for k in range(3):
+            x = points[i, k]
+            lo[k] = min(lo[k], x)
+            hi[k] = max(hi[k], x)
+            nan |= x != x
+    return nan
 
 
 @nb.njit(cache=True, nogil=True)
