@@ -127,18 +127,20 @@ def _meets(o, d, tri):
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.integers(1, 7), st.sampled_from([1e-3, 1.0, 1e3]))
-def test_block_frame_keeps_every_cell_a_ray_meets(seed, pd, scale):
+@given(st.integers(0, 2**32 - 1), st.integers(1, 7), st.sampled_from([1e-3, 1.0, 1e3]),
+       st.sampled_from([0.0, 1e4]))
+def test_block_frame_keeps_every_cell_a_ray_meets(seed, pd, scale, away):
     """Triangles whose corners are points of a cell's surface, as the renderer evaluates
     them (the cell's corners, and any other points of it, as a fan beside a finer
     neighbour has): every ray that meets one, aimed inside or just beside it, from near
-    or far, finds the cell in its block's mask."""
-    _rays_meet_their_cells(seed, pd, scale)
+    or far, finds the cell in its block's mask; also with the patch ``away`` times its size
+    from the origin (the rounding of large coordinates)."""
+    _rays_meet_their_cells(seed, pd, scale, away=away)
 
 
-def _rays_meet_their_cells(seed, pd, scale, shrink=1.0):
+def _rays_meet_their_cells(seed, pd, scale, shrink=1.0, away=0.0):
     rng = np.random.default_rng(seed)
-    root = _wavy_net(rng, scale)
+    root = _wavy_net(rng, scale) + away * scale * rng.standard_normal(3)
     nets = root[None]
     n = 1 << pd
     bi, bj = (int(x) for x in rng.integers(0, n >> 1, 2))
