@@ -67,6 +67,20 @@ def _cubes(tmp_path, offsets):
     return path
 
 
+def _cube_scene(mesh, eye, target, fov, light, ground=False):
+    """``scene(shadows)``: the cubes ``mesh`` seen at 64x48 from ``eye`` under ``light``
+    (a [light] table), one sample, over a grey ground at height 0 with ``ground``."""
+
+    def scene(shadows):
+        return scene_from_dict({
+            "object": [{"mesh": str(mesh)}],
+            "camera": {"eye": eye, "target": target, "fov": fov, "width": 64, "height": 48},
+            "render": {"shadows": shadows, "samples": 1}, "light": [light],
+            **({"ground": {"height": 0.0, "color": [0.6, 0.6, 0.6]}} if ground else {})})
+
+    return scene
+
+
 def _culled_as_full(scene_of, monkeypatch):
     """``scene_of(shadows)`` rendered with shadows, culled and not: the same image, in which
     shadows darken more than 20 pixels (against ``scene_of(False)``). Returns the culled
@@ -93,14 +107,8 @@ def test_offscreen_caster_without_ground_is_kept_and_the_rest_culled(tmp_path, m
     the directional light, its box swept along the light would reach the view), and the
     image is the full table's."""
     mesh = _cubes(tmp_path, [(0, 0, 0), (-6.0, 6.0, 0.0), (6.0, -6.0, 0.0)])
-
-    def scene(shadows):
-        return scene_from_dict({
-            "object": [{"mesh": str(mesh)}],
-            "camera": {"eye": [0.0, 0.5, 7.0], "target": [0.0, 0.0, 0.0], "fov": 25.0,
-                       "width": 64, "height": 48},
-            "render": {"shadows": shadows, "samples": 1},
-            "light": [{**light, "intensity": 1.0 if "direction" in light else 300.0}]})
+    scene = _cube_scene(mesh, [0.0, 0.5, 7.0], [0.0, 0.0, 0.0], 25.0,
+                        {**light, "intensity": 1.0 if "direction" in light else 300.0})
 
     lazy = _culled_as_full(scene, monkeypatch)
     assert lazy.stats.faces_culled == 6  # the third cube
@@ -199,15 +207,8 @@ def test_with_a_ground_a_caster_whose_shadow_misses_the_view_is_culled(tmp_path,
     lie in the scene box's shadow on the ground, clipped to the view); the image is the
     full table's."""
     mesh = _cubes(tmp_path, [(6.0, 4.0, 0.0), (6.0, 4.0, -10.0)])
-
-    def scene(shadows):
-        return scene_from_dict({
-            "object": [{"mesh": str(mesh)}],
-            "camera": {"eye": [0.0, 6.0, 6.0], "target": [0.0, 0.0, 0.0], "fov": 30.0,
-                       "width": 64, "height": 48},
-            "render": {"shadows": shadows, "samples": 1},
-            "light": [{"direction": [-6.0, -4.0, 0.0]}],
-            "ground": {"height": 0.0, "color": [0.6, 0.6, 0.6]}})
+    scene = _cube_scene(mesh, [0.0, 6.0, 6.0], [0.0, 0.0, 0.0], 30.0,
+                        {"direction": [-6.0, -4.0, 0.0]}, ground=True)
 
     lazy = _culled_as_full(scene, monkeypatch)
     assert lazy.stats.faces_culled == 6  # the second cube
@@ -242,6 +243,26 @@ def _reach_over_ground(cam, bounds, light, ground):
     return secondary_reach(scene, bounds, cam, ground)
 
 
+def _ground_case(seed):
+    """(rng, a random camera, up, the ground's height, 400 random points whose heights the
+    caller sets) of a ground property test."""
+    rng = np.random.default_rng(seed)
+    cam, _ = _points_in_view(rng, 1)
+    return (rng, cam, np.array([0.0, 1.0, 0.0]), float(rng.uniform(-3, 3)),
+            rng.uniform(-6, 6, (400, 3)))
+
+
+def _blockers_and_reach(rng, cam, x, q, light, up, height):
+    """(lo, hi, bounds, reach): the boxes between ``x`` and their shadows ``q`` whose shadow
+    is in view (:func:`_ground_blockers`) and the cull's reach under ``light`` over the
+    ground; None when no shadow is in view."""
+    boxes = _ground_blockers(rng, cam, x, q)
+    if boxes is None:
+        return None
+    lo, hi, bounds = boxes
+    return lo, hi, bounds, _reach_over_ground(cam, bounds, light, (up, height))
+
+
 @settings(max_examples=60, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_a_box_that_blocks_a_shadow_ray_from_the_ground_in_view_is_kept(seed):
@@ -250,22 +271,17 @@ def test_a_box_that_blocks_a_shadow_ray_from_the_ground_in_view_is_kept(seed):
     view, a small box around a point between x and q is kept by the cull's view test."""
     from subtrace.accel.cull import view_test
 
-    rng = np.random.default_rng(seed)
-    cam, _ = _points_in_view(rng, 1)
-    up = np.array([0.0, 1.0, 0.0])
-    height = float(rng.uniform(-3, 3))
+    rng, cam, up, height, x = _ground_case(seed)
     d = rng.standard_normal(3)
     d[1] = -abs(d[1]) - 0.05
     d /= np.linalg.norm(d)
-    x = rng.uniform(-6, 6, (400, 3))
     x[:, 1] = height + rng.uniform(0.01, 4.0, len(x))
     q = x + ((height - x @ up) / (d @ up))[:, None] * d
-    boxes = _ground_blockers(rng, cam, x, q)
-    if boxes is None:
+    case = _blockers_and_reach(rng, cam, x, q, SimpleNamespace(position=None, direction=d),
+                               up, height)
+    if case is None:
         return
-    lo, hi, bounds = boxes
-    reach = _reach_over_ground(cam, bounds, SimpleNamespace(position=None, direction=d),
-                               (up, height))
+    lo, hi, _, reach = case
     assert reach is not None and reach.light_frames is not None
     assert view_test(cam, reach)(lo, hi).all()
 
@@ -275,15 +291,8 @@ def test_a_low_suns_long_shadow_on_the_ground_keeps_its_caster(tmp_path, monkeyp
     diagonal: the cube, out of the picture, is kept for the ground in view, and the image is
     the full table's (the sweep once stopped at twice the diagonal and lost the shadow)."""
     mesh = _cubes(tmp_path, [(30.0, 1.5, 0.0)])
-
-    def scene(shadows):
-        return scene_from_dict({
-            "object": [{"mesh": str(mesh)}],
-            "camera": {"eye": [10.0, 6.0, 8.0], "target": [10.0, 0.0, 0.0], "fov": 40.0,
-                       "width": 64, "height": 48},
-            "render": {"shadows": shadows, "samples": 1},
-            "light": [{"direction": [-1.0, -0.1, 0.0]}],
-            "ground": {"height": 0.0, "color": [0.6, 0.6, 0.6]}})
+    scene = _cube_scene(mesh, [10.0, 6.0, 8.0], [10.0, 0.0, 0.0], 40.0,
+                        {"direction": [-1.0, -0.1, 0.0]}, ground=True)
 
     lazy = _culled_as_full(scene, monkeypatch)
     assert np.all(lazy.channels["object_id"] < 0)  # (the cube is not in the picture)
@@ -298,20 +307,15 @@ def test_a_box_that_blocks_a_point_lights_shadow_ray_from_the_ground_is_kept(see
     kept by the cull's view test; a box reaching L's height turns the cull off."""
     from subtrace.accel.cull import view_test
 
-    rng = np.random.default_rng(seed)
-    cam, _ = _points_in_view(rng, 1)
-    up = np.array([0.0, 1.0, 0.0])
-    height = float(rng.uniform(-3, 3))
+    rng, cam, up, height, x = _ground_case(seed)
     light = np.array([rng.uniform(-8, 8), height + rng.uniform(0.5, 12.0), rng.uniform(-8, 8)])
-    x = rng.uniform(-6, 6, (400, 3))
     x[:, 1] = height + rng.uniform(0.0, 1.0, len(x)) * (light[1] - height)
     q = light + ((height - light[1]) / (x[:, 1] - light[1]))[:, None] * (x - light)
-    boxes = _ground_blockers(rng, cam, x, q)
-    if boxes is None:
+    case = _blockers_and_reach(rng, cam, x, q, SimpleNamespace(position=light, direction=None),
+                               up, height)
+    if case is None:
         return
-    lo, hi, bounds = boxes
-    reach = _reach_over_ground(cam, bounds, SimpleNamespace(position=light, direction=None),
-                               (up, height))
+    lo, hi, bounds, reach = case
     if bounds[1][1] >= light[1]:
         assert reach is None
         return
@@ -327,15 +331,8 @@ def test_a_point_light_over_a_ground_keeps_the_casters_of_its_shadows_in_view(tm
     before: a point light above a ground turned the cull off); the image is the full
     table's."""
     mesh = _cubes(tmp_path, [(4.0, 2.0, 0.0), (14.0, 2.0, 0.0)])
-
-    def scene(shadows):
-        return scene_from_dict({
-            "object": [{"mesh": str(mesh)}],
-            "camera": {"eye": [0.0, 6.0, 6.0], "target": [0.0, 0.0, 0.0], "fov": 30.0,
-                       "width": 64, "height": 48},
-            "render": {"shadows": shadows, "samples": 1},
-            "light": [{"position": [8.0, 6.0, 0.0], "intensity": 80.0}],
-            "ground": {"height": 0.0, "color": [0.6, 0.6, 0.6]}})
+    scene = _cube_scene(mesh, [0.0, 6.0, 6.0], [0.0, 0.0, 0.0], 30.0,
+                        {"position": [8.0, 6.0, 0.0], "intensity": 80.0}, ground=True)
 
     lazy = _culled_as_full(scene, monkeypatch)
     assert lazy.stats.faces_culled == 6  # the second cube
