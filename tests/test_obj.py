@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from fuzzing import mutations
 from subtrace.errors import ObjError, SubtraceWarning
 from subtrace.io.obj import (DEFAULT_DIFFUSE, DEFAULT_SHININESS, DEFAULT_SPECULAR, Material,
-                             ObjData, read_obj)
+                             ObjData, ObjReader, read_obj)
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 ORACLE = SHARED / "oracle"
@@ -662,7 +662,10 @@ def _both_readers(path: Path):
     raw = path.read_bytes()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SubtraceWarning)
-        fast = ObjReader(str(path)).read_fast(raw)
+        source = [raw]
+        fast = ObjReader(str(path)).read_fast(source)
+        # (what it read, it let the bytes go before cutting the arrays to size)
+        assert (source == []) if fast is not None else True
         try:
             slow = ObjReader(str(path)).read(decode_obj(str(path), raw))
         except ObjError as err:
@@ -824,3 +827,16 @@ def test_a_small_file_is_read_without_compiling_the_scanner(tmp_path):
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout)
     assert out["compiled"] == [0, 1] and all(out["same"])
+
+
+def test_a_file_with_a_late_error_is_read_again_for_it(tmp_path):
+    """A file the byte scanner reads (every file here: the fixture above) whose error shows
+    only once the scanner let its bytes go (a tag's vertex index out of range, checked
+    last): the file is read again and the statement reader names the tag's line."""
+    n = 400
+    grid = "".join(f"v {i % 97} {i // 97} 0.123456789012345678\n" for i in range(n))
+    faces = "".join(f"f {i + 1} {i + 2} {i + 98} {i + 97}\n" for i in range(n - 98))
+    path = write(tmp_path, grid + faces + f"t crease 2/1/0 0 {n + 5} 1.0\n")
+    source = [path.read_bytes()]
+    assert ObjReader(str(path)).read_fast(source) is None and source == []
+    expect_error(path, n + (n - 98) + 1, "out of range")

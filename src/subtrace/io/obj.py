@@ -122,8 +122,12 @@ def read_obj(path) -> ObjData:
         raise ObjError(path, None, f"{foreign} files are not read: subtrace reads {READABLE}")
     # ASCII is valid UTF-8 without a byte-order mark: only other files need checking first
     text = None if raw.isascii() else decode_obj(path, raw)
-    data = ObjReader(path).read_fast(raw) or ObjReader(path).read(
-        decode_obj(path, raw) if text is None else text)
+    source = [raw]
+    del raw  # (the fast reader lets the bytes go once it has what it needs of them)
+    data = ObjReader(path).read_fast(source)
+    if data is None:  # (the bytes again when the fast reader had let them go)
+        raw = source[0] if source else read_obj_bytes(path)
+        data = ObjReader(path).read(decode_obj(path, raw) if text is None else text)
     for message in data.warnings:
         warnings.warn(message, SubtraceWarning, stacklevel=2)
     return data
@@ -234,20 +238,22 @@ def slow_numbers(data: bytes, spans: np.ndarray):
     converts in a fraction of a second and a few MB, where a list of them took 0.2 GB."""
     buf = np.frombuffer(data, dtype=np.uint8)
     out = np.empty(len(spans))
-    starts, ends = spans[:, 0], spans[:, 1]
-    long = np.nonzero(ends - starts > _SLOW_WIDTH)[0]
     try:
-        for k in long.tolist():
-            out[k] = float(data[starts[k]:ends[k]])
-        short = np.nonzero(ends - starts <= _SLOW_WIDTH)[0]
-        for s in range(0, len(short), _SLOW_CHUNK):
-            rows = short[s:s + _SLOW_CHUNK]
-            a, b = starts[rows], ends[rows]
+        # (chunk by chunk: no temporary as long as the numbers, only their values)
+        for s in range(0, len(spans), _SLOW_CHUNK):
+            a, b = spans[s:s + _SLOW_CHUNK, 0], spans[s:s + _SLOW_CHUNK, 1]
+            long = b - a > _SLOW_WIDTH
+            for k in np.nonzero(long)[0].tolist():
+                out[s + k] = float(data[a[k]:b[k]])
+            rows = np.nonzero(~long)[0]
+            if not len(rows):
+                continue
+            a, b = a[rows], b[rows]
             width = int((b - a).max())
             cols = np.arange(width)
             chars = buf[np.minimum(a[:, None] + cols, len(buf) - 1)]
             chars[cols >= (b - a)[:, None]] = 0  # (a byte string ends at its first NUL)
-            out[rows] = chars.view(f"S{width}").ravel().astype(np.float64)
+            out[s + rows] = chars.view(f"S{width}").ravel().astype(np.float64)
     except ValueError:
         return None
     return out
@@ -303,19 +309,24 @@ class ObjReader:
 
     # -- the pass over statements --------------------------------------------------------
 
-    def read_fast(self, data: bytes) -> ObjData | None:
+    def read_fast(self, source: list) -> ObjData | None:
         """What `read` returns, from the byte scanner; None where only `read` can tell.
 
         The scanner (:func:`subtrace.io.obj_scan.scan`) reads v / vt / vn / f lines and lists
         the other statements for _statement. Continuation lines, anything malformed or out of range, and errors of
         other statements go to `read` (on a fresh ObjReader), which reports them.
+        ``source``: [the file's bytes], emptied once they are no longer needed (before the
+        arrays are cut to size: a large file's bytes and both copies of its arrays are not
+        held at once); a None returned after that leaves it empty.
         """
+        data = source[0]
         if b"\\" in data:
             return None
         scanned = scan(data)
         if scanned is None:
             return None
         points, uvs, normals, face_sizes, corners, other, slow, counts = scanned
+        del scanned
         nv, nt, nn, nf, nc, no, ns = counts.tolist()
         if nf == 0:
             return None
@@ -326,9 +337,11 @@ class ObjReader:
             values = slow_numbers(data, slow)
             if values is None or not np.isfinite(values).all():
                 return None
-            for block, out in enumerate((points, uvs, normals)):
-                at = slow[:, 2] == block
-                out[slow[at, 3]] = values[at]
+            for k in range(0, ns, _SLOW_CHUNK):
+                rows, vals = slow[k:k + _SLOW_CHUNK], values[k:k + _SLOW_CHUNK]
+                for block, out in enumerate((points, uvs, normals)):
+                    at = rows[:, 2] == block
+                    out[rows[at, 3]] = vals[at]
         try:
             for a, b, number, num_faces in other[:no].tolist():
                 line = data[a:b].decode("utf-8")
@@ -340,10 +353,20 @@ class ObjReader:
                 if parts[0] in FREEFORM_STATEMENTS:
                     return None  # free-form geometry: weights of v lines are needed
                 self._statement(number, line, parts, num_faces)
-            return self._finish(
-                points[: 3 * nv].reshape(-1, 3).copy(), uvs[: 2 * nt].reshape(-1, 2).copy(),
-                normals[: 3 * nn].reshape(-1, 3).copy(), face_sizes[:nf].copy(),
-                corners[0, :nc].copy(), corners[1, :nc].copy(), corners[2, :nc].copy())
+            source.clear()
+            del data
+            # each array cut to size, its scanner's buffer (sized for the worst case)
+            # dropped before the next is cut
+            points = points[: 3 * nv].reshape(-1, 3).copy()
+            uvs = uvs[: 2 * nt].reshape(-1, 2).copy()
+            normals = normals[: 3 * nn].reshape(-1, 3).copy()
+            face_sizes = face_sizes[:nf].copy()
+            verts = corners[0, :nc].copy()
+            corner_uvs = corners[1, :nc].copy()
+            corner_normals = corners[2, :nc].copy()
+            del corners, other, slow
+            return self._finish(points, uvs, normals, face_sizes, verts, corner_uvs,
+                                corner_normals)
         except ObjError:
             return None
 
