@@ -9,7 +9,8 @@ renders it in two fresh processes, alternated: *whole*, the sword scene's camera
 sword in view), and *tip*, the same eye looking at the blade's tip through a 2.6 degree
 field of view (about a tenth of the cage faces reach the image). Each process first renders
 a tiny scene of the original sword (kernels loaded), then measures from that baseline:
-loading the OBJ and rendering it, the time split (``subtrace:time_*``), the patches built and
+loading the OBJ and rendering it as ``subtrace render`` does (in bands, streamed into an
+EXR in a temporary folder), the time split (``subtrace:time_*``), the patches built and
 the cage faces culled, and the peak of the resident set above the baseline
 (``sweep.PeakMemory``: VmHWM reset through /proc/self/clear_refs), of which ``cage MiB`` is
 the loaded cage's resident set. The figures are medians over the rounds; the last row
@@ -60,6 +61,7 @@ def write_refined(path, levels: int) -> int:
 def worker(obj: str, view: str, width: int, height: int, light: str = "none",
            ground: str = "no") -> dict:
     import_subtrace()
+    from subtrace.io.exr import ExrBands
     from subtrace.io.scene import scene_from_dict
     from subtrace.mesh.cage import load_cage
     from subtrace.render import render_scene
@@ -74,7 +76,15 @@ def worker(obj: str, view: str, width: int, height: int, light: str = "none",
                                 "render": {"tolerance": 1.0}, "light": LIGHTS[light],
                                 **({"ground": {}} if ground == "yes" else {})})
 
-    render_scene(scene(SWORD, 32, 18))  # kernels loaded (or compiled) before the baseline
+    def render(sc, cages=None):
+        # as ``subtrace render`` does: streamed in bands into its EXR (render_scene's sink)
+        with tempfile.TemporaryDirectory() as out:
+            exr = ExrBands(os.path.join(out, "render.exr"), sc.camera.width, sc.camera.height)
+            res = render_scene(sc, cages=cages, sink=exr.write)
+            exr.finish({})
+        return res
+
+    render(scene(SWORD, 32, 18))  # kernels loaded (or compiled) before the baseline
     probe = PeakMemory()
     probe.start()
     base_kb = _rss_kb()
@@ -82,7 +92,7 @@ def worker(obj: str, view: str, width: int, height: int, light: str = "none",
     cage = load_cage(obj)
     t_load = time.perf_counter() - t0
     cage_mib = (_rss_kb() - base_kb) / 1024.0
-    res = render_scene(scene(obj, width, height), cages=[cage])
+    res = render(scene(obj, width, height), [cage])
     wall = time.perf_counter() - t0
     st = res.stats
     return dict(load=t_load, prep=st.time_preprocess, refine=st.time_refine,

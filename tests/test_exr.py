@@ -418,3 +418,67 @@ def test_read_errors(tmp_path):
     assert str(tmp_path / "garbage.exr") in str(info.value)
     with pytest.raises(SubtraceError, match="is a directory"):
         read_exr(tmp_path)
+
+
+def tall_film(height: int, seed: int = 3) -> dict[str, np.ndarray]:
+    """Every channel, ``height`` rows of the film's awkward values (repeated; noise on
+    the real-valued ones)."""
+    rng = np.random.default_rng(seed)
+    base = film(seed)
+    reps = -(-height // H)
+    noise = rng.uniform(0, 1e-3, (height, W)).astype(np.float32)
+    return {name: np.tile(np.asarray(a, np.float32), (reps, 1))[:height]
+            + (0 if name in exr.INTEGER_CHANNELS or name == "Z" else noise)
+            for name, a in base.items()}
+
+
+@pytest.mark.parametrize("height, rows", [(16, 16), (50, 16), (61, 32), (40, 48)])
+def test_bands_write_the_whole_image_file(tmp_path, height, rows):
+    """ExrBands (bands of ``rows``, the last one shorter) writes the file write_exr writes
+    from the whole image, byte for byte, header attributes included, and the same preview."""
+    ch = tall_film(height)
+    attrs = {"subtrace:time_total": 0.125, "subtrace:depth_cap_reason": "memory,precision",
+             "subtrace:patches": 2**40, "worldToCamera": np.arange(16.0), "note": "bands"}
+    write_exr(tmp_path / "whole.exr", ch, attrs, png_path=tmp_path / "whole.png")
+    bands = exr.ExrBands(tmp_path / "bands.exr", W, height, png_path=tmp_path / "bands.png")
+    for y0 in range(0, height, rows):
+        y1 = min(height, y0 + rows)
+        bands.write(y0, y1, {name: a[y0:y1] for name, a in ch.items()})
+    assert listing(tmp_path) == ["whole.exr", "whole.png"]  # nothing before finish
+    bands.finish(attrs)
+    for name in ("exr", "png"):
+        assert (tmp_path / f"bands.{name}").read_bytes() == (tmp_path / f"whole.{name}").read_bytes()
+    back, head = read_exr(tmp_path / "bands.exr")
+    assert head["subtrace:depth_cap_reason"] == "memory,precision"
+    np.testing.assert_array_equal(back["Z"], ch["Z"])
+
+
+def test_bands_in_order_of_whole_blocks(tmp_path):
+    """Bands come top to bottom, every band but the last whole ZIP blocks (16 rows), with
+    the first band's channels; finish needs every row; each misuse is a ValueError and
+    leaves no file."""
+    ch = tall_film(40)
+    bands = exr.ExrBands(tmp_path / "b.exr", W, 40)
+    with pytest.raises(ValueError, match="in order"):
+        bands.write(16, 32, {n: a[16:32] for n, a in ch.items()})
+    with pytest.raises(ValueError, match="multiple of 16"):
+        bands.write(0, 10, {n: a[:10] for n, a in ch.items()})
+    bands.write(0, 16, {n: a[:16] for n, a in ch.items()})
+    with pytest.raises(ValueError, match="differ"):
+        bands.write(16, 32, {"Z": ch["Z"][16:32]})
+    with pytest.raises(ValueError, match="expected"):
+        bands.write(16, 32, {n: a[16:30] for n, a in ch.items()})
+    with pytest.raises(ValueError, match="16 of 40 rows"):
+        bands.finish({})
+    assert listing(tmp_path) == []
+
+
+def test_bands_to_a_missing_folder(tmp_path):
+    """A file that cannot be written: SubtraceError naming it, no file left."""
+    ch = tall_film(16)
+    path = tmp_path / "no" / "b.exr"
+    bands = exr.ExrBands(path, W, 16)
+    bands.write(0, 16, ch)
+    with pytest.raises(SubtraceError, match=str(path.parent)):
+        bands.finish({})
+    assert listing(tmp_path) == []

@@ -190,6 +190,10 @@ MEMORY_BYTES_PER_SIDE_SAMPLE = 64
 # a thread's memo of split Bezier nets (trace/bezier.py) is kept within what the budget
 # leaves over, but not below this (below it rays split on the spot: slower, same image)
 MEMORY_MEMO_MIN_BYTES = 8 << 20
+# image rows a render streamed to its output traces, shades and hands over at a time
+# (render.render_bands): its per-pixel arrays are a band's; each band traces the rows of
+# its apron (render.apron) again
+STREAM_ROWS = 64
 
 # Adaptive anti-aliasing (picture.py): a pixel gets more rays when it and a neighbour (right
 # or below) differ in coverage or object, in depth by more than AA_DEPTH_STEP of the

@@ -85,14 +85,14 @@ def _pools(keep, stats) -> Pools:
 
 def _count_secondary(pools, stats) -> None:
     """The patches and micro-triangles secondary rays built, into ``stats``."""
-    if pools is not None:
-        stats.secondary_patches_refined = pools.stats.patches_refined
-        stats.secondary_micro_triangles = pools.stats.micro_triangles
-        stats.secondary_max_depth = pools.stats.max_depth
+    if pools is not None:  # (added up over the bands of an image: render.render_bands)
+        stats.secondary_patches_refined += pools.stats.patches_refined
+        stats.secondary_micro_triangles += pools.stats.micro_triangles
+        stats.secondary_max_depth = max(stats.secondary_max_depth, pools.stats.max_depth)
 
 
 def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, stats,
-          nurbs=None, offset=0):
+          nurbs=None, offset=0, ground=False):
     """Fill the colour (R, G, B) and, with anti-aliasing, filter colour and alpha of
     ``planes`` (len(CHANNELS), W*H) float32, whose other channels :func:`shade.shade` (and
     the NURBS pass) wrote; ``t`` (W*H,) float64 each pixel's hit distance (inf: none);
@@ -142,7 +142,8 @@ def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, st
         col0, row0 = window_offset(frame)
         row, col = np.divmod(np.arange(W * H, dtype=np.int64), W)
         ids = (row + row0) * image.width + col + col0
-    ground = ground_plane(scene, cages, camera, nurbs)
+    if ground is False:
+        ground = ground_plane(scene, cages, camera, nurbs)
     y0 = getattr(camera, "y0", 0)
     rows = background_rows(scene.render.background, scene.render.background_bottom,
                            image.height)[y0:y0 + H]

@@ -15,6 +15,13 @@ Finally ``shade.py`` turns hits into image channels. The scene's free-form (trim
 surfaces are traced after that in a pass of their own
 (:func:`subtrace.nurbs.scene.nurbs_pass`), which overwrites a pixel's channels where its
 hit is nearer.
+
+A render handed to a ``sink`` (``subtrace render`` of an EXR: ``io.exr.ExrBands``) runs in
+bands of ``config.STREAM_ROWS`` rows (:func:`render_bands`): the set-up above is the whole
+image's, once (:func:`trace_setup`); each band's rays go through the rounds
+(:func:`trace_window`), are shaded and painted, and the band is handed over. The per-pixel
+arrays (hit records, requests, candidate lists, channels, normals) are then a band's, and
+the image is never held whole.
 """
 
 from __future__ import annotations
@@ -30,7 +37,7 @@ from subtrace import config
 from subtrace.accel.bvh import build_bvh, no_bvh
 from subtrace.accel.cull import casting_bounds, secondary_origins, secondary_reach, view_test
 from subtrace.accel.projection import TILE, no_tiles, project_shells, tiles_bytes
-from subtrace.camera import CameraWindow, whole_image
+from subtrace.camera import CameraWindow, whole_image, window_offset
 from subtrace.errors import SceneError
 from subtrace.io.limits import check_coordinates, check_valences
 from subtrace.mesh.cage import load_cage, valence_bound
@@ -43,7 +50,7 @@ from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
 from subtrace.runtime.memory import let_go, one_block
 from subtrace.picture import ground_plane, paint
-from subtrace.shade import (C_OBJECT, C_R, CHANNELS, background_rows, deepest_level,
+from subtrace.shade import (C_LEVEL, C_OBJECT, C_R, CHANNELS, background_rows, deepest_level,
                             miss_values, patch_shading, shade)
 from subtrace.subdiv.limit import limit_points
 from subtrace.tiles import check_crop
@@ -51,7 +58,7 @@ from subtrace.trace.bezier import table_loop_flag
 from subtrace.trace.budget import check_memory, choose_within_budget, warn_tiles
 from subtrace.trace.build import build_loop_regular, build_requested, cut_to_loop_nets
 from subtrace.trace.kernels import trace_round
-from subtrace.trace.pools import Memos, Pieces, candidate_lists, round_arrays
+from subtrace.trace.pools import Hits, Memos, Pieces, candidate_lists, round_arrays
 from subtrace.trace.rays import compile_kernel as compile_secondary
 from subtrace.trace.tris import TRI
 
@@ -159,21 +166,83 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
     (``trace.rays.Pools``' fields). ``seen``: None (primary rays alone), or where the
     secondary rays start (``accel.cull.secondary_origins``): depths are then chosen for
     the narrowest cone that may reach each patch (``patches.shells.Sight``)."""
+    shared = trace_setup(table, camera, tol_rad, stats, max_depth, compiling, accel,
+                         max_memory, seen)
+    hits = trace_window(shared, camera.frame(), camera.width, camera.height, progress, keep)
+    return hits, shared.iso, shared.finish()
+
+
+class SharedTrace:
+    """What the rays of every window of one image share (:func:`trace_setup`): the
+    depths, the shells and the structure rays find them by, the threads' memos and the
+    built patches. A patch built for one window's rays is there for the next window's.
+    ``finish()`` counts what was refined into the stats and returns the patches refined."""
+
+    def __init__(self, table, chosen, tiles, bvh, memos, iso, edge_depth, eye, tol_rad,
+                 stats, windows):
+        self.table, self.chosen, self.tiles, self.bvh = table, chosen, tiles, bvh
+        self.memos, self.iso, self.edge_depth, self.eye = memos, iso, edge_depth, eye
+        self.tol_rad, self.stats, self.windows = tol_rad, stats, windows
+        self.loop = table_loop_flag(table)  # (None: a kernel without the Loop descents)
+        self.rounds = 0  # the most rounds a window took
+        self.built_rounds = []  # the pieces' round numbers of the primary rays' builds
+
+    def window_tiles(self, frame, height):
+        """The projection's tiles of the window of ``frame`` (full rows of the image, from
+        an even row) and ``height`` rows: a view of the image's lists (none with the BVH)."""
+        if len(self.tiles.off) <= 1:
+            return self.tiles
+        col0, row0 = window_offset(frame)
+        per_row = int(self.tiles.per_row)
+        if col0 or row0 % TILE:
+            raise ValueError("a window of the image's tiles has full rows from an even row")
+        b0, ty = row0 // TILE, -(-int(height) // TILE)
+        return self.tiles._replace(off=self.tiles.off[b0 * per_row:(b0 + ty) * per_row + 1])
+
+    def finish(self):
+        """Count the patches refined and pieces made into the stats; returns the ids of
+        every patch refined."""
+        stats, iso = self.stats, self.iso
+        stats.rounds = self.rounds
+        self.memos.finish(stats)
+        # regular patches count as refined once a ray has descended into them
+        first = (iso.a["round"] < 0) & (iso.a["touched"] > 0)
+        direct = iso.a["patch"][first]
+        stats.patches_refined += len(direct)
+        # (regular Loop nets are built before the first round: they count as pieces once a
+        # ray descends into them, as they did when rays asked for them)
+        stats.pieces += int(np.count_nonzero(first & (iso.a["kind"][iso.a["first"]] == TRI)))
+        # (what secondary rays built between windows is counted apart: picture.py)
+        primary = np.isin(iso.a["round"], self.built_rounds)
+        keep = primary | (iso.a["round"] < 0)
+        first, count = iso.a["first"][keep], iso.a["count"][keep]
+        items = np.repeat(first - np.cumsum(count) + count, count) + np.arange(count.sum())
+        stats.max_depth = int(iso.a["depth_i"][items].max(initial=0))
+        return np.concatenate([iso.a["patch"][primary], direct])
+
+
+def trace_setup(table, camera, tol_rad, stats, max_depth=None, compiling=None, accel=None,
+                max_memory=None, seen=None, windows=False) -> SharedTrace:
+    """What :func:`trace_hits` does before its rounds (see there): the depths, the shells'
+    projection (or BVH), the memos, the regular patches' pieces; the kernels waited for.
+    ``windows``: the rays will be traced in windows of full rows of ``camera``'s image
+    (:meth:`SharedTrace.window_tiles`), not all at once."""
     accel = config.PRIMARY_ACCEL if accel is None else accel
     if accel not in ("projection", "bvh"):
         raise ValueError(f"unknown acceleration {accel!r}")
     W, H = camera.width, camera.height
     frame = camera.frame()
     # (a window, ``camera.CameraWindow``, budgets for its own pixels)
-    image = whole_image(camera)
+    whole = whole_image(camera)
     t0 = time.perf_counter()
     eye = frame[0] if seen is None else Sight(frame[0], *seen)
+    # (the budget is the image's, in windows too: the same depths as a render at once)
     chosen = choose_within_budget(table, eye, tol_rad, max_depth, max_memory, W * H, stats)
     stats.time_refine += time.perf_counter() - t0
     t0 = time.perf_counter()
     cut_to_loop_nets(table, chosen.shell_min, chosen.shell_max)
     tiles, bvh = _shell_walk(chosen, frame, W, H, accel, max_memory, stats,
-                             None if image is camera else (image.width, image.height))
+                             None if whole is camera else (whole.width, whole.height))
     stats.time_preprocess += time.perf_counter() - t0
     n_threads = tasks.thread_count()
     memo_bytes = (None if chosen.left is None
@@ -189,15 +258,6 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
         # the picture's lights, edge flags and background until the trace kernel is ready
         warmup.picture_while_tracing(compiling, tasks.thread_count())
     warmup.wait_traced(compiling)
-    return _rounds(table, frame, W, W * H, tol_rad, chosen, tiles, bvh,
-                   Memos(n_threads, memo_bytes), stats, progress, keep, eye)
-
-
-def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, stats, progress,
-            keep, eye):
-    """The rounds of :func:`trace_hits`: trace the rays that asked, build what they asked
-    for, until no ray asks. ``eye``: what the depths were chosen from (``frame``'s eye,
-    or a ``patches.shells.Sight``)."""
     depths = chosen.depths
     edge_depth, reg_side = edge_sampling(table, depths)
     iso = Pieces(table.n_patches)
@@ -211,20 +271,40 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
     iso.append_regular(reg, depths[reg], reg_side, None, table.shell_min[reg],
                        table.shell_max[reg])
     build_loop_regular(table, depths, edge_depth, iso)
+    return SharedTrace(table, chosen, tiles, bvh, Memos(n_threads, memo_bytes), iso,
+                       edge_depth, eye, tol_rad, stats, windows and whole is camera)
+
+
+def trace_window(shared, frame, width, height, progress=None, keep=None, hits=None):
+    """The rounds of the rays of the window ``frame`` (``width`` x ``height`` pixels; the
+    whole image's frame, or a window's of full rows: :meth:`SharedTrace.window_tiles`):
+    trace the rays that asked, build what they asked for, until no ray asks. Returns the
+    hit records (in ``hits``, (Hits, requests) of at least the window's pixels, when
+    given). ``keep``: as in :func:`trace_hits`."""
+    table, chosen, iso, memos, stats = (shared.table, shared.chosen, shared.iso, shared.memos,
+                                        shared.stats)
+    depths = chosen.depths
+    n_rays = width * height
+    tiles = shared.window_tiles(frame, height) if shared.windows else shared.tiles
     # (round 0 writes every ray's request)
-    hits, request = round_arrays(n_rays)
+    if hits is None:
+        hits, request = round_arrays(n_rays)
+    else:
+        hits, request = Hits(*(f[:n_rays] for f in hits[0])), hits[1][:n_rays]
     # the micro-triangles each thread's rays built (each chunk of rays counts what its own
     # memo built: the sum is the same on any threads)
     tested = np.zeros(len(memos.m), np.int64)
     cands = candidate_lists(n_rays, table.n_patches, tiles.off)  # (rows: pools.Candidates)
     rays = None  # round 0: every pixel's ray
     round_no = 0
-    loop = table_loop_flag(table)  # (None: a kernel without the Loop descents)
+    # (the pieces record the round they were built in: this window's rounds are numbered
+    # on from every earlier build, its secondary rays' too)
+    base = int(iso.a["round"].max(initial=-1)) + 1
     while rays is None or len(rays):
         t0 = time.perf_counter()
-        trace_round(rays, frame, width, round_no, bvh, tiles, chosen.shell_min,
+        trace_round(rays, frame, width, round_no, shared.bvh, tiles, chosen.shell_min,
                     chosen.shell_max, iso.view(), memos.views(len(iso.a["kind"])), cands,
-                    config.TRI_SLACK, hits, request, tested, loop)
+                    config.TRI_SLACK, hits, request, tested, shared.loop, base)
         stats.time_trace += time.perf_counter() - t0
         # the rays that asked: traced again
         rays = np.flatnonzero(request >= 0) if rays is None else rays[request[rays] >= 0]
@@ -235,8 +315,8 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
         t0 = time.perf_counter()
         new = np.nonzero(cands.wanted)[0]  # (kernels.py: requests and what they overlap)
         cands.wanted[:] = 0
-        build_requested(table, new, depths, edge_depth, iso, round_no, stats, eye, tol_rad,
-                        chosen.record)
+        build_requested(table, new, depths, shared.edge_depth, iso, base + round_no, stats,
+                        shared.eye, shared.tol_rad, chosen.record)
         # a built patch's shell shrinks to its items' boxes (all that rays test of it):
         # later rounds, and the secondary rays' BVH, enter it less often
         built = new[iso.patch_iso[new] >= 0]
@@ -245,25 +325,18 @@ def _rounds(table, frame, width, n_rays, tol_rad, chosen, tiles, bvh, memos, sta
             chosen.shell_min[built] = np.maximum(chosen.shell_min[built], lo)
             chosen.shell_max[built] = np.minimum(chosen.shell_max[built], hi)
         stats.time_refine += time.perf_counter() - t0
+        shared.built_rounds.append(base + round_no)
         round_no += 1
-    stats.rounds = round_no + 1
-    memos.finish(stats)
+    shared.rounds = max(shared.rounds, round_no + 1)
     stats.micro_triangles += int(tested.sum())
-    # regular patches count as refined once a ray has descended into them
-    first = (iso.a["round"] < 0) & (iso.a["touched"] > 0)
-    direct = iso.a["patch"][first]
-    stats.patches_refined += len(direct)
-    # (regular Loop nets are built before the first round: they count as pieces once a ray
-    # descends into them, as they did when rays asked for them)
-    stats.pieces += int(np.count_nonzero(first & (iso.a["kind"][iso.a["first"]] == TRI)))
-    stats.max_depth = int(iso.a["depth_i"].max(initial=0))
-    built = np.concatenate([iso.a["patch"][iso.a["round"] >= 0], direct])
     if keep is not None:  # for secondary rays (trace/rays.py)
-        keep.update(table=table, depths=depths, edge_depth=edge_depth, iso=iso,
+        keep.update(table=table, depths=depths, edge_depth=shared.edge_depth, iso=iso,
                     record=chosen.record, shell_min=chosen.shell_min,
-                    shell_max=chosen.shell_max, bvh=bvh, eye=eye, tol_rad=tol_rad,
-                    stats=stats, round_no=round_no + 1, memo_bytes=memos.max_bytes)
-    return hits, iso, built
+                    shell_max=chosen.shell_max, bvh=keep.get("bvh", shared.bvh),
+                    eye=shared.eye, tol_rad=shared.tol_rad, stats=stats,
+                    round_no=base + round_no + 1,
+                    memo_bytes=memos.max_bytes)
+    return hits
 
 
 def cage_objects(scene) -> list[int]:
@@ -409,12 +482,15 @@ def crop_window(camera, crop, margin=1) -> CameraWindow:
 
 
 def apron(scene) -> int:
-    """The pixels a tile's window holds around the tile (:func:`crop_window`)."""
+    """The pixels a tile's window holds around the tile (:func:`crop_window`): none when a
+    pixel's value is its own rays' alone (one ray a pixel, no ambient occlusion)."""
+    if (scene.render.samples or 1) <= 1 and scene.render.ao <= 0:
+        return 0
     return 1 + (config.AO_SMOOTH_RADIUS if scene.render.ao > 0 else 0)
 
 
 def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
-                 crop=None) -> RenderResult:
+                 crop=None, sink=None, band_rows=None) -> RenderResult:
     """Render a :class:`subtrace.io.scene.Scene`; returns the channels and statistics.
     ``accel``: how rays find the shells they enter (see :func:`trace_hits`). ``progress``:
     None, or called as ``progress(done, total, label)`` with the rays whose hits are final
@@ -426,7 +502,12 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
     for bit to those pixels of the whole render (the camera, tolerance, patch table, depths
     and projection lists are the whole image's; the per-pixel arrays are the window's, and
     the memory budget holds them: where the whole image's pixels would make the budget cap
-    depths (a warning says so), its tiles, needing less, may be refined further)."""
+    depths (a warning says so), its tiles, needing less, may be refined further).
+    ``sink``: None (the result holds the channels), or ``sink(y0, y1, channels)``, told
+    the image's rows [y0, y1) (name -> (y1 - y0, W) float32 views, valid during the call)
+    band after band, top to bottom (:func:`render_bands`; ``band_rows``: their height):
+    the result's channels are then empty. Only a whole image of cages is rendered in bands
+    (a crop, or free-form surfaces, go to the sink as one band)."""
     t_start = time.perf_counter()
     threads = tasks.usable_threads(threads)
     accel = config.PRIMARY_ACCEL if accel is None else accel
@@ -447,8 +528,12 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
         if progress is not None:
             progress(0, stats.rays, "tracing")
         keep = {}
+        banded = sink is not None and table is not None and nurbs is None and crop is None
         if table is None:
             warmup.stop(compiling)  # no cage: the subdivision kernels are not needed
+        elif banded:
+            shared = trace_setup(table, view, tol_rad, stats, compiling=compiling, accel=accel,
+                                 max_memory=budget, seen=seen, windows=True)
         else:
             hits, iso, built = trace_hits(table, view, tol_rad, stats, compiling=compiling,
                                           accel=accel, progress=progress, max_memory=budget,
@@ -456,6 +541,9 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
     except BaseException:
         warmup.stop(compiling)
         raise
+    if banded:
+        return render_bands(scene, cages, owners, camera, shared, keep, stats, sink,
+                            band_rows, compiling, progress, t_start, accel)
     try:  # (a helper may still be compiling the picture's kernels)
         t0 = time.perf_counter()
         W, H = view.width, view.height
@@ -468,15 +556,8 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
         miss = miss_values(scene.render.background)
         patches = None
         if table is None:  # free-form surfaces only: the background, then the NURBS pass
-            planes[:] = miss[:, None]
-            y0 = getattr(view, "y0", 0)  # (a window's rows of the image's gradient)
-            rows = background_rows(scene.render.background, scene.render.background_bottom,
-                                   camera.height)[y0:y0 + H]
-            for k in range(3):
-                planes[C_R + k] = np.repeat(rows[:, k], W)
+            t = _background(scene, view, camera.height, miss, planes, pix_patch)
             built = np.zeros(0, np.int64)
-            pix_patch[:] = -1
-            t = np.full(W * H, np.inf)
         else:
             patches = patch_shading(table, [scene.objects[k] for k in owners])
             shade(frame, W, hits, iso.view(), patches, miss, planes, normals, pix_patch, covered,
@@ -512,20 +593,119 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
           offset)
     stats.time_shade = time.perf_counter() - t0
     if crop is not None:  # the tile's pixels of the window
-        x0, y0, x1, y1 = crop
-        cx, cy = x0 - view.x0, y0 - view.y0
-        planes = np.ascontiguousarray(planes.reshape(len(CHANNELS), H, W)[
-            :, cy:cy + y1 - y0, cx:cx + x1 - x0]).reshape(len(CHANNELS), -1)
-        W, H = x1 - x0, y1 - y0
+        planes, W, H = _cropped(planes, crop, view)
     stats.pixels_covered = (int(covered.sum()) if nurbs is None and crop is None
                             else int(np.count_nonzero(planes[C_OBJECT] >= 0)))
     stats.max_level = deepest_level(planes)
     channels = {name: planes[k].reshape(H, W) for k, name in enumerate(CHANNELS)}
+    if sink is not None:  # (free-form surfaces or a crop: one band)
+        t0 = time.perf_counter()
+        sink(0, H, channels)
+        t_start += time.perf_counter() - t0
+        channels = {}
     stats.time_total = time.perf_counter() - t_start
     schemes = tuple(c.scheme for c in cages) + (("nurbs",) if nurbs is not None else ())
     used = "bvh" if stats.accel_fallback else accel
     refined = np.zeros(0, np.int32) if table is None else table.object_id[built]
     return RenderResult(channels, stats, camera, tol_rad, schemes, refined, used, crop)
+
+
+def _background(scene, view, image_height, miss, planes, pix_patch):
+    """``planes`` of a render without cages before the NURBS pass: every ray missed (the
+    background's rows of the image's gradient); returns their distances (inf)."""
+    planes[:] = miss[:, None]
+    y0 = getattr(view, "y0", 0)  # (a window's rows of the image's gradient)
+    rows = background_rows(scene.render.background, scene.render.background_bottom,
+                           image_height)[y0:y0 + view.height]
+    for k in range(3):
+        planes[C_R + k] = np.repeat(rows[:, k], view.width)
+    pix_patch[:] = -1
+    return np.full(view.width * view.height, np.inf)
+
+
+def _cropped(planes, crop, view):
+    """The planes of ``crop``'s pixels of its ``view`` (window); their width, height."""
+    x0, y0, x1, y1 = crop
+    cx, cy = x0 - view.x0, y0 - view.y0
+    planes = np.ascontiguousarray(planes.reshape(len(CHANNELS), view.height, view.width)[
+        :, cy:cy + y1 - y0, cx:cx + x1 - x0]).reshape(len(CHANNELS), -1)
+    return planes, x1 - x0, y1 - y0
+
+
+_BAND_ALIGN = 16  # rows: a band is a multiple of this (io.exr.LINES_PER_BLOCK)
+
+
+def render_bands(scene, cages, owners, camera, shared, keep, stats, sink, band_rows,
+                 compiling, progress, t_start, accel) -> RenderResult:
+    """The rest of :func:`render_scene` in bands of ``band_rows`` rows (default
+    ``config.STREAM_ROWS``), each traced, shaded and painted as the window of
+    :func:`crop_window` around it (its apron's pixels traced again by the next band) and
+    handed to ``sink``: the per-pixel arrays are a band's, not the image's. Rays share
+    the depths, the projection's lists, the memos and what earlier bands built
+    (:class:`SharedTrace`), so a patch is built once. Each band's pixels are those of a
+    render of the whole image (the tile renders' argument: the same rays, depths and
+    pieces; only the order in which a ray meets the patches built differs)."""
+    W, H = camera.width, camera.height
+    # (whole blocks of an EXR's lines, io.exr.LINES_PER_BLOCK, and so of tiles' rows)
+    rows = config.STREAM_ROWS if band_rows is None else int(band_rows)
+    rows = max(_BAND_ALIGN, rows - rows % _BAND_ALIGN)
+    margin = apron(scene)
+    table = shared.table
+    patches = patch_shading(table, [scene.objects[k] for k in owners])
+    miss = miss_values(scene.render.background)
+    remap = (None if owners == list(range(len(owners)))
+             else np.array(owners, np.float32))  # objects without a cage: scene indices
+    # one band's arrays, reused: a window holds at most its band, the apron on both
+    # sides and a row more on each for the even bounds
+    n_max = W * min(H, rows + 2 * (margin + 1))
+    buffers = round_arrays(n_max)
+    planes_store, normals_store, pix_store = one_block(
+        ((len(CHANNELS) * n_max,), np.float32), ((3 * n_max,), np.float64), ((n_max,), np.int32))
+    covered = np.zeros(tasks.thread_count(), np.int64)
+    n_covered = 0
+    max_level = -1
+    t_sink = t_shade = 0.0
+    ground = ground_plane(scene, cages, camera) if scene.ground is not None else None
+    for y0 in range(0, H, rows):
+        y1 = min(H, y0 + rows)
+        window = crop_window(camera, (0, y0, W, y1), margin)
+        h = window.height
+        n = W * h
+        frame = window.frame()
+        band_progress = (None if progress is None else
+                         lambda done, total, label, y0=y0: progress(
+                             W * y0 + done * (y1 - y0) // max(h, 1), W * H, label))
+        hits = trace_window(shared, frame, W, h, band_progress, keep, buffers)
+        t0 = time.perf_counter()
+        planes = planes_store[:len(CHANNELS) * n].reshape(len(CHANNELS), n)
+        normals, pix_patch = normals_store[:3 * n].reshape(n, 3), pix_store[:n]
+        shade(frame, W, hits, shared.iso.view(), patches, miss, planes, normals, pix_patch,
+              covered, loop=shared.loop)
+        if remap is not None:
+            hit = planes[C_OBJECT] >= 0
+            planes[C_OBJECT][hit] = remap[planes[C_OBJECT][hit].astype(np.int64)]
+        if y0 == 0:  # (the first band: the picture's kernels a helper compiled meanwhile)
+            if compiling is not None and compiling.procs and keep:
+                warmup.compile_bvh()
+            warmup.wait(compiling)
+        paint(scene, cages, window, keep, hits.t, normals, pix_patch, patches, planes, stats,
+              ground=ground)
+        band = planes.reshape(len(CHANNELS), h, W)[:, y0 - window.y0:y1 - window.y0]
+        n_covered += int(np.count_nonzero(band[C_OBJECT] >= 0))
+        max_level = max(max_level, int(band[C_LEVEL].max(initial=-1.0)))
+        t_shade += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        sink(y0, y1, {name: band[k] for k, name in enumerate(CHANNELS)})
+        t_sink += time.perf_counter() - t0
+    stats.time_shade = t_shade
+    built = shared.finish()
+    stats.pixels_covered = n_covered
+    stats.max_level = max_level
+    stats.time_total = time.perf_counter() - t_start - t_sink
+    schemes = tuple(c.scheme for c in cages)
+    used = "bvh" if stats.accel_fallback else accel
+    return RenderResult({}, stats, camera, shared.tol_rad, schemes,
+                        table.object_id[built], used, None)
 
 
 def _nurbs_hits(scene, nurbs, frame, W, H, tol_rad, table, t, normals, pix_patch, patches,

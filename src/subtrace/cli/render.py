@@ -97,6 +97,9 @@ def execute(args) -> int:
 
     progress = ProgressBar() if sys.stderr.isatty() and not args.quiet else None
     if numbers is None and tile is None and dask is None:
+        if picture is None and crop is None:  # an EXR of the whole image: streamed
+            _render_streamed(args, scene, out, png, progress)
+            return 0
         result = render_scene(scene, threads=args.threads, accel=args.accel, progress=progress,
                               crop=crop)
         _write(args, scene, result, out, png, picture, bits)
@@ -132,6 +135,34 @@ def _write(args, scene, result, out, png, picture, bits) -> None:
                        scene.render.transparent)
     if not args.quiet:
         print(_summary(out, png, result, took))
+
+
+def _render_streamed(args, scene, out, png, progress) -> None:
+    """Render the whole image in bands (``render.render_scene(sink=...)``), each encoded
+    into the EXR as it is done (``io.exr.ExrBands``), so that neither the image's per-pixel
+    arrays nor its channels are held at once; write the file and print its summary line.
+    The write time is the bands' encoding and the file's writing."""
+    import time
+
+    from subtrace.io.exr import ExrBands
+    from subtrace.jobs import result_files
+    from subtrace.render import render_scene
+
+    exr = ExrBands(out, scene.camera.width, scene.camera.height, png)
+    took = [0.0]
+
+    def sink(y0, y1, channels):
+        t0 = time.perf_counter()
+        exr.write(y0, y1, channels)
+        took[0] += time.perf_counter() - t0
+
+    result = render_scene(scene, threads=args.threads, accel=args.accel, progress=progress,
+                          sink=sink)
+    t0 = time.perf_counter()
+    exr.finish(result_files(result, scene))
+    took[0] += time.perf_counter() - t0
+    if not args.quiet:
+        print(_summary(out, png, result, took[0]))
 
 
 def _summary(out, png, result, time_write: float) -> str:

@@ -18,11 +18,20 @@ took 0.36 s of a 0.42 s write of a 1280x720 film with 16 channels (0.14 s this w
 Every file is written through :mod:`subtrace.io.atomic` (a hidden temporary in the
 destination folder, then os.replace), so a failure never leaves a partial file and never
 touches an existing one; failures raise SubtraceError naming the path.
+
+A render streamed in bands of rows (``render.render_scene(sink=...)``) is written by
+:class:`ExrBands`: each band is encoded as it arrives (OpenEXR's ZIP blocks of 16 lines,
+compressed on every core) and only its compressed blocks are kept; once the last band is
+in, the header (with the render's statistics, known only then) is written, then the
+blocks' offsets and the blocks. The file is the one :func:`write_exr` writes from the
+whole image, byte for byte (tests/test_exr.py).
 """
 
 from __future__ import annotations
 
+import io
 import os
+import struct
 import threading
 
 import numpy as np
@@ -113,6 +122,130 @@ def write_exr(path, channels: dict, attributes: dict | None = None, png_path=Non
         jobs.append((png_path, "png", _png_spec(width, height),
                      lambda: srgb8(np.stack(rgb, axis=-1))))
     _write_all(jobs)
+
+
+# scanlines per ZIP block (OpenEXR): bands but the last are whole blocks, so that the blocks
+# of the bands are the whole image's
+LINES_PER_BLOCK = 16
+
+
+class ExrBands:
+    """An EXR with the channels of :func:`write_exr`, written band by band (rows
+    ``[y0, y1)`` in order, top to bottom; every band but the last a multiple of
+    ``LINES_PER_BLOCK`` rows), and its optional sRGB PNG preview: only the compressed blocks
+    of the bands (and the preview's 8-bit pixels) are held, not the image. ``write(y0, y1,
+    channels)`` takes a band (name -> (y1 - y0, width) arrays, the same names each time);
+    ``finish(attributes)`` writes the file (atomically, as :func:`write_exr`) with the header
+    ``attributes``. Nothing is written before ``finish``."""
+
+    def __init__(self, path, width: int, height: int, png_path=None):
+        self.path, self.png_path = path, png_path
+        self.width, self.height = int(width), int(height)
+        self.blocks: list[bytes] = []  # each block's record (y, size, data), top to bottom
+        self.rows = 0  # rows written
+        self.names: list[str] | None = None
+        self.rgb = None if png_path is None else np.empty((self.height, self.width, 3), np.uint8)
+
+    def write(self, y0: int, y1: int, channels: dict) -> None:
+        """Encode rows [y0, y1) of every channel (see the class comment)."""
+        y0, y1 = int(y0), int(y1)
+        if y0 != self.rows or not y0 < y1 <= self.height:
+            raise ValueError(f"rows {y0}..{y1}: bands come in order, from row {self.rows}")
+        if y1 < self.height and (y1 - y0) % LINES_PER_BLOCK:
+            raise ValueError(f"a band but the last is a multiple of {LINES_PER_BLOCK} rows")
+        names, arrays = _channel_arrays(channels)
+        if arrays[0].shape != (y1 - y0, self.width):
+            raise ValueError(f"expected ({y1 - y0}, {self.width}) arrays, got {arrays[0].shape}")
+        if self.names is not None and names != self.names:
+            raise ValueError(f"channels {names} differ from the first band's {self.names}")
+        self.names = names
+        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
+                  "dataWindow": _box(0, y0, self.width, y1 - y0),
+                  "displayWindow": _box(0, 0, self.width, self.height)}
+        self.blocks += _blocks(_encoded(header, _pixels(names, arrays)))
+        if self.rgb is not None:
+            if any(c not in channels for c in "RGB"):
+                raise ValueError("a PNG preview needs channels R, G, B")
+            self.rgb[y0:y1] = srgb8(np.stack([np.asarray(channels[c]) for c in "RGB"], -1))
+        self.rows = y1
+
+    def finish(self, attributes: dict | None = None) -> None:
+        """Write the file (and the preview): the header with ``attributes`` (as
+        :func:`write_exr` takes them), the blocks' offsets, the blocks."""
+        if self.rows != self.height:
+            raise ValueError(f"{self.rows} of {self.height} rows written")
+        # the header: a one-row file's with the same channels and attributes, its data
+        # window then widened to the image (a value of the same size, rewritten in place)
+        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
+                  "dataWindow": _box(0, 0, self.width, 1),
+                  "displayWindow": _box(0, 0, self.width, self.height)}
+        for key, value in _header(attributes or {}).items():
+            if not key.startswith("oiio:"):
+                header[key] = _attribute_value(key, value)
+        one_row = {n: np.zeros((1, self.width), np.float16 if n in HALF_CHANNELS else
+                               np.float32) for n in self.names}
+        start, attrs, window = _header_bytes(_encoded(header, one_row))
+        attrs[window:window + 16] = struct.pack("<4i", 0, 0, self.width - 1, self.height - 1)
+        head = start + bytes(attrs)
+        offsets = np.cumsum([0] + [len(b) for b in self.blocks[:-1]], dtype=np.uint64)
+        offsets += np.uint64(len(head) + 8 * len(self.blocks))
+        parts = [head, offsets.astype("<u8").tobytes(), *self.blocks]
+        jobs = [(self.path, "bytes", None, parts)]
+        if self.png_path is not None:
+            jobs.append((self.png_path, "png", _png_spec(self.width, self.height), self.rgb))
+        _write_all(jobs)
+
+
+def _box(x: int, y: int, width: int, height: int):
+    """An OpenEXR box (Box2i) from (x, y) of ``width`` x ``height`` pixels."""
+    return (np.array([x, y], np.int32), np.array([x + width - 1, y + height - 1], np.int32))
+
+
+def _pixels(names, arrays) -> dict:
+    """Each channel in its pixel type (module comment)."""
+    with np.errstate(over="ignore"):  # (beyond half's range is +-inf, as OpenEXR rounds)
+        return {n: a.astype(np.float16) if n in HALF_CHANNELS else np.ascontiguousarray(a)
+                for n, a in zip(names, arrays)}
+
+
+def _encoded(header: dict, pixels: dict) -> bytes:
+    """The OpenEXR file of ``header`` and ``pixels``, in memory."""
+    if OpenEXR.global_thread_count() == 0:  # (its ZIP blocks compressed on every core)
+        OpenEXR.set_global_thread_count(max_threads())
+    stream = io.BytesIO()
+    OpenEXR.File(header, pixels).write(stream)
+    return stream.getvalue()
+
+
+def _header_bytes(data: bytes):
+    """(magic number and version, the header's attributes with the terminating NUL as a
+    bytearray, the offset of the ``dataWindow`` value in them) of a single-part scanline
+    OpenEXR file ``data``."""
+    at, window = 8, None
+    while data[at] != 0:  # attribute: name NUL, type NUL, size (int32), value
+        name_end = data.index(b"\0", at)
+        type_end = data.index(b"\0", name_end + 1)
+        (size,) = struct.unpack_from("<i", data, type_end + 1)
+        if data[at:name_end] == b"dataWindow":
+            window = type_end + 5 - 8
+        at = type_end + 5 + size
+    return data[:8], bytearray(data[8:at + 1]), window
+
+
+def _blocks(data: bytes) -> list[bytes]:
+    """The blocks of a single-part scanline OpenEXR file ``data``: each block's record (its
+    first line, size, compressed lines), in the order of the offset table."""
+    _, attrs, window = _header_bytes(data)
+    y_min, y_max = struct.unpack_from("<i", attrs, window + 4)[0], \
+        struct.unpack_from("<i", attrs, window + 12)[0]
+    n = -(-(y_max - y_min + 1) // LINES_PER_BLOCK)
+    table = 8 + len(attrs)
+    offsets = struct.unpack_from(f"<{n}Q", data, table)
+    blocks = []
+    for off in offsets:
+        (size,) = struct.unpack_from("<i", data, off + 4)
+        blocks.append(data[off:off + 8 + size])
+    return blocks
 
 
 def write_png(path, rgb_linear) -> None:
@@ -333,6 +466,14 @@ def _write_image(path_str: str, temp: str, fmt: str, spec, pixels) -> None:
     if fmt == "openexr":
         _write_openexr(path_str, temp, spec, pixels)
         return
+    if fmt == "bytes":  # (pixels: the file's parts, in order)
+        try:
+            with open_temp(temp, "wb") as stream:
+                for part in pixels:
+                    stream.write(part)
+        except OSError as err:
+            raise SubtraceError(f"{path_str}: cannot write the file: {reason(err)}") from None
+        return
     out = oiio.ImageOutput.create(fmt)
     if out is None:
         raise SubtraceError(f"{path_str}: OpenImageIO has no {fmt} writer: {_oiio_error()}")
@@ -371,4 +512,4 @@ def _oiio_error(obj=None) -> str:
     return " ".join(message.split()) or "unknown error"
 
 
-__all__ = ["write_exr", "write_png", "read_exr", "srgb8", "check_writable", "CHANNEL_ORDER"]
+__all__ = ["write_exr", "ExrBands", "write_png", "read_exr", "srgb8", "check_writable", "CHANNEL_ORDER"]

@@ -45,7 +45,7 @@ BAND_CHUNK = 2  # bands a thread takes at a time (the next free ones, as it fini
 
 
 def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, iso, mems,
-                cands, slack, hits, request, tested, loop):
+                cands, slack, hits, request, tested, loop, base=0):
     """One round for the rays ``rays`` (sorted pixel indices; None: every pixel's): update
     ``hits`` (a :class:`~subtrace.trace.pools.Hits` over all pixels) and set ``request[r]``
     to the nearest unbuilt patch the ray reaches first (or -1). Round 0 starts every ray
@@ -66,7 +66,10 @@ def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, 
     image does not depend on the threads. ``cands``
     (:class:`~subtrace.trace.pools.Candidates`) carries each ray's unbuilt shells to the
     next round. ``loop``: ``bezier.loop_flag`` of the patches (None: no Loop patch, and a
-    kernel compiled without the Loop descents).
+    kernel compiled without the Loop descents). ``base``: the rounds' number in the
+    pieces' records (``round``) of this call's round 0: a patch built in round
+    ``base + k`` is tested in round ``k + 1`` (in round 0, every patch built before); the
+    windows of one image (``render.trace_window``) count their rounds on from the last.
     """
     max_d = int(iso.depth_i.max(initial=0))
     band_rows = BAND_ROWS * int(width)
@@ -83,7 +86,7 @@ def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, 
     # dispatcher types plain tuples of arrays in C but named tuples in Python (28 against
     # 9 us a call, measured; a render of the sword makes about 320 calls)
     args = (float(frame[0, 0]), float(frame[0, 1]), float(frame[0, 2]), frame, int(width),
-            int(round_no), tuple(bvh), tuple(tiles), shell_min, shell_max, tuple(iso), tuple(tuple(m) for m in mems), scratch, tuple(cands), float(slack),
+            int(round_no), int(base), tuple(bvh), tuple(tiles), shell_min, shell_max, tuple(iso), tuple(tuple(m) for m in mems), scratch, tuple(cands), float(slack),
             tuple(hits), request, tested, loop)
 
     def work(t, a, b):
@@ -154,15 +157,16 @@ def _sort_candidates(cands, r):
 
 
 @inline_njit
-def _visit(p, ray, round_no, iso, mem, slack, hit, scratch, loop):
-    """Intersect patch ``p`` for the ray if it was built in the previous round: the
-    micro-triangles that built (0 for an older patch), or -1 if it is unbuilt. (A function,
+def _visit(p, ray, round_no, base, iso, mem, slack, hit, scratch, loop):
+    """Intersect patch ``p`` for the ray if it was built in the previous round (in round
+    0: at all; :func:`trace_round`'s ``base``): the micro-triangles that built (0 for an
+    older patch), or -1 if it is unbuilt. (A function,
     not a closure of the kernel: a closure over the bundles named inside the kernel lost
     its writes, with Numba 0.68.)"""
     s = iso.patch_iso[p]
     if s < 0:
         return -1
-    if iso.round[s] != round_no - 1:
+    if round_no > 0 and iso.round[s] != base + round_no - 1:
         return 0
     if iso.touched[s] == 0:  # (a store, even of the same value, takes the cache line from
         iso.touched[s] = 1   # the other threads reading it)
@@ -170,7 +174,7 @@ def _visit(p, ray, round_no, iso, mem, slack, hit, scratch, loop):
 
 
 @nb.njit(cache=True, nogil=True, _nrt=False, error_model="numpy")  # see jit.leaf_njit
-def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, tiles_t,
+def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, base, bvh_t, tiles_t,
                 shell_min, shell_max, iso_t, mems_t, scratches, cands_t, slack, hits_t,
                 request, tested, loop):
     """The bands of rays ``bands`` (band k: rays[bands[k]:bands[k+1]]) on thread ``task``,
@@ -249,7 +253,7 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, bvh_t, ti
                 j += 1
                 if te == np.inf:
                     continue
-                built = _visit(p, ray, round_no, iso, mem, slack, hit, scratch, loop)
+                built = _visit(p, ray, round_no, base, iso, mem, slack, hit, scratch, loop)
                 if built >= 0:
                     n_tested += built
                 else:
