@@ -191,9 +191,12 @@ MEMORY_BYTES_PER_SIDE_SAMPLE = 64
 # leaves over, but not below this (below it rays split on the spot: slower, same image)
 MEMORY_MEMO_MIN_BYTES = 8 << 20
 # image rows a render streamed to its output traces, shades and hands over at a time
-# (render.render_bands): its per-pixel arrays are a band's; each band traces the rows of
-# its apron (render.apron) again
-STREAM_ROWS = 64
+# (render.render_bands; a multiple of 16, an EXR's ZIP block): its per-pixel arrays are a
+# band's; each band traces the rows of its apron (render.apron) again. Smaller bands hold
+# less but cost more: every band is a pass of the rounds, and what its rays ask for is
+# built in calls of its own (BENCHMARKS.md, "Renders streamed in bands": 64 rows were
+# 4-26 % slower than the whole image at once on the benchmark scenes, 128 rows -3-9 %)
+STREAM_ROWS = 128
 
 # Adaptive anti-aliasing (picture.py): a pixel gets more rays when it and a neighbour (right
 # or below) differ in coverage or object, in depth by more than AA_DEPTH_STEP of the
