@@ -68,7 +68,8 @@ def test_bands_are_the_whole_render(path):
     for rows in (16, 32):
         bands, result, _ = _banded(scene, rows)
         for name, plane in whole.channels.items():
-            np.testing.assert_array_equal(bands[name], plane, err_msg=f"{path.stem} {rows}: {name}")
+            np.testing.assert_array_equal(bands[name], plane,
+                                          err_msg=f"{path.stem} {rows}: {name}")
         assert result.stats.pixels_covered == whole.stats.pixels_covered
         assert result.stats.max_level == whole.stats.max_level
         assert result.stats.rays == whole.stats.rays

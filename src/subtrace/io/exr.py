@@ -21,9 +21,9 @@ touches an existing one; failures raise SubtraceError naming the path.
 
 A render streamed in bands of rows (``render.render_scene(sink=...)``) is written by
 :class:`ExrBands`: each band is encoded as it arrives (OpenEXR's ZIP blocks of 16 lines,
-compressed on every core) and only its compressed blocks are kept; once the last band is
-in, the header (with the render's statistics, known only then) is written, then the
-blocks' offsets and the blocks. The file is the one :func:`write_exr` writes from the
+compressed on every core) and its compressed blocks are set aside in an unnamed temporary
+file; once the last band is in, the header (with the render's statistics, known only then)
+is written, then the blocks' offsets and the blocks. The file is the one :func:`write_exr` writes from the
 whole image, byte for byte (tests/test_exr.py).
 """
 
@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import io
 import os
+import shutil
 import struct
 import threading
 
@@ -132,16 +133,19 @@ LINES_PER_BLOCK = 16
 class ExrBands:
     """An EXR with the channels of :func:`write_exr`, written band by band (rows
     ``[y0, y1)`` in order, top to bottom; every band but the last a multiple of
-    ``LINES_PER_BLOCK`` rows), and its optional sRGB PNG preview: only the compressed blocks
-    of the bands (and the preview's 8-bit pixels) are held, not the image. ``write(y0, y1,
+    ``LINES_PER_BLOCK`` rows), and its optional sRGB PNG preview. Each band is encoded as it
+    arrives and its compressed blocks go to an unnamed temporary file in the output's
+    folder (no name in the folder, gone with the process), so that neither the image nor
+    its encoding is held in memory; only the preview's 8-bit pixels are. ``write(y0, y1,
     channels)`` takes a band (name -> (y1 - y0, width) arrays, the same names each time);
-    ``finish(attributes)`` writes the file (atomically, as :func:`write_exr`) with the header
-    ``attributes``. Nothing is written before ``finish``."""
+    ``finish(attributes)`` writes the file (atomically, as :func:`write_exr`) with the
+    header ``attributes``, then the blocks."""
 
     def __init__(self, path, width: int, height: int, png_path=None):
         self.path, self.png_path = path, png_path
         self.width, self.height = int(width), int(height)
-        self.blocks: list[bytes] = []  # each block's record (y, size, data), top to bottom
+        self.sizes: list[int] = []  # each block's record (first line, size, data): bytes
+        self.spool = None  # the blocks, top to bottom
         self.rows = 0  # rows written
         self.names: list[str] | None = None
         self.rgb = None if png_path is None else np.empty((self.height, self.width, 3), np.uint8)
@@ -158,14 +162,23 @@ class ExrBands:
             raise ValueError(f"expected ({y1 - y0}, {self.width}) arrays, got {arrays[0].shape}")
         if self.names is not None and names != self.names:
             raise ValueError(f"channels {names} differ from the first band's {self.names}")
+        if self.rgb is not None and any(c not in channels for c in "RGB"):
+            raise ValueError("a PNG preview needs channels R, G, B")
         self.names = names
         header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
                   "dataWindow": _box(0, y0, self.width, y1 - y0),
                   "displayWindow": _box(0, 0, self.width, self.height)}
-        self.blocks += _blocks(_encoded(header, _pixels(names, arrays)))
+        data = _encoded(header, _pixels(names, arrays))
+        start, sizes = _blocks(data)
+        if self.spool is None:
+            self.spool = _spool(self.path)
+        try:
+            self.spool.write(memoryview(data)[start:])
+        except OSError as err:
+            raise SubtraceError(f"{path_str(self.path)}: cannot write the file: "
+                                f"{reason(err)}") from None
+        self.sizes += sizes
         if self.rgb is not None:
-            if any(c not in channels for c in "RGB"):
-                raise ValueError("a PNG preview needs channels R, G, B")
             self.rgb[y0:y1] = srgb8(np.stack([np.asarray(channels[c]) for c in "RGB"], -1))
         self.rows = y1
 
@@ -187,13 +200,31 @@ class ExrBands:
         start, attrs, window = _header_bytes(_encoded(header, one_row))
         attrs[window:window + 16] = struct.pack("<4i", 0, 0, self.width - 1, self.height - 1)
         head = start + bytes(attrs)
-        offsets = np.cumsum([0] + [len(b) for b in self.blocks[:-1]], dtype=np.uint64)
-        offsets += np.uint64(len(head) + 8 * len(self.blocks))
-        parts = [head, offsets.astype("<u8").tobytes(), *self.blocks]
-        jobs = [(self.path, "bytes", None, parts)]
+        offsets = np.cumsum([0] + self.sizes[:-1], dtype=np.uint64)
+        offsets += np.uint64(len(head) + 8 * len(self.sizes))
+        self.spool.seek(0)
+        jobs = [(self.path, "bytes", None, [head, offsets.astype("<u8").tobytes(), self.spool])]
         if self.png_path is not None:
             jobs.append((self.png_path, "png", _png_spec(self.width, self.height), self.rgb))
-        _write_all(jobs)
+        try:
+            _write_all(jobs)
+        finally:
+            self.spool.close()
+
+
+def _spool(path):
+    """An unnamed temporary file for the blocks of ``path``, in its folder (it has no name
+    there: O_TMPFILE, or removed at once); SubtraceError naming ``path`` when the folder
+    cannot take it."""
+    import tempfile
+
+    folder = os.path.dirname(os.path.abspath(path_str(path)))
+    try:
+        return tempfile.TemporaryFile(dir=folder)
+    except OSError as err:
+        what = "does not exist" if not os.path.isdir(folder) else reason(err)
+        raise SubtraceError(f"{path_str(path)}: cannot write the file: the folder {folder} "
+                            f"{what}") from None
 
 
 def _box(x: int, y: int, width: int, height: int):
@@ -232,20 +263,23 @@ def _header_bytes(data: bytes):
     return data[:8], bytearray(data[8:at + 1]), window
 
 
-def _blocks(data: bytes) -> list[bytes]:
-    """The blocks of a single-part scanline OpenEXR file ``data``: each block's record (its
-    first line, size, compressed lines), in the order of the offset table."""
+def _blocks(data: bytes):
+    """(where the blocks start, each block's record size) of a single-part scanline OpenEXR
+    file ``data`` whose blocks follow its offset table one after another, top to bottom
+    (as OpenEXR writes lines in increasing order)."""
     _, attrs, window = _header_bytes(data)
-    y_min, y_max = struct.unpack_from("<i", attrs, window + 4)[0], \
-        struct.unpack_from("<i", attrs, window + 12)[0]
+    (y_min,), (y_max,) = (struct.unpack_from("<i", attrs, window + k) for k in (4, 12))
     n = -(-(y_max - y_min + 1) // LINES_PER_BLOCK)
     table = 8 + len(attrs)
-    offsets = struct.unpack_from(f"<{n}Q", data, table)
-    blocks = []
-    for off in offsets:
-        (size,) = struct.unpack_from("<i", data, off + 4)
-        blocks.append(data[off:off + 8 + size])
-    return blocks
+    offsets = list(struct.unpack_from(f"<{n}Q", data, table)) + [len(data)]
+    sizes = [b - a for a, b in zip(offsets, offsets[1:])]
+    for off, size in zip(offsets, sizes):
+        (length,) = struct.unpack_from("<i", data, off + 4)
+        if length + 8 != size:
+            raise ValueError("an EXR whose blocks are not one after another")
+    if offsets[0] != table + 8 * n:
+        raise ValueError("an EXR whose blocks do not follow its offset table")
+    return offsets[0], sizes
 
 
 def write_png(path, rgb_linear) -> None:
@@ -466,11 +500,14 @@ def _write_image(path_str: str, temp: str, fmt: str, spec, pixels) -> None:
     if fmt == "openexr":
         _write_openexr(path_str, temp, spec, pixels)
         return
-    if fmt == "bytes":  # (pixels: the file's parts, in order)
+    if fmt == "bytes":  # (pixels: the file's parts, in order: bytes, or files read through)
         try:
             with open_temp(temp, "wb") as stream:
                 for part in pixels:
-                    stream.write(part)
+                    if isinstance(part, (bytes, bytearray, memoryview)):
+                        stream.write(part)
+                    else:
+                        shutil.copyfileobj(part, stream, 1 << 20)
         except OSError as err:
             raise SubtraceError(f"{path_str}: cannot write the file: {reason(err)}") from None
         return
@@ -512,4 +549,5 @@ def _oiio_error(obj=None) -> str:
     return " ".join(message.split()) or "unknown error"
 
 
-__all__ = ["write_exr", "ExrBands", "write_png", "read_exr", "srgb8", "check_writable", "CHANNEL_ORDER"]
+__all__ = ["write_exr", "ExrBands", "write_png", "read_exr", "srgb8", "check_writable",
+           "CHANNEL_ORDER"]

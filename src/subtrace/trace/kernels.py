@@ -86,7 +86,8 @@ def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, 
     # dispatcher types plain tuples of arrays in C but named tuples in Python (28 against
     # 9 us a call, measured; a render of the sword makes about 320 calls)
     args = (float(frame[0, 0]), float(frame[0, 1]), float(frame[0, 2]), frame, int(width),
-            int(round_no), int(base), tuple(bvh), tuple(tiles), shell_min, shell_max, tuple(iso), tuple(tuple(m) for m in mems), scratch, tuple(cands), float(slack),
+            int(round_no), int(base), tuple(bvh), tuple(tiles), shell_min, shell_max,
+            tuple(iso), tuple(tuple(m) for m in mems), scratch, tuple(cands), float(slack),
             tuple(hits), request, tested, loop)
 
     def work(t, a, b):
