@@ -16,7 +16,8 @@ Default scenes: ``scenes/spot.toml`` and ``scenes/sword.toml``. Each scene runs 
 subprocess: one *cold* run (first render in the process: Numba's cache is loaded, or kernels
 compile when it is stale) and ``repeat`` *warm* runs whose medians are reported. Times are
 the renderer's own (``subtrace:time_*``: load, preprocess, refine, trace, shade) plus the
-EXR write; ``cmd s`` is the median wall time of ``repeat`` whole ``subtrace render``
+EXR write (streamed in bands as ``subtrace render`` writes it: the bands' encoding and the
+file); ``cmd s`` is the median wall time of ``repeat`` whole ``subtrace render``
 commands (interpreter start and imports included), measured separately. Peak memory is the subprocess's max RSS.
 
 The commands run with Python's bytecode cache on, as on a normal machine (``pip install``
@@ -45,7 +46,7 @@ def worker(scene_path: str, width: int, height: int, tolerance: float, repeat: i
     import resource
 
     import_subtrace()
-    from subtrace.io.exr import write_exr
+    from subtrace.io.exr import ExrBands
     from subtrace.io.scene import apply_overrides, load_scene
     from subtrace.render import render_scene, result_attributes
 
@@ -54,11 +55,21 @@ def worker(scene_path: str, width: int, height: int, tolerance: float, repeat: i
     runs = []
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(repeat + 1):
-            res = render_scene(scene)
+            # as ``subtrace render`` writes an EXR: streamed in bands, each encoded at once
+            exr = ExrBands(os.path.join(tmp, "out.exr"), scene.camera.width,
+                           scene.camera.height)
+            spent = [0.0]
+
+            def sink(y0, y1, channels, exr=exr, spent=spent):
+                t0 = time.perf_counter()
+                exr.write(y0, y1, channels)
+                spent[0] += time.perf_counter() - t0
+
+            res = render_scene(scene, sink=sink)
             t0 = time.perf_counter()
-            write_exr(os.path.join(tmp, "out.exr"), res.channels, result_attributes(res, scene))
+            exr.finish(result_attributes(res, scene))
             st = dict(res.stats.__dict__)
-            st["time_write"] = time.perf_counter() - t0
+            st["time_write"] = spent[0] + time.perf_counter() - t0
             runs.append(st)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     return {"cold": runs[0], "warm": runs[1:], "peak_mb": peak}

@@ -112,3 +112,14 @@ def test_the_command_streams_the_whole_render(tmp_path):
     assert head["subtrace:time_total"] > 0
     assert (tmp_path / "c.png").stat().st_size > 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.exr", "c.png"]  # no temporary
+
+
+def test_progress_over_the_bands():
+    """The progress callback counts the image's rays: never back, ending at all of them."""
+    scene = _scene(SCENES / "spot.toml", width=96, height=200)
+    told = []
+    render_scene(scene, threads=2, sink=lambda *a: None, band_rows=32,
+                 progress=lambda done, total, label: told.append((done, total)))
+    done = [d for d, _ in told]
+    assert done == sorted(done) and len(told) > 6
+    assert told[-1] == (96 * 200, 96 * 200) and {t for _, t in told} == {96 * 200}

@@ -432,7 +432,7 @@ def tall_film(height: int, seed: int = 3) -> dict[str, np.ndarray]:
             for name, a in base.items()}
 
 
-@pytest.mark.parametrize("height, rows", [(16, 16), (50, 16), (61, 32), (40, 48)])
+@pytest.mark.parametrize("height, rows", [(16, 16), (50, 16), (61, 32), (40, 48), (150, 128)])
 def test_bands_write_the_whole_image_file(tmp_path, height, rows):
     """ExrBands (bands of ``rows``, the last one shorter) writes the file write_exr writes
     from the whole image, byte for byte, header attributes included, and the same preview."""
