@@ -25,7 +25,7 @@ def _scene(path, width=96, height=72):
     return apply_overrides(load_scene(path), width=str(width), height=str(height))
 
 
-def _banded(scene, rows):
+def _banded(scene, rows, trace_bands=True):
     """The channels a render in bands of ``rows`` hands to its sink, put together; the
     result; the bytes of the largest buffer a band's arrays were views of."""
     width, height = scene.camera.width, scene.camera.height
@@ -42,7 +42,7 @@ def _banded(scene, rows):
             largest[0] = max(largest[0], base.nbytes)
             out.setdefault(name, np.full((height, width), -7.0, np.float32))[y0:y1] = band
 
-    result = render_scene(scene, threads=2, sink=sink, band_rows=rows)
+    result = render_scene(scene, threads=2, sink=sink, band_rows=rows, trace_bands=trace_bands)
     assert [y for y, _ in seen] == sorted(y for y, _ in seen)  # top to bottom
     assert seen[0][0] == 0 and seen[-1][1] == height
     assert all(a[1] == b[0] for a, b in zip(seen, seen[1:]))  # each row once
@@ -59,27 +59,31 @@ def _banded(scene, rows):
     default_scene_path(),  # a shadow-catching ground, a gradient background
 ], ids=lambda p: p.stem)
 def test_bands_are_the_whole_render(path):
-    """Bands of 16 and 32 rows: every channel of every pixel is the whole render's (the
-    bands share the built patches, so rays meet them in another order; the apron's rows,
-    traced again, give anti-aliasing and smoothed occlusion their neighbours)."""
+    """Bands of 16 and 32 rows, the rays traced band by band or for the whole image first:
+    every channel of every pixel is the whole render's (bands traced apart share the built
+    patches, so rays meet them in another order; the apron's rows give anti-aliasing and
+    smoothed occlusion their neighbours)."""
     scene = _scene(path)
     whole = render_scene(scene, threads=2)
     assert whole.stats.pixels_covered > 0
-    for rows in (16, 32):
-        bands, result, _ = _banded(scene, rows)
+    for rows, trace_bands in ((16, True), (32, True), (32, False)):
+        bands, result, _ = _banded(scene, rows, trace_bands)
         for name, plane in whole.channels.items():
             np.testing.assert_array_equal(bands[name], plane,
-                                          err_msg=f"{path.stem} {rows}: {name}")
+                                          err_msg=f"{path.stem} {rows} {trace_bands}: {name}")
         assert result.stats.pixels_covered == whole.stats.pixels_covered
         assert result.stats.max_level == whole.stats.max_level
         assert result.stats.rays == whole.stats.rays
+        if not trace_bands:  # (the same rounds as the whole render's)
+            assert result.stats.patches_refined == whole.stats.patches_refined
+            assert result.stats.micro_triangles == whole.stats.micro_triangles
 
 
 def test_a_band_holds_its_rows_alone():
-    """A tall image in bands of 16 rows: the arrays handed over are views of a buffer of a
-    band's window (its rows, the apron above and below, a row more for even bounds: the
-    16 float32 channels, the normals and patch ids, 92 bytes a pixel), far less than the
-    image's channels alone."""
+    """A tall image traced and shaded in bands of 16 rows: the arrays handed over are views
+    of a buffer of a band's window (its rows, the apron above and below, a row more for
+    even bounds: the 16 float32 channels, the normals and patch ids, 92 bytes a pixel), far
+    less than the image's channels alone."""
     scene = _scene(SCENES / "spot_ao.toml", width=80, height=240)
     _, result, largest = _banded(scene, 16)
     assert result.stats.pixels_covered > 0
@@ -92,7 +96,8 @@ def test_band_rows_are_whole_blocks():
     one (at least 16): every band but the last starts a block."""
     scene = _scene(SCENES / "creases.toml", width=64, height=100)
     seen = []
-    render_scene(scene, threads=1, sink=lambda y0, y1, _: seen.append((y0, y1)), band_rows=23)
+    render_scene(scene, threads=1, sink=lambda y0, y1, _: seen.append((y0, y1)), band_rows=23,
+                 trace_bands=False)
     assert seen == [(0, 16), (16, 32), (32, 48), (48, 64), (64, 80), (80, 96), (96, 100)]
 
 
@@ -118,8 +123,29 @@ def test_progress_over_the_bands():
     """The progress callback counts the image's rays: never back, ending at all of them."""
     scene = _scene(SCENES / "spot.toml", width=96, height=200)
     told = []
-    render_scene(scene, threads=2, sink=lambda *a: None, band_rows=32,
+    render_scene(scene, threads=2, sink=lambda *a: None, band_rows=32, trace_bands=True,
                  progress=lambda done, total, label: told.append((done, total)))
     done = [d for d, _ in told]
     assert done == sorted(done) and len(told) > 6
     assert told[-1] == (96 * 200, 96 * 200) and {t for _, t in told} == {96 * 200}
+
+
+def test_which_images_are_traced_in_bands(monkeypatch):
+    """By default an image is traced band by band only above config.STREAM_TRACE_PIXELS;
+    either way the bands are the whole render's."""
+    from subtrace import config, render
+
+    scene = _scene(SCENES / "creases.toml", width=64, height=48)
+    windows = []
+    setup = render.trace_setup
+
+    def spy(*args, **kwargs):
+        shared = setup(*args, **kwargs)
+        windows.append(shared.windows)
+        return shared
+
+    monkeypatch.setattr(render, "trace_setup", spy)
+    render_scene(scene, threads=1, sink=lambda *a: None)
+    monkeypatch.setattr(config, "STREAM_TRACE_PIXELS", 64 * 48 - 1)
+    render_scene(scene, threads=1, sink=lambda *a: None)
+    assert windows == [False, True]

@@ -190,13 +190,16 @@ MEMORY_BYTES_PER_SIDE_SAMPLE = 64
 # a thread's memo of split Bezier nets (trace/bezier.py) is kept within what the budget
 # leaves over, but not below this (below it rays split on the spot: slower, same image)
 MEMORY_MEMO_MIN_BYTES = 8 << 20
-# image rows a render streamed to its output traces, shades and hands over at a time
-# (render.render_bands; a multiple of 16, an EXR's ZIP block): its per-pixel arrays are a
-# band's; each band traces the rows of its apron (render.apron) again. Smaller bands hold
-# less but cost more: every band is a pass of the rounds, and what its rays ask for is
-# built in calls of its own (BENCHMARKS.md, "Renders streamed in bands": 64 rows were
-# 4-26 % slower than the whole image at once on the benchmark scenes, 128 rows -3-9 %)
-STREAM_ROWS = 128
+# A render streamed to its output (render.render_bands) is shaded, painted and handed over
+# in bands of whole rows of about this many pixels (a multiple of 16 rows: an EXR's ZIP
+# block; 192 rows of 1280): its channels, normals and the picture's arrays are a band's
+STREAM_BAND_PIXELS = 1 << 18
+# ... and an image of more pixels than this (2560x1600) is traced band by band too, its
+# hit records and candidate lists a band's. Tracing in bands costs time (BENCHMARKS.md,
+# "Renders streamed in bands": each band is a pass of the rounds, and its rays' patches are
+# built in calls of their own: 3-26 % on the benchmark scenes at 1280x720, against 0-3 %
+# for the whole image's trace), which an image this large pays for the memory it saves
+STREAM_TRACE_PIXELS = 1 << 22
 
 # Adaptive anti-aliasing (picture.py): a pixel gets more rays when it and a neighbour (right
 # or below) differ in coverage or object, in depth by more than AA_DEPTH_STEP of the

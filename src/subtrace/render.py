@@ -16,12 +16,11 @@ surfaces are traced after that in a pass of their own
 (:func:`subtrace.nurbs.scene.nurbs_pass`), which overwrites a pixel's channels where its
 hit is nearer.
 
-A render handed to a ``sink`` (``subtrace render`` of an EXR: ``io.exr.ExrBands``) runs in
-bands of ``config.STREAM_ROWS`` rows (:func:`render_bands`): the set-up above is the whole
-image's, once (:func:`trace_setup`); each band's rays go through the rounds
-(:func:`trace_window`), are shaded and painted, and the band is handed over. The per-pixel
-arrays (hit records, requests, candidate lists, channels, normals) are then a band's, and
-the image is never held whole.
+A render handed to a ``sink`` (``subtrace render`` of an EXR: ``io.exr.ExrBands``) is shaded,
+painted and handed over in bands of rows (:func:`render_bands`): its channels are never
+held whole. The set-up above is the whole image's, once (:func:`trace_setup`); the rays are
+traced for the whole image (:func:`trace_window`), or, for an image of more than
+``config.STREAM_TRACE_PIXELS``, band by band, so that the hit records are a band's too.
 """
 
 from __future__ import annotations
@@ -489,8 +488,19 @@ def apron(scene) -> int:
     return 1 + (config.AO_SMOOTH_RADIUS if scene.render.ao > 0 else 0)
 
 
+def _threads_and_accel(threads, accel) -> str:
+    """Set the render's threads up (``runtime.threads``); the acceleration ``accel``
+    checked (SceneError naming --accel), its default filled in."""
+    threads = tasks.usable_threads(threads)
+    accel = config.PRIMARY_ACCEL if accel is None else accel
+    if accel not in ("projection", "bvh"):
+        raise SceneError(f"expected projection or bvh, got {accel!r}", key="--accel")
+    tasks.set_threads(threads)
+    return accel
+
+
 def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
-                 crop=None, sink=None, band_rows=None) -> RenderResult:
+                 crop=None, sink=None, band_rows=None, trace_bands=None) -> RenderResult:
     """Render a :class:`subtrace.io.scene.Scene`; returns the channels and statistics.
     ``accel``: how rays find the shells they enter (see :func:`trace_hits`). ``progress``:
     None, or called as ``progress(done, total, label)`` with the rays whose hits are final
@@ -505,15 +515,13 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
     depths (a warning says so), its tiles, needing less, may be refined further).
     ``sink``: None (the result holds the channels), or ``sink(y0, y1, channels)``, told
     the image's rows [y0, y1) (name -> (y1 - y0, W) float32 views, valid during the call)
-    band after band, top to bottom (:func:`render_bands`; ``band_rows``: their height):
-    the result's channels are then empty. Only a whole image of cages is rendered in bands
-    (a crop, or free-form surfaces, go to the sink as one band)."""
+    band after band, top to bottom (:func:`render_bands`; ``band_rows``: their height;
+    ``trace_bands``: whether the rays are traced band by band too, None: for an image of
+    more than ``config.STREAM_TRACE_PIXELS``): the result's channels are then empty. Only
+    a whole image of cages is rendered in bands (a crop, or free-form surfaces, go to the
+    sink as one band)."""
     t_start = time.perf_counter()
-    threads = tasks.usable_threads(threads)
-    accel = config.PRIMARY_ACCEL if accel is None else accel
-    if accel not in ("projection", "bvh"):
-        raise SceneError(f"expected projection or bvh, got {accel!r}", key="--accel")
-    tasks.set_threads(threads)
+    accel = _threads_and_accel(threads, accel)
     stats = RenderStats()
     compiling = warmup.start(tasks.thread_count())  # on a cold cache only
     try:
@@ -529,11 +537,13 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
             progress(0, stats.rays, "tracing")
         keep = {}
         banded = sink is not None and table is not None and nurbs is None and crop is None
+        if trace_bands is None:
+            trace_bands = view.width * view.height > config.STREAM_TRACE_PIXELS
         if table is None:
             warmup.stop(compiling)  # no cage: the subdivision kernels are not needed
         elif banded:
             shared = trace_setup(table, view, tol_rad, stats, compiling=compiling, accel=accel,
-                                 max_memory=budget, seen=seen, windows=True)
+                                 max_memory=budget, seen=seen, windows=trace_bands)
         else:
             hits, iso, built = trace_hits(table, view, tol_rad, stats, compiling=compiling,
                                           accel=accel, progress=progress, max_memory=budget,
@@ -637,17 +647,21 @@ _BAND_ALIGN = 16  # rows: a band is a multiple of this (io.exr.LINES_PER_BLOCK)
 
 def render_bands(scene, cages, owners, camera, shared, keep, stats, sink, band_rows,
                  compiling, progress, t_start, accel) -> RenderResult:
-    """The rest of :func:`render_scene` in bands of ``band_rows`` rows (default
-    ``config.STREAM_ROWS``), each traced, shaded and painted as the window of
-    :func:`crop_window` around it (its apron's pixels traced again by the next band) and
-    handed to ``sink``: the per-pixel arrays are a band's, not the image's. Rays share
-    the depths, the projection's lists, the memos and what earlier bands built
-    (:class:`SharedTrace`), so a patch is built once. Each band's pixels are those of a
-    render of the whole image (the tile renders' argument: the same rays, depths and
-    pieces; only the order in which a ray meets the patches built differs)."""
+    """The rest of :func:`render_scene` in bands of ``band_rows`` rows (default: about
+    ``config.STREAM_BAND_PIXELS`` pixels), each shaded and painted as the window of
+    :func:`crop_window` around it (with the rows its anti-aliasing and smoothed occlusion
+    read) and handed to ``sink``: the channels, normals and the picture's arrays are a
+    band's, not the image's. The rays are traced for the whole image first, or, when
+    ``shared`` was set up for windows (:func:`trace_setup`), band by band too, each window
+    through the rounds on reused arrays (its apron's rays traced again): then the hit
+    records and candidate lists are a band's as well. Bands share the depths, the
+    projection's lists, the memos and what earlier bands built (:class:`SharedTrace`), so a
+    patch is built once. Each band's pixels are those of a render of the whole image (the
+    tile renders' argument: the same rays, depths and pieces; only the order in which a ray
+    meets the patches built differs)."""
     W, H = camera.width, camera.height
     # (whole blocks of an EXR's lines, io.exr.LINES_PER_BLOCK, and so of tiles' rows)
-    rows = config.STREAM_ROWS if band_rows is None else int(band_rows)
+    rows = config.STREAM_BAND_PIXELS // W if band_rows is None else int(band_rows)
     rows = max(_BAND_ALIGN, rows - rows % _BAND_ALIGN)
     margin = apron(scene)
     table = shared.table
@@ -658,7 +672,7 @@ def render_bands(scene, cages, owners, camera, shared, keep, stats, sink, band_r
     # one band's arrays, reused: a window holds at most its band, the apron on both
     # sides and a row more on each for the even bounds
     n_max = W * min(H, rows + 2 * (margin + 1))
-    buffers = round_arrays(n_max)
+    buffers = round_arrays(n_max) if shared.windows else None
     planes_store, normals_store, pix_store = one_block(
         ((len(CHANNELS) * n_max,), np.float32), ((3 * n_max,), np.float64), ((n_max,), np.int32))
     covered = np.zeros(tasks.thread_count(), np.int64)
@@ -666,16 +680,22 @@ def render_bands(scene, cages, owners, camera, shared, keep, stats, sink, band_r
     max_level = -1
     t_sink = t_shade = 0.0
     ground = ground_plane(scene, cages, camera) if scene.ground is not None else None
+    whole = None if shared.windows else trace_window(shared, camera.frame(), W, H, progress,
+                                                     keep)
     for y0 in range(0, H, rows):
         y1 = min(H, y0 + rows)
         window = crop_window(camera, (0, y0, W, y1), margin)
         h = window.height
         n = W * h
         frame = window.frame()
-        band_progress = (None if progress is None else
-                         lambda done, total, label, y0=y0: progress(
-                             W * y0 + done * (y1 - y0) // max(h, 1), W * H, label))
-        hits = trace_window(shared, frame, W, h, band_progress, keep, buffers)
+        if whole is not None:
+            a = window.y0 * W
+            hits = Hits(*(f[a:a + n] for f in whole))
+        else:
+            band_progress = (None if progress is None else
+                             lambda done, total, label, y0=y0: progress(
+                                 W * y0 + done * (y1 - y0) // max(h, 1), W * H, label))
+            hits = trace_window(shared, frame, W, h, band_progress, keep, buffers)
         t0 = time.perf_counter()
         planes = planes_store[:len(CHANNELS) * n].reshape(len(CHANNELS), n)
         normals, pix_patch = normals_store[:3 * n].reshape(n, 3), pix_store[:n]
