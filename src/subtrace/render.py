@@ -680,8 +680,11 @@ def render_bands(scene, cages, owners, camera, shared, keep, stats, sink, band_r
     max_level = -1
     t_sink = t_shade = 0.0
     ground = ground_plane(scene, cages, camera) if scene.ground is not None else None
-    whole = None if shared.windows else trace_window(shared, camera.frame(), W, H, progress,
-                                                     keep)
+    whole = built = None
+    if not shared.windows:  # the whole image's rays first; their memos then let go
+        whole = trace_window(shared, camera.frame(), W, H, progress, keep)
+        built = shared.finish()
+        shared.memos = None
     for y0 in range(0, H, rows):
         y1 = min(H, y0 + rows)
         window = crop_window(camera, (0, y0, W, y1), margin)
@@ -718,7 +721,7 @@ def render_bands(scene, cages, owners, camera, shared, keep, stats, sink, band_r
         sink(y0, y1, {name: band[k] for k, name in enumerate(CHANNELS)})
         t_sink += time.perf_counter() - t0
     stats.time_shade = t_shade
-    built = shared.finish()
+    built = shared.finish() if built is None else built
     stats.pixels_covered = n_covered
     stats.max_level = max_level
     stats.time_total = time.perf_counter() - t_start - t_sink
