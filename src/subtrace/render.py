@@ -548,12 +548,12 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
             hits, iso, built = trace_hits(table, view, tol_rad, stats, compiling=compiling,
                                           accel=accel, progress=progress, max_memory=budget,
                                           keep=keep, seen=seen)
+        if banded:
+            return render_bands(scene, cages, owners, camera, shared, keep, stats, sink,
+                                band_rows, compiling, progress, t_start, accel)
     except BaseException:
         warmup.stop(compiling)
         raise
-    if banded:
-        return render_bands(scene, cages, owners, camera, shared, keep, stats, sink,
-                            band_rows, compiling, progress, t_start, accel)
     try:  # (a helper may still be compiling the picture's kernels)
         t0 = time.perf_counter()
         W, H = view.width, view.height
