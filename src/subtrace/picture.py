@@ -54,6 +54,7 @@ from subtrace.shade import (C_A, C_R, CHANNELS, ambient_occlusion, background_pi
                             ground_points, light, light_array, miss_values, shade,
                             shadow_visibility, smooth_occlusion)
 from subtrace.trace.bezier import table_loop_flag
+from subtrace.trace.pools import Memos
 from subtrace.trace.rays import Pools, trace_rays
 
 # the R2 sequence's steps (the plastic number's powers): well-spread points in a square
@@ -77,6 +78,8 @@ def _pools(keep, stats) -> Pools:
     t0 = time.perf_counter()
     if not len(keep["bvh"].node_first):
         keep["bvh"] = build_bvh(keep["shell_min"], keep["shell_max"])
+    if "memos" not in keep:  # (one set for every band of the image: trace.rays.Pools)
+        keep["memos"] = Memos(tasks.thread_count(), keep["memo_bytes"])
     stats.time_preprocess += time.perf_counter() - t0
     side = SimpleNamespace(pieces=0, micro_triangles=0, grid_points=0, patches_refined=0,
                            max_depth=-1)

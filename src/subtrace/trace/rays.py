@@ -76,6 +76,11 @@ class Pools:
     stats: object
     round_no: int
     memo_bytes: int | None = None
+    # the threads' memos of these rays (None: fresh ones each call). Each chunk of rays
+    # starts its memo afresh, so what a memo held for earlier rays is never read: sharing
+    # them over the calls of a render (its bands' shadow, occlusion and extra rays) only
+    # spares faulting their pages in again
+    memos: object = None
 
 
 def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
@@ -103,10 +108,11 @@ def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
     req = np.empty((n, CANDIDATES), np.int64)
     req_n = np.zeros(n, np.int64)
     n_threads = tasks.thread_count()
-    # fresh memos: reusing the primary trace's (warmer: faster) changed a Loop render by an
-    # ulp between the projection and the BVH (tests/test_projection.py, random cameras)
-    # (within the primary memos' budget: they are gone by now)
-    memos = Memos(n_threads, pools.memo_bytes)
+    # memos of the secondary rays' own: reusing the primary trace's (warmer: faster)
+    # changed a Loop render by an ulp between the projection and the BVH
+    # (tests/test_projection.py, random cameras) (within the primary memos' budget: they
+    # are gone by now)
+    memos = Memos(n_threads, pools.memo_bytes) if pools.memos is None else pools.memos
     built = np.zeros(n_threads, np.int64)
     req_ts = np.empty((n_threads, CANDIDATES))  # each thread's entry distances of req
     rays = np.arange(n, dtype=np.int64)
