@@ -58,18 +58,10 @@ def worker(scene_path: str, width: int, height: int, tolerance: float, repeat: i
             # as ``subtrace render`` writes an EXR: streamed in bands, each encoded at once
             exr = ExrBands(os.path.join(tmp, "out.exr"), scene.camera.width,
                            scene.camera.height)
-            spent = [0.0]
-
-            def sink(y0, y1, channels, exr=exr, spent=spent):
-                t0 = time.perf_counter()
-                exr.write(y0, y1, channels)
-                spent[0] += time.perf_counter() - t0
-
-            res = render_scene(scene, sink=sink)
-            t0 = time.perf_counter()
+            res = render_scene(scene, sink=exr.write)
             exr.finish(result_attributes(res, scene))
             st = dict(res.stats.__dict__)
-            st["time_write"] = spent[0] + time.perf_counter() - t0
+            st["time_write"] = exr.seconds
             runs.append(st)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     return {"cold": runs[0], "warm": runs[1:], "peak_mb": peak}

@@ -142,27 +142,16 @@ def _render_streamed(args, scene, out, png, progress) -> None:
     into the EXR as it is done (``io.exr.ExrBands``), so that neither the image's per-pixel
     arrays nor its channels are held at once; write the file and print its summary line.
     The write time is the bands' encoding and the file's writing."""
-    import time
-
     from subtrace.io.exr import ExrBands
     from subtrace.jobs import result_files
     from subtrace.render import render_scene
 
     exr = ExrBands(out, scene.camera.width, scene.camera.height, png)
-    took = [0.0]
-
-    def sink(y0, y1, channels):
-        t0 = time.perf_counter()
-        exr.write(y0, y1, channels)
-        took[0] += time.perf_counter() - t0
-
     result = render_scene(scene, threads=args.threads, accel=args.accel, progress=progress,
-                          sink=sink)
-    t0 = time.perf_counter()
+                          sink=exr.write)
     exr.finish(result_files(result, scene))
-    took[0] += time.perf_counter() - t0
     if not args.quiet:
-        print(_summary(out, png, result, took[0]))
+        print(_summary(out, png, result, exr.seconds))
 
 
 def _summary(out, png, result, time_write: float) -> str:

@@ -34,6 +34,7 @@ import os
 import shutil
 import struct
 import threading
+import time
 
 import numpy as np
 import OpenEXR
@@ -99,21 +100,10 @@ def write_exr(path, channels: dict, attributes: dict | None = None, png_path=Non
     """
     names, arrays = _channel_arrays(channels)
     height, width = arrays[0].shape
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    if window is not None:
-        x, y = int(window[0]), int(window[1])
-        header["dataWindow"] = (np.array([x, y], np.int32),
-                                np.array([x + width - 1, y + height - 1], np.int32))
-        header["displayWindow"] = (np.array([0, 0], np.int32),
-                                   np.array([int(window[2]) - 1, int(window[3]) - 1], np.int32))
-    for key, value in _header(attributes or {}).items():
-        if not key.startswith("oiio:"):
-            header[key] = _attribute_value(key, value)
-    pixels = {}
-    with np.errstate(over="ignore"):  # (beyond half's range is +-inf, as OpenEXR rounds)
-        for name, array in zip(names, arrays):
-            pixels[name] = array.astype(np.float16) if name in HALF_CHANNELS else array
-    jobs = [(path, "openexr", header, pixels)]
+    header = (_openexr_header(attributes) if window is None else _openexr_header(
+        attributes, (int(window[0]), int(window[1]), width, height),
+        (0, 0, int(window[2]), int(window[3]))))
+    jobs = [(path, "openexr", header, _pixels(names, arrays))]
     if png_path is not None:
         missing = [c for c in ("R", "G", "B") if c not in channels]
         if missing:
@@ -149,6 +139,7 @@ class ExrBands:
 
     def __init__(self, path, width: int, height: int, png_path=None):
         self.path, self.png_path = path, png_path
+        self.seconds = 0.0  # spent encoding and writing (write and finish)
         self.width, self.height = int(width), int(height)
         self.sizes: list[int] = []  # each block's record (first line, size, data): bytes
         self.spool = None  # the blocks, top to bottom
@@ -158,6 +149,7 @@ class ExrBands:
 
     def write(self, y0: int, y1: int, channels: dict) -> None:
         """Encode rows [y0, y1) of every channel (see the class comment)."""
+        t0 = time.perf_counter()
         y0, y1 = int(y0), int(y1)
         if y0 != self.rows or not y0 < y1 <= self.height:
             raise ValueError(f"rows {y0}..{y1}: bands come in order, from row {self.rows}")
@@ -176,9 +168,8 @@ class ExrBands:
         # (a few blocks at a time: OpenEXR's copy of the lines it encodes stays small)
         for a in range(0, y1 - y0, ENCODE_ROWS):
             b = min(y1 - y0, a + ENCODE_ROWS)
-            header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
-                      "dataWindow": _box(0, y0 + a, self.width, b - a),
-                      "displayWindow": _box(0, 0, self.width, self.height)}
+            header = _openexr_header({}, (0, y0 + a, self.width, b - a),
+                                     (0, 0, self.width, self.height))
             data = _encoded(header, _pixels(names, [x[a:b] for x in arrays]))
             start, sizes = _blocks(data)
             try:
@@ -190,20 +181,18 @@ class ExrBands:
         if self.rgb is not None:
             self.rgb[y0:y1] = srgb8(np.stack([np.asarray(channels[c]) for c in "RGB"], -1))
         self.rows = y1
+        self.seconds += time.perf_counter() - t0
 
     def finish(self, attributes: dict | None = None) -> None:
         """Write the file (and the preview): the header with ``attributes`` (as
         :func:`write_exr` takes them), the blocks' offsets, the blocks."""
         if self.rows != self.height:
             raise ValueError(f"{self.rows} of {self.height} rows written")
+        t0 = time.perf_counter()
         # the header: a one-row file's with the same channels and attributes, its data
         # window then widened to the image (a value of the same size, rewritten in place)
-        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
-                  "dataWindow": _box(0, 0, self.width, 1),
-                  "displayWindow": _box(0, 0, self.width, self.height)}
-        for key, value in _header(attributes or {}).items():
-            if not key.startswith("oiio:"):
-                header[key] = _attribute_value(key, value)
+        header = _openexr_header(attributes, (0, 0, self.width, 1),
+                                 (0, 0, self.width, self.height))
         one_row = {n: np.zeros((1, self.width), np.float16 if n in HALF_CHANNELS else
                                np.float32) for n in self.names}
         start, attrs, window = _header_bytes(_encoded(header, one_row))
@@ -219,6 +208,7 @@ class ExrBands:
             _write_all(jobs)
         finally:
             self.spool.close()
+            self.seconds += time.perf_counter() - t0
 
 
 def _spool(path):
@@ -236,9 +226,26 @@ def _spool(path):
                             f"{what}") from None
 
 
-def _box(x: int, y: int, width: int, height: int):
-    """An OpenEXR box (Box2i) from (x, y) of ``width`` x ``height`` pixels."""
-    return (np.array([x, y], np.int32), np.array([x + width - 1, y + height - 1], np.int32))
+def _openexr_header(attributes, data=None, display=None) -> dict:
+    """The header OpenEXR's binding takes: ZIP-compressed scanlines, the data and display
+    windows ``data``, ``display`` ((x, y, width, height) each; None: the channels' own) and
+    ``attributes`` (as :func:`write_exr` takes them)."""
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    for key, window in (("dataWindow", data), ("displayWindow", display)):
+        if window is not None:
+            x, y, width, height = window
+            header[key] = (np.array([x, y], np.int32),
+                           np.array([x + width - 1, y + height - 1], np.int32))
+    for key, value in _header(attributes or {}).items():
+        if not key.startswith("oiio:"):
+            header[key] = _attribute_value(key, value)
+    return header
+
+
+def _openexr_threads() -> None:
+    """OpenEXR's ZIP blocks compressed on every core (its global thread pool)."""
+    if OpenEXR.global_thread_count() == 0:
+        OpenEXR.set_global_thread_count(max_threads())
 
 
 def _pixels(names, arrays) -> dict:
@@ -250,8 +257,7 @@ def _pixels(names, arrays) -> dict:
 
 def _encoded(header: dict, pixels: dict) -> bytes:
     """The OpenEXR file of ``header`` and ``pixels``, in memory."""
-    if OpenEXR.global_thread_count() == 0:  # (its ZIP blocks compressed on every core)
-        OpenEXR.set_global_thread_count(max_threads())
+    _openexr_threads()
     stream = io.BytesIO()
     OpenEXR.File(header, pixels).write(stream)
     return stream.getvalue()
@@ -539,8 +545,7 @@ def _write_image(path_str: str, temp: str, fmt: str, spec, pixels) -> None:
 
 
 def _write_openexr(path_str: str, temp: str, header: dict, channels: dict) -> None:
-    if OpenEXR.global_thread_count() == 0:  # (its ZIP blocks compressed on every core)
-        OpenEXR.set_global_thread_count(max_threads())
+    _openexr_threads()
     try:
         # written through a file opened under the temporaries' lock (see _write_image),
         # not by name: the lock is not held while the film is encoded
