@@ -190,15 +190,19 @@ MEMORY_BYTES_PER_SIDE_SAMPLE = 64
 # a thread's memo of split Bezier nets (trace/bezier.py) is kept within what the budget
 # leaves over, but not below this (below it rays split on the spot: slower, same image)
 MEMORY_MEMO_MIN_BYTES = 8 << 20
+# scanlines in one of an EXR's ZIP blocks (OpenEXR): a streamed render's bands (but the
+# last) are whole blocks, so that the blocks io.exr.ExrBands encodes are the image's
+EXR_LINES_PER_BLOCK = 16
 # A render streamed to its output (render.render_bands) is shaded, painted and handed over
-# in bands of whole rows of about this many pixels (a multiple of 16 rows: an EXR's ZIP
-# block; 192 rows of 1280): its channels, normals and the picture's arrays are a band's
+# in bands of whole rows of about this many pixels (whole EXR blocks of lines; 192 rows of
+# 1280): its channels, normals and the picture's arrays are a band's
 STREAM_BAND_PIXELS = 1 << 18
 # ... and an image of more pixels than this (2560x1600) is traced band by band too, its
 # hit records and candidate lists a band's. Tracing in bands costs time (BENCHMARKS.md,
 # "Renders streamed in bands": each band is a pass of the rounds, and its rays' patches are
-# built in calls of their own: 3-26 % on the benchmark scenes at 1280x720, against 0-3 %
-# for the whole image's trace), which an image this large pays for the memory it saves
+# built in calls of their own: 3-26 % more render time on the benchmark scenes at
+# 1280x720, where streamed renders traced whole took 0.94-1.00 of it), which an image this
+# large pays for the memory it saves
 STREAM_TRACE_PIXELS = 1 << 22
 
 # Adaptive anti-aliasing (picture.py): a pixel gets more rays when it and a neighbour (right

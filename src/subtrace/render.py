@@ -214,8 +214,8 @@ class SharedTrace:
         # (what secondary rays built between windows is counted apart: picture.py)
         primary = np.isin(iso.a["round"], self.built_rounds)
         keep = primary | (iso.a["round"] < 0)
-        first, count = iso.a["first"][keep], iso.a["count"][keep]
-        items = np.repeat(first - np.cumsum(count) + count, count) + np.arange(count.sum())
+        starts, count = iso.a["first"][keep], iso.a["count"][keep]
+        items = np.repeat(starts - np.cumsum(count) + count, count) + np.arange(count.sum())
         stats.max_depth = int(iso.a["depth_i"][items].max(initial=0))
         return np.concatenate([iso.a["patch"][primary], direct])
 
@@ -570,12 +570,8 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
             built = np.zeros(0, np.int64)
         else:
             patches = patch_shading(table, [scene.objects[k] for k in owners])
-            shade(frame, W, hits, iso.view(), patches, miss, planes, normals, pix_patch, covered,
-                  loop=table_loop_flag(table))
-            if owners != list(range(len(owners))):  # objects without a cage: scene indices
-                hit = planes[C_OBJECT] >= 0
-                index = planes[C_OBJECT][hit].astype(np.int64)
-                planes[C_OBJECT][hit] = np.array(owners, np.float32)[index]
+            _shade_hits(frame, W, hits, iso, patches, miss, planes, normals, pix_patch, covered,
+                        owners, table_loop_flag(table))
             # each pixel's hit distance for the picture (the NURBS pass writes its nearer
             # hits into a copy); the rest of the hit records (one block with the rounds'
             # requests, 40 bytes a ray) is given back before the picture makes its own arrays
@@ -593,12 +589,8 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
     except BaseException:
         warmup.stop(compiling)
         raise
-    # the colour: shadows, ambient occlusion, lighting, anti-aliasing (picture.py), with
-    # the kernels a helper compiled meanwhile (a cold cache: warmup.compile_picture; the
-    # secondary rays' BVH build compiles here while it finishes)
-    if compiling is not None and compiling.procs and keep:
-        warmup.compile_bvh()
-    warmup.wait(compiling)
+    # the colour: shadows, ambient occlusion, lighting, anti-aliasing (picture.py)
+    _picture_kernels(compiling, keep)
     paint(scene, cages, view, keep, t, normals, pix_patch, patches, planes, stats, nurbs,
           offset)
     stats.time_shade = time.perf_counter() - t0
@@ -618,6 +610,28 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
     used = "bvh" if stats.accel_fallback else accel
     refined = np.zeros(0, np.int32) if table is None else table.object_id[built]
     return RenderResult(channels, stats, camera, tol_rad, schemes, refined, used, crop)
+
+
+def _shade_hits(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, covered,
+                owners, loop):
+    """``shade.shade`` the hits into ``planes`` (and ``normals``, ``pix_patch``,
+    ``covered``); the object ids made the scene's (``owners``: the scene index of each
+    cage's object, :func:`cage_objects`)."""
+    shade(frame, width, hits, iso.view(), patches, miss, planes, normals, pix_patch, covered,
+          loop=loop)
+    if owners != list(range(len(owners))):  # objects without a cage: scene indices
+        hit = planes[C_OBJECT] >= 0
+        index = planes[C_OBJECT][hit].astype(np.int64)
+        planes[C_OBJECT][hit] = np.array(owners, np.float32)[index]
+
+
+def _picture_kernels(compiling, keep) -> None:
+    """Wait for the picture's kernels a helper compiled while the rays were traced (a cold
+    cache: ``warmup.compile_picture``); the secondary rays' BVH build compiles here
+    meanwhile."""
+    if compiling is not None and compiling.procs and keep:
+        warmup.compile_bvh()
+    warmup.wait(compiling)
 
 
 def _background(scene, view, image_height, miss, planes, pix_patch):
@@ -642,9 +656,6 @@ def _cropped(planes, crop, view):
     return planes, x1 - x0, y1 - y0
 
 
-_BAND_ALIGN = 16  # rows: a band is a multiple of this (io.exr.LINES_PER_BLOCK)
-
-
 def render_bands(scene, cages, owners, camera, shared, keep, stats, sink, band_rows,
                  compiling, progress, t_start, accel) -> RenderResult:
     """The rest of :func:`render_scene` in bands of ``band_rows`` rows (default: about
@@ -662,13 +673,12 @@ def render_bands(scene, cages, owners, camera, shared, keep, stats, sink, band_r
     W, H = camera.width, camera.height
     # (whole blocks of an EXR's lines, io.exr.LINES_PER_BLOCK, and so of tiles' rows)
     rows = config.STREAM_BAND_PIXELS // W if band_rows is None else int(band_rows)
-    rows = max(_BAND_ALIGN, rows - rows % _BAND_ALIGN)
+    align = config.EXR_LINES_PER_BLOCK
+    rows = max(align, rows - rows % align)
     margin = apron(scene)
     table = shared.table
     patches = patch_shading(table, [scene.objects[k] for k in owners])
     miss = miss_values(scene.render.background)
-    remap = (None if owners == list(range(len(owners)))
-             else np.array(owners, np.float32))  # objects without a cage: scene indices
     # one band's arrays, reused: a window holds at most its band, the apron on both
     # sides and a row more on each for the even bounds
     n_max = W * min(H, rows + 2 * (margin + 1))
@@ -679,7 +689,7 @@ def render_bands(scene, cages, owners, camera, shared, keep, stats, sink, band_r
     n_covered = 0
     max_level = -1
     t_sink = t_shade = 0.0
-    ground = ground_plane(scene, cages, camera) if scene.ground is not None else None
+    ground = ground_plane(scene, cages, camera)
     whole = built = None
     if not shared.windows:  # the whole image's rays first; their memos then let go
         whole = trace_window(shared, camera.frame(), W, H, progress, keep)
@@ -702,15 +712,10 @@ def render_bands(scene, cages, owners, camera, shared, keep, stats, sink, band_r
         t0 = time.perf_counter()
         planes = planes_store[:len(CHANNELS) * n].reshape(len(CHANNELS), n)
         normals, pix_patch = normals_store[:3 * n].reshape(n, 3), pix_store[:n]
-        shade(frame, W, hits, shared.iso.view(), patches, miss, planes, normals, pix_patch,
-              covered, loop=shared.loop)
-        if remap is not None:
-            hit = planes[C_OBJECT] >= 0
-            planes[C_OBJECT][hit] = remap[planes[C_OBJECT][hit].astype(np.int64)]
-        if y0 == 0:  # (the first band: the picture's kernels a helper compiled meanwhile)
-            if compiling is not None and compiling.procs and keep:
-                warmup.compile_bvh()
-            warmup.wait(compiling)
+        _shade_hits(frame, W, hits, shared.iso, patches, miss, planes, normals, pix_patch,
+                    covered, owners, shared.loop)
+        if y0 == 0:
+            _picture_kernels(compiling, keep)
         paint(scene, cages, window, keep, hits.t, normals, pix_patch, patches, planes, stats,
               ground=ground)
         band = planes.reshape(len(CHANNELS), h, W)[:, y0 - window.y0:y1 - window.y0]

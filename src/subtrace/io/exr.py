@@ -40,6 +40,7 @@ import numpy as np
 import OpenEXR
 import OpenImageIO as oiio
 
+from subtrace import config
 from subtrace.errors import SubtraceError
 from subtrace.io.atomic import atomic_paths, check_writable, open_temp, path_str, reason
 from subtrace.runtime.signals import temp_lock
@@ -117,7 +118,7 @@ def write_exr(path, channels: dict, attributes: dict | None = None, png_path=Non
 
 # scanlines per ZIP block (OpenEXR): bands but the last are whole blocks, so that the blocks
 # of the bands are the whole image's
-LINES_PER_BLOCK = 16
+LINES_PER_BLOCK = config.EXR_LINES_PER_BLOCK
 # lines :class:`ExrBands` hands OpenEXR at a time, two blocks for each of two threads:
 # OpenEXR copies what it encodes (at 1280 pixels a line, 27 MiB at a time with 128 lines, 15
 # with 32), and each call costs a few milliseconds more than its blocks' compression (Spot
