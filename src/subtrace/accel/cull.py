@@ -52,7 +52,7 @@ import numpy as np
 from subtrace import config
 from subtrace.accel.projection import boxes_in_view
 from subtrace.camera import camera_frame
-from subtrace.patches.shells import box_distance
+from subtrace.patches.shells import box_distance, box_extent, box_least
 
 # pixels of margin around the image for the pyramid's sides (the tile lists widen a box's
 # rectangle by one pixel for rounding; half a pixel more reaches the pixels' outer edges)
@@ -403,21 +403,6 @@ def _clip(poly, point, normal):
     return np.array(out).reshape(-1, 3)
 
 
-def _box_extent(axes, lo, hi):
-    """(lo (N,3), hi (N,3)): each box's least and greatest coordinate along each of
-    ``axes`` (3,3) (a linear function's extremes over a box are at its corners: per
-    coordinate, the smaller or larger of its two ends: the low end where the axis
-    grows with the coordinate, else the high one). Two products of (N,3) by (3,3): the
-    (N,3,3) products and their sums took 0.11 s on the sword refined twice's 358,048 faces."""
-    return _box_least(axes, lo, hi), _box_least(axes, hi, lo)
-
-
-def _box_least(axes, lo, hi):
-    """(N,k): each box's least coordinate along each of ``axes`` (k,3) (:func:`_box_extent`;
-    with ``lo`` and ``hi`` swapped, the greatest)."""
-    return lo @ np.maximum(axes, 0.0).T + hi @ np.minimum(axes, 0.0).T
-
-
 def view_test(camera, reach: Reach | None = None):
     """``in_view(lo, hi)`` -> (N,) bool: the boxes (N,3) that a primary ray of ``camera``
     may enter, or a secondary ray of ``reach`` may meet (module comment)."""
@@ -432,7 +417,7 @@ def view_test(camera, reach: Reach | None = None):
             rest = ~seen
             if reach.light_frames is not None:
                 axes, elo, ehi = reach.light_frames[k]
-                blo, bhi = _box_extent(axes, lo[rest], hi[rest])
+                blo, bhi = box_extent(axes, lo[rest], hi[rest])
                 near = ((blo[:, 0] <= ehi[0]) & (bhi[:, 0] >= elo[0])
                         & (blo[:, 1] <= ehi[1]) & (bhi[:, 1] >= elo[1]) & (blo[:, 2] <= ehi[2]))
                 rest[rest] = near
@@ -444,7 +429,7 @@ def view_test(camera, reach: Reach | None = None):
         for light_frame, n, axis, depth in reach.point_views:
             # the boxes not kept yet whose least depth along the light's axis is no deeper
             # than the points'
-            least = _box_least(axis[None], lo, hi)[:, 0]
+            least = box_least(axis[None], lo, hi)[:, 0]
             idx = np.nonzero(~seen & (least <= depth + float(light_frame[0] @ axis)))[0]
             if len(idx):
                 seen[idx] = boxes_in_view(lo[idx], hi[idx], light_frame, n, n)

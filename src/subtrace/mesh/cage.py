@@ -34,7 +34,7 @@ from subtrace.mesh.topology import (
     tag_base_level,
 )
 from subtrace.patches.evaluate import evaluate, ptex_starts
-from subtrace.patches.shells import face_star_boxes
+from subtrace.patches.shells import box_extent, face_star_boxes
 from subtrace.runtime.jit import nb
 from subtrace.subdiv.limit import limit_points
 from subtrace.subdiv.refine import refine_level, refine_points
@@ -463,10 +463,8 @@ def _lowest_limit(cage: Cage, up: np.ndarray) -> float:
         return float((cage.limit(1)[0] @ up).min())
     # each face's range of heights from its star box (exact for an axis as ``up``, else
     # wider, which only keeps more faces)
-    lo, hi = cage.star_boxes
-    plus, minus = np.maximum(up, 0.0), np.minimum(up, 0.0)
-    bottom = lo @ plus + hi @ minus
-    top = (hi @ plus + lo @ minus).min()
+    bottom, top = box_extent(up[None], *cage.star_boxes)
+    bottom, top = bottom[:, 0], top[:, 0].min()
     # (a margin for the rounding of the limit masks' sums: far above it, far below a cell)
     top += 1e-9 * (np.abs(cage.points @ up).max() + 1.0)
     near = face_rings(cage, bottom <= top, RESTRICT_RINGS)

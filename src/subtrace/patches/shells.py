@@ -26,6 +26,21 @@ def box_distance(bmin, bmax, p):
     return np.sqrt((q * q).sum(axis=1))
 
 
+def box_extent(axes, lo, hi):
+    """(lo (N,k), hi (N,k)): each box ``[lo, hi]`` (N,3)'s least and greatest coordinate
+    along each of ``axes`` (k,3) (a linear function's extremes over a box are at its
+    corners: per coordinate, the smaller or larger of its two ends: the low end where the
+    axis grows with the coordinate, else the high one). Two products of (N,3) by (3,k): the
+    (N,3,3) products and their sums took 0.11 s on the sword refined twice's 358,048 faces."""
+    return box_least(axes, lo, hi), box_least(axes, hi, lo)
+
+
+def box_least(axes, lo, hi):
+    """(N,k): each box's least coordinate along each of ``axes`` (k,3) (:func:`box_extent`;
+    with ``lo`` and ``hi`` swapped, the greatest)."""
+    return lo @ np.maximum(axes, 0.0).T + hi @ np.minimum(axes, 0.0).T
+
+
 @dataclass(frozen=True, eq=False)
 class Sight:
     """Where the rays that refine the patches come from, for the angular criterion
