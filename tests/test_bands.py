@@ -15,6 +15,7 @@ from subtrace.cli import main
 from subtrace.data import default_scene_path
 from subtrace.io.exr import HALF_CHANNELS, read_exr
 from subtrace.io.scene import apply_overrides, load_scene
+from subtrace.mesh.cage import load_cage
 from subtrace.render import apron, render_scene
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -131,8 +132,9 @@ def test_progress_over_the_bands():
 
 
 def test_which_images_are_traced_in_bands(monkeypatch):
-    """By default an image is traced band by band only above config.STREAM_TRACE_PIXELS;
-    either way the bands are the whole render's."""
+    """By default an image is traced band by band only above config.STREAM_TRACE_PIXELS,
+    or when its cages have config.STREAM_TRACE_FACES faces or more; either way the bands
+    are the whole render's."""
     from subtrace import config, render
 
     scene = _scene(SCENES / "creases.toml", width=64, height=48)
@@ -148,4 +150,10 @@ def test_which_images_are_traced_in_bands(monkeypatch):
     render_scene(scene, threads=1, sink=lambda *a: None)
     monkeypatch.setattr(config, "STREAM_TRACE_PIXELS", 64 * 48 - 1)
     render_scene(scene, threads=1, sink=lambda *a: None)
-    assert windows == [False, True]
+    monkeypatch.setattr(config, "STREAM_TRACE_PIXELS", 64 * 48)
+    faces = load_cage(scene.objects[0].mesh).n_faces
+    monkeypatch.setattr(config, "STREAM_TRACE_FACES", faces + 1)
+    render_scene(scene, threads=1, sink=lambda *a: None)
+    monkeypatch.setattr(config, "STREAM_TRACE_FACES", faces)
+    render_scene(scene, threads=1, sink=lambda *a: None)
+    assert windows == [False, True, False, True]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -65,3 +66,43 @@ def test_let_go_gives_back_whole_granules_of_the_arrays_named_and_nothing_else()
     assert np.all((a == 0.0) | (a == 2.0)) and np.all((b == 0) | (b == 3))
     if sys.platform.startswith("linux"):
         assert given >= a.nbytes + b.nbytes - 4 * 2 * 1024 * 1024
+
+
+def _mapping(a) -> tuple[dict, set]:
+    """The fields (kB) and VmFlags of the /proc/self/smaps entry that holds ``a``'s first
+    page-aligned byte."""
+    import mmap
+
+    addr = -(-a.ctypes.data // mmap.PAGESIZE) * mmap.PAGESIZE
+    fields, flags, inside = {}, set(), False
+    with open("/proc/self/smaps") as f:
+        for line in f:
+            head = line.split()
+            if head and "-" in head[0] and not head[0].endswith(":"):
+                if inside:
+                    break
+                lo, hi = (int(x, 16) for x in head[0].split("-"))
+                inside = lo <= addr < hi
+            elif inside and head[0] == "VmFlags:":
+                flags = set(head[1:])
+            elif inside and len(head) >= 2 and head[1].isdigit():
+                fields[head[0].rstrip(":")] = int(head[1])
+    return fields, flags
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc/self/smaps")
+def test_small_pages_keep_a_sparsely_written_store_small():
+    """An array advised by ``small_pages`` is marked for small pages (VmFlags ``nh``) and,
+    written once every 2 MB, holds about a page for each write, not 2 MB; the memos' stores
+    are advised so."""
+    from subtrace.runtime.memory import small_pages
+    from subtrace.trace.pools import Memos
+
+    step = 2 * 1024 * 1024
+    a = small_pages(np.empty(32 * step, np.uint8))
+    a[::step] = 1
+    fields, flags = _mapping(a)
+    assert "nh" in flags
+    assert fields.get("AnonHugePages", 0) == 0 and fields["Rss"] <= 1024  # kB
+    for store in Memos(1).m[0][1:7]:  # (child, box, slab, data, nets, cells)
+        assert "nh" in _mapping(store)[1]

@@ -66,11 +66,12 @@ def test_every_box_a_ray_enters_is_in_its_tile(seed, width, height, fov):
 
 
 @settings(max_examples=40, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.integers(1, 40), st.integers(1, 30))
-def test_candidate_rows_are_the_listed_tiles_pixels(seed, width, height):
-    """The rounds' candidate lists have a row for each pixel of a tile that lists a shell,
-    and for no other: distinct rows, all of them used, none for a pixel of a tile that
-    lists none (a tile's pixels beyond the image's edge keep their rows unused)."""
+@given(st.integers(0, 2**32 - 1), st.integers(1, 40), st.integers(1, 30), st.booleans())
+def test_candidate_rows_are_the_listed_tiles_pixels(seed, width, height, some_built):
+    """The rounds' candidate lists have a row for each pixel of a tile that lists an unbuilt
+    shell, and for no other: distinct rows, all of them used, none for a pixel of a tile
+    that lists none, or built ones only (a tile's pixels beyond the image's edge keep their
+    rows unused). A window's tiles (a run of whole tile rows) get the rows of its own."""
     rng = np.random.default_rng(seed)
     cam = Camera(eye=(0.0, 0.0, 0.0), target=(0.0, 1.0, 0.0), up=(0.0, 0.0, 1.0), fov_deg=60.0,
                  width=width, height=height)
@@ -78,17 +79,24 @@ def test_candidate_rows_are_the_listed_tiles_pixels(seed, width, height):
     c = rng.normal(0, 1, (int(rng.integers(0, 6)), 3)) * (1.0, 0.2, 1.0) + (0.0, 4.0, 0.0)
     half = np.abs(rng.normal(0, 0.3, c.shape))
     tiles = project_shells(c - half, c + half, frame, width, height)
-    cands = candidate_lists(width * height, len(c), tiles.off)
-    listed = tiles.off[1:] > tiles.off[:-1]
-    assert len(cands.t) == TILE * TILE * np.count_nonzero(listed) == len(cands.patch)
-    assert np.all((cands.tile_row >= 0) == listed)
-    rows = []
+    unbuilt = rng.random(len(c)) < 0.5 if some_built else None
     per_row = -(-width // TILE)
-    for ty, tx in np.ndindex(-(-height // TILE), per_row):
-        k = ty * per_row + tx
-        if listed[k]:
+    n_ty = -(-height // TILE)
+    t0 = int(rng.integers(0, n_ty))  # a window of tile rows (maybe all)
+    t1 = int(rng.integers(t0 + 1, n_ty + 1))
+    window = tiles._replace(off=tiles.off[t0 * per_row:t1 * per_row + 1])
+    for tl, first in ((tiles, 0), (window, t0 * per_row)):
+        cands = candidate_lists(width * height, len(c), tl, unbuilt)
+        listed = np.array([
+            any(unbuilt is None or unbuilt[p]
+                for p in tiles.items[tiles.off[k]:tiles.off[k + 1]])
+            for k in range(first, first + len(tl.off) - 1)], bool)
+        assert len(cands.t) == TILE * TILE * np.count_nonzero(listed) == len(cands.patch)
+        assert np.all((cands.tile_row >= 0) == listed)
+        rows = []
+        for k in np.nonzero(listed)[0]:
             rows += [cands.tile_row[k] + a * TILE + b for a in range(TILE) for b in range(TILE)]
-    assert sorted(rows) == list(range(len(cands.t)))
+        assert sorted(rows) == list(range(len(cands.t)))
     assert len(candidate_lists(width * height).t) == width * height  # (the BVH's rays)
 
 

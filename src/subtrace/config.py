@@ -197,13 +197,20 @@ EXR_LINES_PER_BLOCK = 16
 # in bands of whole rows of about this many pixels (whole EXR blocks of lines; 192 rows of
 # 1280): its channels, normals and the picture's arrays are a band's
 STREAM_BAND_PIXELS = 1 << 18
-# ... and an image of more pixels than this (2560x1600) is traced band by band too, its
-# hit records and candidate lists a band's. Tracing in bands costs time (BENCHMARKS.md,
-# "Renders streamed in bands": each band is a pass of the rounds, and its rays' patches are
-# built in calls of their own: 3-26 % more render time on the benchmark scenes at
-# 1280x720, where streamed renders traced whole took 0.94-1.00 of it), which an image this
-# large pays for the memory it saves
+# ... and an image of more pixels than this (2560x1600), or of cages of at least
+# STREAM_TRACE_FACES faces in all, is traced band by band too, in bands of about
+# STREAM_TRACE_BAND_PIXELS (96 rows of 1280): its hit records, candidate lists and shading
+# arrays are then a band's. Tracing in bands costs time (BENCHMARKS.md, "Renders streamed
+# in bands": each band is a pass of the rounds, and its rays' patches are built in calls of
+# their own, whose fixed cost is the isolation's levels: 3-26 % more render time on the
+# benchmark scenes at 1280x720, where streamed renders traced whole took 0.94-1.00 of it).
+# An image this large pays for the memory it saves; so does a large cage, whose loading and
+# patch table outweigh the bands' extra calls, and whose render must leave room for the
+# table (the sword refined twice, 358,048 faces, seen in part: 0.25 of the whole view's
+# memory above the interpreter's, against 0.31 traced whole; "Memory of the streamed render")
 STREAM_TRACE_PIXELS = 1 << 22
+STREAM_TRACE_FACES = 1 << 16
+STREAM_TRACE_BAND_PIXELS = 1 << 17
 
 # Adaptive anti-aliasing (picture.py): a pixel gets more rays when it and a neighbour (right
 # or below) differ in coverage or object, in depth by more than AA_DEPTH_STEP of the

@@ -20,7 +20,8 @@ A render handed to a ``sink`` (``subtrace render`` of an EXR: ``io.exr.ExrBands`
 painted and handed over in bands of rows (:func:`render_bands`): its channels are never
 held whole. The set-up above is the whole image's, once (:func:`trace_setup`); the rays are
 traced for the whole image (:func:`trace_window`), or, for an image of more than
-``config.STREAM_TRACE_PIXELS``, band by band, so that the hit records are a band's too.
+``config.STREAM_TRACE_PIXELS`` or cages of ``config.STREAM_TRACE_FACES`` faces and more,
+band by band, so that the hit records are a band's too.
 """
 
 from __future__ import annotations
@@ -293,7 +294,8 @@ def trace_window(shared, frame, width, height, progress=None, keep=None, hits=No
     # the micro-triangles each thread's rays built (each chunk of rays counts what its own
     # memo built: the sum is the same on any threads)
     tested = np.zeros(len(memos.m), np.int64)
-    cands = candidate_lists(n_rays, table.n_patches, tiles.off)  # (rows: pools.Candidates)
+    # (rows for the pixels of the tiles that list a patch still unbuilt: pools.Candidates)
+    cands = candidate_lists(n_rays, table.n_patches, tiles, iso.patch_iso < 0)
     rays = None  # round 0: every pixel's ray
     round_no = 0
     # (the pieces record the round they were built in: this window's rounds are numbered
@@ -517,7 +519,8 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
     the image's rows [y0, y1) (name -> (y1 - y0, W) float32 views, valid during the call)
     band after band, top to bottom (:func:`render_bands`; ``band_rows``: their height;
     ``trace_bands``: whether the rays are traced band by band too, None: for an image of
-    more than ``config.STREAM_TRACE_PIXELS``): the result's channels are then empty. Only
+    more than ``config.STREAM_TRACE_PIXELS`` or cages of at least
+    ``config.STREAM_TRACE_FACES`` faces): the result's channels are then empty. Only
     a whole image of cages is rendered in bands (a crop, or free-form surfaces, go to the
     sink as one band)."""
     t_start = time.perf_counter()
@@ -538,7 +541,8 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
         keep = {}
         banded = sink is not None and table is not None and nurbs is None and crop is None
         if trace_bands is None:
-            trace_bands = view.width * view.height > config.STREAM_TRACE_PIXELS
+            trace_bands = (view.width * view.height > config.STREAM_TRACE_PIXELS
+                           or sum(c.n_faces for c in cages) >= config.STREAM_TRACE_FACES)
         if table is None:
             warmup.stop(compiling)  # no cage: the subdivision kernels are not needed
         elif banded:
@@ -659,7 +663,8 @@ def _cropped(planes, crop, view):
 def render_bands(scene, cages, owners, camera, shared, keep, stats, sink, band_rows,
                  compiling, progress, t_start, accel) -> RenderResult:
     """The rest of :func:`render_scene` in bands of ``band_rows`` rows (default: about
-    ``config.STREAM_BAND_PIXELS`` pixels), each shaded and painted as the window of
+    ``config.STREAM_BAND_PIXELS`` pixels, ``config.STREAM_TRACE_BAND_PIXELS`` when traced
+    band by band), each shaded and painted as the window of
     :func:`crop_window` around it (with the rows its anti-aliasing and smoothed occlusion
     read) and handed to ``sink``: the channels, normals and the picture's arrays are a
     band's, not the image's. The rays are traced for the whole image first, or, when
@@ -672,7 +677,10 @@ def render_bands(scene, cages, owners, camera, shared, keep, stats, sink, band_r
     meets the patches built differs)."""
     W, H = camera.width, camera.height
     # (whole blocks of an EXR's lines, io.exr.LINES_PER_BLOCK, and so of tiles' rows)
-    rows = config.STREAM_BAND_PIXELS // W if band_rows is None else int(band_rows)
+    if band_rows is None:
+        band_rows = (config.STREAM_TRACE_BAND_PIXELS if shared.windows
+                     else config.STREAM_BAND_PIXELS) // W
+    rows = int(band_rows)
     align = config.EXR_LINES_PER_BLOCK
     rows = max(align, rows - rows % align)
     margin = apron(scene)

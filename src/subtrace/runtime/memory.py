@@ -39,9 +39,9 @@ def one_block(*specs) -> list[np.ndarray]:
 _GRANULE = 2 * 1024 * 1024
 
 
-def _madvise():
-    """libc's ``madvise`` and ``MADV_DONTNEED``, or None where either is missing."""
-    advice = getattr(mmap, "MADV_DONTNEED", None)
+def _madvise(name="MADV_DONTNEED"):
+    """libc's ``madvise`` and the advice ``name``, or None where either is missing."""
+    advice = getattr(mmap, name, None)
     try:
         fn = ctypes.CDLL(None, use_errno=True).madvise
     except (OSError, AttributeError, TypeError):
@@ -54,6 +54,7 @@ def _madvise():
 
 
 _MADVISE = _madvise()
+_NO_HUGE = _madvise("MADV_NOHUGEPAGE")
 
 
 def let_go(arrays) -> int:
@@ -71,3 +72,23 @@ def let_go(arrays) -> int:
         if hi > lo and fn(lo, hi - lo, advice) == 0:
             total += hi - lo
     return total
+
+
+def small_pages(a: np.ndarray) -> np.ndarray:
+    """``a`` (just allocated, untouched) faulted in small pages: ``madvise(MADV_NOHUGEPAGE)``
+    on the whole 4 kB pages inside it. For a large store of which a render touches only the
+    start, and a varying amount: NumPy asks for transparent huge pages on every allocation
+    of 4 MB and more, and then the first byte written in each 2 MB makes all of it resident.
+    The memos' stores (``trace.pools.Memos``: six per thread, each touched up to what one
+    chunk of rays split) held 2 MB each at least that way, 24-28 MiB of the tip of the
+    sword refined twice, for about 4 MiB of splits a thread (BENCHMARKS.md, "Memory of the
+    streamed render"). Returns ``a``."""
+    if _NO_HUGE is None or a.nbytes < _GRANULE:
+        return a
+    fn, advice = _NO_HUGE
+    page = mmap.PAGESIZE
+    lo = -(-a.ctypes.data // page) * page
+    hi = (a.ctypes.data + a.nbytes) // page * page
+    if hi > lo:
+        fn(lo, hi - lo, advice)
+    return a

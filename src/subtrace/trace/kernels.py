@@ -41,7 +41,12 @@ from subtrace.trace.prims import (
 
 
 BAND_ROWS = 8  # image rows per band of rays
-BAND_CHUNK = 2  # bands a thread takes at a time (the next free ones, as it finishes)
+# bands a thread takes at a time (the next free ones, as it finishes). Each take is a chunk
+# with a memo of its own, and a memo holds the splits of its chunk's rays: at one band a
+# chunk, the memos' pages held at once are halved (Spot 8.4 -> 4.7 MiB, gen_vase_loop 21 ->
+# 11) for the same trace time within 2 % (two bands a chunk before: BENCHMARKS.md, "Memory
+# of the streamed render"); four-row bands lost 2-8 % of the trace time
+BAND_CHUNK = 1
 
 
 def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, iso, mems,
@@ -204,9 +209,11 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, base, bvh
                 hits.t[r] = np.inf
                 hits.prim[r] = -1
                 continue
-            cr = r  # the ray's row of the candidate lists (pools.Candidates)
-            if len(cands.tile_row):
-                cr = cands.tile_row[tile] + (row % TILE) * TILE + col % TILE
+            cr = r  # the ray's row of the candidate lists (pools.Candidates; -1: none, its
+            if len(cands.tile_row):  # tile lists built patches only)
+                cr = cands.tile_row[tile]
+                if cr >= 0:
+                    cr += (row % TILE) * TILE + col % TILE
             dx, dy, dz = ray_setup(frame, row, col)
             ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
             kx, ky, kz, sx, sy, sz = shear(dx, dy, dz)
@@ -220,7 +227,7 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, base, bvh
             src = 2
             sp = 0
             j = j_end = np.int64(0)
-            if round_no > 0 and cands.count[cr] >= 0:
+            if round_no > 0 and cr >= 0 and cands.count[cr] >= 0:
                 src = 0
                 j_end = _sort_candidates(cands, cr)
             elif projected:
@@ -260,7 +267,9 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, base, bvh
                 else:
                     # unbuilt: a candidate (rewritten in place when remembered: n_c < j), the
                     # nearest one the request
-                    if n_c < CANDIDATES:
+                    if cr < 0:  # (no row: traverses its tile again when traced again)
+                        n_c = CANDIDATES + 1
+                    elif n_c < CANDIDATES:
                         cands.patch[cr, n_c] = p
                         cands.t[cr, n_c] = te
                         n_c += 1
@@ -280,9 +289,10 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, base, bvh
                 request[r] = req
                 cands.wanted[req] = 1
                 reach = min(req_x, hit[H_T])
-                for k in range(min(n_c, CANDIDATES)):
+                for k in range(min(n_c, CANDIDATES) if cr >= 0 else 0):
                     if cands.t[cr, k] < reach:
                         cands.wanted[cands.patch[cr, k]] = 1
-            cands.count[cr] = n_c if n_c <= CANDIDATES else -1
+            if cr >= 0:
+                cands.count[cr] = n_c if n_c <= CANDIDATES else -1
             _store_hit(hit, hits, r)
     tested[task] += n_tested

@@ -33,7 +33,7 @@ from subtrace.trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
 from subtrace.trace.prims import (
     M_COUNTS, M_MADE, M_PEAK_CELLS, M_PEAK_NETS, M_PEAK_NODES, memo_restart,
 )
-from subtrace.runtime.memory import one_block
+from subtrace.runtime.memory import one_block, small_pages
 from subtrace.patches.isolate_loop import sample_ranges, side_samples
 from subtrace.trace.tris import LOOP_CELL, TRI, tri_nets_as_pieces
 
@@ -88,11 +88,14 @@ class Candidates(NamedTuple):
     """Per ray, the unbuilt shells it entered before its best hit: a ray traced again after
     they are built tests just those instead of traversing again.
 
-    Only a ray that enters a shell has a list. With projection tiles (``accel/projection``)
-    those are the rays of tiles that list a shell, so the lists have rows for those tiles
-    alone: ``tile_row[k]`` is tile k's first row (its ``TILE`` x ``TILE`` pixels row by row
-    from there), -1 for a tile that lists none. Without tiles (``tile_row`` empty) ray r's
-    row is r. (osd_catmark_nonquads at 1280x720: 152,156 rows instead of 921,600.)"""
+    Only a ray that enters an unbuilt shell has a list. With projection tiles
+    (``accel/projection``) those are the rays of tiles that list an unbuilt patch, so the
+    lists have rows for those tiles alone: ``tile_row[k]`` is tile k's first row (its
+    ``TILE`` x ``TILE`` pixels row by row from there), -1 for a tile that lists none (its
+    rays meet built patches only, and never ask for a build). Without tiles (``tile_row``
+    empty) ray r's row is r. (osd_catmark_nonquads at 1280x720: 152,156 rows for the tiles
+    that list a shell, instead of 921,600; the tip of the sword refined twice: 266,268 rows
+    for those, of which ... list an unbuilt patch.)"""
 
     patch: np.ndarray  # (R, CANDIDATES) int32
     t: np.ndarray  # (R, CANDIDATES) float64: entry distances
@@ -115,13 +118,20 @@ class Hits(NamedTuple):
     b: np.ndarray  # (R,) float64: the patch parameter v
 
 
-def candidate_lists(n_rays: int, n_patches: int = 0, tiles_off=None) -> Candidates:
+def candidate_lists(n_rays: int, n_patches: int = 0, tiles=None, unbuilt=None) -> Candidates:
     """Empty candidate lists (round 0 sets every list it uses) among ``n_patches`` patches:
-    for ``n_rays`` rays, or with ``tiles_off`` (the projection tiles' ``off``), for the
-    pixels of the tiles that list a shell (:class:`Candidates`)."""
+    for ``n_rays`` rays, or with ``tiles`` (the projection's :class:`Tiles`, its ``off``
+    perhaps a window's), for the pixels of the tiles that list a patch for which
+    ``unbuilt`` (P,) is true (None: any patch) (:class:`Candidates`)."""
     tile_row = np.zeros(0, np.int64)
-    if tiles_off is not None and len(tiles_off) > 1:
-        listed = tiles_off[1:] != tiles_off[:-1]
+    if tiles is not None and len(tiles.off) > 1:
+        off = tiles.off
+        if unbuilt is None:
+            listed = off[1:] != off[:-1]
+        else:  # (the unbuilt patches in each tile's list, from the window's first entry)
+            in_list = np.zeros(int(off[-1] - off[0]) + 1, np.int64)
+            np.cumsum(unbuilt[tiles.items[off[0]:off[-1]]], out=in_list[1:])
+            listed = in_list[off[1:] - off[0]] != in_list[off[:-1] - off[0]]
         tile_row = np.cumsum(listed) - 1
         n_rays = (int(tile_row[-1]) + 1) * TILE * TILE
         tile_row *= TILE * TILE
@@ -150,10 +160,12 @@ def round_arrays(n_rays: int) -> tuple[Hits, np.ndarray]:
     return Hits(*fields), request
 
 
-def grown(a, n_used, size):
-    """``a`` with room for ``size`` rows (``np.empty``: pages are touched as used), its
-    first ``n_used`` rows copied."""
+def grown(a, n_used, size, small=False):
+    """``a`` with room for ``size`` rows (``np.empty``: pages are touched as used; ``small``:
+    in small pages, ``runtime.memory.small_pages``), its first ``n_used`` rows copied."""
     b = np.empty((size, *a.shape[1:]), a.dtype)
+    if small:
+        small_pages(b)
     b[:n_used] = a[:n_used]
     return b
 
@@ -443,14 +455,14 @@ class Memos:
         n = self._rows("child", len(child))
         if "child" in which and n > len(child):
             used = cnt[M_NODES]
-            child, box, slab, data = (grown(child, used, n), grown(box, used, n),
-                                      grown(slab, used, n), grown(data, used, n))
+            child, box, slab, data = (grown(child, used, n, True), grown(box, used, n, True),
+                                      grown(slab, used, n, True), grown(data, used, n, True))
         n = self._rows("nets", len(nets))
         if "nets" in which and n > len(nets):
-            nets = grown(nets, cnt[M_NETS], n)
+            nets = grown(nets, cnt[M_NETS], n, True)
         n = 4 * (self._rows("cells", len(cells)) // 4)
         if "cells" in which and n > len(cells):
-            cells = grown(cells, 4 * cnt[M_CELLS], n)
+            cells = grown(cells, 4 * cnt[M_CELLS], n, True)
         cnt[M_FULL] = 0
         return Memo(root, child, box, slab, data, nets, cells, cnt)
 
