@@ -294,8 +294,10 @@ def trace_window(shared, frame, width, height, progress=None, keep=None, hits=No
     # the micro-triangles each thread's rays built (each chunk of rays counts what its own
     # memo built: the sum is the same on any threads)
     tested = np.zeros(len(memos.m), np.int64)
-    # (rows for the pixels of the tiles that list a patch still unbuilt: pools.Candidates)
-    cands = candidate_lists(n_rays, table.n_patches, tiles, iso.patch_iso < 0)
+    # (rows for the pixels of the tiles that list a patch, in bands one still unbuilt:
+    # pools.Candidates)
+    cands = candidate_lists(n_rays, table.n_patches, tiles,
+                            iso.patch_iso < 0 if shared.windows else None)
     rays = None  # round 0: every pixel's ray
     round_no = 0
     # (the pieces record the round they were built in: this window's rounds are numbered
