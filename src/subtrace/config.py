@@ -206,8 +206,9 @@ STREAM_BAND_PIXELS = 1 << 18
 # benchmark scenes at 1280x720, where streamed renders traced whole took 0.94-1.00 of it).
 # An image this large pays for the memory it saves; so does a large cage, whose loading and
 # patch table outweigh the bands' extra calls, and whose render must leave room for the
-# table (the sword refined twice, 358,048 faces, seen in part: 0.25 of the whole view's
-# memory above the interpreter's, against 0.31 traced whole; "Memory of the streamed render")
+# table (the sword refined twice, 358,048 faces, a tenth of it in view: 0.23-0.24 of the
+# whole view's memory above the interpreter's, against 0.29-0.30 traced whole; BENCHMARKS.md,
+# "Memory of the streamed render")
 STREAM_TRACE_PIXELS = 1 << 22
 STREAM_TRACE_FACES = 1 << 16
 STREAM_TRACE_BAND_PIXELS = 1 << 17
