@@ -209,8 +209,10 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, base, bvh
                 hits.t[r] = np.inf
                 hits.prim[r] = -1
                 continue
-            cr = r  # the ray's row of the candidate lists (pools.Candidates; -1: none, its
-            if len(cands.tile_row):  # tile lists built patches only)
+            # the ray's row of the candidate lists (pools.Candidates; -1: none, its tile
+            # lists built patches only)
+            cr = r
+            if len(cands.tile_row):
                 cr = cands.tile_row[tile]
                 if cr >= 0:
                     cr += (row % TILE) * TILE + col % TILE
