@@ -50,7 +50,7 @@ from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
 from subtrace.runtime.memory import let_go, one_block
 from subtrace.picture import ground_plane, paint
-from subtrace.shade import (C_LEVEL, C_OBJECT, C_R, CHANNELS, background_rows, deepest_level,
+from subtrace.shade import (C_OBJECT, C_R, CHANNELS, background_rows, deepest_level,
                             miss_values, patch_shading, shade)
 from subtrace.subdiv.limit import limit_points
 from subtrace.tiles import check_crop
@@ -730,7 +730,7 @@ def render_bands(scene, cages, owners, camera, shared, keep, stats, sink, band_r
               ground=ground)
         band = planes.reshape(len(CHANNELS), h, W)[:, y0 - window.y0:y1 - window.y0]
         n_covered += int(np.count_nonzero(band[C_OBJECT] >= 0))
-        max_level = max(max_level, int(band[C_LEVEL].max(initial=-1.0)))
+        max_level = max(max_level, deepest_level(band))
         t_shade += time.perf_counter() - t0
         t0 = time.perf_counter()
         sink(y0, y1, {name: band[k] for k, name in enumerate(CHANNELS)})
