@@ -200,7 +200,7 @@ def _in_view(task, n_tasks, bmin, bmax, eye, inv, width, height, seen):
             seen[i] = x0 <= x1
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _fill(order, rect, tx, cursor, items):
     """Append the boxes to their tiles' lists in the order ``order`` (nearest first)."""
     for i in order:

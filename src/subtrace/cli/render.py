@@ -5,6 +5,7 @@ the scene the render and sweep commands build from their inputs and options
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 from dataclasses import replace
@@ -93,17 +94,39 @@ def execute(args) -> int:
     # and OpenImageIO load (Numba set up first: its runtime starts while the renderer's
     # modules import)
     set_up_numba(args)
+    import subtrace.render  # noqa: F401  (the modules whose kernels a render loads)
+
+    # (a process of its own: the kernels the last render of this kind loaded, loaded ahead
+    # from the moment the render starts)
+    ahead = contextlib.nullcontext
+    if getattr(args, "own_process", False):
+        from subtrace.runtime import preload
+
+        key = preload.render_key(scene, args.accel, picture, crop is not None,
+                                 numbers is not None, tile is not None, dask is not None)
+        ahead = lambda: preload.loading(key)  # noqa: E731
+    _render(args, scene, out, png, picture, bits, crop, tile, dask, resume, numbers,
+            turntable, ahead)
+    return 0
+
+
+def _render(args, scene, out, png, picture, bits, crop, tile, dask, resume, numbers,
+            turntable, ahead) -> None:
+    """The render(s) of :func:`execute`, their files written and summaries printed;
+    ``ahead()``: the context the renders run in (:func:`subtrace.runtime.preload.loading`,
+    or none)."""
     from subtrace.render import render_scene
 
     progress = ProgressBar() if sys.stderr.isatty() and not args.quiet else None
     if numbers is None and tile is None and dask is None:
         if picture is None and crop is None:  # an EXR of the whole image: streamed
-            _render_streamed(args, scene, out, png, progress)
-            return 0
-        result = render_scene(scene, threads=args.threads, accel=args.accel, progress=progress,
-                              crop=crop)
+            _render_streamed(args, scene, out, png, progress, ahead)
+            return
+        with ahead():
+            result = render_scene(scene, threads=args.threads, accel=args.accel,
+                                  progress=progress, crop=crop)
         _write(args, scene, result, out, png, picture, bits)
-        return 0
+        return
     from subtrace.frames import render_frames
 
     def report(frame):
@@ -116,14 +139,14 @@ def execute(args) -> int:
                   f"{frame.stats['time_total']:.3f} s"
                   + (f"; preview {frame.preview}" if frame.preview else ""))
 
-    done = render_frames(scene, out, turntable=turntable, frames=args.frames, crop=crop,
-                         tile=tile, dask=False if dask is None else (dask or None),
-                         resume=resume, png=png, bits=bits, threads=args.threads,
-                         accel=args.accel, progress=progress, report=report)
+    with ahead():
+        done = render_frames(scene, out, turntable=turntable, frames=args.frames, crop=crop,
+                             tile=tile, dask=False if dask is None else (dask or None),
+                             resume=resume, png=png, bits=bits, threads=args.threads,
+                             accel=args.accel, progress=progress, report=report)
     skipped = sum(f.skipped for f in done)
     if resume and not args.quiet:
         print(f"--resume: {skipped} of {len(done)} frames already there, left out")
-    return 0
 
 
 def _write(args, scene, result, out, png, picture, bits) -> None:
@@ -137,7 +160,7 @@ def _write(args, scene, result, out, png, picture, bits) -> None:
         print(_summary(out, png, result, took))
 
 
-def _render_streamed(args, scene, out, png, progress) -> None:
+def _render_streamed(args, scene, out, png, progress, ahead) -> None:
     """Render the whole image in bands (``render.render_scene(sink=...)``), each encoded
     into the EXR as it is done (``io.exr.ExrBands``), so that neither the image's per-pixel
     arrays nor its channels are held at once; write the file and print its summary line.
@@ -147,8 +170,9 @@ def _render_streamed(args, scene, out, png, progress) -> None:
     from subtrace.render import render_scene
 
     exr = ExrBands(out, scene.camera.width, scene.camera.height, png)
-    result = render_scene(scene, threads=args.threads, accel=args.accel, progress=progress,
-                          sink=exr.write)
+    with ahead():
+        result = render_scene(scene, threads=args.threads, accel=args.accel,
+                              progress=progress, sink=exr.write)
     exr.finish(result_files(result, scene))
     if not args.quiet:
         print(_summary(out, png, result, exr.seconds))

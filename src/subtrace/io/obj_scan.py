@@ -143,7 +143,7 @@ def _parse_index(data, a, b):
 # state (byte position, line number, element / face / corner / statement counts) changes in
 # every branch, so helpers would each take and return most of it, and the per-token calls
 # sit on the hottest path of loading a cage. Each step carries a one-line comment instead.
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def scan_bytes(data, start, points, uvs, normals, face_sizes, corners, other, slow, counts):
     """Read the statements of `data` (uint8) from byte `start`; True when it read them all.
 

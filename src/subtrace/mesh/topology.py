@@ -146,7 +146,7 @@ def base_edges(face_offsets: np.ndarray, face_verts: np.ndarray, n_verts: int):
     return edge_verts[:n_edges].copy(), face_edges, forward
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _base_edges(face_offsets, face_verts, n_verts, edge_verts, face_edges, forward):
     """Number the edges of the faces' corners (corner k -> k+1) in order of first use; each
     distinct vertex pair is one edge, except that, as in OpenSubdiv, a degenerate edge (a
@@ -279,7 +279,7 @@ def build_level(
     )
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _relations(face_offsets, face_verts, face_edges, edge_verts, face_edge_forward,
                edge_face_offsets, edge_faces, edge_face_corner, vert_face_offsets, vert_faces,
                vert_face_corner, vert_edge_offsets, vert_edges, detect, edge_nonmanifold,
@@ -539,7 +539,7 @@ def tag_base_level(
     )
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _tag_kernel(
     vert_face_offsets,
     vert_faces,

@@ -328,7 +328,7 @@ def bezier_nets(cv: np.ndarray) -> np.ndarray:
     return out
 
 
-@nb.njit(cache=True)  # (also from Python)
+@nb.njit(cache=True, nogil=True)  # (also from Python)
 def to_bezier(cv, M, out):
     """Bezier nets ``out`` (m,4,4,3) of B-spline grids ``cv`` (m,4,4,3); ``M`` = TO_BEZIER."""
     tmp = np.empty((4, 4, 3))
@@ -354,7 +354,7 @@ def net_bounds(bez: np.ndarray):
     net_summary(np.ascontiguousarray(bez), lo, hi, bound)
     return lo, hi, bound
 
-@nb.njit(cache=True)  # (also from Python)
+@nb.njit(cache=True, nogil=True)  # (also from Python)
 def net_summary(bez, lo, hi, bound):
     """Box of each net, and 3 max |b[i+1,j] - b[i,j]| over both directions."""
     for m in range(bez.shape[0]):

@@ -146,7 +146,7 @@ def _mirror(cv, cut):
         cv[m, row, :] = 2.0 * cv[m, (row + inner) // 2, :] - cv[m, inner, :]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _sharp_side_grids(fo, fv, fe, efo, ef, es, vfo, vf, vfc, faces, bc, trail, inf, ids, cut):
     """Real point ids of the grids of regular quads with sharp sides (-1 where a phantom
     point goes) and which sides are sharp."""

@@ -164,7 +164,7 @@ def edge_sampling(table, depths):
     return edge_depth, np.ascontiguousarray(reg_side, dtype=np.int64)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _sample_edges(edges, shift, depths, iso, regular, fan_levels, nb_max, edge_depth):
     """Raise the ``iso`` patches to their neighbours' depths and the ``regular`` ones to
     within ``fan_levels`` of them until none changes (in place); fill the deepest patch on

@@ -347,7 +347,7 @@ def _add_cells(cells, level, points, options, faces, root, i0, j0):
         cells[6].append(level.vert_boundary()[corners].any(axis=1))
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def item_sides(first, count, level, i0, j0, depth, patch_side, out):
     """How finely each side of each piece is sampled, for watertight pieces of different
     depths: patch ``p``'s pieces are ``first[p] .. first[p] + count[p] - 1`` (dyadic squares
@@ -398,7 +398,7 @@ def item_sides(first, count, level, i0, j0, depth, patch_side, out):
                             changed = True
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def rest_boxes(first, count, lo, hi, rest_lo, rest_hi):
     """Per item, the box of it and the items after it in its patch (patch ``p``'s items are
     ``first[p] .. first[p] + count[p] - 1``, coarse levels first): a ray that misses the box

@@ -684,10 +684,12 @@ class _PatchInliningOnCompile(_event.Listener):
     (:func:`_calls_without_literals`), the flags' values (:func:`_flag_values_from_defaults`)
     and the IR's variable lists (:func:`_ir_variables_listed_directly`) are applied at the
     process's first compile, so a command whose kernels are all cached does not import
-    Numba's inliner for it."""
+    Numba's inliner for it. Also counts the compiles under way on each thread
+    (:func:`compiling_here`)."""
 
     def on_start(self, event):
         global INLINE_PATCHED
+        _COMPILES.depth = getattr(_COMPILES, "depth", 0) + 1
         if INLINE_PATCHED is None:
             INLINE_PATCHED = _inline_copies_scope_once()
             _calls_without_literals()
@@ -698,11 +700,18 @@ class _PatchInliningOnCompile(_event.Listener):
             _function_types_resolved_once()
 
     def on_end(self, event):
-        pass
+        _COMPILES.depth -= 1
 
 
 INLINE_PATCHED = None  # True once applied (the process's first compile), False: not here
+_COMPILES = threading.local()  # depth: the compiles under way on this thread
 _event.register("numba:compile", _PatchInliningOnCompile())
+
+
+def compiling_here() -> bool:
+    """Whether this thread is compiling a function (a kernel read from the cache now is
+    one that compile links in, not one Python called)."""
+    return getattr(_COMPILES, "depth", 0) > 0
 
 
 # What the first-run notice says the compile takes (benchmarks/startup.py: a cold render of
@@ -870,7 +879,11 @@ def trim_loader() -> None:
       named ``numba_extensions``), made before a process's first call of a kernel, is
       skipped: the command runs only subtrace's kernels, which use none, and the search
       read the metadata of every installed distribution (3.7 ms of every render here, 132
-      distributions).
+      distributions);
+    * each kernel loaded is listed, with its signature, in
+      :data:`subtrace.runtime.preload.LOADED`: what the next render of the same kind reads
+      ahead (:mod:`subtrace.runtime.preload`), and a kernel that was read ahead is taken
+      from there instead of the cache.
 
     Numbas whose loader is organised differently are left alone (the command is then just
     slower); tests run the command in fresh processes on warm and cold caches.
@@ -884,6 +897,8 @@ def trim_loader() -> None:
     if not all(hasattr(Cache, name) for name in ("_load_overload",
                                                    "_guard_against_spurious_io_errors")):
         return  # pragma: no cover - a Numba whose cache loader is organised differently
+    from subtrace.runtime import preload
+
     _drop_llvm_lock_events()
     _target_described_once()
     _runtime_from_the_kernel_folder()
@@ -906,11 +921,23 @@ def trim_loader() -> None:
         starting.join()
         rtsys.initialize(target_context)  # idempotent (and the fallback if the thread failed)
 
-    def load_overload(self, sig, target_context):
+    def read_overload(self, sig, target_context):
         runtime_ready(target_context)  # loaded code calls into the runtime
+        cres = None  # (a miss: the kernel compiles; also when the guard swallowed an I/O error)
         with _without_scipy_linalg(), unimported, self._guard_against_spurious_io_errors():
-            return self._load_overload(sig, target_context)
-        # None (a miss: the kernel compiles) when the guard swallowed an I/O error
+            cres = self._load_overload(sig, target_context)
+        return cres
+
+    def load_overload(self, sig, target_context):
+        func = getattr(self, "_py_func", None)
+        cres = preload.take(func, sig)  # (read ahead by the preload thread, if it was)
+        if cres is None:
+            cres = read_overload(self, sig, target_context)
+        if cres is not None and func is not None and not compiling_here():
+            # (the next render's preload manifest: what Python called, not what a compile
+            # linked in)
+            preload.LOADED.append((func.__module__, func.__qualname__, tuple(sig)))
+        return cres
 
     full_refresh = context.refresh
 
@@ -921,6 +948,7 @@ def trim_loader() -> None:
 
     Cache.load_overload = load_overload
     context.refresh = refresh
+    preload.READ = read_overload
 
 
 def _runtime_from_the_kernel_folder() -> bool:

@@ -87,7 +87,7 @@ def classify(level: Level, options: Options, which=None) -> np.ndarray:
     return out
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _classify_kernel(
     reg_size,
     face_offsets,
@@ -223,7 +223,7 @@ def _add3(P, du, dv, r, X, q, w, w1, w2):
         dv[r, k] += w2 * X[q, k]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _closed_form_kernel(
     is_loop,
     crease,

@@ -110,7 +110,7 @@ def _decrement_all(s: np.ndarray) -> np.ndarray:
     return out
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _child_edge_sharpness_kernel(edge_verts, edge_sharp, vert_edge_offsets, vert_edges, chaikin, out):
     for e in range(len(edge_sharp)):
         s = edge_sharp[e]
@@ -282,7 +282,7 @@ def _crease_ends(edge_sharp_around):
     return i0, i1
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _refine_points_kernel(
     is_loop,
     smooth_triangles,
