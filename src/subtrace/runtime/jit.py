@@ -890,6 +890,7 @@ def trim_loader() -> None:
     """
     try:
         from numba.core.caching import Cache
+        from numba.core.compiler_lock import global_compiler_lock
         from numba.core.registry import cpu_target
         from numba.core.runtime import rtsys
     except ImportError:  # pragma: no cover - a Numba without these internal modules
@@ -948,7 +949,8 @@ def trim_loader() -> None:
 
     Cache.load_overload = load_overload
     context.refresh = refresh
-    preload.READ = read_overload
+    preload.READ, preload.FOLDER = read_overload, KERNEL_DIR / "preload"
+    preload.LOCK = global_compiler_lock
 
 
 def _runtime_from_the_kernel_folder() -> bool:

@@ -44,6 +44,8 @@ LOADED: list = []
 # ``READ(cache, sig, target_context)``: a kernel's compile result read from Numba's cache
 # (jit.trim_loader's reader), or None; None where trim_loader is not applied
 READ = None
+FOLDER = None  # where the manifests are kept (jit.KERNEL_DIR / "preload", set with READ)
+LOCK = None  # Numba's compiler lock (set with READ): what its dispatchers load under
 # compile results read ahead and not yet taken: (python function, signature) -> result
 _READ_AHEAD: dict = {}
 
@@ -70,9 +72,7 @@ def take(func, sig):
 
 
 def _manifest_path(key: str):
-    from subtrace.runtime.jit import KERNEL_DIR
-
-    return KERNEL_DIR / "preload" / f"{key}.pkl"
+    return FOLDER / f"{key}.pkl"
 
 
 def _read_manifest(key: str) -> list | None:
@@ -121,11 +121,9 @@ def read_ahead(dispatcher, sig) -> bool:
     """Read ``dispatcher``'s compile result for the argument types ``sig`` from the cache
     and keep it for :func:`take`, unless the dispatcher has that overload or it was read
     already; never compile. True when it is there afterwards."""
-    from numba.core.compiler_lock import global_compiler_lock
-
     sig = tuple(sig)
     func = dispatcher.py_func
-    with global_compiler_lock:
+    with LOCK:
         if dispatcher.overloads.get(sig) is not None or (func, sig) in _READ_AHEAD:
             return True
         cres = READ(dispatcher._cache, sig, dispatcher.targetctx)
