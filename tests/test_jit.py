@@ -449,23 +449,8 @@ def test_a_command_does_not_search_the_installed_packages_for_numba_extensions(t
     assert out["plain"]["searched"] >= 1
 
 
-_COMPILES = """
+_COMPILES = COMPILE_LISTENER + """
 import json, sys
-from numba.core import event
-
-compiled = []
-
-
-class Listener(event.Listener):
-    def on_start(self, ev):
-        func = getattr(ev.data.get("dispatcher"), "py_func", None)
-        compiled.append(getattr(func, "__qualname__", "?"))
-
-    def on_end(self, ev):
-        pass
-
-
-event.register("numba:compile", Listener())
 from subtrace.cli.main import main
 
 code = main(["render", "--width", "48", "--height", "32", "--quiet", "-o", sys.argv[1]])

@@ -16,34 +16,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from shared_data import COMPILE_LISTENER, MODELS, needs_shared
 from subtrace.io.scene import Light, load_scene
 from subtrace.runtime import preload
 
 pytest.importorskip("OpenImageIO")
 import OpenImageIO as oiio  # noqa: E402
 
-MODELS = Path(__file__).resolve().parents[2] / "shared" / "models"
-
 # a render command in a fresh process (its own: the loader trimmed, kernels read ahead),
 # reporting what the read-ahead did
-_PROBE = r"""
+_PROBE = COMPILE_LISTENER + r"""
 import json, sys
-from numba.core import event
 from subtrace.runtime import preload
 
-compiled = []
-
-
-class Listener(event.Listener):
-    def on_start(self, ev):
-        func = getattr(ev.data.get("dispatcher"), "py_func", None)
-        compiled.append(getattr(func, "__qualname__", "?"))
-
-    def on_end(self, ev):
-        pass
-
-
-event.register("numba:compile", Listener())
 seen = {}
 loading = preload.loading
 
@@ -127,6 +112,7 @@ def test_render_key_follows_what_changes_the_kernels(tmp_path):
     assert preload.render_key(scene, "bvh") != key
 
 
+@needs_shared
 def test_kernels_are_read_ahead_taken_and_forgotten(tmp_path):
     """A first render of a cage remembers the kernels it asked for, in order; the next
     render of the same kind in a fresh process reads every one ahead, takes every one, asks
