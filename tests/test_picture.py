@@ -164,3 +164,53 @@ def test_position_channels_are_eye_plus_z_along_the_ray(scene, tmp_path, which):
     assert np.all(err <= 1e-6 * scale), err.max()
     if which == "nurbs_mixed":  # both passes' pixels were checked
         assert np.unique(ch["object_id"][hit]).tolist() == [0.0, 1.0]
+
+
+@pytest.mark.parametrize("bands", [False, True])
+def test_hits_coloured_in_the_shading_pass_as_the_lights_pass_colours_them(tmp_path,
+                                                                           monkeypatch, bands):
+    """A render without shadows or ambient occlusion colours its hits in the shading pass
+    (``picture.lit_in_shading``): every channel is the same, bit for bit, as when the
+    lights' own pass colours them, for a shiny material under the headlight, a directional
+    and a point light, the whole image at once and in bands; with shadows the lights' pass
+    colours them."""
+    import subtrace.picture as picture
+    import subtrace.render as render
+
+    path = tmp_path / "cube.obj"
+    path.write_text(CUBE)
+    scene = scene_from_dict({
+        "object": [{"mesh": str(path), "specular": [0.3, 0.25, 0.2], "shininess": 30.0}],
+        "camera": {"eye": [3.0, 2.5, 4.0], "target": [0.0, 0.0, 0.0], "width": 64,
+                   "height": 48},
+        "render": {"shadows": False},
+        "light": [{"direction": [0.3, -1.0, -0.5]},
+                  {"position": [2.0, 3.0, 2.5], "color": [1.0, 0.8, 0.6]}],
+    }, base_dir=tmp_path)
+    assert picture.lit_in_shading(scene) is not None
+    assert picture.lit_in_shading(apply_overrides(scene, shadows=True)) is None
+    assert picture.lit_in_shading(scene, loop=True) is None
+
+    def channels(sc):
+        if not bands:
+            return render_scene(sc).channels
+        out = {}
+
+        def sink(y0, y1, band):
+            for name, plane in band.items():
+                out.setdefault(name, []).append(np.array(plane))
+
+        render_scene(sc, sink=sink, band_rows=16)
+        return {name: np.concatenate(parts) for name, parts in out.items()}
+
+    calls = []
+    light = picture.light
+    monkeypatch.setattr(picture, "light", lambda *a, **k: calls.append(1) or light(*a, **k))
+    fused = channels(scene)
+    assert calls == []  # (no lights' pass)
+    monkeypatch.setattr(render, "lit_in_shading", lambda *a, **k: None)
+    apart = channels(scene)
+    assert calls  # (the lights' pass coloured them)
+    assert (fused["R"] > 0).any() and set(fused) == set(CHANNELS)
+    for name in CHANNELS:
+        np.testing.assert_array_equal(fused[name], apart[name], err_msg=name)

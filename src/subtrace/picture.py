@@ -95,7 +95,7 @@ def _count_secondary(pools, stats) -> None:
 
 
 def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, stats,
-          nurbs=None, offset=0, ground=False):
+          nurbs=None, offset=0, ground=False, lit=False):
     """Fill the colour (R, G, B) and, with anti-aliasing, filter colour and alpha of
     ``planes`` (len(CHANNELS), W*H) float32, whose other channels :func:`shade.shade` (and
     the NURBS pass) wrote; ``t`` (W*H,) float64 each pixel's hit distance (inf: none);
@@ -103,7 +103,8 @@ def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, st
     rows of ``patches`` from ``offset``: ``nurbs.scene.with_surfaces``); ``patches``: the
     :class:`shade.PatchShading`; ``keep``: what ``render.trace_hits`` kept for secondary
     rays (empty: no cage); ``nurbs``: the free-form surfaces (None: none), which cast
-    shadows, occlude and take extra rays too. Counts and times go to ``stats``."""
+    shadows, occlude and take extra rays too. ``lit``: the shading pass coloured the hits
+    already (:func:`lit_in_shading`). Counts and times go to ``stats``."""
     W, H = camera.width, camera.height
     frame = camera.frame()
     samples = scene.render.samples or 1
@@ -151,7 +152,7 @@ def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, st
     rows = background_rows(scene.render.background, scene.render.background_bottom,
                            image.height)[y0:y0 + H]
     _colour(scene, frame, W, t, normals, pix_patch, patches, planes, lights, rows,
-            ground, trace_shadows, tol_rad, None, ao, ids)
+            ground, trace_shadows, tol_rad, None, ao, ids, lit)
     if samples > 1:
         t0 = time.perf_counter()
         closest = _closest(pools, nurbs, frame, W, patches, scene, tol_rad, offset)
@@ -159,6 +160,24 @@ def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, st
                    trace_shadows, samples, stats, tol_rad, ao)
         stats.time_aa += time.perf_counter() - t0
     _count_secondary(pools, stats)
+
+
+def headlight_of(scene) -> np.ndarray:
+    """(1,) float64: the headlight's intensity (0: none), as the lighting takes it."""
+    r = scene.render
+    return np.array([r.headlight_intensity if r.headlight else 0.0])
+
+
+def lit_in_shading(scene, nurbs=None, loop=None):
+    """``(lights, headlight)`` for :func:`shade.shade` to colour the hits in its own pass,
+    where the colour needs nothing the shading pass lacks: no shadow rays (no lights, or
+    shadows off), no ambient occlusion, no free-form surfaces (their hits come after the
+    shading and are coloured with the cages'), no Loop cage (``loop``: its items' normals
+    come after); else None, and :func:`paint` colours the hits."""
+    if ((scene.lights and scene.render.shadows) or scene.render.ao > 0 or nurbs is not None
+            or loop is not None):
+        return None
+    return light_array(scene.lights), headlight_of(scene)
 
 
 def _any_hit(pools, nurbs, eye, tol_rad):
@@ -244,11 +263,12 @@ def ground_plane(scene, cages, camera, nurbs=None):
 
 
 def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights, rows,
-            ground, trace_shadows, tol_rad, dirs, ao=None, ids=None):
+            ground, trace_shadows, tol_rad, dirs, ao=None, ids=None, lit=False):
     """The colour of rays from the eye (pixel centres, or ``dirs``): shadows, ambient
     occlusion (``ao``: None, or (trace, rays per hit, distance, the image's width); ``ids``:
-    each ray's key for its AO pattern, :func:`shade.ambient_occlusion`), lighting, the
-    background (``rows``: per image row, or per ray with ``dirs``) and the ground."""
+    each ray's key for its AO pattern, :func:`shade.ambient_occlusion`), lighting (unless
+    ``lit``: the shading pass coloured the hits), the background (``rows``: per image row,
+    or per ray with ``dirs``) and the ground."""
     visible = np.ones((len(lights), 0), np.float32)  # (no columns: every pixel lit)
     if len(lights) and scene.render.shadows:
         visible = shadow_visibility(trace_shadows, frame, width, t, normals, pix_patch, lights,
@@ -274,9 +294,10 @@ def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights,
                                            occlusion, miss, ground, t_ground, ground_ao,
                                            skip, ao)
     r = scene.render
-    headlight = np.array([r.headlight_intensity if r.headlight else 0.0])
-    light(frame, width, t, normals, pix_patch, patches, lights, headlight, visible, planes,
-          dirs, occlusion)
+    headlight = headlight_of(scene)
+    if not lit:
+        light(frame, width, t, normals, pix_patch, patches, lights, headlight, visible, planes,
+              dirs, occlusion)
     if r.background_bottom is not None or dirs is not None:
         miss = np.nonzero(pix_patch < 0)[0] if miss is None else miss
         background_pixels(miss, rows, width, planes, dirs)

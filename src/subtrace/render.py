@@ -49,7 +49,7 @@ from subtrace.patches.table import build_patch_table, cage_face_shells, restrict
 from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
 from subtrace.runtime.memory import let_go, one_block
-from subtrace.picture import ground_plane, paint
+from subtrace.picture import ground_plane, lit_in_shading, paint
 from subtrace.shade import (C_OBJECT, C_R, CHANNELS, background_rows, deepest_level,
                             miss_values, patch_shading, shade)
 from subtrace.subdiv.limit import limit_points
@@ -570,14 +570,15 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
         normals, pix_patch = one_block(((W * H, 3), np.float64), ((W * H,), np.int32))
         covered = np.zeros(tasks.thread_count(), np.int64)
         miss = miss_values(scene.render.background)
-        patches = None
+        patches = lit = None
         if table is None:  # free-form surfaces only: the background, then the NURBS pass
             t = _background(scene, view, camera.height, miss, planes, pix_patch)
             built = np.zeros(0, np.int64)
         else:
             patches = patch_shading(table, [scene.objects[k] for k in owners])
+            lit = lit_in_shading(scene, nurbs, table_loop_flag(table))
             _shade_hits(frame, W, hits, iso, patches, miss, planes, normals, pix_patch, covered,
-                        owners, table_loop_flag(table))
+                        owners, table_loop_flag(table), lit)
             # each pixel's hit distance for the picture (the NURBS pass writes its nearer
             # hits into a copy); the rest of the hit records (one block with the rounds'
             # requests, 40 bytes a ray) is given back before the picture makes its own arrays
@@ -598,7 +599,7 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
     # the colour: shadows, ambient occlusion, lighting, anti-aliasing (picture.py)
     _picture_kernels(compiling, keep)
     paint(scene, cages, view, keep, t, normals, pix_patch, patches, planes, stats, nurbs,
-          offset)
+          offset, lit=lit is not None)
     stats.time_shade = time.perf_counter() - t0
     if crop is not None:  # the tile's pixels of the window
         planes, W, H = _cropped(planes, crop, view)
@@ -619,12 +620,13 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
 
 
 def _shade_hits(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, covered,
-                owners, loop):
+                owners, loop, lit=None):
     """``shade.shade`` the hits into ``planes`` (and ``normals``, ``pix_patch``,
-    ``covered``); the object ids made the scene's (``owners``: the scene index of each
-    cage's object, :func:`cage_objects`)."""
+    ``covered``; their colour too with ``lit``, ``picture.lit_in_shading``); the object ids
+    made the scene's (``owners``: the scene index of each cage's object,
+    :func:`cage_objects`)."""
     shade(frame, width, hits, iso.view(), patches, miss, planes, normals, pix_patch, covered,
-          loop=loop)
+          loop=loop, lit=lit)
     if owners != list(range(len(owners))):  # objects without a cage: scene indices
         hit = planes[C_OBJECT] >= 0
         index = planes[C_OBJECT][hit].astype(np.int64)
@@ -700,6 +702,7 @@ def render_bands(scene, cages, owners, camera, shared, keep, stats, sink, band_r
     max_level = -1
     t_sink = t_shade = 0.0
     ground = ground_plane(scene, cages, camera)
+    lit = lit_in_shading(scene, None, shared.loop)  # (the colour in the shading's pass)
     whole = built = None
     if not shared.windows:  # the whole image's rays first; their memos then let go
         whole = trace_window(shared, camera.frame(), W, H, progress, keep)
@@ -723,11 +726,11 @@ def render_bands(scene, cages, owners, camera, shared, keep, stats, sink, band_r
         planes = planes_store[:len(CHANNELS) * n].reshape(len(CHANNELS), n)
         normals, pix_patch = normals_store[:3 * n].reshape(n, 3), pix_store[:n]
         _shade_hits(frame, W, hits, shared.iso, patches, miss, planes, normals, pix_patch,
-                    covered, owners, shared.loop)
+                    covered, owners, shared.loop, lit)
         if y0 == 0:
             _picture_kernels(compiling, keep)
         paint(scene, cages, window, keep, hits.t, normals, pix_patch, patches, planes, stats,
-              ground=ground)
+              ground=ground, lit=lit is not None)
         band = planes.reshape(len(CHANNELS), h, W)[:, y0 - window.y0:y1 - window.y0]
         n_covered += int(np.count_nonzero(band[C_OBJECT] >= 0))
         max_level = max(max_level, deepest_level(band))

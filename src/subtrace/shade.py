@@ -50,10 +50,14 @@ MISS = (0.0, 0.0, 0.0, 0.0, np.inf, 0.0, 0.0, 0.0, -1.0, -1.0, -1.0, 0.0, 0.0, n
 
 
 def shade(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, covered,
-          dirs=None, loop=None):
+          dirs=None, loop=None, lit=None):
     """Fill ``planes`` (len(CHANNELS), n_pixels) float32 from ``hits``
     (:class:`~subtrace.trace.pools.Hits`) on every thread (blocks of pixels in turn): every
-    channel but the colour, which :func:`light` adds.
+    channel but the colour, which :func:`light` adds, or with ``lit`` = (lights (L,7),
+    headlight (1,)) the colour too, as :func:`light` gives it with every pixel lit and no
+    ambient occlusion (a render without shadows or ambient occlusion: one pass over the
+    pixels, and the lights' kernel neither loaded nor run; not for Loop cages, whose
+    normals come after).
 
     ``iso``: the built patches' items (:class:`~subtrace.trace.pools.PieceArrays`);
     ``patches``: per patch, its ids and material (:class:`PatchShading`); ``miss``
@@ -66,14 +70,28 @@ def shade(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, co
     are a second pass of their own (:func:`_loop_normals_task`), which a render of
     Catmull-Clark cages neither runs nor compiles."""
     dirs = _no_dirs() if dirs is None else dirs
+    if lit is None:  # (the same types: one compiled kernel either way)
+        lit = (np.zeros((0, 7)), np.zeros(0))
+    elif loop is not None:
+        raise ValueError("Loop items' normals come after the shading pass: colour them by light()")
+    lights, headlight = lit
     run_tasks(_shade_task, frame, width, hits, iso, patches, miss, planes, normals, pix_patch,
-              covered, dirs)
+              covered, dirs, lights, headlight, _all_lit(len(lights)), _NO_OCCLUSION)
     if loop is not None:
         run_tasks(_loop_normals_task, frame, width, hits, iso, planes, normals, dirs)
 
 
 def _no_dirs():
     return np.zeros((0, 3))
+
+
+def _all_lit(n_lights):
+    """(n_lights, 0) float32: every pixel lit by every light (:func:`light`'s ``visible``
+    without columns)."""
+    return np.ones((n_lights, 0), np.float32)
+
+
+_NO_OCCLUSION = np.zeros(0, np.float32)  # (light()'s ``occlusion``: none)
 
 
 def light(frame, width, t, normals, pix_patch, patches, lights, headlight, visible, planes,
@@ -87,7 +105,7 @@ def light(frame, width, t, normals, pix_patch, patches, lights, headlight, visib
     (:func:`ambient_occlusion`: the share of the hemisphere open) scaling the diffuse
     (Lambert) part of every light; the specular lobe keeps its own visibility."""
     dirs = _no_dirs() if dirs is None else dirs
-    occlusion = np.zeros(0, np.float32) if occlusion is None else occlusion
+    occlusion = _NO_OCCLUSION if occlusion is None else occlusion
     run_tasks(_light_task, frame, width, t, normals, pix_patch, patches, lights, headlight,
               visible, planes, dirs, occlusion)
 
@@ -136,10 +154,11 @@ SHADE_BLOCK = 1024  # consecutive pixels shaded together
 
 @nb.njit(cache=True, nogil=True, _nrt=False)
 def _shade_task(task, n_tasks, frame, width, hits, iso, patches, miss, planes, normals,
-                pix_patch, covered, dirs):
+                pix_patch, covered, dirs, lights, headlight, visible, occlusion):
     """Shade the blocks of pixels ``task, task + n_tasks, ...`` into ``planes`` (see
     :func:`shade`): each block is first filled with ``miss`` (contiguous stores), then its
-    hits are shaded over it."""
+    hits are shaded over it, and coloured where ``headlight`` is not empty (its other
+    arguments as :func:`light`'s)."""
     n_pix = len(hits.t)
     n_blocks = (n_pix + SHADE_BLOCK - 1) // SHADE_BLOCK
     n_hit = 0
@@ -191,6 +210,9 @@ def _shade_task(task, n_tasks, frame, width, hits, iso, patches, miss, planes, n
             normals[r, 1] = sgn * ny
             normals[r, 2] = sgn * nz
             pix_patch[r] = np.int32(p)
+            if len(headlight):
+                _colour_pixel(r, p, frame, width, t, normals, patches, lights, headlight,
+                              visible, planes, dirs, occlusion)
     covered[task] = n_hit
 
 
@@ -204,51 +226,60 @@ def _light_task(task, n_tasks, frame, width, t, normals, pix_patch, patches, lig
     for blk in range(task, n_blocks, n_tasks):
         for r in range(blk * SHADE_BLOCK, min(n_pix, (blk + 1) * SHADE_BLOCK)):
             p = pix_patch[r]
-            if p < 0:
-                continue
-            dx, dy, dz = _direction(frame, width, dirs, r)
-            fx, fy, fz = normals[r, 0], normals[r, 1], normals[r, 2]
-            ks = patches.specular[p]
-            shiny = ks[0] > 0.0 or ks[1] > 0.0 or ks[2] > 0.0
-            lr = lg = lb = 0.0
-            sr = sg = sb = 0.0
-            if headlight[0] > 0.0:
-                c = -(fx * dx + fy * dy + fz * dz) * headlight[0]
-                lr += c
-                lg += c
-                lb += c
-                if shiny:  # the headlight's half vector is the view direction
-                    h = (-(fx * dx + fy * dy + fz * dz)) ** patches.shininess[p] * headlight[0]
-                    sr += h
-                    sg += h
-                    sb += h
-            for k in range(lights.shape[0]):
-                # (lx, ly, lz): the direction the light arrives along; e: its irradiance
-                lx, ly, lz, e = _incoming(lights, k, frame, t[r], dx, dy, dz)
-                c = -(fx * lx + fy * ly + fz * lz) * e
-                v = visible[k, r] if visible.shape[1] else 1.0  # (no columns: all lit)
-                if c > 0.0 and v > 0.0:
-                    c *= v
-                    lr += c * lights[k, 4]
-                    lg += c * lights[k, 5]
-                    lb += c * lights[k, 6]
-                    if shiny:
-                        h = _blinn(fx, fy, fz, lx, ly, lz, dx, dy, dz, patches.shininess[p])
-                        h *= e * v
-                        sr += h * lights[k, 4]
-                        sg += h * lights[k, 5]
-                        sb += h * lights[k, 6]
-            if len(occlusion):  # ambient occlusion darkens the diffuse light
-                lr *= occlusion[r]
-                lg *= occlusion[r]
-                lb *= occlusion[r]
-            planes[C_R, r] = patches.color[p, 0] * lr
-            planes[C_R + 1, r] = patches.color[p, 1] * lg
-            planes[C_R + 2, r] = patches.color[p, 2] * lb
+            if p >= 0:
+                _colour_pixel(r, np.int64(p), frame, width, t[r], normals, patches, lights,
+                              headlight, visible, planes, dirs, occlusion)
+
+
+@inline_njit
+def _colour_pixel(r, p, frame, width, t, normals, patches, lights, headlight, visible, planes,
+                  dirs, occlusion):
+    """The colour (R, G, B of ``planes``) of hit pixel ``r`` on patch ``p`` at distance
+    ``t``, its eye-facing normal in ``normals`` (:func:`light`: the lights, their
+    visibility and ambient occlusion)."""
+    dx, dy, dz = _direction(frame, width, dirs, r)
+    fx, fy, fz = normals[r, 0], normals[r, 1], normals[r, 2]
+    ks = patches.specular[p]
+    shiny = ks[0] > 0.0 or ks[1] > 0.0 or ks[2] > 0.0
+    lr = lg = lb = 0.0
+    sr = sg = sb = 0.0
+    if headlight[0] > 0.0:
+        c = -(fx * dx + fy * dy + fz * dz) * headlight[0]
+        lr += c
+        lg += c
+        lb += c
+        if shiny:  # the headlight's half vector is the view direction
+            h = (-(fx * dx + fy * dy + fz * dz)) ** patches.shininess[p] * headlight[0]
+            sr += h
+            sg += h
+            sb += h
+    for k in range(lights.shape[0]):
+        # (lx, ly, lz): the direction the light arrives along; e: its irradiance
+        lx, ly, lz, e = _incoming(lights, k, frame, t, dx, dy, dz)
+        c = -(fx * lx + fy * ly + fz * lz) * e
+        v = visible[k, r] if visible.shape[1] else 1.0  # (no columns: all lit)
+        if c > 0.0 and v > 0.0:
+            c *= v
+            lr += c * lights[k, 4]
+            lg += c * lights[k, 5]
+            lb += c * lights[k, 6]
             if shiny:
-                planes[C_R, r] += ks[0] * sr
-                planes[C_R + 1, r] += ks[1] * sg
-                planes[C_R + 2, r] += ks[2] * sb
+                h = _blinn(fx, fy, fz, lx, ly, lz, dx, dy, dz, patches.shininess[p])
+                h *= e * v
+                sr += h * lights[k, 4]
+                sg += h * lights[k, 5]
+                sb += h * lights[k, 6]
+    if len(occlusion):  # ambient occlusion darkens the diffuse light
+        lr *= occlusion[r]
+        lg *= occlusion[r]
+        lb *= occlusion[r]
+    planes[C_R, r] = patches.color[p, 0] * lr
+    planes[C_R + 1, r] = patches.color[p, 1] * lg
+    planes[C_R + 2, r] = patches.color[p, 2] * lb
+    if shiny:
+        planes[C_R, r] += ks[0] * sr
+        planes[C_R + 1, r] += ks[1] * sg
+        planes[C_R + 2, r] += ks[2] * sb
 
 
 @nb.njit(cache=True, nogil=True, _nrt=False)
