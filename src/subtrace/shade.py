@@ -73,7 +73,8 @@ def shade(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, co
     if lit is None:  # (the same types: one compiled kernel either way)
         lit = (np.zeros((0, 7)), np.zeros(0))
     elif loop is not None:
-        raise ValueError("Loop items' normals come after the shading pass: colour them by light()")
+        raise ValueError("Loop items' normals come after the shading pass: colour them "
+                         "by light()")
     lights, headlight = lit
     run_tasks(_shade_task, frame, width, hits, iso, patches, miss, planes, normals, pix_patch,
               covered, dirs, lights, headlight, _all_lit(len(lights)), _NO_OCCLUSION)
