@@ -322,9 +322,16 @@ def net_flatness(w, q):
     return e + 0.25 * math.sqrt(tw)
 
 def bezier_nets(cv: np.ndarray) -> np.ndarray:
-    """(m,4,4,3) Bezier control nets of B-spline control grids ``cv`` (m,4,4,3)."""
-    out = np.empty((len(cv), 4, 4, 3))
-    to_bezier(np.ascontiguousarray(cv, dtype=np.float64), TO_BEZIER, out)
+    """(m,4,4,3) Bezier control nets of B-spline control grids ``cv`` (m,4,4,3): through
+    the patch table's kernel (:func:`bspline_nets`, the same conversion), which a render
+    has loaded already, not a kernel of its own to load."""
+    m = len(cv)
+    pts = np.ascontiguousarray(cv, dtype=np.float64).reshape(-1, 3)
+    out = np.empty((m, 4, 4, 3))
+    rows = np.arange(m, dtype=np.int64)
+    lo, hi, bound = np.empty((m, 3)), np.empty((m, 3)), np.empty(m)
+    bspline_nets(0, 1, np.arange(16 * m, dtype=np.int64).reshape(m, 4, 4), pts, TO_BEZIER,
+                 rows, NET_CHUNK, out, lo, hi, bound)
     return out
 
 
@@ -379,6 +386,48 @@ def net_summary(bez, lo, hi, bound):
                     dz = bez[m, a, b + 1, 2] - bez[m, a, b, 2]
                     best = max(best, math.sqrt(dx * dx + dy * dy + dz * dz))
         bound[m] = 3.0 * best
+
+
+# patches converted to Bezier nets per call of bspline_nets' inner kernels: their B-spline
+# points stay in cache
+NET_CHUNK = 64
+
+
+@nb.njit(cache=True, nogil=True)
+def bspline_nets(task, n_tasks, grids, pts, bspline_to_bezier, rows, chunk, nets, smin, smax,
+                 ebound):
+    """Bezier nets (R,4,4,3) of bicubic B-spline patches from their control grids (R,4,4)
+    of ids into ``pts`` (the table's regular patches; :func:`bezier_nets`' grids), and each
+    net's box and derivative bound (:func:`net_summary`) written to rows ``rows`` of
+    ``smin``, ``smax``, ``ebound``.
+
+    The conversion and the bounds are :func:`to_bezier` and :func:`net_summary`, called on
+    ``chunk`` patches at a time so that neither the B-spline points nor the nets make a pass
+    through memory; task ``task`` of ``n_tasks`` (tasks.run_tasks) takes chunks task,
+    task + n_tasks, ...
+    """
+    cv = np.empty((chunk, 4, 4, 3))
+    lo = np.empty((chunk, 3))
+    hi = np.empty((chunk, 3))
+    bound = np.empty(chunk)
+    for a in range(task * chunk, len(grids), n_tasks * chunk):
+        m = min(chunk, len(grids) - a)
+        # the chunk's B-spline control points
+        for i in range(m):
+            for u in range(4):
+                for v in range(4):
+                    p = grids[a + i, u, v]
+                    cv[i, u, v, 0] = pts[p, 0]
+                    cv[i, u, v, 1] = pts[p, 1]
+                    cv[i, u, v, 2] = pts[p, 2]
+        to_bezier(cv[:m], bspline_to_bezier, nets[a : a + m])
+        net_summary(nets[a : a + m], lo[:m], hi[:m], bound[:m])
+        # scattered to the patches' rows
+        for i in range(m):
+            r = rows[a + i]
+            smin[r, 0], smin[r, 1], smin[r, 2] = lo[i, 0], lo[i, 1], lo[i, 2]
+            smax[r, 0], smax[r, 1], smax[r, 2] = hi[i, 0], hi[i, 1], hi[i, 2]
+            ebound[r] = bound[i]
 
 
 def bspline_basis(t):

@@ -58,7 +58,7 @@ import numpy as np
 from subtrace import config
 from subtrace.mesh.cage import RESTRICT_RINGS, face_rings
 from subtrace.mesh.topology import compact, gather, gather_index
-from subtrace.patches.basis import TO_BEZIER, net_summary, to_bezier
+from subtrace.patches.basis import NET_CHUNK, TO_BEZIER, bspline_nets
 from subtrace.patches.bspline import phantom_grids, regular_mask
 from subtrace.patches.criterion import subdominant
 from subtrace.patches.evaluate import ptex_starts
@@ -353,11 +353,6 @@ def _cut_level(cage, L0, kept):
     return lev, pts, sub_edge, n_corners, cut_face
 
 
-# regular patches converted to Bezier nets per call of _regular_shells' inner kernels: their
-# B-spline points stay in cache
-_NET_CHUNK = 64
-
-
 def regular_cage_quads(cage) -> np.ndarray:
     """(F,) bool: the faces of a Catmull-Clark cage that are regular bicubic patches as they
     are (:func:`~subtrace.patches.bspline.regular_mask` on the cage, each corner's faces all
@@ -438,8 +433,7 @@ def _object_arrays(cage, L0, lev, pts, faces, F, j, oid, first_edge, quad, regul
     # regular quads: bicubic patches with a tight hull and an exact derivative bound
     rows = np.nonzero(regular)[0]
     grids, ext = phantom_grids(lev, faces[rows], pts)
-    run_tasks(_regular_shells, grids, ext, TO_BEZIER, rows,
-              _NET_CHUNK, nets, smin, smax, ebound)
+    run_tasks(bspline_nets, grids, ext, TO_BEZIER, rows, NET_CHUNK, nets, smin, smax, ebound)
     rate[rows] = 0.5
     # the others: boxes of their one-ring control points
     rows = np.nonzero(~regular)[0]
@@ -478,35 +472,3 @@ def _object_arrays(cage, L0, lev, pts, faces, F, j, oid, first_edge, quad, regul
     )
 
 
-@nb.njit(cache=True, nogil=True)
-def _regular_shells(task, n_tasks, grids, pts, bspline_to_bezier, rows, chunk, nets, smin, smax,
-                    ebound):
-    """Bezier nets (R,4,4,3) of the regular patches from their control grids (R,4,4) of
-    point ids, and each net's box and derivative bound written to patch rows ``rows``.
-
-    The conversion and the bounds are the basis's own kernels, called on ``chunk`` patches at
-    a time so that neither the B-spline points nor the nets make a pass through memory;
-    task ``task`` of ``n_tasks`` (tasks.run_tasks) takes chunks task, task + n_tasks, ...
-    """
-    cv = np.empty((chunk, 4, 4, 3))
-    lo = np.empty((chunk, 3))
-    hi = np.empty((chunk, 3))
-    bound = np.empty(chunk)
-    for a in range(task * chunk, len(grids), n_tasks * chunk):
-        m = min(chunk, len(grids) - a)
-        # the chunk's B-spline control points
-        for i in range(m):
-            for u in range(4):
-                for v in range(4):
-                    p = grids[a + i, u, v]
-                    cv[i, u, v, 0] = pts[p, 0]
-                    cv[i, u, v, 1] = pts[p, 1]
-                    cv[i, u, v, 2] = pts[p, 2]
-        to_bezier(cv[:m], bspline_to_bezier, nets[a : a + m])
-        net_summary(nets[a : a + m], lo[:m], hi[:m], bound[:m])
-        # scattered to the patches' rows
-        for i in range(m):
-            r = rows[a + i]
-            smin[r, 0], smin[r, 1], smin[r, 2] = lo[i, 0], lo[i, 1], lo[i, 2]
-            smax[r, 0], smax[r, 1], smax[r, 2] = hi[i, 0], hi[i, 1], hi[i, 2]
-            ebound[r] = bound[i]
