@@ -15,10 +15,12 @@ cache (``jit.trim_loader``'s loader), which hands over what the thread read (:fu
 instead of reading it again; one the thread has not reached yet is read by the render as
 before (Numba's compiler lock keeps the two from reading at once). So the manifest lists
 what the render asked for, not what was read ahead, and a kernel a render no longer uses
-drops out of it. Reading takes Python's lock for its unpickling, so the thread gains most
-while the render runs kernels that let go of it (``nogil``) and while LLVM links the code,
-and little on a cage so small that its render is all Python. The kernels are Numba's own,
-read by its own loader, so the images are the same bit for bit.
+drops out of it. Reading holds Python's lock while it unpickles (about 60 % of a read), so
+the thread overlaps the render only where the render runs kernels that let go of that lock
+(``nogil``) or the thread is inside LLVM: the sword's render 0.207 -> 0.195 s, while a cage
+so small that its render is all Python gains nothing (BENCHMARKS.md, Cycles "Latest run").
+The kernels are Numba's own, read by its own loader, so the images are the same bit for
+bit.
 
 What a manifest lists is only ever read from the cache, never compiled (a kernel missing
 from the cache is left to the render, which compiles it as before). A manifest that cannot
