@@ -93,6 +93,9 @@ def test_net_bounds_contain_the_patch_and_bound_its_derivatives():
     cv = rng.normal(size=(3, 4, 4, 3))
     nets = basis.bezier_nets(cv)
     lo, hi, bound = basis.net_bounds(nets)
+    # the conversion with its bounds in one pass: the same arrays, bit for bit
+    for a, b in zip(basis.bezier_nets_and_bounds(cv), (nets, lo, hi, bound)):
+        assert np.array_equal(a, b)
     uv = rng.random((200, 2))
     out = np.empty((6, 3))
     for m in range(3):

@@ -322,9 +322,15 @@ def net_flatness(w, q):
     return e + 0.25 * math.sqrt(tw)
 
 def bezier_nets(cv: np.ndarray) -> np.ndarray:
-    """(m,4,4,3) Bezier control nets of B-spline control grids ``cv`` (m,4,4,3): through
-    the patch table's kernel (:func:`bspline_nets`, the same conversion), which a render
-    has loaded already, not a kernel of its own to load."""
+    """(m,4,4,3) Bezier control nets of B-spline control grids ``cv`` (m,4,4,3)."""
+    return bezier_nets_and_bounds(cv)[0]
+
+
+def bezier_nets_and_bounds(cv: np.ndarray):
+    """``(nets, lo, hi, bound)``: :func:`bezier_nets` of ``cv`` and their
+    :func:`net_bounds`, in one pass through the patch table's kernel (:func:`bspline_nets`,
+    the same conversion and bounds), which a render has loaded already, not a kernel of its
+    own to load."""
     m = len(cv)
     pts = np.ascontiguousarray(cv, dtype=np.float64).reshape(-1, 3)
     out = np.empty((m, 4, 4, 3))
@@ -332,7 +338,7 @@ def bezier_nets(cv: np.ndarray) -> np.ndarray:
     lo, hi, bound = np.empty((m, 3)), np.empty((m, 3)), np.empty(m)
     bspline_nets(0, 1, np.arange(16 * m, dtype=np.int64).reshape(m, 4, 4), pts, TO_BEZIER,
                  rows, NET_CHUNK, out, lo, hi, bound)
-    return out
+    return out, lo, hi, bound
 
 
 @nb.njit(cache=True, nogil=True)  # (also from Python)

@@ -28,7 +28,7 @@ import numpy as np
 from subtrace import config
 
 from subtrace.config import IRREGULAR_MARGIN
-from subtrace.patches.basis import bezier_nets, net_bounds
+from subtrace.patches.basis import bezier_nets_and_bounds, net_bounds
 from subtrace.patches.bspline import control_points
 from subtrace.patches.grids import levels_needed, refine_children, unit_normals
 from subtrace.patches.shells import one_ring_shells, sight_distance
@@ -111,8 +111,7 @@ def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0, 
         kid_active = np.repeat(active, 4)
         bez, n = np.zeros((0, 4, 4, 3)), np.zeros(0)
         if reg.any():
-            bez = bezier_nets(control_points(cur, kids[reg], cur_pts))
-            lo, hi, bound = net_bounds(bez)
+            bez, lo, hi, bound = bezier_nets_and_bounds(control_points(cur, kids[reg], cur_pts))
             n = levels_needed(bound, sight_distance(lo, hi, eye), tol_rad)
             if boxes is not None:
                 np.minimum.at(boxes[0], kid_root[reg], lo)
@@ -309,13 +308,14 @@ def _next_level(subs, k, cur, cur_pts, kids, reg, root, i0, j0, depth, eye, tol_
         subs[1].append(np.full(int(reg.sum()), k))
         subs[2].append(ki[reg])
         subs[3].append(kj[reg])
+        bounds = None
         if bez is None:
-            bez = bezier_nets(control_points(cur, kids[reg], cur_pts))
+            bez, *bounds = bezier_nets_and_bounds(control_points(cur, kids[reg], cur_pts))
         subs[4].append(bez)
         own = depth[kid_root[reg]]
         if eye is not None:
             if n is None:
-                lo, hi, bound = net_bounds(bez)
+                lo, hi, bound = net_bounds(bez) if bounds is None else bounds
                 n = levels_needed(bound, sight_distance(lo, hi, eye), tol_rad)
             own = np.clip(k + n, k, own).astype(np.int64)
         subs[5].append(own)

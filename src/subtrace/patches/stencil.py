@@ -36,7 +36,7 @@ from subtrace.config import IRREGULAR_MARGIN
 from subtrace.errors import SubtraceError
 from subtrace.io.atomic import write_bytes
 from subtrace.mesh.topology import Options, compact, gather_index
-from subtrace.patches.basis import bezier_nets, net_bounds
+from subtrace.patches.basis import bezier_nets_and_bounds, net_bounds
 from subtrace.patches.grids import levels_needed, refine_children, unit_normals
 from subtrace.patches.shells import sight_distance
 
@@ -329,10 +329,11 @@ def _kid_origin(i0, j0, corner):
 
 
 def _nets(grids, pts):
-    """(m*3, 4,4,3) the Bezier nets of the three regular children of each ring ``pts``
-    (K,m,3), their grids' map ``grids`` (48,K)."""
+    """``(nets, lo, hi, bound)``: the Bezier nets (m*3, 4,4,3) of the three regular children
+    of each ring ``pts`` (K,m,3), their grids' map ``grids`` (48,K), and their
+    :func:`~subtrace.patches.basis.net_bounds`."""
     g = _times(grids, pts).transpose(1, 0, 2)  # (m, 48, 3)
-    return bezier_nets(g.reshape(-1, 4, 4, 3))
+    return bezier_nets_and_bounds(g.reshape(-1, 4, 4, 3))
 
 
 def stencil_depths(level, points, faces, corner, valence, cap, eye, tol_rad, boxes=None):
@@ -350,7 +351,7 @@ def stencil_depths(level, points, faces, corner, valence, cap, eye, tol_rad, box
         while len(rows):
             k += 1
             # (the nets' bounds do not depend on their orientation: corner 0's grids)
-            lo, hi, bound = net_bounds(_nets(st.grids[0].reshape(48, -1), pts))
+            _, lo, hi, bound = _nets(st.grids[0].reshape(48, -1), pts)
             n = levels_needed(bound, sight_distance(lo, hi, eye), tol_rad).reshape(-1, 3)
             need[rows] = np.maximum(need[rows], k + n.max(axis=1).astype(np.int64))
             if boxes is not None:
@@ -399,7 +400,7 @@ def stencil_pieces(level, points, options, faces, corner, valence, depth, eye=No
             for c in compact(cor, 4)[0]:  # (the grids follow the corners)
                 at = cor == c
                 grids = st.grids[c][np.argsort((c + st.kids) % 4)]
-                nets[at] = _nets(grids.reshape(48, -1), pts[:, at]).reshape(-1, 3, 4, 4, 3)
+                nets[at] = _nets(grids.reshape(48, -1), pts[:, at])[0].reshape(-1, 3, 4, 4, 3)
             nets = nets.reshape(-1, 4, 4, 3)
             kid_corner = np.sort((cor[:, None] + st.kids[None, :]) % 4, axis=1).ravel()
             ki, kj = _kid_origin(np.repeat(gi, 3), np.repeat(gj, 3), kid_corner)
