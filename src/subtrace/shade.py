@@ -34,6 +34,7 @@ from subtrace.io.obj import DEFAULT_DIFFUSE, Material
 from subtrace.patches.basis import bez_normal
 from subtrace.runtime.jit import callee_njit, inline_njit, leaf_njit, llvm_inline_njit, nb
 from subtrace.runtime.threads import run_tasks, thread_count
+from subtrace.trace.pools import Hits, PieceArrays
 from subtrace.trace.prims import ray_setup
 from subtrace.trace.tris import LOOP_CELL, TRI, tri_normal
 
@@ -76,8 +77,10 @@ def shade(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, co
         raise ValueError("Loop items' normals come after the shading pass: colour them "
                          "by light()")
     lights, headlight = lit
-    run_tasks(_shade_task, frame, width, hits, iso, patches, miss, planes, normals, pix_patch,
-              covered, dirs, lights, headlight, _all_lit(len(lights)), _NO_OCCLUSION)
+    # (the bundles as plain tuples, named again inside: see trace.kernels.trace_round)
+    run_tasks(_shade_task, frame, width, tuple(hits), tuple(iso), tuple(patches), miss, planes,
+              normals, pix_patch, covered, dirs, lights, headlight, _all_lit(len(lights)),
+              _NO_OCCLUSION)
     if loop is not None:
         run_tasks(_loop_normals_task, frame, width, hits, iso, planes, normals, dirs)
 
@@ -154,12 +157,13 @@ SHADE_BLOCK = 1024  # consecutive pixels shaded together
 
 
 @nb.njit(cache=True, nogil=True, _nrt=False)
-def _shade_task(task, n_tasks, frame, width, hits, iso, patches, miss, planes, normals,
+def _shade_task(task, n_tasks, frame, width, hits_t, iso_t, patches_t, miss, planes, normals,
                 pix_patch, covered, dirs, lights, headlight, visible, occlusion):
     """Shade the blocks of pixels ``task, task + n_tasks, ...`` into ``planes`` (see
     :func:`shade`): each block is first filled with ``miss`` (contiguous stores), then its
     hits are shaded over it, and coloured where ``headlight`` is not empty (its other
-    arguments as :func:`light`'s)."""
+    arguments as :func:`light`'s; the hits, pieces and patch shading as plain tuples)."""
+    hits, iso, patches = Hits(*hits_t), PieceArrays(*iso_t), PatchShading(*patches_t)
     n_pix = len(hits.t)
     n_blocks = (n_pix + SHADE_BLOCK - 1) // SHADE_BLOCK
     n_hit = 0

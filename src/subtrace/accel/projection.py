@@ -99,11 +99,13 @@ def boxes_in_view(bmin, bmax, frame, width: int, height: int) -> np.ndarray:
     is in no tile's list, so a surface inside it is never seen by a primary ray."""
     bmin = np.ascontiguousarray(bmin, dtype=np.float64)
     bmax = np.ascontiguousarray(bmax, dtype=np.float64)
-    seen = np.empty(len(bmin), np.bool_)
+    rect = np.empty((len(bmin), 4), np.int64)
     n_tasks = tasks.thread_count() if len(bmin) >= _PARALLEL_MIN else 1
-    tasks.run_tasks(_in_view, bmin, bmax, np.ascontiguousarray(frame[0]), _pixel_map(frame),
-                    int(width), int(height), seen, n=n_tasks)
-    return seen
+    # (the tile lists' own kernel, over no tiles: one kernel fewer to load in a render)
+    tasks.run_tasks(_rectangles, bmin, bmax, np.ascontiguousarray(frame[0]), _pixel_map(frame),
+                    int(width), int(height), 0, 0, 0, 0, rect, np.zeros((n_tasks, 1), np.int64),
+                    np.empty(len(bmin)), n=n_tasks)
+    return rect[:, 0] <= rect[:, 2]
 
 
 def _pixel_map(frame) -> np.ndarray:
@@ -188,16 +190,6 @@ def _rectangles(task, n_tasks, bmin, bmax, eye, inv, width, height, tile_a0, til
                 for a in range(max(rect[i, 0] - tile_a0, 0),
                                min(rect[i, 2] - tile_a0, tx - 1) + 1):
                     count[task, b * tx + a] += 1
-
-
-@nb.njit(cache=True, nogil=True)
-def _in_view(task, n_tasks, bmin, bmax, eye, inv, width, height, seen):
-    """``seen[i]``: whether box ``i``'s pixel rectangle (:func:`_box_rect`) is not empty.
-    Task ``task`` of ``n_tasks`` takes every n_tasks-th block of ``_BLOCK`` boxes."""
-    for b0 in range(task * _BLOCK, len(bmin), n_tasks * _BLOCK):
-        for i in range(b0, min(b0 + _BLOCK, len(bmin))):
-            x0, _, x1, _ = _box_rect(i, bmin, bmax, eye, inv, width, height)
-            seen[i] = x0 <= x1
 
 
 @nb.njit(cache=True, nogil=True)

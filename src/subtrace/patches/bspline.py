@@ -120,7 +120,7 @@ def phantom_grids(level, faces, points):
     _sharp_side_grids(level.face_offsets, level.face_verts, level.face_edges,
                       level.edge_face_offsets, level.edge_faces, level.edge_sharpness,
                       level.vert_face_offsets, level.vert_faces, level.vert_face_corner,
-                      rest, B_CORNER, TRAIL, INF_SHARP, ids, cut)
+                      rest, B_CORNER, TRAIL, ids, cut)
     cv = np.asarray(points, dtype=np.float64)[np.maximum(ids, 0)]
     _mirror(cv, cut)
     n = len(points)
@@ -147,7 +147,7 @@ def _mirror(cv, cut):
 
 
 @nb.njit(cache=True, nogil=True)
-def _sharp_side_grids(fo, fv, fe, efo, ef, es, vfo, vf, vfc, faces, bc, trail, inf, ids, cut):
+def _sharp_side_grids(fo, fv, fe, efo, ef, es, vfo, vf, vfc, faces, bc, trail, ids, cut):
     """Real point ids of the grids of regular quads with sharp sides (-1 where a phantom
     point goes) and which sides are sharp."""
     for m in range(len(faces)):
@@ -155,7 +155,7 @@ def _sharp_side_grids(fo, fv, fe, efo, ef, es, vfo, vf, vfc, faces, bc, trail, i
         for k in range(4):
             c = fv[fo[f] + k]
             ids[m, bc[k, 0], bc[k, 1]] = c
-            cut[m, k] = es[fe[fo[f] + k]] >= inf
+            cut[m, k] = es[fe[fo[f] + k]] >= INF_SHARP
         for k in range(4):
             if cut[m, k]:
                 continue

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from subtrace import config
-from subtrace.accel.bvh import box_entry, slab_entry
+from subtrace.accel.bvh import box_entry, four_entries, slab_entry
 from subtrace.runtime.jit import inline_njit, leaf_njit, llvm_inline_njit
 from subtrace.patches.basis import (
     bez_across as _bez_across, bez_point as _bez_point, bez_rows as _bez_rows,
@@ -656,16 +656,17 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop):
                     continue
             # the children the ray enters, pushed far to near (blocks: box and slab)
             n = 0
-            for q in range(4):
-                if lev + 2 == pd:
+            if lev + 2 == pd:
+                for q in range(4):
                     te = _cell_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, box, slab, c + q,
                                      hit[H_T])
-                else:
-                    te = slab_entry(ox, oy, oz, ix, iy, iz, box[c + q, 0], box[c + q, 1],
-                                    box[c + q, 2], box[c + q, 3], box[c + q, 4], box[c + q, 5],
-                                    0.0, hit[H_T])
-                if te < np.inf:
-                    n = push_sorted(tmp_t, order, n, te, q)
+                    if te < np.inf:
+                        n = push_sorted(tmp_t, order, n, te, q)
+            else:
+                e = four_entries(ox, oy, oz, ix, iy, iz, box, c, hit[H_T])
+                for q in range(4):
+                    if e[q] < np.inf:
+                        n = push_sorted(tmp_t, order, n, e[q], q)
             for e in range(n):
                 q = order[e]
                 st[sp, 0], st[sp, 1], st[sp, 4] = c + q, node, lev + 1

@@ -197,17 +197,30 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, base, bvh
     # (added to per patch there, the threads' counts shared a cache line)
     n_tested = 0
     for band in range(len(bands) - 1):
-        for q in range(bands[band], bands[band + 1]):
+        q, q_end = bands[band], bands[band + 1]
+        while q < q_end:
             r = q if len(rays) == 0 else rays[q]
+            q += 1
             row = r // width
             col = r - row * width
             tile = (row // TILE) * tiles.per_row + col // TILE if projected else 0
             if projected and round_no == 0 and tiles.off[tile] == tiles.off[tile + 1]:
                 # no shell projects onto its tile: a miss, recorded as the loop below
-                # records one (without the ray's set-up; its tile has no candidate rows)
-                request[r] = -1
-                hits.t[r] = np.inf
-                hits.prim[r] = -1
+                # records one (without the ray's set-up; its tile has no candidate rows);
+                # with every pixel's ray, so are the rest of the row's pixels up to the
+                # next tile that lists a shell (most of an image is background)
+                end = col + 1
+                if len(rays) == 0:
+                    end = col - col % TILE + TILE
+                    while end < width and tiles.off[tile + 1] == tiles.off[tile + 2]:
+                        end += TILE
+                        tile += 1
+                    end = min(end, width)
+                    q += end - col - 1
+                for x in range(r, r + end - col):
+                    request[x] = -1
+                    hits.t[x] = np.inf
+                    hits.prim[x] = -1
                 continue
             # the ray's row of the candidate lists (pools.Candidates; -1: none, its tile
             # lists built patches only)
