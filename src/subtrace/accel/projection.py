@@ -59,8 +59,7 @@ def project_shells(bmin, bmax, frame, width: int, height: int,
     (``camera.CameraWindow``: its offset, even, in a fifth row): only the window's tiles
     are listed (and held against ``max_bytes``), each exactly as the whole image lists it:
     the same boxes, in the same order."""
-    bmin = np.ascontiguousarray(bmin, dtype=np.float64)
-    bmax = np.ascontiguousarray(bmax, dtype=np.float64)
+    bmin, bmax = _boxes(bmin, bmax)
     eye = frame[0]
     inv = _pixel_map(frame)
     key = np.empty(len(bmin))
@@ -74,8 +73,10 @@ def project_shells(bmin, bmax, frame, width: int, height: int,
     rect = np.empty((len(bmin), 4), np.int64)  # (in the image's tiles)
     n_tasks = tasks.thread_count() if len(bmin) >= _PARALLEL_MIN else 1
     count = np.zeros((n_tasks, tx * ty + 1), np.int64)
-    tasks.run_tasks(_rectangles, bmin, bmax, np.ascontiguousarray(eye), inv, full_w,
-                    full_h, a0, b0, tx, ty, rect, count, key, n=n_tasks)
+    eye = np.ascontiguousarray(eye)
+    none = np.zeros(0, np.int64)
+    tasks.run_tasks(_tiles, 0, bmin, bmax, eye, inv, full_w, full_h, a0, b0, tx, ty, rect,
+                    count, key, none, none, np.zeros(0, np.int32), n=n_tasks)
     off = np.zeros(tx * ty + 1, np.int64)
     np.cumsum(count.sum(axis=0)[:-1], out=off[1:])
     if max_bytes is not None and tiles_bytes(int(off[-1]), tx * ty) > max_bytes:
@@ -88,7 +89,8 @@ def project_shells(bmin, bmax, frame, width: int, height: int,
     np.minimum(rect[:, 2:4] - (a0, b0), (tx - 1, ty - 1), out=local[:, 2:4])
     # nearest first (ties: any fixed order will do; a window's is its image's: the order of
     # the image's boxes in view)
-    _fill(seen[np.argsort(key[seen])], local, tx, off.copy(), items)
+    _tiles(0, 1, 1, bmin, bmax, eye, inv, full_w, full_h, a0, b0, tx, ty, local, count, key,
+           seen[np.argsort(key[seen])], off.copy(), items)
     return Tiles(off, items, key, np.int64(tx))
 
 
@@ -97,15 +99,26 @@ def boxes_in_view(bmin, bmax, frame, width: int, height: int) -> np.ndarray:
     ``frame`` can enter the box ``[bmin[i], bmax[i]]``: the box's pixel rectangle, as the
     tiles list it (a pixel wider on each side), is not empty. A box for which this is False
     is in no tile's list, so a surface inside it is never seen by a primary ray."""
-    bmin = np.ascontiguousarray(bmin, dtype=np.float64)
-    bmax = np.ascontiguousarray(bmax, dtype=np.float64)
+    bmin, bmax = _boxes(bmin, bmax)
     rect = np.empty((len(bmin), 4), np.int64)
     n_tasks = tasks.thread_count() if len(bmin) >= _PARALLEL_MIN else 1
     # (the tile lists' own kernel, over no tiles: one kernel fewer to load in a render)
-    tasks.run_tasks(_rectangles, bmin, bmax, np.ascontiguousarray(frame[0]), _pixel_map(frame),
+    none = np.zeros(0, np.int64)
+    tasks.run_tasks(_tiles, 0, bmin, bmax, np.ascontiguousarray(frame[0]), _pixel_map(frame),
                     int(width), int(height), 0, 0, 0, 0, rect, np.zeros((n_tasks, 1), np.int64),
-                    np.empty(len(bmin)), n=n_tasks)
+                    np.empty(len(bmin)), none, none, np.zeros(0, np.int32), n=n_tasks)
     return rect[:, 0] <= rect[:, 2]
+
+
+def _boxes(bmin, bmax):
+    """``bmin``, ``bmax`` as :func:`_tiles` reads them: contiguous float64, read-only views
+    (shared boxes are read-only, ``mesh.cage``: one signature of the kernel for both)."""
+    out = []
+    for b in (bmin, bmax):
+        b = np.ascontiguousarray(b, dtype=np.float64).view()
+        b.flags.writeable = False
+        out.append(b)
+    return out
 
 
 def _pixel_map(frame) -> np.ndarray:
@@ -165,14 +178,27 @@ def _box_rect(i, bmin, bmax, eye, inv, width, height):
 
 
 @nb.njit(cache=True, nogil=True)
-def _rectangles(task, n_tasks, bmin, bmax, eye, inv, width, height, tile_a0, tile_b0, tx, ty,
-                rect, count, key):
-    """Each box's tile rectangle ``rect[i]`` = (x0, y0, x1, y1), inclusive, empty (x0 > x1)
-    when it lies behind the eye plane or outside the ``width`` x ``height`` image, in the
-    image's tiles; counts per tile of the window (``tx`` x ``ty`` tiles from tile
+def _tiles(task, n_tasks, step, bmin, bmax, eye, inv, width, height, tile_a0, tile_b0, tx, ty,
+           rect, count, key, order, cursor, items):
+    """The tile lists' two steps, one kernel (one load in a render).
+
+    Step 0: each box's tile rectangle ``rect[i]`` = (x0, y0, x1, y1), inclusive, empty
+    (x0 > x1) when it lies behind the eye plane or outside the ``width`` x ``height`` image,
+    in the image's tiles; counts per tile of the window (``tx`` x ``ty`` tiles from tile
     (tile_a0, tile_b0); the whole image: 0, 0 and all its tiles) into ``count[task]``; the
     distance from the eye to each box into ``key``. Task ``task`` of ``n_tasks``
-    (tasks.run_tasks) takes every n_tasks-th block of ``_BLOCK`` boxes."""
+    (tasks.run_tasks) takes every n_tasks-th block of ``_BLOCK`` boxes.
+
+    Step 1 (one task): append the boxes ``order`` (nearest first) to the lists ``items``
+    of the tiles of their rectangles ``rect`` (in the window's tiles), at ``cursor``."""
+    if step == 1:
+        for i in order:
+            for b in range(rect[i, 1], rect[i, 3] + 1):
+                for a in range(rect[i, 0], rect[i, 2] + 1):
+                    t = b * tx + a
+                    items[cursor[t]] = i
+                    cursor[t] += 1
+        return
     for b0 in range(task * _BLOCK, len(bmin), n_tasks * _BLOCK):
         for i in range(b0, min(b0 + _BLOCK, len(bmin))):
             d2 = 0.0
@@ -190,14 +216,3 @@ def _rectangles(task, n_tasks, bmin, bmax, eye, inv, width, height, tile_a0, til
                 for a in range(max(rect[i, 0] - tile_a0, 0),
                                min(rect[i, 2] - tile_a0, tx - 1) + 1):
                     count[task, b * tx + a] += 1
-
-
-@nb.njit(cache=True, nogil=True)
-def _fill(order, rect, tx, cursor, items):
-    """Append the boxes to their tiles' lists in the order ``order`` (nearest first)."""
-    for i in order:
-        for b in range(rect[i, 1], rect[i, 3] + 1):
-            for a in range(rect[i, 0], rect[i, 2] + 1):
-                t = b * tx + a
-                items[cursor[t]] = i
-                cursor[t] += 1

@@ -104,9 +104,9 @@ def face_ring_boxes(level, pts):
     vhi = np.empty((level.n_verts, 3))
     lo = np.empty((level.n_faces, 3))
     hi = np.empty((level.n_faces, 3))
-    run_tasks(_vertex_ring_boxes, level.vert_face_offsets, level.vert_faces,
-              level.face_offsets, level.face_verts, pts, vlo, vhi)
-    run_tasks(_face_boxes, level.face_offsets, level.face_verts, vlo, vhi, lo, hi)
+    for step in (0, 1):  # (the vertices' boxes, then the faces')
+        run_tasks(_ring_boxes, step, level.vert_face_offsets, level.vert_faces,
+                  level.face_offsets, level.face_verts, pts, vlo, vhi, lo, hi)
     return lo, hi
 
 
@@ -120,7 +120,7 @@ def face_star_boxes(face_offsets, face_verts, pts):
     lo = np.empty((n_faces, 3))
     hi = np.empty((n_faces, 3))
     _vertex_star_boxes(face_offsets, face_verts, pts, vlo, vhi)
-    run_tasks(_face_boxes, face_offsets, face_verts, vlo, vhi, lo, hi)
+    _face_step(face_offsets, face_verts, vlo, vhi, lo, hi)
     return lo, hi
 
 
@@ -138,8 +138,17 @@ def split_ring_boxes(level, child_pts):
     hi = np.empty((level.n_faces, 3))
     run_tasks(_vertex_split_boxes, level.vert_edge_offsets, level.vert_edges, child_pts,
               vlo, vhi)
-    run_tasks(_face_boxes, level.face_offsets, level.face_verts, vlo, vhi, lo, hi)
+    _face_step(level.face_offsets, level.face_verts, vlo, vhi, lo, hi)
     return lo, hi
+
+
+def _face_step(face_offsets, face_verts, vlo, vhi, lo, hi):
+    """Per face, the union ``lo, hi`` of its corners' boxes ``vlo, vhi``: step 1 of
+    :func:`_ring_boxes` (whose vertex arrays and points it does not read: the face lists
+    and ``vlo`` stand in for them, of the same types)."""
+    fo = np.ascontiguousarray(face_offsets, dtype=np.int64)
+    fv = np.ascontiguousarray(face_verts, dtype=np.int32)
+    run_tasks(_ring_boxes, 1, fo, fv, fo, fv, vlo, vlo, vhi, lo, hi)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -161,10 +170,23 @@ def _vertex_split_boxes(task, n_tasks, vert_edge_offsets, vert_edges, child_pts,
 
 
 @nb.njit(cache=True, nogil=True)
-def _vertex_ring_boxes(task, n_tasks, vert_face_offsets, vert_faces, face_offsets, face_verts,
-                       pts, vlo, vhi):
-    """Per vertex, the box of the points of the faces around it (``run_tasks``: task
-    ``task`` of ``n_tasks`` takes a contiguous share of the vertices)."""
+def _ring_boxes(task, n_tasks, step, vert_face_offsets, vert_faces, face_offsets, face_verts,
+                pts, vlo, vhi, lo, hi):
+    """Step 0: per vertex, the box ``vlo, vhi`` of the points of the faces around it; step
+    1: per face, the union ``lo, hi`` of its corners' boxes (:func:`face_ring_boxes`; one
+    kernel for both steps, one load fewer in a render). ``run_tasks``: task ``task`` of
+    ``n_tasks`` takes a contiguous share of the vertices, or of the faces."""
+    if step == 1:
+        n = len(lo)
+        for f in range(task * n // n_tasks, (task + 1) * n // n_tasks):
+            for k in range(3):
+                lo[f, k], hi[f, k] = np.inf, -np.inf
+            for c in range(face_offsets[f], face_offsets[f + 1]):
+                v = face_verts[c]
+                for k in range(3):
+                    lo[f, k] = min(lo[f, k], vlo[v, k])
+                    hi[f, k] = max(hi[f, k], vhi[v, k])
+        return
     n = len(vlo)
     for v in range(task * n // n_tasks, (task + 1) * n // n_tasks):
         lo0, lo1, lo2 = np.inf, np.inf, np.inf
@@ -197,20 +219,6 @@ def _vertex_star_boxes(face_offsets, face_verts, pts, vlo, vhi):
             vlo[v, 0], vhi[v, 0] = min(vlo[v, 0], lo0), max(vhi[v, 0], hi0)
             vlo[v, 1], vhi[v, 1] = min(vlo[v, 1], lo1), max(vhi[v, 1], hi1)
             vlo[v, 2], vhi[v, 2] = min(vlo[v, 2], lo2), max(vhi[v, 2], hi2)
-
-
-@nb.njit(cache=True, nogil=True)
-def _face_boxes(task, n_tasks, face_offsets, face_verts, vlo, vhi, lo, hi):
-    """Per face, the union of its corners' vertex-ring boxes (tasks as above)."""
-    n = len(lo)
-    for f in range(task * n // n_tasks, (task + 1) * n // n_tasks):
-        for k in range(3):
-            lo[f, k], hi[f, k] = np.inf, -np.inf
-        for c in range(face_offsets[f], face_offsets[f + 1]):
-            v = face_verts[c]
-            for k in range(3):
-                lo[f, k] = min(lo[f, k], vlo[v, k])
-                hi[f, k] = max(hi[f, k], vhi[v, k])
 
 
 @nb.njit(cache=True, nogil=True)
