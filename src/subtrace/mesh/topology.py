@@ -142,11 +142,35 @@ def base_edges(face_offsets: np.ndarray, face_verts: np.ndarray, n_verts: int):
     edge_verts = np.empty((n_corners, 2), dtype=np.int32)
     face_edges = np.empty(n_corners, dtype=np.int32)
     forward = np.empty(n_corners, dtype=np.bool_)
-    n_edges = _base_edges(face_offsets, face_verts, n_verts, edge_verts, face_edges, forward)
+    n_edges = _topology(0, face_offsets, face_verts, int(n_verts), edge_verts, face_edges,
+                        forward, *_NO_RELATIONS)
     return edge_verts[:n_edges].copy(), face_edges, forward
 
 
+# the relations' arrays for :func:`_topology`'s step 0, which fills none
+_NO_RELATIONS = (np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros(0, np.int32),
+                 np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros(0, np.int32),
+                 np.zeros(0, np.int64), np.zeros(0, np.int32), False, np.zeros(0, np.bool_),
+                 np.zeros(0, np.bool_))
+
+
 @nb.njit(cache=True, nogil=True)
+def _topology(step, face_offsets, face_verts, n_verts, edge_verts, face_edges, forward,
+              edge_face_offsets, edge_faces, edge_face_corner, vert_face_offsets, vert_faces,
+              vert_face_corner, vert_edge_offsets, vert_edges, detect, edge_nonmanifold,
+              vert_manifold):
+    """A level's topology, in one kernel for its two steps (a kernel load less in a
+    render): step 0, a base level's edges (:func:`_base_edges`; returns their count); step
+    1, the relations of any level from its faces and edges (:func:`_relations`)."""
+    if step == 0:
+        return _base_edges(face_offsets, face_verts, n_verts, edge_verts, face_edges, forward)
+    _relations(face_offsets, face_verts, face_edges, edge_verts, forward, edge_face_offsets,
+               edge_faces, edge_face_corner, vert_face_offsets, vert_faces, vert_face_corner,
+               vert_edge_offsets, vert_edges, detect, edge_nonmanifold, vert_manifold)
+    return 0
+
+
+@callee_njit
 def _base_edges(face_offsets, face_verts, n_verts, edge_verts, face_edges, forward):
     """Number the edges of the faces' corners (corner k -> k+1) in order of first use; each
     distinct vertex pair is one edge, except that, as in OpenSubdiv, a degenerate edge (a
@@ -249,10 +273,10 @@ def build_level(
     edge_nonmanifold = (np.empty(n_edges, dtype=np.bool_) if detect
                         else np.ascontiguousarray(edge_nonmanifold, dtype=np.bool_))
     vert_manifold = np.empty(n_verts, dtype=np.bool_)
-    _relations(face_offsets, face_verts, face_edges, edge_verts, face_edge_forward,
-               edge_face_offsets, edge_faces, edge_face_corner, vert_face_offsets, vert_faces,
-               vert_face_corner, vert_edge_offsets, vert_edges, detect, edge_nonmanifold,
-               vert_manifold)
+    _topology(1, face_offsets, face_verts, int(n_verts), edge_verts, face_edges,
+              face_edge_forward, edge_face_offsets, edge_faces, edge_face_corner,
+              vert_face_offsets, vert_faces, vert_face_corner, vert_edge_offsets, vert_edges,
+              detect, edge_nonmanifold, vert_manifold)
     if vert_nonmanifold is not None:
         vert_manifold &= ~vert_nonmanifold
 
@@ -279,7 +303,7 @@ def build_level(
     )
 
 
-@nb.njit(cache=True, nogil=True)
+@callee_njit
 def _relations(face_offsets, face_verts, face_edges, edge_verts, face_edge_forward,
                edge_face_offsets, edge_faces, edge_face_corner, vert_face_offsets, vert_faces,
                vert_face_corner, vert_edge_offsets, vert_edges, detect, edge_nonmanifold,

@@ -117,10 +117,7 @@ def phantom_grids(level, faces, points):
     rest = faces[~smooth]
     ids = np.full((len(rest), 4, 4), -1, dtype=np.int64)
     cut = np.zeros((len(rest), 4), dtype=np.bool_)
-    _sharp_side_grids(level.face_offsets, level.face_verts, level.face_edges,
-                      level.edge_face_offsets, level.edge_faces, level.edge_sharpness,
-                      level.vert_face_offsets, level.vert_faces, level.vert_face_corner,
-                      rest, B_CORNER, TRAIL, ids, cut)
+    _grids(0, 1, 1, *_grid_arrays(level), rest, B_CORNER, LEAD, TRAIL, ids, cut)
     cv = np.asarray(points, dtype=np.float64)[np.maximum(ids, 0)]
     _mirror(cv, cut)
     n = len(points)
@@ -146,62 +143,24 @@ def _mirror(cv, cut):
         cv[m, row, :] = 2.0 * cv[m, (row + inner) // 2, :] - cv[m, inner, :]
 
 
-@nb.njit(cache=True, nogil=True)
-def _sharp_side_grids(fo, fv, fe, efo, ef, es, vfo, vf, vfc, faces, bc, trail, ids, cut):
-    """Real point ids of the grids of regular quads with sharp sides (-1 where a phantom
-    point goes) and which sides are sharp."""
-    for m in range(len(faces)):
-        f = faces[m]
-        for k in range(4):
-            c = fv[fo[f] + k]
-            ids[m, bc[k, 0], bc[k, 1]] = c
-            cut[m, k] = es[fe[fo[f] + k]] >= INF_SHARP
-        for k in range(4):
-            if cut[m, k]:
-                continue
-            # the face across side k and its two points off the side
-            a, b = fv[fo[f] + k], fv[fo[f] + (k + 1) % 4]
-            e = fe[fo[f] + k]
-            g = ef[efo[e]] if ef[efo[e]] != f else ef[efo[e] + 1]
-            for end in range(2):
-                c = a if end == 0 else b
-                o = b if end == 0 else a
-                ia = 0
-                for i in range(4):
-                    if fv[fo[g] + i] == c:
-                        ia = i
-                nxt = fv[fo[g] + (ia + 1) % 4]
-                out = fv[fo[g] + (ia + 3) % 4] if nxt == o else nxt
-                kc = (k + end) % 4
-                ids[m, bc[kc, 0] - trail[k, 0], bc[kc, 1] - trail[k, 1]] = out
-        for k in range(4):
-            # the grid corner beyond corner k: real when neither side at k is sharp (the
-            # corner is then smooth of valence 4), the diagonal of the opposite face
-            if cut[m, k] or cut[m, (k + 3) % 4]:
-                continue
-            c = fv[fo[f] + k]
-            a = vfo[c]
-            pos = 0
-            for j in range(4):
-                if vf[a + j] == f:
-                    pos = j
-            g = vf[a + (pos + 2) % 4]
-            kk = vfc[a + (pos + 2) % 4]
-            d = fv[fo[g] + (kk + 2) % 4]
-            ids[m, 2 * bc[k, 0] - bc[(k + 2) % 4, 0], 2 * bc[k, 1] - bc[(k + 2) % 4, 1]] = d
-
-
 def control_grids(level, faces) -> np.ndarray:
     """(m, 4, 4) int64 point ids of the control grids of regular quads ``faces``."""
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     out = np.empty((len(faces), 4, 4), dtype=np.int64)
-    run_tasks(
-        _control_grids, level.face_offsets, level.face_verts, level.vert_face_offsets,
-        level.vert_faces, level.vert_face_corner, level.vert_edge_offsets, level.vert_edges,
-        level.edge_verts, faces, B_CORNER, LEAD, TRAIL, out,
-        n=None if len(faces) >= _GRID_PARALLEL_MIN else 1,
-    )
+    run_tasks(_grids, 0, *_grid_arrays(level), faces, B_CORNER, LEAD, TRAIL, out, _NO_CUT,
+              n=None if len(faces) >= _GRID_PARALLEL_MIN else 1)
     return out
+
+
+_NO_CUT = np.zeros((0, 4), dtype=np.bool_)  # (the smooth grids' step marks no side)
+
+
+def _grid_arrays(level):
+    """The topology :func:`_grids` reads, in its order."""
+    return (level.face_offsets, level.face_verts, level.face_edges, level.edge_face_offsets,
+            level.edge_faces, level.edge_sharpness, level.vert_face_offsets, level.vert_faces,
+            level.vert_face_corner, level.vert_edge_offsets, level.vert_edges,
+            level.edge_verts)
 
 
 _GRID_BLOCK = 256  # faces a task gathers at a time
@@ -209,10 +168,58 @@ _GRID_PARALLEL_MIN = 8 * _GRID_BLOCK  # fewer faces than this: one thread
 
 
 @nb.njit(cache=True, nogil=True)
-def _control_grids(task, n_tasks, fo, fv, vfo, vf, vfc, veo, ve, ev, faces, bc, lead, trail,
-                   out):
-    """Task ``task`` of ``n_tasks`` (tasks.run_tasks): blocks of _GRID_BLOCK faces, every
-    n_tasks-th."""
+def _grids(task, n_tasks, step, fo, fv, fe, efo, ef, es, vfo, vf, vfc, veo, ve, ev, faces, bc,
+           lead, trail, ids, cut):
+    """The control grids (point ids, (m,4,4)) ``ids`` of quads ``faces`` (topology as
+    :func:`_grid_arrays` lists it), in one kernel for the table's two kinds (a kernel load
+    less in a render):
+
+    step 0, regular quads (:func:`control_grids`): task ``task`` of ``n_tasks``
+    (tasks.run_tasks) takes blocks of ``_GRID_BLOCK`` faces, every n_tasks-th;
+
+    step 1 (one task), regular quads with sharp sides (:func:`phantom_grids`): the real
+    point ids (-1 where a phantom point goes) and which sides are sharp (``cut`` (m,4))."""
+    if step == 1:
+        for m in range(len(faces)):
+            f = faces[m]
+            for k in range(4):
+                c = fv[fo[f] + k]
+                ids[m, bc[k, 0], bc[k, 1]] = c
+                cut[m, k] = es[fe[fo[f] + k]] >= INF_SHARP
+            for k in range(4):
+                if cut[m, k]:
+                    continue
+                # the face across side k and its two points off the side
+                a, b = fv[fo[f] + k], fv[fo[f] + (k + 1) % 4]
+                e = fe[fo[f] + k]
+                g = ef[efo[e]] if ef[efo[e]] != f else ef[efo[e] + 1]
+                for end in range(2):
+                    c = a if end == 0 else b
+                    o = b if end == 0 else a
+                    ia = 0
+                    for i in range(4):
+                        if fv[fo[g] + i] == c:
+                            ia = i
+                    nxt = fv[fo[g] + (ia + 1) % 4]
+                    out = fv[fo[g] + (ia + 3) % 4] if nxt == o else nxt
+                    kc = (k + end) % 4
+                    ids[m, bc[kc, 0] - trail[k, 0], bc[kc, 1] - trail[k, 1]] = out
+            for k in range(4):
+                # the grid corner beyond corner k: real when neither side at k is sharp (the
+                # corner is then smooth of valence 4), the diagonal of the opposite face
+                if cut[m, k] or cut[m, (k + 3) % 4]:
+                    continue
+                c = fv[fo[f] + k]
+                a = vfo[c]
+                pos = 0
+                for j in range(4):
+                    if vf[a + j] == f:
+                        pos = j
+                g = vf[a + (pos + 2) % 4]
+                kk = vfc[a + (pos + 2) % 4]
+                d = fv[fo[g] + (kk + 2) % 4]
+                ids[m, 2 * bc[k, 0] - bc[(k + 2) % 4, 0], 2 * bc[k, 1] - bc[(k + 2) % 4, 1]] = d
+        return
     dirs = np.empty((4, 2), dtype=np.int64)
     for b0 in range(task * _GRID_BLOCK, len(faces), n_tasks * _GRID_BLOCK):
         for m in range(b0, min(b0 + _GRID_BLOCK, len(faces))):
@@ -220,7 +227,7 @@ def _control_grids(task, n_tasks, fo, fv, vfo, vf, vfc, veo, ve, ev, faces, bc, 
             for i in range(4):
                 c = fv[fo[f] + i]
                 x0, y0 = bc[i, 0], bc[i, 1]
-                out[m, x0, y0] = c
+                ids[m, x0, y0] = c
                 a = vfo[c]
                 pos = 0
                 for j in range(4):
@@ -238,8 +245,8 @@ def _control_grids(task, n_tasks, fo, fv, vfo, vf, vfc, veo, ve, ev, faces, bc, 
                     kk = vfc[a + j]
                     diag = fv[fo[g] + (kk + 2) % 4]
                     x1, y1 = x0 + dirs[k - 1, 0], y0 + dirs[k - 1, 1]
-                    out[m, x1 + dirs[k, 0], y1 + dirs[k, 1]] = diag
+                    ids[m, x1 + dirs[k, 0], y1 + dirs[k, 1]] = diag
                     if k >= 2:
                         e = ve[veo[c] + j]
                         other = ev[e, 1] if ev[e, 0] == c else ev[e, 0]
-                        out[m, x1, y1] = other
+                        ids[m, x1, y1] = other
