@@ -32,6 +32,7 @@ from subtrace.accel.bvh import (
 )
 from subtrace.accel.projection import TILE, Tiles
 from subtrace.runtime.jit import inline_njit, nb
+from subtrace.runtime.memory import one_block
 from subtrace.runtime.threads import run_chunks
 from subtrace.trace.bezier import MAX_SIDE_SAMPLES, intersect_patch
 from subtrace.trace.pools import CANDIDATES, Candidates, Hits, Memo, PieceArrays
@@ -113,10 +114,14 @@ def scratch_buffers(max_d):
     record."""
     n = 6 * max_d + 8
     stack, stack_t = traversal_stack.py_func()  # (numpy's: no kernel to load for it)
-    return (stack, stack_t, np.empty((3 * max_d + 10, 4, 4, 3)),
-            np.empty((n, 6), np.int64), np.empty(n), np.empty(4), np.empty(4, np.int64),
-            np.empty((4 * MAX_SIDE_SAMPLES + 8, 3)), np.empty((4 * MAX_SIDE_SAMPLES + 8, 2)),
-            np.empty(HIT_FIELDS))
+    # (in one allocation, each array on cache lines of its own: small arrays allocated one
+    # after another may share a line, and a thread's stores would then take it from the
+    # thread whose arrays lie beside its own)
+    return tuple(one_block(((len(stack),), stack.dtype), ((len(stack_t),), stack_t.dtype),
+                     ((3 * max_d + 10, 4, 4, 3), np.float64), ((n, 6), np.int64),
+                     ((n,), np.float64), ((4,), np.float64), ((4,), np.int64),
+                     ((4 * MAX_SIDE_SAMPLES + 8, 3), np.float64),
+                     ((4 * MAX_SIDE_SAMPLES + 8, 2), np.float64), ((HIT_FIELDS,), np.float64)))
 
 
 @inline_njit
@@ -301,11 +306,14 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, base, bvh
                 # the request, and the unbuilt shells the ray entered before the request's
                 # exit (its surface may lie beyond their entries): built together (the
                 # flags are only ever set, so threads may race on them)
+                # (stored only where not set yet, as ``touched`` in _visit: rays ask for
+                # the same few patches over and over)
                 request[r] = req
-                cands.wanted[req] = 1
+                if cands.wanted[req] == 0:
+                    cands.wanted[req] = 1
                 reach = min(req_x, hit[H_T])
                 for k in range(min(n_c, CANDIDATES) if cr >= 0 else 0):
-                    if cands.t[cr, k] < reach:
+                    if cands.t[cr, k] < reach and cands.wanted[cands.patch[cr, k]] == 0:
                         cands.wanted[cands.patch[cr, k]] = 1
             if cr >= 0:
                 cands.count[cr] = n_c if n_c <= CANDIDATES else -1

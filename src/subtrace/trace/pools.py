@@ -448,9 +448,13 @@ class Memos:
     def _grow(self, old, n_items, *which) -> Memo:
         """A memo with room for ``n_items`` items, the stores named in ``which`` doubled."""
         if old is None:
+            # (the counts, stored at every split, on a cache line of their own, not one
+            # that another thread's arrays may share)
+            cnt = one_block(((M_COUNTS,), np.int64))[0]
+            cnt[:] = 0
             old = Memo(np.full(0, -1, np.int64), np.empty(0, np.int64), np.empty((0, 6)),
                        np.empty((0, 5)), np.empty(0, np.int64), np.empty((0, 4, 4, 3)),
-                       np.empty((0, 3)), np.zeros(M_COUNTS, np.int64))
+                       np.empty((0, 3)), cnt)
         root, child, box, slab, data, nets, cells, cnt = old
         if len(root) < n_items:
             root = np.concatenate([root, np.full(max(n_items, 2 * len(root)) - len(root), -1)])
