@@ -110,7 +110,7 @@ def test_isolated_pieces_tile_the_grid(name):
     irr = np.nonzero(~table.regular)[0][:12]
     scale = float(np.abs(o.points).max())
     for depth in (0, 1, 3):
-        (sr, sl, si, sj, nets, _), (cr, ci, cj, cp, _) = build_isolated(o, table.face[irr], depth)
+        (sr, sl, si, sj, nets, *_), (cr, ci, cj, cp, _) = build_isolated(o, table.face[irr], depth)
         G = build_grids(o.level, o.points, cage.options, table.face[irr], depth)[0]
         n = (1 << depth) + 1
         G = G.reshape(len(irr), n, n, 3)
@@ -237,7 +237,7 @@ def test_cells_subtend_at_most_the_tolerance():
     irr = np.nonzero(~table.regular & (depths > 0))[0]
     for d in np.unique(depths[irr]):
         ids = irr[depths[irr] == d]
-        (_, lev, _, _, nets, own), _ = build_isolated(o, table.face[ids], int(d), eye, tol)
+        (_, lev, _, _, nets, own, *_), _ = build_isolated(o, table.face[ids], int(d), eye, tol)
         assert np.all((own >= lev) & (own <= d))
         for pd in np.unique(own - lev):
             sel = own - lev == pd
@@ -291,9 +291,16 @@ def test_isolation_taken_from_the_depth_choice_equals_a_fresh_one(record_depth, 
         order = np.lexsort(arrays[:n_keys][::-1])
         return [x[order] for x in arrays]
 
-    (ar, al, ai, aj, an, ad), (br, bl, bi, bj, bn, bd) = by_piece(a[0], 4), by_piece(b[0], 4)
+    (ar, al, ai, aj, an, ad, *_), (br, bl, bi, bj, bn, bd, *_) = by_piece(a[0], 4), by_piece(b[0], 4)
     for x, y in ((ar, br), (al, bl), (ai, bi), (aj, bj), (ad, bd)):
         assert np.array_equal(x, y)
+    # each piece's box travels with it (taken from the record, or made with its net): the
+    # box of its net's control points, bit for bit
+    from subtrace.patches.basis import net_bounds
+
+    for subs in (a[0], b[0]):
+        lo, hi, _ = net_bounds(subs[4])
+        assert np.array_equal(subs[6], lo) and np.array_equal(subs[7], hi)
     assert np.abs(an - bn).max() <= 1e-13 * scale
     (cr, ci, cj, cp, _), (dr, di, dj, dp, _) = by_piece(a[1], 3), by_piece(b[1], 3)
     for x, y in ((cr, dr), (ci, di), (cj, dj)):
@@ -315,7 +322,10 @@ def test_regular_patches_appended_directly_equal_the_general_append():
     z = np.zeros(len(reg), np.int64)
     none = np.zeros(0, np.int64)
     a, b = Pieces(table.n_patches), Pieces(table.n_patches)
-    a.append(reg, depth, side, (np.arange(len(reg)), z, z, z, table.nets, depth),
+    from subtrace.patches.basis import net_bounds
+
+    lo, hi, _ = net_bounds(table.nets)
+    a.append(reg, depth, side, (np.arange(len(reg)), z, z, z, table.nets, depth, lo, hi),
              (none, none, none, np.zeros((0, 4, 3)), np.zeros((0, 4, 3))), -1)
     b.append_regular(reg, depth, side, table.nets, table.shell_min[reg], table.shell_max[reg])
     assert np.array_equal(a.patch_iso, b.patch_iso)

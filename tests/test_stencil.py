@@ -11,6 +11,7 @@ import pytest
 
 from subtrace import config
 from subtrace.mesh.cage import load_cage
+from subtrace.patches.basis import net_bounds
 from subtrace.patches.criterion import wanted_depths
 from subtrace.patches.isolate import build_isolated, isolated_depths
 from subtrace.patches.stencil import (
@@ -67,6 +68,10 @@ def test_maps_isolate_as_the_mesh_does(name):
     s0, s1 = _sorted(list(s0), (0, 1, 2, 3)), _sorted(list(s1), (0, 1, 2, 3))
     for k in (0, 1, 2, 3, 5):  # the same pieces at the same places, the same own depths
         np.testing.assert_array_equal(s0[k], s1[k])
+    for s in (s0, s1):  # the boxes that travel with the pieces: their nets', exactly
+        lo, hi, _ = net_bounds(s[4])
+        np.testing.assert_array_equal(s[6], lo)
+        np.testing.assert_array_equal(s[7], hi)
     np.testing.assert_allclose(s0[4], s1[4], rtol=0, atol=1e-13 * scale)
     c0, c1 = _sorted(list(c0), (0, 1, 2)), _sorted(list(c1), (0, 1, 2))
     for k in (0, 1, 2, 6):

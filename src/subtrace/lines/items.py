@@ -191,7 +191,7 @@ class Items:
         subs, cells = [[] for _ in range(5)], [[] for _ in range(4)]
         todo = np.arange(len(rows))
         while len(todo):
-            (root, level, i0, j0, bez, _), (croot, ci, cj, cpts, _, diag, _) = \
+            (root, level, i0, j0, bez, *_), (croot, ci, cj, cpts, _, diag, _) = \
                 build_isolated(obj, tb.face[rows[todo]], d[todo], ring=True)
             again = np.zeros(len(todo), bool)
             again[croot[grow * diag > allowed]] = True

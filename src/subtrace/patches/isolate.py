@@ -110,6 +110,7 @@ def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0, 
         kid_root = np.repeat(root, 4)
         kid_active = np.repeat(active, 4)
         bez, n = np.zeros((0, 4, 4, 3)), np.zeros(0)
+        lo = hi = np.zeros((0, 3))
         if reg.any():
             bez, lo, hi, bound = bezier_nets_and_bounds(control_points(cur, kids[reg], cur_pts))
             n = levels_needed(bound, sight_distance(lo, hi, eye), tol_rad)
@@ -119,7 +120,7 @@ def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0, 
             sets = kid_active[reg]
             np.maximum.at(need, kid_root[reg][sets], k + n[sets].astype(np.int64))
         if record is not None:
-            levels.append(_Level(parent_start, cur, cur_pts, kids, reg, bez, n))
+            levels.append(_Level(parent_start, cur, cur_pts, kids, reg, bez, n, lo, hi))
         irr = np.nonzero(~reg)[0]
         smin, smax, ebound, _ = one_ring_shells(cur, kids[irr], cur_pts)
         flat = IRREGULAR_MARGIN * ebound <= tol_rad * sight_distance(smin, smax, eye)
@@ -149,15 +150,20 @@ def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0, 
 class _Level:
     """One level of :func:`isolated_depths`' refinement: the faces it refined (``start``,
     in the previous level), the refined cut ``cur`` with its points, their four children
-    each (``kids``, in ``cur``), which are regular, and those's Bezier nets and levels
-    needed beyond this one (``bez``, ``n``)."""
+    each (``kids``, in ``cur``), which are regular, and those's Bezier nets, levels
+    needed beyond this one and boxes (``bez``, ``n``, ``lo``, ``hi``)."""
 
-    def __init__(self, start, cur, pts, kids, reg, bez, n):
+    def __init__(self, start, cur, pts, kids, reg, bez, n, lo, hi):
         self.start, self.cur, self.pts, self.kids, self.reg = start, cur, pts, kids, reg
-        self.bez, self.n = bez, n
+        self.bez, self.n, self.lo, self.hi = bez, n, lo, hi
         self.reg_rank = np.cumsum(reg) - 1
         self.lut = np.full(int(start.max(initial=-1)) + 1, -1, np.int64)
         self.lut[start] = np.arange(len(start))
+
+    def regular(self, kid_rows):
+        """``(bez, n, lo, hi)`` of the regular ones of the children ``kid_rows``."""
+        at = self.reg_rank[kid_rows[self.reg[kid_rows]]]
+        return self.bez[at], self.n[at], self.lo[at], self.hi[at]
 
     def find(self, faces):
         """Row of each of ``faces`` (in the previous level) in ``start``, or -1."""
@@ -165,6 +171,9 @@ class _Level:
         ok = faces < len(self.lut)
         out[ok] = self.lut[faces[ok]]
         return out
+
+
+_SUBS = 8  # the lists of build_isolated's pieces (its ``subs``)
 
 
 def build_isolated(obj, faces, depth, eye=None, tol_rad=None, record=None, ring=False):
@@ -179,7 +188,9 @@ def build_isolated(obj, faces, depth, eye=None, tol_rad=None, record=None, ring=
     ``subs`` = (root index (s,), level (s,), origin i0, j0 (s,) in units of 2^-level,
     Bezier nets (s,4,4,3), grid depth (s,) in the patch's units: the piece's own need from
     its Bezier bound as seen from ``eye`` at ``tol_rad`` (as :func:`isolated_depths`), at
-    least its level and at most its patch's depth; the patch's depth without an eye);
+    least its level and at most its patch's depth; the patch's depth without an eye; the
+    boxes of the nets' control points, lo and hi (s,3), as ``basis.net_bounds`` makes
+    them);
     ``cells`` = (root index (c,), cell i, j (c,) in units of 2^-depth, corner points (c,4,3),
     corner unit normals (c,4,3), NaN where undefined), and with ``ring`` the diagonal (c,)
     of the box of each cell's one-ring control points and whether the cell touches the
@@ -199,7 +210,7 @@ def build_isolated(obj, faces, depth, eye=None, tol_rad=None, record=None, ring=
             parts.append(build_isolated(obj, faces[~ok], depth[~ok], eye, tol_rad, record,
                                         ring))
         return _merged(parts, (np.nonzero(ok)[0], np.nonzero(~ok)[0]), ring)
-    subs = [[], [], [], [], [], []]
+    subs = [[] for _ in range(_SUBS)]
     cells = [[] for _ in range(7 if ring else 5)]
     zero = np.zeros(len(faces), dtype=np.int64)
     levels = record["levels"] if record is not None and eye is not None else []
@@ -227,8 +238,7 @@ def build_isolated(obj, faces, depth, eye=None, tol_rad=None, record=None, ring=
                 nxt.append(_next_level(subs, k + 1, lv.cur, lv.pts, lv.kids[kid_rows],
                                        lv.reg[kid_rows], root[have], i0[have], j0[have], depth,
                                        eye, tol_rad, True,
-                                       lv.bez[lv.reg_rank[kid_rows[lv.reg[kid_rows]]]],
-                                       lv.n[lv.reg_rank[kid_rows[lv.reg[kid_rows]]]]))
+                                       *lv.regular(kid_rows)))
             if not have.all():
                 fresh = ~have
                 ref, ref_pts, kids, reg = refine_children(cur, cur_pts, start[fresh], options)
@@ -268,7 +278,7 @@ def _merged(parts, rows, ring):
     """One ``(subs, cells)`` of :func:`build_isolated` from ``parts`` made for the faces
     ``rows[i]`` each (their root indices are into those): the stencils' lists of arrays,
     then the topological path's arrays."""
-    subs = [[] for _ in range(6)]
+    subs = [[] for _ in range(_SUBS)]
     cells = [[] for _ in range(7 if ring else 5)]
     for part, at in zip(parts, rows):
         _add_part(subs, cells, part, at)
@@ -283,7 +293,8 @@ def _packed(subs, cells, ring):
     maps), the cells by patch."""
     empty = (np.zeros(0, np.int64),) * 4
     out_subs = (tuple(np.concatenate(a) for a in subs) if subs[0]
-                else (*empty, np.zeros((0, 4, 4, 3)), empty[0]))
+                else (*empty, np.zeros((0, 4, 4, 3)), empty[0], np.zeros((0, 3)),
+                      np.zeros((0, 3))))
     out_cells = (tuple(np.concatenate(a) for a in cells) if cells[0]
                  else (*empty[:3], np.zeros((0, 4, 3)), np.zeros((0, 4, 3)),
                        *((np.zeros(0), np.zeros(0, bool)) if ring else ())))
@@ -295,7 +306,7 @@ def _packed(subs, cells, ring):
 
 
 def _next_level(subs, k, cur, cur_pts, kids, reg, root, i0, j0, depth, eye, tol_rad, recorded,
-                bez=None, n=None):
+                bez=None, n=None, lo=None, hi=None):
     """Append the regular children ``kids[reg]`` (level ``k`` of ``cur``; four per frontier
     face of roots ``root`` at origins ``i0, j0``) to ``subs`` as pieces; return the group of
     the irregular ones. ``bez``, ``n``: the regular ones' nets and needs, when known."""
@@ -308,17 +319,22 @@ def _next_level(subs, k, cur, cur_pts, kids, reg, root, i0, j0, depth, eye, tol_
         subs[1].append(np.full(int(reg.sum()), k))
         subs[2].append(ki[reg])
         subs[3].append(kj[reg])
-        bounds = None
+        bound = None
         if bez is None:
-            bez, *bounds = bezier_nets_and_bounds(control_points(cur, kids[reg], cur_pts))
+            bez, lo, hi, bound = bezier_nets_and_bounds(control_points(cur, kids[reg], cur_pts))
         subs[4].append(bez)
         own = depth[kid_root[reg]]
         if eye is not None:
             if n is None:
-                lo, hi, bound = net_bounds(bez) if bounds is None else bounds
+                if bound is None:
+                    lo, hi, bound = net_bounds(bez)
                 n = levels_needed(bound, sight_distance(lo, hi, eye), tol_rad)
             own = np.clip(k + n, k, own).astype(np.int64)
+        elif lo is None:
+            lo, hi, _ = net_bounds(bez)
         subs[5].append(own)
+        subs[6].append(lo)
+        subs[7].append(hi)
     irr = ~reg
     return cur, cur_pts, kid_root[irr], kids[irr], ki[irr], kj[irr], recorded
 

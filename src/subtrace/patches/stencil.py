@@ -36,7 +36,7 @@ from subtrace.config import IRREGULAR_MARGIN
 from subtrace.errors import SubtraceError
 from subtrace.io.atomic import write_bytes
 from subtrace.mesh.topology import Options, compact, gather_index
-from subtrace.patches.basis import bezier_nets_and_bounds, net_bounds
+from subtrace.patches.basis import bezier_nets_and_bounds
 from subtrace.patches.grids import levels_needed, refine_children, unit_normals
 from subtrace.patches.shells import sight_distance
 
@@ -381,7 +381,7 @@ def stencil_pieces(level, points, options, faces, corner, valence, depth, eye=No
     m = len(faces)
     i0 = np.zeros(m, np.int64) if i0 is None else np.asarray(i0, np.int64)
     j0 = np.zeros(m, np.int64) if j0 is None else np.asarray(j0, np.int64)
-    subs = [[] for _ in range(6)]
+    subs = [[] for _ in range(8)]  # (isolate.build_isolated's)
     cells = [[] for _ in range(7 if ring else 5)]
     for rows, cor, st, _, pts in _groups(level, points, faces, corner, valence):
         gi, gj = i0[rows], j0[rows]
@@ -397,20 +397,26 @@ def stencil_pieces(level, points, options, faces, corner, valence, depth, eye=No
                     break
             # the children in the order of their corners, as the topological path lists them
             nets = np.empty((len(rows), 3, 4, 4, 3))
+            lo, hi = np.empty((len(rows), 3, 3)), np.empty((len(rows), 3, 3))
+            bound = np.empty((len(rows), 3))
             for c in compact(cor, 4)[0]:  # (the grids follow the corners)
                 at = cor == c
                 grids = st.grids[c][np.argsort((c + st.kids) % 4)]
-                nets[at] = _nets(grids.reshape(48, -1), pts[:, at])[0].reshape(-1, 3, 4, 4, 3)
+                got = _nets(grids.reshape(48, -1), pts[:, at])
+                nets[at] = got[0].reshape(-1, 3, 4, 4, 3)
+                lo[at], hi[at] = got[1].reshape(-1, 3, 3), got[2].reshape(-1, 3, 3)
+                bound[at] = got[3].reshape(-1, 3)
             nets = nets.reshape(-1, 4, 4, 3)
+            lo, hi, bound = lo.reshape(-1, 3), hi.reshape(-1, 3), bound.ravel()
             kid_corner = np.sort((cor[:, None] + st.kids[None, :]) % 4, axis=1).ravel()
             ki, kj = _kid_origin(np.repeat(gi, 3), np.repeat(gj, 3), kid_corner)
             root = np.repeat(rows, 3)
             own = depth[root]
             if eye is not None:
-                lo, hi, bound = net_bounds(nets)
                 n = levels_needed(bound, sight_distance(lo, hi, eye), tol_rad)
                 own = np.clip(k + 1 + n, k + 1, own).astype(np.int64)
-            for lst, a in zip(subs, (root, np.full(len(root), k + 1), ki, kj, nets, own)):
+            for lst, a in zip(subs, (root, np.full(len(root), k + 1), ki, kj, nets, own, lo,
+                                     hi)):
                 lst.append(np.asarray(a))
             pts = _times(st.ring, pts)
             gi, gj = _kid_origin(gi, gj, cor)

@@ -250,8 +250,7 @@ class Pieces(Growable):
         ``side`` (m,4)) made of ``subs`` and ``cells`` (see
         :func:`~subtrace.patches.isolate.build_isolated`); each piece samples its sides as
         finely as the pieces beside it (:func:`~subtrace.patches.isolate.item_sides`)."""
-        (sr, sl, si, sj, nets, sd), (cr, ci, cj, cp, cn) = subs, cells
-        lo_s, hi_s, _ = net_bounds(nets)
+        (sr, sl, si, sj, nets, sd, lo_s, hi_s), (cr, ci, cj, cp, cn) = subs, cells
         root = np.concatenate([sr, cr])
         order = np.argsort(root, kind="stable")
         level = np.r_[sl, depth[cr]][order]
