@@ -119,8 +119,10 @@ def face_star_boxes(face_offsets, face_verts, pts):
     vhi = np.full((len(pts), 3), -np.inf)
     lo = np.empty((n_faces, 3))
     hi = np.empty((n_faces, 3))
-    _vertex_star_boxes(face_offsets, face_verts, pts, vlo, vhi)
-    _face_step(face_offsets, face_verts, vlo, vhi, lo, hi)
+    fo = np.ascontiguousarray(face_offsets, dtype=np.int64)
+    fv = np.ascontiguousarray(face_verts, dtype=np.int32)
+    _ring_boxes(0, 1, 2, fo, fv, fo, fv, pts, vlo, vhi, lo, hi)  # (the vertices' boxes)
+    _face_step(fo, fv, vlo, vhi, lo, hi)
     return lo, hi
 
 
@@ -173,9 +175,27 @@ def _vertex_split_boxes(task, n_tasks, vert_edge_offsets, vert_edges, child_pts,
 def _ring_boxes(task, n_tasks, step, vert_face_offsets, vert_faces, face_offsets, face_verts,
                 pts, vlo, vhi, lo, hi):
     """Step 0: per vertex, the box ``vlo, vhi`` of the points of the faces around it; step
-    1: per face, the union ``lo, hi`` of its corners' boxes (:func:`face_ring_boxes`; one
-    kernel for both steps, one load fewer in a render). ``run_tasks``: task ``task`` of
-    ``n_tasks`` takes a contiguous share of the vertices, or of the faces."""
+    1: per face, the union ``lo, hi`` of its corners' boxes (:func:`face_ring_boxes`); step
+    2 (one task, no topology: :func:`face_star_boxes`): per vertex, the box of the points
+    of the faces that list it (``vlo``, ``vhi`` start at +inf / -inf), each face's box
+    widened into its corners' boxes. One kernel for the three steps: one load in a render,
+    not three. ``run_tasks``: task ``task`` of ``n_tasks`` takes a contiguous share of the
+    vertices, or of the faces."""
+    if step == 2:
+        for f in range(len(face_offsets) - 1):
+            lo0, lo1, lo2 = np.inf, np.inf, np.inf
+            hi0, hi1, hi2 = -np.inf, -np.inf, -np.inf
+            for c in range(face_offsets[f], face_offsets[f + 1]):
+                p = face_verts[c]
+                x, y, z = pts[p, 0], pts[p, 1], pts[p, 2]
+                lo0, lo1, lo2 = min(lo0, x), min(lo1, y), min(lo2, z)
+                hi0, hi1, hi2 = max(hi0, x), max(hi1, y), max(hi2, z)
+            for c in range(face_offsets[f], face_offsets[f + 1]):
+                v = face_verts[c]
+                vlo[v, 0], vhi[v, 0] = min(vlo[v, 0], lo0), max(vhi[v, 0], hi0)
+                vlo[v, 1], vhi[v, 1] = min(vlo[v, 1], lo1), max(vhi[v, 1], hi1)
+                vlo[v, 2], vhi[v, 2] = min(vlo[v, 2], lo2), max(vhi[v, 2], hi2)
+        return
     if step == 1:
         n = len(lo)
         for f in range(task * n // n_tasks, (task + 1) * n // n_tasks):
@@ -200,25 +220,6 @@ def _ring_boxes(task, n_tasks, step, vert_face_offsets, vert_faces, face_offsets
                 hi0, hi1, hi2 = max(hi0, x), max(hi1, y), max(hi2, z)
         vlo[v, 0], vlo[v, 1], vlo[v, 2] = lo0, lo1, lo2
         vhi[v, 0], vhi[v, 1], vhi[v, 2] = hi0, hi1, hi2
-
-
-@nb.njit(cache=True, nogil=True)
-def _vertex_star_boxes(face_offsets, face_verts, pts, vlo, vhi):
-    """Per vertex, the box of the points of the faces that list it (``vlo``, ``vhi``
-    start at +inf / -inf): each face's box, widened into its corners' boxes."""
-    for f in range(len(face_offsets) - 1):
-        lo0, lo1, lo2 = np.inf, np.inf, np.inf
-        hi0, hi1, hi2 = -np.inf, -np.inf, -np.inf
-        for c in range(face_offsets[f], face_offsets[f + 1]):
-            p = face_verts[c]
-            x, y, z = pts[p, 0], pts[p, 1], pts[p, 2]
-            lo0, lo1, lo2 = min(lo0, x), min(lo1, y), min(lo2, z)
-            hi0, hi1, hi2 = max(hi0, x), max(hi1, y), max(hi2, z)
-        for c in range(face_offsets[f], face_offsets[f + 1]):
-            v = face_verts[c]
-            vlo[v, 0], vhi[v, 0] = min(vlo[v, 0], lo0), max(vhi[v, 0], hi0)
-            vlo[v, 1], vhi[v, 1] = min(vlo[v, 1], lo1), max(vhi[v, 1], hi1)
-            vlo[v, 2], vhi[v, 2] = min(vlo[v, 2], lo2), max(vhi[v, 2], hi2)
 
 
 @nb.njit(cache=True, nogil=True)
