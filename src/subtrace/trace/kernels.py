@@ -184,6 +184,35 @@ def _visit(p, ray, round_no, base, iso, mem, slack, hit, scratch, loop):
     return intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop)
 
 
+@inline_njit
+def _want(wanted, p):
+    """Flag patch ``p`` to be built after the round: stored only where not set yet, as
+    ``touched`` in :func:`_visit` (rays ask for the same few patches over and over)."""
+    if wanted[p] == 0:
+        wanted[p] = 1
+
+
+@inline_njit
+def _background_run(tiles, r, col, width, tile, all_rays, request, hits):
+    """Record ray ``r`` (pixel column ``col``), whose tile ``tile`` lists no shell, as a
+    miss, as :func:`_trace_task` records one (without the ray's set-up; its tile has no
+    candidate rows); with ``all_rays`` (every pixel's ray, in pixel order) the rest of the
+    row's pixels up to the next tile that lists a shell too (most of an image is
+    background). Returns how many rays it recorded."""
+    end = col + 1
+    if all_rays:
+        end = col - col % TILE + TILE
+        while end < width and tiles.off[tile + 1] == tiles.off[tile + 2]:
+            end += TILE
+            tile += 1
+        end = min(end, width)
+    for x in range(r, r + end - col):
+        request[x] = -1
+        hits.t[x] = np.inf
+        hits.prim[x] = -1
+    return end - col
+
+
 @nb.njit(cache=True, nogil=True, _nrt=False, error_model="numpy")  # see jit.leaf_njit
 def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, base, bvh_t, tiles_t,
                 shell_min, shell_max, iso_t, mems_t, scratches, cands_t, slack, hits_t,
@@ -210,22 +239,10 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, base, bvh
             col = r - row * width
             tile = (row // TILE) * tiles.per_row + col // TILE if projected else 0
             if projected and round_no == 0 and tiles.off[tile] == tiles.off[tile + 1]:
-                # no shell projects onto its tile: a miss, recorded as the loop below
-                # records one (without the ray's set-up; its tile has no candidate rows);
-                # with every pixel's ray, so are the rest of the row's pixels up to the
-                # next tile that lists a shell (most of an image is background)
-                end = col + 1
-                if len(rays) == 0:
-                    end = col - col % TILE + TILE
-                    while end < width and tiles.off[tile + 1] == tiles.off[tile + 2]:
-                        end += TILE
-                        tile += 1
-                    end = min(end, width)
-                    q += end - col - 1
-                for x in range(r, r + end - col):
-                    request[x] = -1
-                    hits.t[x] = np.inf
-                    hits.prim[x] = -1
+                # no shell projects onto its tile: a miss (and with every pixel's ray, the
+                # rest of the row's up to the next tile that lists a shell)
+                q += _background_run(tiles, r, col, width, tile, len(rays) == 0, request,
+                                     hits) - 1
                 continue
             # the ray's row of the candidate lists (pools.Candidates; -1: none, its tile
             # lists built patches only)
@@ -306,15 +323,12 @@ def _trace_task(task, rays, bands, ox, oy, oz, frame, width, round_no, base, bvh
                 # the request, and the unbuilt shells the ray entered before the request's
                 # exit (its surface may lie beyond their entries): built together (the
                 # flags are only ever set, so threads may race on them)
-                # (stored only where not set yet, as ``touched`` in _visit: rays ask for
-                # the same few patches over and over)
                 request[r] = req
-                if cands.wanted[req] == 0:
-                    cands.wanted[req] = 1
+                _want(cands.wanted, req)
                 reach = min(req_x, hit[H_T])
                 for k in range(min(n_c, CANDIDATES) if cr >= 0 else 0):
-                    if cands.t[cr, k] < reach and cands.wanted[cands.patch[cr, k]] == 0:
-                        cands.wanted[cands.patch[cr, k]] = 1
+                    if cands.t[cr, k] < reach:
+                        _want(cands.wanted, cands.patch[cr, k])
             if cr >= 0:
                 cands.count[cr] = n_c if n_c <= CANDIDATES else -1
             _store_hit(hit, hits, r)
