@@ -576,9 +576,10 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
             built = np.zeros(0, np.int64)
         else:
             patches = patch_shading(table, [scene.objects[k] for k in owners])
-            lit = lit_in_shading(scene, nurbs, table_loop_flag(table))
+            loop = table_loop_flag(table)
+            lit = lit_in_shading(scene, nurbs, loop)
             _shade_hits(frame, W, hits, iso, patches, miss, planes, normals, pix_patch, covered,
-                        owners, table_loop_flag(table), lit)
+                        owners, loop, lit)
             # each pixel's hit distance for the picture (the NURBS pass writes its nearer
             # hits into a copy); the rest of the hit records (one block with the rounds'
             # requests, 40 bytes a ray) is given back before the picture makes its own arrays

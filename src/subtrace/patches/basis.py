@@ -44,7 +44,7 @@ import math
 
 import numpy as np
 
-from subtrace.runtime.jit import leaf_njit, llvm_inline_njit, nb
+from subtrace.runtime.jit import callee_njit, leaf_njit, llvm_inline_njit, nb
 
 # ------------------------------------------------------------------------------------------
 # bicubic nets
@@ -341,7 +341,7 @@ def bezier_nets_and_bounds(cv: np.ndarray):
     return out, lo, hi, bound
 
 
-@nb.njit(cache=True, nogil=True)  # (also from Python)
+@callee_njit  # (from bspline_nets)
 def to_bezier(cv, M, out):
     """Bezier nets ``out`` (m,4,4,3) of B-spline grids ``cv`` (m,4,4,3); ``M`` = TO_BEZIER."""
     tmp = np.empty((4, 4, 3))

@@ -28,7 +28,7 @@ import numpy as np
 from subtrace import config
 
 from subtrace.config import IRREGULAR_MARGIN
-from subtrace.patches.basis import bezier_nets_and_bounds, net_bounds
+from subtrace.patches.basis import bezier_nets_and_bounds
 from subtrace.patches.bspline import control_points
 from subtrace.patches.grids import levels_needed, refine_children, unit_normals
 from subtrace.patches.shells import one_ring_shells, sight_distance
@@ -309,7 +309,8 @@ def _next_level(subs, k, cur, cur_pts, kids, reg, root, i0, j0, depth, eye, tol_
                 bez=None, n=None, lo=None, hi=None):
     """Append the regular children ``kids[reg]`` (level ``k`` of ``cur``; four per frontier
     face of roots ``root`` at origins ``i0, j0``) to ``subs`` as pieces; return the group of
-    the irregular ones. ``bez``, ``n``: the regular ones' nets and needs, when known."""
+    the irregular ones. ``bez``, ``n``, ``lo``, ``hi``: the regular ones' nets, needs and
+    boxes, when known (all four, from the depth choice's record)."""
     q = np.arange(4)
     kid_root = np.repeat(root, 4)
     ki = (2 * i0[:, None] + (q == 1) + (q == 2)).ravel()
@@ -319,19 +320,14 @@ def _next_level(subs, k, cur, cur_pts, kids, reg, root, i0, j0, depth, eye, tol_
         subs[1].append(np.full(int(reg.sum()), k))
         subs[2].append(ki[reg])
         subs[3].append(kj[reg])
-        bound = None
         if bez is None:
             bez, lo, hi, bound = bezier_nets_and_bounds(control_points(cur, kids[reg], cur_pts))
+            if eye is not None:
+                n = levels_needed(bound, sight_distance(lo, hi, eye), tol_rad)
         subs[4].append(bez)
         own = depth[kid_root[reg]]
         if eye is not None:
-            if n is None:
-                if bound is None:
-                    lo, hi, bound = net_bounds(bez)
-                n = levels_needed(bound, sight_distance(lo, hi, eye), tol_rad)
             own = np.clip(k + n, k, own).astype(np.int64)
-        elif lo is None:
-            lo, hi, _ = net_bounds(bez)
         subs[5].append(own)
         subs[6].append(lo)
         subs[7].append(hi)
