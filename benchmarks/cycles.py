@@ -18,6 +18,16 @@ shapes (``../shared/oracle/shapes``, Modified Apache 2.0):
     osd_loop_icos_semisharp    OpenSubdiv's Loop icosahedron with semi-sharp creases, corners
     osd_catmark_nonquads       OpenSubdiv's n-gon cage (triangles to hexagons), boundaries
 
+and hard-surface cages as artists model them, from OpenSubdiv's regression shapes committed
+in ``models/opensubdiv/`` (Modified Apache 2.0, ``models/README.md``), turned Y up:
+
+    chess      pawn, bishop and rook side by side in one view (2,333 faces, 176 of them
+               triangles; 624 semi-sharp creases of sharpness 6 and 7.9; open at the
+               bases): subtrace cannot move an object, so the three become one OBJ, the
+               vertices offset, the tags re-indexed
+    car        the car body (1,575 quads, 314 semi-sharp creases of sharpness 6)
+    helmet     the helmet shell (58 quads, 38 creases of sharpness 7, open, edge-and-corner)
+
 Each scene's camera (eye, target, up, vertical fov, resolution) is resolved here and given to
 both renderers, subtrace on its command line: the two images frame the same view.
 
@@ -52,7 +62,11 @@ Timing: per scene one warm-up render of each renderer (Numba's cache, the file c
 Recorded per render: the renderer's own render time, the whole process's wall time
 (interpreter start, imports, scene load, EXR write) and its peak RSS (``os.wait4``). The
 table gives medians per renderer, ratios subtrace / Cycles (below 1: subtrace is faster or
-smaller) and the geometric mean of each ratio over the scenes.
+smaller) and the geometric mean of each ratio over the scenes. A third table gives each
+renderer's time per covered pixel (its render time over the pixels subtrace covered) and
+subtrace's refine time per patch refined (``subtrace:time_refine`` over
+``subtrace:patches_refined`` of the EXR header): what a hard-surface cage costs beside a
+smooth one.
 
 ``--images DIR`` also renders every scene at 480x270 with both renderers and writes
 ``DIR/<scene>_subtrace.png``, ``DIR/<scene>_cycles.png`` and a side-by-side
@@ -81,6 +95,7 @@ import tempfile
 import time
 import tomllib
 from dataclasses import dataclass, field
+from decimal import Decimal
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -114,6 +129,7 @@ class Cage:
     boundary: str | None = None  # from "t interpolateboundary"; None: absent
     crease_method: str | None = None  # from "t creasemethod"
     holes: int = 0
+    hole_faces: list = field(default_factory=list)  # the faces "t hole" names
 
     def to_obj(self, header: str) -> str:
         lines = [f"# {line}" for line in header.splitlines()]
@@ -124,6 +140,9 @@ class Cage:
             lines.append(f"t interpolateboundary 1/0/0 {code}")
         lines += [f"t crease 2/1/0 {a} {b} {s:g}" for a, b, s in self.creases]
         lines += [f"t corner 1/1/0 {v} {s:g}" for v, s in self.corners]
+        if self.hole_faces:
+            lines.append(f"t hole {len(self.hole_faces)}/0/0 "
+                         + " ".join(map(str, self.hole_faces)))
         return "\n".join(lines) + "\n"
 
     def features(self) -> str:
@@ -202,6 +221,7 @@ def _read_tag(cage: Cage, parts: list) -> None:
         cage.crease_method = strings[0]
     elif name == "hole":
         cage.holes += len(ints)
+        cage.hole_faces += ints
 
 
 # ------------------------------------------------------------------ generated feature cages
@@ -313,6 +333,57 @@ def cage_vase_loop() -> Cage:
     return Cage(positions, faces, creases, corners, boundary="edge-only")
 
 
+# ------------------------------------------------------------ hard-surface cages (committed)
+HARD_SURFACE = REPO / "models" / "opensubdiv"  # OpenSubdiv's shapes; models/README.md
+CHESS_SPACING = 0.55  # centre to centre along +X (the pieces are 0.31-0.45 wide)
+
+
+def _hard_surface(name: str) -> Cage:
+    """``models/opensubdiv/catmark_<name>.obj`` turned a quarter about +X: its +Z (up in
+    these shapes) becomes +Y, the extra scenes' up (a rotation: faces keep their winding)."""
+    cage = read_obj(HARD_SURFACE / f"catmark_{name}.obj")
+    cage.positions = [(x, z, -y) for x, y, z in cage.positions]
+    return cage
+
+
+def _joined(parts: list) -> Cage:
+    """One cage of several, side by side along +X, ``CHESS_SPACING`` apart, each centred
+    on its slot, standing on y = 0. Indices of faces and tags are shifted with their
+    vertices (subtrace places no object by a transform, so the cages become one)."""
+    out = Cage([], [])
+    for slot, cage in enumerate(parts):
+        lo = [min(p[k] for p in cage.positions) for k in range(3)]
+        hi = [max(p[k] for p in cage.positions) for k in range(3)]
+        move = (slot * CHESS_SPACING - (lo[0] + hi[0]) / 2.0, -lo[1], -(lo[2] + hi[2]) / 2.0)
+        n = len(out.positions)
+        out.positions += [tuple(c + m for c, m in zip(p, move)) for p in cage.positions]
+        out.faces += [[v + n for v in f] for f in cage.faces]
+        out.creases += [(a + n, b + n, s) for a, b, s in cage.creases]
+        out.corners += [(v + n, s) for v, s in cage.corners]
+        out.hole_faces += [f + len(out.faces) - len(cage.faces) for f in cage.hole_faces]
+        out.boundary = out.boundary or cage.boundary
+    out.holes = len(out.hole_faces)
+    return out
+
+
+def cage_chess() -> Cage:
+    """OpenSubdiv's pawn, bishop and rook side by side (semi-sharp creases of 6 and 7.9)."""
+    return _joined([_hard_surface(n) for n in ("pawn", "bishop", "rook")])
+
+
+def cage_car() -> Cage:
+    """OpenSubdiv's car body (semi-sharp creases of sharpness 6), Y up."""
+    return _hard_surface("car")
+
+
+def cage_helmet() -> Cage:
+    """OpenSubdiv's helmet shell (open, edge-and-corner, creases of sharpness 7), Y up."""
+    return _hard_surface("helmet")
+
+
+HARD_ORIGIN = ("OpenSubdiv regression shapes (models/opensubdiv), Modified Apache 2.0; "
+               "turned Y up by benchmarks/cycles.py")
+
 # (name, builder or OpenSubdiv shape, view direction from the target, licence / origin)
 EXTRA_CAGES = [
     ("gen_pawn", cage_pawn, (1.0, 0.9, 1.6), "built by benchmarks/cycles.py"),
@@ -322,6 +393,10 @@ EXTRA_CAGES = [
      "OpenSubdiv regression shape, Modified Apache 2.0"),
     ("osd_catmark_nonquads", "catmark_nonquads", (0.4, 1.6, 1.2),
      "OpenSubdiv regression shape, Modified Apache 2.0"),
+    # hard-surface cages as artists model them: many semi-sharp creases of sharpness 6-8
+    ("chess", cage_chess, (0.35, 0.55, 1.6), HARD_ORIGIN),
+    ("car", cage_car, (1.6, 0.7, 0.9), HARD_ORIGIN),
+    ("helmet", cage_helmet, (1.0, 0.6, 1.6), HARD_ORIGIN),
 ]
 
 
@@ -505,6 +580,11 @@ def exr_header(path) -> dict:
     return attrs
 
 
+def cli_number(value) -> str:
+    """``value`` exactly, without an exponent: argparse takes "-1e-06" for an option."""
+    return format(Decimal(repr(float(value))), "f")
+
+
 class Renderers:
     """Runs one render of a scene in either renderer, each a separate process."""
 
@@ -522,8 +602,8 @@ class Renderers:
         cmd = self.subtrace + [
             "render", str(scene.toml), "-o", str(exr), "--threads", str(self.args.threads),
             "--width", str(width), "--height", str(height), "--fov", repr(cam["fov"]),
-            "--eye", *map(repr, cam["eye"]), "--target", *map(repr, cam["target"]),
-            "--up", *map(repr, cam["up"]), "--quiet",
+            "--eye", *map(cli_number, cam["eye"]), "--target",
+            *map(cli_number, cam["target"]), "--up", *map(cli_number, cam["up"]), "--quiet",
             # like for like with Cycles' one sample and sun lights without shadows or AO
             "--samples", "1", "--no-shadows", "--ao", "0"]
         return cmd
@@ -697,9 +777,28 @@ def summarize(results) -> dict:
             row["cycles_" + key] = _median(c, key)
         for key in ("render", "wall", "rss_mb"):
             row["ratio_" + key] = row["subtrace_" + key] / row["cycles_" + key]
+        px = max(row["px"], 1)  # the pixels subtrace covered (the same view for both)
+        row["subtrace_us_per_px"] = 1e6 * row["subtrace_render"] / px
+        row["cycles_us_per_px"] = 1e6 * row["cycles_render"] / px
+        row["subtrace_ms_per_refined"] = (1e3 * row["subtrace_time_refine"]
+                                          / max(row["subtrace_patches_refined"], 1))
         rows.append(row)
     geo = {k: _geomean([row["ratio_" + k] for row in rows]) for k in ("render", "wall", "rss_mb")}
     return {"rows": rows, "geomean": geo}
+
+
+def cost_table(rows) -> list[str]:
+    """Lines of the table of costs per covered pixel and per refined patch."""
+    out = ["", "Cost per covered pixel (render time / pixels subtrace covered) and per patch "
+           "refined\n(subtrace's refine time / its patches refined; medians).", "",
+           "| scene | covered px | subtrace us/px | Cycles us/px | patches refined "
+           "| refine ms/patch |", "|---|---:|---:|---:|---:|---:|"]
+    for row in rows:
+        out.append(
+            f"| {row['scene']} | {row['px']:,} | {row['subtrace_us_per_px']:.2f} "
+            f"| {row['cycles_us_per_px']:.2f} | {row['subtrace_patches_refined']:,.0f} "
+            f"| {row['subtrace_ms_per_refined']:.3f} |")
+    return out
 
 
 def markdown(summary, images=None) -> str:
@@ -739,6 +838,7 @@ def markdown(summary, images=None) -> str:
             f"| {row['subtrace_micro_triangles']:,.0f} | {row['cycles_time_tessellate']:.3f} "
             f"| {row['cycles_time_bvh']:.3f} | {row['cycles_time_sync']:.3f} "
             f"| {row['cycles_time_samples']:.3f} |")
+    out += cost_table(rows)
     if images:
         out += ["", f"Image check ({IMAGE_SIZE[0]}x{IMAGE_SIZE[1]}): pixels covered by each "
                 "renderer and the intersection over union of\nthe two coverage masks.", "",
