@@ -60,7 +60,8 @@ Renderers, each a separate process per render:
 Timing: per scene one warm-up render of each renderer (Numba's cache, the file cache), then
 ``--rounds`` rounds, each running subtrace then Cycles, the order swapped every round.
 Recorded per render: the renderer's own render time, the whole process's wall time
-(interpreter start, imports, scene load, EXR write) and its peak RSS (``os.wait4``). The
+(interpreter start, imports, scene load, EXR write) and its peak RSS (``os.wait4``, in a
+bare launcher so that this script's own memory does not count: see ``run_process``). The
 table gives medians per renderer, ratios subtrace / Cycles (below 1: subtrace is faster or
 smaller) and the geometric mean of each ratio over the scenes. A third table gives each
 renderer's time per covered pixel (its render time over the pixels subtrace covered) and
@@ -92,7 +93,6 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 import tomllib
 from dataclasses import dataclass, field
 from decimal import Decimal
@@ -542,20 +542,32 @@ def cycles_job(scene: Scene, width: int, height: int, threads: int, exr: str) ->
 
 
 # ------------------------------------------------------------------------------- processes
+# A child's peak RSS (ru_maxrss) starts at its parent's peak: Linux's exec keeps the peak
+# of the address space it replaces (and posix_spawn's child borrows its parent's). So every
+# render is started by a bare Python (-S, only os, sys and time: about 9 MiB) that waits
+# for it and reports its exit code, wall time and peak RSS: a renderer smaller than this
+# script (numpy, OpenImageIO; embree.py's driver takes tens of MiB) is measured as itself.
+_LAUNCHER = """
+import os, sys, time
+out = [(os.POSIX_SPAWN_OPEN, 1, sys.argv[1], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644),
+       (os.POSIX_SPAWN_DUP2, 1, 2)]
+t0 = time.perf_counter()
+pid = os.posix_spawnp(sys.argv[2], sys.argv[2:], os.environ, file_actions=out)
+_, status, usage = os.wait4(pid, 0)
+print(os.waitstatus_to_exitcode(status), time.perf_counter() - t0, usage.ru_maxrss)
+"""
+
+
 def run_process(cmd, log_path, env):
     """Run ``cmd``; return (exit code, wall s, peak RSS MiB) of that process alone."""
-    with open(log_path, "wb") as log:
-        t0 = time.perf_counter()
-        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env)
-        try:
-            _, status, usage = os.wait4(proc.pid, 0)
-        except BaseException:
-            proc.kill()
-            proc.wait()
-            raise
-        wall = time.perf_counter() - t0
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    return proc.returncode, wall, usage.ru_maxrss / 1024.0  # Linux: ru_maxrss in KiB
+    launcher = [sys.executable, "-S", "-c", _LAUNCHER, str(log_path), *map(str, cmd)]
+    out = subprocess.run(launcher, capture_output=True, text=True, env=env)
+    try:
+        rc, wall, rss_kib = out.stdout.split()
+    except ValueError:
+        last = (out.stderr.strip().splitlines() or ["no report"])[-1]
+        raise BenchError(f"could not run {cmd[0]}: {last}") from None
+    return int(rc), float(wall), int(rss_kib) / 1024.0  # Linux: ru_maxrss in KiB
 
 
 def _log_tail(path, n=6):

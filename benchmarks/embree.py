@@ -32,9 +32,11 @@ Like for like:
   normalised, in doubles), then rounds it to Embree's floats.
 * Edge levels: as Cycles dices at 1 px (``intern/cycles/subd`` DiagSplit: every patch split
   once at its middle, then per half ``T = max(1, ceil(2 max(L1, L2)))`` with L1, L2 the
-  pixel lengths of its two quarters), measured on the cage's straight edges: the exact
-  rule is in the driver's comment. Cage edges are a little longer than the limit curves
-  they become, so Embree gets slightly more segments than Cycles would give it.
+  pixel lengths of its two quarters), measured on the limit surface (Embree's
+  ``rtcInterpolate`` at five points of every edge; the exact rule is in the driver's
+  comment). That costs time Cycles spends too: it is part of the build (``levels`` in the
+  second table). Measured on the cage's straight edges instead, the levels would be
+  larger by as much as the cage stands off its limit (Spot's mean level 60 instead of 53).
 * Threads: ``threads=N`` in ``rtcNewDevice``'s config (the BVH build and tessellation) and
   N threads taking rows for the trace; subtrace runs ``render --tolerance 1 --samples 1
   --threads N`` with the same camera on its command line (plus ``--subtrace-args``, e.g.
@@ -49,6 +51,11 @@ Embree's rules differ from OpenSubdiv's (which subtrace follows exactly) in a fe
   chess's, car's and helmet's creases are one value per cage); not where mixed
   semi-sharp creases meet. OpenSubdiv's ``t creasemethod chaikin`` (the ``chaikin`` scene)
   is close to Embree's rule, not equal: OpenSubdiv averages over every semi-sharp edge.
+* Three or more semi-sharp creases at a vertex: Embree takes the corner rule whatever
+  their sharpness; OpenSubdiv blends corner and crease rules by the sharpness of the edges
+  about to vanish. The ``creases`` scene's cube has such corners (edges of sharpness 0.1,
+  5 and 5): about 1,000 pixels disagree off silhouettes at 1280x720, none once its 0.1
+  edge is made 5.
 * Corner tags (vertex sharpness): Embree blends smooth and corner positions by the vertex
   weight and then ignores the edges' creases at that vertex; OpenSubdiv blends with the
   rule the edges give. They differ at fractional corner tags on crease vertices.
@@ -65,11 +72,11 @@ Timing: per scene one warm-up run of each (Numba's cache, the file cache), then
 ``--rounds`` rounds, each running subtrace then Embree, the order swapped every round;
 every run a fresh process. subtrace's render time is the EXR header's
 ``subtrace:time_total`` (load, preprocess, refine, trace, shade; not the EXR write), shown
-with its refine + trace part; Embree's is build (geometry, levels, ``rtcCommitScene``:
+with its refine + trace part; Embree's is build (geometry, edge levels, ``rtcCommitScene``:
 tessellation and BVH) + trace (one ``rtcIntersect1`` per pixel), with the device's creation
 (TBB's start) shown apart. Also per run: the process's wall time and its peak RSS
-(``os.wait4``). The table gives medians, ratios subtrace / Embree and their geometric
-means.
+(``os.wait4`` in cycles.py's bare launcher, so that this script's own memory does not
+count). The table gives medians, ratios subtrace / Embree and their geometric means.
 
 Coverage agreement (on the last round's outputs): subtrace covers a pixel where its ``Z``
 is finite, Embree where its ray hit. *Off silhouettes* counts the pixels where the two
@@ -337,7 +344,7 @@ def summarize(results) -> dict:
                     "time_preprocess", "time_refine", "time_trace", "time_shade",
                     "patches_refined", "micro_triangles"):
             row["subtrace_" + key] = med(s, key)
-        for key in ("render", "device_s", "build_s", "trace_s", "wall", "rss_mb",
+        for key in ("render", "device_s", "build_s", "levels_s", "trace_s", "wall", "rss_mb",
                     "level_mean", "level_max", "edges"):
             row["embree_" + key] = med(e, key)
         for key in ("render", "wall", "rss_mb"):
@@ -385,7 +392,7 @@ def detail_table(rows) -> list[str]:
            "levels (segments per cage edge)\nand the coverage agreement of the last round "
            "(off silhouettes and depth: see the module comment).", "",
            "| scene | load | preprocess | refine | trace | shade | patches refined "
-           "| Embree device | build | trace | mean level | max level | subtrace px "
+           "| Embree device | build (levels) | trace | mean level | max level | subtrace px "
            "| Embree px | differ px | off silhouettes | depth rel. median | p99 |",
            "|---|" + "---:|" * 17]
     for row in rows:
@@ -395,7 +402,8 @@ def detail_table(rows) -> list[str]:
             f"| {row['subtrace_time_preprocess']:.3f} | {row['subtrace_time_refine']:.3f} "
             f"| {row['subtrace_time_trace']:.3f} | {row['subtrace_time_shade']:.3f} "
             f"| {row['subtrace_patches_refined']:,.0f} | {row['embree_device_s']:.3f} "
-            f"| {row['embree_build_s']:.3f} | {row['embree_trace_s']:.3f} "
+            f"| {row['embree_build_s']:.3f} ({row['embree_levels_s']:.3f}) "
+            f"| {row['embree_trace_s']:.3f} "
             f"| {row['embree_level_mean']:.1f} | {row['embree_level_max']:.0f} "
             f"| {c['subtrace_px']:,} | {c['embree_px']:,} | {c['differ_px']:,} "
             f"| **{c['off_silhouette_px']:,}** | {c['depth_rel_median']:.1e} "

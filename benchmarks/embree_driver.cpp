@@ -23,19 +23,22 @@
 // Camera: the ray of pixel (row, col) leaves the eye along p00 + col dx + row dy, normalised,
 // in doubles and in that order (subtrace.camera.ray_direction), then rounded to floats.
 //
-// Edge levels: Cycles' dicing rule (intern/cycles/subd split.cpp, DiagSplit::T with its
-// default test_steps = 3), measured on the cage's straight edges instead of the limit
-// curves. With w(p) = |p - eye| * s the world size of a pixel at p (s = |dx|, Cycles'
-// Camera::world_to_raster_size) and l(x, y) = |y - x| / w((x + y) / 2):
-//     T(p, q) = max(1, ceil(2 * max(l(p, c), l(c, q)) / R)),  c = (p + q) / 2
-//     level(a, b) = min(4096, T(a, m) + T(m, b)),             m = (a + b) / 2
-// (Cycles splits every patch once at its middle before it dices, so every cage edge is
-// diced as two halves; 4096 is Embree's largest level and Cycles' 2^12). Endpoints are
-// taken in vertex order, so both half-edges of an edge get the same level (watertight).
+// Edge levels: Cycles' dicing rule at dicing rate R (intern/cycles/subd split.cpp,
+// DiagSplit::T with its default test_steps = 3, on the limit surface). With w(p) =
+// |p - eye| * s the world size of a pixel at p (s = |dx|: Camera::world_to_raster_size of a
+// perspective camera) and l(x, y) = |y - x| / w((x + y) / 2):
+//     T(p, c, q) = max(1, ceil(2 * max(l(p, c), l(c, q)) / R))
+//     level = min(4096, T(P0, P1, P2) + T(P2, P3, P4))
+// with P0..P4 the limit points at t = 0, 1/4, 1/2, 3/4, 1 along the edge (rtcInterpolate
+// on the committed geometry): Cycles splits every patch once at its middle before it dices,
+// so every cage edge is diced as two halves of three test points each; 4096 is Embree's
+// largest level and Cycles' (2^12). Each edge is measured once, from one of its faces, so
+// both its half-edges get the same level (watertight). The time this takes is levels_s, a
+// part of build_s.
 //
-// OUT.txt gets "key value" lines (device_s, build_s, trace_s, hits, edges, level_mean,
-// level_max); OUT.mask W*H bytes (1: hit), OUT.depth W*H float32 ray distances (inf: miss),
-// rows from the top. Exit 2: a bad job (one line on stderr); 3: an Embree error.
+// OUT.txt gets "key value" lines (device_s, build_s, levels_s, trace_s, hits, edges,
+// level_mean, level_max); OUT.mask W*H bytes (1: hit), OUT.depth W*H float32 ray distances
+// (inf: miss), rows from the top. Exit 2: a bad job (one line on stderr); 3: an Embree error.
 
 #include <embree3/rtcore.h>
 
@@ -50,6 +53,7 @@
 #include <limits>
 #include <string>
 #include <thread>
+#include <unordered_map>
 #include <vector>
 
 namespace {
@@ -156,12 +160,12 @@ Job read_job(const char* path) {
   return job;
 }
 
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
 // ------------------------------------------------------------------------------ levels
 struct Vec { double x, y, z; };
-Vec at(const Object& o, unsigned v) {
-  return {o.positions[3 * v], o.positions[3 * v + 1], o.positions[3 * v + 2]};
-}
-Vec mid(Vec a, Vec b) { return {(a.x + b.x) * 0.5, (a.y + b.y) * 0.5, (a.z + b.z) * 0.5}; }
 double dist(Vec a, Vec b) { return std::sqrt((a.x - b.x) * (a.x - b.x) +
                                              (a.y - b.y) * (a.y - b.y) +
                                              (a.z - b.z) * (a.z - b.z)); }
@@ -170,29 +174,75 @@ struct LevelRule {
   Vec eye;
   double pixel;  // s: the side of a pixel at unit distance
   double rate;
-  double pixels(Vec a, Vec b) const { return dist(a, b) / (dist(eye, mid(a, b)) * pixel); }
-  double T(Vec p, Vec q) const {  // Cycles' DiagSplit::T with test_steps = 3
-    Vec c = mid(p, q);
-    double lmax = std::max(pixels(p, c), pixels(c, q));
-    return std::max(1.0, std::ceil(2.0 * lmax / rate));
+  double pixels(Vec a, Vec b) const {
+    Vec m{(a.x + b.x) * 0.5, (a.y + b.y) * 0.5, (a.z + b.z) * 0.5};
+    return dist(a, b) / (dist(eye, m) * pixel);
   }
-  float level(Vec a, Vec b) const {
-    Vec m = mid(a, b);
-    return float(std::min(4096.0, T(a, m) + T(m, b)));
+  double T(Vec p, Vec c, Vec q) const {  // Cycles' DiagSplit::T, test_steps = 3
+    return std::max(1.0, std::ceil(2.0 * std::max(pixels(p, c), pixels(c, q)) / rate));
+  }
+  float level(const Vec p[5]) const {
+    return float(std::min(4096.0, T(p[0], p[1], p[2]) + T(p[2], p[3], p[4])));
   }
 };
 
-std::vector<float> edge_levels(const Object& o, const LevelRule& rule) {
-  std::vector<float> levels(o.indices.size());
-  size_t start = 0;
-  for (unsigned size : o.face_sizes) {
-    for (unsigned k = 0; k < size; ++k) {
-      unsigned a = o.indices[start + k], b = o.indices[start + (k + 1) % size];
-      if (b < a) std::swap(a, b);
-      levels[start + k] = rule.level(at(o, a), at(o, b));
+// The limit points at t = 0, 1/4, 1/2, 3/4, 1 along edge k (vertex k to k + 1) of face f of
+// n vertices, in Embree's parametrisation: a quad's own (u, v); for other faces the sub-quad
+// at each corner (u, v encode its number and local coordinates; corner (0, 0), the next
+// edge's middle at (1, 0), the previous edge's at (0, 1)), so the edge's first half is
+// sub-quad k's local (2t, 0) and its second half sub-quad k + 1's local (0, 2 - 2t).
+void edge_points(RTCGeometry g, unsigned f, unsigned n, unsigned k, Vec out[5]) {
+  for (int j = 0; j < 5; ++j) {
+    float t = 0.25f * j, u, v;
+    if (n == 4) {
+      const float uq[4] = {t, 1.0f, 1.0f - t, 0.0f}, vq[4] = {0.0f, t, 1.0f, 1.0f - t};
+      u = uq[k], v = vq[k];
+    } else {
+      unsigned sub = j <= 2 ? k : (k + 1) % n;
+      u = 2.0f * float(sub % 4) + 0.5f + (j <= 2 ? 2.0f * t : 0.0f);
+      v = 2.0f * float(sub / 4) + 0.5f + (j <= 2 ? 0.0f : 2.0f - 2.0f * t);
     }
-    start += size;
+    alignas(16) float p[4];
+    rtcInterpolate0(g, f, u, v, RTC_BUFFER_TYPE_VERTEX, 0, p, 3);
+    out[j] = {p[0], p[1], p[2]};
   }
+}
+
+struct EdgeRef { unsigned face, size, k; };
+
+// Every edge's level once (from the first face that is not a hole), for both its half-edges.
+std::vector<float> limit_levels(RTCGeometry g, const Object& o, const LevelRule& rule,
+                                int threads) {
+  std::vector<char> hole(o.face_sizes.size(), 0);
+  for (unsigned f : o.holes) if (f < hole.size()) hole[f] = 1;
+  std::unordered_map<uint64_t, unsigned> index;
+  std::vector<EdgeRef> edges;
+  std::vector<unsigned> half_edge(o.indices.size(), ~0u);
+  size_t start = 0;
+  for (unsigned f = 0; f < o.face_sizes.size(); start += o.face_sizes[f++]) {
+    unsigned n = o.face_sizes[f];
+    for (unsigned k = 0; k < n && !hole[f]; ++k) {
+      uint64_t a = o.indices[start + k], b = o.indices[start + (k + 1) % n];
+      auto [it, fresh] = index.emplace(std::min(a, b) << 32 | std::max(a, b), edges.size());
+      if (fresh) edges.push_back({f, n, k});
+      half_edge[start + k] = it->second;
+    }
+  }
+  std::vector<float> level(edges.size());
+  std::atomic<size_t> next{0};
+  auto work = [&] {
+    for (size_t i; (i = next.fetch_add(1)) < edges.size();) {
+      Vec p[5];
+      edge_points(g, edges[i].face, edges[i].size, edges[i].k, p);
+      level[i] = rule.level(p);
+    }
+  };
+  std::vector<std::thread> pool;
+  for (int t = 0; t < threads; ++t) pool.emplace_back(work);
+  for (auto& t : pool) t.join();
+  std::vector<float> levels(o.indices.size(), 1.0f);  // hole faces' own edges: 1
+  for (size_t i = 0; i < levels.size(); ++i)
+    if (half_edge[i] != ~0u) levels[i] = level[half_edge[i]];
   return levels;
 }
 
@@ -214,7 +264,7 @@ RTCSubdivisionMode mode(const std::string& boundary) {
 }
 
 void add_object(RTCDevice device, RTCScene scene, const Object& o, const LevelRule& rule,
-                std::vector<float>& all_levels) {
+                int threads, std::vector<float>& all_levels, double& levels_s) {
   RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_SUBDIVISION);
   buffer(g, RTC_BUFFER_TYPE_VERTEX, RTC_FORMAT_FLOAT3, o.positions, 3);
   buffer(g, RTC_BUFFER_TYPE_FACE, RTC_FORMAT_UINT, o.face_sizes, 1);
@@ -224,10 +274,13 @@ void add_object(RTCDevice device, RTCScene scene, const Object& o, const LevelRu
   buffer(g, RTC_BUFFER_TYPE_VERTEX_CREASE_INDEX, RTC_FORMAT_UINT, o.corner_ids, 1);
   buffer(g, RTC_BUFFER_TYPE_VERTEX_CREASE_WEIGHT, RTC_FORMAT_FLOAT, o.corner_weights, 1);
   buffer(g, RTC_BUFFER_TYPE_HOLE, RTC_FORMAT_UINT, o.holes, 1);
-  std::vector<float> levels = edge_levels(o, rule);
+  rtcSetGeometrySubdivisionMode(g, 0, mode(o.boundary));
+  rtcCommitGeometry(g);  // the topology, for rtcInterpolate
+  auto t0 = std::chrono::steady_clock::now();
+  std::vector<float> levels = limit_levels(g, o, rule, threads);
+  levels_s += seconds_since(t0);
   buffer(g, RTC_BUFFER_TYPE_LEVEL, RTC_FORMAT_FLOAT, levels, 1);
   all_levels.insert(all_levels.end(), levels.begin(), levels.end());
-  rtcSetGeometrySubdivisionMode(g, 0, mode(o.boundary));
   rtcCommitGeometry(g);
   rtcAttachGeometry(scene, g);
   rtcReleaseGeometry(g);
@@ -265,10 +318,6 @@ void on_error(void*, RTCError code, const char* message) {
   fail("Embree error " + std::to_string(int(code)) + ": " + (message ? message : ""), 3);
 }
 
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
 template <typename T> void write_raw(const std::string& path, const std::vector<T>& data) {
   std::ofstream out(path, std::ios::binary);
   out.write(reinterpret_cast<const char*>(data.data()), std::streamsize(sizeof(T) * data.size()));
@@ -299,7 +348,9 @@ int main(int argc, char** argv) {
                  job.dicing_rate};
   RTCScene scene = rtcNewScene(device);
   std::vector<float> levels;
-  for (const Object& o : job.objects) add_object(device, scene, o, rule, levels);
+  double levels_s = 0.0;
+  for (const Object& o : job.objects)
+    add_object(device, scene, o, rule, job.threads, levels, levels_s);
   rtcCommitScene(scene);
   double build_s = seconds_since(t1);
 
@@ -323,7 +374,8 @@ int main(int argc, char** argv) {
   write_raw(out + ".depth", depth);
   std::ofstream txt(out + ".txt");
   txt.precision(9);
-  txt << "device_s " << device_s << "\nbuild_s " << build_s << "\ntrace_s " << trace_s
+  txt << "device_s " << device_s << "\nbuild_s " << build_s << "\nlevels_s " << levels_s
+      << "\ntrace_s " << trace_s
       << "\nhits " << hits << "\nedges " << levels.size() << "\nlevel_mean "
       << (levels.empty() ? 0.0 : level_sum / levels.size()) << "\nlevel_max " << level_max
       << "\n";
