@@ -65,6 +65,8 @@ Embree's rules differ from OpenSubdiv's (which subtrace follows exactly) in a fe
   (irregular) or bicubic (regular) patches: the remaining crease sharpness is then
   ignored (sharpness above 10 only) and the corner pieces, 2^-10 of a face wide, are
   approximate. Positions are floats (subtrace: doubles).
+* Debian's library keeps Embree's internal assertions (they fire: see the driver's vertex
+  buffer), so it is not quite an upstream release build: an anchor on the slow side.
 * The tessellation is a chord approximation of the limit at about 1 px; subtrace's hits
   are on the limit within its 1 px angular tolerance.
 

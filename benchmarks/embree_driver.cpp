@@ -60,7 +60,10 @@ namespace {
 
 struct Object {
   std::string boundary;
-  std::vector<float> positions;  // x y z per vertex
+  // x y z 0 per vertex: Embree reads a vertex as 4 floats (SSE), and its assertions
+  // (Debian's build keeps them) reject a fourth lane that is not finite, as the bytes
+  // after the last vertex of a 12-byte stride may be
+  std::vector<float> positions;
   std::vector<unsigned> face_sizes, indices, crease_pairs, corner_ids, holes;
   std::vector<float> crease_weights, corner_weights;
 };
@@ -108,9 +111,11 @@ Object read_object(Reader& r) {
   r.expect("object");
   o.boundary = r.word("boundary mode");
   r.expect("vertices");
-  for (long n = r.next<long>("vertex count") * 3; n > 0; --n)
-    o.positions.push_back(float(r.next<double>("a coordinate")));
-  long nv = long(o.positions.size() / 3);
+  for (long n = r.next<long>("vertex count"); n > 0; --n) {
+    for (int k = 0; k < 3; ++k) o.positions.push_back(float(r.next<double>("a coordinate")));
+    o.positions.push_back(0.0f);
+  }
+  long nv = long(o.positions.size() / 4);
   r.expect("faces");
   for (long n = r.next<long>("face count"); n > 0; --n) {
     unsigned size = r.next<unsigned>("a face size");
@@ -266,7 +271,7 @@ RTCSubdivisionMode mode(const std::string& boundary) {
 void add_object(RTCDevice device, RTCScene scene, const Object& o, const LevelRule& rule,
                 int threads, std::vector<float>& all_levels, double& levels_s) {
   RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_SUBDIVISION);
-  buffer(g, RTC_BUFFER_TYPE_VERTEX, RTC_FORMAT_FLOAT3, o.positions, 3);
+  buffer(g, RTC_BUFFER_TYPE_VERTEX, RTC_FORMAT_FLOAT3, o.positions, 4);
   buffer(g, RTC_BUFFER_TYPE_FACE, RTC_FORMAT_UINT, o.face_sizes, 1);
   buffer(g, RTC_BUFFER_TYPE_INDEX, RTC_FORMAT_UINT, o.indices, 1);
   buffer(g, RTC_BUFFER_TYPE_EDGE_CREASE_INDEX, RTC_FORMAT_UINT2, o.crease_pairs, 2);
