@@ -380,18 +380,52 @@ def compile_secondary(threads: int) -> None:
         tasks.set_threads(None)
 
 
-def compile_all(jobs: int) -> float:
+def compile_all(jobs: int, progress=None) -> float:
     """Compile every kernel of every command into the kernel cache (``subtrace warmup``),
-    running up to ``jobs`` commands at once; returns the seconds it took. A command that
-    fails raises :class:`subtrace.errors.SubtraceError` naming it and its error line."""
+    running up to ``jobs`` commands at once; returns the seconds it took. ``progress(done,
+    total, seconds)``, where given, hears the commands done so far after each one and every
+    :data:`HEARTBEAT_S` in between (a cold default render alone compiles for half a minute
+    or more). A command that fails raises :class:`subtrace.errors.SubtraceError` naming it
+    and its error line."""
     t0 = time.perf_counter()
     folder = Path(tempfile.mkdtemp(prefix="subtrace-warmup-"))
     try:
-        for stage in _stages(folder):
-            _run_side_by_side(stage, max(1, jobs))
+        stages = _stages(folder)
+        counter = _Counter(sum(len(chain) for stage in stages for chain in stage), progress, t0)
+        for stage in stages:
+            _run_side_by_side(stage, max(1, jobs), counter)
     finally:
         shutil.rmtree(folder, ignore_errors=True)
     return time.perf_counter() - t0
+
+
+HEARTBEAT_S = 10.0  # the longest compile_all's progress stays silent, in seconds
+
+
+class _Counter:
+    """The commands of :func:`compile_all` done so far, told to ``progress(done, total,
+    seconds)`` after each one and at least every :data:`HEARTBEAT_S`."""
+
+    def __init__(self, total: int, progress, t0: float):
+        self.done, self.total, self.progress, self.t0 = 0, total, progress, t0
+        self.said = t0
+
+    def step(self) -> None:
+        self.done += 1
+        self.say()
+
+    def timeout(self) -> float:
+        """Seconds until the next line is due."""
+        return max(0.05, HEARTBEAT_S - (time.perf_counter() - self.said))
+
+    def tick(self) -> None:
+        if time.perf_counter() - self.said >= HEARTBEAT_S:
+            self.say()
+
+    def say(self) -> None:
+        self.said = time.perf_counter()
+        if self.progress is not None:
+            self.progress(self.done, self.total, self.said - self.t0)
 
 
 def _stages(folder: Path) -> list[list[list[list[str]]]]:
@@ -467,49 +501,81 @@ def _triangulated(obj_text: str) -> str:
     return "\n".join(out) + "\n"
 
 
-def _run_side_by_side(chains: list[list[list[str]]], jobs: int) -> None:
+def _run_side_by_side(chains: list[list[list[str]]], jobs: int, counter: _Counter) -> None:
     """Run each chain of ``subtrace`` commands in a process of its own (``python -m
-    subtrace.runtime.warmup --commands JSON``), at most ``jobs`` processes at once."""
-    from subtrace.errors import SubtraceError
+    subtrace.runtime.warmup --commands JSON``), at most ``jobs`` processes at once; each says
+    a line on its output when one of its commands is done (``counter``)."""
+    import select
 
     pending = list(chains)
     running = []
     try:
         while pending or running:
             while pending and len(running) < jobs:
-                chain = pending.pop(0)
-                proc = subprocess.Popen([sys.executable, "-m", "subtrace.runtime.warmup",
-                                         "--commands", json.dumps(chain)],
-                                        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                        stderr=subprocess.PIPE, text=True)
-                signals.register_child(proc)
-                running.append(proc)
-            proc = running.pop(0)
-            _, err = proc.communicate()
-            signals.forget_child(proc)
-            if proc.returncode != 0:
-                last = (err.strip().splitlines() or ["no message"])[-1]
-                raise SubtraceError(f"warmup: a command failed (exit code {proc.returncode}): "
-                                    f"{last}")
+                running.append(_start_chain(pending.pop(0)))
+            ready = select.select([p.stdout for p in running], [], [], counter.timeout())[0]
+            for proc in [p for p in running if p.stdout in ready]:
+                if proc.stdout.readline():
+                    counter.step()
+                else:  # its output closed: it ended
+                    running.remove(proc)
+                    _finish_chain(proc)
+            counter.tick()
     finally:
         for proc in running:
             proc.kill()
             proc.wait()
-            signals.forget_child(proc)
+            _finish_chain(proc, check=False)
+
+
+def _start_chain(chain: list[list[str]]):
+    """The process running ``chain``: its output unbuffered (one line per command done),
+    its errors in a temporary file (read when it ends)."""
+    errors = tempfile.TemporaryFile(mode="w+")
+    proc = subprocess.Popen([sys.executable, "-m", "subtrace.runtime.warmup", "--commands",
+                             json.dumps(chain)], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=errors, bufsize=0)
+    proc.errors = errors
+    signals.register_child(proc)
+    return proc
+
+
+def _finish_chain(proc, check: bool = True) -> None:
+    """Wait for a chain's process; with ``check``, a failure is a SubtraceError naming its
+    last error line."""
+    from subtrace.errors import SubtraceError
+
+    proc.wait()
+    signals.forget_child(proc)
+    proc.stdout.close()
+    proc.errors.seek(0)
+    err = proc.errors.read()
+    proc.errors.close()
+    if check and proc.returncode != 0:
+        last = (err.strip().splitlines() or ["no message"])[-1]
+        raise SubtraceError(f"warmup: a command failed (exit code {proc.returncode}): {last}")
 
 
 def _run_commands(chain: list[list[str]]) -> int:
-    """Run the ``subtrace`` commands of ``chain`` in this process, in order; the first
-    failure's exit code (its error line is on stderr, followed by the command), else 0."""
+    """Run the ``subtrace`` commands of ``chain`` in this process, in order, each saying
+    ``done`` on this process's output when it ends (what the commands print is dropped);
+    the first failure's exit code (its error line is on stderr, followed by the command),
+    else 0."""
+    import contextlib
+    import io
+
     from subtrace.cli import main
     from subtrace.io import obj_scan
 
     obj_scan.STATEMENT_READER_BYTES = 0  # (the OBJ scanner compiles too, whatever the size)
+    out = sys.stdout
     for argv in chain:
-        code = main(argv)
+        with contextlib.redirect_stdout(io.StringIO()):
+            code = main(argv)
         if code != 0:
             print(f"subtrace warmup: `subtrace {' '.join(argv)}` failed", file=sys.stderr)
             return code
+        print("done", file=out, flush=True)
     return 0
 
 
