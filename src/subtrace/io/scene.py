@@ -131,6 +131,10 @@ _RENDER_KEYS = ("tolerance", "tolerance_deg", "background", "headlight", "headli
                 "max_memory", "shadows", "transparent", "samples", "ao")
 _LIGHT_KEYS = ("direction", "position", "color", "intensity")
 _GROUND_KEYS = ("height", "color")
+# Every key the parser accepts, by table ("": the top level); docs/guide/scene-format.md
+# lists exactly these (tests/test_docs.py)
+SCENE_KEYS = {"": _TOP_KEYS, "object": _OBJECT_KEYS, "camera": _CAMERA_KEYS,
+              "render": _RENDER_KEYS, "light": _LIGHT_KEYS, "ground": _GROUND_KEYS}
 # Camera field -> scene key / command-line option
 _CAMERA_FIELD_KEY = {
     "eye": "eye",
