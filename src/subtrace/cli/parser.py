@@ -189,7 +189,8 @@ def _add_compare(sub) -> argparse.ArgumentParser:
     for name in THRESHOLD_OPTIONS:
         compare.add_argument(f"--{name}", action="append", default=[],
                              metavar="[GROUP=]VALUE",
-                             help=f"{name} threshold of a group (default: see the README)")
+                             help=f"{name} threshold of a group (defaults: docs/guide/"
+                                  "compare-sweep-intersect.md)")
     compare.add_argument("--diff", metavar="OUT.exr",
                          help="write the per-pixel differences and a normalised 'heat' channel")
     compare.add_argument("--png", action="store_true",

@@ -8,7 +8,8 @@ tolerance and of the reference and a refinement-level heat map PNG per tolerance
 (``<dir>/<scene>/tol_<T>.exr``, ``tol_<T>_levels.png``, ``reference.exr``), and for the
 whole sweep ``sweep.csv``, ``sweep.json`` and three log-log plots (:data:`PLOTS`).
 
-Measurements (the columns are :data:`COLUMNS`, documented in the README):
+Measurements (the columns are :data:`COLUMNS`, documented in
+docs/guide/compare-sweep-intersect.md):
   times   RenderStats times (total, refine, trace) of each render, the median of the
           repeats, each column separately. The reference renders first, so every swept
           render finds Numba's kernels loaded and the per-process tables built.
