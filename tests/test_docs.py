@@ -129,7 +129,18 @@ def test_the_checker_finds_a_missing_and_an_unknown_key():
     assert "shininess" not in keys and "shinyness" in keys
 
 
-LINK = re.compile(r"\]\(([^)#\s]+)(?:#[^)]*)?\)")
+LINK = re.compile(r"\]\(([^)#\s]*)(?:#([^)\s]*))?\)")
+
+
+def anchors(page: Path) -> set[str]:
+    """The anchors of a page's headings, as GitHub makes them: lower case, punctuation but
+    hyphens and underscores dropped, spaces as hyphens."""
+    out = set()
+    for line in page.read_text(encoding="utf-8").splitlines():
+        m = re.match(r"#{1,6} (.+)", line)
+        if m:
+            out.add(re.sub(r"[^\w\- ]", "", m.group(1).strip().lower()).replace(" ", "-"))
+    return out
 
 
 def _doc_files():
@@ -137,19 +148,56 @@ def _doc_files():
 
 
 def test_links_lead_to_files_of_the_repository():
-    """Every relative link of the README and docs/ names a file or folder that exists, and
-    none leaves the repository (a clone has no ``../shared``)."""
+    """Every relative link of the README and docs/ names a file or folder that exists (and a
+    heading of it, where it names one), and none leaves the repository (a clone has no
+    ``../shared``)."""
     bad = []
     for page in _doc_files():
-        for target in LINK.findall(page.read_text(encoding="utf-8")):
+        for target, anchor in LINK.findall(page.read_text(encoding="utf-8")):
             if re.match(r"[a-z]+:", target):
                 continue  # a web address
-            path = (page.parent / target).resolve()
+            path = (page.parent / target).resolve() if target else page.resolve()
+            where = f"{page.relative_to(ROOT)}: {target}#{anchor}"
             if ROOT.resolve() not in path.parents and path != ROOT.resolve():
-                bad.append(f"{page.relative_to(ROOT)}: {target} leaves the repository")
+                bad.append(f"{where} leaves the repository")
             elif not path.exists():
-                bad.append(f"{page.relative_to(ROOT)}: {target} does not exist")
+                bad.append(f"{where} does not exist")
+            elif anchor and path.suffix == ".md" and anchor not in anchors(path):
+                bad.append(f"{where}: no such heading")
     assert not bad, "\n".join(bad)
+
+
+FIRST_RUN_STEPS = ("install", "first render", "warm render", "first Loop render", "warmup")
+
+
+def _first_run_figures(text: str, section: str) -> list[float]:
+    """The ``seconds`` column of the first table after the heading ``section``."""
+    column, figures = None, []
+    for line in text[text.index(section):].splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if not line.startswith("|"):
+            if figures:
+                break
+        elif column is None and "seconds" in cells:
+            column = cells.index("seconds")
+        elif column is not None and not set(cells[0]) <= set("-: "):
+            figures.append(float(cells[column]))
+    return figures
+
+
+def test_the_readme_quotes_the_first_run_benchmark():
+    """The README's first-run figures are BENCHMARKS.md's benchmarks/first_run.py table, and
+    the compile notice's estimate is that run's first render."""
+    from subtrace.runtime import jit
+
+    bench = _first_run_figures((ROOT / "BENCHMARKS.md").read_text(encoding="utf-8"),
+                               "## First run (`benchmarks/first_run.py`)")
+    readme = _first_run_figures((ROOT / "README.md").read_text(encoding="utf-8"),
+                                "## Two commands")
+    assert len(bench) == len(FIRST_RUN_STEPS), bench
+    assert readme == bench
+    assert jit.COLD_COMPILE_S == round(bench[1])
+    assert str(jit.COLD_COMPILE_S) in jit.COLD_COMPILE
 
 
 def test_no_page_names_shared():
