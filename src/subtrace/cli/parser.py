@@ -286,7 +286,9 @@ def _add_warmup(sub) -> argparse.ArgumentParser:
             "so that later commands load them. The cache is $SUBTRACE_CACHE_DIR (else "
             "$NUMBA_CACHE_DIR, else ~/.cache/subtrace)/numba-<key>, the key a hash of the "
             "sources' bytes, the Numba and Python versions and the CPU: workers that share "
-            "one folder share the kernels. Prints the folder and what it holds."
+            "one folder share the kernels. Prints the folder, a line of progress after each "
+            "command (commands done / all, kernels in the cache, seconds) and at least every "
+            "10 s, and what the cache holds."
         ),
     )
     warmup.add_argument("--jobs", metavar="N",
