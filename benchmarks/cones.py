@@ -47,8 +47,8 @@ from pathlib import Path
 
 from _common import REPO, import_subtrace
 
-SHARED_MODELS = REPO.parent / "shared" / "models"
-SWORD = SHARED_MODELS / "sword_quad_dominant.obj"
+MODELS = REPO / "models"
+SWORD = MODELS / "sword_quad_dominant.obj"
 
 DEFAULT = ["src/subtrace/data/default_scene.toml", "scenes/spot_ao.toml",
            "scenes/creases.toml", "scenes/sword.toml", "scenes/torus_loop.toml"]
@@ -128,7 +128,7 @@ def write_canopy(folder) -> str:
     ground = eye + (height - eye[1]) / ray[1] * ray
     sun = ground - centre
     text = (Path(REPO / "scenes" / "spot.toml").read_text()
-            .replace("../models/", str(SHARED_MODELS) + "/")
+            .replace("../models/", str(MODELS) + "/")
             .replace("[camera]", "[[object]]\nmesh = \"sword_canopy.obj\"\n"
                      "color = [0.75, 0.75, 0.8]\n\n[camera]")
             .replace("direction = [-0.4, -1.0, -0.5]",

@@ -6,7 +6,7 @@
 
 Scenes: every ``scenes/*.toml`` plus feature-rich cages this script builds (deterministic
 OBJ files with OpenSubdiv tags, in a temporary folder) or takes from OpenSubdiv's regression
-shapes (``../shared/oracle/shapes``, Modified Apache 2.0):
+shapes (``tests/oracle/shapes``, Modified Apache 2.0):
 
     gen_pawn         Catmull-Clark lathe (chess-pawn-like): open bottom (boundary), semi-sharp
                      and infinitely sharp crease rings, fluted stem (semi-sharp edges), corner
@@ -100,7 +100,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 WORKER = Path(__file__).resolve().with_name("_cycles_worker.py")
-OSD_SHAPES = REPO.parent / "shared" / "oracle" / "shapes"
+OSD_SHAPES = REPO / "tests" / "oracle" / "shapes"
 BPY_VERSION = "5.0.1"
 BPY_PYTHON_VERSION = (3, 11)  # the bpy wheels are built for one CPython version
 DEFAULT_VENV = Path.home() / ".cache" / "subtrace" / "bpy-venv"

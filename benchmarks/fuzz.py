@@ -61,10 +61,9 @@ def seeds() -> tuple[list[bytes], list[bytes]]:
     from subtrace.data import sample_cage_path
 
     objs.append(Path(sample_cage_path()).read_bytes())
-    shapes = REPO.parent / "shared" / "oracle" / "shapes"
-    if shapes.is_dir():
-        objs += [p.read_bytes() for p in sorted(shapes.glob("*.obj"))[:40]
-                 if p.stat().st_size < 200_000]
+    shapes = REPO / "tests" / "oracle" / "shapes"
+    objs += [p.read_bytes() for p in sorted(shapes.glob("*.obj"))[:40]
+             if p.stat().st_size < 200_000]
     return objs, tomls
 
 

@@ -32,7 +32,7 @@ from subtrace.lines.api import intersect_lines
 from subtrace.runtime.threads import set_threads
 from subtrace.shapes import torus_cage
 
-SPOT = Path(__file__).resolve().parents[2] / "shared" / "models" / "spot_low_resolution.obj"
+SPOT = Path(__file__).resolve().parents[1] / "models" / "spot_low_resolution.obj"
 
 
 def _rss_mb():

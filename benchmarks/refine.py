@@ -11,7 +11,7 @@ the remaining ``repeat`` runs. Peak memory is the subprocess's maximum resident 
 (``resource.getrusage``), which includes the interpreter, numpy and Numba (the "base" column
 is the same after imports, before any work).
 
-Default model: ``../shared/models/sword_quad_dominant.obj`` from the repository root
+Default model: ``models/sword_quad_dominant.obj`` of the repository
 (22,465 faces; "Moonbrand sword, The Oakeshott Institute, remeshed by Oded Stein,
 odedstein-meshes", CC BY 4.0).
 """
@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 from _common import REPO, import_subtrace  # benchmarks/ is on sys.path when run as a script
-DEFAULT_MODEL = REPO.parent / "shared" / "models" / "sword_quad_dominant.obj"
+DEFAULT_MODEL = REPO / "models" / "sword_quad_dominant.obj"
 
 
 def _max_rss_mb() -> float:

@@ -1,5 +1,6 @@
-"""Where the tests find the shared data (real meshes, OpenSubdiv shapes), and small scene
-builders shared by the renderer's tests."""
+"""Where the tests find their data (the real meshes of ``models/``, the OpenSubdiv shapes and
+reference results of ``tests/oracle/``, both in the repository), and small scene builders
+shared by the renderer's tests."""
 
 from __future__ import annotations
 
@@ -8,24 +9,18 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
-
 import subtrace
 from subtrace.io.scene import scene_from_dict
 
-SHARED = Path(__file__).resolve().parents[2] / "shared"
-MODELS = SHARED / "models"
-SHAPES = SHARED / "oracle" / "shapes"
-
-needs_shared = pytest.mark.skipif(not MODELS.is_dir(), reason="../shared/models not present")
+REPO = Path(__file__).resolve().parents[1]
+MODELS = REPO / "models"
+ORACLE = REPO / "tests" / "oracle"
+SHAPES = ORACLE / "shapes"
 
 
 def load_shape(name):
-    """An OpenSubdiv regression shape's cage (the test is skipped when it is absent)."""
-    path = SHAPES / f"{name}.obj"
-    if not path.exists():
-        pytest.skip(f"{path} not present")
-    return subtrace.load_cage(path)
+    """An OpenSubdiv regression shape's cage."""
+    return subtrace.load_cage(SHAPES / f"{name}.obj")
 
 
 def small_scene(meshes, eye, target, width=64, height=48, fov=60.0, tolerance=1.0,

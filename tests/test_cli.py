@@ -17,16 +17,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from shared_data import ORACLE
 
 from subtrace.cli import main
 from subtrace.data import sample_cage_path
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared"
-ORACLE = SHARED / "oracle"
-needs_oracle = pytest.mark.skipif(
-    not (ORACLE / "shapes").is_dir(), reason=f"OpenSubdiv oracle data not found at {ORACLE}"
-)
 
 
 def run_info(capsys, *args):
@@ -155,7 +151,6 @@ def _oracle_counts(name):
     )
 
 
-@needs_oracle
 @pytest.mark.parametrize(
     "name",
     [
@@ -191,7 +186,6 @@ def test_info_on_oracle_shape(capsys, name):
     )
 
 
-@needs_oracle
 def test_info_scheme_option(capsys):
     # a Catmark reading of an all-triangle Loop shape: the level-1 faces are quads
     path = ORACLE / "shapes" / "loop_tetrahedron.obj"

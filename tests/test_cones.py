@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from shared_data import MODELS, needs_shared
+from shared_data import MODELS
 
 from subtrace import render
 from subtrace.accel.cull import secondary_origins
@@ -176,7 +176,6 @@ def test_a_caster_near_the_eye_is_refined_for_the_cones_that_reach_it(tmp_path, 
     assert np.count_nonzero(masks[0] ^ masks[1]) < 0.1 * masks[0].sum()
 
 
-@needs_shared
 def test_patches_in_view_keep_the_eyes_depths(monkeypatch):
     """A patch a pixel may see is refined as the eye asks, cones or not: the Spot scene
     (a ground plane, a sun, shadows, ambient occlusion) renders bit for bit as with the

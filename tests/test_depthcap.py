@@ -7,7 +7,7 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-from shared_data import MODELS, SHAPES, needs_shared, small_scene
+from shared_data import MODELS, SHAPES, small_scene
 
 from subtrace import config
 from subtrace.errors import SubtraceWarning
@@ -37,7 +37,6 @@ def _level_max(res):
     return int(level[res.channels["A"] > 0].max())
 
 
-@needs_shared
 def test_finer_tolerance_refines_deeper_without_a_cap():
     """0.01 px asks for finer cells than 0.1 px: it is refined deeper (both were held at
     depth 8 by a constant, silently), and neither is capped nor warned about."""
@@ -55,7 +54,6 @@ def test_finer_tolerance_refines_deeper_without_a_cap():
     assert _level_max(fine) > _level_max(coarse)
 
 
-@needs_shared
 def test_summary_deepest_level_is_the_level_channel_maximum():
     """The line ``subtrace render`` prints names the deepest level of the image (the level
     channel counts the patch level L0 too, which the grid depth does not)."""
@@ -68,7 +66,6 @@ def test_summary_deepest_level_is_the_level_channel_maximum():
     assert res.stats.max_level == deepest
 
 
-@needs_shared
 def test_precision_cap_on_an_absurd_tolerance_is_reported_once():
     """At 1e-12 px the tolerance asks for cells below what doubles resolve: refinement stops
     at the precision limit (at most PRECISION_BITS + 2), the render completes, and the cap
@@ -88,7 +85,6 @@ def test_precision_cap_on_an_absurd_tolerance_is_reported_once():
     assert attrs["subtrace:depth_cap_reason"] == "precision"
 
 
-@needs_shared
 def test_irregular_loop_scene_refines_as_deep_as_its_tolerance_asks():
     """Irregular Loop triangles are isolated level by level along their irregular
     remainder, priced per level: at 0.001 px a 256 MiB budget holds the icosahedron (every
@@ -105,7 +101,6 @@ def test_irregular_loop_scene_refines_as_deep_as_its_tolerance_asks():
     assert levels[0] < levels[1] < levels[2], levels
 
 
-@needs_shared
 def test_loop_scene_over_a_small_budget_is_capped_with_one_warning():
     """A budget too small for the isolation levels a tiny tolerance asks for caps them: one
     warning, reason "memory", and the image's levels are the cap's."""
@@ -122,7 +117,6 @@ def test_loop_scene_over_a_small_budget_is_capped_with_one_warning():
     assert _level_max(res) == res.stats.depth_cap == res.stats.max_level
 
 
-@needs_shared
 def test_regular_loop_patches_are_not_priced_as_grids():
     """Regular Loop triangles are Bezier nets split per ray, their splits kept within the
     threads' memos: the budget that holds the grids above does not cap the torus (every

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from shared_data import MODELS, SHAPES, needs_shared, small_scene
+from shared_data import MODELS, SHAPES, small_scene
 
 import subtrace
 from subtrace.lines.items import loop_regular
@@ -21,10 +21,7 @@ CREASED = ["loop_cube_creases1", "loop_icos_semisharp", "loop_chaikin1"]
 
 
 def _irregular(name, n=12):
-    path = SHAPES / f"{name}.obj"
-    if not path.exists():
-        pytest.skip(f"{path} not present")
-    cage = subtrace.load_cage(path)
+    cage = subtrace.load_cage(SHAPES / f"{name}.obj")
     table = build_patch_table([cage])
     o = table.objects[0]
     ids = np.nonzero(~loop_regular(o.level, cage.options, table.face))[0][:n]
@@ -103,10 +100,7 @@ def test_watertight_from_inside_creased_loop_cages(name, tolerance, monkeypatch)
     extraordinary vertices, infinitely sharp and semi-sharp creases (Chaikin too)."""
     from test_render import _check_watertight
 
-    path = SHAPES / f"{name}.obj"
-    if not path.exists():
-        pytest.skip(f"{path} not present")
-    _check_watertight(path, None, tolerance, monkeypatch)
+    _check_watertight(SHAPES / f"{name}.obj", None, tolerance, monkeypatch)
 
 
 def _open_box(path):
@@ -161,7 +155,6 @@ def test_watertight_at_an_open_boundary(tmp_path, tolerance):
         assert np.count_nonzero(res.channels["A"] == 0) == 0
 
 
-@needs_shared
 def test_a_hidden_irregular_loop_object_is_not_refined(tmp_path):
     """Invariant 5 for irregular Loop patches: Spot's Loop cage (extraordinary vertices
     throughout) hidden behind a plane gets no piece, no cell; seen alone, its irregular
@@ -183,7 +176,6 @@ def test_a_hidden_irregular_loop_object_is_not_refined(tmp_path):
     assert alone.stats.pieces > len(alone.refined_objects) > 50
 
 
-@needs_shared
 @pytest.mark.parametrize("tolerance", [4.0, 1.0, 0.25])
 def test_micro_triangles_per_covered_pixel_on_spot_loop(tolerance):
     """At most 4 micro-triangles per covered pixel on Spot's Loop cage, whose irregular

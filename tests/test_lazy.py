@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from shared_data import MODELS, SHAPES, needs_shared, small_scene
+from shared_data import MODELS, SHAPES, small_scene
 
 import subtrace
 from subtrace import config
@@ -64,7 +64,6 @@ def _shared_cage(name):
     return subtrace.load_cage(path if path.exists() else SHAPES / f"{name}.obj")
 
 
-@needs_shared
 @pytest.mark.parametrize("name", _BOX_CAGES)
 def test_face_ring_boxes_are_the_one_ring_shells(name):
     """The per-vertex construction of the cage faces' boxes gives the one-ring boxes, and
@@ -94,7 +93,6 @@ def _rings_naive(cage, faces, rings):
     return out
 
 
-@needs_shared
 @pytest.mark.parametrize("name", _BOX_CAGES[1:])
 def test_face_rings_are_the_faces_around(name):
     """``face_rings`` (from the face lists) against a plain set construction."""
@@ -152,7 +150,6 @@ def test_a_restricted_cage_has_the_whole_cages_patches(tmp_path, monkeypatch, tr
     assert not cage.has_topology
 
 
-@needs_shared
 def test_cage_face_boxes_hold_their_patches_shells():
     """A cage face's box holds the one-ring boxes of its level-1 patches (their points are
     convex combinations of its one-ring's), so culling by it never drops a visible patch."""
@@ -169,7 +166,6 @@ def test_cage_face_boxes_hold_their_patches_shells():
     assert np.all(h1 <= hi[parent] + 1e-15 * scale)
 
 
-@needs_shared
 def test_only_patches_in_view_are_built():
     """Looking at the sword's tip: the table holds every patch whose shell reaches the
     image (a plain-numpy projection of the whole cage's shells), few more, the same shells
@@ -270,7 +266,6 @@ def test_partial_views_of_feature_cages_are_unchanged(tmp_path, monkeypatch, tri
     _same_image_without_cull(scene, [subtrace.load_cage(mesh)], res)
 
 
-@needs_shared
 def test_object_out_of_view_builds_nothing(tmp_path):
     """Invariant 5: a second sword beside the view, or behind the eye, adds no patch."""
     cage = subtrace.load_cage(SWORD)
@@ -297,7 +292,6 @@ def test_nothing_in_view_renders_the_background(tmp_path):
     assert np.all(res.channels["object_id"] < 0) or np.all(res.channels["A"] == 0)
 
 
-@needs_shared
 def test_level_one_patches_out_of_view_are_left_out():
     """On a coarse cage seen close, a kept face's level-1 quads whose own one-ring box
     misses the image are not built either; the image is unchanged."""
@@ -332,7 +326,6 @@ def test_the_lowest_limit_point_is_found_around_the_lowest_faces(tmp_path, monke
         assert not cage.has_topology  # (the cut's, not the cage's)
 
 
-@needs_shared
 def test_a_ground_under_a_partial_view_builds_no_whole_topology():
     """The sword seen at its tip above an automatic ground: the ground's height comes from
     a cut around the sword's lowest faces, the cage's own topology is never built (before,
@@ -350,7 +343,6 @@ def test_a_ground_under_a_partial_view_builds_no_whole_topology():
     _same_image_without_cull(scene, [subtrace.load_cage(SWORD)], res)
 
 
-@needs_shared
 def test_the_ground_and_the_cull_share_one_computation_of_the_face_boxes(monkeypatch):
     """The sword's tip under a sun over an automatic ground: the ground's height (its
     lowest faces) and the cull (the faces in view) both need every face's star box; they

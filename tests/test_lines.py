@@ -6,11 +6,11 @@ that does not grow with the precision, and the CLI."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import naive
 import numpy as np
 import pytest
+from shared_data import MODELS, SHAPES
 
 import subtrace
 from subtrace.cli import main
@@ -19,7 +19,6 @@ from subtrace.lines.api import intersect_lines
 from subtrace.lines.items import items_for
 from subtrace.shapes import torus_cage
 
-SHARED = Path(__file__).resolve().parents[2] / "shared"
 
 PREC = 1e-3
 
@@ -291,19 +290,17 @@ def _cell_errors(cage, precision):
     return err, len(cell), items.cell_bound
 
 
-@pytest.mark.parametrize("name, precision", [("models/spot_control_mesh.obj", 3e-2),
-                                             ("oracle/shapes/catmark_pole8.obj", 3e-2),
-                                             ("oracle/shapes/catmark_fan.obj", 3e-2)])
-def test_cells_lie_within_half_the_precision_of_the_surface(name, precision):
+@pytest.mark.parametrize("path, precision", [(MODELS / "spot_control_mesh.obj", 3e-2),
+                                             (SHAPES / "catmark_pole8.obj", 3e-2),
+                                             (SHAPES / "catmark_fan.obj", 3e-2)],
+                         ids=["spot_control_mesh", "catmark_pole8", "catmark_fan"])
+def test_cells_lie_within_half_the_precision_of_the_surface(path, precision):
     """A Catmull-Clark cell (the flat stand-in next to an extraordinary vertex or a feature)
     is refined until its one-ring box's diagonal is at most precision / 2, a proven bound:
     the exact surface at any parameter of the cell is that close to the cell's bilinear
     patch at the same parameter (here at a coarse precision, where cells are large). The
     errors measured are far below it (1-3 % of precision / 2): the bound is what guarantees
     them, so it is checked itself."""
-    path = SHARED / name
-    if not path.exists():
-        pytest.skip(f"{path} not present")
     err, n, bound = _cell_errors(subtrace.load_cage(path), precision)
     assert n > 0
     assert 0.0 < bound <= 0.5 * precision

@@ -6,10 +6,9 @@ samples, ``mode="first"`` against ``"all"``, and the per-cage cache."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from shared_data import MODELS, ORACLE
 from test_lines import check_random_lines
 
 import subtrace
@@ -21,13 +20,7 @@ from subtrace.patches.basis import tri_bernstein as bernstein
 from subtrace.patches.table import build_patch_table
 from subtrace.shapes import torus_cage
 
-SHARED = Path(__file__).resolve().parents[2] / "shared"
-MODELS = SHARED / "models"
-ORACLE = SHARED / "oracle"
 PREC = 1e-3
-
-needs_shared = pytest.mark.skipif(not (MODELS / "spot_low_resolution.obj").exists(),
-                                  reason="../shared models not present")
 
 
 @pytest.fixture(scope="module")
@@ -85,7 +78,6 @@ def _surface(cage, ptex, uv):
 # ---------------------------------------------------------------------------------------
 
 
-@needs_shared
 def test_regular_patch_nets_are_the_box_splines(spot):
     faces = np.arange(spot.n_faces)
     reg = faces[loop_regular(spot.base, spot.options, faces)]
@@ -166,7 +158,6 @@ def test_boundary_items_do_not_follow_precision(disc):
 # ---------------------------------------------------------------------------------------
 
 
-@needs_shared
 def test_table1_situations_on_a_regular_patch(spot):
     faces = np.arange(spot.n_faces)
     f = int(faces[loop_regular(spot.base, spot.options, faces)][10])
@@ -245,8 +236,6 @@ CASES = {"spot": 3, "icosahedron": 5, "disc": 6}
 
 @pytest.mark.parametrize("which", list(CASES))
 def test_random_lines_against_brute_force(which, request):
-    if which == "spot" and not (MODELS / "spot_low_resolution.obj").exists():
-        pytest.skip("../shared models not present")
     cage = request.getfixturevalue(which)
     org, dirs, h = check_random_lines(cage, CASES[which], 30, seed=11, ref_tol=REF_TOL)
     assert len(h) >= len(org) // 2
@@ -261,10 +250,7 @@ def test_random_lines_against_brute_force(which, request):
 def test_oracle_samples(icosahedron):
     """OpenSubdiv's limit points (random, corner, centre and near-extraordinary samples of
     loop_icosahedron) hit by lines along their normals."""
-    path = ORACLE / "loop_icosahedron.npz"
-    if not path.exists():
-        pytest.skip("oracle data not present")
-    z = np.load(path)
+    z = np.load(ORACLE / "loop_icosahedron.npz")
     cage = subtrace.load_cage(ORACLE / "shapes" / "loop_icosahedron.obj")
     P = z["sample_P"]
     n = np.cross(z["sample_dPdu"], z["sample_dPdv"])
@@ -358,7 +344,6 @@ def test_cli_intersect_loop_cage(tmp_path, icosahedron):
     np.testing.assert_allclose([float(r[1]) for r in rows], ref.t, rtol=1e-12)
 
 
-@needs_shared
 @pytest.mark.parametrize("name", ["loop_saddle_edgecorner", "loop_cube_creases1",
                                   "loop_cubes_infsharp", "loop_triangle_edgeonly",
                                   "loop_fvar_bound0"])

@@ -154,9 +154,7 @@ def test_tile_lists_over_the_budget_fall_back_to_the_bvh(capsys, tmp_path):
     from subtrace.render import load_objects, table_in_view
     from subtrace.camera import camera_frame
 
-    spot = ROOT.parent / "shared" / "models" / "spot_control_mesh.obj"
-    if not spot.exists():
-        pytest.skip(f"{spot} not present")
+    spot = ROOT / "models" / "spot_control_mesh.obj"
     argv = [spot, "--eye", "0", "0.05", "0.2", "--target", "0.3", "0.15", "1.2", "--fov",
             "120", "--no-shadows"]  # (shadows would keep more patches: a bigger table)
     code, err, free = render(capsys, tmp_path, *argv, name="free.exr")

@@ -12,22 +12,15 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from shared_data import MODELS, ORACLE
 
 from fuzzing import mutations
 from subtrace.errors import ObjError, SubtraceWarning
 from subtrace.io.obj import (DEFAULT_DIFFUSE, DEFAULT_SHININESS, DEFAULT_SPECULAR, Material,
                              ObjData, ObjReader, read_obj)
 
-SHARED = Path(__file__).resolve().parents[2] / "shared"
-ORACLE = SHARED / "oracle"
-MODELS = SHARED / "models"
-
-ORACLE_SHAPES = sorted((ORACLE / "shapes").glob("*.obj")) if ORACLE.is_dir() else []
-MODEL_FILES = sorted(MODELS.glob("*.obj")) if MODELS.is_dir() else []
-needs_oracle = pytest.mark.skipif(
-    not ORACLE_SHAPES, reason=f"OpenSubdiv oracle data not found at {ORACLE}"
-)
-needs_models = pytest.mark.skipif(not MODEL_FILES, reason=f"models not found at {MODELS}")
+ORACLE_SHAPES = sorted((ORACLE / "shapes").glob("*.obj"))
+MODEL_FILES = sorted(MODELS.glob("*.obj"))
 
 
 @pytest.fixture(autouse=True)
@@ -106,7 +99,6 @@ _CREASING = {None: "CREASE_UNIFORM", "uniform": "CREASE_UNIFORM", "chaikin": "CR
 _TRI_SUB = {None: "TRI_SUB_CATMARK", "catmark": "TRI_SUB_CATMARK", "smooth": "TRI_SUB_SMOOTH"}
 
 
-@needs_oracle
 @pytest.mark.parametrize("obj_path", ORACLE_SHAPES, ids=lambda p: p.stem)
 def test_oracle_shape_matches_opensubdiv(obj_path):
     data = read_quiet(obj_path)
@@ -145,7 +137,6 @@ def test_oracle_shape_matches_opensubdiv(obj_path):
         assert oracle["vertex_sharpness"][vert] == sharpness, vert
 
 
-@needs_oracle
 def test_oracle_tags_read_as_documented():
     shapes = ORACLE / "shapes"
     edgenone = read_quiet(shapes / "catmark_edgenone.obj")
@@ -164,7 +155,6 @@ def test_oracle_tags_read_as_documented():
         read_obj(shapes / "catmark_cubes_semisharp.obj")
 
 
-@needs_oracle
 def test_oracle_shape_with_missing_mtl_warns():
     path = ORACLE / "shapes" / "catmark_gregory_test2.obj"
     with pytest.warns(SubtraceWarning) as record:
@@ -177,7 +167,7 @@ def test_oracle_shape_with_missing_mtl_warns():
 
 # -- real models ---------------------------------------------------------------------------
 
-# Face counts by size, from /work/shared/models/README.md.
+# Face counts by size, from models/README.md.
 MODEL_FACES = {
     "spot_control_mesh": {4: 160, 5: 16, 3: 4},
     "blub_control_mesh": {4: 100, 5: 4, 3: 8},
@@ -190,7 +180,6 @@ MODEL_FACES = {
 }
 
 
-@needs_models
 @pytest.mark.parametrize("obj_path", MODEL_FILES, ids=lambda p: p.stem)
 def test_model_face_counts(obj_path):
     data = read_quiet(obj_path)
@@ -201,7 +190,6 @@ def test_model_face_counts(obj_path):
         assert len(data.points) == 7
 
 
-@needs_models
 def test_large_model_parses_fast():
     path = MODELS / "sword_quad_dominant.obj"
     read_quiet(path)  # warm caches

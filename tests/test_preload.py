@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from shared_data import COMPILE_LISTENER, MODELS, needs_shared
+from shared_data import COMPILE_LISTENER, MODELS
 from subtrace.io.scene import Light, load_scene
 from subtrace.runtime import preload
 
@@ -112,7 +112,6 @@ def test_render_key_follows_what_changes_the_kernels(tmp_path):
     assert preload.render_key(scene, "bvh") != key
 
 
-@needs_shared
 def test_kernels_are_read_ahead_taken_and_forgotten(tmp_path):
     """A first render of a cage remembers the kernels it asked for, in order; the next
     render of the same kind in a fresh process reads every one ahead, takes every one, asks

@@ -9,14 +9,13 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from shared_data import MODELS
 
 from subtrace.accel.projection import TILE, project_shells
 from subtrace.io.scene import scene_from_dict
 from subtrace.render import render_scene
 from subtrace.trace.pools import candidate_lists
 from subtrace.camera import Camera, camera_frame
-
-MODELS = Path(__file__).resolve().parents[2] / "shared" / "models"
 
 
 def _entries(frame, width, height, lo, hi):
@@ -117,7 +116,6 @@ CAMERAS = [
 ]
 
 
-@pytest.mark.skipif(not MODELS.is_dir(), reason="../shared/models not present")
 @pytest.mark.parametrize("mesh,eye,target,fov", CAMERAS)
 def test_projection_and_bvh_give_the_same_image(mesh, eye, target, fov):
     scene = _scene(MODELS / mesh, eye, target, fov)
@@ -141,7 +139,6 @@ def _same_image(scene):
     return a
 
 
-@pytest.mark.skipif(not MODELS.is_dir(), reason="../shared/models not present")
 @pytest.mark.parametrize("path", SCENES, ids=lambda p: p.stem)
 def test_every_scene_gives_the_same_image_with_both_methods(path):
     """Each shipped scene at 64x36 (its own camera, framing the object): same image, and
@@ -164,7 +161,6 @@ RANDOM = [(m, s) for m in ("spot_control_mesh.obj", "spot_low_resolution.obj", "
           for s in range(4)]
 
 
-@pytest.mark.skipif(not MODELS.is_dir(), reason="../shared/models not present")
 @pytest.mark.parametrize("mesh,seed", RANDOM)
 def test_random_cameras_in_and_around_objects(mesh, seed):
     """Random cameras whose eye sits at a cage vertex pushed a little in or out (seeds

@@ -13,8 +13,8 @@ hole tags (sharpness in {0.5, 1, 2.5, inf}) and random options. Properties:
 * refinement, the limit and evaluation are affine invariant, and the limit normals move by
   the map's cofactor matrix (a reflection flips them).
 
-Tests of ``cage.limit`` / ``cage.evaluate`` skip only while their modules do not exist yet;
-an import error inside an existing module fails the test.
+Tests of ``cage.limit`` / ``cage.evaluate`` import their modules first: an import error
+fails the test.
 """
 
 from __future__ import annotations
@@ -26,7 +26,6 @@ import os
 from dataclasses import dataclass, field
 
 import numpy as np
-import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
@@ -43,13 +42,7 @@ PROPS = settings(
 
 
 def _needs(module: str):
-    """Skip while ``module`` does not exist; import it (errors propagate) once it does."""
-    try:
-        spec = importlib.util.find_spec(module)
-    except ModuleNotFoundError:
-        spec = None
-    if spec is None:
-        pytest.skip(f"{module} is not written yet")
+    """Import ``module`` (errors propagate: a missing module fails the test)."""
     return importlib.import_module(module)
 
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from shared_data import COMPILE_LISTENER, MODELS, SHAPES, needs_shared, run_fresh, small_scene
+from shared_data import COMPILE_LISTENER, MODELS, SHAPES, run_fresh, small_scene
 
 import subtrace
 from subtrace.patches.table import build_patch_table
@@ -22,7 +22,6 @@ WATERTIGHT = [
 ]
 
 
-@needs_shared
 @pytest.mark.parametrize("tolerance", [4.0, 1.0, 0.25])
 @pytest.mark.parametrize("mesh,eye", WATERTIGHT, ids=lambda x: getattr(x, "stem", ""))
 def test_watertight_from_inside(mesh, eye, tolerance, monkeypatch):
@@ -132,7 +131,6 @@ def _write_plane(path, z, half):
     path.write_text("\n".join(lines) + "\n")
 
 
-@needs_shared
 def test_hidden_object_is_not_refined(tmp_path):
     """Invariant 5: an object fully hidden behind another is never refined."""
     plane = tmp_path / "plane.obj"
@@ -159,7 +157,6 @@ def test_hidden_object_is_not_refined(tmp_path):
 SEMI_SHARP = ("catmark_cube_creases0", "catmark_chaikin0")
 
 
-@needs_shared
 @pytest.mark.parametrize("name", ["catmark_edgecorner", "catmark_single_crease", *SEMI_SHARP])
 def test_hidden_sharp_patches_are_not_refined(tmp_path, name):
     """Invariant 5 for regular boundary and crease patches (phantom points) and for
@@ -195,7 +192,6 @@ def test_hidden_sharp_patches_are_not_refined(tmp_path, name):
     assert np.count_nonzero(res.refined_objects == 0) > 0
 
 
-@needs_shared
 def test_offscreen_patches_are_not_refined():
     spot = MODELS / "spot_control_mesh.obj"
     cage = subtrace.load_cage(spot)
@@ -232,7 +228,6 @@ def _closest_distance(cage, ptex, uv, X, iters=12):
     return np.linalg.norm(P - X, axis=1)
 
 
-@needs_shared
 @pytest.mark.parametrize(
     "mesh,eye,target",
     [
@@ -277,7 +272,6 @@ def test_hits_lie_on_the_limit_surface(mesh, eye, target):
     assert np.median(cos) > np.cos(np.radians(2.0))
 
 
-@needs_shared
 def test_render_reports_progress_up_to_every_ray():
     """``render_scene(progress=...)`` is told the rays whose hits are final, never fewer than
     before, ending at all of them; a ProgressBar draws that on one line."""
@@ -300,7 +294,6 @@ def test_render_reports_progress_up_to_every_ray():
     assert text.count("\n") == 1 and text.endswith("\n") and "round" in text
 
 
-@needs_shared
 @pytest.mark.parametrize("mesh", ["spot_control_mesh.obj", "spot_low_resolution.obj"])
 def test_memo_and_threads_do_not_change_the_image(mesh, monkeypatch):
     """Rays share their Bezier splits (quads, and Loop triangles' nets) through a per-thread
@@ -325,7 +318,6 @@ def test_memo_and_threads_do_not_change_the_image(mesh, monkeypatch):
         assert np.array_equal(ch, small.channels[name], equal_nan=True), name
 
 
-@needs_shared
 def test_warmup_compiles_the_kernels_a_render_uses():
     """On a cold cache a second process compiles the trace and shade kernels from empty
     inputs (``subtrace.runtime.warmup``); that only helps if it does compile (or load) them, with
@@ -358,7 +350,6 @@ print(before, sigs())
     assert warmup.start(tasks.max_threads()) is None  # cached now: no second process
 
 
-@needs_shared
 def test_the_secondary_ray_kernels_compile_with_the_types_of_a_render():
     """On a cold cache the secondary-ray kernel compiles while the trace kernels compile
     elsewhere (``trace.rays.compile_kernel`` on empty pools); that only helps if the types
@@ -478,7 +469,6 @@ def test_the_picture_kernels_compile_here_only_while_the_trace_kernel_is_not_rea
     assert quick.returncode == 0 and warmup.traced(warmup.Helpers([], False))
 
 
-@needs_shared
 @pytest.mark.parametrize("accel", ["projection", "bvh"])
 def test_patches_are_built_only_for_rays_that_reach_them_first(accel):
     """'Only what is needed', checked from the outside: every patch built on request (an
@@ -511,7 +501,6 @@ def test_patches_are_built_only_for_rays_that_reach_them_first(accel):
     assert np.all(reached_first.any(axis=1))
 
 
-@needs_shared
 def test_catmark_micro_triangles_grow_with_the_tolerance_until_the_pixels_bound_them():
     """Coarse tolerances: each halving multiplies the micro-triangles built by 1.5-4.5 (cells
     a quarter the area, 4x, where whole cells are met; less where a ray meets only part of
@@ -531,7 +520,6 @@ def test_catmark_micro_triangles_grow_with_the_tolerance_until_the_pixels_bound_
     assert counts[0.5] <= 1.3 * counts[1.0], counts
 
 
-@needs_shared
 @pytest.mark.parametrize("name", ["spot", "creases", "torus_loop"])
 def test_a_few_micro_triangles_per_covered_pixel_at_every_tolerance(name):
     """At 4, 1 and 0.25 px, at most 4 micro-triangles per covered pixel, Catmull-Clark (Spot:

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from shared_data import MODELS, needs_shared
+from shared_data import MODELS
 
 
-@needs_shared
 def test_render_cli_writes_exr(tmp_path):
     from subtrace.cli import main
     from subtrace.io.exr import read_exr

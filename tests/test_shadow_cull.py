@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from shared_data import MODELS, needs_shared
+from shared_data import MODELS
 
 from subtrace import config
 from subtrace.io.scene import scene_from_dict
@@ -115,7 +115,6 @@ def test_offscreen_caster_without_ground_is_kept_and_the_rest_culled(tmp_path, m
     assert set(np.unique(lazy.channels["object_id"])) == {-1.0, 0.0}
 
 
-@needs_shared
 def test_ambient_occlusion_keeps_what_occludes_the_view(monkeypatch):
     """Ambient occlusion rays from points in view reach config.AO_DISTANCE of the scene's
     diagonal: Spot seen close, with AO, renders as with the full table (the faces beside the

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from shared_data import MODELS, load_shape, needs_shared
+from shared_data import MODELS, load_shape
 
 import subtrace
 from subtrace.patches.grids import build_grids, leaf_corners
@@ -22,7 +22,6 @@ GRID_SHAPES = [
 ]
 
 
-@needs_shared
 @pytest.mark.parametrize("name", GRID_SHAPES)
 def test_grids_equal_uniform_refinement(name):
     """Grids built by sparse local refinement are bit-identical to the limit points of a
@@ -47,7 +46,6 @@ def test_grids_equal_uniform_refinement(name):
             np.testing.assert_array_equal(P[a][slot], ref[cv])
 
 
-@needs_shared
 @pytest.mark.parametrize("name", GRID_SHAPES)
 def test_shells_contain_limit_grids(name):
     """Invariant 2: the shell of every patch contains the exact limit points of its grid,
@@ -62,7 +60,6 @@ def test_shells_contain_limit_grids(name):
         assert np.median(ray / (table.shell_max - table.shell_min).sum(axis=1)) < 0.85
 
 
-@needs_shared
 def test_regular_loop_triangles_are_found_by_their_nets_boxes():
     """The renderer also cuts a regular Loop triangle's box for the rays to its quartic
     net's box (``trace.build.cut_to_loop_nets``): on the torus (every triangle regular) the
@@ -122,7 +119,6 @@ def _perturbed(name, seed):
     )
 
 
-@needs_shared
 @settings(max_examples=15, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), name=st.sampled_from(GRID_SHAPES))
 def test_shells_contain_limit_of_perturbed_cages(seed, name):
@@ -150,7 +146,6 @@ def _isolated_shells(cage, tol_rad):
 ISOLATED_SHAPES = [n for n in GRID_SHAPES if n.startswith("catmark")]
 
 
-@needs_shared
 @pytest.mark.parametrize("name", ISOLATED_SHAPES)
 def test_isolated_shells_contain_limit_grids(name):
     """Invariant 2 for the shells tightened by the depth choice's isolation (the union of
@@ -167,7 +162,6 @@ def test_isolated_shells_contain_limit_grids(name):
         assert np.median(new / np.where(old > 0, old, 1.0)) < 0.5
 
 
-@needs_shared
 @settings(max_examples=15, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), name=st.sampled_from(ISOLATED_SHAPES),
        tol_exp=st.floats(-5.0, -1.0))
@@ -179,7 +173,6 @@ def test_isolated_shells_contain_limit_of_perturbed_cages(seed, name, tol_exp):
     _assert_inside(_limit_grids(table, 4), table, (lo, hi))
 
 
-@needs_shared
 def test_isolated_shells_contain_spot():
     """On Spot (many extraordinary vertices), at about a pixel of the default scene."""
     cage = subtrace.load_cage(MODELS / "spot_control_mesh.obj")

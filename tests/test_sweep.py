@@ -21,10 +21,6 @@ from subtrace.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
 SPOT = REPO / "scenes" / "spot.toml"
-needs_spot = pytest.mark.skipif(
-    not (REPO.parent / "shared" / "models" / "spot_control_mesh.obj").is_file(),
-    reason="the Spot scene needs ../shared/models",
-)
 
 # The documented columns of sweep.csv and of every record of sweep.json (README), in order.
 DOCUMENTED_COLUMNS = (
@@ -60,8 +56,6 @@ f 1 4 6
 @pytest.fixture(scope="module")
 def spot_sweep(tmp_path_factory):
     """(output folder, stdout, records of sweep.json) of one CLI sweep of Spot."""
-    if not SPOT.is_file() or not (REPO.parent / "shared" / "models").is_dir():
-        pytest.skip("the Spot scene needs ../shared/models")
     out = tmp_path_factory.mktemp("sweep") / "out"
     import contextlib
     import io
@@ -75,7 +69,6 @@ def spot_sweep(tmp_path_factory):
     return out, stdout.getvalue(), records
 
 
-@needs_spot
 def test_error_falls_as_the_tolerance_tightens(spot_sweep):
     _, _, recs = spot_sweep
     assert [r["tolerance_px"] for r in recs] == list(SPOT_TOLS)
@@ -98,7 +91,6 @@ def test_error_falls_as_the_tolerance_tightens(spot_sweep):
         assert r["depth_err_max"] >= r["depth_err_mean"] > 0
 
 
-@needs_spot
 def test_catmark_micro_triangles_are_bounded_by_the_pixels_covered(spot_sweep):
     """Catmull-Clark patches are split per ray: the count stays a few triangles per covered
     pixel instead of growing as 1/tolerance^2 (which would be 256x from 4 to 0.25 px, and
@@ -141,7 +133,6 @@ def test_loop_micro_triangles_stay_bounded_by_the_pixels(tmp_path):
     assert [c[0] for c in calls] == list(range(8)) and {c[1] for c in calls} == {7}
 
 
-@needs_spot
 def test_csv_json_and_plots_have_the_documented_content(spot_sweep):
     import OpenImageIO as oiio
 
@@ -238,7 +229,6 @@ def test_bad_input_is_one_error_line_and_writes_nothing(tmp_path, capsys, args, 
     assert not out.exists()
 
 
-@needs_spot
 @pytest.mark.parametrize("where", ["file", "below_file"])
 def test_unwritable_output_folder_is_an_error_naming_it(tmp_path, capsys, where):
     blocker = tmp_path / "taken"

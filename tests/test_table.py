@@ -5,10 +5,10 @@ functions), bit for bit, for one and several objects and any thread count."""
 from __future__ import annotations
 
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
+from shared_data import MODELS, SHAPES
 
 from subtrace import config, load_cage
 from subtrace.errors import SubtraceWarning
@@ -20,11 +20,8 @@ from subtrace.patches.shells import one_ring_shells
 from subtrace.patches.table import build_patch_table
 from subtrace.runtime import threads as tasks
 
-SHARED = Path(__file__).resolve().parents[2] / "shared"
-SHAPES = SHARED / "oracle" / "shapes"
 NAMES = ["catmark_chaikin1", "catmark_cube_creases1", "catmark_nonman_verts", "catmark_hole_test2",
          "catmark_nonquads", "catmark_edgenone", "loop_chaikin1", "loop_saddle_edgecorner"]
-pytestmark = pytest.mark.skipif(not SHAPES.is_dir(), reason="../shared/oracle not present")
 
 
 def _load(name):
@@ -147,10 +144,7 @@ def test_control_grids_on_two_tasks_equal_one(monkeypatch):
     """control_grids split over two tasks (blocks of faces) gathers what one task does."""
     from subtrace.patches import bspline
 
-    path = SHARED / "models" / "spot_control_mesh.obj"
-    if not path.exists():
-        pytest.skip(f"{path} not present")
-    cage = load_cage(path)
+    cage = load_cage(MODELS / "spot_control_mesh.obj")
     lev = cage.level_topology(2)
     faces = np.nonzero(regular_mask(lev, cage.options, np.arange(lev.n_faces)))[0]
     assert len(faces) > 2 * bspline._GRID_BLOCK

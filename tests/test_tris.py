@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from shared_data import MODELS, needs_shared, small_scene
+from shared_data import MODELS, small_scene
 
 import subtrace
 from subtrace.lines.items import box_nets, loop_regular
@@ -21,7 +21,6 @@ TORUS_VIEW = ((1.226, 4.085, 4.902), (0.0, 0.0, 0.0))  # scenes/torus_loop.toml'
 SPOT_VIEW = ((2.0, 0.8, 2.4), (0.0, 0.1, 0.2))
 
 
-@needs_shared
 @pytest.mark.parametrize("mesh", ["torus.obj", "spot_low_resolution.obj"])
 def test_net_points_and_normals_are_the_limit_surface(mesh):
     """tri_point / tri_normal on a regular triangle's net equal the exact evaluator
@@ -55,7 +54,6 @@ def _torus(tolerance, width=160, height=90, threads=None):
     return render_scene(scene, cages=[subtrace.load_cage(mesh)], threads=threads)
 
 
-@needs_shared
 @pytest.mark.parametrize("tolerance", [4.0, 1.0, 0.25])
 @pytest.mark.parametrize("mesh,view", [("torus.obj", TORUS_VIEW),
                                        ("spot_low_resolution.obj", SPOT_VIEW)],
@@ -105,7 +103,6 @@ def test_hits_are_the_exact_grids_micro_triangles(mesh, view, tolerance):
     assert np.all(rel[found] <= 2 * res.tolerance_rad), rel[found].max()
 
 
-@needs_shared
 @pytest.mark.parametrize("tolerance", [4.0, 1.0, 0.25])
 def test_micro_triangles_per_covered_pixel_stay_bounded(tolerance):
     """RenderStats: at most 4 micro-triangles per covered pixel at every tolerance on the
@@ -114,7 +111,6 @@ def test_micro_triangles_per_covered_pixel_stay_bounded(tolerance):
     assert st.micro_triangles <= 4 * st.pixels_covered, st.micro_triangles / st.pixels_covered
 
 
-@needs_shared
 def test_threads_do_not_change_the_image():
     """Bit-identical channels with 1 and 2 threads (and on Spot's Loop cage, whose irregular
     triangles are isolated into pieces and cells beside the regular nets)."""
@@ -133,7 +129,6 @@ def test_threads_do_not_change_the_image():
         assert np.array_equal(one.channels[name], two.channels[name], equal_nan=True), name
 
 
-@needs_shared
 def test_a_hidden_loop_object_is_not_refined(tmp_path):
     """Invariant 5 for the per-ray nets: a Loop torus hidden behind a plane gets no net and
     no piece; seen alone, it is refined (so the test can fail)."""
