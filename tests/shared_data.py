@@ -5,9 +5,12 @@ shared by the renderer's tests."""
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 import subtrace
 from subtrace.io.scene import scene_from_dict
@@ -66,5 +69,22 @@ def run_fresh(code, *args, cache):
     env.update(SUBTRACE_CACHE_DIR=str(cache), PYTHONDONTWRITEBYTECODE="1")
     proc = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True,
                           env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    return proc.stdout
+
+
+def error_without_root_powers(code):
+    """The standard output of the Python program ``code`` (which prints the error it
+    expects) run in a fresh process as this root user without the capabilities that let
+    root read and write any file (setpriv, util-linux); the test is skipped where setpriv
+    is not installed."""
+    setpriv = shutil.which("setpriv")
+    if setpriv is None:
+        pytest.skip("running as root without setpriv (util-linux): root reads and writes "
+                    "any file")
+    caps = "-dac_override,-dac_read_search"
+    proc = subprocess.run([setpriv, f"--inh-caps={caps}", f"--bounding-set={caps}",
+                           sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=600)
     assert proc.returncode == 0, proc.stderr
     return proc.stdout
