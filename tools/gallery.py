@@ -1,4 +1,4 @@
-"""Render the README gallery: a small PNG of every scene in ``scenes/`` and of the built-in
+"""Render the gallery (README and docs/guide/gallery.md): a small PNG of every scene in ``scenes/`` and of the built-in
 default scene, into ``docs/gallery/``.
 
     PYTHONPATH=src python tools/gallery.py [--width 384] [--height 216] [--out docs/gallery]
