@@ -40,7 +40,7 @@ from subtrace.accel.projection import TILE, no_tiles, project_shells, tiles_byte
 from subtrace.camera import CameraWindow, whole_image, window_offset
 from subtrace.errors import SceneError
 from subtrace.io.limits import check_coordinates, check_valences
-from subtrace.mesh.cage import load_cage, valence_bound
+from subtrace.mesh.cage import load_cage, valence_bound, without_unused_vertices
 from subtrace.nurbs.scene import (has_faces, has_surfaces, load_nurbs, nurbs_pass,
                                   picture_hits, with_surfaces)
 from subtrace.patches.criterion import edge_sampling
@@ -351,10 +351,16 @@ def cage_objects(scene) -> list[int]:
 
 def load_objects(scene):
     """Cages of the scene's objects (scheme / boundary overrides applied), in the order of
-    :func:`cage_objects`."""
-    return [load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code, prim=o.prim,
+    :func:`cage_objects`, their coordinates checked and the vertices no face uses left out
+    (``mesh.cage.without_unused_vertices``: checked first, so a message's vertex number
+    is the file's)."""
+    cages = []
+    for o in (scene.objects[k] for k in cage_objects(scene)):
+        c = load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code, prim=o.prim,
                       time=o.time)
-            for o in (scene.objects[k] for k in cage_objects(scene))]
+        check_coordinates(c.path, c.points, config.MAX_COORDINATE, c.points_box)
+        cages.append(without_unused_vertices(c))
+    return cages
 
 
 def scene_bounds(cages, nurbs=None):
