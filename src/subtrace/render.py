@@ -790,9 +790,11 @@ def result_attributes(result: RenderResult, scene) -> dict:
     # file names only: a header travels with the image, the user's folders need not
     attrs["subtrace:meshes"] = ";".join(Path(o.mesh).name for o in scene.objects)
     attrs["chromaticities"] = REC709_CHROMATICITIES
-    attrs["subtrace:Z"] = "distance from the eye along the pixel's ray (not camera-space z)"
-    attrs["subtrace:P"] = ("world-space hit point of the pixel's centre ray, eye + Z * its "
-                           "unit direction; NaN where it missed (Z = +inf)")
+    attrs["subtrace:Z"] = ("distance from the eye along the pixel's ray (not camera-space z): "
+                           "its centre ray, or where that missed, its nearest "
+                           "anti-aliasing ray that hit")
+    attrs["subtrace:P"] = ("world-space hit point of that ray, eye + Z * its unit "
+                           "direction; NaN where no ray of the pixel hit (Z = +inf)")
     attrs["subtrace:accel"] = result.accel
     attrs["subtrace:samples"] = int(scene.render.samples or 1)  # rays per edge pixel at most
     attrs["subtrace:shadows"] = int(bool(scene.render.shadows and scene.lights))
