@@ -283,6 +283,8 @@ BAD = [
     ("table typo", "[camera]", "[camra]", 5, "camra", "did you mean 'camera'"),
     ("output not a string", 'output = "renders/out.exr"', "output = true", 2, "output",
      "expected a file name"),
+    ("preview not a png", 'preview = "renders/out.png"', 'preview = "renders/out.jpg"', 3,
+     "preview", "ending in .png"),
 ]
 
 

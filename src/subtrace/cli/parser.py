@@ -110,8 +110,10 @@ def _add_render(sub) -> argparse.ArgumentParser:
                         help="one TOML scene, or one or more OBJ cages or USD stages")
     render.add_argument("-o", "--output", metavar="OUT.exr",
                         help="output file (default: the scene's output, else render.exr): "
-                             "the multi-channel EXR, or by its extension an sRGB picture "
-                             "of the colour (.png, .tif with alpha; .jpg)")
+                             "the multi-channel EXR (.exr), or by its extension a picture "
+                             "of the colour in any format OpenImageIO writes: sRGB .png, "
+                             ".jpg, .tif, .bmp, .webp, .tga, ..., linear .hdr; another "
+                             "extension, or none, is an error")
     _add_camera_options(render)
     tol = render.add_mutually_exclusive_group()
     tol.add_argument("--tolerance", metavar="PIXELS",
@@ -134,8 +136,9 @@ def _add_render(sub) -> argparse.ArgumentParser:
     render.add_argument("--no-shadows", dest="shadows", action="store_false", default=None,
                         help="no shadow rays (on by default where the scene has lights)")
     render.add_argument("--transparent", action="store_true", default=None,
-                        help=".png / .tif outputs: alpha 0 where nothing was hit (default: "
-                             "opaque, over the background)")
+                        help="picture outputs that store alpha (.png, .tif, .webp, .tga, "
+                             "...): alpha 0 where nothing was hit (default: opaque, over "
+                             "the background)")
     render.add_argument("--png", action="store_true",
                         help="also write an sRGB PNG preview next to the output (never over "
                              "it)")

@@ -584,6 +584,9 @@ def _out_path(ctx, d: dict, key: str, base_dir: str) -> str | None:
     value = d[key]
     if not isinstance(value, str) or not value.strip():
         raise ctx.error((key,), f"expected a file name in quotes, got {show_value(value)}")
+    if key == "preview" and not value.lower().endswith(".png"):
+        raise ctx.error((key,), f"a preview is an 8-bit sRGB PNG: give a file name ending in "
+                                f".png, not {show_value(value)}")
     return os.path.normpath(os.path.join(base_dir, os.path.expanduser(value)))
 
 
