@@ -610,8 +610,8 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
     stats.time_shade = time.perf_counter() - t0
     if crop is not None:  # the tile's pixels of the window
         planes, W, H = _cropped(planes, crop, view)
-    stats.pixels_covered = (int(covered.sum()) if nurbs is None and crop is None
-                            else int(np.count_nonzero(planes[C_OBJECT] >= 0)))
+    # (a pixel whose centre ray missed but an anti-aliasing ray hit is covered too)
+    stats.pixels_covered = int(np.count_nonzero(planes[C_OBJECT] >= 0))
     stats.max_level = deepest_level(planes)
     channels = {name: planes[k].reshape(H, W) for k, name in enumerate(CHANNELS)}
     if sink is not None:  # (free-form surfaces or a crop: one band)
