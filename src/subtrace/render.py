@@ -373,6 +373,22 @@ def scene_bounds(cages, nurbs=None):
     return np.min([b[0] for b in bounds], axis=0), np.max([b[1] for b in bounds], axis=0)
 
 
+def check_extent(cages, lo, hi) -> None:
+    """SceneError naming the cages when their limit surface's box [lo, hi] is a point
+    (every vertex at one place): nothing an automatic camera could frame (its eye would
+    be the point it looks at)."""
+    scale = max(1.0, float(np.abs(lo).max()), float(np.abs(hi).max()))
+    if float((hi - lo).max()) > 1e-12 * scale:
+        return
+    where = ", ".join(f"{v:.6g}" for v in lo)
+    if len(cages) == 1:
+        raise SceneError(f"the cage has no extent: its vertices all lie at one point "
+                         f"({where}); nothing to frame", path=cages[0].path)
+    names = ", ".join(str(c.path) for c in cages)
+    raise SceneError(f"the cages {names} have no extent: their vertices all lie at one "
+                     f"point ({where}); nothing to frame")
+
+
 def faces_in_view(cages, camera, reach=None):
     """Per cage, a (F,) bool mask of the faces whose limit surface a primary ray may reach:
     the box that holds it (``patches.table.cage_face_shells``) projects into the image
@@ -442,6 +458,8 @@ def _prepare(scene, cages, stats, nurbs=None, crop=None, compiling=None):
         points = np.concatenate([c.limit(2 if c.n_faces < 20000 else 1 if c.n_faces < 200000
                                          else 0)[0] for c in cages] + extra)
         lo, hi = points.min(axis=0), points.max(axis=0)
+        if scene.camera.eye is None and nurbs is None:
+            check_extent(cages, lo, hi)
     camera = scene.make_camera(lo, hi, points)
     # (shadow and ambient occlusion rays may meet what the camera does not see; the
     # ground's shadows are bounded by where the ground is)
