@@ -100,10 +100,12 @@ def _add_render(sub) -> argparse.ArgumentParser:
         description=(
             "Render a TOML scene, or OBJ cages or USD stages (with the stage's camera and "
             "distant lights, else an automatic camera), as the exact "
-            "Catmull-Clark / Loop limit surface: one ray per pixel, patches refined only "
-            "where a ray reaches them and only until they are below the angular tolerance. "
-            "Without inputs the built-in default scene (Spot) is rendered. Writes a "
-            "multi-channel EXR (R,G,B,A, Z, N.X/N.Y/N.Z, level, patch_id, object_id, u, v)."
+            "Catmull-Clark / Loop limit surface: patches refined only where a ray reaches "
+            "them and only until they are below the angular tolerance, with adaptive "
+            "anti-aliasing (edge pixels get up to --samples rays, 4 by default; the others "
+            "one). Without inputs the built-in default scene (Spot) is rendered. Writes a "
+            "multi-channel EXR (R,G,B,A, Z, N.X/N.Y/N.Z, level, patch_id, object_id, u, v, "
+            "P.X/P.Y/P.Z), or by the output's extension a picture of the colour."
         ),
     )
     render.add_argument("inputs", nargs="*", metavar="SCENE.toml | CAGE.obj | STAGE.usd",
