@@ -620,3 +620,33 @@ def test_unused_vertices_leave_the_picture_as_it_is(tmp_path, before, after):
     assert np.count_nonzero(images[0]["A"]) > 0.1 * images[0]["A"].size
     for name in images[0]:
         assert np.array_equal(images[0][name], images[1][name], equal_nan=True), name
+
+
+def test_the_automatic_camera_stays_out_of_the_shells_and_frames_the_shadow(tmp_path):
+    """A four-face Loop tetrahedron, whose limit surface is far smaller than its cage,
+    with the default picture: the eye lies outside the cage's box (it was inside the
+    patches' shells: depth 14, 828k micro-triangles and a warning about the eye inside
+    them), nothing warns, and the ground's shadow lies whole in the image (no pixel on the
+    border darker than the background there)."""
+    import warnings
+
+    from subtrace.io.scene import apply_overrides, scene_for_meshes
+
+    path = tmp_path / "tetrahedron.obj"
+    path.write_text("v 1 1 1\nv -1 -1 1\nv -1 1 -1\nv 1 -1 -1\n"
+                    "f 1 2 3\nf 1 4 2\nf 1 3 4\nf 2 4 3\n")
+    scene = apply_overrides(scene_for_meshes([str(path)]), width=160, height=90)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        result = render_scene(scene)
+    eye = np.asarray(result.camera.eye)
+    assert np.any(np.abs(eye) > 1.0)  # (the cage's box is [-1, 1]^3)
+    ch = result.channels
+    top, bottom = (np.asarray(c) for c in (scene.render.background,
+                                           scene.render.background_bottom))
+    w = (np.arange(90) + 0.5) / 90
+    back = (1 - w) * top[0] + w * bottom[0]  # the gradient's red, row by row
+    shadow = (ch["A"] == 0) & (ch["R"] < 0.8 * back[:, None])
+    assert shadow.sum() > 100  # (the key light's shadow, beside the object)
+    assert not (shadow[0].any() or shadow[-1].any() or shadow[:, 0].any()
+                or shadow[:, -1].any())

@@ -262,6 +262,34 @@ def ground_plane(scene, cages, camera, nurbs=None):
     return up, height
 
 
+# the automatic camera frames the ground shadows of the directional lights at least this
+# high above the horizon (sin of 20 degrees); a lower light's shadow reaches far, and
+# framing it would leave the objects small
+SHADOW_FRAMING_MIN_SIN = 0.34
+
+
+def ground_shadow_points(scene, cages, points, nurbs=None) -> np.ndarray:
+    """(n,3): ``points`` (of the objects' surface) projected along each directional light
+    of ``scene`` that casts shadows onto its ground (:func:`ground_plane`, with the
+    scene's up), where the automatic camera frames their shadows too; (0,3) without a
+    ground, shadows or such lights."""
+    if scene.ground is None or not scene.render.shadows or not len(points):
+        return np.zeros((0, 3))
+    up, height = ground_plane(scene, cages, scene.camera, nurbs)
+    out = []
+    for lamp in scene.lights:
+        if lamp.direction is None:
+            continue
+        d = np.asarray(lamp.direction, np.float64)
+        down = -float(d @ up) / float(np.linalg.norm(d))
+        if down < SHADOW_FRAMING_MIN_SIN:
+            continue
+        # p + s d meets the plane x . up = height at s = (height - p . up) / (d . up)
+        s = (height - points @ up) / float(d @ up)
+        out.append(points + np.maximum(s, 0.0)[:, None] * d)
+    return np.concatenate(out) if out else np.zeros((0, 3))
+
+
 def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights, rows,
             ground, trace_shadows, tol_rad, dirs, ao=None, ids=None, lit=False):
     """The colour of rays from the eye (pixel centres, or ``dirs``): shadows, ambient

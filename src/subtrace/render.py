@@ -49,7 +49,7 @@ from subtrace.patches.table import build_patch_table, cage_face_shells, restrict
 from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
 from subtrace.runtime.memory import let_go, one_block
-from subtrace.picture import ground_plane, lit_in_shading, paint
+from subtrace.picture import ground_plane, ground_shadow_points, lit_in_shading, paint
 from subtrace.shade import (C_OBJECT, C_R, CHANNELS, background_rows, deepest_level,
                             miss_values, patch_shading, shade)
 from subtrace.subdiv.limit import limit_points
@@ -460,7 +460,10 @@ def _prepare(scene, cages, stats, nurbs=None, crop=None, compiling=None):
         lo, hi = points.min(axis=0), points.max(axis=0)
         if scene.camera.eye is None and nurbs is None:
             check_extent(cages, lo, hi)
-    camera = scene.make_camera(lo, hi, points)
+        # and the shadows on the ground; the eye outside every cage's box
+        points = np.concatenate([points, ground_shadow_points(scene, cages, points, nurbs)])
+        lo, hi = points.min(axis=0), points.max(axis=0)
+    camera = scene.make_camera(lo, hi, points, [c.points_box for c in cages])
     # (shadow and ambient occlusion rays may meet what the camera does not see; the
     # ground's shadows are bounded by where the ground is)
     secondary = bool(scene.lights and scene.render.shadows) or scene.render.ao > 0

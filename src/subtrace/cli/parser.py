@@ -103,7 +103,10 @@ def _add_render(sub) -> argparse.ArgumentParser:
             "Catmull-Clark / Loop limit surface: patches refined only where a ray reaches "
             "them and only until they are below the angular tolerance, with adaptive "
             "anti-aliasing (edge pixels get up to --samples rays, 4 by default; the others "
-            "one). Without inputs the built-in default scene (Spot) is rendered. Writes a "
+            "one). What a scene or a stage leaves out, every input gets alike: 1280x720, "
+            "a soft gradient behind, a key and a fill light with shadows, a weak headlight "
+            "and a shadow-catching ground. Without inputs the built-in default scene "
+            "(Spot) is rendered. Writes a "
             "multi-channel EXR (R,G,B,A, Z, N.X/N.Y/N.Z, level, patch_id, object_id, u, v, "
             "P.X/P.Y/P.Z), or by the output's extension a picture of the colour."
         ),
