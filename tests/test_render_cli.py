@@ -349,3 +349,30 @@ def test_render_cli_an_output_no_writer_takes_is_an_error(tmp_path, capsys, name
     assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
     assert name in err and all(e in err for e in (".exr", ".png", ".jpg", ".webp", ".hdr"))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cube.obj"]
+
+
+def test_a_bare_toml_scene_renders_as_its_cage_on_the_command_line(tmp_path):
+    """``[[object]] mesh = ...`` alone renders the picture the same cage gets on the command
+    line, channel for channel (it was black, lit by a headlight alone, without shadows or
+    ground, at 640x480); both at the default 1280x720 without --width / --height."""
+    from subtrace.cli import main
+    from subtrace.io.exr import read_exr
+
+    cage = _cube(tmp_path)
+    scene = tmp_path / "bare.toml"
+    scene.write_text('[[object]]\nmesh = "cube.obj"\n')
+    size = ["--width", "64", "--height", "36", "--quiet"]
+    assert main(["render", str(scene), "-o", str(tmp_path / "toml.exr"), *size]) == 0
+    assert main(["render", str(cage), "-o", str(tmp_path / "obj.exr"), *size]) == 0
+    a, head = read_exr(tmp_path / "toml.exr")
+    b, _ = read_exr(tmp_path / "obj.exr")
+    assert set(a) == set(b)
+    for name in a:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    assert head["subtrace:shadows"] == 1
+    miss = a["A"] == 0
+    assert a["R"][0][miss[0]].mean() > a["R"][-1][miss[-1]].mean()  # the gradient
+    from subtrace.io.scene import load_scene, scene_for_meshes
+
+    for s in (load_scene(scene), scene_for_meshes([str(cage)])):
+        assert (s.camera.width, s.camera.height) == (1280, 720)
