@@ -28,7 +28,8 @@ def load_shape(name):
 
 def small_scene(meshes, eye, target, width=64, height=48, fov=60.0, tolerance=1.0,
                 colors=None):
-    """A scene of ``meshes`` seen from ``eye`` towards ``target``."""
+    """A scene of ``meshes`` seen from ``eye`` towards ``target``, lit by the headlight
+    alone on black, without a ground (the geometry's tests need no more)."""
     objects = [{"mesh": str(m)} for m in meshes]
     for o, c in zip(objects, colors or []):
         o["color"] = c
@@ -37,7 +38,10 @@ def small_scene(meshes, eye, target, width=64, height=48, fov=60.0, tolerance=1.
             "object": objects,
             "camera": {"eye": list(eye), "target": list(target), "fov": fov, "width": width,
                        "height": height},
-            "render": {"tolerance": tolerance},
+            "render": {"tolerance": tolerance, "background": [0.0, 0.0, 0.0],
+                       "headlight_intensity": 1.0},
+            "light": [],
+            "ground": False,
         }
     )
 

@@ -44,7 +44,8 @@ def _scene(tmp_path, objects, ao, eye=(3.0, 4.0, 5.0), target=(0.0, 0.0, 0.0), s
         "camera": {"eye": list(eye), "target": list(target), "width": size[0],
                    "height": size[1]},
         "render": {"headlight": True, "headlight_intensity": 1.0, "shadows": False,
-                   "samples": 1, "ao": ao},
+                   "samples": 1, "ao": ao, "background": [0.0, 0.0, 0.0]},
+        "light": [], "ground": False,  # (the headlight alone)
     }, base_dir=tmp_path)
 
 
@@ -102,7 +103,8 @@ def test_zero_rays_is_no_ambient_occlusion(tmp_path, block_on_slab):
         "camera": {"eye": [3.0, 4.0, 5.0], "target": [0.0, 0.0, 0.0], "width": 96,
                    "height": 72},
         "render": {"headlight": True, "headlight_intensity": 1.0, "shadows": False,
-                   "samples": 1},
+                   "samples": 1, "background": [0.0, 0.0, 0.0]},
+        "light": [], "ground": False,
     }, base_dir=tmp_path)
     a, b = render_scene(scene), render_scene(plain)
     assert a.stats.ao_rays == 0
@@ -144,6 +146,7 @@ def _ground_scene(tmp_path, block, ao, color):
         "render": {"headlight": True, "headlight_intensity": 1.0, "shadows": False,
                    "samples": 1, "ao": ao, "background": [0.5, 0.6, 0.7]},
         "ground": {} if color is None else {"color": color},
+        "light": [],  # (the headlight alone)
     }
     return scene_from_dict(data, base_dir=tmp_path)
 

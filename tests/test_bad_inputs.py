@@ -111,6 +111,23 @@ def test_render_refuses_with_one_clean_line(capsys, tmp_path, name, camera):
 # --------------------------------------------------------------------------------------
 
 
+@pytest.mark.parametrize("faces", ["f 1 2 3 4", "f 1 2 3\nf 1 3 4"])
+def test_a_cage_at_one_point_has_no_extent(capsys, tmp_path, faces):
+    """A cage whose vertices all lie at one point, under the automatic camera: one line
+    naming the file and saying the cage has no extent (it said "eye and target
+    coincide", which the user had not given), exit 2, nothing written; with a camera of
+    the user's it renders (nothing to see)."""
+    path = tmp_path / "point.obj"
+    path.write_text("v 0.5 2 -1\n" * 4 + faces + "\n")
+    code, _, err, out = render(capsys, tmp_path, path)
+    assert code == 2
+    assert_one_line_error(err, "point.obj", "the cage has no extent")
+    assert "coincide" not in err and list(out.parent.iterdir()) == []
+    code, _, err = run(capsys, ["render", path, "-o", tmp_path / "seen.exr", *RENDER_ARGS,
+                                "--eye", "3", "3", "3", "--target", "0", "0", "0"])
+    assert code == 0, err
+
+
 def test_vertex_of_valence_1000_reads_and_renders(capsys, tmp_path):
     n = 1000
     lines = ["v 0 0 0"]

@@ -378,3 +378,32 @@ def test_auto_camera_frames_points_within_the_margin_and_tightly():
     boxed = auto_camera(pts.min(axis=0), pts.max(axis=0), 1280, 720, 30.0)
     assert np.linalg.norm(np.subtract(boxed.eye, boxed.target)) > np.linalg.norm(
         np.subtract(cam.eye, cam.target))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.floats(-3, 3), st.floats(-3, 3), st.floats(-3, 3),
+                          st.floats(0.01, 4), st.floats(0.01, 4), st.floats(0.01, 4)),
+                min_size=1, max_size=4),
+       st.floats(0.05, 1.0))
+def test_auto_camera_keeps_the_eye_outside_the_boxes(boxes, shrink):
+    """With boxes to keep out of (cages' control points, whose shells hold their patches),
+    the eye lies outside each, grown by AUTO_BOX_MARGIN of its diagonal, and still looks
+    at the framed points' centre along AUTO_VIEW_DIRECTION: framing a limit surface far
+    smaller than its cage (a Loop tetrahedron) put the eye among the shells."""
+    from subtrace.camera import AUTO_BOX_MARGIN
+
+    outside = [(np.array(b[:3]), np.array(b[:3]) + np.array(b[3:])) for b in boxes]
+    lo, hi = outside[0]
+    mid = 0.5 * (lo + hi)
+    pts = mid + shrink * 0.5 * (np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1)
+                                          for sz in (-1, 1)]) * (hi - lo))
+    free = auto_camera(pts.min(0), pts.max(0), 64, 48, points=pts)
+    cam = auto_camera(pts.min(0), pts.max(0), 64, 48, points=pts, outside=outside)
+    eye = np.array(cam.eye)
+    for blo, bhi in outside:
+        pad = AUTO_BOX_MARGIN * np.linalg.norm(bhi - blo)
+        assert np.any(eye < blo - pad) or np.any(eye > bhi + pad)
+    assert cam.target == free.target
+    view = eye - np.array(cam.target)
+    assert angle(view, AUTO_VIEW_DIRECTION) < 1e-9
+    assert np.linalg.norm(view) >= np.linalg.norm(np.array(free.eye) - free.target) - 1e-12

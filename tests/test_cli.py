@@ -316,3 +316,25 @@ def test_every_commands_help_reads_as_written():
         out = subprocess.run([sys.executable, "-m", "subtrace.cli", command, "--help"],
                              capture_output=True, text=True, check=True).stdout
         assert "%%" not in out and "%(" not in out, command
+
+
+def test_render_help_says_what_a_render_does(capsys, tmp_path):
+    """``render --help`` names every channel a render writes (read from a real render's
+    EXR, not from the code's list) and the anti-aliasing default (the scene reader's
+    DEFAULT_SAMPLES), and no longer says "one ray per pixel"."""
+    from subtrace.io.exr import read_exr
+    from subtrace.io.scene import DEFAULT_SAMPLES
+
+    assert main(["render", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    out = tmp_path / "c.exr"
+    assert main(["render", str(sample_cage_path()), "-o", str(out), "--width", "16",
+                 "--height", "8", "--quiet"]) == 0
+    channels, _ = read_exr(out)
+    description = text[:text.index("positional arguments")]
+    for name in channels:
+        assert re.search(rf"(?<![\w.]){re.escape(name)}(?![\w])", description) or (
+            name[:2] in ("N.", "P.") and f"{name[:2]}X/{name[:2]}Y/{name[:2]}Z"
+            in description), name
+    assert "one ray per pixel" not in text
+    assert f"up to --samples rays, {DEFAULT_SAMPLES} by default" in text

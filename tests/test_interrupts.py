@@ -280,3 +280,46 @@ def test_no_temporary_reappears_after_the_cleanup(tmp_path):
         release.set()
         for job in jobs:
             job.join(10)
+
+
+CUBE = ("v -1 -1 -1\nv 1 -1 -1\nv 1 1 -1\nv -1 1 -1\nv -1 -1 1\nv 1 -1 1\nv 1 1 1\nv -1 1 1\n"
+        "f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 3 4 8 7\nf 2 3 7 6\nf 1 5 8 4\n")
+
+
+@pytest.mark.parametrize("after_s", [0.0, 0.4])
+def test_an_interrupted_tiled_dask_job_leaves_no_tiles(tmp_path, after_s):
+    """``--tile N --dask`` interrupted while its workers write tiles (``after_s`` after the
+    first tile's file appears): one line, exit 130, and neither a tile's file (169 MB at
+    4K were left before), nor a temporary, nor a partial image in the folder."""
+    pytest.importorskip("distributed", reason="dask[distributed] is not installed")
+    cube = tmp_path / "cube.obj"
+    cube.write_text(CUBE)
+    out = tmp_path / "out.exr"
+    proc = _start(["render", str(cube), "-o", str(out), "--width", "128", "--height", "96",
+                   "--tile", "16", "--dask"])
+    _wait_until_watched(proc)
+    end = time.perf_counter() + 240
+    while not list(tmp_path.glob(".*.tile.npz")) and proc.poll() is None:
+        assert time.perf_counter() < end, "no tile was written"
+        time.sleep(0.01)
+    time.sleep(after_s)
+    assert proc.poll() is None, "the job ended before the signal"
+    tiles_then = len(list(tmp_path.glob(".*.tile.npz")))
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and err.decode() == "subtrace: interrupted\n", err.decode()
+    assert tiles_then >= 1
+    left = sorted(p.name for p in tmp_path.iterdir())
+    assert left == ["cube.obj"] or left == ["cube.obj", "out.exr"] and _complete_at(
+        out, 96, 128), left
+
+
+def _complete_at(path: Path, height: int, width: int) -> bool:
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        return False
+    try:
+        pixels = inp.read_image(oiio.FLOAT)
+        return pixels is not None and pixels.shape[:2] == (height, width)
+    finally:
+        inp.close()

@@ -46,12 +46,15 @@ def test_sample_offsets_are_spread_over_the_pixel():
 
 def test_antialiasing_changes_only_edge_pixels(scene):
     """--samples 1 is one ray per pixel; with more, only pixels edge_pixels marks change
-    (colour and alpha), some get intermediate alpha, and every auxiliary channel is bit for
-    bit the centre ray's."""
+    (colour and alpha; the auxiliary channels where the centre ray missed:
+    :func:`test_a_covered_pixel_has_the_channels_of_a_ray_that_hit`), some get intermediate
+    alpha, and every auxiliary channel of a pixel whose centre ray hit is bit for bit the
+    centre ray's."""
     one = render_scene(apply_overrides(scene, samples=1)).channels
     many = render_scene(apply_overrides(scene, samples=8)).channels
+    centre = np.isfinite(one["Z"])
     for c in AUX:
-        assert one[c].tobytes() == many[c].tobytes(), c
+        assert one[c][centre].tobytes() == many[c][centre].tobytes(), c
     assert set(np.unique(one["A"])) == {0.0, 1.0}
     partial = (many["A"] > 0) & (many["A"] < 1)
     assert partial.sum() > 20
@@ -61,8 +64,6 @@ def test_antialiasing_changes_only_edge_pixels(scene):
     for c in "RGBA":
         changed |= one[c] != many[c]
     assert changed.any() and not np.any(changed & ~edges)
-    # where the centre ray missed, the auxiliary channels say so whatever the alpha
-    assert np.all(np.isinf(many["Z"][many["A"] < 1][one["A"][many["A"] < 1] == 0]))
 
 
 def test_antialiased_alpha_is_the_coverage(scene):
@@ -214,3 +215,48 @@ def test_hits_coloured_in_the_shading_pass_as_the_lights_pass_colours_them(tmp_p
     assert (fused["R"] > 0).any() and set(fused) == set(CHANNELS)
     for name in CHANNELS:
         np.testing.assert_array_equal(fused[name], apart[name], err_msg=name)
+
+
+@pytest.mark.parametrize("which", ["cube", "nurbs_mixed"])
+def test_a_covered_pixel_has_the_channels_of_a_ray_that_hit(scene, which):
+    """With anti-aliasing, a pixel of alpha above 0 has a finite depth and ids, as a
+    compositor expects (they were the missed centre ray's: Z = +inf at alpha up to 0.75,
+    2-20 pixels a view): where the centre ray missed, the auxiliary channels are those of
+    a ray through the pixel's own square that hit the surface, its point P at distance Z
+    from the eye (checked from the camera's geometry alone); elsewhere they are the
+    centre ray's, and a pixel no ray hit says so."""
+    from pathlib import Path
+
+    from subtrace.io.scene import load_scene
+
+    if which == "nurbs_mixed":
+        root = Path(__file__).resolve().parents[1]
+        scene = apply_overrides(load_scene(root / "scenes" / "nurbs_mixed.toml"), width=160,
+                                height=90)
+    one = render_scene(apply_overrides(scene, samples=1)).channels
+    result = render_scene(apply_overrides(scene, samples=8))
+    many = result.channels
+    covered = many["A"] > 0
+    assert np.all(np.isfinite(many["Z"][covered])) and np.all(np.isinf(many["Z"][~covered]))
+    for c in ("patch_id", "object_id"):
+        assert np.all(many[c][covered] >= 0) and np.all(many[c][~covered] == -1)
+    taken = covered & np.isinf(one["Z"])
+    assert taken.sum() >= 3
+    p = np.stack([many[c][taken] for c in ("P.X", "P.Y", "P.Z")], axis=-1).astype(np.float64)
+    cam = result.camera
+    eye, target, up = (np.asarray(v, np.float64) for v in (cam.eye, cam.target, cam.up))
+    forward = (target - eye) / np.linalg.norm(target - eye)
+    right = np.cross(forward, up)
+    right /= np.linalg.norm(right)
+    true_up = np.cross(right, forward)
+    d = p - eye
+    dist = np.linalg.norm(d, axis=1)
+    z = many["Z"][taken].astype(np.float64)
+    assert np.all(np.abs(dist - z) <= 1e-5 * (dist + np.abs(eye).max()))
+    s = 2.0 * np.tan(np.radians(cam.fov_deg) / 2.0) / cam.height
+    depth = d @ forward
+    col = (d @ right) / depth / s + 0.5 * cam.width - 0.5
+    row = -(d @ true_up) / depth / s + 0.5 * cam.height - 0.5
+    rows, cols = np.nonzero(taken)
+    # (float32 P: far below a pixel's half)
+    assert np.abs(col - cols).max() < 0.5 + 1e-3 and np.abs(row - rows).max() < 0.5 + 1e-3

@@ -350,3 +350,40 @@ def test_valence_two_corners_follow_the_boundary_interpolation():
     assert not reg[(sharp > 0) & (sharp < INF_SHARP)].any()
     reg, sharp = found[BOUNDARY_EDGE_AND_CORNER]
     assert reg[sharp >= INF_SHARP].all() and (sharp >= INF_SHARP).sum() > 4
+
+
+def _cube_cage(extra_points=()):
+    """The unit cube (8 vertices, 6 quads), with ``extra_points`` after its vertices that no
+    face uses."""
+    from subtrace.mesh.cage import make_cage
+
+    pts = [[x, y, z] for z in (0.5, -0.5) for y in (-0.5, 0.5) for x in (-0.5, 0.5)]
+    quads = [[0, 1, 3, 2], [2, 3, 7, 6], [6, 7, 5, 4], [4, 5, 1, 0], [1, 5, 7, 3],
+             [4, 0, 2, 6]]
+    return make_cage(np.array(pts + list(extra_points), float), np.full(6, 4),
+                     np.array(quads).ravel(), "catmark")
+
+
+def test_a_record_of_the_maps_alone_serves_shallower_builds():
+    """When every patch the depth choice isolates goes by the maps (patches/stencil.py,
+    caps of ``MIN_LEVELS`` and more), the record holds no levels of its own; a patch
+    built later below ``MIN_LEVELS`` (by local topology) refines afresh, as without a
+    record (a cube seen small: every patch's cap 4, some depths 1 or 2; this raised
+    ``KeyError: 'levels'``)."""
+    from subtrace.patches.isolate import build_isolated, isolated_depths
+    from subtrace.patches.stencil import MIN_LEVELS
+
+    table = build_patch_table([_cube_cage()])
+    o = table.objects[0]
+    faces = table.face[~table.regular]
+    assert len(faces) == 24
+    eye, tol = np.array([9.0, 1.0, -7.5]), 0.02
+    cap = np.full(len(faces), MIN_LEVELS + 1)
+    record = {}
+    depths = isolated_depths(o, faces, cap, eye, tol, record)
+    shallow = depths < MIN_LEVELS
+    assert shallow.any() and depths.max() > 0
+    a = build_isolated(o, faces[shallow], depths[shallow], eye, tol, record)
+    b = build_isolated(o, faces[shallow], depths[shallow], eye, tol)
+    for x, y in zip(a[0] + a[1], b[0] + b[1]):
+        assert np.array_equal(x, y)

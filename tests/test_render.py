@@ -560,3 +560,81 @@ def test_the_shading_of_catmull_clark_cages_compiles_no_loop_normals(tmp_path, s
     assert "_shade_task" in names, compiled
     loop = {"_loop_normals_task", "tri_normal"} & names
     assert loop == (set() if scheme == "catmark" else {"_loop_normals_task", "tri_normal"})
+
+
+CUBE = """v -0.5 -0.5 0.5
+v 0.5 -0.5 0.5
+v -0.5 0.5 0.5
+v 0.5 0.5 0.5
+v -0.5 0.5 -0.5
+v 0.5 0.5 -0.5
+v -0.5 -0.5 -0.5
+v 0.5 -0.5 -0.5
+f 1 2 4 3
+f 3 4 6 5
+f 5 6 8 7
+f 7 8 2 1
+f 2 8 6 4
+f 7 1 3 5
+"""
+
+
+def _unused_cube(tmp_path, before, after):
+    """The cube with a vertex ``before`` its eight and one ``after``, which no face uses."""
+    lines = CUBE.splitlines()
+    renumber = lambda s: " ".join(str(int(i) + 1) for i in s.split())
+    text = "\n".join([f"v {before}"] + lines[:8] + [f"f {renumber(f[2:])}" for f in lines[8:]]
+                     + [f"v {after}"]) + "\n"
+    path = tmp_path / "cube_unused.obj"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("before,after", [("9 9 9", "7 7 7"), ("0 -40 0", "0.1 0.2 0.3")])
+def test_unused_vertices_leave_the_picture_as_it_is(tmp_path, before, after):
+    """Vertices that no face uses (common in OBJ files) are no part of the limit surface:
+    the default picture of a cube with two of them (the automatic camera, which they used
+    to push away until the cube was a few pixels wide, the lights and the ground, which
+    they could move far below it) is the cube's alone, channel for channel."""
+    from subtrace.io.scene import apply_overrides, scene_for_meshes
+
+    plain = tmp_path / "cube.obj"
+    plain.write_text(CUBE)
+    images = []
+    for path in (plain, _unused_cube(tmp_path, before, after)):
+        scene = apply_overrides(scene_for_meshes([str(path)]), width=96, height=64)
+        images.append(render_scene(scene).channels)
+    assert set(images[0]) == set(images[1])
+    assert np.count_nonzero(images[0]["A"]) > 0.1 * images[0]["A"].size
+    for name in images[0]:
+        assert np.array_equal(images[0][name], images[1][name], equal_nan=True), name
+
+
+def test_the_automatic_camera_stays_out_of_the_shells_and_frames_the_shadow(tmp_path):
+    """A four-face Loop tetrahedron, whose limit surface is far smaller than its cage,
+    with the default picture: the eye lies outside the cage's box (it was inside the
+    patches' shells: depth 14, 828k micro-triangles and a warning about the eye inside
+    them), nothing warns, and the ground's shadow lies whole in the image (no pixel on the
+    border darker than the background there)."""
+    import warnings
+
+    from subtrace.io.scene import apply_overrides, scene_for_meshes
+
+    path = tmp_path / "tetrahedron.obj"
+    path.write_text("v 1 1 1\nv -1 -1 1\nv -1 1 -1\nv 1 -1 -1\n"
+                    "f 1 2 3\nf 1 4 2\nf 1 3 4\nf 2 4 3\n")
+    scene = apply_overrides(scene_for_meshes([str(path)]), width=160, height=90)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        result = render_scene(scene)
+    eye = np.asarray(result.camera.eye)
+    assert np.any(np.abs(eye) > 1.0)  # (the cage's box is [-1, 1]^3)
+    ch = result.channels
+    top, bottom = (np.asarray(c) for c in (scene.render.background,
+                                           scene.render.background_bottom))
+    w = (np.arange(90) + 0.5) / 90
+    back = (1 - w) * top[0] + w * bottom[0]  # the gradient's red, row by row
+    shadow = (ch["A"] == 0) & (ch["R"] < 0.8 * back[:, None])
+    assert shadow.sum() > 100  # (the key light's shadow, beside the object)
+    assert not (shadow[0].any() or shadow[-1].any() or shadow[:, 0].any()
+                or shadow[:, -1].any())

@@ -289,3 +289,89 @@ def test_render_cli_ao_option(tmp_path, capsys):
         err = capsys.readouterr().err
         assert rc == 2 and err.count("\n") == 1 and "--ao" in err and "Traceback" not in err
         assert not bad.exists()
+
+
+# the magic bytes that open each format's files (the formats' own specifications)
+MAGIC = {".bmp": (0, b"BM"), ".webp": (8, b"WEBP"), ".hdr": (0, b"#?"), ".tga": None,
+         ".ppm": (0, b"P6"), ".gif": (0, b"GIF8")}
+
+
+@pytest.mark.parametrize("ext", sorted(MAGIC))
+def test_render_cli_writes_the_picture_format_its_extension_names(tmp_path, ext):
+    """``-o x.bmp`` (.webp, .hdr, .tga, ...: any OpenImageIO writer) writes that format,
+    not an EXR under that name: the file opens with the format's magic bytes, OpenImageIO
+    reads it as that format, 40x30, its colour the EXR's (sRGB-encoded; linear in a
+    Radiance .hdr)."""
+    import OpenImageIO as oiio
+
+    from subtrace.cli import main
+    from subtrace.io.exr import read_exr, srgb_encode
+
+    out = tmp_path / f"pic{ext}"
+    args = ["render", str(_cube(tmp_path)), *CUBE_SCENE_ARGS]
+    assert main([*args, "-o", str(out)]) == 0
+    assert main([*args, "-o", str(tmp_path / "ref.exr")]) == 0
+    data = out.read_bytes()
+    assert not data.startswith(b"\x76\x2f\x31\x01")  # (OpenEXR's magic number)
+    if MAGIC[ext] is not None:
+        at, magic = MAGIC[ext]
+        assert data[at:at + len(magic)] == magic
+    inp = oiio.ImageInput.open(str(out))
+    assert inp.format_name() == {".bmp": "bmp", ".webp": "webp", ".hdr": "hdr",
+                                 ".tga": "targa", ".ppm": "pnm", ".gif": "gif"}[ext]
+    assert (inp.spec().width, inp.spec().height) == (40, 30)
+    inp.close()
+    ref, _ = read_exr(tmp_path / "ref.exr")
+    got = oiio.ImageBuf(str(out)).get_pixels(oiio.FLOAT)[..., :3]
+    if ext == ".hdr":
+        want = np.stack([ref[c] for c in "RGB"], axis=-1).astype(np.float64)
+        # RGBE keeps 8 bits of mantissa under a shared exponent: 2^-8 of the largest
+        # component; the EXR's half floats 2^-11
+        assert np.all(np.abs(got - want) <= (2.0**-7 + 2.0**-11) * want.max(axis=-1,
+                                                                              keepdims=True))
+    elif ext != ".gif":  # (GIF's palette of 256 colours is not the picture's pixels)
+        want = np.stack([srgb_encode(ref[c]) for c in "RGB"], axis=-1)
+        tol = 0.5 / 255 + 12.92 * 2.0**-11 if ext != ".webp" else 0.1  # (lossy WebP)
+        assert np.abs(got - want).max() <= tol
+
+
+@pytest.mark.parametrize("name", ["out.txt", "out", "out.docx", "out.jp2"])
+def test_render_cli_an_output_no_writer_takes_is_an_error(tmp_path, capsys, name):
+    """An output whose extension names no format subtrace writes (or that has none) is one
+    line that lists the formats, exit 2, and nothing is written (it was an EXR under that
+    name, exit 0)."""
+    from subtrace.cli import main
+
+    cage = _cube(tmp_path)
+    code = main(["render", str(cage), *CUBE_SCENE_ARGS, "-o", str(tmp_path / name)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
+    assert name in err and all(e in err for e in (".exr", ".png", ".jpg", ".webp", ".hdr"))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cube.obj"]
+
+
+def test_a_bare_toml_scene_renders_as_its_cage_on_the_command_line(tmp_path):
+    """``[[object]] mesh = ...`` alone renders the picture the same cage gets on the command
+    line, channel for channel (it was black, lit by a headlight alone, without shadows or
+    ground, at 640x480); both at the default 1280x720 without --width / --height."""
+    from subtrace.cli import main
+    from subtrace.io.exr import read_exr
+
+    cage = _cube(tmp_path)
+    scene = tmp_path / "bare.toml"
+    scene.write_text('[[object]]\nmesh = "cube.obj"\n')
+    size = ["--width", "64", "--height", "36", "--quiet"]
+    assert main(["render", str(scene), "-o", str(tmp_path / "toml.exr"), *size]) == 0
+    assert main(["render", str(cage), "-o", str(tmp_path / "obj.exr"), *size]) == 0
+    a, head = read_exr(tmp_path / "toml.exr")
+    b, _ = read_exr(tmp_path / "obj.exr")
+    assert set(a) == set(b)
+    for name in a:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    assert head["subtrace:shadows"] == 1
+    miss = a["A"] == 0
+    assert a["R"][0][miss[0]].mean() > a["R"][-1][miss[-1]].mean()  # the gradient
+    from subtrace.io.scene import load_scene, scene_for_meshes
+
+    for s in (load_scene(scene), scene_for_meshes([str(cage)])):
+        assert (s.camera.width, s.camera.height) == (1280, 720)

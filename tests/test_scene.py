@@ -14,6 +14,7 @@ from subtrace.errors import SceneError
 from subtrace.io.obj import BOUNDARY_EDGE_AND_CORNER, BOUNDARY_NONE
 from subtrace.io.scene import (
     CameraSettings,
+    Ground,
     Light,
     RenderSettings,
     Scene,
@@ -114,6 +115,7 @@ def test_full_scene(folder, monkeypatch):
         tolerance_px=0.5,
         tolerance_deg=None,
         background=(0.1, 0.2, 0.3),
+        background_bottom=None,  # (one colour given: a flat background)
         headlight=False,
         headlight_intensity=0.7,
     )
@@ -140,17 +142,25 @@ def test_full_scene(folder, monkeypatch):
 
 
 def test_minimal_scene_defaults(folder):
+    """A bare scene gets the picture defaults (io/scene.py: the command line's too): the
+    automatic camera at 1280x720 and 30 degrees, a gradient, a key and a fill light with
+    shadows, a weak headlight and a shadow-catching ground at the lowest point."""
     scene = load_scene(write(folder, '[[object]]\nmesh = "tri2.obj"\n'))
     obj = scene.objects[0]
     assert (obj.scheme, obj.boundary, obj.color, obj.boundary_code) == (None, None, None, None)
     assert scene.camera == CameraSettings()
     assert scene.camera.is_auto and scene.camera.eye is None and scene.camera.target is None
-    assert (scene.camera.width, scene.camera.height, scene.camera.fov_deg) == (640, 480, 30.0)
+    assert (scene.camera.width, scene.camera.height, scene.camera.fov_deg) == (1280, 720, 30.0)
     assert scene.camera.up == (0.0, 1.0, 0.0)
     assert scene.render == RenderSettings()
     assert scene.render.tolerance_px == 1.0 and scene.render.tolerance_deg is None
-    assert scene.render.headlight is True and scene.render.background == (0.0, 0.0, 0.0)
-    assert scene.lights == () and scene.output is None and scene.preview is None
+    assert scene.render.headlight is True and scene.render.headlight_intensity == 0.2
+    assert scene.render.background != scene.render.background_bottom  # a gradient
+    assert scene.render.shadows and scene.render.background_bottom is not None
+    assert len(scene.lights) == 2 and all(lamp.direction[1] < 0 for lamp in scene.lights)
+    assert [lamp.intensity for lamp in scene.lights] == [0.75, 0.25]
+    assert scene.ground == Ground(height=None, color=None)
+    assert scene.output is None and scene.preview is None
 
 
 def test_auto_camera_frames_bounds(folder):
@@ -284,6 +294,8 @@ BAD = [
     ("table typo", "[camera]", "[camra]", 5, "camra", "did you mean 'camera'"),
     ("output not a string", 'output = "renders/out.exr"', "output = true", 2, "output",
      "expected a file name"),
+    ("preview not a png", 'preview = "renders/out.png"', 'preview = "renders/out.jpg"', 3,
+     "preview", "ending in .png"),
 ]
 
 
@@ -496,7 +508,7 @@ def test_override_eye_alone_looks_at_the_centre(folder):
         apply_overrides(scene, target="0,0,0")
     new = apply_overrides(scene, eye="0,0,5", target="0,0,0", width=10)
     assert not new.camera.is_auto
-    assert new.make_camera() == Camera((0, 0, 5), (0, 0, 0), (0, 1, 0), 30, 10, 480)
+    assert new.make_camera() == Camera((0, 0, 5), (0, 0, 0), (0, 1, 0), 30, 10, 720)
 
 
 def test_override_unknown_flag_is_a_type_error(folder):
@@ -582,3 +594,35 @@ def test_scene_for_meshes_lights_a_picture(folder, monkeypatch):
     assert (scene.camera.width, scene.camera.height) == (1280, 720)
     assert len(scene.lights) == 2 and scene.render.shadows
     assert scene.render.background_bottom is not None and scene.ground is not None
+
+
+def test_one_set_of_picture_defaults(folder, monkeypatch):
+    """A bare TOML scene, the same cage on the command line and a scene built in code get
+    the same camera, render settings, lights and ground; what a scene sets it keeps:
+    ``light = []`` no lights, ``ground = false`` no ground, its background and headlight
+    (it rendered at 640x480 on black with a headlight alone, the command line at 1280x720
+    with the gradient, key and fill lights, shadows and the ground)."""
+    monkeypatch.chdir(folder)
+    bare = load_scene(write(folder, '[[object]]\nmesh = "tri2.obj"\n'))
+    cli = scene_for_meshes(["tri2.obj"])
+    code = Scene(objects=bare.objects)
+    for scene in (cli, code):
+        assert (scene.camera, scene.render, scene.lights, scene.ground) == (
+            bare.camera, bare.render, bare.lights, bare.ground)
+    assert (bare.camera.width, bare.camera.height) == (1280, 720) and len(bare.lights) == 2
+    plain = load_scene(write(folder, 'light = []\nground = false\n[render]\n'
+                                     'background = [0, 0, 0]\nheadlight_intensity = 1.0\n'
+                                     '[camera]\nwidth = 640\nheight = 480\n'
+                                     '[[object]]\nmesh = "tri2.obj"\n', "plain.toml"))
+    assert plain.lights == () and plain.ground is None
+    assert plain.render.background == (0.0, 0.0, 0.0) and plain.render.background_bottom is None
+    assert plain.render.headlight_intensity == 1.0
+    assert (plain.camera.width, plain.camera.height) == (640, 480)
+    own = load_scene(write(folder, '[[light]]\ndirection = [0, -1, 0]\n[ground]\n'
+                                   'height = -2\n[[object]]\nmesh = "tri2.obj"\n', "own.toml"))
+    assert own.lights == (Light(direction=(0.0, -1.0, 0.0)),)
+    assert own.ground == Ground(height=-2.0)
+    assert load_scene(write(folder, 'ground = true\n[[object]]\nmesh = "tri2.obj"\n',
+                            "g.toml")).ground == Ground()
+    with pytest.raises(SceneError, match="ground"):
+        load_scene(write(folder, 'ground = 3\n[[object]]\nmesh = "tri2.obj"\n', "bad.toml"))

@@ -35,8 +35,7 @@ def _scene(cube, tmp_path, shadows=True, ground=True, width=96, height=72,
          "render": {"headlight": False, "shadows": shadows, "samples": 1,
                     "background": [BACKGROUND] * 3},
          "light": [{"direction": LIGHT.tolist()}]}
-    if ground:
-        d["ground"] = {"height": GROUND}
+    d["ground"] = {"height": GROUND} if ground else False
     return scene_from_dict(d, base_dir=tmp_path)
 
 

@@ -196,3 +196,52 @@ def test_a_tile_of_a_huge_image_holds_only_its_own_pixels():
     assert peaks[1] - peaks[0] < 64 << 20, [p >> 20 for p in peaks]
     with pytest.raises(SceneError, match="budget"):
         render_scene(scene)  # the whole image does not fit
+
+
+# how each statistic of a tiled render relates to the whole render's (tiles.merge_stats):
+# one value of the whole image, which every tile and the merge have too
+WHOLE_IMAGE = ("patches", "faces_culled", "max_depth", "max_level", "depth_cap",
+               "depth_cap_reason", "accel_fallback", "secondary_max_depth", "pixels_covered")
+# the most any tile had (no relation to the whole render's but that)
+MOST = ("rounds", "memo_bytes")
+# work counted per tile: summed, at least the whole render's (a patch two tiles reach is
+# built by both, the pixels around a tile are traced again); times are sums too
+WORK = ("patches_refined", "micro_triangles", "pieces", "memo_nodes", "memo_full", "rays",
+        "shadow_rays", "aa_pixels", "aa_rays", "ao_rays", "secondary_patches_refined",
+        "secondary_micro_triangles")
+
+
+def test_a_tiled_renders_statistics_are_the_whole_renders(tmp_path):
+    """Every statistic of a tiled render (``tiles.merge_stats`` of its tiles', as
+    ``render --tile`` reports them) against the whole render's and the tiles': the whole
+    image's values equal (the deepest secondary grid was the sum over tiles: 35 or 59
+    where the whole render said 8), the peaks the largest tile's, the work and the times
+    the tiles' sums; every field of RenderStats is one of these."""
+    import dataclasses
+
+    from subtrace.io.scene import apply_overrides, scene_for_meshes
+    from subtrace.jobs import render_tiled
+    from subtrace.render import RenderStats, render_scene
+    from subtrace.tiles import merge_stats
+
+    cube = tmp_path / "cube.obj"
+    cube.write_text(CUBE)
+    scene = apply_overrides(scene_for_meshes([str(cube)]), width=96, height=72, samples=4,
+                            ao=4)
+    whole = dataclasses.asdict(render_scene(scene).stats)
+    tiles = [dataclasses.asdict(render_scene(scene, crop=c).stats)
+             for c in tile_grid(96, 72, 32)]
+    merged = merge_stats(tiles)
+    tiled = dataclasses.asdict(render_tiled(scene, 32).stats)  # (a run of its own)
+    times = tuple(f for f in whole if f.startswith("time_"))
+    assert sorted(WHOLE_IMAGE + MOST + WORK + times) == sorted(
+        f.name for f in dataclasses.fields(RenderStats))
+    assert whole["secondary_max_depth"] > 0 and whole["aa_pixels"] > 0
+    for f in WHOLE_IMAGE:
+        assert merged[f] == whole[f] == tiled[f], f
+    for f in MOST:
+        assert merged[f] == max(t[f] for t in tiles), f
+    for f in WORK:
+        assert merged[f] == sum(t[f] for t in tiles) >= whole[f], f
+    for f in times:
+        assert merged[f] == pytest.approx(sum(t[f] for t in tiles), rel=1e-12), f

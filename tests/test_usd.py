@@ -333,3 +333,30 @@ def test_frames_of_a_stage_without_time_samples_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no time samples" in err and "cube.usda" in err
     assert not list(tmp_path.glob("x*"))
+
+
+def test_a_stage_without_lights_gets_the_picture_defaults(tmp_path):
+    """A stage with no lights (nor camera) gets the same picture on the command line and
+    named by a bare TOML scene: the picture defaults of io/scene.py (1280x720, the
+    gradient, key and fill lights, shadows and the ground), as an OBJ cage does; a stage
+    with a distant light keeps its light in both."""
+    from pxr import UsdLux
+
+    from subtrace.io.scene import DEFAULT_LIGHTS, load_scene, scene_for_meshes
+
+    usd = tmp_path / "cube.usda"
+    stage, _, _ = _cube_stage(usd)
+    stage.Save()
+    toml = tmp_path / "scene.toml"
+    toml.write_text('[[object]]\nmesh = "cube.usda"\n')
+    cli, bare = scene_for_meshes([str(usd)]), load_scene(toml)
+    for scene in (cli, bare):
+        assert (scene.camera.width, scene.camera.height) == (1280, 720)
+        assert scene.lights == DEFAULT_LIGHTS and scene.ground is not None
+        assert scene.render.background_bottom is not None and scene.render.shadows
+    assert (cli.camera, cli.render, cli.ground) == (bare.camera, bare.render, bare.ground)
+    lit = tmp_path / "lit.usda"
+    stage, _, _ = _cube_stage(lit)
+    UsdLux.DistantLight.Define(stage, "/World/Sun")
+    stage.Save()
+    assert len(scene_for_meshes([str(lit)]).lights) == 1

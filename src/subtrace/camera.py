@@ -37,6 +37,10 @@ MAX_RESOLUTION = 32768  # pixels per side, inclusive
 # (+z, the usual front of an OBJ model), about 22 degrees above the horizon
 AUTO_VIEW_DIRECTION = (1.0, 0.62, 1.3)
 AUTO_MARGIN = 1.15  # auto_camera: what it frames fills at most 1 / 1.15 of the half-image
+# auto_camera: the eye stays this share of a box's diagonal outside each box it is kept
+# out of (a cage's control points: the shells of its patches lie within, and an eye among
+# them makes the patches near it refine without end)
+AUTO_BOX_MARGIN = 0.1
 # up within this angle (radians) of the view direction is "parallel": the frame is undefined
 _MIN_UP_ANGLE = 1e-6
 
@@ -219,7 +223,7 @@ def ray_direction(frame, row, col):
 
 def auto_camera(
     bounds_min, bounds_max, width: int, height: int, fov_deg: float = 30.0, up=(0.0, 1.0, 0.0),
-    points=None,
+    points=None, outside=(),
 ) -> Camera:
     """A camera that frames the axis-aligned box [bounds_min, bounds_max].
 
@@ -230,7 +234,9 @@ def auto_camera(
     half-height from the centre). A box of zero size is taken as a unit cube. With
     ``points`` (n,3) (points of the surface, e.g. limit points), those are framed instead
     of the corners, the target moved so that their extent across the view is centred:
-    a box's empty corners would leave the object small in a three-quarter view.
+    a box's empty corners would leave the object small in a three-quarter view. The eye
+    then moves back along its direction, where it must, until it lies outside each box
+    (lo, hi) of ``outside`` by ``AUTO_BOX_MARGIN`` of the box's diagonal.
     """
     lo = np.asarray(bounds_min, dtype=np.float64).reshape(-1)
     hi = np.asarray(bounds_max, dtype=np.float64).reshape(-1)
@@ -266,7 +272,7 @@ def auto_camera(
             corners = corners - shift
     need = corners @ direction + AUTO_MARGIN * np.maximum(
         np.abs(corners @ right) / tan_h, np.abs(corners @ true_up) / tan_v)
-    distance = float(need.max())
+    distance = _outside_boxes(centre, direction, float(need.max()), outside)
     eye = centre + distance * direction
     return Camera(
         eye=tuple(eye.tolist()),
@@ -276,6 +282,31 @@ def auto_camera(
         width=width,
         height=height,
     )
+
+
+def _outside_boxes(centre, direction, distance: float, boxes) -> float:
+    """The least distance from ``distance`` on at which ``centre + distance * direction``
+    lies outside every box (lo, hi) of ``boxes``, each grown by ``AUTO_BOX_MARGIN`` of its
+    diagonal."""
+    grown = []
+    for lo, hi in boxes:
+        lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+        pad = AUTO_BOX_MARGIN * float(np.linalg.norm(hi - lo))
+        grown.append((lo - pad, hi + pad))
+    for _ in range(len(grown) + 1):  # (each pass leaves one box at least behind)
+        moved = False
+        for lo, hi in grown:
+            eye = centre + distance * direction
+            if np.all(eye >= lo) and np.all(eye <= hi):
+                # where the ray from the centre leaves this box
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    t = np.where(direction > 0, (hi - centre) / direction,
+                                 np.where(direction < 0, (lo - centre) / direction, np.inf))
+                distance = float(t.min()) * (1.0 + 1e-9)  # (just beyond, rounding aside)
+                moved = True
+        if not moved:
+            break
+    return distance
 
 
 # --------------------------------------------------------------------------------------

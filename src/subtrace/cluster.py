@@ -17,7 +17,10 @@ removing the tiles. Tiles of one frame reassemble into the local render, bit for
 Failures: a worker that dies mid-task has its task run again elsewhere (``retries``); a task
 that fails on bad input (a :class:`subtrace.errors.SubtraceError`) stops the job, the other
 tasks are cancelled, and the error is the same one line as a local render's. A frame's file
-is written whole or not at all, so a stopped job leaves only complete frames.
+is written whole or not at all, so a stopped job leaves only complete frames. A job stopped
+(an error, or an interrupt: ``runtime.signals.register_cleanup``, run once the local
+cluster's workers are killed) removes its tiles' files and the temporaries its killed
+workers were writing.
 """
 
 from __future__ import annotations
@@ -151,8 +154,14 @@ def run_jobs(dask, jobs, crop, tile, picture, bits, accel, report=None, wait=Tru
     client = client_for(dask) if own else dask
     from distributed import as_completed
 
+    from subtrace.runtime import signals
+
     token = uuid.uuid4().hex[:8]  # (keys unique to this job)
     futures, tiles, number = [], [], {}
+    outputs = [p for _, _, out, png in jobs for p in (out, png) if p]
+    leftovers = lambda: _remove(tiles, outputs)  # noqa: E731
+    signals.register_cleanup(leftovers)
+    stopped = False
     try:
         for k, scene, out, png in jobs:
             name = f"{'image' if k is None else k}-{token}"
@@ -179,8 +188,8 @@ def run_jobs(dask, jobs, crop, tile, picture, bits, accel, report=None, wait=Tru
                 if report is not None:
                     report(FrameResult(number[future.key], out, png, stats))
         except BaseException:
+            stopped = True
             client.cancel(futures)
-            _remove(tiles)
             raise
     finally:
         if own:
@@ -188,14 +197,22 @@ def run_jobs(dask, jobs, crop, tile, picture, bits, accel, report=None, wait=Tru
             client.close()
             if cluster is not None and dask is None:
                 cluster.close()
+        if stopped:  # (once an own cluster's workers are gone: none writes any more)
+            _remove(tiles, outputs)
+        signals.forget_cleanup(leftovers)
     return futures
 
 
-def _remove(paths) -> None:
-    """Remove the tiles a stopped job leaves (those there)."""
+def _remove(tiles, outputs) -> None:
+    """Remove what a stopped job leaves: the files of its ``tiles`` (those there), and the
+    temporaries of its tiles and ``outputs`` whose workers are gone
+    (``io.atomic.orphaned_temps``)."""
     import os
 
-    for path in paths:
+    from subtrace.io.atomic import orphaned_temps
+
+    for path in list(tiles) + [t for p in list(tiles) + list(outputs) for t in
+                               orphaned_temps(p)]:
         try:
             os.unlink(path)
         except OSError:

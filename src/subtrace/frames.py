@@ -202,7 +202,8 @@ def frame_scenes(scene, turntable=None, frames=None, output=None, png=None):
         return [(t, scene_at_time(scene, t), frame_path(out, t), png and frame_path(png, t))
                 for t in picked], cages
     n = check_turntable(turntable)
-    camera = scene.make_camera(*scene_bounds(loaded, load_nurbs(scene)))
+    camera = scene.make_camera(*scene_bounds(loaded, load_nurbs(scene)),
+                               outside=[c.points_box for c in loaded])
     return [(k, apply_overrides(scene, target=tuple(camera.target), up=tuple(camera.up),
                                 fov=camera.fov_deg,
                                 eye=turntable_eye(camera.eye, camera.target, camera.up, k, n)),

@@ -16,15 +16,15 @@ over ``shade.py`` and ``trace/rays.py``; no kernels here).
 * the background (a colour or a vertical gradient) and the ground (``[ground]``);
 * adaptive anti-aliasing (``[render] samples`` / ``--samples N``; the API's default is one
   ray per pixel, the command line's ``io.scene.DEFAULT_SAMPLES``): every pixel keeps its
-  centre ray, which alone writes depth, normal, ids, level and (u, v), so regression
-  comparisons stay exact; a pixel that differs from a neighbour (coverage, object, a depth
+  centre ray, which writes depth, normal, ids, level, (u, v) and position wherever it hit,
+  so regression comparisons stay exact; a pixel that differs from a neighbour (coverage, object, a depth
   step, a normal jump, a contrast in the displayed colour: :func:`edge_pixels`) gets N - 1
   more rays at fixed stratified positions in its square (:func:`sample_offsets`), traced
   like any secondary ray (refined by the same angular criterion, at the depths chosen for
   the camera: an extra ray's footprint is the pixel's), shaded, shadowed and lit like
   centre rays. Its colour and alpha are the box-filtered mean of its N rays. Where the
-  centre ray missed but others hit, alpha is above 0 while the other channels say
-  "no hit".
+  centre ray missed but others hit, the other channels are those of the nearest extra ray
+  that hit (:func:`_nearest_hit`): a pixel of alpha above 0 has a depth and ids.
 
 The free-form (NURBS) surfaces' pixels take part in every step as the cages' do: they are
 hits of their own rows of the patch shading (``nurbs.scene.with_surfaces``), and the extra
@@ -49,7 +49,7 @@ from subtrace.nurbs.scene import blocked as nurbs_blocked
 from subtrace.nurbs.scene import shade_rays
 from subtrace.runtime import threads as tasks
 from subtrace import config
-from subtrace.shade import (C_A, C_R, CHANNELS, ambient_occlusion, background_pixels,
+from subtrace.shade import (C_A, C_R, C_Z, CHANNELS, ambient_occlusion, background_pixels,
                             background_rows, edge_pixels, ground_occlusion, ground_pixels,
                             ground_points, light, light_array, miss_values, shade,
                             shadow_visibility, smooth_occlusion)
@@ -262,6 +262,34 @@ def ground_plane(scene, cages, camera, nurbs=None):
     return up, height
 
 
+# the automatic camera frames the ground shadows of the directional lights at least this
+# high above the horizon (sin of 20 degrees); a lower light's shadow reaches far, and
+# framing it would leave the objects small
+SHADOW_FRAMING_MIN_SIN = 0.34
+
+
+def ground_shadow_points(scene, cages, points, nurbs=None) -> np.ndarray:
+    """(n,3): ``points`` (of the objects' surface) projected along each directional light
+    of ``scene`` that casts shadows onto its ground (:func:`ground_plane`, with the
+    scene's up), where the automatic camera frames their shadows too; (0,3) without a
+    ground, shadows or such lights."""
+    if scene.ground is None or not scene.render.shadows or not len(points):
+        return np.zeros((0, 3))
+    up, height = ground_plane(scene, cages, scene.camera, nurbs)
+    out = []
+    for lamp in scene.lights:
+        if lamp.direction is None:
+            continue
+        d = np.asarray(lamp.direction, np.float64)
+        down = -float(d @ up) / float(np.linalg.norm(d))
+        if down < SHADOW_FRAMING_MIN_SIN:
+            continue
+        # p + s d meets the plane x . up = height at s = (height - p . up) / (d . up)
+        s = (height - points @ up) / float(d @ up)
+        out.append(points + np.maximum(s, 0.0)[:, None] * d)
+    return np.concatenate(out) if out else np.zeros((0, 3))
+
+
 def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights, rows,
             ground, trace_shadows, tol_rad, dirs, ao=None, ids=None, lit=False):
     """The colour of rays from the eye (pixel centres, or ``dirs``): shadows, ambient
@@ -382,5 +410,18 @@ def _antialias(scene, frame, W, H, closest, patches, planes, lights, ground, tra
         extra = sub[k].astype(np.float64).reshape(len(pix), m).sum(axis=1)
         planes[k, pix] = ((planes[k, pix].astype(np.float64) + extra) / samples).astype(
             np.float32)
+    _nearest_hit(planes, pix, sub, m)
     stats.aa_pixels += len(pix)
     stats.aa_rays += n
+
+
+def _nearest_hit(planes, pix, sub, m) -> None:
+    """The pixels ``pix`` whose centre ray missed (Z = +inf) but an extra ray hit take the
+    channels after the colour and alpha (depth, normal, level, ids, (u, v), position) of
+    their nearest extra ray that hit: ``sub`` (len(CHANNELS), len(pix) * m), each pixel's
+    ``m`` extra rays in turn. A covered pixel then has a depth, as compositors expect."""
+    z = sub[C_Z].reshape(len(pix), m)
+    k = np.argmin(z, axis=1)
+    rows = np.arange(len(pix))
+    take = np.isinf(planes[C_Z, pix]) & np.isfinite(z[rows, k])
+    planes[C_Z:, pix[take]] = sub[C_Z:, rows[take] * m + k[take]]

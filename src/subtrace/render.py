@@ -40,7 +40,7 @@ from subtrace.accel.projection import TILE, no_tiles, project_shells, tiles_byte
 from subtrace.camera import CameraWindow, whole_image, window_offset
 from subtrace.errors import SceneError
 from subtrace.io.limits import check_coordinates, check_valences
-from subtrace.mesh.cage import load_cage, valence_bound
+from subtrace.mesh.cage import load_cage, valence_bound, without_unused_vertices
 from subtrace.nurbs.scene import (has_faces, has_surfaces, load_nurbs, nurbs_pass,
                                   picture_hits, with_surfaces)
 from subtrace.patches.criterion import edge_sampling
@@ -49,7 +49,7 @@ from subtrace.patches.table import build_patch_table, cage_face_shells, restrict
 from subtrace.runtime import threads as tasks
 from subtrace.runtime import warmup
 from subtrace.runtime.memory import let_go, one_block
-from subtrace.picture import ground_plane, lit_in_shading, paint
+from subtrace.picture import ground_plane, ground_shadow_points, lit_in_shading, paint
 from subtrace.shade import (C_OBJECT, C_R, CHANNELS, background_rows, deepest_level,
                             miss_values, patch_shading, shade)
 from subtrace.subdiv.limit import limit_points
@@ -351,10 +351,16 @@ def cage_objects(scene) -> list[int]:
 
 def load_objects(scene):
     """Cages of the scene's objects (scheme / boundary overrides applied), in the order of
-    :func:`cage_objects`."""
-    return [load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code, prim=o.prim,
+    :func:`cage_objects`, their coordinates checked and the vertices no face uses left out
+    (``mesh.cage.without_unused_vertices``: checked first, so a message's vertex number
+    is the file's)."""
+    cages = []
+    for o in (scene.objects[k] for k in cage_objects(scene)):
+        c = load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code, prim=o.prim,
                       time=o.time)
-            for o in (scene.objects[k] for k in cage_objects(scene))]
+        check_coordinates(c.path, c.points, config.MAX_COORDINATE, c.points_box)
+        cages.append(without_unused_vertices(c))
+    return cages
 
 
 def scene_bounds(cages, nurbs=None):
@@ -365,6 +371,22 @@ def scene_bounds(cages, nurbs=None):
     if nurbs is not None:
         bounds.append(nurbs.bounds())
     return np.min([b[0] for b in bounds], axis=0), np.max([b[1] for b in bounds], axis=0)
+
+
+def check_extent(cages, lo, hi) -> None:
+    """SceneError naming the cages when their limit surface's box [lo, hi] is a point
+    (every vertex at one place): nothing an automatic camera could frame (its eye would
+    be the point it looks at)."""
+    scale = max(1.0, float(np.abs(lo).max()), float(np.abs(hi).max()))
+    if float((hi - lo).max()) > 1e-12 * scale:
+        return
+    where = ", ".join(f"{v:.6g}" for v in lo)
+    if len(cages) == 1:
+        raise SceneError(f"the cage has no extent: its vertices all lie at one point "
+                         f"({where}); nothing to frame", path=cages[0].path)
+    names = ", ".join(str(c.path) for c in cages)
+    raise SceneError(f"the cages {names} have no extent: their vertices all lie at one "
+                     f"point ({where}); nothing to frame")
 
 
 def faces_in_view(cages, camera, reach=None):
@@ -436,7 +458,12 @@ def _prepare(scene, cages, stats, nurbs=None, crop=None, compiling=None):
         points = np.concatenate([c.limit(2 if c.n_faces < 20000 else 1 if c.n_faces < 200000
                                          else 0)[0] for c in cages] + extra)
         lo, hi = points.min(axis=0), points.max(axis=0)
-    camera = scene.make_camera(lo, hi, points)
+        if scene.camera.eye is None and nurbs is None:
+            check_extent(cages, lo, hi)
+        # and the shadows on the ground; the eye outside every cage's box
+        points = np.concatenate([points, ground_shadow_points(scene, cages, points, nurbs)])
+        lo, hi = points.min(axis=0), points.max(axis=0)
+    camera = scene.make_camera(lo, hi, points, [c.points_box for c in cages])
     # (shadow and ambient occlusion rays may meet what the camera does not see; the
     # ground's shadows are bounded by where the ground is)
     secondary = bool(scene.lights and scene.render.shadows) or scene.render.ao > 0
@@ -604,8 +631,8 @@ def render_scene(scene, cages=None, threads=None, progress=None, accel=None,
     stats.time_shade = time.perf_counter() - t0
     if crop is not None:  # the tile's pixels of the window
         planes, W, H = _cropped(planes, crop, view)
-    stats.pixels_covered = (int(covered.sum()) if nurbs is None and crop is None
-                            else int(np.count_nonzero(planes[C_OBJECT] >= 0)))
+    # (a pixel whose centre ray missed but an anti-aliasing ray hit is covered too)
+    stats.pixels_covered = int(np.count_nonzero(planes[C_OBJECT] >= 0))
     stats.max_level = deepest_level(planes)
     channels = {name: planes[k].reshape(H, W) for k, name in enumerate(CHANNELS)}
     if sink is not None:  # (free-form surfaces or a crop: one band)
@@ -784,9 +811,11 @@ def result_attributes(result: RenderResult, scene) -> dict:
     # file names only: a header travels with the image, the user's folders need not
     attrs["subtrace:meshes"] = ";".join(Path(o.mesh).name for o in scene.objects)
     attrs["chromaticities"] = REC709_CHROMATICITIES
-    attrs["subtrace:Z"] = "distance from the eye along the pixel's ray (not camera-space z)"
-    attrs["subtrace:P"] = ("world-space hit point of the pixel's centre ray, eye + Z * its "
-                           "unit direction; NaN where it missed (Z = +inf)")
+    attrs["subtrace:Z"] = ("distance from the eye along the pixel's ray (not camera-space z): "
+                           "its centre ray, or where that missed, its nearest "
+                           "anti-aliasing ray that hit")
+    attrs["subtrace:P"] = ("world-space hit point of that ray, eye + Z * its unit "
+                           "direction; NaN where no ray of the pixel hit (Z = +inf)")
     attrs["subtrace:accel"] = result.accel
     attrs["subtrace:samples"] = int(scene.render.samples or 1)  # rays per edge pixel at most
     attrs["subtrace:shadows"] = int(bool(scene.render.shadows and scene.lights))

@@ -41,8 +41,9 @@ from subtrace.trace.tris import LOOP_CELL, TRI, tri_normal
 
 # the planes the shading fills, in this order, and what a pixel whose ray missed holds
 # (R, G, B: the background colour). P.X, P.Y, P.Z: the world-space hit point of the
-# centre ray, eye + Z d (OpenEXR's / Cycles' names), NaN where it missed (Z = +inf: no
-# point)
+# ray, eye + Z d (OpenEXR's / Cycles' names), NaN where it missed (Z = +inf: no point);
+# a pixel's ray is its centre ray, or where that missed its nearest anti-aliasing ray
+# that hit (picture.py)
 CHANNELS = ("R", "G", "B", "A", "Z", "N.X", "N.Y", "N.Z", "level", "patch_id", "object_id",
             "u", "v", "P.X", "P.Y", "P.Z")
 C_R, C_A, C_Z, C_N, C_LEVEL, C_PATCH, C_OBJECT, C_U, C_P = 0, 3, 4, 5, 8, 9, 10, 11, 13

@@ -25,9 +25,14 @@ import numpy as np
 
 from subtrace.errors import SceneError
 
-# RenderStats fields that are one value of the whole render, not a sum over tiles
+# RenderStats fields that are not a sum over tiles but the largest of them: one value of
+# the whole render that every tile has (the table's patches, the faces culled, the
+# fallback), the deepest (grid, level, cap, secondary rays' grid), and the most at once
+# (rounds, the memos' peak bytes). The others are counts and times, summed: the pixels
+# covered are the image's (a tile counts its own pixels), the rest what the tiles did (a
+# patch two tiles reach is built twice; rays of the pixels around a tile are traced again)
 _MAX_FIELDS = frozenset(("patches", "faces_culled", "max_depth", "max_level", "depth_cap",
-                         "accel_fallback", "rounds"))
+                         "accel_fallback", "rounds", "memo_bytes", "secondary_max_depth"))
 
 
 def check_tile(n) -> int:

@@ -100,18 +100,25 @@ def _add_render(sub) -> argparse.ArgumentParser:
         description=(
             "Render a TOML scene, or OBJ cages or USD stages (with the stage's camera and "
             "distant lights, else an automatic camera), as the exact "
-            "Catmull-Clark / Loop limit surface: one ray per pixel, patches refined only "
-            "where a ray reaches them and only until they are below the angular tolerance. "
-            "Without inputs the built-in default scene (Spot) is rendered. Writes a "
-            "multi-channel EXR (R,G,B,A, Z, N.X/N.Y/N.Z, level, patch_id, object_id, u, v)."
+            "Catmull-Clark / Loop limit surface: patches refined only where a ray reaches "
+            "them and only until they are below the angular tolerance, with adaptive "
+            "anti-aliasing (edge pixels get up to --samples rays, 4 by default; the others "
+            "one). What a scene or a stage leaves out, every input gets alike: 1280x720, "
+            "a soft gradient behind, a key and a fill light with shadows, a weak headlight "
+            "and a shadow-catching ground. Without inputs the built-in default scene "
+            "(Spot) is rendered. Writes a "
+            "multi-channel EXR (R,G,B,A, Z, N.X/N.Y/N.Z, level, patch_id, object_id, u, v, "
+            "P.X/P.Y/P.Z), or by the output's extension a picture of the colour."
         ),
     )
     render.add_argument("inputs", nargs="*", metavar="SCENE.toml | CAGE.obj | STAGE.usd",
                         help="one TOML scene, or one or more OBJ cages or USD stages")
     render.add_argument("-o", "--output", metavar="OUT.exr",
                         help="output file (default: the scene's output, else render.exr): "
-                             "the multi-channel EXR, or by its extension an sRGB picture "
-                             "of the colour (.png, .tif with alpha; .jpg)")
+                             "the multi-channel EXR (.exr), or by its extension a picture "
+                             "of the colour in any format OpenImageIO writes: sRGB .png, "
+                             ".jpg, .tif, .bmp, .webp, .tga, ..., linear .hdr; another "
+                             "extension, or none, is an error")
     _add_camera_options(render)
     tol = render.add_mutually_exclusive_group()
     tol.add_argument("--tolerance", metavar="PIXELS",
@@ -134,8 +141,9 @@ def _add_render(sub) -> argparse.ArgumentParser:
     render.add_argument("--no-shadows", dest="shadows", action="store_false", default=None,
                         help="no shadow rays (on by default where the scene has lights)")
     render.add_argument("--transparent", action="store_true", default=None,
-                        help=".png / .tif outputs: alpha 0 where nothing was hit (default: "
-                             "opaque, over the background)")
+                        help="picture outputs that store alpha (.png, .tif, .webp, .tga, "
+                             "...): alpha 0 where nothing was hit (default: opaque, over "
+                             "the background)")
     render.add_argument("--png", action="store_true",
                         help="also write an sRGB PNG preview next to the output (never over "
                              "it)")

@@ -71,6 +71,27 @@ def make_temp(path) -> str:
     raise SubtraceError(f"{target}: cannot create a temporary file in {folder}")
 
 
+def orphaned_temps(path) -> list[str]:
+    """The temporaries of :func:`make_temp` for ``path`` whose process is gone (a Dask
+    worker killed while it wrote a tile or a frame): left behind, as no writer will move
+    or remove them. A live process's temporary (another command writing ``path``) is not
+    among them."""
+    from subtrace.runtime.signals import is_running
+
+    folder, name = os.path.split(os.path.abspath(path_str(path)))
+    head = f".{name}."
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return []
+    out = []
+    for entry in names:
+        pid = entry[len(head):].split(".")[0] if entry.startswith(head) else ""
+        if entry.endswith(".tmp") and pid.isdigit() and not is_running(int(pid)):
+            out.append(os.path.join(folder, entry))
+    return out
+
+
 def remove_temp(temp: str) -> None:
     """Remove the temporary ``temp`` (from :func:`make_temp`), if it is still there."""
     with temp_lock():

@@ -45,7 +45,7 @@ from subtrace.errors import SubtraceError
 from subtrace.io.atomic import atomic_paths, check_writable, open_temp, path_str, reason
 from subtrace.runtime.signals import temp_lock
 from subtrace.runtime.threads import max_threads
-from subtrace.io.formats import DEEP, PICTURE_FORMATS, WITH_ALPHA, picture_format
+from subtrace.io.formats import DEEP, LINEAR, PICTURE_FORMATS, WITH_ALPHA, picture_format
 from subtrace.version import VERSION
 
 CHANNEL_ORDER = ("R", "G", "B", "A", "Z", "N.X", "N.Y", "N.Z", "level", "patch_id", "object_id")
@@ -308,28 +308,42 @@ def write_png(path, rgb_linear) -> None:
 
 
 def write_picture(path, channels: dict, bits: int = 8) -> None:
-    """Write the colour of ``channels`` (R, G, B, and A where the format has it: PNG, TIFF)
-    as an sRGB picture in the format of ``path``'s extension (:data:`PICTURE_FORMATS`),
-    ``bits`` (8, or 16 for PNG and TIFF) per channel. Same temporary-then-rename policy and
-    errors as :func:`write_exr`."""
+    """Write the colour of ``channels`` (R, G, B, and A where the format stores alpha) as a
+    picture in the format of ``path``'s extension (``io.formats.picture_format``): sRGB at
+    ``bits`` (8, or 16 for PNG and TIFF) per channel, or linear floating point for the
+    formats of ``io.formats.LINEAR`` (Radiance HDR, FITS). Same temporary-then-rename
+    policy and errors as :func:`write_exr`."""
     fmt = picture_format(path)
     if fmt is None:
         raise ValueError(f"{path_str(path)}: not a picture format ({sorted(PICTURE_FORMATS)})")
     if bits not in (8, 16) or (bits == 16 and fmt not in DEEP):
         raise ValueError(f"{fmt} pictures take 8 bits per channel" if bits == 16 else
                          f"expected 8 or 16 bits per channel, got {bits}")
+    linear = fmt in LINEAR
     planes = [np.asarray(channels[c], dtype=np.float64) for c in ("R", "G", "B")]
-    encoded = [srgb_encode(x) for x in planes]
-    if fmt in WITH_ALPHA and "A" in channels:
+    encoded = [np.nan_to_num(x) if linear else srgb_encode(x) for x in planes]
+    if "A" in channels and _stores_alpha(fmt):
         encoded.append(np.clip(np.nan_to_num(np.asarray(channels["A"], np.float64)), 0.0, 1.0))
-    top, dtype, kind = (255.0, np.uint8, oiio.UINT8) if bits == 8 else \
-        (65535.0, np.uint16, oiio.UINT16)
-    pixels = np.ascontiguousarray(np.rint(np.stack(encoded, axis=-1) * top).astype(dtype))
+    if linear:
+        pixels = np.ascontiguousarray(np.stack(encoded, axis=-1).astype(np.float32))
+        kind = oiio.FLOAT
+    else:
+        top, dtype, kind = (255.0, np.uint8, oiio.UINT8) if bits == 8 else \
+            (65535.0, np.uint16, oiio.UINT16)
+        pixels = np.ascontiguousarray(np.rint(np.stack(encoded, axis=-1) * top).astype(dtype))
     height, width, n = pixels.shape
     spec = oiio.ImageSpec(width, height, n, kind)
-    spec.attribute("oiio:ColorSpace", "sRGB")
+    spec.attribute("oiio:ColorSpace", "lin_rec709" if linear else "sRGB")
     spec.alpha_channel = 3 if n == 4 else -1
     _write_all([(path, fmt, spec, pixels)])
+
+
+def _stores_alpha(fmt: str) -> bool:
+    """Whether the picture format ``fmt`` stores an alpha channel (its writer says)."""
+    if fmt in WITH_ALPHA:
+        return True
+    out = oiio.ImageOutput.create(fmt)
+    return out is not None and bool(out.supports("alpha"))
 
 
 def srgb_encode(linear) -> np.ndarray:

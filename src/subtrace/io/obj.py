@@ -37,7 +37,7 @@ from subtrace.errors import ObjError, SubtraceWarning
 from subtrace.io.freeform import STATEMENTS as FREEFORM_STATEMENTS
 from subtrace.io.freeform import FreeForm, FreeFormReader
 from subtrace.io.obj_scan import MAX_INDEX, scan
-from subtrace.io.text import decode, read_bytes
+from subtrace.io.text import check_text, decode, read_bytes
 
 DEFAULT_NAME = "default"  # group / object of faces before any `g` / `o`
 DEFAULT_DIFFUSE = (0.8, 0.8, 0.8)  # Kd of a material with no (readable) definition
@@ -120,6 +120,7 @@ def read_obj(path) -> ObjData:
                                        f"{READ_ELSEWHERE[foreign]} extension to read it as "
                                        f"{foreign}")
         raise ObjError(path, None, f"{foreign} files are not read: subtrace reads {READABLE}")
+    check_text(raw, _error(path))  # (a PNG or a gzip named .obj, say)
     # ASCII is valid UTF-8 without a byte-order mark: only other files need checking first
     text = None if raw.isascii() else decode_obj(path, raw)
     source = [raw]

@@ -31,14 +31,15 @@ Schema (every table and key optional unless marked *required*)::
     up     = [0.0, 1.0, 0.0]        # default [0, 1, 0]; must not be along target - eye
                                     #   (the automatic camera uses it too)
     fov    = 30.0                   # vertical field of view, degrees, in (0, 180); default 30
-    width  = 640                    # pixels, 1..32768; default 640
-    height = 480                    # pixels, 1..32768; default 480
+    width  = 1280                   # pixels, 1..32768; default 1280
+    height = 720                    # pixels, 1..32768; default 720
 
     [render]
     tolerance = 1.0                 # angular tolerance in pixels (> 0); default 1 ...
     # tolerance_deg = 0.05          # ... or in degrees (> 0); not both
     background = [0.0, 0.0, 0.0]    # linear RGB in 0..1, or [top, bottom]: a vertical
-                                    #   gradient; default black
+                                    #   gradient; default the gradient
+                                    #   [[0.42, 0.47, 0.54], [0.09, 0.10, 0.12]]
     shadows = true                  # shadow rays towards every [[light]]; default true
     samples = 4                     # rays per pixel at most (adaptive anti-aliasing: edge
                                     #   pixels only), 1..64; default: one ray per pixel in
@@ -49,19 +50,23 @@ Schema (every table and key optional unless marked *required*)::
     transparent = false             # .png / .tif pictures: alpha where nothing was hit
                                     #   (default false: opaque over the background)
     headlight = true                # a directional light from the eye; default true
-    headlight_intensity = 1.0       # >= 0; default 1
+    headlight_intensity = 1.0       # >= 0; default 0.2
     max_memory = "4G"               # memory budget: a number of MiB or a size with a unit
                                     #   (K, M, G, T: powers of 1024); default half of the
                                     #   memory available when the render starts
 
-    [[light]]                       # directional or point lights, any number
+    [[light]]                       # directional or point lights, any number; without
+                                    #   any, a key and a fill light (DEFAULT_LIGHT_RAYS);
+                                    #   light = [] for none
     direction = [-1.0, -1.0, -0.5]  # the direction a directional light travels (from the
                                     #   light into the scene), any non-zero length; or
     # position = [2.0, 4.0, 1.0]    #   a point light's position (1 / distance^2 falloff)
     color     = [1.0, 1.0, 1.0]     # linear RGB in 0..1; default white
     intensity = 1.0                 # >= 0; default 1
 
-    [ground]                        # an optional ground plane, facing the camera's up
+    [ground]                        # a ground plane facing the camera's up; without the
+                                    #   table the default one (its defaults below);
+                                    #   ground = false for none
     height = -0.7                   # along up; default: the objects' lowest point
     color = [0.6, 0.6, 0.6]         # an opaque lit ground; without it the ground is a
                                     #   shadow catcher (the background, darkened by shadows)
@@ -95,27 +100,27 @@ from subtrace.camera import (
     check_view,
 )
 
-DEFAULT_WIDTH = 640
-DEFAULT_HEIGHT = 480
+# The picture defaults, the same for a TOML scene, OBJ cages or USD stages on the command
+# line and a scene built in code: what a scene leaves out it gets from here, what it sets
+# it keeps. 1280x720 through a 30 degree lens, a soft vertical gradient behind, a key and
+# a fill light (the directions they travel, for +Y up and the automatic camera's view:
+# a scene's [[light]] tables, or a USD stage's distant lights, replace them; light = []
+# leaves none) with shadows, a weak headlight, and a shadow-catching ground at the
+# objects' lowest point (ground = false leaves it out).
+DEFAULT_WIDTH, DEFAULT_HEIGHT = 1280, 720
 DEFAULT_FOV_DEG = 30.0
 DEFAULT_UP = (0.0, 1.0, 0.0)
 DEFAULT_TOLERANCE_PX = 1.0
+DEFAULT_BACKGROUND = ((0.42, 0.47, 0.54), (0.09, 0.10, 0.12))  # (top, bottom)
+DEFAULT_LIGHT_RAYS = (((0.45, -1.0, -0.5), 0.75), ((-0.8, -1.0, 0.1), 0.25))  # key, fill
+DEFAULT_HEADLIGHT_INTENSITY = 0.2
+DEFAULT_LIGHT_COLOR = (1.0, 1.0, 1.0)
 # rays per edge pixel at most where neither the scene nor --samples says: the command
 # line's default (subtrace.picture; chosen in BENCHMARKS.md); the API renders one ray per
 # pixel unless asked
 DEFAULT_SAMPLES = 4
 MAX_SAMPLES = 64
 MAX_AO_SAMPLES = 1024
-DEFAULT_BACKGROUND = (0.0, 0.0, 0.0)
-# what OBJ cages rendered without a scene get: a soft vertical gradient, a key and a fill
-# light (directions they travel, for +Y up and the automatic camera's view) and a ground
-# shadow, at 1280x720
-AUTO_WIDTH, AUTO_HEIGHT = 1280, 720
-AUTO_BACKGROUND = ((0.42, 0.47, 0.54), (0.09, 0.10, 0.12))
-AUTO_LIGHTS = (((0.45, -1.0, -0.5), 0.75), ((-0.8, -1.0, 0.1), 0.25))
-AUTO_HEADLIGHT = 0.2
-DEFAULT_HEADLIGHT_INTENSITY = 1.0
-DEFAULT_LIGHT_COLOR = (1.0, 1.0, 1.0)
 
 SCHEMES = {"catmark": "catmark", "catmull-clark": "catmark", "loop": "loop"}
 BOUNDARIES = {
@@ -181,6 +186,11 @@ class Light:
     position: tuple[float, float, float] | None = None
 
 
+DEFAULT_LIGHTS = tuple(
+    Light(tuple(c / math.sqrt(sum(x * x for x in d)) for c in d), intensity=intensity)
+    for d, intensity in DEFAULT_LIGHT_RAYS)
+
+
 @dataclass(frozen=True)
 class Ground:
     """The [ground] table: a plane facing the camera's up at ``height`` along it (None: the
@@ -207,9 +217,9 @@ class CameraSettings:
         their centre), or neither eye nor target (:func:`auto_camera`)."""
         return self.target is None
 
-    def make_camera(self, bounds_min=None, bounds_max=None, points=None) -> Camera:
+    def make_camera(self, bounds_min=None, bounds_max=None, points=None, outside=()) -> Camera:
         """The Camera: explicit, or :func:`auto_camera` framing the bounds (then required)
-        and ``points`` of the surface where given."""
+        and ``points`` of the surface where given, its eye outside the boxes ``outside``."""
         if not self.is_auto:
             return Camera(self.eye, self.target, self.up, self.fov_deg, self.width, self.height)
         if bounds_min is None or bounds_max is None:
@@ -224,7 +234,8 @@ class CameraSettings:
                                  key="eye") from None
             return Camera(self.eye, target, self.up, self.fov_deg, self.width, self.height)
         return auto_camera(
-            bounds_min, bounds_max, self.width, self.height, self.fov_deg, self.up, points
+            bounds_min, bounds_max, self.width, self.height, self.fov_deg, self.up, points,
+            outside,
         )
 
 
@@ -234,8 +245,9 @@ class RenderSettings:
 
     tolerance_px: float | None = DEFAULT_TOLERANCE_PX
     tolerance_deg: float | None = None
-    background: tuple[float, float, float] = DEFAULT_BACKGROUND  # (the top of a gradient)
-    background_bottom: tuple[float, float, float] | None = None  # None: a flat background
+    background: tuple[float, float, float] = DEFAULT_BACKGROUND[0]  # (a gradient's top)
+    # None: a flat background
+    background_bottom: tuple[float, float, float] | None = DEFAULT_BACKGROUND[1]
     headlight: bool = True
     headlight_intensity: float = DEFAULT_HEADLIGHT_INTENSITY
     max_memory: int | None = None  # bytes; None: config.default_max_memory() at render time
@@ -258,8 +270,8 @@ class Scene:
     objects: tuple[SceneObject, ...]
     camera: CameraSettings = CameraSettings()
     render: RenderSettings = RenderSettings()
-    lights: tuple[Light, ...] = ()
-    ground: Ground | None = None
+    lights: tuple[Light, ...] = DEFAULT_LIGHTS
+    ground: Ground | None = Ground()  # None: no ground
     output: str | None = None
     preview: str | None = None
     path: str | None = None
@@ -267,9 +279,9 @@ class Scene:
     # None, whether the lights came from it): read again at each frame's time code
     usd_source: tuple[str, str | None, bool] | None = None
 
-    def make_camera(self, bounds_min=None, bounds_max=None, points=None) -> Camera:
+    def make_camera(self, bounds_min=None, bounds_max=None, points=None, outside=()) -> Camera:
         """See :meth:`CameraSettings.make_camera`."""
-        return self.camera.make_camera(bounds_min, bounds_max, points)
+        return self.camera.make_camera(bounds_min, bounds_max, points, outside)
 
 
 # --------------------------------------------------------------------------------------
@@ -315,8 +327,8 @@ def scene_from_dict(d: dict, path=None, base_dir=None, *, text: str | None = Non
     objects = _objects(ctx, d, base_dir)
     camera = _camera(ctx, d.get("camera", {}))
     render = _render(ctx, d.get("render", {}))
-    lights = _lights(ctx, d.get("light", []))
-    ground = _ground(ctx, d["ground"]) if "ground" in d else None
+    lights = _lights(ctx, d["light"]) if "light" in d else DEFAULT_LIGHTS
+    ground = _ground(ctx, d["ground"]) if "ground" in d else Ground()
     output = _out_path(ctx, d, "output", base_dir)
     preview = _out_path(ctx, d, "preview", base_dir)
     return Scene(
@@ -333,12 +345,12 @@ def scene_from_dict(d: dict, path=None, base_dir=None, *, text: str | None = Non
 
 def scene_for_meshes(meshes, scheme: str | None = None, camera: str | None = None,
                      time: float | None = None) -> Scene:
-    """A default scene for OBJ files named on the command line: the automatic camera at
-    1280x720, a key and a fill light with shadows, a weak headlight, a soft vertical
-    gradient and a shadow-catching ground below the objects (AUTO_*). A USD stage brings its
-    meshes, its camera (``camera``: the prim path of one, default its first) and its distant
-    lights (:func:`subtrace.io.usd.usd_scene_table`), which replace the automatic ones, all
-    at the time code ``time`` (None: the stage's still, :func:`subtrace.io.usd.read_stage`).
+    """The scene of cages named on the command line: the automatic camera and the picture
+    defaults (``DEFAULT_*``: the same a TOML scene of these objects alone gets). A USD stage
+    brings its meshes, its camera (``camera``: the prim path of one, default its first) and
+    its distant lights (:func:`subtrace.io.usd.usd_scene_table`), which replace the default
+    ones, all at the time code ``time`` (None: the stage's still,
+    :func:`subtrace.io.usd.read_stage`).
 
     Relative paths are relative to the working directory.
     """
@@ -364,20 +376,13 @@ def scene_for_meshes(meshes, scheme: str | None = None, camera: str | None = Non
     except SceneError as err:
         key = "--scheme" if err.key and err.key.endswith(".scheme") else None
         raise SceneError(err.problem, key=key) from None
-    lights = scene.lights or tuple(  # (a USD stage's distant lights, if it has some)
-        Light(tuple(c / math.sqrt(sum(c * c for c in d)) for c in d), intensity=intensity)
-        for d, intensity in AUTO_LIGHTS)
-    render = replace(scene.render, background=AUTO_BACKGROUND[0],
-                     background_bottom=AUTO_BACKGROUND[1],
-                     headlight_intensity=AUTO_HEADLIGHT)
     if time is not None:
         scene = replace(scene, objects=tuple(replace(o, time=float(time)) if is_usd(o.mesh)
                                              else o for o in scene.objects))
     if usd is not None:
         scene = replace(scene, usd_source=(os.path.abspath(usd["stage"]), usd["camera"],
                                            usd["lights"]))
-    return replace(scene, camera=replace(scene.camera, width=AUTO_WIDTH, height=AUTO_HEIGHT),
-                   render=render, lights=lights, ground=Ground())
+    return scene
 
 
 def _read_text(path: str) -> str:
@@ -555,8 +560,11 @@ def _lights(ctx, raw) -> tuple[Light, ...]:
     return tuple(lights)
 
 
-def _ground(ctx, table) -> Ground:
+def _ground(ctx, table) -> Ground | None:
+    """The [ground] table, or ``ground = false`` (no ground) / ``true`` (the default one)."""
     where = ("ground",)
+    if isinstance(table, bool):
+        return Ground() if table else None
     table = ctx.table(where, table, "[ground]")
     ctx.check_keys(where, table, _GROUND_KEYS)
     values = {}
@@ -588,6 +596,9 @@ def _out_path(ctx, d: dict, key: str, base_dir: str) -> str | None:
     value = d[key]
     if not isinstance(value, str) or not value.strip():
         raise ctx.error((key,), f"expected a file name in quotes, got {show_value(value)}")
+    if key == "preview" and not value.lower().endswith(".png"):
+        raise ctx.error((key,), f"a preview is an 8-bit sRGB PNG: give a file name ending in "
+                                f".png, not {show_value(value)}")
     return os.path.normpath(os.path.join(base_dir, os.path.expanduser(value)))
 
 

@@ -471,6 +471,19 @@ def _lowest_limit(cage: Cage, up: np.ndarray) -> float:
     return float((cage.restricted(near).limit(1)[0] @ up).min())
 
 
+def without_unused_vertices(cage: Cage) -> Cage:
+    """``cage`` without the vertices no face uses (``v`` lines of an OBJ file that no face
+    names): :meth:`Cage.restricted` to all its faces, so the surface, the tags on used
+    vertices and the ptex ids are the same; ``cage`` itself when every vertex is used. An
+    unused vertex is no part of the limit surface, but its level-1 point is among the
+    limit points that frame the automatic camera and set the ground's height."""
+    used = np.zeros(len(cage.points), bool)
+    used[cage.face_verts] = True
+    if used.all():
+        return cage
+    return cage.restricted(np.ones(cage.n_faces, bool))
+
+
 def valence_bound(cage: Cage) -> np.ndarray:
     """(n,) int64: each vertex's valence (its edges) where the topology is built, else an
     upper bound from the face lists alone: two edges for each face at the vertex."""

@@ -236,8 +236,10 @@ def shade_rays(nurbs: NurbsScene, frame, dirs, tol_rad, offset, t, normals, pix_
                planes) -> None:
     """Rays from the eye along ``dirs`` (n,3) (extra anti-aliasing rays) whose NURBS hit
     is nearer than ``t`` (n,) (their subdivision hits): ``t``, ``normals``, ``pix_patch``
-    as :func:`picture_hits` writes them, and in ``planes`` (len(CHANNELS), n) the channels
-    the picture reads of them (A, Z, N, P, object_id)."""
+    as :func:`picture_hits` writes them, and in ``planes`` (len(CHANNELS), n) every channel
+    but the colour, as the pixels' pass writes them (A, Z, N, level, patch_id (the
+    surface), object_id, u, v, P: a pixel whose centre ray missed takes them from its
+    nearest extra ray that hit, ``picture._nearest_hit``)."""
     eye = np.repeat(frame[0][None], len(dirs), axis=0)
     hits = trace_rays(nurbs.model, nurbs.bvh, eye, dirs, tol_rad)
     hits.patch[~(hits.t < t)] = -1
@@ -247,7 +249,13 @@ def shade_rays(nurbs: NurbsScene, frame, dirs, tol_rad, offset, t, normals, pix_
     for k in range(3):
         planes[C_N + k, near] = normals[near, k]
         planes[C_P + k, near] = frame[0, k] + t[near] * dirs[near, k]
-    planes[C_OBJECT, near] = nurbs.surface_object[pix_patch[near] - offset]
+    surface = pix_patch[near] - offset
+    planes[C_OBJECT, near] = nurbs.surface_object[surface]
+    planes[C_PATCH, near] = surface
+    planes[C_LEVEL, near] = hits.level[near]
+    if len(near):
+        planes[C_U:C_U + 2, near] = hit_geometry(nurbs.model, hits.patch[near],
+                                                 hits.st[near])[2].T
 
 
 def blocked(nurbs: NurbsScene, origins, dirs, tmax, cone, tol_rad) -> np.ndarray:

@@ -79,8 +79,9 @@ def isolated_depths(obj, faces, cap, eye, tol_rad, record=None, record_depth=0, 
         out[ok] = stencil_depths(obj.level, obj.points, faces[ok], corner[ok], valence[ok],
                                  cap[ok], eye, tol_rad, sub)
         rest = None if boxes is None else tuple(b[~ok] for b in boxes)
+        # (called with no faces too: the record gets its levels, empty ones)
         out[~ok] = isolated_depths(obj, faces[~ok], cap[~ok], eye, tol_rad, record,
-                                   record_depth, rest, max_faces) if (~ok).any() else 0
+                                   record_depth, rest, max_faces)
         if boxes is not None:
             for b, part, other in zip(boxes, sub, rest):
                 b[ok], b[~ok] = part, other

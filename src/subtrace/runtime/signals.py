@@ -9,8 +9,11 @@ every thread and leaves them to one watcher thread that waits for them with ``si
 On a signal the watcher takes the lock that guards the temporaries, removes every
 temporary file still registered (:mod:`subtrace.io.atomic` registers each one when it
 creates it and forgets it when it moves it into place or removes it), ends the child
-processes registered here (the kernel compiler of :mod:`subtrace.runtime.warmup`), prints
-``subtrace: interrupted`` and ends the process with ``os._exit``. Holding the lock to the
+processes registered here (the kernel compiler of :mod:`subtrace.runtime.warmup`) and
+every descendant (a local Dask cluster's workers), waits until they are gone, runs the
+clean-ups registered here (:func:`register_cleanup`: a tiled Dask job's tiles, and what
+the killed workers were writing), prints ``subtrace: interrupted`` and ends the process
+with ``os._exit``. Holding the lock to the
 end means no temporary can be created or moved into place after the clean-up: a
 destination is either the complete earlier file or the complete new one.
 
@@ -36,7 +39,10 @@ MESSAGE = b"subtrace: interrupted\n"
 _lock = threading.RLock()  # held by the watcher from a signal to the process's end
 _temps: set[str] = set()
 _children: list = []
+_cleanups: list = []
 _state = {"installed": False}
+# how long the watcher waits for the processes it killed to be gone before its clean-ups
+_KILL_WAIT_S = 0.5
 
 
 def temp_lock() -> threading.RLock:
@@ -66,6 +72,38 @@ def forget_child(proc) -> None:
     with _lock:
         if proc in _children:
             _children.remove(proc)
+
+
+def register_cleanup(fn) -> None:
+    """Call ``fn()`` if this process is interrupted, once its children and descendants are
+    gone (nothing of theirs can write any more): files they leave that are no output."""
+    with _lock:
+        _cleanups.append(fn)
+
+
+def forget_cleanup(fn) -> None:
+    with _lock:
+        if fn in _cleanups:
+            _cleanups.remove(fn)
+
+
+def is_running(pid: int) -> bool:
+    """Whether process ``pid`` exists and is not a zombie (Linux's /proc; elsewhere:
+    whether it exists)."""
+    if os.path.isdir("/proc"):
+        try:
+            with open(f"/proc/{pid}/stat", "rb") as fh:
+                stat = fh.read()
+        except OSError:
+            return False
+        return stat[stat.rindex(b")") + 2:][:1] != b"Z"
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        pass
+    return True
 
 
 def install() -> None:
@@ -125,16 +163,33 @@ def _watch(taken) -> None:
             proc.kill()
         except OSError:
             pass
-    for pid in _descendants(os.getpid()):  # (a local Dask cluster's worker processes)
+    killed = _descendants(os.getpid())  # (a local Dask cluster's worker processes)
+    for pid in killed:
         try:
             os.kill(pid, signal.SIGKILL)
         except OSError:
             pass
+    if _cleanups:
+        _gone([p.pid for p in _children] + killed)
+        for fn in _cleanups:
+            try:
+                fn()
+            except Exception:  # noqa: BLE001 - (the process ends: the rest still run)
+                pass
     try:
         os.write(2, MESSAGE)
     except OSError:
         pass
     os._exit(EXIT_CODES.get(sig, 128 + int(sig)))
+
+
+def _gone(pids) -> None:
+    """Wait (up to ``_KILL_WAIT_S``) until the processes ``pids`` have ended."""
+    import time
+
+    end = time.monotonic() + _KILL_WAIT_S
+    while any(is_running(p) for p in pids) and time.monotonic() < end:
+        time.sleep(0.005)
 
 
 def exit_now(code: int):
@@ -151,4 +206,5 @@ def exit_now(code: int):
 
 
 __all__ = ["install", "unblock", "temp_lock", "register_temp", "forget_temp",
-           "register_child", "forget_child", "exit_now", "EXIT_CODES"]
+           "register_child", "forget_child", "register_cleanup", "forget_cleanup",
+           "is_running", "exit_now", "EXIT_CODES"]
