@@ -6,7 +6,9 @@ main thread is inside a Numba kernel, an OpenImageIO write or a thread join, it 
 that returns (seconds, for a large trace chunk or image). So a process of its own
 (:func:`install`, called first by :func:`subtrace.cli.main.run`) blocks both signals in
 every thread and leaves them to one watcher thread that waits for them with ``sigwait``.
-On a signal the watcher takes the lock that guards the temporaries, removes every
+On a signal the watcher takes the lock that guards the temporaries, points the standard
+error of the threads still running at /dev/null (the one line it prints at the end is the
+command's output), removes every
 temporary file still registered (:mod:`subtrace.io.atomic` registers each one when it
 creates it and forgets it when it moves it into place or removes it), ends the child
 processes registered here (the kernel compiler of :mod:`subtrace.runtime.warmup`) and
@@ -153,6 +155,9 @@ def _descendants(root: int) -> list[int]:
 def _watch(taken) -> None:
     sig = signal.sigwait(taken)
     _lock.acquire()  # never released: the process ends here
+    # the other threads run on until the end: what they say now (a thread relaunching a
+    # process killed below) is not the command's output, which is the one line at the end
+    out = _quiet_stderr()
     for path in list(_temps):
         try:
             os.unlink(path)
@@ -177,18 +182,42 @@ def _watch(taken) -> None:
             except Exception:  # noqa: BLE001 - (the process ends: the rest still run)
                 pass
     try:
-        os.write(2, MESSAGE)
+        os.write(out, MESSAGE)
     except OSError:
         pass
     os._exit(EXIT_CODES.get(sig, 128 + int(sig)))
 
 
+def _quiet_stderr() -> int:
+    """Point file descriptor 2 at /dev/null (for this process's threads and the children
+    it starts from now on); returns a descriptor of the stderr it had (2 where that fails)."""
+    try:
+        out = os.dup(2)
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, 2)
+        os.close(null)
+        return out
+    except OSError:
+        return 2
+
+
 def _gone(pids) -> None:
-    """Wait (up to ``_KILL_WAIT_S``) until the processes ``pids`` have ended."""
+    """Wait (up to ``_KILL_WAIT_S``) until the processes ``pids`` have ended, killing the
+    descendants that appear meanwhile too (a thread of this process relaunching a helper
+    process it lost)."""
     import time
 
+    pids = set(pids)
     end = time.monotonic() + _KILL_WAIT_S
-    while any(is_running(p) for p in pids) and time.monotonic() < end:
+    while time.monotonic() < end:
+        for pid in set(_descendants(os.getpid())) - pids:
+            pids.add(pid)
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except OSError:
+                pass
+        if not any(is_running(p) for p in pids):
+            break
         time.sleep(0.005)
 
 
