@@ -254,6 +254,14 @@ def build_isolated(obj, faces, depth, eye=None, tol_rad=None, record=None, ring=
     above sharpness 1: ``config.SHELL_CHAIKIN_MARGIN``), so no point of either is farther
     than the diagonal from the other.
     """
+    return _packed(*isolated_parts(obj, faces, depth, eye, tol_rad, record, ring), ring)
+
+
+def isolated_parts(obj, faces, depth, eye=None, tol_rad=None, record=None, ring=False):
+    """:func:`build_isolated`'s result before it is put in order: ``(subs, cells)``, a list
+    per array of its layout, the arrays of each as they were made (:func:`packed_order`
+    gives the order, :func:`rows_in_order` the rows): for a caller that copies the nets
+    somewhere anyway (``trace.pools.Pieces.append``) and can take them as they are."""
     options = obj.cage.options
     faces = np.asarray(faces, dtype=np.int64)
     depth = np.broadcast_to(np.asarray(depth, dtype=np.int64), faces.shape)
@@ -267,7 +275,7 @@ def build_isolated(obj, faces, depth, eye=None, tol_rad=None, record=None, ring=
     rest = np.nonzero(~maps.ok)[0]
     if len(rest):
         _by_topology(obj, faces, depth, rest, eye, tol_rad, record, subs, cells)
-    return _packed(subs, cells, ring)
+    return subs, cells
 
 
 def _by_topology(obj, faces, depth, rest, eye, tol_rad, record, subs, cells):
@@ -339,23 +347,19 @@ def _add_part(subs, cells, part, roots):
 
 
 def _packed(subs, cells, ring):
-    """:func:`build_isolated`'s result from its lists of arrays ``subs``, ``cells``: the
-    pieces level by level, each level's by patch and then by corner in their parent (those
-    of one corner in the order they were made: the topological path's order, save for the
-    patches that the maps take over below their root), the cells by patch. Each array is
-    written once, each list's rows scattered to their places (concatenating the pieces'
-    nets and then taking them in order cost twice as much on the chess pieces' 331,283)."""
+    """:func:`build_isolated`'s result from its lists of arrays ``subs``, ``cells``
+    (:func:`isolated_parts`), in :func:`packed_order`. Each array is written once, each
+    list's rows scattered to their places (concatenating the pieces' nets and then taking
+    them in order cost twice as much on the chess pieces' 331,283)."""
+    order, cell_order = packed_order(subs, cells)
     if subs[0]:
-        root, level, i0, j0 = (np.concatenate(a) for a in subs[:4])
-        order = np.lexsort(((i0 & 1) + 3 * (j0 & 1) - 2 * (i0 & j0 & 1), root, level))
-        out_subs = tuple(_in_order(a, order) for a in subs)
+        out_subs = tuple(rows_in_order(a, order) for a in subs)
     else:
         empty = np.zeros(0, np.int64)
         out_subs = (empty,) * 4 + (np.zeros((0, 4, 4, 3)), empty, np.zeros((0, 3)),
                     np.zeros((0, 3)))
     if cells[0]:
-        order = np.argsort(np.concatenate(cells[0]), kind="stable")
-        out_cells = tuple(_in_order(a, order) for a in cells)
+        out_cells = tuple(rows_in_order(a, cell_order) for a in cells)
     else:
         empty = np.zeros(0, np.int64)
         out_cells = ((empty,) * 3 + (np.zeros((0, 4, 3)), np.zeros((0, 4, 3)))
@@ -363,8 +367,24 @@ def _packed(subs, cells, ring):
     return out_subs, out_cells
 
 
-def _in_order(arrays, order):
-    """The rows of the concatenation of ``arrays`` (a list) taken in ``order``."""
+def packed_order(subs, cells):
+    """``(order, cell_order)``: the rows (in the concatenation of each list of
+    :func:`isolated_parts`' ``subs``, ``cells``) of :func:`build_isolated`'s pieces, level
+    by level, each level's by patch and then by corner in their parent (those of one corner
+    in the order they were made: the topological path's order, save for the patches that
+    the maps take over below their root), and of its cells, by patch."""
+    if subs[0]:
+        root, level, i0, j0 = (np.concatenate(a) for a in subs[:4])
+        order = np.lexsort(((i0 & 1) + 3 * (j0 & 1) - 2 * (i0 & j0 & 1), root, level))
+    else:
+        order = np.zeros(0, np.int64)
+    cell_order = (np.argsort(np.concatenate(cells[0]), kind="stable") if cells[0]
+                  else np.zeros(0, np.int64))
+    return order, cell_order
+
+
+def rows_in_order(arrays, order):
+    """The rows of the concatenation of ``arrays`` (a list of arrays) taken in ``order``."""
     first = np.asarray(arrays[0])
     out = np.empty((len(order),) + first.shape[1:], dtype=first.dtype)
     flat = out.reshape(len(order), -1)
