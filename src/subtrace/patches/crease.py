@@ -31,9 +31,14 @@ then its smooth mask (what ``subdiv/limit.py`` does through topology).
 :func:`crease_where` finds the quads (and which side is creased, with the sharpness of each
 of the two opposite sides), :func:`crease_depths` and :func:`crease_pieces` do the depth
 choice's and the pieces' refinement with the maps, in each patch's canonical frame (turned so
-that the crease is side 0 or 2: a rotation, which keeps the normals), its results put back in
-the patch's own frame. The results equal the topological path's to rounding
-(tests/test_crease.py compares them); ``ENABLED`` False sends every patch through topology.
+that the crease is its side 0, the opposite one side 2: a rotation, which keeps the normals),
+its results put back in the patch's own frame. Where a crease ends or meets another, the
+patches there go through topology, and the maps take over their frontier's faces along the
+crease level by level (``isolate._Maps``). (Creases on two opposite sides of a grid happen on
+a cage's own quads only: one level down, the two creases are two quads apart.) The results
+equal the topological path's to rounding (tests/test_crease.py compares them, and the
+pieces with OpenSubdiv's limit surface); ``ENABLED`` False sends every patch through
+topology.
 """
 
 from __future__ import annotations
