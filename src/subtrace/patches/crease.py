@@ -114,7 +114,13 @@ def crease_faces(level, options, faces):
     s_lo, s_hi = np.zeros(m, np.float32), np.zeros(m, np.float32)
     if options.scheme != "catmark" or m == 0 or not ENABLED:
         return ok, side, s_lo, s_hi
-    at = np.nonzero(_plain_corners(level, faces))[0]
+    # (first the quads with a semi-sharp side: the others, most of a frontier around
+    # extraordinary vertices, cost one look at their sides)
+    fo = level.face_offsets
+    sides = level.edge_sharpness[level.face_edges[np.minimum(
+        fo[faces][:, None] + np.arange(4), len(level.face_edges) - 1)]]
+    at = np.nonzero(((sides > 0) & (sides < INF_SHARP)).any(axis=1))[0]
+    at = at[_plain_corners(level, faces[at])]
     if not len(at):
         return ok, side, s_lo, s_hi
     grid = control_grids(level, faces[at]).reshape(-1, 16)
