@@ -213,22 +213,33 @@ class Growable:
             if end > len(buf):
                 self._store[name] = grown(buf, start, max(end, 2 * len(buf)))
 
-    def put(self, group, **values):
+    def put(self, group, order=None, **values):
         """Append rows to every array of ``group`` (zeros where no value is given); returns
-        the first new row. A value may be a list of arrays: their rows one after another."""
+        the first new row. A value may be a list of arrays, whose rows are taken one after
+        another, or with ``order`` in that order (row k is their row ``order[k]``: each is
+        written once, at its place)."""
         start = self._used[group]
         first = next(iter(values.values()))
         end = start + (sum(len(a) for a in first) if isinstance(first, list) else len(first))
         self._grow(group, end)
+        at = None
+        if order is not None:
+            at = np.empty(len(order), np.int64)
+            at[order] = np.arange(start, end)
         for name in self.GROUPS[group]:
             value = values.get(name, 0)
             if not isinstance(value, list):
                 self._store[name][start:end] = value
                 continue
-            at = start
+            store = self._store[name].reshape(len(self._store[name]), -1)
+            row = start if at is None else 0
             for a in value:
-                self._store[name][at:at + len(a)] = a
-                at += len(a)
+                n = len(a)
+                if at is None:
+                    store[row:row + n] = a.reshape(n, -1)
+                else:
+                    store[at[row:row + n]] = a.reshape(n, -1)
+                row += n
         self._used[group] = end
         self._refresh()
         return start
@@ -258,8 +269,8 @@ class Pieces(Growable):
         ``side`` (m,4)) made of ``subs`` and ``cells`` (see
         :func:`~subtrace.patches.isolate.build_isolated`; or its lists as they were made,
         :func:`~subtrace.patches.isolate.isolated_parts`, whose nets, cell corners and
-        normals are then stored as they are, not put in order first); each piece samples
-        its sides as finely as the pieces beside it
+        normals are then written once, into the store at their places, not put in order
+        first); each piece samples its sides as finely as the pieces beside it
         (:func:`~subtrace.patches.isolate.item_sides`)."""
         net_at = cell_at = None  # (the row of each piece's net, cell's corners, as made)
         if isinstance(subs[0], list):
@@ -285,10 +296,10 @@ class Pieces(Growable):
                 break
             depth_i[up] = low[up]
             item_sides(first, count, level, i0, j0, depth_i, patch_side, item_side)
-        n0 = self.put("nets", nets=nets)
-        c0 = self.put("cells", cells=cp, normals=cn)
+        # (the nets and corners as made go to their places in order: each patch's together)
+        n0 = self.put("nets", net_at, nets=nets)
+        c0 = self.put("cells", cell_at, cells=cp, normals=cn)
         if cell_at is None:
-            net_at, cell_at = np.arange(len(sr)), np.arange(len(cr))
             c_lo, c_hi = cp.min(axis=1), cp.max(axis=1)
         else:
             c_lo = rows_in_order([a.min(axis=1) for a in cp], cell_at) if cp else _NO_BOX
@@ -298,7 +309,7 @@ class Pieces(Growable):
         i_start, first, count = self._put_grouped(
             root[order], None,
             kind=np.r_[np.zeros(len(sr), np.int8), np.ones(len(cr), np.int8)][order],
-            ref=np.r_[n0 + net_at, c0 + cell_at][order],
+            ref=np.r_[n0 + np.arange(len(sr)), c0 + np.arange(len(cr))][order],
             level=level, i0=i0, j0=j0, depth_i=depth_i, side=item_side, lo=lo, hi=hi,
             orient=np.ones(len(root), np.int8))
         s0 = self.put("slots", patch=patches, first=i_start + first, count=count,
