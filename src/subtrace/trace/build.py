@@ -8,7 +8,7 @@ import numpy as np
 from subtrace.lines.items import box_nets, loop_regular
 from subtrace.mesh.topology import compact
 from subtrace.patches.basis import BOX_PAD
-from subtrace.patches.isolate import build_isolated
+from subtrace.patches.isolate import isolated_parts
 from subtrace.patches.isolate_loop import build_loop_isolated
 from subtrace.trace.tris import tri_nets_as_pieces
 
@@ -33,7 +33,8 @@ def build_requested(table, requested, depths, edge_depth, iso, round_no, stats, 
         ids = requested[s:e]
         o = table.objects[int(obj[s])]
         if quad[s]:
-            subs, cells = build_isolated(o, table.face[ids], dep[s:e], eye, tol_rad,
+            # (as made: the pool puts the pieces in order, their nets stay where they are)
+            subs, cells = isolated_parts(o, table.face[ids], dep[s:e], eye, tol_rad,
                                          record.get(int(obj[s])))
             n_sub, n_cell = iso.append(ids, dep[s:e], np.repeat(dep[s:e], 4), subs, cells,
                                        round_no)

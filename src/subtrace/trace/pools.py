@@ -28,7 +28,7 @@ from subtrace import config
 from subtrace.accel.projection import TILE
 from subtrace.patches.basis import BOX_PAD, net_bounds
 from subtrace.patches.groups import GROUP, grouped_layout
-from subtrace.patches.isolate import item_sides
+from subtrace.patches.isolate import item_sides, packed_order, rows_in_order
 from subtrace.trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
 from subtrace.trace.prims import (
     M_COUNTS, M_MADE, M_PEAK_CELLS, M_PEAK_NETS, M_PEAK_NODES, memo_restart,
@@ -213,14 +213,33 @@ class Growable:
             if end > len(buf):
                 self._store[name] = grown(buf, start, max(end, 2 * len(buf)))
 
-    def put(self, group, **values):
+    def put(self, group, order=None, **values):
         """Append rows to every array of ``group`` (zeros where no value is given); returns
-        the first new row."""
+        the first new row. A value may be a list of arrays, whose rows are taken one after
+        another, or with ``order`` in that order (row k is their row ``order[k]``: each is
+        written once, at its place)."""
         start = self._used[group]
-        end = start + len(next(iter(values.values())))
+        first = next(iter(values.values()))
+        end = start + (sum(len(a) for a in first) if isinstance(first, list) else len(first))
         self._grow(group, end)
+        at = None
+        if order is not None:
+            at = np.empty(len(order), np.int64)
+            at[order] = np.arange(start, end)
         for name in self.GROUPS[group]:
-            self._store[name][start:end] = values.get(name, 0)
+            value = values.get(name, 0)
+            if not isinstance(value, list):
+                self._store[name][start:end] = value
+                continue
+            store = self._store[name].reshape(len(self._store[name]), -1)
+            row = start if at is None else 0
+            for a in value:
+                n = len(a)
+                if at is None:
+                    store[row:row + n] = a.reshape(n, -1)
+                else:
+                    store[at[row:row + n]] = a.reshape(n, -1)
+                row += n
         self._used[group] = end
         self._refresh()
         return start
@@ -248,9 +267,15 @@ class Pieces(Growable):
     def append(self, patches, depth, side, subs, cells, round_no):
         """Slots for ``patches`` (grid depths ``depth`` (m,), how their sides are sampled
         ``side`` (m,4)) made of ``subs`` and ``cells`` (see
-        :func:`~subtrace.patches.isolate.build_isolated`); each piece samples its sides as
-        finely as the pieces beside it (:func:`~subtrace.patches.isolate.item_sides`)."""
-        (sr, sl, si, sj, nets, sd, lo_s, hi_s), (cr, ci, cj, cp, cn) = subs, cells
+        :func:`~subtrace.patches.isolate.build_isolated`; or its lists as they were made,
+        :func:`~subtrace.patches.isolate.isolated_parts`, whose nets, cell corners and
+        normals are then written once, into the store at their places, not put in order
+        first); each piece samples its sides as finely as the pieces beside it
+        (:func:`~subtrace.patches.isolate.item_sides`)."""
+        net_at = cell_at = None  # (the row of each piece's net, cell's corners, as made)
+        if isinstance(subs[0], list):
+            subs, cells, net_at, cell_at = _in_order(subs, cells)
+        (sr, sl, si, sj, nets, sd, lo_s, hi_s), (cr, ci, cj, cp, cn) = subs, cells[:5]
         root = np.concatenate([sr, cr])
         order = np.argsort(root, kind="stable")
         level = np.r_[sl, depth[cr]][order]
@@ -271,10 +296,16 @@ class Pieces(Growable):
                 break
             depth_i[up] = low[up]
             item_sides(first, count, level, i0, j0, depth_i, patch_side, item_side)
-        n0 = self.put("nets", nets=nets)
-        c0 = self.put("cells", cells=cp, normals=cn)
-        lo = np.concatenate([lo_s, cp.min(axis=1)])[order]
-        hi = np.concatenate([hi_s, cp.max(axis=1)])[order]
+        # (the nets and corners as made go to their places in order: each patch's together)
+        n0 = self.put("nets", net_at, nets=nets)
+        c0 = self.put("cells", cell_at, cells=cp, normals=cn)
+        if cell_at is None:
+            c_lo, c_hi = cp.min(axis=1), cp.max(axis=1)
+        else:
+            c_lo = rows_in_order([a.min(axis=1) for a in cp], cell_at) if cp else _NO_BOX
+            c_hi = rows_in_order([a.max(axis=1) for a in cp], cell_at) if cp else _NO_BOX
+        lo = np.concatenate([lo_s, c_lo])[order]
+        hi = np.concatenate([hi_s, c_hi])[order]
         i_start, first, count = self._put_grouped(
             root[order], None,
             kind=np.r_[np.zeros(len(sr), np.int8), np.ones(len(cr), np.int8)][order],
@@ -407,6 +438,23 @@ class Pieces(Growable):
                            a["lo"], a["hi"], a["nets"],
                            a["cells"].reshape(-1, 3), a["normals"], a["touched"], a["orient"],
                            a["samples"], a["nets"].reshape(-1, 16, 3))
+
+
+_NO_BOX = np.zeros((0, 3))
+
+
+def _in_order(subs, cells):
+    """``(subs, cells, net_at, cell_at)``: :func:`~subtrace.patches.isolate.isolated_parts`'
+    lists as :func:`~subtrace.patches.isolate.build_isolated`'s arrays in order, but the
+    nets, the cells' corners and normals left as lists as made (``net_at``, ``cell_at``:
+    the row in those of each piece and cell in order)."""
+    order, cell_order = packed_order(subs, cells)
+    empty = np.zeros(0, np.int64)
+    subs = tuple(a if k == 4 else rows_in_order(a, order) if a else
+                 (_NO_BOX if k >= 6 else empty) for k, a in enumerate(subs))
+    cells = tuple(a if k in (3, 4) else rows_in_order(a, cell_order) if a else empty
+                  for k, a in enumerate(cells))
+    return subs, cells, order, cell_order
 
 
 class Memos:
