@@ -491,8 +491,9 @@ def _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, src, s, lev0, ci0, 
 #
 # Rays of neighbouring pixels descend the same nodes of a patch's quadtree. A thread keeps
 # what its rays split: ``mem`` = (root node of each item (I,) or -1, first of the four
-# children of each node (N,) or -1, each node's padded box (N,6), a block's slab (N,5): a
-# normal and the range of the normal coordinate of its net (see :func:`_cell_slab`), each
+# children of each node (N,) or -1, each node's padded box (N,6), a block's slab (N,6): a
+# normal and the range of the normal coordinate of its net (see :func:`_cell_slab`; for
+# any-hit rays every node's; column 5 a node's own bound, :func:`_covers`), each
 # node's row (N,) in the net store (an inner node whose children are split in turn), in
 # the cell store (a node whose children are blocks: their frames; a block: its corners and
 # flags, ``BLOCK_FLAGS``), or -1 (not yet), the net store (.,4,4,3), the cell store ((.,3),
@@ -566,7 +567,7 @@ def _expand(node, parent, ci, cj, lev, pd, child, box, slab, data, m_nets, m_cel
         else:  # its children are blocks: their corners come from the piece's own net
             src, s = work, 0
     if bound:
-        slab[node, 0] = _interpolation_bound(src, s, 1.0)
+        slab[node, 5] = _interpolation_bound(src, s, 1.0)
     _split(src, s, work, base)
     if lev + 2 == pd:  # (its net is not needed again: its data holds the frames)
         data[node] = _store_frame(src, s, work, base, m_cells, cnt)
@@ -574,7 +575,7 @@ def _expand(node, parent, ci, cj, lev, pd, child, box, slab, data, m_nets, m_cel
     for q in range(4):
         lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(work, base + q)
         m = new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, NOT_YET)
-        if lev + 2 == pd:  # a block: its slab too
+        if lev + 2 == pd or bound:  # a block (or an any-hit ray's node): its slab too
             _cell_slab(work, base + q, slab, m)
     child[node] = first
     return first
@@ -695,8 +696,13 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop, stop):
             node = new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2,
                              _store_net(m_nets, cnt, nets, nk) if pd > 1 else NOT_YET)
             if pd == 1 or stop > -np.inf:  # (a block's frame: its net's corners and this
-                slab[node, 0] = _interpolation_bound(nets, nk, 1.0)  # bound)
+                slab[node, 5] = _interpolation_bound(nets, nk, 1.0)  # bound)
+            if stop > -np.inf:  # (an any-hit ray's nodes are cut by their slabs)
+                _cell_slab(nets, nk, slab, node)
             root_m[it] = node
+        if stop > -np.inf and _cell_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, box, slab, node,
+                                          hit[H_T]) == np.inf:
+            continue
         # stack rows: node, parent, i, j, level; st_t: entry distance when pushed
         st[0, 0], st[0, 1], st[0, 2], st[0, 3], st[0, 4] = node, -1, 0, 0, 0
         st_t[0] = 0.0
@@ -710,7 +716,7 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop, stop):
                 # its frame: a root's own (its net's corners, its slab row), or from its
                 # parent's split (kept in the cell store)
                 if lev == 0:
-                    dlt = slab[node, 0]
+                    dlt = slab[node, 5]
                     c00 = (nets[nk, 0, 0, 0], nets[nk, 0, 0, 1], nets[nk, 0, 0, 2])
                     c10 = (nets[nk, 3, 0, 0], nets[nk, 3, 0, 1], nets[nk, 3, 0, 2])
                     c01 = (nets[nk, 0, 3, 0], nets[nk, 0, 3, 1], nets[nk, 0, 3, 2])
@@ -791,15 +797,16 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop, stop):
                 else:
                     c00, c10, c01, c11 = _frame_corners(m_cells, data[node], 2)
                 te = _covers(px, py, pz, kx, ky, kz, sx, sy, sz, c00, c10, c01, c11,
-                             slab[node, 0] + pad_o, box[node, kz], box[node, 3 + kz], hit[H_T])
+                             slab[node, 5] + pad_o, box[node, kz], box[node, 3 + kz], hit[H_T])
                 if te < np.inf:
                     half = 1 << (pd - lev - 1)  # (the node's centre, in its grid's cells)
                     _occluded(hit, te, code, it, depth, (oi + (2 * ci + 1) * half) * inv,
                               (oj + (2 * cj + 1) * half) * inv)
                     return tested
-            # the children the ray enters, pushed far to near (blocks: box and slab)
+            # the children the ray enters, pushed far to near (blocks, and any-hit rays'
+            # nodes: box and slab)
             n = 0
-            if lev + 2 == pd:
+            if lev + 2 == pd or stop > -np.inf:
                 for q in range(4):
                     te = _cell_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, box, slab, c + q,
                                      hit[H_T])
