@@ -1126,10 +1126,18 @@ def _differ(planes, lum, a, b, depth_step, cos_jump, contrast):
 
 @nb.njit(cache=True, nogil=True, _nrt=False)
 def _luminance_rows(task, n_tasks, planes, width, height, lum):
-    """Rows ``task, task + n_tasks, ...``: each pixel's displayed luminance into ``lum``."""
+    """Rows ``task, task + n_tasks, ...``: each pixel's displayed luminance into ``lum``
+    (a pixel of its left neighbour's colour takes its value: a row of the background or
+    of a lit ground is one colour, and a power per pixel was most of the pass)."""
     for row in range(task, height, n_tasks):
+        last_r = last_g = last_b = np.float32(np.nan)
+        y = 0.0
         for r in range(row * width, (row + 1) * width):
-            lum[r] = _display_luminance(planes, r)
+            cr, cg, cb = planes[C_R, r], planes[C_R + 1, r], planes[C_R + 2, r]
+            if not (cr == last_r and cg == last_g and cb == last_b):
+                y = _display_luminance(planes, r)
+                last_r, last_g, last_b = cr, cg, cb
+            lum[r] = y
 
 
 @nb.njit(cache=True, nogil=True, _nrt=False)
