@@ -44,7 +44,10 @@ TIMES = ("total", "refine", "trace", "shade", "shadows", "ao")
 
 def run_render(tree: Path, cache: Path, scene: str, out: Path, options: list[str]):
     """One ``subtrace render`` of ``scene`` from source tree ``tree``; (wall s, peak MiB)."""
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(tree / "src"))
+    # (SUBTRACE_CACHE_DIR too: where it is set, subtrace takes it before NUMBA_CACHE_DIR, and
+    # both sides would share one cache)
+    env = dict(os.environ, SUBTRACE_CACHE_DIR=str(cache), NUMBA_CACHE_DIR=str(cache),
+               PYTHONPATH=str(tree / "src"))
     env.pop("PYTHONDONTWRITEBYTECODE", None)  # as installed: bytecode cached
     cmd = [sys.executable, "-m", "subtrace.cli", "render", scene, "-o", str(out), "--quiet",
            *options]

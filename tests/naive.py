@@ -370,3 +370,73 @@ def _edge_flag(level, a, b, flag):
         if b in level.edge_verts[e]:
             return bool(flag[e])
     return False
+
+
+# --------------------------------------------------------------------------------------
+# shading: the shadow rays of hit pixels and the anti-aliasing's edge marks, in numpy
+# --------------------------------------------------------------------------------------
+
+
+def shadow_rays(frame, width, t, normals, pix_patch, lights, tol_rad, point_rounding,
+                dirs=None):
+    """[(pixels, origins, directions, tmax)] per light (rows of ``shade.light_array``): the
+    shadow rays of the hit pixels whose normal faces the light, in pixel order, as numpy
+    made them before ``shade.shadow_visibility`` had kernels: the hit point from the pixel's
+    unit ray (divided by its length), displaced along the normal by ``t * tol_rad`` and
+    the point's rounding."""
+    pix = np.nonzero(pix_patch >= 0)[0]
+    th = t[pix]
+    if dirs is None:
+        row, col = np.divmod(pix.astype(np.int64), width)
+        if len(frame) > 4:
+            col, row = col + int(frame[4, 0]), row + int(frame[4, 1])
+        d = frame[3] + col[:, None] * frame[1] + row[:, None] * frame[2]
+        d = d / np.sqrt((d * d).sum(axis=1))[:, None]
+    else:
+        d = dirs[pix]
+    points = frame[0] + th[:, None] * d
+    f = normals[pix]
+    err = th * tol_rad + point_rounding * np.abs(points).max(axis=1)
+    out = []
+    for light in lights:
+        if light[0] == 0:  # directional: x, y, z the direction it travels
+            to = np.repeat(-light[None, 1:4], len(pix), axis=0)
+            dist = np.full(len(pix), np.inf)
+        else:
+            v = light[1:4] - points
+            dist = np.sqrt((v * v).sum(axis=1))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                to = v / dist[:, None]
+        facing = (f * to).sum(axis=1) > 0.0
+        out.append((pix[facing], points[facing] + err[facing, None] * f[facing], to[facing],
+                    dist[facing] - err[facing]))
+    return out
+
+
+def edge_marks(planes, width, height, depth_step, cos_jump, contrast, channels):
+    """(height, width) bool: ``shade.edge_pixels`` in numpy (``channels``: its indices
+    ``(C_R, C_A, C_Z, C_N, C_OBJECT)``)."""
+    c_r, c_a, c_z, c_n, c_obj = channels
+    p = planes.astype(np.float64).reshape(len(planes), height, width)
+    y = 0.2126 * p[c_r] + 0.7152 * p[c_r + 1] + 0.0722 * p[c_r + 2]
+    with np.errstate(invalid="ignore"):
+        lum = np.where(y <= 0.0031308, np.maximum(12.92 * y, 0.0),
+                       np.minimum(1.055 * np.abs(y) ** (1.0 / 2.4) - 0.055, 1.0))
+    hit = p[c_a] > 0.0
+
+    def differ(a, b):  # index tuples of the two pixels of each pair (inf - inf: NaN, no step)
+        with np.errstate(invalid="ignore"):
+            depth = np.abs(p[c_z][a] - p[c_z][b]) > depth_step * np.minimum(p[c_z][a],
+                                                                              p[c_z][b])
+        dot = sum(p[c_n + k][a] * p[c_n + k][b] for k in range(3))
+        both = hit[a] & hit[b] & ((p[c_obj][a] != p[c_obj][b]) | depth | (dot < cos_jump))
+        return (np.abs(lum[a] - lum[b]) > contrast) | (hit[a] != hit[b]) | both
+
+    mark = np.zeros((height, width), bool)
+    right = differ((slice(None), slice(0, -1)), (slice(None), slice(1, None)))
+    mark[:, :-1] |= right
+    mark[:, 1:] |= right
+    down = differ((slice(0, -1), slice(None)), (slice(1, None), slice(None)))
+    mark[:-1] |= down
+    mark[1:] |= down
+    return mark

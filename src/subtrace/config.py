@@ -97,6 +97,14 @@ LAZY_TOPOLOGY_SHARE = 0.5
 BVH_LEAF_SIZE = 2
 STACK_SIZE = 128
 
+# Parallel rays (a directional light's shadow rays, accel/parallel.py): a run of at least
+# PARALLEL_MIN_RAYS rays of one direction in a trace walks a grid of the shells projected
+# along it instead of the BVH; about PARALLEL_CELLS cells per shell (Spot's 678 shells:
+# 64 x 64; a ray's list then holds 3-10 shells), at most PARALLEL_MAX_SIDE along a side.
+PARALLEL_MIN_RAYS = 2048
+PARALLEL_CELLS = 6
+PARALLEL_MAX_SIDE = 1024
+
 # Ray / micro-triangle test: edge functions down to -TRI_SLACK times their sum still count
 # as inside. Shared vertices of patches refined to different depths can differ in the last
 # bit (the same limit point computed at two levels); this closes those gaps (1e-12 of a

@@ -80,6 +80,7 @@ def _pools(keep, stats) -> Pools:
         keep["bvh"] = build_bvh(keep["shell_min"], keep["shell_max"])
     if "memos" not in keep:  # (one set for every band of the image: trace.rays.Pools)
         keep["memos"] = Memos(tasks.thread_count(), keep["memo_bytes"])
+        keep["grids"] = {}  # (the parallel rays' grids, made once: the shells are the image's)
     stats.time_preprocess += time.perf_counter() - t0
     side = SimpleNamespace(pieces=0, micro_triangles=0, grid_points=0, patches_refined=0,
                            max_depth=-1)

@@ -482,23 +482,113 @@ def shadow_visibility(trace, frame, width, t, normals, pix_patch, lights, tol_ra
     bound: the micro-surface lies within a cell of the limit surface, and a cell subtends
     at most the angular tolerance from the eye, so within ``t * tol_rad`` of the hit; plus
     the rounding of the hit point itself. Rays then leave the cell they hit and never
-    speckle a lit surface with its own shadow."""
-    visible = np.ones((len(lights), len(pix_patch)), np.float32)
-    pix = np.nonzero(pix_patch >= 0)[0]
-    if not len(lights) or not len(pix):
+    speckle a lit surface with its own shadow.
+
+    The rays are made on every thread (:func:`_shadow_ray`: the hit point as
+    :func:`pixel_rays` makes it, for the light's direction as :func:`toward_lights` gives
+    it), light after light, each light's in pixel order, and traced in one call."""
+    n_lights = len(lights)
+    visible = np.ones((n_lights, len(pix_patch)), np.float32)
+    if not n_lights:
         return visible
-    th = t[pix]
-    d = pixel_rays(frame, width, pix) if dirs is None else dirs[pix]
-    points = frame[0] + th[:, None] * d
-    f = normals[pix]
-    err = th * tol_rad + POINT_ROUNDING * np.abs(points).max(axis=1)
-    dirs, dist, _ = toward_lights(lights, points)
-    for k in range(len(lights)):
-        facing = (f * dirs[k]).sum(axis=1) > 0.0
-        origins = points[facing] + err[facing, None] * f[facing]
-        blocked = trace(origins, dirs[k][facing], dist[k][facing] - err[facing])
-        visible[k, pix[facing]] = 1.0 - blocked
+    dirs = _no_dirs() if dirs is None else dirs
+    n_tasks = thread_count()
+    counts = np.zeros((n_tasks, n_lights), np.int64)  # per thread and light: its rays
+    shading = (frame, width, t, normals, pix_patch, lights, float(tol_rad), dirs)
+    run_tasks(_shadow_count, *shading, counts, n=n_tasks)
+    n_rays = int(counts.sum())
+    if not n_rays:
+        return visible
+    # thread task's rays towards light k from base[task, k]: light by light, in pixel order
+    flat = counts.T.ravel()
+    base = np.ascontiguousarray((np.cumsum(flat) - flat).reshape(n_lights, n_tasks).T)
+    origins, to_light, tmax = np.empty((n_rays, 3)), np.empty((n_rays, 3)), np.empty(n_rays)
+    run_tasks(_shadow_make, *shading, base, origins, to_light, tmax, n=n_tasks)
+    blocked = np.ascontiguousarray(trace(origins, to_light, tmax), np.uint8)
+    run_tasks(_shadow_mark, *shading, base, blocked, visible, n=n_tasks)
     return visible
+
+
+@llvm_inline_njit
+def _shadow_ray(frame, width, t, normals, dirs, r, lights, k, tol_rad):
+    """Pixel r's shadow ray towards light k: (whether its normal faces the light, origin
+    x, y, z, unit direction x, y, z, tmax). The arithmetic of :func:`pixel_rays` (a
+    division by the length), :func:`toward_lights` and the error bound of
+    :func:`shadow_visibility`, operation for operation, so the rays are those numpy made."""
+    if len(dirs):
+        dx, dy, dz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
+    else:
+        row = r // width
+        col = r - row * width
+        if frame.shape[0] > 4:  # (a window's pixels: their image's rays)
+            col += np.int64(frame[4, 0])
+            row += np.int64(frame[4, 1])
+        ax = frame[3, 0] + col * frame[1, 0] + row * frame[2, 0]
+        ay = frame[3, 1] + col * frame[1, 1] + row * frame[2, 1]
+        az = frame[3, 2] + col * frame[1, 2] + row * frame[2, 2]
+        n = np.sqrt(ax * ax + ay * ay + az * az)
+        dx, dy, dz = ax / n, ay / n, az / n
+    th = t[r]
+    px, py, pz = frame[0, 0] + th * dx, frame[0, 1] + th * dy, frame[0, 2] + th * dz
+    err = th * tol_rad + POINT_ROUNDING * max(max(abs(px), abs(py)), abs(pz))
+    if lights[k, 0] == DIRECTIONAL:
+        lx, ly, lz, dist = -lights[k, 1], -lights[k, 2], -lights[k, 3], np.inf
+    else:
+        vx, vy, vz = lights[k, 1] - px, lights[k, 2] - py, lights[k, 3] - pz
+        dist = np.sqrt(vx * vx + vy * vy + vz * vz)
+        lx, ly, lz = vx / dist, vy / dist, vz / dist
+    fx, fy, fz = normals[r, 0], normals[r, 1], normals[r, 2]
+    facing = fx * lx + fy * ly + fz * lz > 0.0
+    return (facing, px + err * fx, py + err * fy, pz + err * fz, lx, ly, lz, dist - err)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def _shadow_count(task, n_tasks, frame, width, t, normals, pix_patch, lights, tol_rad, dirs,
+                  counts):
+    """Pass 1 of :func:`shadow_visibility`: the shadow rays of thread ``task``'s pixels
+    (:func:`_segment`), per light, into ``counts[task]``."""
+    a, b = _segment(task, n_tasks, len(pix_patch))
+    for k in range(lights.shape[0]):
+        n = 0  # (counted here: threads adding to ``counts`` share a cache line)
+        for r in range(a, b):
+            if pix_patch[r] >= 0 and _shadow_ray(frame, width, t, normals, dirs, r, lights, k,
+                                                 tol_rad)[0]:
+                n += 1
+        counts[task, k] = n
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def _shadow_make(task, n_tasks, frame, width, t, normals, pix_patch, lights, tol_rad, dirs,
+                 base, origins, to_light, tmax):
+    """Pass 2: the shadow rays of thread ``task``'s pixels, light k's from ``base[task, k]``."""
+    a, b = _segment(task, n_tasks, len(pix_patch))
+    for k in range(lights.shape[0]):
+        j = base[task, k]
+        for r in range(a, b):
+            if pix_patch[r] < 0:
+                continue
+            facing, ox, oy, oz, lx, ly, lz, tm = _shadow_ray(frame, width, t, normals, dirs, r,
+                                                             lights, k, tol_rad)
+            if facing:
+                origins[j, 0], origins[j, 1], origins[j, 2] = ox, oy, oz
+                to_light[j, 0], to_light[j, 1], to_light[j, 2] = lx, ly, lz
+                tmax[j] = tm
+                j += 1
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def _shadow_mark(task, n_tasks, frame, width, t, normals, pix_patch, lights, tol_rad, dirs,
+                 base, blocked, visible):
+    """Pass 3: 0 in ``visible`` where thread ``task``'s rays were ``blocked``."""
+    a, b = _segment(task, n_tasks, len(pix_patch))
+    for k in range(lights.shape[0]):
+        j = base[task, k]
+        for r in range(a, b):
+            if pix_patch[r] >= 0 and _shadow_ray(frame, width, t, normals, dirs, r, lights, k,
+                                                 tol_rad)[0]:
+                if blocked[j]:
+                    visible[k, r] = 0.0
+                j += 1
 
 
 def ambient_occlusion(trace, frame, width, t, normals, pix_patch, samples, distance, tol_rad,
@@ -784,19 +874,37 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
     rows = np.ascontiguousarray(rows, np.float64)
     n_tasks = thread_count()
     pending = np.empty(len(miss), np.int8)  # per missed pixel: its shadow rays to trace
-    counts = np.zeros((n_tasks, 2), np.int64)  # per thread: ground pixels, rays
+    # per thread: its ground pixels, then its rays towards each light (rows of 16 at
+    # least: a thread's counts on cache lines of their own)
+    counts = np.zeros((n_tasks, max(16, 1 + len(lights))), np.int64)
     occlusion = np.zeros(0, np.float32) if occlusion is None else occlusion
-    shading = (frame, width, miss, dirs, up, float(height), lights, float(headlight), color,
-               catcher, rows, shadows, cull, lo, hi, planes, occlusion, pending)
+    shading = (frame, width, miss, dirs, up, float(height), _with_inverse(lights),
+               float(headlight), color, catcher, rows, shadows, cull, lo, hi, planes, occlusion,
+               pending)
     run_tasks(_ground_first, *shading, counts, n=n_tasks)
-    n_rays = int(counts[:, 1].sum())
+    n_rays = int(counts[:, 1:1 + len(lights)].sum())
     if n_rays:
-        base = np.concatenate([[0], np.cumsum(counts[:, 1])[:-1]]).astype(np.int64)
+        # thread task's rays towards light k from base[task, k]: light by light (a run of
+        # one direction for each directional light: trace.rays), in pixel order
+        flat = counts[:, 1:1 + len(lights)].T.ravel()
+        base = np.ascontiguousarray((np.cumsum(flat) - flat).reshape(-1, n_tasks).T)
         origins, to_light, dist = np.empty((n_rays, 3)), np.empty((n_rays, 3)), np.empty(n_rays)
-        run_tasks(_ground_rays, *shading, base, origins, to_light, dist, n=n_tasks)
+        run_tasks(_ground_rays, *shading, base.copy(), origins, to_light, dist, n=n_tasks)
         blocked = np.ascontiguousarray(trace(origins, to_light, dist), np.uint8)
         run_tasks(_ground_last, *shading, base, blocked, n=n_tasks)
     return int(counts[:, 0].sum())
+
+
+def _with_inverse(lights) -> np.ndarray:
+    """(L,10) float64: the rows of :func:`light_array` and, for a directional light, the
+    inverse of each component of the direction towards it (the ground's slab tests, made
+    once instead of per pixel; the same IEEE quotients)."""
+    out = np.zeros((len(lights), 10))
+    out[:, :7] = lights
+    with np.errstate(divide="ignore"):
+        inv = 1.0 / -np.asarray(lights, np.float64).reshape(-1, 7)[:, 1:4]
+    out[:, 7:] = np.where(out[:, :1] == DIRECTIONAL, inv, 0.0)
+    return out
 
 
 @llvm_inline_njit
@@ -835,12 +943,16 @@ def _ground_irradiance(lights, k, x, y, z, up):
 def _ground_ray(lights, k, x, y, z, up, shadows, cull, lo, hi):
     """Light k at the ground point (:func:`_ground_irradiance`) and whether its shadow ray
     is to be traced: shadows on, the light faces the ground, and (``cull``) the ray's
-    segment enters the box [lo, hi]."""
+    segment enters the box [lo, hi]. ``lights``: :func:`_with_inverse`'s."""
     lx, ly, lz, d, ck = _ground_irradiance(lights, k, x, y, z, up)
     ray = shadows and ck > 0.0
     if ray and cull:
-        ray = slab_entry(x, y, z, 1.0 / lx, 1.0 / ly, 1.0 / lz, lo[0], lo[1], lo[2], hi[0],
-                         hi[1], hi[2], 0.0, d) < np.inf
+        if lights[k, 0] == DIRECTIONAL:
+            ix, iy, iz = lights[k, 7], lights[k, 8], lights[k, 9]
+        else:
+            ix, iy, iz = 1.0 / lx, 1.0 / ly, 1.0 / lz
+        ray = slab_entry(x, y, z, ix, iy, iz, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2], 0.0,
+                         d) < np.inf
     return lx, ly, lz, d, ck, ray
 
 
@@ -852,21 +964,24 @@ def _segment(task, n_tasks, n):
 
 @llvm_inline_njit
 def _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, color, catcher,
-                  rows, shadows, cull, lo, hi, planes, occ, blocked, b):
+                  rows, shadows, cull, lo, hi, planes, occ, blocked, next_ray, traced):
     """The colour of ground pixel r (point (x, y, z), ``dn`` its ray's d . up) into
-    ``planes``: each light's irradiance unless its shadow ray (the next of ``blocked`` from
-    ``b``, for the lights :func:`_ground_ray` traces) was blocked, all scaled by the
-    ambient occlusion ``occ``; returns the next ``b``."""
+    ``planes``: each light's irradiance unless its shadow ray (for the lights
+    :func:`_ground_ray` traces, where ``traced``: the ray ``next_ray[k]`` of ``blocked``,
+    which moves on) was blocked, all scaled by the ambient occlusion ``occ``."""
     full = max(-dn, 0.0) * headlight
     lit = full
     cr = cg = cb = full
     for k in range(len(lights)):
-        ck, ray = _ground_ray(lights, k, x, y, z, up, shadows, cull, lo, hi)[4:]
+        if traced:
+            ck, ray = _ground_ray(lights, k, x, y, z, up, shadows, cull, lo, hi)[4:]
+        else:
+            ck, ray = _ground_irradiance(lights, k, x, y, z, up)[4], False
         full += ck
         dark = False
         if ray:
-            dark = blocked[b] != 0
-            b += 1
+            dark = blocked[next_ray[k]] != 0
+            next_ray[k] += 1
         if not dark:
             lit += ck
             cr += ck * lights[k, 4]
@@ -881,7 +996,6 @@ def _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, col
     planes[C_R, r] = cr
     planes[C_R + 1, r] = cg
     planes[C_R + 2, r] = cb
-    return b
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # (see _ground_ray)
@@ -890,10 +1004,11 @@ def _ground_first(task, n_tasks, frame, width, miss, dirs, up, height, lights, h
                   counts):
     """Pass 1 of :func:`ground_pixels` over thread ``task``'s missed pixels: shade the ground
     pixels with no shadow ray to trace, set ``pending`` (their rays' count, 0 for the
-    others) and count the ground pixels and rays (``counts[task]``)."""
+    others) and count the ground pixels and each light's rays (``counts[task]``: the
+    pixels, then the rays of light 0, 1, ...)."""
     e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
     a, b = _segment(task, n_tasks, len(miss))
-    n_ground = n_rays = 0  # (counted here: threads adding to ``counts`` share a cache line)
+    n_ground = 0  # (counted here: threads adding to ``counts`` share a cache line)
     for m in range(a, b):
         r = miss[m]
         pending[m] = 0
@@ -904,27 +1019,26 @@ def _ground_first(task, n_tasks, frame, width, miss, dirs, up, height, lights, h
         n = 0
         for k in range(len(lights) if shadows else 0):
             if _ground_ray(lights, k, x, y, z, up, shadows, cull, lo, hi)[5]:
+                counts[task, 1 + k] += 1  # (a row of this thread's own)
                 n += 1
         if n == 0:
             occ = occlusion[m] if len(occlusion) else 1.0
             _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, color,
-                          catcher, rows, shadows, cull, lo, hi, planes, occ, pending, -1)
+                          catcher, rows, shadows, cull, lo, hi, planes, occ, pending, counts[0],
+                          False)
         else:
             pending[m] = n
-            n_rays += n
     counts[task, 0] = n_ground
-    counts[task, 1] = n_rays
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # (see _ground_ray)
 def _ground_rays(task, n_tasks, frame, width, miss, dirs, up, height, lights, headlight,
                  color, catcher, rows, shadows, cull, lo, hi, planes, occlusion, pending,
                  base, origins, to_light, dist):
-    """Pass 2: the shadow rays of thread ``task``'s pending pixels, from ``base[task]`` on,
-    in pixel and light order."""
+    """Pass 2: the shadow rays of thread ``task``'s pending pixels, light k's from
+    ``base[task, k]`` on (which this moves on), in pixel order."""
     e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
     a, b = _segment(task, n_tasks, len(miss))
-    j = base[task]
     for m in range(a, b):
         if pending[m] == 0:
             continue
@@ -933,28 +1047,30 @@ def _ground_rays(task, n_tasks, frame, width, miss, dirs, up, height, lights, he
             lx, ly, lz, d, ck, ray = _ground_ray(lights, k, x, y, z, up, shadows, cull, lo,
                                                  hi)
             if ray:
+                j = base[task, k]
                 origins[j, 0], origins[j, 1], origins[j, 2] = x, y, z
                 to_light[j, 0], to_light[j, 1], to_light[j, 2] = lx, ly, lz
                 dist[j] = d
-                j += 1
+                base[task, k] = j + 1
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # (see _ground_ray)
 def _ground_last(task, n_tasks, frame, width, miss, dirs, up, height, lights, headlight,
                  color, catcher, rows, shadows, cull, lo, hi, planes, occlusion, pending, base,
                  blocked):
-    """Pass 3: shade thread ``task``'s pending pixels with their rays' ``blocked``."""
+    """Pass 3: shade thread ``task``'s pending pixels with their rays' ``blocked`` (light
+    k's from ``base[task, k]``, which this moves on)."""
     e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
     a, b = _segment(task, n_tasks, len(miss))
-    j = base[task]
     for m in range(a, b):
         if pending[m] == 0:
             continue
         r = miss[m]
         hit, x, y, z, dn = _ground_hit(frame, width, dirs, r, up, e_up, height)
         occ = occlusion[m] if len(occlusion) else 1.0
-        j = _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, color,
-                          catcher, rows, shadows, cull, lo, hi, planes, occ, blocked, j)
+        _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, color,
+                      catcher, rows, shadows, cull, lo, hi, planes, occ, blocked, base[task],
+                      True)
 
 
 def edge_pixels(planes, width, height) -> np.ndarray:
@@ -963,10 +1079,17 @@ def edge_pixels(planes, width, height) -> np.ndarray:
     ``config.AA_DEPTH_STEP`` of the nearer depth), a normal jump (more than
     ``config.AA_NORMAL_DEG``) or a contrast in displayed luminance (sRGB, more than
     ``config.AA_CONTRAST``): silhouettes, folds, creases, shadow edges. ``planes``: the
-    (len(CHANNELS), width*height) float32 of :func:`shade` with the colour lit."""
-    flag = np.zeros(width * height, np.bool_)
-    _edge_flags(planes, width, height, config.AA_DEPTH_STEP,
-                math.cos(math.radians(config.AA_NORMAL_DEG)), config.AA_CONTRAST, flag)
+    (len(CHANNELS), width*height) float32 of :func:`shade` with the colour lit. On every
+    thread, rows in turn: each pixel's luminance, then whether it differs from its right
+    and lower neighbours, then each pixel's mark from the pairs it is in."""
+    n = width * height
+    lum = np.empty(n)
+    pairs = np.zeros(n, np.uint8)  # bit 0: differs from its right neighbour, bit 1: lower
+    flag = np.zeros(n, np.bool_)
+    run_tasks(_luminance_rows, planes, width, height, lum)
+    run_tasks(_pair_rows, planes, width, height, lum, config.AA_DEPTH_STEP,
+              math.cos(math.radians(config.AA_NORMAL_DEG)), config.AA_CONTRAST, pairs)
+    run_tasks(_flag_rows, width, height, pairs, flag)
     return flag.reshape(height, width)
 
 
@@ -1002,20 +1125,46 @@ def _differ(planes, lum, a, b, depth_step, cos_jump, contrast):
     return False
 
 
-@nb.njit(cache=True)
-def _edge_flags(planes, width, height, depth_step, cos_jump, contrast, flag):
-    """Mark in ``flag`` (width*height,) both pixels of every differing neighbour pair."""
-    lum = np.empty(width * height)
-    for r in range(width * height):
-        lum[r] = _display_luminance(planes, r)
-    for row in range(height):
+@nb.njit(cache=True, nogil=True, _nrt=False)
+def _luminance_rows(task, n_tasks, planes, width, height, lum):
+    """Rows ``task, task + n_tasks, ...``: each pixel's displayed luminance into ``lum``
+    (a pixel of its left neighbour's colour takes its value: a row of the background or
+    of a lit ground is one colour, and a power per pixel was most of the pass)."""
+    for row in range(task, height, n_tasks):
+        last_r = last_g = last_b = np.float32(np.nan)
+        y = 0.0
+        for r in range(row * width, (row + 1) * width):
+            cr, cg, cb = planes[C_R, r], planes[C_R + 1, r], planes[C_R + 2, r]
+            if not (cr == last_r and cg == last_g and cb == last_b):
+                y = _display_luminance(planes, r)
+                last_r, last_g, last_b = cr, cg, cb
+            lum[r] = y
+
+
+@nb.njit(cache=True, nogil=True, _nrt=False)
+def _pair_rows(task, n_tasks, planes, width, height, lum, depth_step, cos_jump, contrast,
+               pairs):
+    """Rows ``task, task + n_tasks, ...``: whether each pixel differs from its right (bit 0
+    of ``pairs``) and lower (bit 1) neighbour."""
+    for row in range(task, height, n_tasks):
         for col in range(width):
             r = row * width + col
+            bits = 0
             if col + 1 < width and _differ(planes, lum, r, r + 1, depth_step, cos_jump,
                                            contrast):
-                flag[r] = True
-                flag[r + 1] = True
+                bits |= 1
             if row + 1 < height and _differ(planes, lum, r, r + width, depth_step, cos_jump,
                                             contrast):
-                flag[r] = True
-                flag[r + width] = True
+                bits |= 2
+            pairs[r] = bits
+
+
+@nb.njit(cache=True, nogil=True, _nrt=False)
+def _flag_rows(task, n_tasks, width, height, pairs, flag):
+    """Rows ``task, task + n_tasks, ...``: a pixel is marked when a pair it is in differs
+    (with its right or lower neighbour: its own bits; its left or upper: theirs)."""
+    for row in range(task, height, n_tasks):
+        for col in range(width):
+            r = row * width + col
+            flag[r] = ((pairs[r] != 0) or (col > 0 and (pairs[r - 1] & 1) != 0)
+                       or (row > 0 and (pairs[r - width] & 2) != 0))

@@ -272,22 +272,23 @@ def compile_shading(threads: int, loop) -> None:
         tasks.set_threads(None)
 
 
-PICTURE = ("ground", "light", "edges", "background")  # compile_picture's kernel groups
+PICTURE = ("ground", "shadows", "light", "edges", "background")  # compile_picture's kernel groups
 
 
 def compile_picture(threads: int, parts=PICTURE) -> None:
     """Compile the kernels that colour a picture, by group (``parts``, of :data:`PICTURE`:
-    the ground with and without shadow rays, the lights, the anti-aliasing's edge flags,
-    the background), with the argument types of a render on ``threads`` threads, on a few
-    pixels of a camera looking down at the ground (tests/test_render.py checks that a
-    render adds no signature to them). A cold render's helper compiles them all, the ground
+    the ground with and without shadow rays, the surfaces' shadow rays, the lights, the
+    anti-aliasing's edge flags, the background), with the argument types of a render on
+    ``threads`` threads, on a few pixels of a camera looking down at the ground
+    (tests/test_render.py checks that a render adds no signature to them). A cold render's helper compiles them all, the ground
     first; the render's own process compiles the others while it waits for the trace
     kernel (``render.trace_hits``, :func:`picture_while_tracing`), and the helper then
     finds them in the cache."""
     import numpy as np
 
     from subtrace.runtime import threads as tasks
-    from subtrace.shade import CHANNELS, background_pixels, edge_pixels, ground_pixels, light
+    from subtrace.shade import (CHANNELS, background_pixels, edge_pixels, ground_pixels, light,
+                                shadow_visibility)
 
     n, width = 4, 2
     frame = np.array([[0.0, 1.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.0, 0.1], [0.0, -1.0, 0.0]])
@@ -307,6 +308,10 @@ def compile_picture(threads: int, parts=PICTURE) -> None:
                 for shadows in (None, trace):
                     ground_pixels(frame, width, pix, (0.0, 1.0, 0.0), 0.0, shadows, lights,
                                   0.5, None, rows, planes)
+            elif part == "shadows":  # every pixel hit, facing the light
+                up = np.tile([0.0, 1.0, 0.0], (n, 1))
+                shadow_visibility(trace, frame, width, np.ones(n), up, np.zeros(n, np.int32),
+                                  lights, 1e-3)
             elif part == "light":
                 light(frame, width, np.full(n, np.inf), np.zeros((n, 3)), pix, _no_patches(),
                       lights, np.array([0.5]), np.ones((1, n), np.float32), planes)

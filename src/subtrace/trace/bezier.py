@@ -219,6 +219,110 @@ def _spans(a, b, c, d, pad):
     return min(min(a, b), min(c, d)) <= pad and max(max(a, b), max(c, d)) >= -pad
 
 
+# An any-hit ray (a shadow or occlusion ray) needs only to know that it meets the surface
+# before its end, not where: a node of a piece's quadtree whose frame (corners and bound, as
+# for _block_cells) certainly holds a triangle the ray meets ends its descent there, before
+# the node's cells are made (:func:`_covers`). On the default picture (Spot, key and fill
+# lights, ground shadows) nine tenths of the blocked shadow rays were decided so within two
+# levels of the piece they met, instead of at its cells four to eight levels down.
+COVER_MARGIN = 1e-9  # relative: the rounding of the t range and of the edge tests, with room
+
+
+@llvm_inline_njit
+def _covers(px, py, pz, kx, ky, kz, sx, sy, sz, c00, c10, c01, c11, dlt, lo_z, hi_z, thi):
+    """Whether the ray certainly meets the micro-triangles of a node before ``thi``: the
+    node's frame (its corners ``c00, c10, c01, c11`` and bound ``dlt``, widened for the
+    origin, as :func:`_block_cells` takes them) and the range [lo_z, hi_z] of its box in the
+    ray's kz coordinate. Returns the nearest distance along the ray of the node's box (a
+    distance no farther than the triangle it meets), or inf when that is not certain.
+
+    Why: the node's triangles form a disc whose boundary (samples of its four sides, a
+    piecewise linear curve) lies within ``dlt`` per coordinate of the frame's edges at the
+    same parameters, so within the pads of :func:`_block_cells` after the ray's shear. When
+    the ray's point (the origin of the sheared plane) lies strictly on the same side of all
+    four projected edges, farther from each than the pads reach, the straight homotopy
+    from the boundary to the frame never passes over it: the boundary winds once around
+    it, so the triangles' signed covers of it add up to one and some triangle covers it;
+    the watertight triangle test (``prims.ray_triangle``: shared edges' functions computed
+    alike) then finds that hit. Every point of the node lies in its box, so the hit's
+    distance lies in the box's range along the ray, which must lie within (0, ``thi``)."""
+    # the box's distances along the ray: all ahead of the origin and before thi
+    ta = (lo_z - pz) * sz
+    tb = (hi_z - pz) * sz
+    t0, t1 = min(ta, tb), max(ta, tb)
+    if not (t0 > COVER_MARGIN * t1 and t1 * (1.0 + COVER_MARGIN) < thi):
+        return np.inf
+    pad_x = dlt * (1.0 + abs(sx))
+    pad_y = dlt * (1.0 + abs(sy))
+    pad2 = pad_x * pad_x + pad_y * pad_y
+    z = c00[kz] - pz
+    x0, y0 = c00[kx] - px - sx * z, c00[ky] - py - sy * z
+    z = c10[kz] - pz
+    x1, y1 = c10[kx] - px - sx * z, c10[ky] - py - sy * z
+    z = c11[kz] - pz
+    x2, y2 = c11[kx] - px - sx * z, c11[ky] - py - sy * z
+    z = c01[kz] - pz
+    x3, y3 = c01[kx] - px - sx * z, c01[ky] - py - sy * z
+    # the four edges (0,0) -> (1,0) -> (1,1) -> (0,1) -> (0,0), each seen on one side
+    e0 = _edge_side(x0, y0, x1, y1, pad2)
+    if e0 == 0:
+        return np.inf
+    if (_edge_side(x1, y1, x2, y2, pad2) == e0 and _edge_side(x2, y2, x3, y3, pad2) == e0
+            and _edge_side(x3, y3, x0, y0, pad2) == e0):
+        return t0
+    return np.inf
+
+
+@llvm_inline_njit
+def _edge_side(ax, ay, bx, by, pad2):
+    """The side (1 or -1) of the sheared plane's origin from the edge a -> b when it lies
+    farther than ``sqrt(pad2)`` from the edge's line (its cross product's rounding
+    taken off), else 0."""
+    e = ax * by - ay * bx
+    m = abs(e) - COVER_MARGIN * (abs(ax * by) + abs(ay * bx))
+    if not m > 0.0:
+        return 0
+    dx, dy = bx - ax, by - ay
+    if m * m > (dx * dx + dy * dy) * pad2 * (1.0 + COVER_MARGIN):
+        return 1 if e > 0.0 else -1
+    return 0
+
+
+@llvm_inline_njit
+def _net_corners(net, s):
+    """The corners of net ``net[s]`` at (u, v) = (0, 0), (1, 0), (0, 1), (1, 1): points of
+    its patch."""
+    return ((net[s, 0, 0, 0], net[s, 0, 0, 1], net[s, 0, 0, 2]),
+            (net[s, 3, 0, 0], net[s, 3, 0, 1], net[s, 3, 0, 2]),
+            (net[s, 0, 3, 0], net[s, 0, 3, 1], net[s, 0, 3, 2]),
+            (net[s, 3, 3, 0], net[s, 3, 3, 1], net[s, 3, 3, 2]))
+
+
+@llvm_inline_njit
+def _frame_corners(m_cells, f, step):
+    """The corners, as :func:`_net_corners`, of a frame in a node's 3 x 3 corners of the
+    cell store (``_store_frame``) from row ``f``: a block's (``step`` 1: rows f, f + 1,
+    f + 3, f + 4) or the node's own (``f`` its first row, ``step`` 2)."""
+    a, b, c = f + step, f + 3 * step, f + 4 * step
+    return ((m_cells[f, 0], m_cells[f, 1], m_cells[f, 2]),
+            (m_cells[a, 0], m_cells[a, 1], m_cells[a, 2]),
+            (m_cells[b, 0], m_cells[b, 1], m_cells[b, 2]),
+            (m_cells[c, 0], m_cells[c, 1], m_cells[c, 2]))
+
+
+@llvm_inline_njit
+def _occluded(hit, t, code, item, depth, u, v):
+    """Record an occluder certainly met (:func:`_covers`): at distance ``t`` no farther
+    than the triangle, on ``item`` of grid depth ``depth``, at the centre ``(u, v)`` of the
+    node in its patch's parameters."""
+    hit[H_T] = t
+    hit[H_SLOT] = code
+    hit[H_LEAF] = depth
+    hit[H_TRI] = item
+    hit[H_B1] = u
+    hit[H_B2] = v
+
+
 @llvm_inline_njit
 def _cell_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, box, slab, c, tmax):
     """Entry distance of the ray into the box of cell node ``c`` cut by its slab; inf when
@@ -387,8 +491,9 @@ def _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, src, s, lev0, ci0, 
 #
 # Rays of neighbouring pixels descend the same nodes of a patch's quadtree. A thread keeps
 # what its rays split: ``mem`` = (root node of each item (I,) or -1, first of the four
-# children of each node (N,) or -1, each node's padded box (N,6), a block's slab (N,5): a
-# normal and the range of the normal coordinate of its net (see :func:`_cell_slab`), each
+# children of each node (N,) or -1, each node's padded box (N,6), a block's slab (N,6): a
+# normal and the range of the normal coordinate of its net (see :func:`_cell_slab`; for
+# any-hit rays every node's; column 5 a node's own bound, :func:`_covers`), each
 # node's row (N,) in the net store (an inner node whose children are split in turn), in
 # the cell store (a node whose children are blocks: their frames; a block: its corners and
 # flags, ``BLOCK_FLAGS``), or -1 (not yet), the net store (.,4,4,3), the cell store ((.,3),
@@ -440,12 +545,15 @@ def _store_row(m_cells, r, nets, nk, bi, bj, b, depth):
 
 
 @leaf_njit
-def _expand(node, parent, ci, cj, lev, pd, child, box, slab, data, m_nets, m_cells, cnt, work):
+def _expand(node, parent, ci, cj, lev, pd, child, box, slab, data, m_nets, m_cells, cnt, work,
+            bound):
     """Split ``node`` (cell (ci, cj) of level ``lev`` < pd - 1 of a piece of depth ``pd``):
     get its net (stored, or the quadrant of its parent's) and create its four children with
     their boxes (and slabs, for blocks: level pd - 1); its net is kept if its children will
-    be split in turn, else its blocks' frames (:func:`_store_frame`). Returns the first
-    child, or -1 when a store is full."""
+    be split in turn, else its blocks' frames (:func:`_store_frame`). ``bound``: keep the
+    node's own :func:`_interpolation_bound` in its slab row (an inner node has no slab;
+    any-hit rays test its frame, :func:`_covers`). Returns the first child, or -1 when a
+    store is full."""
     if (cnt[M_NODES] + 4 > len(child) or cnt[M_NETS] + 1 > len(m_nets)
             or cnt[M_CELLS] + FRAME_UNITS > len(m_cells) // 4):
         cnt[M_FULL] = 1
@@ -458,6 +566,8 @@ def _expand(node, parent, ci, cj, lev, pd, child, box, slab, data, m_nets, m_cel
             data[node] = s = _store_net(m_nets, cnt, work, 0)
         else:  # its children are blocks: their corners come from the piece's own net
             src, s = work, 0
+    if bound:
+        slab[node, 5] = _interpolation_bound(src, s, 1.0)
     _split(src, s, work, base)
     if lev + 2 == pd:  # (its net is not needed again: its data holds the frames)
         data[node] = _store_frame(src, s, work, base, m_cells, cnt)
@@ -465,7 +575,7 @@ def _expand(node, parent, ci, cj, lev, pd, child, box, slab, data, m_nets, m_cel
     for q in range(4):
         lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(work, base + q)
         m = new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, NOT_YET)
-        if lev + 2 == pd:  # a block: its slab too
+        if lev + 2 == pd or bound:  # a block (or an any-hit ray's node): its slab too
             _cell_slab(work, base + q, slab, m)
     child[node] = first
     return first
@@ -486,7 +596,7 @@ def table_loop_flag(table) -> bool | None:
 # (see kernels._trace_task), and its quadtree descent keeps the ray, the stack and the memo
 # in locals that helpers would have to take and return at every node.
 @inline_njit
-def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop):
+def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop, stop):
     """Closest hit on the pieces of Catmull-Clark patch ``p`` (slot ``s`` of ``iso``, a
     :class:`~subtrace.trace.pools.PieceArrays`) nearer than hit[H_T]; updates ``hit``. Returns the
     number of micro-triangles built: those of the cells this ray was the first of its
@@ -509,6 +619,11 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop):
     kernel that inlines this is then compiled without the Loop items' descents (Numba
     prunes a branch on an argument that is None before typing it), about half of its
     compile; True otherwise.
+
+    ``stop``: -inf for the closest hit; an any-hit ray's end (its tmax): it returns at the
+    first hit nearer than that, and at the first node of a piece that certainly holds one
+    (:func:`_covers`; ``hit`` then holds the node's nearest distance, not the triangle's).
+    The memo's nodes then keep their own bound (slab column 0) for that test.
     """
     ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz = ray
     work, st, st_t, tmp_t, order, lv, lp = scratch
@@ -525,6 +640,8 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop):
     pad_o = LOCATE_PAD * max(abs(ox), max(abs(oy), abs(oz)))
     nxt, end = first, first + count
     while nxt < end:  # the rows depth first; a group missed is skipped whole
+        if hit[H_T] < stop:  # an any-hit ray's occluder
+            return tested
         it = nxt
         nxt = it + 1
         if box_entry(ox, oy, oz, ix, iy, iz, lo, hi, it, 0.0, hit[H_T]) == np.inf:
@@ -578,9 +695,14 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop):
             # (a root that is a block keeps no net: its corners come from nets[nk])
             node = new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2,
                              _store_net(m_nets, cnt, nets, nk) if pd > 1 else NOT_YET)
-            if pd == 1:  # a block: its frame is its net's corners and this bound
-                slab[node, 0] = _interpolation_bound(nets, nk, 1.0)
+            if pd == 1 or stop > -np.inf:  # (a block's frame: its net's corners and this
+                slab[node, 5] = _interpolation_bound(nets, nk, 1.0)  # bound)
+            if stop > -np.inf:  # (an any-hit ray's nodes are cut by their slabs)
+                _cell_slab(nets, nk, slab, node)
             root_m[it] = node
+        if stop > -np.inf and _cell_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, box, slab, node,
+                                          hit[H_T]) == np.inf:
+            continue
         # stack rows: node, parent, i, j, level; st_t: entry distance when pushed
         st[0, 0], st[0, 1], st[0, 2], st[0, 3], st[0, 4] = node, -1, 0, 0, 0
         st_t[0] = 0.0
@@ -594,7 +716,7 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop):
                 # its frame: a root's own (its net's corners, its slab row), or from its
                 # parent's split (kept in the cell store)
                 if lev == 0:
-                    dlt = slab[node, 0]
+                    dlt = slab[node, 5]
                     c00 = (nets[nk, 0, 0, 0], nets[nk, 0, 0, 1], nets[nk, 0, 0, 2])
                     c10 = (nets[nk, 3, 0, 0], nets[nk, 3, 0, 1], nets[nk, 3, 0, 2])
                     c01 = (nets[nk, 0, 3, 0], nets[nk, 0, 3, 1], nets[nk, 0, 3, 2])
@@ -606,6 +728,13 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop):
                     c10 = (m_cells[f + 1, 0], m_cells[f + 1, 1], m_cells[f + 1, 2])
                     c01 = (m_cells[f + 3, 0], m_cells[f + 3, 1], m_cells[f + 3, 2])
                     c11 = (m_cells[f + 4, 0], m_cells[f + 4, 1], m_cells[f + 4, 2])
+                if stop > -np.inf:
+                    te = _covers(px, py, pz, kx, ky, kz, sx, sy, sz, c00, c10, c01, c11,
+                                 dlt + pad_o, box[node, kz], box[node, 3 + kz], hit[H_T])
+                    if te < np.inf:
+                        _occluded(hit, te, code, it, depth, (oi + 2 * ci + 1.0) * inv,
+                                  (oj + 2 * cj + 1.0) * inv)
+                        return tested
                 near = _block_cells(px, py, pz, kx, ky, kz, sx, sy, c00, c10, c01, c11,
                                     dlt + pad_o)
                 if near == 0:
@@ -641,22 +770,43 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop):
                     elif not (d >> (3 + q)) & 1:
                         tested += n_t
                         d |= 1 << (3 + q)
+                    if hit[H_T] < stop:  # an any-hit ray's occluder
+                        break
                 if d >= 0:
                     data[node] = d
+                if hit[H_T] < stop:
+                    return tested
                 continue
             c = child[node]
             if c < 0:
                 c = _expand(node, parent, ci, cj, lev, pd, child, box, slab, data, m_nets,
-                            m_cells, cnt, work)
+                            m_cells, cnt, work, stop > -np.inf)
                 if c < 0:  # a store is full: split per ray below this node
                     tested += _descend_node(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, node,
                                             parent, lev, ci, cj, nets, nk, pd, oi, oj, depth,
                                             item_side, it, slack, hit, code, it, mem, work, st,
                                             st_t, sp + 1, tmp_t, order, lv, lp)
+                    if hit[H_T] < stop:
+                        return tested
                     continue
-            # the children the ray enters, pushed far to near (blocks: box and slab)
+            if stop > -np.inf:  # the node's own frame: its net's corners, or its 3 x 3's
+                if lev == 0:
+                    c00, c10, c01, c11 = _net_corners(nets, nk)
+                elif lev + 2 < pd:
+                    c00, c10, c01, c11 = _net_corners(m_nets, data[node])
+                else:
+                    c00, c10, c01, c11 = _frame_corners(m_cells, data[node], 2)
+                te = _covers(px, py, pz, kx, ky, kz, sx, sy, sz, c00, c10, c01, c11,
+                             slab[node, 5] + pad_o, box[node, kz], box[node, 3 + kz], hit[H_T])
+                if te < np.inf:
+                    half = 1 << (pd - lev - 1)  # (the node's centre, in its grid's cells)
+                    _occluded(hit, te, code, it, depth, (oi + (2 * ci + 1) * half) * inv,
+                              (oj + (2 * cj + 1) * half) * inv)
+                    return tested
+            # the children the ray enters, pushed far to near (blocks, and any-hit rays'
+            # nodes: box and slab)
             n = 0
-            if lev + 2 == pd:
+            if lev + 2 == pd or stop > -np.inf:
                 for q in range(4):
                     te = _cell_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, box, slab, c + q,
                                      hit[H_T])

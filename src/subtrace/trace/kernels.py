@@ -181,7 +181,7 @@ def _visit(p, ray, round_no, base, iso, mem, slack, hit, scratch, loop):
         return 0
     if iso.touched[s] == 0:  # (a store, even of the same value, takes the cache line from
         iso.touched[s] = 1   # the other threads reading it)
-    return intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop)
+    return intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop, -np.inf)
 
 
 @inline_njit

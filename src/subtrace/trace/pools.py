@@ -77,7 +77,10 @@ class Memo(NamedTuple):
     root: np.ndarray  # (I,) int64: root node of each item or -1
     child: np.ndarray  # (N,) int64: first of the four children of each node, or -1
     box: np.ndarray  # (N,6) float64: each node's padded box
-    slab: np.ndarray  # (N,5) float64: a cell's slab (normal and range); a Loop root's bound
+    # (N,6) float64: a block's slab (normal and range; any-hit rays': every node's); a
+    # Loop root's bound; column 5: a Catmull-Clark node's own bound (its frame's,
+    # bezier._interpolation_bound) where it is a root block or any-hit rays test it
+    slab: np.ndarray
     data: np.ndarray  # (N,) int64: each node's row in nets / cells, or a state code
     nets: np.ndarray  # (., 4, 4, 3) float64
     cells: np.ndarray  # (., 3) float64: cell corners, 4 rows per cell
@@ -471,7 +474,7 @@ class Memos:
     # rows per unit of START (a cell has 4 corner rows) and bytes per row: a node (child,
     # box, slab, data), a net, a cell corner
     ROWS = {"child": 1, "nets": 1, "cells": 4}
-    ROW_BYTES = {"child": 8 + 48 + 40 + 8, "nets": 4 * 4 * 3 * 8, "cells": 3 * 8}
+    ROW_BYTES = {"child": 8 + 48 + 48 + 8, "nets": 4 * 4 * 3 * 8, "cells": 3 * 8}
     MIN_ROWS = 64  # rows of a store at least, whatever the budget
 
     def __init__(self, n_threads, max_bytes=None):
@@ -500,7 +503,7 @@ class Memos:
             cnt = one_block(((M_COUNTS,), np.int64))[0]
             cnt[:] = 0
             old = Memo(np.full(0, -1, np.int64), np.empty(0, np.int64), np.empty((0, 6)),
-                       np.empty((0, 5)), np.empty(0, np.int64), np.empty((0, 4, 4, 3)),
+                       np.empty((0, 6)), np.empty(0, np.int64), np.empty((0, 4, 4, 3)),
                        np.empty((0, 3)), cnt)
         root, child, box, slab, data, nets, cells, cnt = old
         if len(root) < n_items:

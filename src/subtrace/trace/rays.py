@@ -41,6 +41,7 @@ import numpy as np
 
 from subtrace import config
 from subtrace.accel.bvh import BVH, box_entry, bvh_next_leaf, bvh_start
+from subtrace.accel.parallel import ParallelGrid, grid_cell, no_grid, parallel_grid
 from subtrace.runtime import threads as tasks
 from subtrace.runtime.jit import nb
 from subtrace.trace.bezier import intersect_patch, table_loop_flag
@@ -81,15 +82,24 @@ class Pools:
     # them over the calls of a render (its bands' shadow, occlusion and extra rays) only
     # spares faulting their pages in again
     memos: object = None
+    # the grids of the shells seen along the directions of parallel rays (trace_rays),
+    # by direction: made once for all the calls that share the shells (None: none yet)
+    grids: dict | None = None
 
 
 def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
     """Trace rays ``origins + t dirs``, ``0 < t < tmax``: (blocked (R,) uint8, hits
     (:class:`~subtrace.trace.pools.Hits`)). ``any_hit``: stop at the first occluder (then
-    ``hits`` holds that occluder, not necessarily the nearest). Patches a ray reaches
+    ``hits`` holds that occluder, not necessarily the nearest, and its distance may be
+    one no farther than it: ``bezier.intersect_patch``'s ``stop``). Patches a ray reaches
     unbuilt are built into ``pools`` (counted in its statistics). The result does not
     depend on the thread count: a ray's hits depend only on the pools, never on the
-    threads' memos."""
+    threads' memos.
+
+    Any-hit rays that come in runs of one direction (a directional light's, at least
+    ``config.PARALLEL_MIN_RAYS`` in a row) find the shells they enter from a grid of the
+    shells seen along it (``accel/parallel.py``, kept in ``pools.grids``) instead of the
+    BVH: the same shells, so the same answers."""
     n = len(tmax)
     origins = np.ascontiguousarray(origins, np.float64).reshape(n, 3)
     dirs = np.ascontiguousarray(dirs, np.float64).reshape(n, 3)
@@ -105,6 +115,51 @@ def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
         hits.a[:] = 0.0
         hits.b[:] = 0.0
         return blocked, hits
+    first_round = pools.round_no
+    for a, b, grid in _runs(pools, dirs, any_hit):
+        part = slice(a, b)
+        _trace_part(pools, origins[part], dirs[part], tmax[part], any_hit, grid,
+                    blocked[part], Hits(*(f[part] for f in hits)))
+    _deepest(pools, hits, tmax, first_round)
+    return blocked, hits
+
+
+def _runs(pools, dirs, any_hit):
+    """[(a, b, grid)]: the rays [a, b) traced together, with the grid of their one
+    direction (:func:`~subtrace.accel.parallel.parallel_grid`) or ``no_grid()`` (the
+    BVH): runs of at least ``config.PARALLEL_MIN_RAYS`` rays of one direction of an
+    any-hit trace, and the rays between them."""
+    n = len(dirs)
+    if not any_hit or n < config.PARALLEL_MIN_RAYS:
+        return [(0, n, no_grid())]
+    cut = np.nonzero((dirs[1:] != dirs[:-1]).any(axis=1))[0] + 1
+    bounds = np.concatenate([[0], cut, [n]])
+    runs = []
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        a, b = int(a), int(b)
+        if b - a >= config.PARALLEL_MIN_RAYS:
+            runs.append((a, b, _grid(pools, dirs[a])))
+        elif runs and runs[-1][2] is None:
+            runs[-1] = (runs[-1][0], b, None)
+        else:
+            runs.append((a, b, None))
+    return [(a, b, no_grid() if g is None else g) for a, b, g in runs]
+
+
+def _grid(pools, d):
+    """The grid of ``pools``' shells along direction ``d``, made once per direction."""
+    if pools.grids is None:
+        pools.grids = {}
+    key = d.tobytes()
+    if key not in pools.grids:
+        pools.grids[key] = parallel_grid(pools.shell_min, pools.shell_max, d)
+    return pools.grids[key]
+
+
+def _trace_part(pools, origins, dirs, tmax, any_hit, grid, blocked, hits):
+    """:func:`trace_rays` of these rays (views of its arrays), through the rounds: each
+    round traces the rays that asked for patches in the last, once those are built."""
+    n = len(tmax)
     req = np.empty((n, CANDIDATES), np.int64)
     req_n = np.zeros(n, np.int64)
     n_threads = tasks.thread_count()
@@ -117,7 +172,6 @@ def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
     req_ts = np.empty((n_threads, CANDIDATES))  # each thread's entry distances of req
     rays = np.arange(n, dtype=np.int64)
     loop = table_loop_flag(pools.table)
-    first_round = pools.round_no
     first = True
     while len(rays) or first:  # (no rays still run the kernel once: compile_kernel)
         first = False
@@ -125,8 +179,8 @@ def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
         max_d = int(iso.a["depth_i"].max(initial=0))
         scratch = tuple(scratch_buffers(max_d) for _ in range(n_threads))
         mems = tuple(tuple(m) for m in memos.views(len(iso.a["kind"])))
-        args = (rays, origins, dirs, tmax, bool(any_hit), tuple(pools.bvh), pools.shell_min,
-                pools.shell_max, tuple(iso.view()),
+        args = (rays, origins, dirs, tmax, bool(any_hit), tuple(pools.bvh), tuple(grid),
+                pools.shell_min, pools.shell_max, tuple(iso.view()),
                 mems, scratch, float(config.TRI_SLACK), tuple(hits), blocked, req, req_n,
                 req_ts, built, loop)
 
@@ -148,8 +202,6 @@ def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
         pools.round_no += 1
     # (each chunk of rays has a memo of its own: its count is the same on any thread)
     pools.stats.micro_triangles += int(built.sum())
-    _deepest(pools, hits, tmax, first_round)
-    return blocked, hits
 
 
 def _deepest(pools, hits, tmax, first_round) -> None:
@@ -196,14 +248,17 @@ def run_chunks(work, n_rays):
 
 
 @nb.njit(cache=True, nogil=True, _nrt=False, error_model="numpy")  # see jit.leaf_njit
-def _rays_task(task, a, b, rays, origins, dirs, tmax, any_hit, bvh_t, shell_min, shell_max,
-               iso_t, mems_t, scratches, slack, hits_t, blocked, req, req_n, req_ts, built,
-               loop):
+def _rays_task(task, a, b, rays, origins, dirs, tmax, any_hit, bvh_t, grid_t, shell_min,
+               shell_max, iso_t, mems_t, scratches, slack, hits_t, blocked, req, req_n, req_ts,
+               built, loop):
     """Rays ``rays[a:b]`` on thread ``task`` (see :func:`trace_rays`): each walks the BVH
-    of the shells from scratch, intersects the built patches whose shells it enters before
-    its best hit and lists (in ``req``, count ``req_n``) the unbuilt ones, nearest kept
-    when there are more than CANDIDATES; an ``any_hit`` ray stops at its first occluder."""
-    bvh, iso, hits = BVH(*bvh_t), PieceArrays(*iso_t), Hits(*hits_t)
+    of the shells from scratch (or its cell's list of the grid ``grid_t``, where it has
+    cells: rays of its one direction), intersects the built patches whose shells it enters
+    before its best hit and lists (in ``req``, count ``req_n``) the unbuilt ones, nearest
+    kept when there are more than CANDIDATES; an ``any_hit`` ray stops at its first
+    occluder."""
+    bvh, grid = BVH(*bvh_t), ParallelGrid(*grid_t)
+    iso, hits = PieceArrays(*iso_t), Hits(*hits_t)
     mem = Memo(*mems_t[task])
     memo_restart(mem.root, mem.cnt)  # one chunk of rays: a memo of its own (trace/prims.py)
     stack, stack_t, work, st, st_t, ent_t, ent_i, lv, lp, hit = scratches[task]
@@ -223,35 +278,46 @@ def _rays_task(task, a, b, rays, origins, dirs, tmax, any_hit, bvh_t, shell_min,
         hit[H_SLOT] = -1.0
         n_req = 0
         done = False
-        # the shells the ray enters before its best hit, nearest BVH child first
-        sp = bvh_start(ox, oy, oz, ix, iy, iz, bvh, 0.0, hit[H_T], stack, stack_t)
+        stop = tmax[r] if any_hit else -np.inf  # (an any-hit ray's pieces stop at an occluder)
+        # the shells the ray enters before its best hit: its grid cell's (nearest along
+        # the direction first), or the BVH's leaves' (nearest child first) in turn
+        j = j_end = sp = 0
+        prims = bvh.prims
+        if len(grid.start):
+            c = grid_cell(grid, ox, oy, oz)
+            if c >= 0:
+                j, j_end, prims = grid.start[c], grid.start[c + 1], grid.items
+        else:
+            sp = bvh_start(ox, oy, oz, ix, iy, iz, bvh, 0.0, hit[H_T], stack, stack_t)
         while not done:
-            j, j_end, sp = bvh_next_leaf(ox, oy, oz, ix, iy, iz, bvh, 0.0, hit[H_T], stack,
-                                         stack_t, sp)
             if j == j_end:
-                break
-            for e in range(j, j_end):
-                p = bvh.prims[e]
-                te = box_entry(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, 0.0, hit[H_T])
-                if te == np.inf:
-                    continue
-                s = iso.patch_iso[p]
-                if s >= 0:
-                    n_built += intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop)
-                else:
-                    # unbuilt: keep the CANDIDATES nearest
-                    m = n_req if n_req < CANDIDATES else CANDIDATES - 1
-                    if n_req < CANDIDATES or te < req_t[m]:
-                        while m > 0 and req_t[m - 1] > te:
-                            req_t[m] = req_t[m - 1]
-                            req[r, m] = req[r, m - 1]
-                            m -= 1
-                        req_t[m] = te
-                        req[r, m] = p
-                        n_req = min(n_req + 1, CANDIDATES)
-                if any_hit and hit[H_T] < tmax[r]:
-                    done = True
+                if sp == 0:
                     break
+                j, j_end, sp = bvh_next_leaf(ox, oy, oz, ix, iy, iz, bvh, 0.0, hit[H_T],
+                                             stack, stack_t, sp)
+                if j == j_end:
+                    break
+            p = prims[j]
+            j += 1
+            te = box_entry(ox, oy, oz, ix, iy, iz, shell_min, shell_max, p, 0.0, hit[H_T])
+            if te == np.inf:
+                continue
+            s = iso.patch_iso[p]
+            if s >= 0:
+                n_built += intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop, stop)
+            else:
+                # unbuilt: keep the CANDIDATES nearest
+                m = n_req if n_req < CANDIDATES else CANDIDATES - 1
+                if n_req < CANDIDATES or te < req_t[m]:
+                    while m > 0 and req_t[m - 1] > te:
+                        req_t[m] = req_t[m - 1]
+                        req[r, m] = req[r, m - 1]
+                        m -= 1
+                    req_t[m] = te
+                    req[r, m] = p
+                    n_req = min(n_req + 1, CANDIDATES)
+            if any_hit and hit[H_T] < tmax[r]:
+                done = True
         # the hit and the unbuilt shells still nearer than it
         blocked[r] = 1 if hit[H_T] < tmax[r] else 0
         n_keep = 0
