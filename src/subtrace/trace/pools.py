@@ -234,14 +234,16 @@ class Growable:
             if not isinstance(value, list):
                 self._store[name][start:end] = value
                 continue
-            store = self._store[name].reshape(len(self._store[name]), -1)
+            whole = self._store[name]
+            width = int(np.prod(whole.shape[1:]))  # (not -1: a store or a part may be empty)
+            store = whole.reshape(len(whole), width)
             row = start if at is None else 0
             for a in value:
                 n = len(a)
                 if at is None:
-                    store[row:row + n] = a.reshape(n, -1)
+                    store[row:row + n] = a.reshape(n, width)
                 else:
-                    store[at[row:row + n]] = a.reshape(n, -1)
+                    store[at[row:row + n]] = a.reshape(n, width)
                 row += n
         self._used[group] = end
         self._refresh()
