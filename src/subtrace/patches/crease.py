@@ -49,7 +49,7 @@ import numpy as np
 
 from subtrace.config import IRREGULAR_MARGIN
 from subtrace.mesh.topology import INF_SHARP, gather_index
-from subtrace.patches.basis import TO_BEZIER, net_summary, to_bezier
+from subtrace.patches.basis import TO_BEZIER
 from subtrace.patches.bspline import control_grids
 from subtrace.patches.grids import levels_needed, unit_normals
 from subtrace.patches.shells import sight_distance
@@ -285,14 +285,15 @@ def _refine_level(grids, weights, side, halves, from_canon, to_bez, slot, with_n
     taking the crease rule of weight ``weights[m]`` (2,) (``w`` the point itself, ``1 - w``
     the smooth rule); the child at the patch's corner q goes to ``slot[m, q]`` of the
     regular ones (>= 0: its net, turned into the patch's frame by ``from_canon[side[m]]``
-    and converted by ``to_bez`` as ``basis.bspline_nets`` does, into ``nets`` where
-    ``with_nets``, and its bounds) or to ``-1 - slot[m, q]`` of the irregular ones (its
+    and converted by ``to_bez`` as ``basis.bspline_nets`` does (:func:`_bezier`,
+    :func:`_net_bounds`), into ``nets`` where ``with_nets``, and its bounds) or to ``-1 - slot[m, q]`` of the irregular ones (its
     grid and one-ring shell)."""
     across = np.empty((2, 4, 4))
     along = np.empty((4, 4, 3))
     child = np.empty((1, 4, 4, 3))
-    turned = np.empty((1, 4, 4, 3))
-    bez = np.empty((1, 4, 4, 3))
+    turned = np.empty((4, 4, 3))
+    tmp = np.empty((4, 4, 3))
+    bez = np.empty((4, 4, 3))
     for m in range(grids.shape[0]):
         # the halves across: rows 1 and 3 of the left, 0 and 2 of the right are the rules
         # at points 1 and 2
@@ -334,11 +335,55 @@ def _refine_level(grids, weights, side, halves, from_canon, to_bez, slot, with_n
                 for f in range(16):  # the patch's grid point f is canonical from_canon[f]
                     t = from_canon[side[m], f]
                     for k in range(3):
-                        turned[0, f // 4, f % 4, k] = child[0, t // 4, t % 4, k]
-                to_bezier(turned, to_bez, bez)
-                net_summary(bez, net_lo[s:s + 1], net_hi[s:s + 1], net_bound[s:s + 1])
+                        turned[f // 4, f % 4, k] = child[0, t // 4, t % 4, k]
+                _bezier(turned, to_bez, tmp, bez)
+                _net_bounds(bez, s, net_lo, net_hi, net_bound)
                 if with_nets:
-                    nets[s] = bez[0]
+                    nets[s] = bez
+
+
+@leaf_njit
+def _bezier(cv, M, tmp, out):
+    """The Bezier net ``out`` (4,4,3) of the B-spline grid ``cv`` (4,4,3), ``M`` =
+    ``basis.TO_BEZIER``: ``basis.to_bezier``'s sums in its order (so the same bits), with
+    its scratch ``tmp`` (4,4,3) given (``to_bezier`` allocates its own per call: half the
+    time of the maps' kernel)."""
+    for a in range(4):
+        for j in range(4):
+            for k in range(3):
+                tmp[a, j, k] = (M[a, 0] * cv[0, j, k] + M[a, 1] * cv[1, j, k]
+                                + M[a, 2] * cv[2, j, k] + M[a, 3] * cv[3, j, k])
+    for a in range(4):
+        for b in range(4):
+            for k in range(3):
+                out[a, b, k] = (M[b, 0] * tmp[a, 0, k] + M[b, 1] * tmp[a, 1, k]
+                                + M[b, 2] * tmp[a, 2, k] + M[b, 3] * tmp[a, 3, k])
+
+
+@leaf_njit
+def _net_bounds(bez, s, lo, hi, bound):
+    """Row ``s`` of the box ``lo``, ``hi`` and derivative bound ``bound`` of the net
+    ``bez`` (4,4,3), as ``basis.net_summary`` makes them."""
+    for k in range(3):
+        lo[s, k] = np.inf
+        hi[s, k] = -np.inf
+    best = 0.0
+    for a in range(4):
+        for b in range(4):
+            for k in range(3):
+                lo[s, k] = min(lo[s, k], bez[a, b, k])
+                hi[s, k] = max(hi[s, k], bez[a, b, k])
+            if a < 3:
+                dx = bez[a + 1, b, 0] - bez[a, b, 0]
+                dy = bez[a + 1, b, 1] - bez[a, b, 1]
+                dz = bez[a + 1, b, 2] - bez[a, b, 2]
+                best = max(best, math.sqrt(dx * dx + dy * dy + dz * dz))
+            if b < 3:
+                dx = bez[a, b + 1, 0] - bez[a, b, 0]
+                dy = bez[a, b + 1, 1] - bez[a, b, 1]
+                dz = bez[a, b + 1, 2] - bez[a, b, 2]
+                best = max(best, math.sqrt(dx * dx + dy * dy + dz * dz))
+    bound[s] = 3.0 * best
 
 
 @leaf_njit

@@ -231,7 +231,8 @@ class Growable:
             if not isinstance(value, list):
                 self._store[name][start:end] = value
                 continue
-            store = self._store[name].reshape(len(self._store[name]), -1)
+            whole = self._store[name]  # (contiguous: a view of its rows, flat)
+            store = whole.reshape(len(whole), int(np.prod(whole.shape[1:], dtype=np.int64)))
             row = start if at is None else 0
             for a in value:
                 n = len(a)
@@ -447,7 +448,7 @@ def _in_order(subs, cells):
     """``(subs, cells, net_at, cell_at)``: :func:`~subtrace.patches.isolate.isolated_parts`'
     lists as :func:`~subtrace.patches.isolate.build_isolated`'s arrays in order, but the
     nets, the cells' corners and normals left as lists as made (``net_at``, ``cell_at``:
-    the row in those of each piece and cell in order)."""
+    the row in those of each piece and cell in order, for ``Growable.put``)."""
     order, cell_order = packed_order(subs, cells)
     empty = np.zeros(0, np.int64)
     subs = tuple(a if k == 4 else rows_in_order(a, order) if a else
