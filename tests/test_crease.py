@@ -152,14 +152,11 @@ CAGES = ["catmark_pawn.obj", "catmark_helmet.obj", "catmark_cubes_semisharp.obj"
          "catmark_chaikin1.obj", *TORI]
 
 
-@pytest.mark.parametrize("kernel", [True, False], ids=["kernel", "numpy"])
 @pytest.mark.parametrize("far", [1.5, 8.0], ids=["near", "far"])
 @pytest.mark.parametrize("name", CAGES)
-def test_maps_isolate_as_the_mesh_does(name, far, kernel, tori, monkeypatch):
+def test_maps_isolate_as_the_mesh_does(name, far, tori, monkeypatch):
     """From near (deep: every crease runs out) and far (shallow: cells left along the
-    creases) the maps give what topology gives, at the root and below it, each level in the
-    kernel or in NumPy."""
-    monkeypatch.setattr(crease, "KERNEL_SQUARES", 0 if kernel else 1 << 40)
+    creases) the maps give what topology gives, at the root and below it."""
     cage = _cage(name, tori)
     table = build_patch_table([cage])
     o = table.objects[0]

@@ -49,7 +49,7 @@ import numpy as np
 
 from subtrace.config import IRREGULAR_MARGIN
 from subtrace.mesh.topology import INF_SHARP, gather_index
-from subtrace.patches.basis import TO_BEZIER, bezier_nets_and_bounds, net_summary, to_bezier
+from subtrace.patches.basis import TO_BEZIER
 from subtrace.patches.bspline import control_grids
 from subtrace.patches.grids import levels_needed, unit_normals
 from subtrace.patches.shells import sight_distance
@@ -247,12 +247,6 @@ def _across(s_lo, s_hi):
     return out
 
 
-# the fewest squares a level refines in the kernel (:func:`_refine_level`); fewer, in NumPy:
-# loading the kernel (20-40 ms) cost the small creased cubes of scenes/creases.toml more
-# than their whole refinement by the maps
-KERNEL_SQUARES = 512
-
-
 def _level(grids, s_lo, s_hi, side, with_nets):
     """One level of the isolation of canonical squares of control grids ``grids`` (n,4,4,3)
     (``[u][v]``, sharpness ``s_lo``, ``s_hi`` at their points 1 and 2 across, patches
@@ -260,11 +254,10 @@ def _level(grids, s_lo, s_hi, side, with_nets):
     the patch's frame (corner q is the canonical corner q - side), the regular ones (whose
     crease has run out) first, then the irregular ones. Returns ``(reg (n,4) bool, nets
     (r,4,4,3) in the patches' frames or None, lo, hi (r,3), bound (r,), kids (i,4,4,3)
-    canonical grids, ring_lo, ring_hi (i,3), ring_bound (i,), their sharpness kid_lo,
-    kid_hi (i,))``: the regular children's Bezier nets (``with_nets``), boxes and
+    canonical grids, their sharpness kid_lo, kid_hi (i,), ring_lo, ring_hi (i,3),
+    ring_bound (i,))``: the regular children's Bezier nets (``with_nets``), boxes and
     derivative bounds (``basis.net_bounds``), the irregular ones' grids and one-ring shells
-    (``shells.one_ring_shells``'s box and length bound), children in order. In the kernel
-    from ``KERNEL_SQUARES`` squares on, else in NumPy (the same sums to rounding)."""
+    (``shells.one_ring_shells``'s box and length bound), children in order."""
     n = len(grids)
     z = np.zeros(n, np.float32)
     lo, hi = _decayed(s_lo), _decayed(s_hi)
@@ -272,9 +265,6 @@ def _level(grids, s_lo, s_hi, side, with_nets):
     kid_lo = np.stack([lo, lo, z, z], axis=1)[np.arange(n)[:, None], turn]
     kid_hi = np.stack([z, z, hi, hi], axis=1)[np.arange(n)[:, None], turn]
     reg = (kid_lo <= 0) & (kid_hi <= 0)
-    if n < KERNEL_SQUARES:
-        return (reg, *_level_numpy(grids, s_lo, s_hi, side, turn, reg, with_nets),
-                kid_lo[~reg], kid_hi[~reg])
     flat = reg.ravel()
     r, i = int(flat.sum()), int((~flat).sum())
     slot = np.where(flat, np.cumsum(flat) - 1, -np.cumsum(~flat)).reshape(n, 4)
@@ -284,28 +274,7 @@ def _level(grids, s_lo, s_hi, side, with_nets):
     weights = np.ascontiguousarray(np.stack([_weights(s_lo), _weights(s_hi)], axis=1))
     _refine_level(np.ascontiguousarray(grids), weights, np.ascontiguousarray(side), HALVES,
                   FROM_CANON, TO_BEZIER, np.ascontiguousarray(slot), with_nets, nets, *out)
-    return (reg, nets if with_nets else None, *out[:4], *out[4:], kid_lo[~reg], kid_hi[~reg])
-
-
-def _level_numpy(grids, s_lo, s_hi, side, turn, reg, with_nets):
-    """:func:`_level`'s nets, bounds, grids and shells (``turn``: the canonical corner of
-    the child at each patch corner, ``reg`` which are regular) in NumPy, as the kernel."""
-    n = len(grids)
-    along = (HALVES[None] @ grids.reshape(n, 1, 4, 12)).reshape(n, 2, 4, 4, 3)
-    kids = np.einsum("ngbq,nhaqk->nhgabk", _across(s_lo, s_hi), along)
-    # canonical corner c is the (u, v) half (0,0), (1,0), (1,1), (0,1)
-    kids = kids[:, [0, 1, 1, 0], [0, 0, 1, 1]][np.arange(n)[:, None], turn]
-    sides = np.repeat(side, 4)[reg.ravel()]
-    regular = kids[reg].reshape(-1, 16, 3)[np.arange(len(sides))[:, None], FROM_CANON[sides]]
-    nets, lo, hi, bound = bezier_nets_and_bounds(regular.reshape(-1, 4, 4, 3))
-    odd = np.ascontiguousarray(kids[~reg])
-    ring_lo, ring_hi = odd.min(axis=(1, 2)), odd.max(axis=(1, 2))
-    du = np.sqrt(((odd[:, 1:] - odd[:, :-1]) ** 2).sum(axis=-1))  # (i,3,4) along u
-    dv = np.sqrt(((odd[:, :, 1:] - odd[:, :, :-1]) ** 2).sum(axis=-1))  # (i,4,3)
-    own = np.maximum(du[:, 1, 1:3].max(axis=1, initial=0), dv[:, 1:3, 1].max(axis=1, initial=0))
-    most = np.maximum(du.max(axis=(1, 2), initial=0), dv.max(axis=(1, 2), initial=0))
-    return (nets if with_nets else None, lo, hi, bound, odd, ring_lo, ring_hi,
-            (4.0 * own + 5.0 * most) / 9.0)
+    return (reg, nets if with_nets else None, *out[:4], kid_lo[~reg], kid_hi[~reg], *out[4:])
 
 
 @nb.njit(cache=True, nogil=True)
@@ -316,14 +285,15 @@ def _refine_level(grids, weights, side, halves, from_canon, to_bez, slot, with_n
     taking the crease rule of weight ``weights[m]`` (2,) (``w`` the point itself, ``1 - w``
     the smooth rule); the child at the patch's corner q goes to ``slot[m, q]`` of the
     regular ones (>= 0: its net, turned into the patch's frame by ``from_canon[side[m]]``
-    and converted by ``to_bez`` as ``basis.bspline_nets`` does, into ``nets`` where
-    ``with_nets``, and its bounds) or to ``-1 - slot[m, q]`` of the irregular ones (its
+    and converted by ``to_bez`` as ``basis.bspline_nets`` does (:func:`_bezier`,
+    :func:`_net_bounds`), into ``nets`` where ``with_nets``, and its bounds) or to ``-1 - slot[m, q]`` of the irregular ones (its
     grid and one-ring shell)."""
     across = np.empty((2, 4, 4))
     along = np.empty((4, 4, 3))
     child = np.empty((1, 4, 4, 3))
-    turned = np.empty((1, 4, 4, 3))
-    bez = np.empty((1, 4, 4, 3))
+    turned = np.empty((4, 4, 3))
+    tmp = np.empty((4, 4, 3))
+    bez = np.empty((4, 4, 3))
     for m in range(grids.shape[0]):
         # the halves across: rows 1 and 3 of the left, 0 and 2 of the right are the rules
         # at points 1 and 2
@@ -365,11 +335,55 @@ def _refine_level(grids, weights, side, halves, from_canon, to_bez, slot, with_n
                 for f in range(16):  # the patch's grid point f is canonical from_canon[f]
                     t = from_canon[side[m], f]
                     for k in range(3):
-                        turned[0, f // 4, f % 4, k] = child[0, t // 4, t % 4, k]
-                to_bezier(turned, to_bez, bez)
-                net_summary(bez, net_lo[s:s + 1], net_hi[s:s + 1], net_bound[s:s + 1])
+                        turned[f // 4, f % 4, k] = child[0, t // 4, t % 4, k]
+                _bezier(turned, to_bez, tmp, bez)
+                _net_bounds(bez, s, net_lo, net_hi, net_bound)
                 if with_nets:
-                    nets[s] = bez[0]
+                    nets[s] = bez
+
+
+@leaf_njit
+def _bezier(cv, M, tmp, out):
+    """The Bezier net ``out`` (4,4,3) of the B-spline grid ``cv`` (4,4,3), ``M`` =
+    ``basis.TO_BEZIER``: ``basis.to_bezier``'s sums in its order (so the same bits), with
+    its scratch ``tmp`` (4,4,3) given (``to_bezier`` allocates its own per call: half the
+    time of the maps' kernel)."""
+    for a in range(4):
+        for j in range(4):
+            for k in range(3):
+                tmp[a, j, k] = (M[a, 0] * cv[0, j, k] + M[a, 1] * cv[1, j, k]
+                                + M[a, 2] * cv[2, j, k] + M[a, 3] * cv[3, j, k])
+    for a in range(4):
+        for b in range(4):
+            for k in range(3):
+                out[a, b, k] = (M[b, 0] * tmp[a, 0, k] + M[b, 1] * tmp[a, 1, k]
+                                + M[b, 2] * tmp[a, 2, k] + M[b, 3] * tmp[a, 3, k])
+
+
+@leaf_njit
+def _net_bounds(bez, s, lo, hi, bound):
+    """Row ``s`` of the box ``lo``, ``hi`` and derivative bound ``bound`` of the net
+    ``bez`` (4,4,3), as ``basis.net_summary`` makes them."""
+    for k in range(3):
+        lo[s, k] = np.inf
+        hi[s, k] = -np.inf
+    best = 0.0
+    for a in range(4):
+        for b in range(4):
+            for k in range(3):
+                lo[s, k] = min(lo[s, k], bez[a, b, k])
+                hi[s, k] = max(hi[s, k], bez[a, b, k])
+            if a < 3:
+                dx = bez[a + 1, b, 0] - bez[a, b, 0]
+                dy = bez[a + 1, b, 1] - bez[a, b, 1]
+                dz = bez[a + 1, b, 2] - bez[a, b, 2]
+                best = max(best, math.sqrt(dx * dx + dy * dy + dz * dz))
+            if b < 3:
+                dx = bez[a, b + 1, 0] - bez[a, b, 0]
+                dy = bez[a, b + 1, 1] - bez[a, b, 1]
+                dz = bez[a, b + 1, 2] - bez[a, b, 2]
+                best = max(best, math.sqrt(dx * dx + dy * dy + dz * dz))
+    bound[s] = 3.0 * best
 
 
 @leaf_njit
@@ -422,7 +436,7 @@ def crease_depths(level, points, faces, side, s_lo, s_hi, cap, eye, tol_rad, box
     k = 0
     while len(rows):
         k += 1
-        reg, _, blo, bhi, bound, grids, smin, smax, ebound, lo, hi = _level(
+        reg, _, blo, bhi, bound, grids, lo, hi, smin, smax, ebound = _level(
             grids, lo, hi, side[rows], False)
         root = np.repeat(rows, 4).reshape(-1, 4)
         if len(blo):
@@ -479,7 +493,7 @@ def crease_pieces(level, points, options, faces, side, s_lo, s_hi, depth, eye=No
             rows, grids, lo, hi, ci, cj = (a[keep] for a in (rows, grids, lo, hi, ci, cj))
             if not len(rows):
                 break
-        reg, nets, blo, bhi, bound, grids, _, _, _, lo, hi = _level(grids, lo, hi, side[rows],
+        reg, nets, blo, bhi, bound, grids, lo, hi, _, _, _ = _level(grids, lo, hi, side[rows],
                                                                     True)
         # the children's canonical corners and positions, in the patch's corner order
         turn = (np.arange(4)[None, :] - side[rows][:, None]) % 4

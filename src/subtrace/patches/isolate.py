@@ -261,7 +261,7 @@ def isolated_parts(obj, faces, depth, eye=None, tol_rad=None, record=None, ring=
     """:func:`build_isolated`'s result before it is put in order: ``(subs, cells)``, a list
     per array of its layout, the arrays of each as they were made (:func:`packed_order`
     gives the order, :func:`rows_in_order` the rows): for a caller that copies the nets
-    somewhere anyway (``trace.pools.Pieces.append``) and can take them as they are."""
+    somewhere anyway (``trace.pools.Pieces.append`` writes each once, at its place)."""
     options = obj.cage.options
     faces = np.asarray(faces, dtype=np.int64)
     depth = np.broadcast_to(np.asarray(depth, dtype=np.int64), faces.shape)

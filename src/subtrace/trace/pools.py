@@ -452,7 +452,7 @@ def _in_order(subs, cells):
     """``(subs, cells, net_at, cell_at)``: :func:`~subtrace.patches.isolate.isolated_parts`'
     lists as :func:`~subtrace.patches.isolate.build_isolated`'s arrays in order, but the
     nets, the cells' corners and normals left as lists as made (``net_at``, ``cell_at``:
-    the row in those of each piece and cell in order)."""
+    the row in those of each piece and cell in order, for ``Growable.put``)."""
     order, cell_order = packed_order(subs, cells)
     empty = np.zeros(0, np.int64)
     subs = tuple(a if k == 4 else rows_in_order(a, order) if a else
