@@ -26,7 +26,7 @@ from typing import NamedTuple
 import numpy as np
 
 from subtrace import config
-from subtrace.runtime.jit import llvm_inline_njit
+from subtrace.runtime.jit import llvm_inline_njit, nb
 
 # a rectangle is widened by this much of the largest coordinate of the boxes: the rounding
 # of the projections (a few operations) and of a ray's drift across the cells while it
@@ -83,18 +83,31 @@ def parallel_grid(bmin, bmax, d) -> ParallelGrid:
     # the boxes nearest first along d (their nearest corner), each listed in its cells
     near = centre @ np.asarray(d, np.float64) - half @ np.abs(np.asarray(d, np.float64))
     order = np.lexsort((np.arange(len(bmin)), near))
-    span = last[order] - first[order] + 1
-    per = span[:, 0] * span[:, 1]
-    box = np.repeat(order, per)
-    k = np.arange(int(per.sum())) - np.repeat(np.cumsum(per) - per, per)
-    across_j = np.repeat(span[:, 1], per)
-    i = first[box, 0] + k // across_j
-    j = first[box, 1] + k % across_j
-    cell = i * shape[1] + j
-    sort = np.argsort(cell, kind="stable")  # (each cell's boxes stay nearest first)
     start = np.zeros(int(shape[0] * shape[1]) + 1, np.int64)
-    np.add.at(start, cell + 1, 1)
-    return ParallelGrid(axes, lo, scale, shape, np.cumsum(start), box[sort].astype(np.int64))
+    items = _cell_lists(order, first, last, int(shape[1]), start)
+    return ParallelGrid(axes, lo, scale, shape, start, items)
+
+
+@nb.njit(cache=True)
+def _cell_lists(order, first, last, per_row, start):
+    """The cells' lists of boxes (each box, in ``order``, in the cells ``first .. last``
+    (N,2) of its rectangle; cell ``i * per_row + j``): fills ``start`` (C+1,) and returns
+    ``items`` (a counting sort: each cell's boxes keep ``order``)."""
+    for p in order:
+        for i in range(first[p, 0], last[p, 0] + 1):
+            for j in range(first[p, 1], last[p, 1] + 1):
+                start[i * per_row + j + 1] += 1
+    for c in range(1, len(start)):
+        start[c] += start[c - 1]
+    items = np.empty(start[-1], np.int64)
+    fill = start[:-1].copy()
+    for p in order:
+        for i in range(first[p, 0], last[p, 0] + 1):
+            for j in range(first[p, 1], last[p, 1] + 1):
+                c = i * per_row + j
+                items[fill[c]] = p
+                fill[c] += 1
+    return items
 
 
 @llvm_inline_njit

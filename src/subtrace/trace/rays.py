@@ -96,10 +96,10 @@ def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
     depend on the thread count: a ray's hits depend only on the pools, never on the
     threads' memos.
 
-    Any-hit rays that come in runs of one direction (a directional light's, at least
-    ``config.PARALLEL_MIN_RAYS`` in a row) find the shells they enter from a grid of the
-    shells seen along it (``accel/parallel.py``, kept in ``pools.grids``) instead of the
-    BVH: the same shells, so the same answers."""
+    Any-hit rays that come in runs of one direction (a directional light's, many in a row:
+    :func:`_runs`) find the shells they enter from a grid of the shells seen along it
+    (``accel/parallel.py``, kept in ``pools.grids``) instead of the BVH: the same shells,
+    so the same answers."""
     n = len(tmax)
     origins = np.ascontiguousarray(origins, np.float64).reshape(n, 3)
     dirs = np.ascontiguousarray(dirs, np.float64).reshape(n, 3)
@@ -127,17 +127,20 @@ def trace_rays(pools: Pools, origins, dirs, tmax, any_hit: bool):
 def _runs(pools, dirs, any_hit):
     """[(a, b, grid)]: the rays [a, b) traced together, with the grid of their one
     direction (:func:`~subtrace.accel.parallel.parallel_grid`) or ``no_grid()`` (the
-    BVH): runs of at least ``config.PARALLEL_MIN_RAYS`` rays of one direction of an
-    any-hit trace, and the rays between them."""
+    BVH): runs of one direction of an any-hit trace long enough to repay the grid (at
+    least ``config.PARALLEL_MIN_RAYS`` rays, ``config.PARALLEL_RAYS_PER_SHELL`` per
+    shell), and the rays between them."""
     n = len(dirs)
-    if not any_hit or n < config.PARALLEL_MIN_RAYS:
+    least = max(config.PARALLEL_MIN_RAYS,
+                config.PARALLEL_RAYS_PER_SHELL * len(pools.shell_min))
+    if not any_hit or n < least:
         return [(0, n, no_grid())]
     cut = np.nonzero((dirs[1:] != dirs[:-1]).any(axis=1))[0] + 1
     bounds = np.concatenate([[0], cut, [n]])
     runs = []
     for a, b in zip(bounds[:-1], bounds[1:]):
         a, b = int(a), int(b)
-        if b - a >= config.PARALLEL_MIN_RAYS:
+        if b - a >= least:
             runs.append((a, b, _grid(pools, dirs[a])))
         elif runs and runs[-1][2] is None:
             runs[-1] = (runs[-1][0], b, None)
