@@ -135,8 +135,7 @@ def _runs(pools, dirs, any_hit):
                 config.PARALLEL_RAYS_PER_SHELL * len(pools.shell_min))
     if not any_hit or n < least:
         return [(0, n, no_grid())]
-    cut = np.nonzero((dirs[1:] != dirs[:-1]).any(axis=1))[0] + 1
-    bounds = np.concatenate([[0], cut, [n]])
+    bounds = np.concatenate([[0], _direction_changes(dirs), [n]])
     runs = []
     for a, b in zip(bounds[:-1], bounds[1:]):
         a, b = int(a), int(b)
@@ -147,6 +146,20 @@ def _runs(pools, dirs, any_hit):
         else:
             runs.append((a, b, None))
     return [(a, b, no_grid() if g is None else g) for a, b, g in runs]
+
+
+@nb.njit(cache=True)
+def _direction_changes(dirs):
+    """The rays (n,) int64 whose direction is not their predecessor's (a pass over the
+    rays; numpy's comparison of the rows and their reduction took three)."""
+    out = np.empty(len(dirs), np.int64)
+    k = 0
+    for r in range(1, len(dirs)):
+        if (dirs[r, 0] != dirs[r - 1, 0] or dirs[r, 1] != dirs[r - 1, 1]
+                or dirs[r, 2] != dirs[r - 1, 2]):
+            out[k] = r
+            k += 1
+    return out[:k]
 
 
 def _grid(pools, d):
@@ -241,6 +254,8 @@ def compile_kernel(schemes=("catmark",)) -> None:
                   shell_min=none, shell_max=none, bvh=no_bvh(), eye=np.zeros(3), tol_rad=1.0,
                   stats=SimpleNamespace(micro_triangles=0), round_no=0)
     trace_rays(pools, none, none, np.zeros(0), True)
+    _direction_changes(none)  # (and the parallel rays' grid: its lists' kernel)
+    parallel_grid(np.zeros((1, 3)), np.ones((1, 3)), np.array([0.0, 0.0, 1.0]))
 
 
 def run_chunks(work, n_rays):
