@@ -83,7 +83,9 @@ class Pools:
     # spares faulting their pages in again
     memos: object = None
     # the grids of the shells seen along the directions of parallel rays (trace_rays),
-    # by direction: made once for all the calls that share the shells (None: none yet)
+    # by direction: made once for all the calls that share the shells (None: none yet).
+    # A shell only shrinks once made (render.trace_window, to its built items' boxes), so
+    # a grid made before lists a box in every cell its box now reaches, and more
     grids: dict | None = None
 
 
