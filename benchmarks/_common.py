@@ -18,3 +18,13 @@ def import_subtrace():
         sys.path.insert(0, str(REPO / "src"))
         import subtrace
     return subtrace
+
+
+def split_extra(argv):
+    """``(own, extra)``: a script's arguments before ``--`` and those after it (passed on to
+    ``subtrace render``), or all of them and none."""
+    argv = list(argv)
+    if "--" not in argv:
+        return argv, []
+    k = argv.index("--")
+    return argv[:k], argv[k + 1:]

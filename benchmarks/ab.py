@@ -37,7 +37,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _common import REPO  # benchmarks/ is on sys.path when run as a script
+from _common import REPO, split_extra  # benchmarks/ is on sys.path when run as a script
 
 TIMES = ("total", "refine", "trace", "shade", "shadows", "ao")
 
@@ -112,11 +112,7 @@ def cache_for(tree: Path) -> Path:
 
 
 def main(argv=None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
-    extra = []
-    if "--" in argv:
-        k = argv.index("--")
-        argv, extra = argv[:k], argv[k + 1:]
+    argv, extra = split_extra(sys.argv[1:] if argv is None else argv)
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("scenes", nargs="+")
     ap.add_argument("--base", default="HEAD", help="the commit A is (default HEAD)")

@@ -813,6 +813,17 @@ def cost_table(rows) -> list[str]:
     return out
 
 
+def note_marks(row_notes, notes) -> str:
+    """A table row's footnote marks (``<sup>k</sup>``), its notes numbered in ``notes`` (the
+    table's, in order of first use: new ones appended)."""
+    marks = ""
+    for note in row_notes:
+        if note not in notes:
+            notes.append(note)
+        marks += f"<sup>{notes.index(note) + 1}</sup>"
+    return marks
+
+
 def markdown(summary, images=None) -> str:
     rows, geo = summary["rows"], summary["geomean"]
     notes, out = [], []
@@ -821,11 +832,7 @@ def markdown(summary, images=None) -> str:
                "| ratio |")
     out.append("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for row in rows:
-        marks = ""
-        for note in row["notes"]:
-            if note not in notes:
-                notes.append(note)
-            marks += f"<sup>{notes.index(note) + 1}</sup>"
+        marks = note_marks(row["notes"], notes)
         out.append(
             f"| {row['scene']}{marks} | {row['features']} | {row['px']:,} "
             f"| {row['subtrace_render']:.3f} | {row['cycles_render']:.3f} "

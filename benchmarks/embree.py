@@ -368,11 +368,7 @@ def markdown(summary) -> str:
                "process s | ratio | subtrace MB | Embree MB | ratio |")
     out.append("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for row in rows:
-        marks = ""
-        for note in row["notes"]:
-            if note not in notes:
-                notes.append(note)
-            marks += f"<sup>{notes.index(note) + 1}</sup>"
+        marks = cycles.note_marks(row["notes"], notes)
         out.append(
             f"| {row['scene']}{marks} | {row['features']} | {row['px']:,} "
             f"| {row['subtrace_render']:.3f} ({row['subtrace_refine_trace']:.3f}) "

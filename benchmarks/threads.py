@@ -34,7 +34,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _common import REPO  # benchmarks/ is on sys.path when run as a script
+from _common import REPO, split_extra  # benchmarks/ is on sys.path when run as a script
 
 STAGES = ("load", "preprocess", "refine", "trace", "shade", "shadows", "aa", "total")
 
@@ -148,11 +148,7 @@ def serial_split(source: str | None, rounds: int, extra: list[str]) -> None:
 
 
 def main(argv=None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
-    extra = []
-    if "--" in argv:
-        k = argv.index("--")
-        argv, extra = argv[:k], argv[k + 1:]
+    argv, extra = split_extra(sys.argv[1:] if argv is None else argv)
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("inputs", nargs="*",
                     help="scene files or meshes (none, or 'default': the default picture)")
