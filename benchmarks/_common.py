@@ -2,10 +2,20 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
+
+
+def bench_cache(name: str) -> Path:
+    """The folder a benchmark keeps what it builds between runs (a base commit's kernels, the
+    bpy environment, the Embree driver): ``$XDG_CACHE_HOME/subtrace-benchmarks/<name>``
+    (``~/.cache`` where it is unset), apart from subtrace's own kernel cache
+    (``~/.cache/subtrace``), which a benchmark never writes."""
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "subtrace-benchmarks" / name
 
 
 def import_subtrace():

@@ -5,7 +5,7 @@
 
 *A* is the commit ``--base`` (default ``HEAD``) checked out into a temporary git worktree;
 *B* is this checkout as it stands, uncommitted edits included. Each side has its own
-Numba cache (``~/.cache/subtrace/ab/<tree>``: a source edit changes the cache key, so the
+Numba cache (``~/.cache/subtrace-benchmarks/ab/<tree>``: a source edit changes the cache key, so the
 two sides would otherwise evict each other's kernels), filled by one untimed render of
 every scene. Then ``--rounds`` rounds render every scene with both sides, in the order AB
 in even rounds and BA in odd ones (the machine's speed drifts within minutes: alternating
@@ -37,7 +37,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _common import REPO, split_extra  # benchmarks/ is on sys.path when run as a script
+from _common import REPO, bench_cache, split_extra  # benchmarks/ is on sys.path when run as a script
 
 TIMES = ("total", "refine", "trace", "shade", "shadows", "ao")
 
@@ -107,8 +107,7 @@ def inspect(a: Path, b: Path) -> tuple:
 
 def cache_for(tree: Path) -> Path:
     key = hashlib.sha1(str(tree.resolve()).encode()).hexdigest()[:12]
-    base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
-    return base / "subtrace" / "ab" / key
+    return bench_cache("ab") / key
 
 
 def main(argv=None) -> int:

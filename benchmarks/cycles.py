@@ -38,7 +38,7 @@ Renderers, each a separate process per render:
   ``render SCENE.toml -o OUT.exr --threads 2 --eye ... --quiet``. Its render time is the EXR
   header's ``subtrace:time_total`` (load, preprocess, refine, trace, shade; not the write).
 * Cycles: Blender ``bpy`` (default 5.0.1) in a virtual environment of its own, created on
-  first use in ``~/.cache/subtrace/bpy-venv`` (``pip install bpy==5.0.1``; the wheel needs
+  first use in ``~/.cache/subtrace-benchmarks/bpy-venv`` (``pip install bpy==5.0.1``; the wheel needs
   Python 3.11) unless ``--bpy-python`` names a Python that imports bpy. bpy is never a
   dependency of subtrace. ``_cycles_worker.py`` (beside this file) builds the cage with
   ``from_pydata``, edge creases in the ``crease_edge`` attribute and corners in
@@ -98,12 +98,14 @@ from dataclasses import dataclass, field
 from decimal import Decimal
 from pathlib import Path
 
+from _common import bench_cache  # benchmarks/ is on sys.path when run as a script
+
 REPO = Path(__file__).resolve().parents[1]
 WORKER = Path(__file__).resolve().with_name("_cycles_worker.py")
 OSD_SHAPES = REPO / "tests" / "oracle" / "shapes"
 BPY_VERSION = "5.0.1"
 BPY_PYTHON_VERSION = (3, 11)  # the bpy wheels are built for one CPython version
-DEFAULT_VENV = Path.home() / ".cache" / "subtrace" / "bpy-venv"
+DEFAULT_VENV = bench_cache("bpy-venv")
 IMAGE_SIZE = (480, 270)
 INF_SHARP = 10.0  # OpenSubdiv: sharpness >= 10 is infinitely sharp
 

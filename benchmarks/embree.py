@@ -9,7 +9,7 @@ A native anchor: what a tuned C++ ray tracer does with the same cages. Embree 3'
 surface at per-edge levels and builds its BVH over the grids; ``embree_driver.cpp`` (beside
 this file, subtrace's own code) feeds it a cage, shoots one primary ray per pixel and writes
 its times, a hit mask and the ray distances. This script builds the driver with ``g++``
-(or ``$CXX``) into a cache folder on first use (``~/.cache/subtrace/embree-driver``, or
+(or ``$CXX``) into a cache folder on first use (``~/.cache/subtrace-benchmarks/embree-driver``, or
 ``--build-dir``; a new binary whenever the source changes) and skips with one message, exit
 0, where the compiler or Embree's headers or library are missing. Embree is never a
 dependency of subtrace.
@@ -111,10 +111,10 @@ import tempfile
 from pathlib import Path
 
 import cycles  # beside this file: the scenes, cameras, cage reader and process timing
-from _common import import_subtrace
+from _common import bench_cache, import_subtrace
 
 DRIVER_SOURCE = Path(__file__).resolve().with_name("embree_driver.cpp")
-DEFAULT_BUILD_DIR = Path.home() / ".cache" / "subtrace" / "embree-driver"
+DEFAULT_BUILD_DIR = bench_cache("embree-driver")
 CXX_FLAGS = ["-O2", "-std=c++17"]
 LIBS = ["-lembree3", "-lpthread"]
 INSTALL_HINT = "Debian / Ubuntu: apt-get install libembree-dev"
