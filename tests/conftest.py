@@ -16,8 +16,9 @@ write at one temporary folder for the whole run, removed when the run ends:
   nothing is written into the checkout (``pytest -p no:cacheprovider`` in pyproject.toml:
   no ``.pytest_cache``; ``-p cacheprovider`` turns it back on for ``--lf``).
 
-Option: ``--update-golden`` rewrites the golden images (``golden_images/<scene>.exr``) from
-fresh renders instead of comparing against them.
+The golden images (``golden_images/<scene>.exr``) are compared by subtrace's own pytest
+plugin (:mod:`subtrace.testing.plugin`, the ``golden`` fixture; ``--update-goldens`` rewrites
+them from fresh renders), which pytest loads from its entry point before this file.
 """
 
 from __future__ import annotations
@@ -28,9 +29,12 @@ import sys
 import tempfile
 from pathlib import Path
 
-import pytest
-
-assert "subtrace" not in sys.modules, "conftest.py must run before subtrace is imported"
+# pytest loads subtrace's plugin (subtrace.testing.plugin) before this file: it imports the
+# package and itself only, which read no environment variable; nothing else of subtrace's may
+# be loaded yet (the kernel cache folder is read when the kernels load)
+PLUGIN_MODULES = {"subtrace", "subtrace.version", "subtrace.testing", "subtrace.testing.plugin"}
+_loaded = {m for m in sys.modules if m == "subtrace" or m.startswith("subtrace.")}
+assert _loaded <= PLUGIN_MODULES, f"conftest.py must run before {sorted(_loaded - PLUGIN_MODULES)}"
 
 RUN_DIR = Path(tempfile.mkdtemp(prefix="subtrace-tests-"))
 KERNEL_CACHE = Path(os.environ.get("SUBTRACE_TEST_CACHE_DIR") or RUN_DIR / "kernels")
@@ -50,15 +54,8 @@ def _private_folders() -> None:
 
 _private_folders()
 
-
-def pytest_addoption(parser):
-    parser.addoption(
-        "--update-golden",
-        action="store_true",
-        default=False,
-        help="render every scene of scenes/ and write it as its golden image "
-        "(golden_images/<scene>.exr) instead of comparing",
-    )
+# pytester runs the sample project of tests/golden_project (tests/test_golden_plugin.py)
+pytest_plugins = ["pytester"]
 
 
 def pytest_unconfigure(config):
@@ -72,9 +69,3 @@ def pytest_unconfigure(config):
         here.rmdir()
     except OSError:  # absent, or holds other files
         pass
-
-
-@pytest.fixture
-def update_golden(request) -> bool:
-    """True when pytest runs with --update-golden."""
-    return bool(request.config.getoption("--update-golden"))

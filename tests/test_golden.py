@@ -3,19 +3,23 @@
 (a fine uniform refinement pushed to the limit, ray cast in plain numpy); and proof that the
 thresholds catch a one-level refinement change and a crease change.
 
-Regenerate the goldens (after a change that is meant to alter the images) with::
+The comparison is subtrace's pytest plugin's (:mod:`subtrace.testing.plugin`, the ``golden``
+fixture; its settings are pyproject.toml's ``[tool.subtrace.compare]``: the goldens in
+golden_images/, failures in test_output/golden/). Regenerate the goldens (after a change that
+is meant to alter the images) with::
 
-    python -m pytest tests/test_golden.py --update-golden
+    python -m pytest tests/test_golden.py --update-goldens
 
 A failing comparison writes the render, the reference and their difference (EXR and PNG) to
-``test_output/golden/<scene>/`` (git-ignored) and prints the paths.
+``test_output/golden/<scene>/`` (git-ignored) and prints the paths; every run's comparisons
+are on one page, ``test_output/golden/report.html``. (The goldens' headers record the command
+with ``--update-golden``, the plugin's other spelling of the option.)
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
-import shutil
 from pathlib import Path
 
 import naive
@@ -25,14 +29,13 @@ from naive import ray_triangles
 
 import subtrace
 from subtrace.compare import DEFAULT_THRESHOLDS, FAIL, GROUPS, OPTIONAL_GROUPS, compare_images
-from subtrace.io.exr import HALF_CHANNELS, read_exr, write_exr, write_png
+from subtrace.io.exr import read_exr
 from subtrace.io.scene import apply_overrides, load_scene
 from subtrace.nurbs.scene import has_faces, has_surfaces
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES_DIR = ROOT / "scenes"
-GOLDEN_DIR = ROOT / "golden_images"
-FAILURE_DIR = ROOT / "test_output" / "golden"
+GOLDEN_DIR = ROOT / "golden_images"  # pyproject.toml [tool.subtrace.compare] goldens
 MODELS = ROOT / "models"  # the scenes' meshes, in the repository (models/README.md)
 SCENES = sorted(p.stem for p in SCENES_DIR.glob("*.toml"))
 
@@ -48,23 +51,19 @@ GOLDEN_CHANNELS = tuple(c for g, names in GROUPS.items() if g not in OPTIONAL_GR
 # unchanged renderer gives 0 everywhere; the percents absorb silhouette, crease and patch
 # border pixels that harmless arithmetic changes flip, while a one-level refinement change
 # (the `level` id over whole patches) and a crease sharpness change (depth, normals) fail
-# (test_thresholds_catch_*).
+# (test_thresholds_catch_*). pyproject.toml's [tool.subtrace.compare] sets no threshold, so
+# the plugin judges by these.
 GOLDEN_THRESHOLDS = DEFAULT_THRESHOLDS
-UPDATE_ALL = "python -m pytest tests/test_golden.py --update-golden"
 
 
 def update_command(scene: str) -> str:
-    """The exact command that (re)writes one scene's golden image."""
+    """The exact command that (re)writes one scene's golden image, as the goldens' headers
+    record it (``--update-golden``: the plugin's other spelling of ``--update-goldens``)."""
     return f'python -m pytest "tests/test_golden.py::test_golden[{scene}]" --update-golden'
 
 
 def golden_path(scene: str) -> Path:
     return GOLDEN_DIR / f"{scene}.exr"
-
-
-def _rel(path: Path) -> str:
-    """``path`` relative to the repository root where it lies inside it."""
-    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
 
 
 def golden_scene(scene: str, **overrides):
@@ -101,65 +100,13 @@ def golden_attributes(result, scene, name: str) -> dict:
     return attrs
 
 
-def same_golden(path: Path, channels: dict, attrs: dict) -> bool:
-    """True when the golden at ``path`` has exactly these pixels and subtrace header values
-    (then it is not rewritten, so its bytes stay as committed: a rewrite would store new
-    timings)."""
-    old_channels, old_attrs = read_exr(path)
-    if list(old_channels) != list(channels):
-        return False
-    for c, new in channels.items():  # as stored: half or float32
-        stored = np.asarray(new, np.float16 if c in HALF_CHANNELS else np.float32)
-        if not np.array_equal(old_channels[c], stored.astype(np.float32), equal_nan=True):
-            return False
-    ours = {k: v for k, v in attrs.items() if k.startswith("subtrace:")}
-    return all(old_attrs.get(k) == pytest.approx(v) if isinstance(v, float)
-               else old_attrs.get(k) == v for k, v in ours.items())
-
-
-def write_failure(name: str, rendered: dict, comparison) -> list[Path]:
-    """Write the render, the golden and their difference (EXR + PNG) for a failed scene."""
-    folder = FAILURE_DIR / name
-    folder.mkdir(parents=True, exist_ok=True)
-    rgb = lambda ch: np.stack([ch[c] for c in "RGB"], axis=-1)  # noqa: E731
-    paths = [folder / f for f in ("rendered.exr", "rendered.png", "reference.exr",
-                                  "reference.png", "diff.exr", "diff.png")]
-    write_exr(paths[0], rendered, {"scene": f"scenes/{name}.toml"})
-    write_png(paths[1], rgb(rendered))
-    shutil.copyfile(golden_path(name), paths[2])
-    write_png(paths[3], rgb(read_exr(golden_path(name))[0]))
-    comparison.write_diff(paths[4], png_path=paths[5])
-    return paths
-
-
 @pytest.mark.parametrize("name", SCENES)
-def test_golden(name, update_golden):
-    """Each scene renders to its golden image within GOLDEN_THRESHOLDS."""
+def test_golden(name, golden):
+    """Each scene renders to its golden image within GOLDEN_THRESHOLDS (the plugin's
+    comparison; with --update-goldens the render is written as the golden, header and all)."""
     scene = golden_scene(name)
-    path = golden_path(name)
-    if update_golden:
-        channels, result = render_channels(scene)
-        attrs = golden_attributes(result, scene, name)
-        if path.exists() and same_golden(path, channels, attrs):
-            print(f"{_rel(path)} unchanged")
-            return
-        path.parent.mkdir(exist_ok=True)
-        write_exr(path, channels, attrs)
-        print(f"wrote {_rel(path)}")
-        return
-    if not path.exists():
-        pytest.fail(f"golden image {_rel(path)} is missing; create it with: "
-                    f"{update_command(name)}", pytrace=False)
-    rendered, _ = render_channels(scene)
-    comparison = compare_images(rendered, path, GOLDEN_THRESHOLDS)
-    if comparison.verdict == FAIL:
-        paths = write_failure(name, rendered, comparison)
-        pytest.fail(
-            f"{name} differs from {_rel(path)}:\n{comparison.table()}\n"
-            "written: " + ", ".join(str(p) for p in paths) + "\nif the change is intended, "
-            f"regenerate with: {update_command(name)}",
-            pytrace=False,
-        )
+    channels, result = render_channels(scene)
+    golden(channels, name, attributes=golden_attributes(result, scene, name))
 
 
 def test_every_scene_has_a_golden():
@@ -184,56 +131,6 @@ def test_golden_header_and_size(name):
     assert attrs["subtrace:tolerance_px"] == pytest.approx(1.0, rel=1e-6)
     assert attrs["subtrace:golden_command"] == update_command(name)
     assert attrs["subtrace:scene"] == f"scenes/{name}.toml"
-
-
-def test_missing_golden_names_the_command(tmp_path, monkeypatch):
-    """A missing golden fails with the exact command that creates it."""
-    monkeypatch.setattr(f"{__name__}.GOLDEN_DIR", tmp_path)
-    with pytest.raises(pytest.fail.Exception) as info:
-        test_golden("creases", update_golden=False)
-    message = str(info.value)
-    assert update_command("creases") in message
-    assert "missing" in message
-
-
-def test_update_golden_writes_and_keeps_unchanged_files(tmp_path, monkeypatch):
-    """--update-golden creates a missing golden that then passes, leaves an equal one
-    untouched (same bytes) and rewrites one whose pixels differ."""
-    monkeypatch.setattr(f"{__name__}.GOLDEN_DIR", tmp_path)
-    path = tmp_path / "creases.exr"
-    test_golden("creases", update_golden=True)
-    first = path.read_bytes()
-    test_golden("creases", update_golden=False)
-    test_golden("creases", update_golden=True)
-    assert path.read_bytes() == first
-    channels, attrs = read_exr(path)
-    changed = dict(channels, Z=channels["Z"] * np.float32(2))
-    write_exr(path, changed, {k: v for k, v in attrs.items() if k.startswith("subtrace:")})
-    test_golden("creases", update_golden=True)
-    np.testing.assert_array_equal(read_exr(path)[0]["Z"], channels["Z"])
-
-
-def test_failure_writes_render_reference_and_difference(tmp_path, monkeypatch):
-    """A golden that no longer matches (depth 1 % off) fails, naming the images it wrote."""
-    channels, attrs = read_exr(golden_path("creases"))
-    channels["Z"] = channels["Z"] * np.float32(1.01)
-    monkeypatch.setattr(f"{__name__}.GOLDEN_DIR", tmp_path / "golden")
-    monkeypatch.setattr(f"{__name__}.FAILURE_DIR", tmp_path / "out")
-    (tmp_path / "golden").mkdir()
-    header = {k: v for k, v in attrs.items() if k.startswith("subtrace:")}
-    write_exr(tmp_path / "golden" / "creases.exr", channels, header)
-    with pytest.raises(pytest.fail.Exception) as info:
-        test_golden("creases", update_golden=False)
-    message = str(info.value)
-    assert "depth" in message and update_command("creases") in message
-    names = ("rendered.exr", "rendered.png", "reference.exr", "reference.png", "diff.exr",
-             "diff.png")
-    for name in names:
-        path = tmp_path / "out" / "creases" / name
-        assert path.stat().st_size > 0 and str(path) in message
-    diff, _ = read_exr(tmp_path / "out" / "creases" / "diff.exr")
-    covered = np.isfinite(channels["Z"])  # the centre ray's hit (alpha is anti-aliased)
-    np.testing.assert_allclose(diff["depth_rel"][covered], 0.01, rtol=1e-3)
 
 
 # --------------------------------------------------------------------------------------
