@@ -112,6 +112,61 @@ def test_ids_count_pixels_that_differ_where_both_are_covered():
     assert compare_images(a, b).groups["ids"].metrics["count"] == 6
 
 
+def test_ids_are_judged_by_count_and_never_heat():
+    """Ids changed over 3 covered pixels and one background pixel: the ids group counts the
+    3; the heat map stays 0 there (ids are labels: no size to divide by a threshold), the
+    ids map marks exactly those 3 and tells covered pixels from the background."""
+    from subtrace.compare import IDS_COLOURS, ids_map
+
+    a, b = image(), image()
+    b["patch_id"][2, :3] = 9
+    b["object_id"][2, W - 1] = 5  # background in both
+    result = compare_images(a, b, {"ids": {"failpercent": 50.0}})
+    assert result.groups["ids"].metrics["count"] == 3 and result.verdict == WARN
+    assert not result.heat().any() and not result.diff_channels()["heat"].any()
+    changed = result.ids_changed()
+    assert changed.sum() == 3 and changed[2, :3].all()
+    pixels = ids_map(changed, result.covered)
+    np.testing.assert_array_equal(pixels[2, 0], IDS_COLOURS["changed"])
+    np.testing.assert_array_equal(pixels[0, 0], IDS_COLOURS["same"])  # covered, same ids
+    np.testing.assert_array_equal(pixels[0, W - 1], IDS_COLOURS["not judged"])
+    # without the ids group: no ids map
+    assert compare_images(a, b, groups=["colour", "depth"]).ids_changed() is None
+
+
+def test_two_renders_differing_only_in_ids(tmp_path, capsys):
+    """subtrace compare on a golden render and a copy whose patch ids changed over the right
+    half of the surface: every other group passes, the heat channel and heat map PNG are
+    all black, the ids map PNG is magenta at exactly the changed pixels."""
+    from pathlib import Path
+
+    from subtrace.compare import IDS_COLOURS
+    from subtrace.io.exr import srgb8
+
+    golden = Path(__file__).resolve().parents[1] / "golden_images" / "creases.exr"
+    channels, _ = read_exr(golden)
+    changed = np.isfinite(channels["Z"]) & (np.arange(channels["Z"].shape[1])[None, :] >= 80)
+    channels["patch_id"] = channels["patch_id"] + np.float32(7) * changed
+    new, diff = tmp_path / "ids.exr", tmp_path / "d.exr"
+    write_exr(new, channels)
+    code, out, _ = run_cli(capsys, new, golden, "--diff", diff, "--png")
+    assert code == 2 and "ids map: " + str(tmp_path / "d_ids.png") in out
+    result = compare_images(new, golden)
+    assert {g: r.verdict for g, r in result.groups.items()} == {
+        "colour": PASS, "coverage": PASS, "depth": PASS, "normals": PASS, "ids": FAIL}
+    assert result.groups["ids"].metrics["count"] == changed.sum() > 1000
+    d, _ = read_exr(diff)
+    assert not d["heat"].any()
+    np.testing.assert_array_equal(d["ids"] > 0, changed)
+    heat_png, _ = read_exr(tmp_path / "d.png")
+    assert not any(heat_png[c].any() for c in "RGB")
+    ids_png, _ = read_exr(tmp_path / "d_ids.png")
+    magenta = srgb8(np.array([[IDS_COLOURS["changed"]]]))[0, 0] / 255.0
+    shown = np.all([np.isclose(ids_png[c], magenta[k], atol=1e-3) for k, c in
+                    enumerate("RGB")], axis=0)
+    np.testing.assert_array_equal(shown, changed)
+
+
 def test_nan_counts_as_a_failure():
     a, b = image(), image()
     b["G"][3, 3] = np.nan
@@ -335,7 +390,8 @@ def test_cli_diff_images(files, capsys, tmp_path):
     np.testing.assert_allclose(channels["heat"][covered], 10, rtol=1e-4)
     assert (tmp_path / "diff.png").stat().st_size > 0
     assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("diff")) == [
-        "diff.exr", "diff.png"]
+        "diff.exr", "diff.png", "diff_ids.png"]
+    assert f"heat map: {tmp_path / 'diff.png'}, ids map: {tmp_path / 'diff_ids.png'}" in out
 
 
 def test_package_exports_compare_images():

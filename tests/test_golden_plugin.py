@@ -57,7 +57,7 @@ def test_a_passing_and_a_failing_golden_with_the_group_table(project):
     no_traceback(out)
     folder = project.path / "test_output" / "golden" / "sphere_lit"
     names = ("rendered.exr", "rendered.png", "reference.exr", "reference.png", "diff.exr",
-             "diff.png")
+             "diff.png", "diff_ids.png")
     for name in names:
         assert (folder / name).stat().st_size > 0 and f"test_output/golden/sphere_lit/{name}" in out
     assert not (project.path / "test_output" / "golden" / "sphere").exists()

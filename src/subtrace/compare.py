@@ -19,6 +19,11 @@ Colour and coverage are judged over all pixels, the others over the pixels cover
 have all of its channels; one image having a group that the other lacks is a mismatch,
 except for the optional groups (OPTIONAL_GROUPS: position), which are then left out.
 
+Pictures of the differences: the heat map (:meth:`Comparison.heat`, :func:`heat_map`) shows
+each pixel's largest error over its group's fail threshold, over every group but ids; ids
+are labels, not quantities, so they are judged by the count of pixels whose ids changed and
+drawn as a map of their own (:meth:`Comparison.ids_changed`, :func:`ids_map`).
+
 Verdict of a group (idiff's rule, per group): n_fail pixels have error > fail, n_warn have
 error > warn; FAIL when n_fail > failpercent % of the group's pixels or the largest error
 > hardfail; else WARN when n_warn > warnpercent % of them; else PASS. The image's verdict
@@ -51,6 +56,8 @@ GROUPS = {
     "ids": ("level", "patch_id", "object_id"),
     "position": ("P.X", "P.Y", "P.Z"),
 }
+# the groups of the heat map: all but the ids (labels: a changed id has no size)
+HEAT_GROUPS = tuple(g for g in GROUPS if g != "ids")
 # groups compared only when both images have them (images written before subtrace wrote
 # P, or by other renderers, still compare)
 OPTIONAL_GROUPS = frozenset(("position",))
@@ -128,13 +135,18 @@ class GroupResult:
 @dataclass
 class Comparison:
     """The result of :func:`compare_images`: per-group results, the overall verdict and
-    exit code, and the per-pixel error maps (group -> (H,W) float32, 0 where not judged)."""
+    exit code, the per-pixel error maps (group -> (H,W) float32, 0 where not judged), the
+    pixels where both images have the surface (``covered``: (H,W) bool, judged by depth,
+    normals, ids and position) and both images' linear RGB (``rgb``: a pair of (H,W,3)
+    float32, None without colour channels) for pictures."""
 
     width: int
     height: int
     groups: dict
     errors: dict
     verdict: str
+    covered: np.ndarray | None = None
+    rgb: tuple | None = None
 
     @property
     def exit_code(self) -> int:
@@ -165,7 +177,8 @@ class Comparison:
     def diff_channels(self) -> dict:
         """Difference image channels: |dR|,|dG|,|dB| as R,G,B, then each group's per-pixel
         error (``coverage``, ``depth_rel``, ``normal_deg``, ``ids``, ``position_rel``) and
-        ``heat``: the largest error divided by its group's fail threshold (>= 1 fails)."""
+        ``heat``: the largest error divided by its group's fail threshold (>= 1 fails), over
+        the groups but ids (:data:`HEAT_GROUPS`; ``ids`` is 1 where an id changed)."""
         out = {c: self.errors[c] for c in ("R", "G", "B") if c in self.errors}
         names = {"coverage": "coverage", "depth": "depth_rel", "normals": "normal_deg",
                  "ids": "ids", "position": "position_rel"}
@@ -175,22 +188,38 @@ class Comparison:
         out["heat"] = self.heat()
         return out
 
-    def heat(self) -> np.ndarray:
-        """(H,W) float32: max over groups of error / fail threshold (0 where nothing differs)."""
+    def heat(self, group: str | None = None) -> np.ndarray:
+        """(H,W) float32: error / fail threshold of ``group``, or (None) the largest over
+        :data:`HEAT_GROUPS` (0 where nothing differs; ids never count)."""
         heat = np.zeros((self.height, self.width), dtype=np.float32)
         for name, g in self.groups.items():
+            if name == "ids" or group not in (None, name):
+                continue
             scale = g.thresholds.fail if g.thresholds.fail > 0 else 1.0
             np.maximum(heat, self.errors[name] / np.float32(scale), out=heat)
         return heat
 
-    def write_diff(self, path, png_path=None) -> None:
+    def ids_changed(self) -> np.ndarray | None:
+        """(H,W) bool: pixels covered in both images whose level, patch or object id
+        changed; None when the ids group was not compared."""
+        return self.errors["ids"] > 0 if "ids" in self.groups else None
+
+    def write_diff(self, path, png_path=None) -> list:
         """Write :meth:`diff_channels` as an EXR (verdict in the header) and optionally a PNG
         heat map of :meth:`heat` (black: equal, red: half the fail threshold, yellow:
-        at the threshold, white: twice it or more)."""
+        at the threshold, white: twice it or more) and, when the ids were compared, the ids
+        map beside it (``<png stem>_ids.png``, :func:`ids_map`). Returns the PNGs' paths."""
         attrs = {"compare_verdict": self.verdict}
         write_exr(path, self.diff_channels(), attrs)
-        if png_path is not None:
-            write_png(png_path, heat_map(self.heat()))
+        if png_path is None:
+            return []
+        write_png(png_path, heat_map(self.heat()))
+        changed = self.ids_changed()
+        if changed is None:
+            return [png_path]
+        stem, ext = os.path.splitext(os.fspath(png_path))
+        write_png(stem + "_ids" + ext, ids_map(changed, self.covered))
+        return [png_path, stem + "_ids" + ext]
 
 
 def heat_map(heat: np.ndarray) -> np.ndarray:
@@ -199,6 +228,22 @@ def heat_map(heat: np.ndarray) -> np.ndarray:
     colours = np.array([[0, 0, 0], [0.8, 0, 0], [1, 0.85, 0], [1, 1, 1]], dtype=np.float64)
     h = np.nan_to_num(np.asarray(heat, dtype=np.float64), nan=2.0, posinf=2.0)
     return np.stack([np.interp(h, stops, colours[:, k]) for k in range(3)], axis=-1)
+
+
+# ids map colours (linear RGB): no surface in one image or both, same ids, changed ids
+IDS_COLOURS = {"not judged": (0.0, 0.0, 0.0), "same": (0.045, 0.045, 0.045),
+               "changed": (1.0, 0.0, 0.9)}
+
+
+def ids_map(changed: np.ndarray, covered: np.ndarray | None = None) -> np.ndarray:
+    """(H,W) bool changed ids (and where both images have the surface) -> (H,W,3) float64
+    linear RGB in :data:`IDS_COLOURS`: magenta changed, dark grey same, black not judged."""
+    changed = np.asarray(changed, dtype=bool)
+    covered = np.ones_like(changed) if covered is None else np.asarray(covered, dtype=bool)
+    out = np.zeros((*changed.shape, 3))
+    out[covered] = IDS_COLOURS["same"]
+    out[changed] = IDS_COLOURS["changed"]
+    return out
 
 
 def compare_images(a, b, thresholds: dict | None = None, flip: bool = True,
@@ -313,7 +358,11 @@ def compare_images(a, b, thresholds: dict | None = None, flip: bool = True,
         errors[group] = err.astype(np.float32)
         groups[group] = _judge(group, err[mask], limits[group], metrics)
     worst = max((g.verdict for g in groups.values()), key=lambda v: EXIT_CODES[v])
-    return Comparison(width, height, groups, errors, worst)
+    rgb = None
+    if _has_group(ca, GROUPS["colour"]) and _has_group(cb, GROUPS["colour"]):
+        rgb = tuple(np.stack([np.asarray(c[k], dtype=np.float32) for k in "RGB"], axis=-1)
+                    for c in (ca, cb))
+    return Comparison(width, height, groups, errors, worst, covered=both, rgb=rgb)
 
 
 def normal_angle_deg(na: np.ndarray, nb: np.ndarray) -> np.ndarray:
@@ -463,5 +512,7 @@ __all__ = [
     "ImageMismatchError",
     "UnreadableImageError",
     "heat_map",
+    "ids_map",
+    "HEAT_GROUPS",
     "normal_angle_deg",
 ]

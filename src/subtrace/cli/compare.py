@@ -28,24 +28,29 @@ def execute(args) -> int:
         check_writable(args.diff)
         if png:
             check_writable(png)
+            check_writable(os.path.splitext(png)[0] + "_ids.png")
     try:
         result = compare_images(args.image_a, args.image_b, thresholds, flip=not args.no_flip,
                                 aliases=aliases_of(args), groups=groups_of(args))
     except (UnreadableImageError, ImageMismatchError) as exc:
         print(f"{PROG}: error: {one_line(str(exc))}", file=sys.stderr)
         return EXIT_UNREADABLE if isinstance(exc, UnreadableImageError) else EXIT_MISMATCH
-    if args.diff:
-        result.write_diff(args.diff, png_path=png)
+    pngs = result.write_diff(args.diff, png_path=png) if args.diff else []
     if args.json:
         report = {"a": args.image_a, "b": args.image_b, **result.as_dict()}
         if args.diff:
             report["diff"] = args.diff
+        if pngs:
+            report["heat_map"] = pngs[0]
+            if len(pngs) > 1:
+                report["ids_map"] = pngs[1]
         print(json.dumps(report, indent=2))
     else:
         print(f"A: {args.image_a}\nB: {args.image_b}")
         print(result.table())
         if args.diff:
-            print(f"difference: {args.diff}" + (f", heat map: {png}" if png else ""))
+            print(f"difference: {args.diff}" + (f", heat map: {pngs[0]}" if pngs else "")
+                  + (f", ids map: {pngs[1]}" if len(pngs) > 1 else ""))
     return result.exit_code
 
 

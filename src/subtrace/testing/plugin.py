@@ -8,7 +8,7 @@ A test asks for the ``golden`` fixture and calls it with its render::
 which compares the render with ``<goldens>/spot.exr`` by subtrace compare's channel groups
 and thresholds (:mod:`subtrace.compare`), fails with the group table when the verdict is
 FAIL (a WARN passes with a pytest warning), writes the render, the golden, the difference
-EXR and the heat map to ``<report>/<name>/`` when it fails, and counts every
+EXR and the heat and ids maps to ``<report>/<name>/`` when it fails, and counts every
 comparison's verdict in the terminal summary.
 ``pytest --update-goldens`` (alias ``--update-golden``) writes the goldens from the renders
 instead; a golden whose pixels and ``subtrace:`` header values are unchanged is left as it
@@ -325,30 +325,25 @@ def write_golden(path: Path, channels: dict, attributes: dict) -> str:
 
 def write_failure(folder: Path, channels: dict, golden: Path, comparison) -> list[Path]:
     """The render, the golden and their difference in ``folder``: rendered.exr/.png,
-    reference.exr/.png (the PNGs where both have colour), diff.exr and diff.png (the heat
-    map). Returns the paths."""
+    reference.exr/.png (the PNGs where both have colour), diff.exr, diff.png (the heat map)
+    and diff_ids.png (the ids map, where ids were compared). Returns the paths."""
     import shutil
 
-    import numpy as np
-
-    from subtrace.io.exr import read_exr, write_exr, write_png
+    from subtrace.io.exr import write_exr, write_png
 
     folder.mkdir(parents=True, exist_ok=True)
-    rgb = lambda ch: np.stack([ch[c] for c in "RGB"], axis=-1)  # noqa: E731
-    reference = read_exr(golden)[0]
-    colour = all(c in channels and c in reference for c in "RGB")
     paths = [folder / "rendered.exr"]
     write_exr(paths[0], channels)
-    if colour:
+    if comparison.rgb is not None:
         paths.append(folder / "rendered.png")
-        write_png(paths[-1], rgb(channels))
+        write_png(paths[-1], comparison.rgb[0])
     paths.append(folder / "reference.exr")
     shutil.copyfile(golden, paths[-1])
-    if colour:
+    if comparison.rgb is not None:
         paths.append(folder / "reference.png")
-        write_png(paths[-1], rgb(reference))
-    paths += [folder / "diff.exr", folder / "diff.png"]
-    comparison.write_diff(paths[-2], png_path=paths[-1])
+        write_png(paths[-1], comparison.rgb[1])
+    paths.append(folder / "diff.exr")
+    paths += [Path(p) for p in comparison.write_diff(paths[-1], png_path=folder / "diff.png")]
     return paths
 
 
