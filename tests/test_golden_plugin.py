@@ -53,7 +53,8 @@ def test_a_passing_and_a_failing_golden_with_the_group_table(project):
                                   r".*depth\s+PASS.*", r".*ids\s+PASS.*",
                                   r".*40x30: FAIL.*"], consecutive=False)
     assert 'python -m pytest "check_sphere.py::test_sphere_lit" --update-goldens' in out
-    assert "golden images: 1 pass, 1 fail" in out
+    assert "golden images: 1 pass, 1 fail; report: test_output/golden/report.html" in out
+    assert (project.path / "test_output" / "golden" / "report.html").stat().st_size > 0
     no_traceback(out)
     folder = project.path / "test_output" / "golden" / "sphere_lit"
     names = ("rendered.exr", "rendered.png", "reference.exr", "reference.png", "diff.exr",
@@ -80,6 +81,20 @@ def test_update_goldens_rewrites_the_changed_golden_only(project):
     # the old spelling of the option is the same option
     project.runpytest("--update-golden").assert_outcomes(passed=2)
     assert (goldens / "sphere_lit.exr").read_bytes() != before["sphere_lit.exr"]
+
+
+def test_a_passing_run_writes_no_page_unless_asked(project, tmp_path):
+    """Only the passing golden: nothing is written into the project; --golden-report DIR
+    writes the session page (and would write failures) in DIR."""
+    result = project.runpytest("check_sphere.py::test_sphere")
+    result.assert_outcomes(passed=1)
+    assert not (project.path / "test_output").exists()
+    assert "report:" not in result.stdout.str()
+    out = tmp_path / "ci-report"
+    result = project.runpytest("check_sphere.py::test_sphere", "--golden-report", str(out))
+    result.assert_outcomes(passed=1)
+    assert (out / "report.html").stat().st_size > 0
+    assert f"golden images: 1 pass; report: {out / 'report.html'}" in result.stdout.str()
 
 
 def test_the_projects_thresholds_apply_and_a_call_overrides_them(project):

@@ -29,6 +29,8 @@ def execute(args) -> int:
         if png:
             check_writable(png)
             check_writable(os.path.splitext(png)[0] + "_ids.png")
+    if args.html:
+        check_writable(args.html)
     try:
         result = compare_images(args.image_a, args.image_b, thresholds, flip=not args.no_flip,
                                 aliases=aliases_of(args), groups=groups_of(args))
@@ -36,6 +38,12 @@ def execute(args) -> int:
         print(f"{PROG}: error: {one_line(str(exc))}", file=sys.stderr)
         return EXIT_UNREADABLE if isinstance(exc, UnreadableImageError) else EXIT_MISMATCH
     pngs = result.write_diff(args.diff, png_path=png) if args.diff else []
+    if args.html:
+        from subtrace.htmlreport import compare_page, write_page
+
+        name = os.path.basename(args.image_a)
+        write_page(args.html, compare_page([{"name": name, "comparison": result,
+                                             "a": args.image_a, "b": args.image_b}]))
     if args.json:
         report = {"a": args.image_a, "b": args.image_b, **result.as_dict()}
         if args.diff:
@@ -44,6 +52,8 @@ def execute(args) -> int:
             report["heat_map"] = pngs[0]
             if len(pngs) > 1:
                 report["ids_map"] = pngs[1]
+        if args.html:
+            report["html"] = args.html
         print(json.dumps(report, indent=2))
     else:
         print(f"A: {args.image_a}\nB: {args.image_b}")
@@ -51,6 +61,8 @@ def execute(args) -> int:
         if args.diff:
             print(f"difference: {args.diff}" + (f", heat map: {pngs[0]}" if pngs else "")
                   + (f", ids map: {pngs[1]}" if len(pngs) > 1 else ""))
+        if args.html:
+            print(f"report: {args.html}")
     return result.exit_code
 
 

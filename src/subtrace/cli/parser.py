@@ -204,6 +204,10 @@ def _add_compare(sub) -> argparse.ArgumentParser:
     compare.add_argument("--png", action="store_true",
                          help="with --diff: also write a heat-map PNG next to it")
     compare.add_argument("--json", action="store_true", help="print the metrics as JSON")
+    compare.add_argument("--html", metavar="REPORT.html",
+                         help="also write one self-contained page (images inlined, no network): "
+                              "A and B under a slider, difference, heat and ids maps with "
+                              "colour keys, the group table")
     compare.add_argument("--channels", nargs="+", metavar="OURS=THEIRS",
                          help="read another renderer's channels as subtrace's, by name or "
                               "prefix (e.g. N=Normal Z=depth)")

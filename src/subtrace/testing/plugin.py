@@ -8,8 +8,9 @@ A test asks for the ``golden`` fixture and calls it with its render::
 which compares the render with ``<goldens>/spot.exr`` by subtrace compare's channel groups
 and thresholds (:mod:`subtrace.compare`), fails with the group table when the verdict is
 FAIL (a WARN passes with a pytest warning), writes the render, the golden, the difference
-EXR and the heat and ids maps to ``<report>/<name>/`` when it fails, and counts every
-comparison's verdict in the terminal summary.
+EXR and the heat and ids maps to ``<report>/<name>/`` when it fails, and puts every
+comparison of the session on one self-contained page, ``<report>/report.html``, when one
+failed or warned (always with ``--golden-report DIR``).
 ``pytest --update-goldens`` (alias ``--update-golden``) writes the goldens from the renders
 instead; a golden whose pixels and ``subtrace:`` header values are unchanged is left as it
 is, byte for byte.
@@ -19,7 +20,7 @@ Settings come from the ``[tool.subtrace.compare]`` table of the project's pyproj
 
     [tool.subtrace.compare]
     goldens = "goldens"            # folder of <name>.exr, relative to pyproject.toml
-    report = "test_output/golden"  # failures' images (--golden-report)
+    report = "test_output/golden"  # failures' images and report.html (--golden-report)
     flip = true                    # compute the colour group's mean FLIP
     ignore = ["position"]          # groups left out
     [tool.subtrace.compare.depth]  # a group's thresholds: warn, fail, warnpercent,
@@ -30,7 +31,7 @@ A bad setting fails each golden test with one line naming the file, table and ke
 
 This module imports only the standard library and pytest at load (pytest loads it in every
 session of an environment where subtrace is installed); subtrace's comparison, images and
-images are imported by the first golden comparison.
+page are imported by the first golden comparison.
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ SECTION_NAME = "[tool.subtrace.compare]"
 SETTINGS = ("goldens", "report", "flip", "ignore")
 DEFAULT_GOLDENS = "goldens"
 DEFAULT_REPORT = os.path.join("test_output", "golden")
+REPORT_PAGE = "report.html"
 NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\-]*")  # a golden's name: one file name, no path
 
 
@@ -87,6 +89,7 @@ class Outcome:
 
 _SETTINGS = pytest.StashKey[object]()
 _OUTCOMES = pytest.StashKey[list]()
+_PAGE = pytest.StashKey[str]()  # the session page's path, or why it was not written
 
 
 def pytest_addoption(parser):
@@ -96,7 +99,8 @@ def pytest_addoption(parser):
                     help="write each golden image (<goldens>/<name>.exr) from the test's "
                          "render instead of comparing (unchanged goldens are left as they are)")
     group.addoption("--golden-report", metavar="DIR", dest="golden_report", default=None,
-                    help="folder for failed goldens' images (default: "
+                    help="folder for failed goldens' images and report.html, which is then "
+                         "written even when every golden passes (default: "
                          f"{SECTION_NAME} report, else {DEFAULT_REPORT})")
 
 
@@ -241,6 +245,7 @@ class Golden:
                        if outcome.files else outcome.note)
             pytest.fail(f"{name} differs from {_rel(outcome.golden, config)}:\n"
                         f"{comparison.table()}\n{written}\n"
+                        f"report: {_rel(settings.report / REPORT_PAGE, config)}\n"
                         f"if the change is intended, regenerate with: {command}",
                         pytrace=False)
         if comparison.verdict == WARN:
@@ -347,6 +352,41 @@ def write_failure(folder: Path, channels: dict, golden: Path, comparison) -> lis
     return paths
 
 
+def pytest_sessionfinish(session):
+    """Write the session's page, report.html, of every golden compared or written: when a
+    golden failed or warned, or always with --golden-report (a run that passes writes
+    nothing into the project)."""
+    config = session.config
+    outcomes = config.stash.get(_OUTCOMES, [])
+    settings = config.stash.get(_SETTINGS, None)
+    if not outcomes or not isinstance(settings, Settings):
+        return
+    flagged = any(o.comparison is not None and o.comparison.verdict != "pass"
+                  for o in outcomes)
+    if not flagged and config.getoption("golden_report") is None:
+        return
+    from subtrace.errors import SubtraceError
+    from subtrace.htmlreport import compare_page, write_page
+
+    entries = []
+    for o in outcomes:
+        golden = _rel(o.golden, config)
+        entry = {"name": o.name, "comparison": o.comparison, "a": f"the render of {o.nodeid}",
+                 "b": golden}
+        if o.comparison is None:
+            entry["note"] = f"{o.note} {golden} ({o.nodeid}, --update-goldens)"
+        elif o.files:
+            entry["note"] = "written: " + ", ".join(_rel(p, config) for p in o.files)
+        entries.append(entry)
+    path = settings.report / REPORT_PAGE
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_page(path, compare_page(entries, "golden images"))
+        config.stash[_PAGE] = _rel(path, config)
+    except (SubtraceError, OSError) as err:
+        config.stash[_PAGE] = f"not written: {err}"
+
+
 def pytest_terminal_summary(terminalreporter, config):
     outcomes = config.stash.get(_OUTCOMES, [])
     if not outcomes:
@@ -356,4 +396,5 @@ def pytest_terminal_summary(terminalreporter, config):
         key = o.comparison.verdict if o.comparison is not None else o.note
         counts[key] = counts.get(key, 0) + 1
     line = ", ".join(f"{n} {k}" for k, n in counts.items())
-    terminalreporter.write_line(f"golden images: {line}")
+    page = config.stash.get(_PAGE, None)
+    terminalreporter.write_line(f"golden images: {line}" + (f"; report: {page}" if page else ""))
