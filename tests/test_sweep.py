@@ -55,7 +55,8 @@ f 1 4 6
 
 @pytest.fixture(scope="module")
 def spot_sweep(tmp_path_factory):
-    """(output folder, stdout, records of sweep.json) of one CLI sweep of Spot."""
+    """(output folder, stdout, records of sweep.json) of one CLI sweep of Spot, its HTML
+    page in the output folder (report.html)."""
     out = tmp_path_factory.mktemp("sweep") / "out"
     import contextlib
     import io
@@ -63,7 +64,8 @@ def spot_sweep(tmp_path_factory):
     stdout = io.StringIO()
     with contextlib.redirect_stdout(stdout):
         code = main(["sweep", str(SPOT), "--width", "64", "--height", "48", "--tolerances",
-                     *map(str, SPOT_TOLS), "--reference-tolerance", "0.0625", "-o", str(out)])
+                     *map(str, SPOT_TOLS), "--reference-tolerance", "0.0625", "-o", str(out),
+                     "--html", str(out / "report.html")])
     assert code == 0
     records = json.loads((out / "sweep.json").read_text())["records"]
     return out, stdout.getvalue(), records
@@ -189,6 +191,34 @@ def test_csv_json_and_plots_have_the_documented_content(spot_sweep):
     lines = stdout.strip().splitlines()
     assert lines[0].split()[:2] == ["scene", "tol"]
     assert [ln.split()[1] for ln in lines[1:4]] == ["4", "1", "0.25"]
+
+
+def test_html_page_in_a_browser(spot_sweep, tmp_path):
+    """report.html, opened in headless Chromium (tests/browser.py): the table has a row per
+    tolerance, the plots and every render and level heat map load from the page itself
+    (at the sweep's size), and each tolerance's figure carries the level key."""
+    from browser import assert_offline, read_page
+
+    from subtrace.sweep import LEVEL_COLOURS, PLOTS
+
+    out, stdout, recs = spot_sweep
+    page = out / "report.html"
+    assert f"report: {page}" in stdout
+    assert_offline(page)
+    text = page.read_text(encoding="utf-8")
+    assert text.count('<tr data-scene="spot">') == len(SPOT_TOLS)
+    seen = read_page(page, tmp_path)
+    assert seen["images"] and all(i["loaded"] and i["inline"] for i in seen["images"])
+    plots = [i for i in seen["images"] if i["alt"] in PLOTS]
+    assert sorted(i["alt"] for i in plots) == sorted(PLOTS)
+    levels = [i for i in seen["images"] if i["alt"].startswith("levels at ")]
+    assert [i["alt"] for i in levels] == [f"levels at {t:g} px" for t in SPOT_TOLS]
+    assert all((i["width"], i["height"]) == (64, 48) for i in levels)
+    figures = [f for f in seen["figures"] if any(a.startswith("levels at") for a in f["alts"])]
+    assert len(figures) == len(SPOT_TOLS)
+    for f in figures:
+        assert "swatch-key" in f["key"] and "refinement level" in f["key_text"]
+        assert f"{len(LEVEL_COLOURS) - 1}+" in f["key_text"] and "no surface" in f["key_text"]
 
 
 def test_peak_memory_is_the_growth_over_the_render_alone():

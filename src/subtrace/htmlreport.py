@@ -1,5 +1,5 @@
-"""Self-contained HTML reports: ``subtrace compare --html`` and the golden plugin's session
-page (:mod:`subtrace.testing.plugin`).
+"""Self-contained HTML reports: ``subtrace compare --html``, the golden plugin's session page
+(:mod:`subtrace.testing.plugin`) and ``subtrace sweep --html``.
 
 One page per run, readable offline as a CI artefact: every image is inlined as a
 ``data:image/png;base64`` URI (PNG encoded here, :func:`png_bytes`), the style sheet and the
@@ -9,6 +9,8 @@ reference under a slider, the difference |A - B|, the heat map (each pixel's lar
 over its group's fail threshold, ids left out) and a heat map per group that differs, each
 with a colour key in its units, the ids map (pixels whose level, patch or object id changed)
 with its key and count, and the group table with the thresholds and FLIP where computed.
+A sweep's page (:func:`sweep_page`) holds its table, its plots and, per scene, the reference
+and each tolerance's render beside its refinement-level heat map with the levels' key.
 
 Verdicts are in the markup for machines too: each image's ``<section class="image">`` has
 ``data-name`` and ``data-verdict``, each group row ``<tr data-group=... data-verdict=...>``,
@@ -20,6 +22,7 @@ from __future__ import annotations
 import base64
 import html
 import math
+import os
 import struct
 import zlib
 
@@ -32,6 +35,7 @@ from subtrace.version import VERSION
 # sharp); wider ones at most MAX_SHOW_PX wide
 MIN_SHOW_PX = 320
 MAX_SHOW_PX = 480
+PLOT_SHOW = {"error_vs_tolerance.png": 620}  # displayed widths of the sweep's plots (else 420)
 DIFF_GAIN = 10.0  # the difference |A - B| is shown times this (small errors stay visible)
 # the heat map's ramp (subtrace.compare.heat_map): error / fail threshold at each stop
 HEAT_STOPS = (0.0, 0.5, 1.0, 2.0)
@@ -324,6 +328,80 @@ def compare_page(entries, title: str = "subtrace compare") -> str:
 def write_page(path, text: str) -> None:
     """Write a page (atomically, :mod:`subtrace.io.atomic`)."""
     write_text(path, text)
+
+
+def sweep_page(records, output_dir, title: str = "subtrace sweep") -> str:
+    """The page of a sweep written to ``output_dir``: the table, the plots (the PNGs there),
+    and per scene each tolerance's render and refinement-level heat map with its key."""
+    from subtrace.io.exr import read_exr
+    from subtrace.sweep.plot import LEVEL_COLOURS, PLOTS
+
+    def file_img(rel: str, alt: str, width: int | None = None, css: str = "") -> str:
+        with open(os.path.join(output_dir, rel), "rb") as f:
+            png = f.read()
+        style = f"width:{_show_width(width)}px" if width else css
+        return f'<img src="{data_uri(png)}" alt="{html.escape(alt)}" style="{style}">'
+
+    # format_table's columns (subtrace.sweep.report)
+    head = ("scene", "tol px", "total s", "refine s", "trace s", "peak MiB", "refined",
+            "micro-tris", "depth", "dZ mean px", "dZ max px", "N mean °", "cov", "RMSE",
+            "FLIP")
+    g = lambda v, p=3: "n/a" if v is None else f"{v:.{p}g}"  # noqa: E731
+    rows = ["<tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in head) + "</tr>"]
+    for r in records:
+        cells = (r.scene, f"{r.tolerance_px:g}", f"{r.time_total_s:.3f}",
+                 f"{r.time_refine_s:.3f}", f"{r.time_trace_s:.3f}",
+                 "n/a" if r.peak_memory_mb is None else f"{r.peak_memory_mb:.1f}",
+                 f"{r.patches_refined}/{r.patches}", str(r.micro_triangles), str(r.max_depth),
+                 g(r.depth_err_px_mean), g(r.depth_err_px_max), g(r.normal_err_mean_deg),
+                 str(r.coverage_mismatches), g(r.colour_rmse), g(r.flip_mean))
+        rows.append(f'<tr data-scene="{html.escape(r.scene)}">' + "".join(
+            f"<td{' class=num' if k else ''}>{html.escape(x)}</td>"
+            for k, x in enumerate(cells)) + "</tr>")
+    sections = [f'<section class="table"><h2>measurements</h2><table class="sweep">'
+                f'{"".join(rows)}</table><p class="note">times: medians of the repeats; '
+                "errors against the reference render; dZ in pixel footprints, N in degrees, "
+                "cov: coverage mismatches (pixels)</p></section>"]
+    # the plots at about two thirds of their size (matplotlib's 100 dpi): two or three a row
+    plots = [_figure(file_img(name, name, css=f"width:{PLOT_SHOW.get(name, 420)}px;"
+                              "max-width:100%;image-rendering:auto;background:#fff"),
+                     html.escape(what))
+             for name, what in PLOTS.items() if os.path.isfile(os.path.join(output_dir, name))]
+    sections.append(f'<section class="plots"><h2>plots</h2><div class="row">{"".join(plots)}'
+                    "</div></section>")
+    levels = [(c, f"{k}{'+' if k == len(LEVEL_COLOURS) - 1 else ''}")
+              for k, c in enumerate(LEVEL_COLOURS)] + [("#000000", "no surface")]
+    key = swatch_key(levels, "refinement level of each pixel's hit")
+    by_scene: dict = {}
+    for r in records:
+        by_scene.setdefault(r.scene, []).append(r)
+    for scene, recs in by_scene.items():
+        figures = []
+        ref = os.path.join(output_dir, scene, "reference.exr")
+        if os.path.isfile(ref):
+            ch = read_exr(ref)[0]
+            rgb = np.stack([ch[c] for c in "RGB"], axis=-1)
+            figures.append(_figure(_img(png_bytes(rgb), rgb.shape[1], "reference"),
+                                   f"reference ({_number(recs[0].reference_tolerance_px)} px)",
+                                   width=rgb.shape[1]))
+        for r in recs:
+            if not r.exr:
+                continue
+            ch = read_exr(os.path.join(output_dir, r.exr))[0]
+            rgb = np.stack([ch[c] for c in "RGB"], axis=-1)
+            body = _img(png_bytes(rgb), r.width, f"render at {r.tolerance_px:g} px")
+            if r.levels_png:
+                body += file_img(r.levels_png, f"levels at {r.tolerance_px:g} px", r.width)
+            figures.append(_figure(body, f"{r.tolerance_px:g} px: render and refinement "
+                                   f"levels (deepest {r.max_depth})", key, width=r.width))
+        sections.append(f'<section class="scene" data-scene="{html.escape(scene)}"><h2>'
+                        f'{html.escape(scene)}</h2><div class="row">{"".join(figures)}</div>'
+                        "</section>")
+    scenes = ", ".join(by_scene)
+    plural = "" if len(by_scene) == 1 else "s"
+    return page(title, f"{len(by_scene)} scene{plural} ({scenes}), "
+                f"{len({r.tolerance_px for r in records})} tolerances · subtrace {VERSION}",
+                "", sections)
 
 
 def _fmt(v) -> str:

@@ -249,6 +249,10 @@ def _add_sweep(sub) -> argparse.ArgumentParser:
                        help="folder for the table, images and plots (created if missing)")
     _add_camera_options(sweep)
     _add_render_options(sweep)
+    sweep.add_argument("--html", metavar="REPORT.html",
+                       help="also write one self-contained page (images inlined, no network) "
+                            "of the table, the plots and each tolerance's render and "
+                            "refinement-level heat map")
     sweep.add_argument("--quiet", action="store_true",
                        help="print nothing on success (no table, no progress bar)")
     return sweep
