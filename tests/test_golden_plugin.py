@@ -149,7 +149,7 @@ def test_a_bad_setting_is_one_line_naming_the_key(project, table, needle):
     no_traceback(result.stdout.str())
 
 
-def test_an_image_of_another_size_is_one_line(project):
+def test_bad_images_and_arguments_are_one_line(project):
     small = {c: v[:20] for c, v in sample_render().items()}
     write_exr(project.path / "small.exr", small)
     project.makepyfile(check_small="""
@@ -161,13 +161,21 @@ def test_an_image_of_another_size_is_one_line(project):
 
         def test_bad_name(golden):
             golden("small.exr", "../sphere")
+
+        def test_bad_group(golden):
+            golden("goldens/sphere.exr", "sphere", depht={"fail": 1.0})
+
+        def test_bad_threshold(golden):
+            golden("goldens/sphere.exr", "sphere", depth={"fial": 1.0})
     """)
     result = project.runpytest("check_small.py")
-    result.assert_outcomes(failed=3)
+    result.assert_outcomes(failed=5)
     out = result.stdout.str()
     assert "sphere: image A is 40x20 but " in out and "goldens/sphere.exr is 40x30" in out
     assert "golden: cannot read the image: nowhere.exr" in out
     assert "golden name '../sphere': expected a file name without a folder" in out
+    assert "golden('sphere'): unknown channel group 'depht': use one of colour," in out
+    assert "golden('sphere'): unknown threshold 'fial': use warn, fail," in out
     no_traceback(out)
 
 
