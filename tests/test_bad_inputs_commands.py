@@ -59,10 +59,11 @@ def images(tmp_path_factory):
 ])
 def test_compare_bad_images(capsys, tmp_path, images, b, code, words):
     diff = tmp_path / "d.exr"
-    got, out, err = run(capsys, ["compare", images / "a.exr", images / b, "--diff", diff])
+    got, out, err = run(capsys, ["compare", images / "a.exr", images / b, "--diff", diff,
+                                 "--html", tmp_path / "r.html"])
     assert got == code, err
     one_line(err, words)
-    assert list(tmp_path.iterdir()) == []  # no difference image
+    assert list(tmp_path.iterdir()) == []  # no difference image, no page
 
 
 @pytest.mark.parametrize("flags, words", [
@@ -73,6 +74,7 @@ def test_compare_bad_images(capsys, tmp_path, images, b, code, words):
     (["--hardfail", "="], "--hardfail =: expected a number >= 0"),
     (["--png"], "--png writes the heat map of --diff"),
     (["--diff", "nowhere/d.exr"], "nowhere"),
+    (["--html", "nowhere/r.html"], "nowhere/r.html: cannot write the file"),
 ])
 def test_compare_bad_options(capsys, tmp_path, images, flags, words, monkeypatch):
     monkeypatch.chdir(tmp_path)
@@ -108,6 +110,15 @@ def test_sweep_bad_options(capsys, tmp_path, flags, words):
     assert code == 2, err
     one_line(err, words)
     assert not out.exists() or list(out.iterdir()) == []
+
+
+def test_sweep_html_in_a_missing_folder_is_one_line_before_rendering(capsys, tmp_path):
+    out = tmp_path / "sw"
+    page = tmp_path / "nowhere" / "r.html"
+    code, _, err = run(capsys, ["sweep", CUBE, "-o", out, "--tolerances", "2", "--html", page])
+    assert code == 2, err
+    one_line(err, str(page), "does not exist")
+    assert not out.exists()
 
 
 @pytest.mark.parametrize("name, words", [
