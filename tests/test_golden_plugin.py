@@ -191,3 +191,15 @@ def test_settings_default_without_a_table(tmp_path):
     with pytest.raises(SettingsError, match="cannot read it as TOML"):
         read_settings(tmp_path)
     assert set(GROUPS) >= {"colour", "ids"}
+
+
+def test_an_unwritable_report_folder_is_named_not_a_traceback(project):
+    """--golden-report under a file: the failing golden still fails with its table, saying
+    the images were not written; the summary says the page was not written."""
+    (project.path / "blocker").write_text("a file, not a folder")
+    result = project.runpytest("check_sphere.py", "--golden-report", "blocker/report")
+    result.assert_outcomes(passed=1, failed=1)
+    out = result.stdout.str()
+    assert "sphere_lit differs from goldens/sphere_lit.exr:" in out
+    assert "images not written: " in out and "report: not written: " in out
+    no_traceback(out)

@@ -239,7 +239,7 @@ class Golden:
             try:
                 outcome.files = write_failure(settings.report / name, channels,
                                               outcome.golden, comparison)
-            except SubtraceError as err:
+            except (SubtraceError, OSError) as err:
                 outcome.note = f"images not written: {err}"
             written = ("written: " + ", ".join(_rel(p, config) for p in outcome.files)
                        if outcome.files else outcome.note)
