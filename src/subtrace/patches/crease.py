@@ -51,8 +51,8 @@ from subtrace.config import IRREGULAR_MARGIN
 from subtrace.mesh.topology import INF_SHARP, gather_index
 from subtrace.patches.basis import TO_BEZIER
 from subtrace.patches.bspline import control_grids
-from subtrace.patches.grids import levels_needed, unit_normals
-from subtrace.patches.shells import sight_distance
+from subtrace.patches.grids import unit_normals
+from subtrace.patches.shells import Sight
 from subtrace.runtime.jit import leaf_njit, nb
 
 ENABLED = True  # False: every creased patch through local topology (tests compare the two)
@@ -247,99 +247,319 @@ def _across(s_lo, s_hi):
     return out
 
 
-def _level(grids, s_lo, s_hi, side, with_nets):
-    """One level of the isolation of canonical squares of control grids ``grids`` (n,4,4,3)
-    (``[u][v]``, sharpness ``s_lo``, ``s_hi`` at their points 1 and 2 across, patches
-    creased on ``side`` (n,)): their four children each, in the order of their corners in
-    the patch's frame (corner q is the canonical corner q - side), the regular ones (whose
-    crease has run out) first, then the irregular ones. Returns ``(reg (n,4) bool, nets
-    (r,4,4,3) in the patches' frames or None, lo, hi (r,3), bound (r,), kids (i,4,4,3)
-    canonical grids, their sharpness kid_lo, kid_hi (i,), ring_lo, ring_hi (i,3),
-    ring_bound (i,))``: the regular children's Bezier nets (``with_nets``), boxes and
-    derivative bounds (``basis.net_bounds``), the irregular ones' grids and one-ring shells
-    (``shells.one_ring_shells``'s box and length bound), children in order."""
-    n = len(grids)
-    z = np.zeros(n, np.float32)
-    lo, hi = _decayed(s_lo), _decayed(s_hi)
-    turn = (np.arange(4)[None, :] - side[:, None]) % 4  # the canonical corner of each
-    kid_lo = np.stack([lo, lo, z, z], axis=1)[np.arange(n)[:, None], turn]
-    kid_hi = np.stack([z, z, hi, hi], axis=1)[np.arange(n)[:, None], turn]
-    reg = (kid_lo <= 0) & (kid_hi <= 0)
-    flat = reg.ravel()
-    r, i = int(flat.sum()), int((~flat).sum())
-    slot = np.where(flat, np.cumsum(flat) - 1, -np.cumsum(~flat)).reshape(n, 4)
-    nets = np.empty((r if with_nets else 0, 4, 4, 3))
-    out = (np.empty((r, 3)), np.empty((r, 3)), np.empty(r), np.empty((i, 4, 4, 3)),
-           np.empty((i, 3)), np.empty((i, 3)), np.empty(i))
-    weights = np.ascontiguousarray(np.stack([_weights(s_lo), _weights(s_hi)], axis=1))
-    _refine_level(np.ascontiguousarray(grids), weights, np.ascontiguousarray(side), HALVES,
-                  FROM_CANON, TO_BEZIER, np.ascontiguousarray(slot), with_nets, nets, *out)
-    return (reg, nets if with_nets else None, *out[:4], kid_lo[~reg], kid_hi[~reg], *out[4:])
+def _sight(eye):
+    """The eye as the kernel takes it: ``(eye (3,), near, seen_min (3,), seen_max (3,),
+    cone)``, ``cone`` whether ``eye`` is a :class:`~subtrace.patches.shells.Sight` (else the
+    other three are unused); ``eye`` None: zeros (the pieces then take their patch's
+    depth)."""
+    if eye is None:
+        z = np.zeros(3)
+        return z, 0.0, z, z, False
+        return (np.asarray(eye.eye, np.float64), float(eye.near),
+                np.asarray(eye.seen_min, np.float64), np.asarray(eye.seen_max, np.float64),
+                True)
+    z = np.zeros(3)
+    return np.asarray(eye, np.float64), 0.0, z, z, False
+
+
+def _isolate(grids, s_lo, s_hi, side, limit, eye, tol_rad, pieces, k0=0, i0=None, j0=None,
+             boxes=None):
+    """Every level of the isolation of canonical squares of control grids ``grids``
+    (m,4,4,3) (sharpness ``s_lo``, ``s_hi`` at their points 1 and 2 across, patches creased
+    on ``side`` (m,)) in one call of :func:`_isolate_kernel` (module doc; its results:
+    there). ``pieces`` False: the depth choice, ``limit`` each square's cap of levels below
+    it; True: the pieces, ``limit`` the patches' depths, the squares of level ``k0`` at
+    ``i0``, ``j0``."""
+    m = len(grids)
+    z = np.zeros(m, np.int64)
+    eye_p, near, seen_min, seen_max, cone = _sight(eye)
+    lo, hi = (np.full((m, 3), np.inf), np.full((m, 3), -np.inf)) if boxes is None else boxes
+    return _isolate_kernel(
+        np.ascontiguousarray(grids, dtype=np.float64), np.ascontiguousarray(s_lo, np.float32),
+        np.ascontiguousarray(s_hi, np.float32), np.ascontiguousarray(side, np.int64),
+        np.ascontiguousarray(limit, np.int64), eye_p, near, seen_min, seen_max, cone,
+        eye is not None, float(tol_rad if tol_rad is not None else 0.0), pieces, int(k0),
+        z if i0 is None else np.ascontiguousarray(i0, np.int64),
+        z if j0 is None else np.ascontiguousarray(j0, np.int64),
+        HALVES, FROM_CANON, TO_BEZIER, float(IRREGULAR_MARGIN), lo, hi)
+
+
+@leaf_njit
+def _nan_max(a, b):
+    """``np.maximum(a, b)`` of two floats (a NaN wins)."""
+    if a != a:
+        return a
+    if b != b:
+        return b
+    return a if a >= b else b
+
+
+@leaf_njit
+def _nan_min(a, b):
+    """``np.minimum(a, b)`` of two floats (a NaN wins)."""
+    if a != a:
+        return a
+    if b != b:
+        return b
+    return a if a <= b else b
+
+
+@leaf_njit
+def _distance(lo, hi, r, eye, near, seen_min, seen_max, cone):
+    """``shells.sight_distance`` of box row ``r`` of ``lo``, ``hi``, in its sums' order."""
+    d = 0.0
+    for k in range(3):
+        q = _nan_max(_nan_max(lo[r, k] - eye[k], 0.0), eye[k] - hi[r, k])
+        d += q * q
+    d = math.sqrt(d)
+    if not cone:
+        return d
+    g = 0.0
+    for k in range(3):
+        q = _nan_max(_nan_max(lo[r, k] - seen_max[k], seen_min[k] - hi[r, k]), 0.0)
+        g += q * q
+    return _nan_max(d, near + math.sqrt(g))
+
+
+@leaf_njit
+def _needed(bound, dist, tol_rad):
+    """``grids.levels_needed`` of one bound (a float: 1e9 where it is not finite)."""
+    allowed = tol_rad * dist
+    if bound <= allowed:
+        return 0.0
+    n = math.ceil(math.log2(bound / allowed) - 1e-9)
+    return n if math.isfinite(n) else 1e9
 
 
 @nb.njit(cache=True, nogil=True)
-def _refine_level(grids, weights, side, halves, from_canon, to_bez, slot, with_nets, nets,
-                  net_lo, net_hi, net_bound, kids, ring_lo, ring_hi, ring_bound):
-    """:func:`_level`'s children of the canonical squares ``grids[m]`` (4,4,3): the uniform
-    split ``halves`` (2,4,4) along ``u``, across ``v`` the same with its points 1 and 2
-    taking the crease rule of weight ``weights[m]`` (2,) (``w`` the point itself, ``1 - w``
-    the smooth rule); the child at the patch's corner q goes to ``slot[m, q]`` of the
-    regular ones (>= 0: its net, turned into the patch's frame by ``from_canon[side[m]]``
-    and converted by ``to_bez`` as ``basis.bspline_nets`` does (:func:`_bezier`,
-    :func:`_net_bounds`), into ``nets`` where ``with_nets``, and its bounds) or to ``-1 - slot[m, q]`` of the irregular ones (its
-    grid and one-ring shell)."""
+def _isolate_kernel(grids, s_lo, s_hi, side, limit, eye, near, seen_min, seen_max, cone,
+                    sighted, tol_rad, pieces, k0, i0, j0, halves, from_canon, to_bez, margin, box_lo,
+                    box_hi):
+    """Every level of the isolation of the canonical squares ``grids[m]`` (4,4,3), level by
+    level over all of them: each square's four children by the uniform split ``halves``
+    (2,4,4) along ``u`` and, across ``v``, the same with its points 1 and 2 taking the
+    crease rule (:func:`_weights` of the sharpness there, ``w`` the point itself, ``1 - w``
+    the smooth rule), in the order of their corners in the patch's frame (corner q is the
+    canonical corner q - side); a child whose crease has run out (its sharpness one level
+    down, :func:`_decayed`, 0 on both lines) is regular: its net turned into the patch's
+    frame by ``from_canon[side[m]]``, converted as ``basis.bspline_nets`` does
+    (:func:`_bezier`), its box and derivative bound as ``basis.net_summary`` makes them;
+    the others are refined further.
+
+    ``pieces`` False (the depth choice): square m's levels are capped at ``limit[m]`` (> 0);
+    a regular child at level k needs k + ``levels_needed`` of its bound seen from the eye,
+    an irregular one k, and is refined no further where its one-ring shell
+    (:func:`_square_shell`) is within ``margin`` of the tolerance; ``box_lo``, ``box_hi``
+    (m,3) grow to hold what each square's refinement ended in. Returns ``need`` (m,) int64
+    (the most of those, before the cap) and the rest empty.
+
+    ``pieces`` True: the squares (level ``k0`` of their patches at ``i0``, ``j0``) are
+    refined down to their patches' depth ``limit[m]``; returns ``(need, root, level, i, j,
+    nets, own, lo, hi, c_root, c_grid, c_lo, c_hi, c_i, c_j)``: the regular children of
+    every level (their square's row, level, patch-frame position, net, own depth
+    ``levels_needed`` from the eye clipped to [level, depth], or the depth where not
+    ``sighted``, box), level by level, each
+    level's square by square in their corners' order (as :func:`crease_pieces` made them a
+    level at a time), and the squares left at the depth (row, canonical grid, sharpness and
+    patch-frame position at the depth: :func:`_add_cells`'s), in the same order."""
+    m = grids.shape[0]
+    need = np.zeros(m, np.int64)
+    # the frontier: square row, canonical grid, sharpness, canonical position (units of
+    # 2^-(k - k0))
+    f_root = np.arange(m)
+    f_grid = grids.copy()
+    f_lo, f_hi = s_lo.copy(), s_hi.copy()
+    f_i = np.zeros(m, np.int64)
+    f_j = np.zeros(m, np.int64)
+    n_f = m
+    if not pieces:  # (the squares of no levels below them are not refined)
+        n_f = 0
+        for r in range(m):
+            if limit[r] > 0:
+                f_root[n_f] = r
+                n_f += 1
+        for a in range(n_f):
+            f_grid[a] = grids[f_root[a]]
+            f_lo[a], f_hi[a] = s_lo[f_root[a]], s_hi[f_root[a]]
+    cap_p = 16 if not pieces else max(16, 4 * m)
+    p_root = np.empty(cap_p, np.int64)
+    p_level = np.empty(cap_p, np.int64)
+    p_i = np.empty(cap_p, np.int64)
+    p_j = np.empty(cap_p, np.int64)
+    p_own = np.empty(cap_p, np.int64)
+    p_nets = np.empty((cap_p, 4, 4, 3))
+    p_lo = np.empty((cap_p, 3))
+    p_hi = np.empty((cap_p, 3))
+    n_p = 0
+    cap_c = 16 if not pieces else max(16, m)
+    c_root = np.empty(cap_c, np.int64)
+    c_grid = np.empty((cap_c, 4, 4, 3))
+    c_lo = np.empty(cap_c, np.float32)
+    c_hi = np.empty(cap_c, np.float32)
+    c_i = np.empty(cap_c, np.int64)
+    c_j = np.empty(cap_c, np.int64)
+    n_c = 0
     across = np.empty((2, 4, 4))
-    along = np.empty((4, 4, 3))
+    along = np.empty((2, 4, 4, 3))
     child = np.empty((1, 4, 4, 3))
     turned = np.empty((4, 4, 3))
     tmp = np.empty((4, 4, 3))
     bez = np.empty((4, 4, 3))
-    for m in range(grids.shape[0]):
-        # the halves across: rows 1 and 3 of the left, 0 and 2 of the right are the rules
-        # at points 1 and 2
-        for g in range(2):
-            for b in range(4):
-                for q in range(4):
-                    across[g, b, q] = halves[g, b, q]
-        for point in range(2):
-            w = weights[m, point]
-            for q in range(4):
-                rule = (1.0 - w) * halves[0, 2 * point + 1, q]
-                if q == point + 1:
-                    rule += w
-                across[0, 2 * point + 1, q] = rule
-                across[1, 2 * point, q] = rule
-        for h in range(2):
-            for a in range(4):  # the u half's rows
-                for q in range(4):
-                    for k in range(3):
-                        x = 0.0
-                        for p in range(4):
-                            x += halves[h, a, p] * grids[m, p, q, k]
-                        along[a, q, k] = x
+    b_lo = np.empty((1, 3))
+    b_hi = np.empty((1, 3))
+    b_bound = np.empty(1)
+    zero = np.float32(0.0)
+    one = np.float32(1.0)
+    k = k0
+    while n_f > 0:
+        if pieces:  # the squares at their patch's depth: cells
+            keep = 0
+            for a in range(n_f):
+                r = f_root[a]
+                if limit[r] != k:
+                    if keep != a:
+                        f_root[keep], f_grid[keep] = r, f_grid[a]
+                        f_lo[keep], f_hi[keep] = f_lo[a], f_hi[a]
+                        f_i[keep], f_j[keep] = f_i[a], f_j[a]
+                    keep += 1
+                    continue
+                if n_c == len(c_root):
+                    c_root, c_grid, c_lo, c_hi, c_i, c_j = (
+                        _grown(c_root, n_c), _grown(c_grid, n_c), _grown(c_lo, n_c),
+                        _grown(c_hi, n_c), _grown(c_i, n_c), _grown(c_j, n_c))
+                c_root[n_c], c_grid[n_c] = r, f_grid[a]
+                c_lo[n_c], c_hi[n_c] = f_lo[a], f_hi[a]
+                c_i[n_c], c_j[n_c] = _absolute1(f_i[a], f_j[a], k - k0, side[r], i0[r], j0[r])
+                n_c += 1
+            n_f = keep
+            if n_f == 0:
+                break
+        k += 1
+        n_next = 0
+        x_root = np.empty(4 * n_f, np.int64)
+        x_grid = np.empty((4 * n_f, 4, 4, 3))
+        x_lo = np.empty(4 * n_f, np.float32)
+        x_hi = np.empty(4 * n_f, np.float32)
+        x_i = np.empty(4 * n_f, np.int64)
+        x_j = np.empty(4 * n_f, np.int64)
+        for a in range(n_f):
+            r = f_root[a]
+            sd = side[r]
+            lo_s, hi_s = f_lo[a], f_hi[a]
+            lo_d = lo_s - one if lo_s > one else zero  # the sharpness one level down
+            hi_d = hi_s - one if hi_s > one else zero
+            # the halves across: rows 1 and 3 of the left, 0 and 2 of the right are the
+            # rules at points 1 and 2
             for g in range(2):
-                # canonical corner c is the (u, v) half (0,0), (1,0), (1,1), (0,1)
-                c = (1 if g == 0 else 2) if h == 1 else (0 if g == 0 else 3)
-                for a in range(4):
+                for b in range(4):
+                    for q in range(4):
+                        across[g, b, q] = halves[g, b, q]
+            for point in range(2):
+                s = lo_s if point == 0 else hi_s
+                w = 1.0 if s >= one else (np.float64(s) if s > zero else 0.0)
+                for q in range(4):
+                    rule = (1.0 - w) * halves[0, 2 * point + 1, q]
+                    if q == point + 1:
+                        rule += w
+                    across[0, 2 * point + 1, q] = rule
+                    across[1, 2 * point, q] = rule
+            for h in range(2):
+                for u in range(4):  # the u half's rows
+                    for q in range(4):
+                        for c3 in range(3):
+                            x = 0.0
+                            for p in range(4):
+                                x += halves[h, u, p] * f_grid[a, p, q, c3]
+                            along[h, u, q, c3] = x
+            for corner in range(4):
+                c = (corner - sd) % 4  # canonical corner c: the (u, v) half (0,0), (1,0),
+                h = 1 if c == 1 or c == 2 else 0  # (1,1), (0,1)
+                g = 1 if c >= 2 else 0
+                for u in range(4):
                     for b in range(4):
-                        for k in range(3):
+                        for c3 in range(3):
                             x = 0.0
                             for q in range(4):
-                                x += across[g, b, q] * along[a, q, k]
-                            child[0, a, b, k] = x
-                s = slot[m, (c + side[m]) % 4]
-                if s < 0:
-                    kids[-1 - s] = child[0]
-                    _square_shell(kids, -1 - s, ring_lo, ring_hi, ring_bound)
+                                x += across[g, b, q] * along[h, u, q, c3]
+                            child[0, u, b, c3] = x
+                kid_lo = lo_d if c < 2 else zero
+                kid_hi = hi_d if c >= 2 else zero
+                ki, kj = 2 * f_i[a] + h, 2 * f_j[a] + g
+                if kid_lo > zero or kid_hi > zero:  # irregular: refined further
+                    if not pieces:
+                        _square_shell(child, 0, b_lo, b_hi, b_bound)
+                        need[r] = max(need[r], k)
+                        dist = _distance(b_lo, b_hi, 0, eye, near, seen_min, seen_max, cone)
+                        if not (margin * b_bound[0] <= tol_rad * dist) and k < limit[r]:
+                            pass
+                        else:  # (refined no further)
+                            for c3 in range(3):
+                                box_lo[r, c3] = _nan_min(box_lo[r, c3], b_lo[0, c3])
+                                box_hi[r, c3] = _nan_max(box_hi[r, c3], b_hi[0, c3])
+                            continue
+                    x_root[n_next], x_grid[n_next] = r, child[0]
+                    x_lo[n_next], x_hi[n_next] = kid_lo, kid_hi
+                    x_i[n_next], x_j[n_next] = ki, kj
+                    n_next += 1
                     continue
                 for f in range(16):  # the patch's grid point f is canonical from_canon[f]
-                    t = from_canon[side[m], f]
-                    for k in range(3):
-                        turned[f // 4, f % 4, k] = child[0, t // 4, t % 4, k]
+                    t = from_canon[sd, f]
+                    for c3 in range(3):
+                        turned[f // 4, f % 4, c3] = child[0, t // 4, t % 4, c3]
                 _bezier(turned, to_bez, tmp, bez)
-                _net_bounds(bez, s, net_lo, net_hi, net_bound)
-                if with_nets:
-                    nets[s] = bez
+                _net_bounds(bez, 0, b_lo, b_hi, b_bound)
+                n = _needed(b_bound[0], _distance(b_lo, b_hi, 0, eye, near, seen_min,
+                                                  seen_max, cone), tol_rad)
+                if not pieces:
+                    need[r] = max(need[r], k + np.int64(n))
+                    for c3 in range(3):
+                        box_lo[r, c3] = _nan_min(box_lo[r, c3], b_lo[0, c3])
+                        box_hi[r, c3] = _nan_max(box_hi[r, c3], b_hi[0, c3])
+                    continue
+                if n_p == len(p_root):
+                    p_root, p_level, p_i, p_j, p_own = (
+                        _grown(p_root, n_p), _grown(p_level, n_p), _grown(p_i, n_p),
+                        _grown(p_j, n_p), _grown(p_own, n_p))
+                    p_nets, p_lo, p_hi = _grown(p_nets, n_p), _grown(p_lo, n_p), _grown(
+                        p_hi, n_p)
+                p_root[n_p], p_level[n_p] = r, k
+                p_i[n_p], p_j[n_p] = _absolute1(ki, kj, k - k0, sd, i0[r], j0[r])
+                p_nets[n_p] = bez
+                p_lo[n_p], p_hi[n_p] = b_lo[0], b_hi[0]
+                # (np.clip of the float k + n, then to int64)
+                own = min(max(np.float64(k) + n, np.float64(k)), np.float64(limit[r]))
+                p_own[n_p] = np.int64(own) if sighted else limit[r]
+                n_p += 1
+        f_root, f_grid, f_lo, f_hi, f_i, f_j = x_root, x_grid, x_lo, x_hi, x_i, x_j
+        n_f = n_next
+    return (need, p_root[:n_p], p_level[:n_p], p_i[:n_p], p_j[:n_p], p_nets[:n_p],
+            p_own[:n_p], p_lo[:n_p], p_hi[:n_p], c_root[:n_c], c_grid[:n_c], c_lo[:n_c],
+            c_hi[:n_c], c_i[:n_c], c_j[:n_c])
+
+
+@leaf_njit
+def _absolute1(ci, cj, d, side, i0, j0):
+    """The patch-frame position (units 2^-(k0 + d)) of the canonical square at ``ci, cj``
+    (units 2^-d) of a square of origin ``i0, j0`` (units 2^-k0) of a patch creased on
+    ``side``."""
+    n = np.int64(1) << d
+    if side == 0:
+        i, j = ci, cj
+    elif side == 1:
+        i, j = n - 1 - cj, ci
+    elif side == 2:
+        i, j = n - 1 - ci, n - 1 - cj
+    else:
+        i, j = cj, n - 1 - ci
+    return (i0 << d) + i, (j0 << d) + j
+
+
+@nb.njit(cache=True, nogil=True)
+def _grown(a, n):
+    """``a`` in twice the room, its first ``n`` rows kept."""
+    b = np.empty((2 * len(a),) + a.shape[1:], a.dtype)
+    b[:n] = a[:n]
+    return b
 
 
 @leaf_njit
@@ -427,40 +647,19 @@ def crease_depths(level, points, faces, side, s_lo, s_hi, cap, eye, tol_rad, box
     """:func:`~subtrace.patches.isolate.isolated_depths` for qualifying ``faces`` (their
     creased ``side`` and sharpness ``s_lo``, ``s_hi``, :func:`crease_faces`) with the maps:
     (m,) int32 depths, none above ``cap``; ``boxes`` = (lo, hi) (m,3) grown to what each
-    face's isolation ended in, as there."""
+    face's isolation ended in, as there. Every level in one kernel call
+    (:func:`_isolate_kernel`)."""
     cap = np.asarray(cap, dtype=np.int64)
-    need = np.zeros(len(faces), dtype=np.int64)
-    rows = np.nonzero(cap > 0)[0]  # (those of depth 0 are not refined)
-    grids = _canonical(level, points, np.asarray(faces)[rows], side[rows])
-    lo, hi = s_lo[rows], s_hi[rows]
-    k = 0
-    while len(rows):
-        k += 1
-        reg, _, blo, bhi, bound, grids, lo, hi, smin, smax, ebound = _level(
-            grids, lo, hi, side[rows], False)
-        root = np.repeat(rows, 4).reshape(-1, 4)
-        if len(blo):
-            n = levels_needed(bound, sight_distance(blo, bhi, eye), tol_rad)
-            np.maximum.at(need, root[reg], k + n.astype(np.int64))
-            if boxes is not None:
-                np.minimum.at(boxes[0], root[reg], blo)
-                np.maximum.at(boxes[1], root[reg], bhi)
-        rows = root[~reg]
-        flat = IRREGULAR_MARGIN * ebound <= tol_rad * sight_distance(smin, smax, eye)
-        np.maximum.at(need, rows, k)
-        more = ~flat & (k < cap[rows])
-        if boxes is not None:  # the irregular children refined no further
-            np.minimum.at(boxes[0], rows[~more], smin[~more])
-            np.maximum.at(boxes[1], rows[~more], smax[~more])
-        rows, grids, lo, hi = rows[more], grids[more], lo[more], hi[more]
+    grids = _canonical(level, points, np.asarray(faces), side)
+    own = None
+    if boxes is not None:
+        own = tuple(np.ascontiguousarray(b, dtype=np.float64) for b in boxes)
+    need = _isolate(grids, s_lo, s_hi, side, cap, eye, tol_rad, False, boxes=own)[0]
+    if boxes is not None:
+        for b, o in zip(boxes, own):
+            if o is not b:
+                b[...] = o
     return np.minimum(need, cap).astype(np.int32)
-
-
-def _turned(i, j, n, side):
-    """The patch-frame position of canonical squares at ``i, j`` (units 1/n) of patches
-    creased on ``side``."""
-    return (np.select([side == 0, side == 1, side == 2], [i, n - 1 - j, n - 1 - i], j),
-            np.select([side == 0, side == 1, side == 2], [j, i, n - 1 - j], n - 1 - i))
 
 
 def crease_pieces(level, points, options, faces, side, s_lo, s_hi, depth, eye=None,
@@ -471,54 +670,20 @@ def crease_pieces(level, points, options, faces, side, s_lo, s_hi, depth, eye=No
     squares of level ``k0`` of their patches at ``i0, j0`` (in units of 2^-k0; default 0:
     the patches themselves), ``depth`` in the patches' units. The pieces of a level come
     square by square in the order of the squares' corners, as the topological path lists
-    them."""
+    them; every level in one kernel call (:func:`_isolate_kernel`)."""
     depth = np.asarray(depth, dtype=np.int64)
-    m = len(faces)
-    i0 = np.zeros(m, np.int64) if i0 is None else np.asarray(i0, np.int64)
-    j0 = np.zeros(m, np.int64) if j0 is None else np.asarray(j0, np.int64)
+    side = np.asarray(side, dtype=np.int64)
+    grids = _canonical(level, points, np.asarray(faces), side)
+    got = _isolate(grids, s_lo, s_hi, side, depth, eye, tol_rad, True, k0, i0, j0)
     subs = [[] for _ in range(8)]  # (isolate.build_isolated's)
     cells = [[] for _ in range(7 if ring else 5)]
-    rows = np.arange(m)
-    grids = _canonical(level, points, np.asarray(faces), side)
-    lo, hi = s_lo.astype(np.float32), s_hi.astype(np.float32)
-    ci = cj = np.zeros(m, np.int64)  # canonical positions, units 2^-(k - k0)
-    k = k0
-    while len(rows):
-        done = depth[rows] == k
-        if done.any():
-            _add_cells(cells, grids[done], lo[done], hi[done], side[rows[done]], rows[done],
-                       *_absolute(ci[done], cj[done], k - k0, side[rows[done]],
-                                  i0[rows[done]], j0[rows[done]]))
-            keep = ~done
-            rows, grids, lo, hi, ci, cj = (a[keep] for a in (rows, grids, lo, hi, ci, cj))
-            if not len(rows):
-                break
-        reg, nets, blo, bhi, bound, grids, lo, hi, _, _, _ = _level(grids, lo, hi, side[rows],
-                                                                    True)
-        # the children's canonical corners and positions, in the patch's corner order
-        turn = (np.arange(4)[None, :] - side[rows][:, None]) % 4
-        ki = 2 * ci[:, None] + ((turn == 1) | (turn == 2))
-        kj = 2 * cj[:, None] + (turn >= 2)
-        root = np.repeat(rows, 4).reshape(-1, 4)
-        k += 1
-        if len(nets):
-            r = root[reg]
-            own = depth[r]
-            if eye is not None:
-                n = levels_needed(bound, sight_distance(blo, bhi, eye), tol_rad)
-                own = np.clip(k + n, k, own).astype(np.int64)
-            pi, pj = _absolute(ki[reg], kj[reg], k - k0, side[r], i0[r], j0[r])
-            for lst, a in zip(subs, (r, np.full(len(r), k), pi, pj, nets, own, blo, bhi)):
-                lst.append(np.asarray(a))
-        rows, ci, cj = root[~reg], ki[~reg], kj[~reg]
+    if len(got[1]):
+        for lst, a in zip(subs, got[1:9]):
+            lst.append(a)
+    c_root, c_grid, c_lo, c_hi, c_i, c_j = got[9:]
+    if len(c_root):
+        _add_cells(cells, c_grid, c_lo, c_hi, side[c_root], c_root, c_i, c_j)
     return subs, cells
-
-
-def _absolute(ci, cj, d, side, i0, j0):
-    """The patch-frame positions (units 2^-(k0 + d)) of canonical squares at ``ci, cj``
-    (units 2^-d) of the squares of origin ``i0, j0`` (units 2^-k0)."""
-    i, j = _turned(ci, cj, 1 << d, side)
-    return (i0 << d) + i, (j0 << d) + j
 
 
 def _curve_masks(s_lo, s_hi, point):
