@@ -381,7 +381,10 @@ def _isolate_kernel(grids, s_lo, s_hi, side, limit, eye, near, seen_min, seen_ma
         for a in range(n_f):
             f_grid[a] = grids[f_root[a]]
             f_lo[a], f_hi[a] = s_lo[f_root[a]], s_hi[f_root[a]]
-    cap_p = 16 if not pieces else max(16, 4 * m)
+    cap_p, cap_c = 0, 0
+    if pieces:
+        cap_p, cap_c = _counts(s_lo, s_hi, limit, k0, np.zeros(4, np.int64),
+                               np.zeros(4, np.float32), np.zeros(4, np.float32))
     p_root = np.empty(cap_p, np.int64)
     p_level = np.empty(cap_p, np.int64)
     p_i = np.empty(cap_p, np.int64)
@@ -391,7 +394,6 @@ def _isolate_kernel(grids, s_lo, s_hi, side, limit, eye, near, seen_min, seen_ma
     p_lo = np.empty((cap_p, 3))
     p_hi = np.empty((cap_p, 3))
     n_p = 0
-    cap_c = 16 if not pieces else max(16, m)
     c_root = np.empty(cap_c, np.int64)
     c_grid = np.empty((cap_c, 4, 4, 3))
     c_lo = np.empty(cap_c, np.float32)
@@ -423,10 +425,6 @@ def _isolate_kernel(grids, s_lo, s_hi, side, limit, eye, near, seen_min, seen_ma
                         f_i[keep], f_j[keep] = f_i[a], f_j[a]
                     keep += 1
                     continue
-                if n_c == len(c_root):
-                    c_root, c_grid, c_lo, c_hi, c_i, c_j = (
-                        _grown(c_root, n_c), _grown(c_grid, n_c), _grown(c_lo, n_c),
-                        _grown(c_hi, n_c), _grown(c_i, n_c), _grown(c_j, n_c))
                 c_root[n_c], c_grid[n_c] = r, f_grid[a]
                 c_lo[n_c], c_hi[n_c] = f_lo[a], f_hi[a]
                 c_i[n_c], c_j[n_c] = _absolute1(f_i[a], f_j[a], k - k0, side[r], i0[r], j0[r])
@@ -516,12 +514,6 @@ def _isolate_kernel(grids, s_lo, s_hi, side, limit, eye, near, seen_min, seen_ma
                         box_lo[r, c3] = _nan_min(box_lo[r, c3], b_lo[0, c3])
                         box_hi[r, c3] = _nan_max(box_hi[r, c3], b_hi[0, c3])
                     continue
-                if n_p == len(p_root):
-                    p_root, p_level, p_i, p_j, p_own = (
-                        _grown(p_root, n_p), _grown(p_level, n_p), _grown(p_i, n_p),
-                        _grown(p_j, n_p), _grown(p_own, n_p))
-                    p_nets, p_lo, p_hi = _grown(p_nets, n_p), _grown(p_lo, n_p), _grown(
-                        p_hi, n_p)
                 p_root[n_p], p_level[n_p] = r, k
                 p_i[n_p], p_j[n_p] = _absolute1(ki, kj, k - k0, sd, i0[r], j0[r])
                 p_nets[n_p] = bez
@@ -554,12 +546,43 @@ def _absolute1(ci, cj, d, side, i0, j0):
     return (i0 << d) + i, (j0 << d) + j
 
 
-@nb.njit(cache=True, nogil=True)
-def _grown(a, n):
-    """``a`` in twice the room, its first ``n`` rows kept."""
-    b = np.empty((2 * len(a),) + a.shape[1:], a.dtype)
-    b[:n] = a[:n]
-    return b
+@leaf_njit
+def _counts(s_lo, s_hi, depth, k0, mult, lo, hi):
+    """How many pieces and cells :func:`_isolate_kernel` makes of squares of sharpness
+    ``s_lo``, ``s_hi`` at level ``k0`` refined down to ``depth``: what they are depends on
+    the sharpness alone. Of a square's children, the two at canonical corners 0 and 1 take
+    the low line's sharpness one level down and the high line none, the other two the
+    reverse; so the squares of a level of one patch are of two kinds at most, counted
+    with their multiplicity (``mult``, ``lo``, ``hi``: (4,) scratch)."""
+    n_p, n_c = 0, 0
+    zero, one = np.float32(0.0), np.float32(1.0)
+    for r in range(len(s_lo)):
+        # the kinds of square of the current level: multiplicity, sharpness
+        mult[0], lo[0], hi[0], n_k = 1, s_lo[r], s_hi[r], 1
+        k = k0
+        while n_k > 0:
+            if depth[r] == k:
+                for a in range(n_k):
+                    n_c += mult[a]
+                break
+            k += 1
+            n_new = 0
+            for a in range(n_k):
+                lo_d = lo[a] - one if lo[a] > one else zero
+                hi_d = hi[a] - one if hi[a] > one else zero
+                for pair in range(2):  # corners 0 and 1, then 2 and 3
+                    s = lo_d if pair == 0 else hi_d
+                    if s > zero:
+                        mult[2 + n_new] = 2 * mult[a]
+                        lo[2 + n_new] = s if pair == 0 else zero
+                        hi[2 + n_new] = zero if pair == 0 else s
+                        n_new += 1
+                    else:
+                        n_p += 2 * mult[a]
+            for a in range(n_new):
+                mult[a], lo[a], hi[a] = mult[2 + a], lo[2 + a], hi[2 + a]
+            n_k = n_new
+    return n_p, n_c
 
 
 @leaf_njit
@@ -597,13 +620,15 @@ def _net_bounds(bez, s, lo, hi, bound):
                 dx = bez[a + 1, b, 0] - bez[a, b, 0]
                 dy = bez[a + 1, b, 1] - bez[a, b, 1]
                 dz = bez[a + 1, b, 2] - bez[a, b, 2]
-                best = max(best, math.sqrt(dx * dx + dy * dy + dz * dz))
+                best = max(best, dx * dx + dy * dy + dz * dz)
             if b < 3:
                 dx = bez[a, b + 1, 0] - bez[a, b, 0]
                 dy = bez[a, b + 1, 1] - bez[a, b, 1]
                 dz = bez[a, b + 1, 2] - bez[a, b, 2]
-                best = max(best, math.sqrt(dx * dx + dy * dy + dz * dz))
-    bound[s] = 3.0 * best
+                best = max(best, dx * dx + dy * dy + dz * dz)
+    # (the root of the longest square: a correctly rounded root never decreases, so it is
+    # the longest of the roots, bit for bit, at one root a net instead of 24)
+    bound[s] = 3.0 * math.sqrt(best)
 
 
 @leaf_njit
@@ -628,12 +653,12 @@ def _square_shell(grids, m, lo, hi, bound):
                 for k in range(3):
                     x = grids[m, a + da, b + db, k] - grids[m, a, b, k]
                     d += x * x
-                d = math.sqrt(d)
                 most = max(most, d)
                 # the square's own sides: between its corners, points 1 and 2
                 if 1 <= a <= 2 and 1 <= b <= 2 and a + da <= 2 and b + db <= 2:
                     own = max(own, d)
-    bound[m] = (4.0 * own + 5.0 * most) / 9.0
+    # (roots of the longest squares: the longest roots, as in _net_bounds)
+    bound[m] = (4.0 * math.sqrt(own) + 5.0 * math.sqrt(most)) / 9.0
 
 
 def _canonical(level, points, faces, side):
