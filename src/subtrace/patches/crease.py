@@ -54,6 +54,7 @@ from subtrace.patches.bspline import control_grids
 from subtrace.patches.grids import unit_normals
 from subtrace.patches.shells import Sight
 from subtrace.runtime.jit import leaf_njit, nb
+from subtrace.runtime.threads import run_chunks, thread_count
 
 ENABLED = True  # False: every creased patch through local topology (tests compare the two)
 
@@ -262,26 +263,57 @@ def _sight(eye):
     return np.asarray(eye, np.float64), 0.0, z, z, False
 
 
+# squares of one call of the kernel at most where there are more (a chunk of the thread
+# pool's: the chess pieces' creased patches make some 100-500 pieces each)
+_SQUARES_PER_CHUNK = 32
+
+
 def _isolate(grids, s_lo, s_hi, side, limit, eye, tol_rad, pieces, k0=0, i0=None, j0=None,
              boxes=None):
     """Every level of the isolation of canonical squares of control grids ``grids``
     (m,4,4,3) (sharpness ``s_lo``, ``s_hi`` at their points 1 and 2 across, patches creased
-    on ``side`` (m,)) in one call of :func:`_isolate_kernel` (module doc; its results:
-    there). ``pieces`` False: the depth choice, ``limit`` each square's cap of levels below
-    it; True: the pieces, ``limit`` the patches' depths, the squares of level ``k0`` at
-    ``i0``, ``j0``."""
+    on ``side`` (m,)) by :func:`_isolate_kernel` (module doc; its results: there), in
+    chunks of squares on the thread pool. ``pieces`` False: the depth choice, ``limit``
+    each square's cap of levels below it; True: the pieces, ``limit`` the patches' depths,
+    the squares of level ``k0`` at ``i0``, ``j0``.
+
+    A chunk's pieces and cells come after the chunk before's, each chunk's level by level:
+    a square's own come in the same order as from one call, and every caller orders them
+    by square first (``isolate.packed_order``, the cells by root), so the result does not
+    depend on the chunks or the threads."""
     m = len(grids)
     z = np.zeros(m, np.int64)
     eye_p, near, seen_min, seen_max, cone = _sight(eye)
     lo, hi = (np.full((m, 3), np.inf), np.full((m, 3), -np.inf)) if boxes is None else boxes
-    return _isolate_kernel(
-        np.ascontiguousarray(grids, dtype=np.float64), np.ascontiguousarray(s_lo, np.float32),
-        np.ascontiguousarray(s_hi, np.float32), np.ascontiguousarray(side, np.int64),
-        np.ascontiguousarray(limit, np.int64), eye_p, near, seen_min, seen_max, cone,
-        eye is not None, float(tol_rad if tol_rad is not None else 0.0), pieces, int(k0),
-        z if i0 is None else np.ascontiguousarray(i0, np.int64),
-        z if j0 is None else np.ascontiguousarray(j0, np.int64),
-        HALVES, FROM_CANON, TO_BEZIER, float(IRREGULAR_MARGIN), lo, hi)
+    per = (np.ascontiguousarray(grids, dtype=np.float64), np.ascontiguousarray(s_lo, np.float32),
+           np.ascontiguousarray(s_hi, np.float32), np.ascontiguousarray(side, np.int64),
+           np.ascontiguousarray(limit, np.int64))
+    at = (z if i0 is None else np.ascontiguousarray(i0, np.int64),
+          z if j0 is None else np.ascontiguousarray(j0, np.int64))
+    rest = (eye_p, near, seen_min, seen_max, cone, eye is not None,
+            float(tol_rad if tol_rad is not None else 0.0), pieces, int(k0))
+    tables = (HALVES, FROM_CANON, TO_BEZIER, float(IRREGULAR_MARGIN))
+
+    def call(a, b):
+        return _isolate_kernel(*(x[a:b] for x in per), *rest, *(x[a:b] for x in at),
+                               *tables, lo[a:b], hi[a:b])
+
+    if m <= _SQUARES_PER_CHUNK or thread_count() == 1:
+        return call(0, m)
+    parts = {}
+
+    def work(t, a, b):
+        parts[a] = call(a, b)
+
+    run_chunks(work, m, _SQUARES_PER_CHUNK)
+    starts = sorted(parts)
+    got = [parts[a] for a in starts]
+    out = [np.concatenate([g[0] for g in got])]
+    for k in range(1, len(got[0])):
+        # (the square rows of the pieces and cells: the chunk's, from its first)
+        out.append(np.concatenate([g[k] + a if k in (1, 9) else g[k]
+                                   for a, g in zip(starts, got)]))
+    return tuple(out)
 
 
 @leaf_njit
