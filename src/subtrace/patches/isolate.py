@@ -38,6 +38,7 @@ from subtrace.patches.grids import levels_needed, refine_children, unit_normals
 from subtrace.patches.shells import one_ring_shells, sight_distance
 from subtrace.patches.stencil import stencil_depths, stencil_pieces, stencil_where
 from subtrace.runtime.jit import nb
+from subtrace.runtime.threads import run_tasks, thread_count
 from subtrace.subdiv.limit import limit_points
 
 
@@ -452,8 +453,18 @@ def _add_cells(cells, level, points, options, faces, root, i0, j0):
         cells[6].append(level.vert_boundary()[corners].any(axis=1))
 
 
-@nb.njit(cache=True, nogil=True)
+_PATCHES_PER_THREAD = 256  # (fewer patches: one thread, not worth starting the others)
+
+
 def item_sides(first, count, level, i0, j0, depth, patch_side, out):
+    """:func:`_item_sides` of every patch, on the thread pool where there are enough
+    (each patch's rows of ``out`` are its own)."""
+    n = thread_count() if len(first) >= _PATCHES_PER_THREAD else 1
+    run_tasks(_item_sides, first, count, level, i0, j0, depth, patch_side, out, n=n)
+
+
+@nb.njit(cache=True, nogil=True)
+def _item_sides(task, n_tasks, first, count, level, i0, j0, depth, patch_side, out):
     """How finely each side of each piece is sampled, for watertight pieces of different
     depths: patch ``p``'s pieces are ``first[p] .. first[p] + count[p] - 1`` (dyadic squares
     at ``level``, origin ``i0, j0``, grid ``depth``, all in the patch's units); ``out`` (n,4)
@@ -464,8 +475,10 @@ def item_sides(first, count, level, i0, j0, depth, patch_side, out):
     patch that overlap, directly or through others, all take the deepest of them. Per
     line, its sides in order along it (sorted: n log n a patch; comparing every pair of
     pieces until nothing changed took 1.2 s of a 4 s refinement on the chess pieces'
-    331,283 pieces, about 80 a patch)."""
-    for p in range(len(first)):
+    331,283 pieces, about 80 a patch). Task ``task`` of ``n_tasks`` takes a contiguous
+    share of the patches."""
+    n_p = len(first)
+    for p in range(task * n_p // n_tasks, (task + 1) * n_p // n_tasks):
         f, c = first[p], count[p]
         top = 0
         for a in range(f, f + c):

@@ -216,6 +216,15 @@ class Growable:
             if end > len(buf):
                 self._store[name] = grown(buf, start, max(end, 2 * len(buf)))
 
+    def room(self, group, n):
+        """Append ``n`` rows to every array of ``group``, unwritten (the caller writes them
+        all, in ``self._store``); returns the first new row."""
+        start = self._used[group]
+        self._grow(group, start + n)
+        self._used[group] = start + n
+        self._refresh()
+        return start
+
     def put(self, group, order=None, **values):
         """Append rows to every array of ``group`` (zeros where no value is given); returns
         the first new row. A value may be a list of arrays, whose rows are taken one after
@@ -412,19 +421,18 @@ class Pieces(Growable):
             root, items["level"], items["i0"], items["j0"], split_orient, items["lo"],
             items["hi"])
         is_item = take >= 0
-        rows = {}
-        for name, v in items.items():
-            v = np.asarray(v)
-            rows[name] = np.zeros((len(take),) + v.shape[1:], v.dtype)
-            rows[name][is_item] = v[take[is_item]]
         group = ~is_item
-        rows["kind"][group] = GROUP
-        rows["ref"][group] = g_span
-        rows["level"][group] = g_level
-        rows["lo"][group], rows["hi"][group] = g_lo, g_hi
-        rows["side"][group] = -1
-        rows["orient"][group] = 1
-        return self.put("items", **rows), first, count
+        # (straight into the store: no array of the rows first, copied in after)
+        start = self.room("items", len(take))
+        at = np.nonzero(is_item)[0]
+        g_at = np.nonzero(group)[0]
+        g_values = {"kind": GROUP, "ref": g_span, "level": g_level, "lo": g_lo, "hi": g_hi,
+                    "side": -1, "orient": 1}
+        for name in self.GROUPS["items"]:
+            rows = self._store[name][start:start + len(take)]
+            rows[at] = np.asarray(items[name])[take[at]]
+            rows[g_at] = g_values.get(name, 0)
+        return start, first, count
 
     def item_boxes(self, patches):
         """(lo (n,3), hi (n,3)): per built patch of ``patches``, the union of its items'
