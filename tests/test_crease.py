@@ -331,6 +331,36 @@ def test_the_pieces_are_opensubdivs_limit_surface(name, monkeypatch):
     assert worst <= 1e-13 * meta["bbox_diag"]
 
 
+@pytest.mark.parametrize("name", ["catmark_helmet.obj", "catmark_rook.obj", "rings"])
+def test_the_kernels_chunks_and_threads_change_nothing(name, tori, monkeypatch):
+    """The maps' kernel takes its squares in chunks on the thread pool: depths, boxes,
+    pieces and cells are the same bit for bit in one call on one thread and in chunks of
+    three squares on two."""
+    from subtrace.runtime import threads
+
+    cage = _cage(name, tori)
+    table = build_patch_table([cage])
+    o = table.objects[0]
+    sel = np.nonzero(table.is_quad & ~table.regular)[0]
+    lo, hi = table.shell_min.min(axis=0), table.shell_max.max(axis=0)
+    eye = lo + 1.5 * (hi - lo) + np.array([0.1, 0.2, 0.3])
+    tol = np.radians(30.0) / 720
+    cap = np.clip(wanted_depths(table, eye, tol)[sel], 0, 9).astype(np.int64)
+    got = []
+    for n, chunk in ((1, 10 ** 9), (2, 3)):
+        monkeypatch.setattr(crease, "_SQUARES_PER_CHUNK", chunk)
+        threads.set_threads(n)
+        try:
+            got.append(_isolate(o, table.face[sel], cap, eye, tol, True, monkeypatch))
+        finally:
+            threads.set_threads(None)
+    (d0, b0, (s0, c0), starts), (d1, b1, (s1, c1), _) = got
+    assert starts and len(s0[0]) > 0
+    np.testing.assert_array_equal(d0, d1)
+    for a, b in zip((*b0, *s0, *c0), (*b1, *s1, *c1)):
+        np.testing.assert_array_equal(a, b)
+
+
 # ------------------------------------------------------------------------------------------
 # item_sides
 # ------------------------------------------------------------------------------------------

@@ -457,6 +457,8 @@ def _isolate_kernel(grids, s_lo, s_hi, side, limit, eye, near, seen_min, seen_ma
                         f_i[keep], f_j[keep] = f_i[a], f_j[a]
                     keep += 1
                     continue
+                if n_c == len(c_root):  # (never: _counts is exact)
+                    raise ValueError("crease maps: more cells than counted")
                 c_root[n_c], c_grid[n_c] = r, f_grid[a]
                 c_lo[n_c], c_hi[n_c] = f_lo[a], f_hi[a]
                 c_i[n_c], c_j[n_c] = _absolute1(f_i[a], f_j[a], k - k0, side[r], i0[r], j0[r])
@@ -546,6 +548,8 @@ def _isolate_kernel(grids, s_lo, s_hi, side, limit, eye, near, seen_min, seen_ma
                         box_lo[r, c3] = _nan_min(box_lo[r, c3], b_lo[0, c3])
                         box_hi[r, c3] = _nan_max(box_hi[r, c3], b_hi[0, c3])
                     continue
+                if n_p == len(p_root):  # (never: _counts is exact)
+                    raise ValueError("crease maps: more pieces than counted")
                 p_root[n_p], p_level[n_p] = r, k
                 p_i[n_p], p_j[n_p] = _absolute1(ki, kj, k - k0, sd, i0[r], j0[r])
                 p_nets[n_p] = bez
@@ -556,6 +560,8 @@ def _isolate_kernel(grids, s_lo, s_hi, side, limit, eye, near, seen_min, seen_ma
                 n_p += 1
         f_root, f_grid, f_lo, f_hi, f_i, f_j = x_root, x_grid, x_lo, x_hi, x_i, x_j
         n_f = n_next
+    if n_p != len(p_root) or n_c != len(c_root):
+        raise ValueError("crease maps: fewer pieces or cells than counted")
     return (need, p_root[:n_p], p_level[:n_p], p_i[:n_p], p_j[:n_p], p_nets[:n_p],
             p_own[:n_p], p_lo[:n_p], p_hi[:n_p], c_root[:n_c], c_grid[:n_c], c_lo[:n_c],
             c_hi[:n_c], c_i[:n_c], c_j[:n_c])
