@@ -363,6 +363,9 @@ def _needed(bound, dist, tol_rad):
     return n if math.isfinite(n) else 1e9
 
 
+# _isolate_kernel (about 200 lines) is not split: its steps share the level's frontier,
+# the scratch of a child and the counts of what it made; helpers would take a dozen of
+# those each, per child
 @nb.njit(cache=True, nogil=True)
 def _isolate_kernel(grids, s_lo, s_hi, side, limit, eye, near, seen_min, seen_max, cone,
                     sighted, tol_rad, pieces, k0, i0, j0, halves, from_canon, to_bez, margin, box_lo,
