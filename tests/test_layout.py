@@ -5,7 +5,11 @@
 * no module imports another module's private (underscore) name;
 * no function longer than MAX_FUNCTION_LINES, except a Numba kernel whose docstring or the
   comment just above it says why it is "not split";
-* Numba is imported only through :mod:`subtrace.runtime.jit`;
+* Numba is imported only through :mod:`subtrace.runtime.jit` (and
+  :mod:`subtrace.runtime.numba_patches`, which jit installs);
+* Numba's internals (``numba``, ``llvmlite``) are changed only in
+  :mod:`subtrace.runtime.numba_patches`: no other module assigns to, or deletes, an
+  attribute or item of what it imported from them, or calls ``setattr`` on it;
 * importing :mod:`subtrace` or its command line executes no module that imports Numba or
   OpenImageIO at module level.
 
@@ -36,7 +40,10 @@ PACKAGE = "subtrace"
 MAX_FUNCTION_LINES = 120
 NOT_SPLIT = "not split"  # the phrase that explains why a long kernel stays whole
 KERNEL_DECORATORS = {"njit", "leaf_njit", "inline_njit"}
-JIT_MODULE = "subtrace.runtime.jit"  # the one module that imports numba
+JIT_MODULE = "subtrace.runtime.jit"  # the module that imports numba for the others
+PATCH_MODULE = "subtrace.runtime.numba_patches"  # the one that changes Numba's internals
+NUMBA_MODULES = (JIT_MODULE, PATCH_MODULE)  # the only modules that import numba
+NUMBA_ROOTS = ("numba", "llvmlite")  # whose objects only PATCH_MODULE changes
 CLI_ROOTS = ("subtrace", "subtrace.cli", "subtrace.cli.__main__")
 HEAVY = ("numba", "OpenImageIO")  # what importing the command line must not import
 
@@ -317,15 +324,70 @@ def long_functions(modules: dict[str, Module]) -> list[str]:
 
 
 def numba_imports(modules: dict[str, Module]) -> list[str]:
-    """Imports of numba anywhere but in JIT_MODULE."""
+    """Imports of numba anywhere but in NUMBA_MODULES."""
     out = []
     for mod in modules.values():
-        if mod.name == JIT_MODULE:
+        if mod.name in NUMBA_MODULES:
             continue
         for imp in mod.imports:
             if imp.target.split(".")[0] == "numba":
                 out.append(f"{where(mod, imp.line)}: {mod.name} imports numba directly "
                            f"(use `from subtrace.runtime.jit import nb`): {imp.text}")
+    return sorted(out, key=_sort_key)
+
+
+def _numba_names(tree: ast.AST) -> set[str]:
+    """The names that imports of NUMBA_ROOTS bind anywhere in ``tree`` (``import numba as
+    nb``: nb; ``import llvmlite.binding``: llvmlite; ``from numba.core import caching``:
+    caching)."""
+    names = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.split(".")[0] in NUMBA_ROOTS:
+                    names.add(alias.asname or alias.name.split(".")[0])
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module and \
+                node.module.split(".")[0] in NUMBA_ROOTS:
+            names.update(alias.asname or alias.name for alias in node.names)
+    return names
+
+
+def _root_name(node: ast.expr) -> str | None:
+    """The name an attribute or item chain starts from (``a`` of ``a.b[c].d``)."""
+    while isinstance(node, (ast.Attribute, ast.Subscript)):
+        node = node.value
+    return node.id if isinstance(node, ast.Name) else None
+
+
+def numba_changes(modules: dict[str, Module]) -> list[str]:
+    """Changes to Numba's or llvmlite's objects anywhere but in PATCH_MODULE: an attribute
+    or item of a name imported from them assigned (``=``, ``+=``, annotated), deleted, or
+    set with ``setattr``."""
+    out = []
+    for mod in modules.values():
+        if mod.name == PATCH_MODULE:
+            continue
+        names = _numba_names(mod.tree)
+        for node in ast.walk(mod.tree):
+            if isinstance(node, ast.Assign):
+                targets = node.targets
+            elif isinstance(node, (ast.AugAssign, ast.AnnAssign)):
+                targets = [node.target]
+            elif isinstance(node, ast.Delete):
+                targets = node.targets
+            elif isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and \
+                    node.func.id in ("setattr", "delattr") and node.args:
+                targets = [ast.Attribute(value=node.args[0], attr="?")]
+            else:
+                continue
+            flat = []
+            for t in targets:
+                flat.extend(t.elts if isinstance(t, (ast.Tuple, ast.List)) else [t])
+            for t in flat:
+                if isinstance(t, (ast.Attribute, ast.Subscript)) and _root_name(t) in names:
+                    out.append(f"{where(mod, node.lineno)}: {mod.name} changes Numba's "
+                               f"internals (only in {PATCH_MODULE}): "
+                               f"{ast.get_source_segment(mod.text, node) or ast.dump(node)}")
     return sorted(out, key=_sort_key)
 
 
@@ -416,6 +478,29 @@ def test_functions_are_short(modules):
 
 def test_numba_only_through_runtime_jit(modules):
     report("numba imported outside subtrace.runtime.jit", numba_imports(modules))
+
+
+def test_numbas_internals_changed_only_in_numba_patches(modules):
+    assert PATCH_MODULE in modules
+    report(f"Numba's internals changed outside {PATCH_MODULE}", numba_changes(modules))
+
+
+def test_checker_finds_changes_to_numba(tmp_path):
+    mods = make_package(tmp_path, {
+        "__init__.py": "",
+        "runtime/__init__.py": "",
+        "runtime/numba_patches.py": ("from numba.core import caching\n"
+                                     "caching.CacheImpl._locator_classes = []\n"),
+        "runtime/jit.py": ("import numba as _numba\nimport llvmlite.binding as ll\n"
+                           "x = _numba.njit\nlocal = {}\nlocal['a'] = 1\n"
+                           "def f():\n    from numba.core import config\n"
+                           "    config.CACHE_DIR = 'x'\n    ll.thing, y = 1, 2\n"
+                           "    setattr(_numba, 'z', 1)\n"),
+        "render.py": "from numba.core.registry import cpu_target\ncpu_target.x += 1\n",
+    })
+    found = numba_changes(mods)
+    assert [f.split(": ")[0].split("/subtrace/", 1)[1] for f in found] == [
+        "render.py:2", "runtime/jit.py:8", "runtime/jit.py:9", "runtime/jit.py:10"], found
 
 
 def test_cli_import_loads_no_numba(modules):

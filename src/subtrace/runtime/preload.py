@@ -25,8 +25,8 @@ bit.
 What a manifest lists is only ever read from the cache, never compiled (a kernel missing
 from the cache is left to the render, which compiles it as before). A manifest that cannot
 be read is ignored and written again; at most :data:`MANIFESTS_KEPT` are kept. Where
-``jit.trim_loader`` is not applied (another Numba, a process that is not a command's own),
-nothing is read ahead.
+``jit.trim_loader`` is not applied (Numba's internals unpatched: ``runtime.numba_patches``;
+a process that is not a command's own), nothing is read ahead.
 """
 
 from __future__ import annotations

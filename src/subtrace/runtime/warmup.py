@@ -54,7 +54,7 @@ def _index_pattern(name: str) -> tuple[Path, str]:
     """(folder, file name pattern) of the cache's index files of the kernel ``name`` (of
     :data:`_KERNEL_MODULES`) in this source version's folder: Numba names them
     ``<module>.<function>-<line>.py<ver>.nbi``, in the folder of the module's path
-    (``jit._ContentLocator``)."""
+    (``numba_patches._content_locator``)."""
     from subtrace.runtime.jit import KERNEL_DIR
 
     folder, _, module = _KERNEL_MODULES[name].rpartition("/")
@@ -63,9 +63,16 @@ def _index_pattern(name: str) -> tuple[Path, str]:
 
 def _index_files(name: str) -> list:
     """The index files of the kernel ``name`` (:func:`_index_pattern`): one folder listed,
-    not the whole cache walked (that took about 1 ms of every render)."""
+    not the whole cache walked (that took about 1 ms of every render); the whole cache
+    where Numba's own locator placed them (``numba_patches``: the patches off)."""
+    from subtrace.runtime import numba_patches
+
     folder, pattern = _index_pattern(name)
-    return list(folder.glob(pattern))
+    if numba_patches.APPLIED.get("content_locator"):
+        return list(folder.glob(pattern))
+    from subtrace.runtime.jit import KERNEL_DIR
+
+    return list(KERNEL_DIR.rglob(pattern))
 
 
 def _cached(name: str) -> bool:
