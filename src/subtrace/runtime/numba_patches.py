@@ -294,21 +294,34 @@ def _wrapperless_helpers() -> bool:
                 call = self._from_python = numba.njit(**NJIT_OPTIONS)(lambda *a: helper(*a))
             return call(*args)
 
+    _make_helper(_Helper, lambda: None, {})  # (a dispatcher built as helper builds them)
     _HELPER_CLASS = _Helper
     return True
+
+
+def _make_helper(cls, fn, options: dict):
+    dispatcher = cls(py_func=fn, locals={}, targetoptions={
+        "nopython": True, "boundscheck": None, **options, "no_cfunc_wrapper": True,
+        "no_cpython_wrapper": True})
+    dispatcher.enable_caching()
+    return dispatcher
 
 
 def helper(fn, options: dict):
     """A cached dispatcher of ``fn`` compiled with ``options`` and neither the Python nor
     the C-callable wrapper (:func:`_wrapperless_helpers`); None where that patch is not
-    applied (``jit`` then compiles a plain ``numba.njit`` function)."""
+    applied (``jit`` then compiles a plain ``numba.njit`` function), or where building
+    one fails (then the patch is dropped, with one debug note, for the helpers after it)."""
+    global _HELPER_CLASS
     if _HELPER_CLASS is None:
         return None
-    dispatcher = _HELPER_CLASS(py_func=fn, locals={}, targetoptions={
-        "nopython": True, "boundscheck": None, **options, "no_cfunc_wrapper": True,
-        "no_cpython_wrapper": True})
-    dispatcher.enable_caching()
-    return dispatcher
+    try:
+        return _make_helper(_HELPER_CLASS, fn, options)
+    except Exception as exc:  # noqa: BLE001 - a Numba whose dispatchers differ: plain njit
+        LOG.debug("Numba patch wrapperless_helpers dropped: %s: %s", type(exc).__name__, exc)
+        _HELPER_CLASS = None
+        APPLIED["wrapperless_helpers"] = False
+        return None
 
 # --------------------------------------------------------------------------------------
 # "compile": the first compile of the process
