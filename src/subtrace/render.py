@@ -40,6 +40,7 @@ from subtrace.accel.projection import TILE, no_tiles, project_shells, tiles_byte
 from subtrace.camera import CameraWindow, whole_image, window_offset
 from subtrace.errors import SceneError
 from subtrace.io.limits import check_coordinates, check_valences
+from subtrace.lights import directional_rows
 from subtrace.mesh.cage import load_cage, valence_bound, without_unused_vertices
 from subtrace.nurbs.scene import (has_faces, has_surfaces, load_nurbs, nurbs_pass,
                                   picture_hits, with_surfaces)
@@ -784,9 +785,7 @@ def _nurbs_hits(scene, nurbs, frame, W, H, tol_rad, table, t, normals, pix_patch
     rows of the patch shading (``nurbs.scene.picture_hits``): (t, patches, offset of the
     surfaces' rows)."""
     # (its own Lambert colour is replaced by the picture's lighting)
-    lights = np.array([[*l.direction, *(np.asarray(l.color) * l.intensity)]
-                       for l in scene.lights if l.position is None],
-                      dtype=np.float64).reshape(-1, 6)
+    lights = directional_rows(scene.lights)
     headlight = np.array([scene.render.headlight_intensity if scene.render.headlight
                           else 0.0])
     nh = nurbs_pass(nurbs, frame, W, H, tol_rad, None if table is None else t, lights,

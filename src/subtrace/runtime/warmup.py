@@ -286,6 +286,7 @@ def compile_picture(threads: int, parts=PICTURE) -> None:
     finds them in the cache."""
     import numpy as np
 
+    from subtrace.lights import Light, light_array
     from subtrace.runtime import threads as tasks
     from subtrace.shade import (CHANNELS, background_pixels, edge_pixels, ground_pixels, light,
                                 shadow_visibility)
@@ -294,7 +295,7 @@ def compile_picture(threads: int, parts=PICTURE) -> None:
     frame = np.array([[0.0, 1.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.0, 0.1], [0.0, -1.0, 0.0]])
     planes = np.zeros((len(CHANNELS), n), np.float32)
     pix = np.full(n, -1, np.int32)
-    lights = np.array([[0.0, 0.0, -1.0, 0.0, 1.0, 1.0, 1.0]])  # directional, straight down
+    lights = light_array([Light(direction=(0.0, -1.0, 0.0))])  # straight down
 
     def trace(origins, dirs, tmax):  # every shadow ray blocked
         return np.ones(len(tmax), np.uint8)
