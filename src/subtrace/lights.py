@@ -4,7 +4,8 @@ record (:class:`Light`), its scene keys and how they are checked (:func:`parse_l
 (:func:`light_array`), how it lights a point and where its shadow rays go (the jitted
 helpers :func:`incoming`, :func:`irradiance_at`, :func:`shadow_samples` and
 :func:`shadow_target`, which ``shade.py``'s kernels inline), and what bounds its shadow
-rays for the cull to the view (:func:`shadow_cast`, which ``accel/cull.py`` asks). A new kind is its entry in each.
+rays for the cull to the view (:func:`shadow_cast`, which ``accel/cull.py`` asks). A new
+kind is its entry in each.
 
 The kinds:
 
@@ -45,7 +46,7 @@ import numpy as np
 
 from subtrace.camera import check_vector
 from subtrace.errors import SceneError, show_value
-from subtrace.runtime.jit import leaf_njit, llvm_inline_njit, nb
+from subtrace.runtime.jit import leaf_njit, llvm_inline_njit
 
 # kinds (column KIND of light_array)
 DIRECTIONAL, POINT, SPHERE = 0, 1, 2

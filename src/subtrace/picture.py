@@ -90,7 +90,7 @@ def _pools(keep, stats) -> Pools:
 
 def _count_secondary(pools, stats) -> None:
     """The patches and micro-triangles secondary rays built, into ``stats``."""
-    if pools is not None:  # (added up over the bands of an image: render.render_bands)
+    if pools is not None:  # (added up over the bands of an image: render._paint_bands)
         stats.secondary_patches_refined += pools.stats.patches_refined
         stats.secondary_micro_triangles += pools.stats.micro_triangles
         stats.secondary_max_depth = max(stats.secondary_max_depth, pools.stats.max_depth)
@@ -103,7 +103,7 @@ def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, st
     the NURBS pass) wrote; ``t`` (W*H,) float64 each pixel's hit distance (inf: none);
     ``normals``, ``pix_patch``: its eye-facing normals and patches (the free-form surfaces'
     rows of ``patches`` from ``offset``: ``nurbs.scene.with_surfaces``); ``patches``: the
-    :class:`shade.PatchShading`; ``keep``: what ``render.trace_hits`` kept for secondary
+    :class:`shade.PatchShading`; ``keep``: what ``trace.rounds.trace_hits`` kept for secondary
     rays (empty: no cage); ``nurbs``: the free-form surfaces (None: none), which cast
     shadows, occlude and take extra rays too. ``lit``: the shading pass coloured the hits
     already (:func:`lit_in_shading`). Counts and times go to ``stats``."""

@@ -31,8 +31,8 @@ from subtrace import config
 from subtrace.accel.bvh import slab_entry
 from subtrace.camera import window_offset
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material
-from subtrace.lights import (DIRECTIONAL, RGB, ROW, incoming, irradiance_at, light_array,
-                             shadow_samples, shadow_target)
+from subtrace.lights import (DIRECTIONAL, RGB, ROW, incoming, irradiance_at, shadow_samples,
+                             shadow_target)
 from subtrace.patches.basis import bez_normal
 from subtrace.runtime.jit import callee_njit, inline_njit, leaf_njit, llvm_inline_njit, nb
 from subtrace.runtime.threads import run_tasks, thread_count
