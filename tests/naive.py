@@ -379,7 +379,7 @@ def _edge_flag(level, a, b, flag):
 
 def shadow_rays(frame, width, t, normals, pix_patch, lights, tol_rad, point_rounding,
                 dirs=None):
-    """[(pixels, origins, directions, tmax)] per light (rows of ``shade.light_array``): the
+    """[(pixels, origins, directions, tmax)] per light (rows of ``lights.light_array``): the
     shadow rays of the hit pixels whose normal faces the light, in pixel order, as numpy
     made them before ``shade.shadow_visibility`` had kernels: the hit point from the pixel's
     unit ray (divided by its length), displaced along the normal by ``t * tol_rad`` and

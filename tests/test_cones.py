@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shared_data import MODELS
 
-from subtrace import render
+from subtrace import prepare, render
 from subtrace.accel.cull import secondary_origins
 from subtrace.camera import Camera, camera_frame
 from subtrace.io.scene import scene_from_dict
@@ -115,14 +115,14 @@ def _caster_scene(tmp_path, **render_options):
 
 def _by_the_eye(monkeypatch):
     """Make renders choose every depth from the eye alone (no cones)."""
-    monkeypatch.setattr(render, "secondary_origins", lambda *args, **kwargs: None)
+    monkeypatch.setattr(prepare, "secondary_origins", lambda *args, **kwargs: None)
 
 
 def _depths(scene, seen_too=True):
     """(patch table, each patch's depth, where secondary rays start) of ``scene``'s
     trace, as the render chooses them."""
     stats = render.RenderStats()
-    cages, table, camera, view, tol_rad, budget, seen = render._prepare(scene, None, stats)
+    cages, table, camera, view, tol_rad, budget, seen = prepare.prepare(scene, None, stats)
     keep = {}
     render.trace_hits(table, view, tol_rad, stats, keep=keep,
                       seen=seen if seen_too else None)

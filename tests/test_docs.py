@@ -91,7 +91,9 @@ def _example(row) -> object:
 # what a key's example needs beside it in its table to be accepted
 COMPANIONS = {("camera", "target"): {"eye": [3.0, 2.0, 5.0]},
               ("light", "color"): {"direction": [0, -1, 0]},
-              ("light", "intensity"): {"direction": [0, -1, 0]}}
+              ("light", "intensity"): {"direction": [0, -1, 0]},
+              ("light", "radius"): {"position": [0, 3, 0]},
+              ("light", "samples"): {"position": [0, 3, 0], "radius": 0.3}}
 
 
 def test_every_example_is_a_value_the_parser_takes(tables):

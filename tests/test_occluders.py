@@ -209,8 +209,10 @@ def test_shadow_rays_are_those_numpy_made():
     rng = np.random.default_rng(3)
     camera = Camera(eye=(0.3, 1.5, 4.0), target=(0.0, 0.2, 0.0), up=(0.0, 1.0, 0.0),
                     fov_deg=40.0, width=37, height=23)
-    lights = np.array([[0, -0.3, -0.9, -0.3, 1, 1, 1], [1, 2.0, 3.0, 1.0, 1, 1, 1],
-                       [0, 0.6, 0.0, -0.8, 1, 1, 1]], float)
+    from subtrace.lights import Light, light_array
+
+    lights = light_array([Light(direction=(-0.3, -0.9, -0.3)), Light(position=(2.0, 3.0, 1.0)),
+                          Light(direction=(0.6, 0.0, -0.8))])
     for view in (camera, CameraWindow(camera, 5, 7, 25, 12)):
         frame = view.frame()
         n = view.width * view.height

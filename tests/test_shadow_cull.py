@@ -15,6 +15,7 @@ from shared_data import MODELS
 
 from subtrace import config
 from subtrace.io.scene import scene_from_dict
+from subtrace.lights import Light
 from subtrace.render import render_scene
 
 CUBE = ("v -1 -1 -1\nv 1 -1 -1\nv 1 1 -1\nv -1 1 -1\nv -1 -1 1\nv 1 -1 1\nv 1 1 1\nv -1 1 1\n"
@@ -175,7 +176,7 @@ def test_a_box_that_blocks_a_shadow_ray_from_the_view_is_kept(seed):
     d = rng.standard_normal(3)
     d /= np.linalg.norm(d)
     p = q - rng.uniform(0.01, 4.0, len(q))[:, None] * d
-    reach, _, kept = _blockers_kept(rng, cam, q, p, SimpleNamespace(position=None, direction=d))
+    reach, _, kept = _blockers_kept(rng, cam, q, p, Light(direction=tuple(d)))
     assert reach is not None and reach.light_frames is not None
     assert kept
 
@@ -192,7 +193,7 @@ def test_a_box_that_blocks_a_point_lights_shadow_ray_from_the_view_is_kept(seed)
     light = q.mean(axis=0) + rng.standard_normal(3) * rng.uniform(1.0, 30.0)
     p = q + rng.uniform(0.0, 1.0, len(q))[:, None] * (light - q)
     reach, bounds, kept = _blockers_kept(rng, cam, q, p,
-                                         SimpleNamespace(position=light, direction=None))
+                                         Light(position=tuple(light)))
     if reach is None:  # (outside the box, the box's projection from the light bounds it)
         assert np.all((light >= bounds[0]) & (light <= bounds[1]))
     else:
@@ -276,7 +277,7 @@ def test_a_box_that_blocks_a_shadow_ray_from_the_ground_in_view_is_kept(seed):
     d /= np.linalg.norm(d)
     x[:, 1] = height + rng.uniform(0.01, 4.0, len(x))
     q = x + ((height - x @ up) / (d @ up))[:, None] * d
-    case = _blockers_and_reach(rng, cam, x, q, SimpleNamespace(position=None, direction=d),
+    case = _blockers_and_reach(rng, cam, x, q, Light(direction=tuple(d)),
                                up, height)
     if case is None:
         return
@@ -310,7 +311,7 @@ def test_a_box_that_blocks_a_point_lights_shadow_ray_from_the_ground_is_kept(see
     light = np.array([rng.uniform(-8, 8), height + rng.uniform(0.5, 12.0), rng.uniform(-8, 8)])
     x[:, 1] = height + rng.uniform(0.0, 1.0, len(x)) * (light[1] - height)
     q = light + ((height - light[1]) / (x[:, 1] - light[1]))[:, None] * (x - light)
-    case = _blockers_and_reach(rng, cam, x, q, SimpleNamespace(position=light, direction=None),
+    case = _blockers_and_reach(rng, cam, x, q, Light(position=tuple(light)),
                                up, height)
     if case is None:
         return

@@ -204,7 +204,7 @@ MEMORY_MEMO_MIN_BYTES = 8 << 20
 # scanlines in one of an EXR's ZIP blocks (OpenEXR): a streamed render's bands (but the
 # last) are whole blocks, so that the blocks io.exr.ExrBands encodes are the image's
 EXR_LINES_PER_BLOCK = 16
-# A render streamed to its output (render.render_bands) is shaded, painted and handed over
+# A render streamed to its output (render._paint_bands) is shaded, painted and handed over
 # in bands of whole rows of about this many pixels (whole EXR blocks of lines; 192 rows of
 # 1280): its channels, normals and the picture's arrays are a band's
 STREAM_BAND_PIXELS = 1 << 18

@@ -49,10 +49,11 @@ from subtrace.nurbs.scene import blocked as nurbs_blocked
 from subtrace.nurbs.scene import shade_rays
 from subtrace.runtime import threads as tasks
 from subtrace import config
+from subtrace.lights import DIRECTIONAL, light_array, ray_keys, sampled
 from subtrace.shade import (C_A, C_R, C_Z, CHANNELS, ambient_occlusion, background_pixels,
                             background_rows, edge_pixels, ground_occlusion, ground_pixels,
-                            ground_points, light, light_array, miss_values, shade,
-                            shadow_visibility, smooth_occlusion)
+                            ground_points, light, miss_values, shade, shadow_visibility,
+                            smooth_occlusion)
 from subtrace.trace.bezier import table_loop_flag
 from subtrace.trace.pools import Memos
 from subtrace.trace.rays import Pools, trace_rays
@@ -89,7 +90,7 @@ def _pools(keep, stats) -> Pools:
 
 def _count_secondary(pools, stats) -> None:
     """The patches and micro-triangles secondary rays built, into ``stats``."""
-    if pools is not None:  # (added up over the bands of an image: render.render_bands)
+    if pools is not None:  # (added up over the bands of an image: render._paint_bands)
         stats.secondary_patches_refined += pools.stats.patches_refined
         stats.secondary_micro_triangles += pools.stats.micro_triangles
         stats.secondary_max_depth = max(stats.secondary_max_depth, pools.stats.max_depth)
@@ -102,7 +103,7 @@ def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, st
     the NURBS pass) wrote; ``t`` (W*H,) float64 each pixel's hit distance (inf: none);
     ``normals``, ``pix_patch``: its eye-facing normals and patches (the free-form surfaces'
     rows of ``patches`` from ``offset``: ``nurbs.scene.with_surfaces``); ``patches``: the
-    :class:`shade.PatchShading`; ``keep``: what ``render.trace_hits`` kept for secondary
+    :class:`shade.PatchShading`; ``keep``: what ``trace.rounds.trace_hits`` kept for secondary
     rays (empty: no cage); ``nurbs``: the free-form surfaces (None: none), which cast
     shadows, occlude and take extra rays too. ``lit``: the shading pass coloured the hits
     already (:func:`lit_in_shading`). Counts and times go to ``stats``."""
@@ -140,25 +141,30 @@ def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, st
 
     image = whole_image(camera)  # (a window's pixels are its image's: rows, AO patterns)
     lo, hi = casting_bounds(cages, nurbs)
-    ao = ids = None
-    if scene.render.ao > 0:
-        ao = (trace_ao, scene.render.ao, config.AO_DISTANCE * float(np.linalg.norm(hi - lo)),
-              image.width, config.AO_SMOOTH_RADIUS, image.pixel_angle())
+    ao = ids = keys = None
+    if scene.render.ao > 0 or (shadows and sampled(lights)):
         col0, row0 = window_offset(frame)
         row, col = np.divmod(np.arange(W * H, dtype=np.int64), W)
         ids = (row + row0) * image.width + col + col0
+        # (the lights of several shadow rays per point sample them per pixel: lights.py)
+        keys = ray_keys(ids) if shadows and sampled(lights) else None
+    if scene.render.ao > 0:
+        ao = (trace_ao, scene.render.ao, config.AO_DISTANCE * float(np.linalg.norm(hi - lo)),
+              image.width, config.AO_SMOOTH_RADIUS, image.pixel_angle())
+    else:
+        ids = None
     if ground is False:
         ground = ground_plane(scene, cages, camera, nurbs)
     y0 = getattr(camera, "y0", 0)
     rows = background_rows(scene.render.background, scene.render.background_bottom,
                            image.height)[y0:y0 + H]
     _colour(scene, frame, W, t, normals, pix_patch, patches, planes, lights, rows,
-            ground, trace_shadows, tol_rad, None, ao, ids, lit)
+            ground, trace_shadows, tol_rad, None, ao, ids, lit, keys)
     if samples > 1:
         t0 = time.perf_counter()
         closest = _closest(pools, nurbs, frame, W, patches, scene, tol_rad, offset)
         _antialias(scene, frame, W, image.height, closest, patches, planes, lights, ground,
-                   trace_shadows, samples, stats, tol_rad, ao)
+                   trace_shadows, samples, stats, tol_rad, ao, image.width, keys is not None)
         stats.time_aa += time.perf_counter() - t0
     _count_secondary(pools, stats)
 
@@ -279,7 +285,7 @@ def ground_shadow_points(scene, cages, points, nurbs=None) -> np.ndarray:
     up, height = ground_plane(scene, cages, scene.camera, nurbs)
     out = []
     for lamp in scene.lights:
-        if lamp.direction is None:
+        if lamp.kind != DIRECTIONAL:
             continue
         d = np.asarray(lamp.direction, np.float64)
         down = -float(d @ up) / float(np.linalg.norm(d))
@@ -292,16 +298,17 @@ def ground_shadow_points(scene, cages, points, nurbs=None) -> np.ndarray:
 
 
 def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights, rows,
-            ground, trace_shadows, tol_rad, dirs, ao=None, ids=None, lit=False):
+            ground, trace_shadows, tol_rad, dirs, ao=None, ids=None, lit=False, keys=None):
     """The colour of rays from the eye (pixel centres, or ``dirs``): shadows, ambient
     occlusion (``ao``: None, or (trace, rays per hit, distance, the image's width); ``ids``:
     each ray's key for its AO pattern, :func:`shade.ambient_occlusion`), lighting (unless
     ``lit``: the shading pass coloured the hits), the background (``rows``: per image row,
-    or per ray with ``dirs``) and the ground."""
+    or per ray with ``dirs``) and the ground. ``keys``: None, or each ray's key for the
+    lights that sample their shadow rays (``lights.ray_keys``)."""
     visible = np.ones((len(lights), 0), np.float32)  # (no columns: every pixel lit)
     if len(lights) and scene.render.shadows:
         visible = shadow_visibility(trace_shadows, frame, width, t, normals, pix_patch, lights,
-                                    tol_rad, dirs)
+                                    tol_rad, dirs, keys)
     occlusion = ground_ao = None
     miss = None
     if ao is not None:
@@ -334,7 +341,7 @@ def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights,
         ground_pixels(frame, width, pix_patch, ground[0], ground[1],
                       trace_shadows if len(lights) and r.shadows else None, lights,
                       float(headlight[0]), scene.ground.color, rows, planes, dirs, miss,
-                      ground_ao)
+                      ground_ao, keys)
 
 
 def _smooth(frame, width, t, normals, pix_patch, patches, occlusion, miss, ground, t_ground,
@@ -376,10 +383,12 @@ def _smooth(frame, width, t, normals, pix_patch, patches, occlusion, miss, groun
 
 
 def _antialias(scene, frame, W, H, closest, patches, planes, lights, ground, trace_shadows,
-               samples, stats, tol_rad, ao=None):
+               samples, stats, tol_rad, ao=None, image_width=None, keyed=False):
     """More rays for the pixels :func:`edge_pixels` marks (see the module comment); their
     colour and alpha become the mean of all their rays. ``W``: the width of ``planes``;
-    ``H``: the height of the image (a window's rows are offset in it: ``frame``)."""
+    ``H``: the height of the image (a window's rows are offset in it: ``frame``);
+    ``image_width`` its width. ``keyed``: the extra rays carry their keys for the lights
+    that sample their shadow rays (``lights.ray_keys``: the pixel's samples 1, 2, ...)."""
     pix = np.nonzero(edge_pixels(planes, W, planes.shape[1] // W).ravel())[0]
     offsets = sample_offsets(samples)
     m = len(offsets)
@@ -401,11 +410,14 @@ def _antialias(scene, frame, W, H, closest, patches, planes, lights, ground, tra
     w = np.clip((rr + 0.5) / H, 0.0, 1.0)[:, None]
     back = np.repeat(top[None], n, axis=0) if bottom is None else (
         (1.0 - w) * top + w * np.asarray(bottom, np.float64))
-    ids = None
+    ids = keys = None
     if ao is not None:  # each extra ray's AO pattern: its image pixel and sample, apart
         ids = ((row * ao[3] + col)[:, None] * m + np.arange(m)).ravel() + (np.int64(1) << 40)
+    if keyed:
+        keys = ray_keys(np.repeat(row * image_width + col, m), np.tile(np.arange(1, m + 1),
+                                                                        len(pix)))
     _colour(scene, frame, W, t, normals, pix_patch, patches, sub, lights, back, ground,
-            trace_shadows, tol_rad, dirs, ao, ids)
+            trace_shadows, tol_rad, dirs, ao, ids, False, keys)
     # box filter: the centre ray and the extra ones, equally weighted
     for k in (C_R, C_R + 1, C_R + 2, C_A):
         extra = sub[k].astype(np.float64).reshape(len(pix), m).sum(axis=1)

@@ -31,6 +31,8 @@ from subtrace import config
 from subtrace.accel.bvh import slab_entry
 from subtrace.camera import window_offset
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material
+from subtrace.lights import (DIRECTIONAL, RGB, ROW, incoming, irradiance_at, shadow_samples,
+                             shadow_target)
 from subtrace.patches.basis import bez_normal
 from subtrace.runtime.jit import callee_njit, inline_njit, leaf_njit, llvm_inline_njit, nb
 from subtrace.runtime.threads import run_tasks, thread_count
@@ -73,7 +75,7 @@ def shade(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, co
     Catmull-Clark cages neither runs nor compiles."""
     dirs = _no_dirs() if dirs is None else dirs
     if lit is None:  # (the same types: one compiled kernel either way)
-        lit = (np.zeros((0, 7)), np.zeros(0))
+        lit = (np.zeros((0, ROW)), np.zeros(0))
     elif loop is not None:
         raise ValueError("Loop items' normals come after the shading pass: colour them "
                          "by light()")
@@ -103,7 +105,7 @@ def light(frame, width, t, normals, pix_patch, patches, lights, headlight, visib
           dirs=None, occlusion=None):
     """The colour (R, G, B of ``planes``) of every hit pixel: two-sided Lambert plus the
     material's Blinn-Phong lobe (``Ks (N.H)^Ns``, MTL's) under a headlight at the eye
-    (``headlight`` (1,): its intensity) and ``lights`` (L,7) (:func:`light_array`), each
+    (``headlight`` (1,): its intensity) and ``lights`` (L, ROW) (``lights.light_array``), each
     scaled by ``visible`` (L, n_pixels) float32 (1 lit, 0 in shadow; (L, 0): all lit).
     ``t`` (n_pixels,) float64: the hits' distances; ``normals``, ``pix_patch``, ``dirs``:
     as for :func:`shade`. ``occlusion``: None, or (n_pixels,) float32 ambient occlusion
@@ -113,18 +115,6 @@ def light(frame, width, t, normals, pix_patch, patches, lights, headlight, visib
     occlusion = _NO_OCCLUSION if occlusion is None else occlusion
     run_tasks(_light_task, frame, width, t, normals, pix_patch, patches, lights, headlight,
               visible, planes, dirs, occlusion)
-
-
-DIRECTIONAL, POINT = 0, 1  # light kinds (column 0 of light_array)
-
-
-def light_array(lights) -> np.ndarray:
-    """(L,7) float64 of :class:`subtrace.io.scene.Light` s: kind (DIRECTIONAL: x, y, z the
-    unit direction the light travels; POINT: its position), then colour times intensity."""
-    rows = [[POINT if l.position is not None else DIRECTIONAL,
-             *(l.position if l.position is not None else l.direction),
-             *(np.asarray(l.color) * l.intensity)] for l in lights]
-    return np.array(rows, dtype=np.float64).reshape(-1, 7)
 
 
 class PatchShading(NamedTuple):
@@ -261,20 +251,20 @@ def _colour_pixel(r, p, frame, width, t, normals, patches, lights, headlight, vi
             sb += h
     for k in range(lights.shape[0]):
         # (lx, ly, lz): the direction the light arrives along; e: its irradiance
-        lx, ly, lz, e = _incoming(lights, k, frame, t, dx, dy, dz)
+        lx, ly, lz, e = incoming(lights, k, frame, t, dx, dy, dz)
         c = -(fx * lx + fy * ly + fz * lz) * e
         v = visible[k, r] if visible.shape[1] else 1.0  # (no columns: all lit)
         if c > 0.0 and v > 0.0:
             c *= v
-            lr += c * lights[k, 4]
-            lg += c * lights[k, 5]
-            lb += c * lights[k, 6]
+            lr += c * lights[k, RGB]
+            lg += c * lights[k, RGB + 1]
+            lb += c * lights[k, RGB + 2]
             if shiny:
                 h = _blinn(fx, fy, fz, lx, ly, lz, dx, dy, dz, patches.shininess[p])
                 h *= e * v
-                sr += h * lights[k, 4]
-                sg += h * lights[k, 5]
-                sb += h * lights[k, 6]
+                sr += h * lights[k, RGB]
+                sg += h * lights[k, RGB + 1]
+                sb += h * lights[k, RGB + 2]
     if len(occlusion):  # ambient occlusion darkens the diffuse light
         lr *= occlusion[r]
         lg *= occlusion[r]
@@ -336,22 +326,6 @@ def _direction(frame, width, dirs, r):
     row = r // width
     col = r - row * width
     return ray_setup(frame, row, col)
-
-
-@leaf_njit
-def _incoming(lights, k, frame, t, dx, dy, dz):
-    """Light ``k`` at the hit ``eye + t d``: the unit direction it travels there and its
-    irradiance factor (1 for a directional light, 1 / distance^2 for a point light)."""
-    if lights[k, 0] == DIRECTIONAL:
-        return lights[k, 1], lights[k, 2], lights[k, 3], 1.0
-    lx = frame[0, 0] + t * dx - lights[k, 1]
-    ly = frame[0, 1] + t * dy - lights[k, 2]
-    lz = frame[0, 2] + t * dz - lights[k, 3]
-    d2 = lx * lx + ly * ly + lz * lz
-    if not d2 > 0.0:
-        return 0.0, 0.0, 0.0, 0.0
-    inv = 1.0 / math.sqrt(d2)
-    return lx * inv, ly * inv, lz * inv, 1.0 / d2
 
 
 @callee_njit
@@ -448,35 +422,18 @@ def pixel_rays(frame, width, pixels) -> np.ndarray:
     return d / np.sqrt((d * d).sum(axis=1))[:, None]
 
 
-def toward_lights(lights, points):
-    """For each light (rows of :func:`light_array`) and point (n,3): the unit direction
-    towards the light (L,n,3), the distance to it (L,n; inf for a directional light) and
-    its irradiance factor (L,n; 1 / distance^2 for a point light)."""
-    n = len(points)
-    dirs = np.empty((len(lights), n, 3))
-    dist = np.full((len(lights), n), np.inf)
-    factor = np.ones((len(lights), n))
-    for k, row in enumerate(lights):
-        if row[0] == DIRECTIONAL:
-            dirs[k] = -row[1:4]
-            continue
-        v = row[1:4] - points
-        d2 = (v * v).sum(axis=1)
-        dist[k] = np.sqrt(d2)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            dirs[k] = v / dist[k][:, None]
-            factor[k] = np.where(d2 > 0.0, 1.0 / d2, 0.0)
-    return dirs, dist, factor
-
-
 # relative rounding of a hit point eye + t d (a few operations on doubles, with room)
 POINT_ROUNDING = 2.0 ** -40
 
 
-def shadow_visibility(trace, frame, width, t, normals, pix_patch, lights, tol_rad, dirs=None):
-    """(L, n_pixels) float32: 1 where a hit pixel sees light k (or faces away from it:
-    then its lighting is 0 anyway), 0 in shadow. ``trace(origins, dirs, tmax)``: an any-hit
-    trace returning blocked (``trace.rays.trace_rays``). ``dirs``: as for :func:`shade`.
+def shadow_visibility(trace, frame, width, t, normals, pix_patch, lights, tol_rad, dirs=None,
+                      keys=None):
+    """(L, n_pixels) float32: the share of light k a hit pixel sees, 1 where all its shadow
+    rays towards it arrive (or where it faces away from it: then its lighting is 0 anyway),
+    0 in shadow. ``trace(origins, dirs, tmax)``: an any-hit trace returning blocked
+    (``trace.rays.trace_rays``). ``dirs``: as for :func:`shade`. ``keys``: None, or (n,)
+    int64 each ray's key (``lights.ray_keys``), which the lights of several shadow rays per
+    point need (``lights.sampled``).
 
     A shadow ray leaves the hit displaced along its (eye-facing) normal by the hit's error
     bound: the micro-surface lies within a cell of the limit surface, and a cell subtends
@@ -485,16 +442,18 @@ def shadow_visibility(trace, frame, width, t, normals, pix_patch, lights, tol_ra
     speckle a lit surface with its own shadow.
 
     The rays are made on every thread (:func:`_shadow_ray`: the hit point as
-    :func:`pixel_rays` makes it, for the light's direction as :func:`toward_lights` gives
-    it), light after light, each light's in pixel order, and traced in one call."""
+    :func:`pixel_rays` makes it, the light's rays as ``lights.shadow_target`` gives them),
+    light after light, each light's in pixel order (a pixel's rays towards one light in
+    turn), and traced in one call."""
     n_lights = len(lights)
     visible = np.ones((n_lights, len(pix_patch)), np.float32)
     if not n_lights:
         return visible
     dirs = _no_dirs() if dirs is None else dirs
+    keys = _NO_KEYS if keys is None else keys
     n_tasks = thread_count()
     counts = np.zeros((n_tasks, n_lights), np.int64)  # per thread and light: its rays
-    shading = (frame, width, t, normals, pix_patch, lights, float(tol_rad), dirs)
+    shading = (frame, width, t, normals, pix_patch, lights, float(tol_rad), dirs, keys)
     run_tasks(_shadow_count, *shading, counts, n=n_tasks)
     n_rays = int(counts.sum())
     if not n_rays:
@@ -509,12 +468,16 @@ def shadow_visibility(trace, frame, width, t, normals, pix_patch, lights, tol_ra
     return visible
 
 
+_NO_KEYS = np.zeros(0, np.int64)  # (no ray keys: every light takes one ray per point)
+
+
 @llvm_inline_njit
-def _shadow_ray(frame, width, t, normals, dirs, r, lights, k, tol_rad):
-    """Pixel r's shadow ray towards light k: (whether its normal faces the light, origin
-    x, y, z, unit direction x, y, z, tmax). The arithmetic of :func:`pixel_rays` (a
-    division by the length), :func:`toward_lights` and the error bound of
-    :func:`shadow_visibility`, operation for operation, so the rays are those numpy made."""
+def _shadow_point(frame, width, t, normals, dirs, r, lights, k, tol_rad):
+    """Pixel r's hit point for shadow rays towards light k: (whether its normal faces the
+    light, the hit point x, y, z displaced along the normal by its error bound ``err``,
+    and ``err``). The arithmetic of :func:`pixel_rays` (a division by the length) and the
+    error bound of :func:`shadow_visibility`, operation for operation, so the rays are
+    those numpy made."""
     if len(dirs):
         dx, dy, dz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
     else:
@@ -531,45 +494,56 @@ def _shadow_ray(frame, width, t, normals, dirs, r, lights, k, tol_rad):
     th = t[r]
     px, py, pz = frame[0, 0] + th * dx, frame[0, 1] + th * dy, frame[0, 2] + th * dz
     err = th * tol_rad + POINT_ROUNDING * max(max(abs(px), abs(py)), abs(pz))
-    if lights[k, 0] == DIRECTIONAL:
-        lx, ly, lz, dist = -lights[k, 1], -lights[k, 2], -lights[k, 3], np.inf
-    else:
-        vx, vy, vz = lights[k, 1] - px, lights[k, 2] - py, lights[k, 3] - pz
-        dist = np.sqrt(vx * vx + vy * vy + vz * vz)
-        lx, ly, lz = vx / dist, vy / dist, vz / dist
+    lx, ly, lz = irradiance_at(lights, k, px, py, pz)[:3]
     fx, fy, fz = normals[r, 0], normals[r, 1], normals[r, 2]
     facing = fx * lx + fy * ly + fz * lz > 0.0
-    return (facing, px + err * fx, py + err * fy, pz + err * fz, lx, ly, lz, dist - err)
+    return facing, px, py, pz, err
+
+
+@llvm_inline_njit
+def _shadow_ray(normals, r, lights, k, s, keys, px, py, pz, err):
+    """Shadow ray ``s`` of pixel r's point (:func:`_shadow_point`) towards light k: origin
+    x, y, z (displaced along the normal by ``err``), unit direction x, y, z, tmax."""
+    key = keys[r] if len(keys) else np.int64(0)
+    lx, ly, lz, dist = shadow_target(lights, k, s, key, px, py, pz)
+    fx, fy, fz = normals[r, 0], normals[r, 1], normals[r, 2]
+    return px + err * fx, py + err * fy, pz + err * fz, lx, ly, lz, dist - err
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def _shadow_count(task, n_tasks, frame, width, t, normals, pix_patch, lights, tol_rad, dirs,
-                  counts):
+                  keys, counts):
     """Pass 1 of :func:`shadow_visibility`: the shadow rays of thread ``task``'s pixels
     (:func:`_segment`), per light, into ``counts[task]``."""
     a, b = _segment(task, n_tasks, len(pix_patch))
     for k in range(lights.shape[0]):
         n = 0  # (counted here: threads adding to ``counts`` share a cache line)
+        m = shadow_samples(lights, k)
         for r in range(a, b):
-            if pix_patch[r] >= 0 and _shadow_ray(frame, width, t, normals, dirs, r, lights, k,
-                                                 tol_rad)[0]:
-                n += 1
+            if pix_patch[r] >= 0 and _shadow_point(frame, width, t, normals, dirs, r, lights,
+                                                   k, tol_rad)[0]:
+                n += m
         counts[task, k] = n
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def _shadow_make(task, n_tasks, frame, width, t, normals, pix_patch, lights, tol_rad, dirs,
-                 base, origins, to_light, tmax):
+                 keys, base, origins, to_light, tmax):
     """Pass 2: the shadow rays of thread ``task``'s pixels, light k's from ``base[task, k]``."""
     a, b = _segment(task, n_tasks, len(pix_patch))
     for k in range(lights.shape[0]):
         j = base[task, k]
+        m = shadow_samples(lights, k)
         for r in range(a, b):
             if pix_patch[r] < 0:
                 continue
-            facing, ox, oy, oz, lx, ly, lz, tm = _shadow_ray(frame, width, t, normals, dirs, r,
-                                                             lights, k, tol_rad)
-            if facing:
+            facing, px, py, pz, err = _shadow_point(frame, width, t, normals, dirs, r, lights,
+                                                    k, tol_rad)
+            if not facing:
+                continue
+            for s in range(m):
+                ox, oy, oz, lx, ly, lz, tm = _shadow_ray(normals, r, lights, k, s, keys, px,
+                                                         py, pz, err)
                 origins[j, 0], origins[j, 1], origins[j, 2] = ox, oy, oz
                 to_light[j, 0], to_light[j, 1], to_light[j, 2] = lx, ly, lz
                 tmax[j] = tm
@@ -578,17 +552,23 @@ def _shadow_make(task, n_tasks, frame, width, t, normals, pix_patch, lights, tol
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def _shadow_mark(task, n_tasks, frame, width, t, normals, pix_patch, lights, tol_rad, dirs,
-                 base, blocked, visible):
-    """Pass 3: 0 in ``visible`` where thread ``task``'s rays were ``blocked``."""
+                 keys, base, blocked, visible):
+    """Pass 3: in ``visible``, the share of thread ``task``'s rays not ``blocked`` (0 or
+    1 for a light of one ray)."""
     a, b = _segment(task, n_tasks, len(pix_patch))
     for k in range(lights.shape[0]):
         j = base[task, k]
+        m = shadow_samples(lights, k)
         for r in range(a, b):
-            if pix_patch[r] >= 0 and _shadow_ray(frame, width, t, normals, dirs, r, lights, k,
-                                                 tol_rad)[0]:
-                if blocked[j]:
-                    visible[k, r] = 0.0
-                j += 1
+            if pix_patch[r] >= 0 and _shadow_point(frame, width, t, normals, dirs, r, lights,
+                                                   k, tol_rad)[0]:
+                dark = 0
+                for s in range(m):
+                    if blocked[j]:
+                        dark += 1
+                    j += 1
+                if dark:
+                    visible[k, r] = np.float32(m - dark) / np.float32(m)
 
 
 def ambient_occlusion(trace, frame, width, t, normals, pix_patch, samples, distance, tol_rad,
@@ -841,7 +821,7 @@ def _background_task(task, n_tasks, miss, rows, width, per_ray, planes):
 
 
 def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight, color, rows,
-                  planes, dirs=None, miss=None, occlusion=None):
+                  planes, dirs=None, miss=None, occlusion=None, keys=None):
     """Where the primary ray missed every surface and meets the ground plane (points p with
     p . up = height, ``up`` a unit vector), write the ground's colour into ``planes``: an
     opaque Lambertian ``color`` under ``lights`` with shadows and the ``headlight`` (its
@@ -854,7 +834,9 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
     ``miss``: the missed pixels, if known (``pix_patch < 0``); ``occlusion``: None, or
     (len(miss),) float32 the ground's ambient occlusion there (:func:`ground_occlusion`),
     which scales its light (a shadow catcher: the share of the background it keeps) as
-    the surfaces' occlusion scales their diffuse light.
+    the surfaces' occlusion scales their diffuse light. ``keys``: as for
+    :func:`shadow_visibility` (a light of several rays lights a point by the share of them
+    that arrive).
 
     On every thread, three passes over the missed pixels: the first shades each ground
     pixel none of whose shadow rays may meet an object (a ray whose segment towards its
@@ -863,6 +845,7 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
     those rays, ``trace`` traces them, and the third shades their pixels."""
     miss = np.nonzero(pix_patch < 0)[0] if miss is None else miss
     dirs = _no_dirs() if dirs is None else dirs
+    keys = _NO_KEYS if keys is None else keys
     up = np.asarray(up, np.float64)
     shadows = trace is not None
     bounds = getattr(trace, "bounds", None) if shadows else None
@@ -873,12 +856,12 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
     color = np.zeros(3) if catcher else np.asarray(color, np.float64)
     rows = np.ascontiguousarray(rows, np.float64)
     n_tasks = thread_count()
-    pending = np.empty(len(miss), np.int8)  # per missed pixel: its shadow rays to trace
+    pending = np.empty(len(miss), np.int8)  # per missed pixel: whether it has rays to trace
     # per thread: its ground pixels, then its rays towards each light (rows of 16 at
     # least: a thread's counts on cache lines of their own)
     counts = np.zeros((n_tasks, max(16, 1 + len(lights))), np.int64)
     occlusion = np.zeros(0, np.float32) if occlusion is None else occlusion
-    shading = (frame, width, miss, dirs, up, float(height), _with_inverse(lights),
+    shading = (frame, width, miss, dirs, keys, up, float(height), _with_inverse(lights),
                float(headlight), color, catcher, rows, shadows, cull, lo, hi, planes, occlusion,
                pending)
     run_tasks(_ground_first, *shading, counts, n=n_tasks)
@@ -896,14 +879,14 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
 
 
 def _with_inverse(lights) -> np.ndarray:
-    """(L,10) float64: the rows of :func:`light_array` and, for a directional light, the
-    inverse of each component of the direction towards it (the ground's slab tests, made
-    once instead of per pixel; the same IEEE quotients)."""
-    out = np.zeros((len(lights), 10))
-    out[:, :7] = lights
+    """(L, ROW + 3) float64: the rows of ``lights.light_array`` and, for a directional
+    light, the inverse of each component of the direction towards it (the ground's slab
+    tests, made once instead of per pixel; the same IEEE quotients)."""
+    out = np.zeros((len(lights), ROW + 3))
+    out[:, :ROW] = lights
     with np.errstate(divide="ignore"):
-        inv = 1.0 / -np.asarray(lights, np.float64).reshape(-1, 7)[:, 1:4]
-    out[:, 7:] = np.where(out[:, :1] == DIRECTIONAL, inv, 0.0)
+        inv = 1.0 / -np.asarray(lights, np.float64).reshape(-1, ROW)[:, 1:4]
+    out[:, ROW:] = np.where(out[:, :1] == DIRECTIONAL, inv, 0.0)
     return out
 
 
@@ -922,38 +905,43 @@ def _ground_hit(frame, width, dirs, r, up, e_up, height):
 
 @llvm_inline_njit
 def _ground_irradiance(lights, k, x, y, z, up):
-    """Light k at the ground point (x, y, z): the unit direction towards it, its distance
-    (inf: directional) and its irradiance there, the cosine with ``up`` times
-    1 / distance^2 for a point light (0 facing away), as :func:`toward_lights`."""
-    if lights[k, 0] == DIRECTIONAL:
-        lx, ly, lz = -lights[k, 1], -lights[k, 2], -lights[k, 3]
-        d, f = np.inf, 1.0
-    else:
-        lx, ly, lz = lights[k, 1] - x, lights[k, 2] - y, lights[k, 3] - z
-        d2 = lx * lx + ly * ly + lz * lz
-        d = np.sqrt(d2)
-        lx, ly, lz = lx / d, ly / d, lz / d
-        f = 1.0 / d2 if d2 > 0.0 else 0.0
-    return lx, ly, lz, d, max(lx * up[0] + ly * up[1] + lz * up[2], 0.0) * f
+    """Light k's irradiance at the ground point (x, y, z): the cosine with ``up`` of the
+    direction towards it times its irradiance factor (``lights.irradiance_at``; 0 facing
+    away)."""
+    lx, ly, lz, d, f = irradiance_at(lights, k, x, y, z)
+    return max(lx * up[0] + ly * up[1] + lz * up[2], 0.0) * f
 
 
 # (1 / 0: inf, as the ray kernels take it; inlined, it takes its callers' error model, so
 # theirs is numpy's too)
 @llvm_inline_njit
-def _ground_ray(lights, k, x, y, z, up, shadows, cull, lo, hi):
-    """Light k at the ground point (:func:`_ground_irradiance`) and whether its shadow ray
-    is to be traced: shadows on, the light faces the ground, and (``cull``) the ray's
-    segment enters the box [lo, hi]. ``lights``: :func:`_with_inverse`'s."""
-    lx, ly, lz, d, ck = _ground_irradiance(lights, k, x, y, z, up)
-    ray = shadows and ck > 0.0
-    if ray and cull:
+def _ground_ray(lights, k, s, key, x, y, z, cull, lo, hi):
+    """Shadow ray ``s`` of the ground point (x, y, z) towards light k
+    (``lights.shadow_target``): its unit direction, length and whether it is to be traced:
+    (``cull``) its segment enters the box [lo, hi]. ``lights``: :func:`_with_inverse`'s."""
+    lx, ly, lz, d = shadow_target(lights, k, s, key, x, y, z)
+    ray = True
+    if cull:
         if lights[k, 0] == DIRECTIONAL:
-            ix, iy, iz = lights[k, 7], lights[k, 8], lights[k, 9]
+            ix, iy, iz = lights[k, ROW], lights[k, ROW + 1], lights[k, ROW + 2]
         else:
             ix, iy, iz = 1.0 / lx, 1.0 / ly, 1.0 / lz
         ray = slab_entry(x, y, z, ix, iy, iz, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2], 0.0,
                          d) < np.inf
-    return lx, ly, lz, d, ck, ray
+    return lx, ly, lz, d, ray
+
+
+@llvm_inline_njit
+def _ground_rays_of(lights, k, key, x, y, z, up, shadows, cull, lo, hi):
+    """Light k at the ground point: (its irradiance there, :func:`_ground_irradiance`; how
+    many of its shadow rays are to be traced: none without shadows or facing away)."""
+    ck = _ground_irradiance(lights, k, x, y, z, up)
+    n = 0
+    if shadows and ck > 0.0:
+        for s in range(shadow_samples(lights, k)):
+            if _ground_ray(lights, k, s, key, x, y, z, cull, lo, hi)[4]:
+                n += 1
+    return ck, n
 
 
 @inline_njit
@@ -963,30 +951,39 @@ def _segment(task, n_tasks, n):
 
 
 @llvm_inline_njit
-def _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, color, catcher,
-                  rows, shadows, cull, lo, hi, planes, occ, blocked, next_ray, traced):
+def _shade_ground(r, x, y, z, dn, frame, width, dirs, keys, up, lights, headlight, color,
+                  catcher, rows, shadows, cull, lo, hi, planes, occ, blocked, next_ray,
+                  traced):
     """The colour of ground pixel r (point (x, y, z), ``dn`` its ray's d . up) into
-    ``planes``: each light's irradiance unless its shadow ray (for the lights
-    :func:`_ground_ray` traces, where ``traced``: the ray ``next_ray[k]`` of ``blocked``,
-    which moves on) was blocked, all scaled by the ambient occlusion ``occ``."""
+    ``planes``: each light's irradiance times the share of its shadow rays not blocked
+    (for the rays :func:`_ground_ray` traces, where ``traced``: the rays ``next_ray[k]``
+    on of ``blocked``, which moves on), all scaled by the ambient occlusion ``occ``."""
     full = max(-dn, 0.0) * headlight
     lit = full
     cr = cg = cb = full
+    key = keys[r] if len(keys) else np.int64(0)
     for k in range(len(lights)):
-        if traced:
-            ck, ray = _ground_ray(lights, k, x, y, z, up, shadows, cull, lo, hi)[4:]
-        else:
-            ck, ray = _ground_irradiance(lights, k, x, y, z, up)[4], False
+        ck = _ground_irradiance(lights, k, x, y, z, up)
         full += ck
-        dark = False
-        if ray:
-            dark = blocked[next_ray[k]] != 0
-            next_ray[k] += 1
-        if not dark:
+        m = shadow_samples(lights, k)
+        dark = 0
+        if traced and shadows and ck > 0.0:
+            for s in range(m):
+                if _ground_ray(lights, k, s, key, x, y, z, cull, lo, hi)[4]:
+                    if blocked[next_ray[k]] != 0:
+                        dark += 1
+                    next_ray[k] += 1
+        if dark == 0:
             lit += ck
-            cr += ck * lights[k, 4]
-            cg += ck * lights[k, 5]
-            cb += ck * lights[k, 6]
+            cr += ck * lights[k, RGB]
+            cg += ck * lights[k, RGB + 1]
+            cb += ck * lights[k, RGB + 2]
+        elif dark < m:  # (a share of a light of several rays)
+            c = ck * ((m - dark) / m)
+            lit += c
+            cr += c * lights[k, RGB]
+            cg += c * lights[k, RGB + 1]
+            cb += c * lights[k, RGB + 2]
     if catcher:
         row = r if len(dirs) else r // width
         keep = (lit / full if full > 0.0 else 1.0) * occ
@@ -999,13 +996,13 @@ def _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, col
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # (see _ground_ray)
-def _ground_first(task, n_tasks, frame, width, miss, dirs, up, height, lights, headlight,
-                  color, catcher, rows, shadows, cull, lo, hi, planes, occlusion, pending,
-                  counts):
+def _ground_first(task, n_tasks, frame, width, miss, dirs, keys, up, height, lights,
+                  headlight, color, catcher, rows, shadows, cull, lo, hi, planes, occlusion,
+                  pending, counts):
     """Pass 1 of :func:`ground_pixels` over thread ``task``'s missed pixels: shade the ground
-    pixels with no shadow ray to trace, set ``pending`` (their rays' count, 0 for the
-    others) and count the ground pixels and each light's rays (``counts[task]``: the
-    pixels, then the rays of light 0, 1, ...)."""
+    pixels with no shadow ray to trace, set ``pending`` (1 for the others, 0 for these)
+    and count the ground pixels and each light's rays (``counts[task]``: the pixels, then
+    the rays of light 0, 1, ...)."""
     e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
     a, b = _segment(task, n_tasks, len(miss))
     n_ground = 0  # (counted here: threads adding to ``counts`` share a cache line)
@@ -1017,24 +1014,25 @@ def _ground_first(task, n_tasks, frame, width, miss, dirs, up, height, lights, h
             continue
         n_ground += 1
         n = 0
+        key = keys[r] if len(keys) else np.int64(0)
         for k in range(len(lights) if shadows else 0):
-            if _ground_ray(lights, k, x, y, z, up, shadows, cull, lo, hi)[5]:
-                counts[task, 1 + k] += 1  # (a row of this thread's own)
-                n += 1
+            rays = _ground_rays_of(lights, k, key, x, y, z, up, shadows, cull, lo, hi)[1]
+            counts[task, 1 + k] += rays  # (a row of this thread's own)
+            n += rays
         if n == 0:
             occ = occlusion[m] if len(occlusion) else 1.0
-            _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, color,
-                          catcher, rows, shadows, cull, lo, hi, planes, occ, pending, counts[0],
-                          False)
+            _shade_ground(r, x, y, z, dn, frame, width, dirs, keys, up, lights, headlight,
+                          color, catcher, rows, shadows, cull, lo, hi, planes, occ, pending,
+                          counts[0], False)
         else:
-            pending[m] = n
+            pending[m] = 1
     counts[task, 0] = n_ground
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # (see _ground_ray)
-def _ground_rays(task, n_tasks, frame, width, miss, dirs, up, height, lights, headlight,
-                 color, catcher, rows, shadows, cull, lo, hi, planes, occlusion, pending,
-                 base, origins, to_light, dist):
+def _ground_rays(task, n_tasks, frame, width, miss, dirs, keys, up, height, lights,
+                 headlight, color, catcher, rows, shadows, cull, lo, hi, planes, occlusion,
+                 pending, base, origins, to_light, dist):
     """Pass 2: the shadow rays of thread ``task``'s pending pixels, light k's from
     ``base[task, k]`` on (which this moves on), in pixel order."""
     e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
@@ -1042,22 +1040,26 @@ def _ground_rays(task, n_tasks, frame, width, miss, dirs, up, height, lights, he
     for m in range(a, b):
         if pending[m] == 0:
             continue
-        x, y, z = _ground_hit(frame, width, dirs, miss[m], up, e_up, height)[1:4]
+        r = miss[m]
+        x, y, z = _ground_hit(frame, width, dirs, r, up, e_up, height)[1:4]
+        key = keys[r] if len(keys) else np.int64(0)
         for k in range(len(lights)):
-            lx, ly, lz, d, ck, ray = _ground_ray(lights, k, x, y, z, up, shadows, cull, lo,
-                                                 hi)
-            if ray:
-                j = base[task, k]
-                origins[j, 0], origins[j, 1], origins[j, 2] = x, y, z
-                to_light[j, 0], to_light[j, 1], to_light[j, 2] = lx, ly, lz
-                dist[j] = d
-                base[task, k] = j + 1
+            if not _ground_irradiance(lights, k, x, y, z, up) > 0.0:
+                continue
+            for s in range(shadow_samples(lights, k)):
+                lx, ly, lz, d, ray = _ground_ray(lights, k, s, key, x, y, z, cull, lo, hi)
+                if ray:
+                    j = base[task, k]
+                    origins[j, 0], origins[j, 1], origins[j, 2] = x, y, z
+                    to_light[j, 0], to_light[j, 1], to_light[j, 2] = lx, ly, lz
+                    dist[j] = d
+                    base[task, k] = j + 1
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # (see _ground_ray)
-def _ground_last(task, n_tasks, frame, width, miss, dirs, up, height, lights, headlight,
-                 color, catcher, rows, shadows, cull, lo, hi, planes, occlusion, pending, base,
-                 blocked):
+def _ground_last(task, n_tasks, frame, width, miss, dirs, keys, up, height, lights,
+                 headlight, color, catcher, rows, shadows, cull, lo, hi, planes, occlusion,
+                 pending, base, blocked):
     """Pass 3: shade thread ``task``'s pending pixels with their rays' ``blocked`` (light
     k's from ``base[task, k]``, which this moves on)."""
     e_up = frame[0, 0] * up[0] + frame[0, 1] * up[1] + frame[0, 2] * up[2]
@@ -1068,7 +1070,7 @@ def _ground_last(task, n_tasks, frame, width, miss, dirs, up, height, lights, he
         r = miss[m]
         hit, x, y, z, dn = _ground_hit(frame, width, dirs, r, up, e_up, height)
         occ = occlusion[m] if len(occlusion) else 1.0
-        _shade_ground(r, x, y, z, dn, frame, width, dirs, up, lights, headlight, color,
+        _shade_ground(r, x, y, z, dn, frame, width, dirs, keys, up, lights, headlight, color,
                       catcher, rows, shadows, cull, lo, hi, planes, occ, blocked, base[task],
                       True)
 

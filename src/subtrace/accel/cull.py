@@ -36,7 +36,9 @@ test the tile lists make) or when a secondary ray from a point in view may reach
 A point light among the points in view (in front of it along no axis tried), or under a
 ground plane one not above the scene's box, is not bounded so: such scenes are not culled
 (:func:`secondary_reach` gives None). Neither is a ground plane along which a directional
-light runs (its sweep alone decides then).
+light runs (its sweep alone decides then). Which of the two bounds a light's shadow rays
+take (rays along one direction, or rays to one point), or none (then no cull), is its
+kind's (``lights.shadow_cast``).
 
 Where the secondary rays start bounds their cones too (:func:`secondary_origins`, for the
 refinement's ``patches.shells.Sight``): a box around the points in view, and their least
@@ -52,6 +54,7 @@ import numpy as np
 from subtrace import config
 from subtrace.accel.projection import boxes_in_view
 from subtrace.camera import camera_frame
+from subtrace.lights import shadow_cast
 from subtrace.patches.shells import box_distance, box_extent, box_least
 
 # pixels of margin around the image for the pyramid's sides (the tile lists widen a box's
@@ -99,12 +102,15 @@ def secondary_reach(scene, bounds, camera, ground=None) -> Reach | None:
         reach.grow = config.AO_DISTANCE * diagonal
     if not (scene.lights and scene.render.shadows):
         return reach
-    points = [l for l in scene.lights if l.position is not None]
+    # (how each light's shadow rays are bounded is the light kind's: lights.shadow_cast)
+    casts = [shadow_cast(light) for light in scene.lights]
+    if any(c is None for c in casts):
+        return None  # (a light whose shadow rays are not bounded)
+    points = [at for how, at in casts if how == "point"]
     if points and scene.ground is not None and ground is None:
         return None  # (a ground whose height is not given: its shadows are not bounded)
     seen = _seen_in_box(camera, lo, hi)  # (the objects' points in view lie in its hull)
-    for light in points:
-        position = np.asarray(light.position, np.float64)
+    for position in points:
         where = seen
         if ground is not None:
             shadow = _ground_under_point(camera, lo, hi, position, *ground)
@@ -115,8 +121,7 @@ def secondary_reach(scene, bounds, camera, ground=None) -> Reach | None:
         if view is None:
             return None
         reach.point_views.append(view)
-    dirs = [np.asarray(l.direction, np.float64) for l in scene.lights if l.position is None]
-    dirs = [d / np.linalg.norm(d) for d in dirs]
+    dirs = [at / np.linalg.norm(at) for how, at in casts if how == "parallel"]
     reach.sweeps = [2.0 * diagonal * d for d in dirs]
     if ground is not None:
         # (a low sun carries a shadow on the ground further than the scene's diagonal: as

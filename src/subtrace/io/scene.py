@@ -91,6 +91,7 @@ from subtrace.errors import SceneError, show_value
 from subtrace.io.text import decode, read_bytes
 from subtrace.io.obj import BOUNDARY_EDGE_AND_CORNER, BOUNDARY_EDGE_ONLY, BOUNDARY_NONE
 from subtrace.io.usd import is_usd, usd_scene_table
+from subtrace.lights import LIGHT_KEYS, Light, parse_light
 from subtrace.camera import (
     Camera,
     auto_camera,
@@ -114,7 +115,6 @@ DEFAULT_TOLERANCE_PX = 1.0
 DEFAULT_BACKGROUND = ((0.42, 0.47, 0.54), (0.09, 0.10, 0.12))  # (top, bottom)
 DEFAULT_LIGHT_RAYS = (((0.45, -1.0, -0.5), 0.75), ((-0.8, -1.0, 0.1), 0.25))  # key, fill
 DEFAULT_HEADLIGHT_INTENSITY = 0.2
-DEFAULT_LIGHT_COLOR = (1.0, 1.0, 1.0)
 # rays per edge pixel at most where neither the scene nor --samples says: the command
 # line's default (subtrace.picture; chosen in BENCHMARKS.md); the API renders one ray per
 # pixel unless asked
@@ -134,7 +134,7 @@ _OBJECT_KEYS = ("mesh", "prim", "scheme", "boundary", "color", "specular", "shin
 _CAMERA_KEYS = ("eye", "target", "up", "fov", "width", "height")
 _RENDER_KEYS = ("tolerance", "tolerance_deg", "background", "headlight", "headlight_intensity",
                 "max_memory", "shadows", "transparent", "samples", "ao")
-_LIGHT_KEYS = ("direction", "position", "color", "intensity")
+_LIGHT_KEYS = LIGHT_KEYS  # (the light kinds' keys: subtrace.lights)
 _GROUND_KEYS = ("height", "color")
 # Every key the parser accepts, by table ("": the top level); docs/guide/scene-format.md
 # lists exactly these (tests/test_docs.py)
@@ -173,17 +173,6 @@ class SceneObject:
     def boundary_code(self) -> int | None:
         """The boundary mode as OpenSubdiv's Sdc code (subtrace.io.obj.BOUNDARY_*), or None."""
         return None if self.boundary is None else BOUNDARIES[self.boundary]
-
-
-@dataclass(frozen=True)
-class Light:
-    """A directional light (unit ``direction`` the light travels) or a point light
-    (``position``, the other None), its colour and intensity."""
-
-    direction: tuple[float, float, float] | None = None
-    color: tuple[float, float, float] = DEFAULT_LIGHT_COLOR
-    intensity: float = 1.0
-    position: tuple[float, float, float] | None = None
 
 
 DEFAULT_LIGHTS = tuple(
@@ -528,35 +517,17 @@ def _render(ctx, table) -> RenderSettings:
 
 
 def _lights(ctx, raw) -> tuple[Light, ...]:
+    """The [[light]] tables: each kind's keys and checks are the lights room's
+    (:func:`subtrace.lights.parse_light`); errors name the key's line here."""
     lights = []
-    for where, table in ctx.array_tables(
-        "light", raw, _LIGHT_KEYS, None, "",
-    ):
-        if "direction" not in table and "position" not in table:
-            raise ctx.error(where, "missing key direction: every [[light]] needs direction = "
-                            "[x, y, z] (the direction the light travels) or position = "
-                            "[x, y, z] (a point light)")
-        if ("direction" in table) == ("position" in table):
-            raise ctx.error(where + ("position",), "give a light either a direction "
-                            "(directional) or a position (point light), not both")
-        if "position" in table:
-            values = {"position": ctx.call(where + ("position",), check_vector,
-                                           table["position"], "")}
-        else:
-            direction = ctx.call(where + ("direction",), check_vector, table["direction"], "")
-            norm = math.sqrt(sum(c * c for c in direction))
-            if norm == 0.0:
-                raise ctx.error(
-                    where + ("direction",), "the direction is zero; give a non-zero vector"
-                )
-            values = {"direction": tuple(c / norm for c in direction)}
-        if "color" in table:
-            values["color"] = ctx.color(where + ("color",), table["color"])
-        if "intensity" in table:
-            values["intensity"] = ctx.call(
-                where + ("intensity",), _non_negative, table["intensity"]
-            )
-        lights.append(Light(**values))
+    for where, table in ctx.array_tables("light", raw, _LIGHT_KEYS, None, ""):
+        def value(key, check, *args, where=where):
+            return ctx.call(where + (key,), check, *args)
+
+        def error(key, problem, where=where):
+            return ctx.error(where if key is None else where + (key,), problem)
+
+        lights.append(parse_light(table, value, error))
     return tuple(lights)
 
 

@@ -13,7 +13,7 @@ lights, anti-aliasing flags, background). The first process waits for the trace 
 before its rounds (:func:`wait_traced`) and for the rest before the picture (:func:`wait`)
 and loads them from the cache. The secondary-ray kernel (shadow and anti-aliasing rays)
 compiles in a third process where the machine has three cores or more, else in the first
-process while it waits (``render.trace_hits``); so do the picture's kernels other than the
+process while it waits (``trace.rounds.trace_hits``); so do the picture's kernels other than the
 ground's, for as long as the trace kernel is not ready (:func:`picture_while_tracing`), and
 the BVH build of the secondary rays (``render.render_scene``). A small OBJ cage is read
 by the statement reader, not the byte scanner (``io.obj_scan.STATEMENT_READER_BYTES``): a
@@ -289,10 +289,11 @@ def compile_picture(threads: int, parts=PICTURE) -> None:
     ``threads`` threads, on a few pixels of a camera looking down at the ground
     (tests/test_render.py checks that a render adds no signature to them). A cold render's helper compiles them all, the ground
     first; the render's own process compiles the others while it waits for the trace
-    kernel (``render.trace_hits``, :func:`picture_while_tracing`), and the helper then
+    kernel (``trace.rounds.trace_hits``, :func:`picture_while_tracing`), and the helper then
     finds them in the cache."""
     import numpy as np
 
+    from subtrace.lights import Light, light_array
     from subtrace.runtime import threads as tasks
     from subtrace.shade import (CHANNELS, background_pixels, edge_pixels, ground_pixels, light,
                                 shadow_visibility)
@@ -301,7 +302,7 @@ def compile_picture(threads: int, parts=PICTURE) -> None:
     frame = np.array([[0.0, 1.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.0, 0.1], [0.0, -1.0, 0.0]])
     planes = np.zeros((len(CHANNELS), n), np.float32)
     pix = np.full(n, -1, np.int32)
-    lights = np.array([[0.0, 0.0, -1.0, 0.0, 1.0, 1.0, 1.0]])  # directional, straight down
+    lights = light_array([Light(direction=(0.0, -1.0, 0.0))])  # straight down
 
     def trace(origins, dirs, tmax):  # every shadow ray blocked
         return np.ones(len(tmax), np.uint8)

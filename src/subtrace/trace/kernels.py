@@ -75,7 +75,7 @@ def trace_round(rays, frame, width, round_no, bvh, tiles, shell_min, shell_max, 
     kernel compiled without the Loop descents). ``base``: the rounds' number in the
     pieces' records (``round``) of this call's round 0: a patch built in round
     ``base + k`` is tested in round ``k + 1`` (in round 0, every patch built before); the
-    windows of one image (``render.trace_window``) count their rounds on from the last.
+    windows of one image (``trace.rounds.trace_window``) count their rounds on from the last.
     """
     max_d = int(iso.depth_i.max(initial=0))
     band_rows = BAND_ROWS * int(width)

@@ -1,7 +1,7 @@
 """Secondary rays: rays of any origin and direction (shadow rays, extra samples) traced
 through the BVH of the patch shells with the primary trace's pools.
 
-The primary trace (``render.trace_hits``) leaves its pools behind: the Catmull-Clark pieces
+The primary trace (``trace.rounds.trace_hits``) leaves its pools behind: the Catmull-Clark pieces
 and the Loop nets, pieces and cells (:class:`~subtrace.trace.pools.Pieces`) and each patch's
 grid depth. A secondary ray is intersected with exactly the same micro-surface as the
 primary rays (the same per-item function, ``bezier.intersect_patch``, at the same depths), so a
@@ -84,7 +84,7 @@ class Pools:
     memos: object = None
     # the grids of the shells seen along the directions of parallel rays (trace_rays),
     # by direction: made once for all the calls that share the shells (None: none yet).
-    # A shell only shrinks once made (render.trace_window, to its built items' boxes), so
+    # A shell only shrinks once made (trace.rounds.trace_window, to its built items' boxes), so
     # a grid made before lists a box in every cell its box now reaches, and more
     grids: dict | None = None
 
@@ -243,7 +243,7 @@ def compile_kernel(schemes=("catmark",)) -> None:
     """Compile the secondary-ray kernel for the current thread
     count (``runtime.threads``) and cages of these ``schemes`` (``bezier.loop_flag``) by
     tracing no rays through empty pools of the types a render passes (a cold cache:
-    ``render.trace_hits`` does it while the trace kernels compile in another process)."""
+    ``trace.rounds.trace_hits`` does it while the trace kernels compile in another process)."""
     from types import SimpleNamespace
 
     from subtrace.accel.bvh import no_bvh

@@ -1,0 +1,331 @@
+"""subtrace.lights: the room of the light kinds. Everything a kind is lives here: its
+record (:class:`Light`), its scene keys and how they are checked (:func:`parse_light`, which
+``io/scene.py`` asks for every ``[[light]]`` table), its row of the array the kernels take
+(:func:`light_array`), how it lights a point and where its shadow rays go (the jitted
+helpers :func:`incoming`, :func:`irradiance_at`, :func:`shadow_samples` and
+:func:`shadow_target`, which ``shade.py``'s kernels inline), and what bounds its shadow
+rays for the cull to the view (:func:`shadow_cast`, which ``accel/cull.py`` asks). A new
+kind is its entry in each.
+
+The kinds:
+
+* **directional** (``direction``: the unit direction the light travels): irradiance 1, one
+  shadow ray along ``-direction``, unbounded;
+* **point** (``position``): irradiance 1 / distance^2, one shadow ray to the position;
+* **sphere** (``position``, ``radius`` >= 0, ``samples`` shadow rays per shading point): a
+  ball of uniform radiance. Unshadowed, such a ball above a point's horizon lights it as a
+  point light of the same power at its centre does, so the lighting is the point light's
+  (direction and 1 / distance^2 from the centre), scaled by the fraction of the ball's
+  solid angle the point sees: its shadow rays go to points of the ball's near side,
+  uniform in the cone of directions it subtends, and the share that arrives unblocked is
+  the visibility (a penumbra). Radius 0 is a point light, ray for ray. The cull to the
+  view does not bound its rays: a scene with a sphere light of radius > 0 is not culled.
+
+Array layout (:func:`light_array`): (L, ROW) float64, one row per light: ``KIND``, then
+x, y, z (``AT``: a directional light's unit travel, else its position), the colour times
+the intensity (``RGB``), the shadow rays it takes per shading point (``SAMPLES``; 1 for a
+directional or point light) and one number of the kind's own (``PARAM``: a sphere's
+radius; 0 for the others).
+
+A light of several shadow rays per shading point samples them per pixel: each ray that
+is shaded carries a key (:func:`ray_keys`: its image pixel times ``KEY_STRIDE`` plus its
+anti-aliasing sample, 0 for the centre ray) from which the kind chooses its rays, so that
+nothing depends on the thread count or on how the image is cut into tiles or bands. A
+sphere's shadow ray ``s`` of sample ``a`` takes point ``a * samples + s`` of the R2
+low-discrepancy sequence turned by a hash of the pixel (a Cranley-Patterson rotation): the
+rays of a pixel's anti-aliasing samples together are the first ``rays * samples`` points of
+one stratified sequence, and the more rays an edge pixel gets, the finer its penumbra.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from subtrace.camera import check_vector
+from subtrace.errors import SceneError, show_value
+from subtrace.runtime.jit import leaf_njit, llvm_inline_njit
+
+# kinds (column KIND of light_array)
+DIRECTIONAL, POINT, SPHERE = 0, 1, 2
+KIND, AT, RGB, SAMPLES, PARAM = 0, 1, 4, 7, 8  # columns of a row
+ROW = 9  # columns of a row
+
+DEFAULT_LIGHT_COLOR = (1.0, 1.0, 1.0)
+DEFAULT_SPHERE_SAMPLES = 8  # a sphere light's shadow rays per shading point
+MAX_SPHERE_SAMPLES = 256
+# a ray's key: its image pixel times KEY_STRIDE plus its anti-aliasing sample (below
+# io.scene.MAX_SAMPLES)
+KEY_STRIDE = 64
+
+
+@dataclass(frozen=True)
+class Light:
+    """A light: directional (unit ``direction`` the light travels, ``position`` None),
+    point (``position``) or sphere (``position`` its centre and ``radius``; ``samples`` its
+    shadow rays per shading point, None: DEFAULT_SPHERE_SAMPLES), with its colour and
+    intensity."""
+
+    direction: tuple[float, float, float] | None = None
+    color: tuple[float, float, float] = DEFAULT_LIGHT_COLOR
+    intensity: float = 1.0
+    position: tuple[float, float, float] | None = None
+    radius: float | None = None
+    samples: int | None = None
+
+    @property
+    def kind(self) -> int:
+        """DIRECTIONAL, POINT or SPHERE."""
+        if self.position is None:
+            return DIRECTIONAL
+        return POINT if self.radius is None else SPHERE
+
+
+# --------------------------------------------------------------------------------------
+# the scene keys
+# --------------------------------------------------------------------------------------
+
+# every key of a [[light]] table (io.scene.SCENE_KEYS["light"]); per kind, in the order
+# they are told apart (the first whose marking keys a table has), its name, the keys that
+# mark it and its own keys (a table may add the common ones)
+LIGHT_KEYS = ("direction", "position", "radius", "samples", "color", "intensity")
+_COMMON = ("color", "intensity")
+_KINDS = (
+    ("sphere light", ("radius",), ("position", "radius", "samples")),
+    ("point light", ("position",), ("position",)),
+    ("directional light", ("direction",), ("direction",)),
+)
+_NEEDS = ("every [[light]] needs direction = [x, y, z] (the direction the light travels) "
+          "or position = [x, y, z] (a point light, with radius = r a sphere light)")
+
+
+def parse_light(table: dict, value, error) -> Light:
+    """The :class:`Light` of one ``[[light]]`` table (its keys checked against LIGHT_KEYS
+    already). ``value(key, check, *args)``: ``check(table[key], *args)`` with a SceneError
+    it raises put at the key's line; ``error(key, problem)``: a SceneError at the key's
+    line (None: the table's)."""
+    if "direction" in table and "position" in table:
+        raise error("position", "give a light either a direction (directional) or a "
+                    "position (point light), not both")
+    kind = next((k for k in _KINDS if all(x in table for x in k[1])), None)
+    if kind is None:
+        raise error(None, f"missing key direction: {_NEEDS}")
+    name, _, keys = kind
+    for key in table:
+        if key not in keys and key not in _COMMON:
+            raise error(key, f"{key} is not a key of a {name} ({', '.join(keys + _COMMON)})")
+    values = {}
+    if "direction" in table:
+        direction = value("direction", check_vector, table["direction"], "")
+        norm = math.sqrt(sum(c * c for c in direction))
+        if norm == 0.0:
+            raise error("direction", "the direction is zero; give a non-zero vector")
+        values["direction"] = tuple(c / norm for c in direction)
+    else:
+        if "position" not in table:
+            raise error(None, "missing key position: a sphere light needs position = "
+                        "[x, y, z] (its centre) besides its radius")
+        values["position"] = value("position", check_vector, table["position"], "")
+    if "radius" in table:
+        values["radius"] = value("radius", _radius, table["radius"])
+    if "samples" in table:
+        values["samples"] = value("samples", _sphere_samples, table["samples"])
+    if "color" in table:
+        values["color"] = value("color", _color, table["color"])
+    if "intensity" in table:
+        values["intensity"] = value("intensity", _non_negative, table["intensity"])
+    return Light(**values)
+
+
+def _number(value) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SceneError(f"expected a number, got {show_value(value)}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise SceneError(f"expected a finite number, got {value}")
+    return value
+
+
+def _non_negative(value) -> float:
+    value = _number(value)
+    if value < 0.0:
+        raise SceneError(f"must be 0 or more, got {value:g}")
+    return value
+
+
+def _radius(value) -> float:
+    value = _number(value)
+    if value < 0.0:
+        raise SceneError(f"a sphere light's radius must be 0 or more (0: a point light), "
+                         f"got {value:g}")
+    return value
+
+
+def _sphere_samples(value) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not (
+            1 <= value <= MAX_SPHERE_SAMPLES):
+        raise SceneError(f"expected a whole number of shadow rays per shading point from 1 "
+                         f"to {MAX_SPHERE_SAMPLES}, got {show_value(value)}")
+    return value
+
+
+def _color(value) -> tuple[float, float, float]:
+    rgb = check_vector(value, "color")
+    if not all(0.0 <= c <= 1.0 for c in rgb):
+        raise SceneError(
+            f"color components must be between 0 and 1 (linear RGB), got {show_value(value)}")
+    return rgb
+
+
+# --------------------------------------------------------------------------------------
+# the kernels' rows, the rays' keys, the cull's bounds
+# --------------------------------------------------------------------------------------
+
+
+def light_array(lights) -> np.ndarray:
+    """(L, ROW) float64 rows of :class:`Light` s (the module comment's layout)."""
+    rows = []
+    for light in lights:
+        kind = light.kind
+        at = light.direction if kind == DIRECTIONAL else light.position
+        radius = light.radius if kind == SPHERE else 0.0
+        samples = 1 if not radius > 0.0 else (
+            DEFAULT_SPHERE_SAMPLES if light.samples is None else light.samples)
+        rows.append([kind, *at, *(np.asarray(light.color) * light.intensity), samples,
+                     radius])
+    return np.array(rows, dtype=np.float64).reshape(-1, ROW)
+
+
+def directional_rows(lights) -> np.ndarray:
+    """(D, 6) float64: the directional lights' unit travel and colour times intensity."""
+    return np.array([[*l.direction, *(np.asarray(l.color) * l.intensity)]
+                     for l in lights if l.kind == DIRECTIONAL],
+                    dtype=np.float64).reshape(-1, 6)
+
+
+def sampled(rows) -> bool:
+    """Whether any light of ``rows`` (:func:`light_array`) sends more than one shadow ray
+    per shading point: then the shaded rays need their keys (:func:`ray_keys`)."""
+    return bool(len(rows)) and bool(np.any(np.asarray(rows)[:, SAMPLES] > 1))
+
+
+def ray_keys(pixels, samples=None) -> np.ndarray:
+    """(n,) int64 keys of shaded rays: ``pixels`` (n,) their image pixels (row * image
+    width + column), ``samples`` (n,) their anti-aliasing sample (None: 0, centre rays)."""
+    keys = np.asarray(pixels, np.int64) * KEY_STRIDE
+    return keys if samples is None else keys + np.asarray(samples, np.int64)
+
+
+def shadow_cast(light: Light):
+    """How the cull to the view (``accel/cull.py``) bounds the light's shadow rays:
+    ``("parallel", unit travel)`` (rays along one direction), ``("point", position)`` (rays
+    to one point), or None (not bounded: the scene is not culled)."""
+    kind = light.kind
+    if kind == DIRECTIONAL:
+        return "parallel", np.asarray(light.direction, np.float64)
+    if kind == POINT or (kind == SPHERE and not light.radius > 0.0):
+        return "point", np.asarray(light.position, np.float64)
+    return None  # (a sphere's rays spread over its ball: no bound is made for them)
+
+
+# --------------------------------------------------------------------------------------
+# the kernels' helpers (inlined into shade.py's kernels)
+# --------------------------------------------------------------------------------------
+
+
+@leaf_njit
+def incoming(lights, k, frame, t, dx, dy, dz):
+    """Light ``k`` at the hit ``eye + t d``: the unit direction it travels there and its
+    irradiance factor (1 for a directional light, 1 / distance^2 from a point light or a
+    sphere's centre)."""
+    if lights[k, KIND] == DIRECTIONAL:
+        return lights[k, 1], lights[k, 2], lights[k, 3], 1.0
+    lx = frame[0, 0] + t * dx - lights[k, 1]
+    ly = frame[0, 1] + t * dy - lights[k, 2]
+    lz = frame[0, 2] + t * dz - lights[k, 3]
+    d2 = lx * lx + ly * ly + lz * lz
+    if not d2 > 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    inv = 1.0 / math.sqrt(d2)
+    return lx * inv, ly * inv, lz * inv, 1.0 / d2
+
+
+@llvm_inline_njit
+def irradiance_at(lights, k, x, y, z):
+    """Light ``k`` at the point (x, y, z): the unit direction towards it, its distance (inf:
+    directional) and its irradiance factor (1 for a directional light, 1 / distance^2 from
+    a point light or a sphere's centre, 0 at it)."""
+    if lights[k, KIND] == DIRECTIONAL:
+        return -lights[k, 1], -lights[k, 2], -lights[k, 3], np.inf, 1.0
+    lx, ly, lz = lights[k, 1] - x, lights[k, 2] - y, lights[k, 3] - z
+    d2 = lx * lx + ly * ly + lz * lz
+    d = np.sqrt(d2)
+    return lx / d, ly / d, lz / d, d, (1.0 / d2 if d2 > 0.0 else 0.0)
+
+
+@leaf_njit
+def shadow_samples(lights, k):
+    """The shadow rays light ``k`` takes per shading point."""
+    return np.int64(lights[k, SAMPLES])
+
+
+@llvm_inline_njit
+def shadow_target(lights, k, s, key, px, py, pz):
+    """Shadow ray ``s`` of the point (px, py, pz) towards light ``k``, for the shaded ray of
+    ``key`` (:func:`ray_keys`; read only where the light takes several rays): its unit
+    direction x, y, z and the distance to where it meets the light (inf: directional)."""
+    kind = lights[k, KIND]
+    if kind == DIRECTIONAL:
+        return -lights[k, 1], -lights[k, 2], -lights[k, 3], np.inf
+    vx, vy, vz = lights[k, 1] - px, lights[k, 2] - py, lights[k, 3] - pz
+    dist = np.sqrt(vx * vx + vy * vy + vz * vz)
+    wx, wy, wz = vx / dist, vy / dist, vz / dist
+    m = np.int64(lights[k, SAMPLES])
+    if kind != SPHERE or m <= 1:
+        return wx, wy, wz, dist
+    return _sphere_point(wx, wy, wz, dist, lights[k, PARAM], m, s, key)
+
+
+@llvm_inline_njit
+def _sphere_point(wx, wy, wz, dist, radius, m, s, key):
+    """Shadow ray ``s`` of ``m`` towards a ball of ``radius`` whose centre lies ``dist``
+    along the unit (wx, wy, wz): uniform in the cone the ball subtends, at the R2 point of
+    the module comment; its direction and the distance to the ball's near side."""
+    pixel = key // KEY_STRIDE
+    i = (key - pixel * KEY_STRIDE) * m + s  # (the pixel's anti-aliasing sample, then s)
+    u1 = (0.5 + i * _R2_A1 + _hash01(pixel, 3)) % 1.0
+    u2 = (0.5 + i * _R2_A2 + _hash01(pixel, 4)) % 1.0
+    sin_max = min(radius / dist, 1.0)  # (inside the ball: every direction)
+    cos_max = math.sqrt(max(0.0, 1.0 - sin_max * sin_max))
+    c = 1.0 - u1 * (1.0 - cos_max)  # uniform in solid angle: cos theta in [cos_max, 1]
+    sn = math.sqrt(max(0.0, 1.0 - c * c))
+    phi = 2.0 * math.pi * u2
+    a, b = sn * math.cos(phi), sn * math.sin(phi)
+    # an orthonormal basis (b1, b2, w) (Duff et al. 2017: continuous, no division by 0)
+    sign = 1.0 if wz >= 0.0 else -1.0
+    f = -1.0 / (sign + wz)
+    g = wx * wy * f
+    ox = a * (1.0 + sign * wx * wx * f) + b * g + c * wx
+    oy = a * (sign * g) + b * (sign + wy * wy * f) + c * wy
+    oz = a * (-sign * wx) + b * (-wy) + c * wz
+    # where the ray meets the ball first (the cone's rim: where it touches it)
+    h = radius * radius - dist * dist * sn * sn
+    return ox, oy, oz, max(dist * c - math.sqrt(max(h, 0.0)), 0.0)
+
+
+# the R2 sequence's steps (the plastic number's powers), as picture.sample_offsets
+_R2_A1 = 1.0 / 1.32471795724474602596
+_R2_A2 = 1.0 / (1.32471795724474602596 * 1.32471795724474602596)
+
+
+@leaf_njit
+def _hash01(x, k):
+    """A float in [0, 1) from the integer ``x`` and stream ``k`` (splitmix64's finaliser)."""
+    z = np.uint64(x) * np.uint64(0x9E3779B97F4A7C15) + np.uint64(k) * np.uint64(
+        0xD1B54A32D192ED03)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    z = z ^ (z >> np.uint64(31))
+    return np.float64(z >> np.uint64(11)) * (1.0 / 9007199254740992.0)
