@@ -256,6 +256,7 @@ def _sight(eye):
     if eye is None:
         z = np.zeros(3)
         return z, 0.0, z, z, False
+    if isinstance(eye, Sight):
         return (np.asarray(eye.eye, np.float64), float(eye.near),
                 np.asarray(eye.seen_min, np.float64), np.asarray(eye.seen_max, np.float64),
                 True)
