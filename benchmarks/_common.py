@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import os
+import subprocess
 import sys
+import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -38,3 +40,20 @@ def split_extra(argv):
         return argv, []
     k = argv.index("--")
     return argv[:k], argv[k + 1:]
+
+
+def load() -> str:
+    """The load average over 1, 5 and 15 minutes."""
+    return " ".join(f"{x:.1f}" for x in os.getloadavg())
+
+
+def timed(argv: list[str], cwd: Path, env: dict, script: str) -> float:
+    """Wall seconds of one run of ``argv``; stops ``script`` (its name, for the message) if
+    the run fails."""
+    t0 = time.perf_counter()
+    proc = subprocess.run(argv, cwd=cwd, env=env, capture_output=True, text=True)
+    seconds = time.perf_counter() - t0
+    if proc.returncode != 0:
+        tail = (proc.stderr.strip().splitlines() or ["no message"])[-1]
+        raise SystemExit(f"{script}: {' '.join(argv)} failed ({proc.returncode}): {tail}")
+    return seconds

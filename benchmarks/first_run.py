@@ -34,6 +34,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from _common import load, timed  # benchmarks/ is on sys.path when run as a script
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -66,22 +68,6 @@ def copy_checkout(dest: Path) -> Path:
             target.parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(src, target)
     return dest
-
-
-def load() -> str:
-    """The load average over 1, 5 and 15 minutes."""
-    return " ".join(f"{x:.1f}" for x in os.getloadavg())
-
-
-def timed(argv: list[str], cwd: Path, env: dict) -> float:
-    """Wall seconds of one run of ``argv``; stops the script if it fails."""
-    t0 = time.perf_counter()
-    proc = subprocess.run(argv, cwd=cwd, env=env, capture_output=True, text=True)
-    seconds = time.perf_counter() - t0
-    if proc.returncode != 0:
-        tail = (proc.stderr.strip().splitlines() or ["no message"])[-1]
-        raise SystemExit(f"first_run.py: {' '.join(argv)} failed ({proc.returncode}): {tail}")
-    return seconds
 
 
 def main() -> None:
@@ -124,7 +110,7 @@ def run(root: Path, warm: int) -> tuple[list[tuple[str, str, float, str]], str]:
         """(seconds, load before) of ``subtrace ARGV`` on the kernel cache ``cache``."""
         env["SUBTRACE_CACHE_DIR"] = str(root / cache)
         before = load()
-        return timed([subtrace, *argv], work, env), before
+        return timed([subtrace, *argv], work, env, "first_run.py"), before
 
     rows.append(("first render", "subtrace render --png", *step(["render", "--png"],
                                                                 "cache-default")))

@@ -23,30 +23,13 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
-from _common import split_extra
+from _common import load, split_extra, timed
 
 from subtrace.runtime.numba_patches import CHECKED_ON
 
 MODES = {"on": "1", "off": "0"}
-
-
-def load() -> str:
-    """The load average over 1, 5 and 15 minutes."""
-    return " ".join(f"{x:.1f}" for x in os.getloadavg())
-
-
-def timed(argv: list[str], cwd: Path, env: dict) -> float:
-    """Wall seconds of one run of ``argv``; stops the script if it fails."""
-    t0 = time.perf_counter()
-    proc = subprocess.run(argv, cwd=cwd, env=env, capture_output=True, text=True)
-    seconds = time.perf_counter() - t0
-    if proc.returncode != 0:
-        tail = (proc.stderr.strip().splitlines() or ["no message"])[-1]
-        raise SystemExit(f"patches.py: {' '.join(argv)} failed ({proc.returncode}): {tail}")
-    return seconds
 
 
 def run(root: Path, rounds: int, warm: int, render: list[str]) -> list[tuple]:
@@ -61,8 +44,8 @@ def run(root: Path, rounds: int, warm: int, render: list[str]) -> list[tuple]:
             shutil.rmtree(cache, ignore_errors=True)
             env.update(SUBTRACE_CACHE_DIR=str(cache), SUBTRACE_NUMBA_PATCHES=MODES[mode])
             before = load()
-            first = timed(argv, root, env)
-            again = [timed(argv, root, env) for _ in range(warm)]
+            first = timed(argv, root, env, "patches.py")
+            again = [timed(argv, root, env, "patches.py") for _ in range(warm)]
             rows.append((r + 1, mode, first, statistics.median(again) if again else None,
                          before))
             print(f"round {r + 1}, patches {mode}: first {first:.1f} s", file=sys.stderr)
