@@ -165,9 +165,9 @@ class Comparison:
         """A readable report: one row per group, then the verdict."""
         rows = [("group", "verdict", "pixels", "> warn", "> fail", "max", "metrics")]
         for g in self.groups.values():
-            metrics = ", ".join(f"{k} {_fmt(v)}" for k, v in g.metrics.items())
+            metrics = ", ".join(f"{k} {format_value(v)}" for k, v in g.metrics.items())
             rows.append((g.name, g.verdict.upper(), str(g.pixels), str(g.n_warn), str(g.n_fail),
-                         _fmt(g.max_error), metrics))
+                         format_value(g.max_error), metrics))
         widths = [max(len(r[k]) for r in rows) for k in range(len(rows[0]) - 1)]
         lines = ["  ".join(c.ljust(w) for c, w in zip(r[:-1], widths)) + "  " + r[-1]
                  for r in rows]
@@ -494,7 +494,9 @@ def _json_number(v):
     return v
 
 
-def _fmt(v) -> str:
+def format_value(v) -> str:
+    """A table cell's text of a figure: ``n/a`` for none, integers as they are, floats to 4
+    significant digits (the command line's table and the HTML page alike)."""
     if v is None:
         return "n/a"
     if isinstance(v, int):

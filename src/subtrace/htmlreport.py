@@ -28,6 +28,7 @@ import zlib
 
 import numpy as np
 
+from subtrace.compare import format_value
 from subtrace.io.atomic import write_text
 from subtrace.version import VERSION
 
@@ -247,13 +248,13 @@ def comparison_section(comparison, name: str, label_a: str, label_b: str,
             "<th>metrics</th></tr>"]
     for g in c.groups.values():
         t = g.thresholds
-        metrics = ", ".join(f"{k} {_fmt(v)}" for k, v in g.metrics.items())
+        metrics = ", ".join(f"{k} {format_value(v)}" for k, v in g.metrics.items())
         hard = "" if math.isinf(t.hardfail) else f", hard {_number(t.hardfail)}"
         rows.append(
             f'<tr data-group="{g.name}" data-verdict="{g.verdict}"><td>{g.name}</td>'
             f"<td>{g.verdict.upper()}</td><td class=num>{g.pixels}</td>"
             f"<td class=num>{g.n_warn}</td><td class=num>{g.n_fail}</td>"
-            f"<td class=num>{_fmt(g.max_error)}</td>"
+            f"<td class=num>{format_value(g.max_error)}</td>"
             f"<td>{_number(t.warn)} / {_number(t.fail)}{hard}</td>"
             f"<td>{_number(t.warnpercent)} / {_number(t.failpercent)}</td>"
             f"<td>{html.escape(metrics)}</td></tr>")
@@ -404,9 +405,3 @@ def sweep_page(records, output_dir, title: str = "subtrace sweep") -> str:
                 "", sections)
 
 
-def _fmt(v) -> str:
-    if v is None:
-        return "n/a"
-    if isinstance(v, int):
-        return str(v)
-    return f"{v:.4g}"

@@ -295,8 +295,8 @@ def _sphere_point(wx, wy, wz, dist, radius, m, s, key):
     the module comment; its direction and the distance to the ball's near side."""
     pixel = key // KEY_STRIDE
     i = (key - pixel * KEY_STRIDE) * m + s  # (the pixel's anti-aliasing sample, then s)
-    u1 = (0.5 + i * _R2_A1 + _hash01(pixel, 3)) % 1.0
-    u2 = (0.5 + i * _R2_A2 + _hash01(pixel, 4)) % 1.0
+    u1 = (0.5 + i * R2_A1 + hash01(pixel, 3)) % 1.0
+    u2 = (0.5 + i * R2_A2 + hash01(pixel, 4)) % 1.0
     sin_max = min(radius / dist, 1.0)  # (inside the ball: every direction)
     cos_max = math.sqrt(max(0.0, 1.0 - sin_max * sin_max))
     c = 1.0 - u1 * (1.0 - cos_max)  # uniform in solid angle: cos theta in [cos_max, 1]
@@ -315,13 +315,14 @@ def _sphere_point(wx, wy, wz, dist, radius, m, s, key):
     return ox, oy, oz, max(dist * c - math.sqrt(max(h, 0.0)), 0.0)
 
 
-# the R2 sequence's steps (the plastic number's powers), as picture.sample_offsets
-_R2_A1 = 1.0 / 1.32471795724474602596
-_R2_A2 = 1.0 / (1.32471795724474602596 * 1.32471795724474602596)
+# the R2 sequence's steps (the plastic number's powers): every sampled ray's (the
+# anti-aliasing offsets of picture.sample_offsets, AO directions, sphere-light points)
+R2_A1 = 1.0 / 1.32471795724474602596
+R2_A2 = 1.0 / (1.32471795724474602596 * 1.32471795724474602596)
 
 
 @leaf_njit
-def _hash01(x, k):
+def hash01(x, k):
     """A float in [0, 1) from the integer ``x`` and stream ``k`` (splitmix64's finaliser)."""
     z = np.uint64(x) * np.uint64(0x9E3779B97F4A7C15) + np.uint64(k) * np.uint64(
         0xD1B54A32D192ED03)

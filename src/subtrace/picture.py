@@ -49,7 +49,7 @@ from subtrace.nurbs.scene import blocked as nurbs_blocked
 from subtrace.nurbs.scene import shade_rays
 from subtrace.runtime import threads as tasks
 from subtrace import config
-from subtrace.lights import DIRECTIONAL, light_array, ray_keys, sampled
+from subtrace.lights import DIRECTIONAL, R2_A1, R2_A2, light_array, ray_keys, sampled
 from subtrace.shade import (C_A, C_R, C_Z, CHANNELS, ambient_occlusion, background_pixels,
                             background_rows, edge_pixels, ground_occlusion, ground_pixels,
                             ground_points, light, miss_values, shade, shadow_visibility,
@@ -59,8 +59,7 @@ from subtrace.trace.pools import Memos
 from subtrace.trace.rays import Pools, trace_rays
 
 # the R2 sequence's steps (the plastic number's powers): well-spread points in a square
-_G = 1.32471795724474602596
-_R2 = (1.0 / _G, 1.0 / (_G * _G))
+_R2 = (R2_A1, R2_A2)
 
 
 def sample_offsets(samples: int) -> np.ndarray:

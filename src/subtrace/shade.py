@@ -31,8 +31,8 @@ from subtrace import config
 from subtrace.accel.bvh import slab_entry
 from subtrace.camera import window_offset
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material
-from subtrace.lights import (DIRECTIONAL, RGB, ROW, incoming, irradiance_at, shadow_samples,
-                             shadow_target)
+from subtrace.lights import (DIRECTIONAL, R2_A1, R2_A2, RGB, ROW, hash01, incoming,
+                             irradiance_at, shadow_samples, shadow_target)
 from subtrace.patches.basis import bez_normal
 from subtrace.runtime.jit import callee_njit, inline_njit, leaf_njit, llvm_inline_njit, nb
 from subtrace.runtime.threads import run_tasks, thread_count
@@ -748,22 +748,6 @@ def _smooth_task(task, n_tasks, width, points, normals, group, values, reach, ra
                 out[r] = np.float32(total / weight)
 
 
-# the R2 sequence's steps (the plastic number's powers), as picture.sample_offsets
-_R2_A1 = 1.0 / 1.32471795724474602596
-_R2_A2 = 1.0 / (1.32471795724474602596 * 1.32471795724474602596)
-
-
-@nb.njit(cache=True)
-def _hash01(x, k):
-    """A float in [0, 1) from the integer ``x`` and stream ``k`` (splitmix64's finaliser)."""
-    z = np.uint64(x) * np.uint64(0x9E3779B97F4A7C15) + np.uint64(k) * np.uint64(
-        0xD1B54A32D192ED03)
-    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    z = z ^ (z >> np.uint64(31))
-    return np.float64(z >> np.uint64(11)) * (1.0 / 9007199254740992.0)
-
-
 @nb.njit(cache=True, _nrt=False)
 def _ao_directions(normals, ids, samples, out):
     """Fill ``out`` (see :func:`ao_directions`)."""
@@ -776,11 +760,11 @@ def _ao_directions(normals, ids, samples, out):
         b1x, b1y, b1z = 1.0 + sign * nx * nx * a, sign * b, -sign * nx
         b2x, b2y, b2z = b, sign + ny * ny * a, -ny
         # the R2 points turned by this row's hash (Cranley-Patterson rotation)
-        r1 = _hash01(ids[i], 1)
-        r2 = _hash01(ids[i], 2)
+        r1 = hash01(ids[i], 1)
+        r2 = hash01(ids[i], 2)
         for k in range(samples):
-            u1 = (0.5 + k * _R2_A1 + r1) % 1.0
-            u2 = (0.5 + k * _R2_A2 + r2) % 1.0
+            u1 = (0.5 + k * R2_A1 + r1) % 1.0
+            u2 = (0.5 + k * R2_A2 + r2) % 1.0
             # cosine-weighted: uniform on the unit disc, lifted to the hemisphere
             rad = math.sqrt(u1)
             phi = 2.0 * math.pi * u2
