@@ -18,7 +18,10 @@ write at one temporary folder for the whole run, removed when the run ends:
 
 The golden images (``golden_images/<scene>.exr``) are compared by subtrace's own pytest
 plugin (:mod:`subtrace.testing.plugin`, the ``golden`` fixture; ``--update-goldens`` rewrites
-them from fresh renders), which pytest loads from its entry point before this file.
+them from fresh renders), which pytest loads from its entry point before this file. Its
+session page (``report.html``, with the images of any golden that failed) goes to
+``GOLDEN_REPORT`` in the system's temporary folder, kept after the run for a look and
+replaced by the next one, unless ``--golden-report DIR`` names another: not the checkout.
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ _loaded = {m for m in sys.modules if m == "subtrace" or m.startswith("subtrace."
 assert _loaded <= PLUGIN_MODULES, f"conftest.py must run before {sorted(_loaded - PLUGIN_MODULES)}"
 
 RUN_DIR = Path(tempfile.mkdtemp(prefix="subtrace-tests-"))
+GOLDEN_REPORT = Path(tempfile.gettempdir()) / f"subtrace-golden-report-{os.getuid()}"
 KERNEL_CACHE = Path(os.environ.get("SUBTRACE_TEST_CACHE_DIR") or RUN_DIR / "kernels")
 
 
@@ -56,6 +60,11 @@ _private_folders()
 
 # pytester runs the sample project of tests/golden_project (tests/test_golden_plugin.py)
 pytest_plugins = ["pytester"]
+
+
+def pytest_configure(config):
+    if config.getoption("golden_report", None) is None:
+        config.option.golden_report = str(GOLDEN_REPORT)
 
 
 def pytest_unconfigure(config):
