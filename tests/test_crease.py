@@ -430,6 +430,54 @@ def test_item_sides_joins_the_stretches_the_pairs_join(seed):
     assert (out > layout[5][:, None]).any()  # something was raised
 
 
+@pytest.mark.parametrize("name", ["rings", "pair", "ends"])
+def test_cell_free_depths_count_the_levels_until_the_creases_run_out(name, tori):
+    """A patch the maps serve has no cell from the depth at which the larger sharpness of
+    its creased lines, one less a level (to 0 from 1 down), is 0; the others have cells at
+    every depth."""
+    cage = _cage(name, tori)
+    table = build_patch_table([cage])
+    o = table.objects[0]
+    iso = np.nonzero(table.is_quad & ~table.regular)[0]
+    free = crease.cell_free_depths(o.level, o.cage.options, table.face[iso])
+    ok, _, s_lo, s_hi = crease.crease_faces(o.level, o.cage.options, table.face[iso])
+    assert ok.any()
+    np.testing.assert_array_equal(free[~ok], crease.CELLS_AT_ANY_DEPTH)
+    s = np.maximum(s_lo, s_hi)[ok].astype(np.float64)
+    np.testing.assert_array_equal(free[ok], np.ceil(s - 1e-6).astype(np.int64))
+
+
+def test_a_patch_past_its_creases_fans_instead_of_rising(tori):
+    """edge_sampling raises a patch along a crease to a finer neighbour's depth only while
+    its isolation leaves cells (below its cell-free depth, and never past it); past it, the
+    patch keeps its depth (within FAN_LEVELS) and samples that side at the neighbour's."""
+    from subtrace import config
+    from subtrace.patches.criterion import edge_sampling
+
+    table = build_patch_table([_cage("rings", tori)])
+    o = table.objects[0]
+    iso = np.nonzero(table.is_quad & ~table.regular)[0]
+    free = crease.cell_free_depths(o.level, o.cage.options, table.face[iso])
+    p = int(iso[np.argmax(free < crease.CELLS_AT_ANY_DEPTH)])
+    L = int(free[iso == p][0])
+    k = int(np.nonzero(table.edges[p] >= 0)[0][0])
+    share = (table.edges == table.edges[p, k])
+    q = int(np.nonzero(share.any(axis=1) & (np.arange(table.n_patches) != p))[0][0])
+    deep = L + config.FAN_LEVELS - 1 + int(table.side_shift[p, k])
+    for start, expected in ((L, L), (L - 1, L)):  # past its creases; just before them
+        depths = np.zeros(table.n_patches, np.int32)
+        depths[p], depths[q] = start, deep
+        _, side = edge_sampling(table, depths)
+        assert depths[p] == expected, (start, depths[p])
+        # (in the patch's units: the neighbour's depth in the edge's, less the side's shift)
+        assert side[p, k] >= deep + int(table.side_shift[q, np.nonzero(share[q])[0][0]]) \
+            - int(table.side_shift[p, k])
+    depths = np.zeros(table.n_patches, np.int32)
+    depths[p], depths[q] = L - 2, L - 1  # a neighbour finer, but before the creases end
+    edge_sampling(table, depths)
+    assert depths[p] >= L - 1
+
+
 # ------------------------------------------------------------------------------------------
 # the renderer
 # ------------------------------------------------------------------------------------------

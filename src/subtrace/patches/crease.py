@@ -142,6 +142,30 @@ def crease_faces(level, options, faces):
     return ok, side, s_lo, s_hi
 
 
+# cell_free_depths of a patch whose isolation leaves cells at every depth
+CELLS_AT_ANY_DEPTH = np.int64(1) << 40
+
+
+def cell_free_depths(level, options, faces):
+    """(m,) int64: for each irregular quad of ``faces`` of ``level`` that the maps serve
+    (:func:`crease_faces`), the depth from which its isolation leaves no cell: the levels
+    until the sharpness of both its creased lines has run out (:func:`_decayed`, in
+    float32, as the kernel decays it), after which every square is regular, so its pieces
+    are all Bezier nets, which sample a side as finely as a neighbour asks (fans); at a
+    smaller depth the squares still creased there are cells of exact limit points, which
+    sample their sides at the depth alone. ``CELLS_AT_ANY_DEPTH`` for the other faces (an
+    extraordinary vertex stays irregular at every level)."""
+    ok, _, s_lo, s_hi = crease_faces(level, options, faces)
+    out = np.full(len(ok), CELLS_AT_ANY_DEPTH, np.int64)
+    s = np.maximum(s_lo, s_hi)[ok]
+    n = np.zeros(len(s), np.int64)
+    while (s > 0).any():
+        n[s > 0] += 1
+        s = _decayed(s)
+    out[ok] = n
+    return out
+
+
 def crease_where(level, options, faces, levels):
     """:func:`crease_faces` for the ``faces`` with ``levels`` (m,) >= 0 to go below them
     (the others: not ok, unexamined)."""

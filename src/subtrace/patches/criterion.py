@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from subtrace import config
+from subtrace.patches.crease import CELLS_AT_ANY_DEPTH, cell_free_depths
 from subtrace.patches.isolate import isolated_depths
 from subtrace.patches.shells import eye_point, sight_distance
 from subtrace.runtime.jit import nb
@@ -139,16 +140,27 @@ def depth_cap(table, depths, n_pixels: int, budget: int, isolated=None):
 
 def edge_sampling(table, depths):
     """Make both sides of every edge sample it alike (design invariant 4); raises ``depths``
-    in place and returns ``(edge_depth, reg_side)``.
+    in place and returns ``(edge_depth, side)``.
 
-    * An irregular Catmull-Clark patch (built into pieces, ``patches/isolate.py``) is raised
-      to the depth of every neighbour, repeatedly, so it is never coarser than a neighbour
-      and equal to its irregular neighbours: its sides need no extra samples.
+    * An irregular Catmull-Clark patch (built into pieces, ``patches/isolate.py``) whose
+      isolation leaves cells of exact limit points at its depth (which sample their sides
+      at that depth alone) is raised to the depth of every neighbour, repeatedly, so it is
+      never coarser than a neighbour and equal to its irregular neighbours of that kind.
+    * One whose isolation leaves no cell at its depth (a patch along semi-sharp creases
+      refined past its sharpness, :func:`~subtrace.patches.crease.cell_free_depths`) is
+      made only of Bezier pieces, which fan as a regular patch does: a neighbour finer
+      than it raises it to that depth at most (where it has no cell), then to within
+      ``config.FAN_LEVELS``. (Raising every irregular patch to its neighbours' depths
+      carried the deepest depth of a crease's corner along every patch of the crease: the
+      chess pieces' creased patches were refined to depth 7, their own needs 3 to 5.)
     * A regular patch (intersected directly) samples a side shared with a finer neighbour at
-      the neighbour's depth (``reg_side`` (R,4)), fanning its cells there; it is raised to
-      within ``config.FAN_LEVELS`` of its finest neighbour, so a cell side carries at most
+      the neighbour's depth, fanning its cells there; it is raised to within
+      ``config.FAN_LEVELS`` of its finest neighbour, so a cell side carries at most
       ``2^FAN_LEVELS`` samples.
     * Loop grids snap a side to the coarsest depth on its edge (``edge_depth``, per edge).
+
+    ``side`` (P,4): how finely each patch samples each of its sides, its own depth or its
+    deepest neighbour's there (the cell-bearing irregular ones: their depth).
 
     Depths compare in the units of the edge: a patch of level 1 whose side lies on a side
     of a cage quad patch (``table.side_shift`` 1) samples half of that cage edge, so its
@@ -159,17 +171,33 @@ def edge_sampling(table, depths):
     nb_max = np.empty(table.edges.shape, dtype=np.int64)
     edge_depth = np.empty(n_e, dtype=np.int64)
     _sample_edges(table.edges, table.side_shift, depths, iso, table.regular,
-                  config.FAN_LEVELS, nb_max, edge_depth)
-    reg_side = np.maximum(depths[table.regular][:, None], nb_max[table.regular])
-    return edge_depth, np.ascontiguousarray(reg_side, dtype=np.int64)
+                  cell_free(table, iso), config.FAN_LEVELS, nb_max, edge_depth)
+    side = np.maximum(depths.astype(np.int64)[:, None], nb_max)
+    return edge_depth, np.ascontiguousarray(side, dtype=np.int64)
+
+
+def cell_free(table, iso):
+    """(P,) int64: per patch, the depth from which its isolation leaves no cell
+    (:func:`~subtrace.patches.crease.cell_free_depths` for the ``iso`` patches of
+    Catmull-Clark objects; ``CELLS_AT_ANY_DEPTH`` for the rest)."""
+    out = np.full(len(iso), CELLS_AT_ANY_DEPTH, np.int64)
+    for oid, o in enumerate(table.objects):
+        if o.cage.scheme != "catmark":
+            continue
+        sel = np.nonzero((table.object_id == oid) & iso)[0]
+        if len(sel):
+            out[sel] = cell_free_depths(o.level, o.cage.options, table.face[sel])
+    return out
 
 
 @nb.njit(cache=True, nogil=True)
-def _sample_edges(edges, shift, depths, iso, regular, fan_levels, nb_max, edge_depth):
-    """Raise the ``iso`` patches to their neighbours' depths and the ``regular`` ones to
-    within ``fan_levels`` of them until none changes (in place); fill the deepest patch on
-    each side's edge (``nb_max``, in the patch's units) and the shallowest per edge (in
-    the edge's: a patch's depth plus its side's ``shift``)."""
+def _sample_edges(edges, shift, depths, iso, regular, cell_free, fan_levels, nb_max,
+                  edge_depth):
+    """Raise the ``iso`` patches to their neighbours' depths (but not past ``cell_free``,
+    from where they have no cells) and the ``regular`` ones and the iso ones at or past
+    ``cell_free`` to within ``fan_levels`` of them until none changes (in place); fill the
+    deepest patch on each side's edge (``nb_max``, in the patch's units) and the
+    shallowest per edge (in the edge's: a patch's depth plus its side's ``shift``)."""
     # (np.empty and a fill, a constant for int32's largest: a cold render compiles neither
     # np.full nor np.iinfo for this kernel alone)
     best = np.empty(len(edge_depth), np.int64)
@@ -186,11 +214,12 @@ def _sample_edges(edges, shift, depths, iso, regular, fan_levels, nb_max, edge_d
             if not (iso[p] or regular[p]):
                 continue
             m = depths[p]
+            fans = regular[p] or depths[p] >= cell_free[p]
             for k in range(4):
                 e = edges[p, k]
                 if e >= 0:
                     b = best[e] - shift[p, k]
-                    m = max(m, b if iso[p] else b - fan_levels)
+                    m = max(m, b - fan_levels if fans else min(b, cell_free[p]))
             if m > depths[p]:
                 depths[p] = m
                 changed = True

@@ -14,14 +14,16 @@ from subtrace.trace.tris import tri_nets_as_pieces
 
 
 def build_requested(table, requested, depths, edge_depth, iso, round_no, stats, eye, tol_rad,
-                    record):
+                    record, patch_side=None):
     """Build the patches ``requested`` (sorted ids) in round ``round_no`` into ``iso`` (a
     :class:`~subtrace.trace.pools.Pieces`), all of an object's at once: irregular
     Catmull-Clark patches into pieces (one isolation, taking what ``record[object id]``
     kept of the depth choice's isolation), regular Loop triangles into triangular Bezier
     nets traced per ray, irregular ones isolated into such nets and cells
     (``patches/isolate_loop.py``), their sides shared with a coarser neighbour snapped onto
-    its polyline (``edge_depth``). Counts go to ``stats``."""
+    its polyline (``edge_depth``). An irregular Catmull-Clark patch's pieces sample each of
+    its sides at least as ``patch_side`` (P,4) says (``criterion.edge_sampling``; None: at
+    its depth). Counts go to ``stats``."""
     obj = table.object_id[requested]
     dep = depths[requested]
     quad = table.is_quad[requested]
@@ -36,8 +38,8 @@ def build_requested(table, requested, depths, edge_depth, iso, round_no, stats, 
             # (as made: the pool puts the pieces in order, their nets stay where they are)
             subs, cells = isolated_parts(o, table.face[ids], dep[s:e], eye, tol_rad,
                                          record.get(int(obj[s])))
-            n_sub, n_cell = iso.append(ids, dep[s:e], np.repeat(dep[s:e], 4), subs, cells,
-                                       round_no)
+            side = np.repeat(dep[s:e], 4) if patch_side is None else patch_side[ids]
+            n_sub, n_cell = iso.append(ids, dep[s:e], side, subs, cells, round_no)
             stats.pieces += n_sub + n_cell
             stats.micro_triangles += 2 * n_cell
             continue

@@ -77,6 +77,7 @@ class Pools:
     stats: object
     round_no: int
     memo_bytes: int | None = None
+    patch_side: np.ndarray | None = None  # (P,4) the sides' sampling (criterion.edge_sampling)
     # the threads' memos of these rays (None: fresh ones each call). Each chunk of rays
     # starts its memo afresh, so what a memo held for earlier rays is never read: sharing
     # them over the calls of a render (its bands' shadow, occlusion and extra rays) only
@@ -216,7 +217,7 @@ def _trace_part(pools, origins, dirs, tmax, any_hit, grid, blocked, hits):
             flag[ids] = True
         build_requested(pools.table, np.nonzero(flag)[0], pools.depths, pools.edge_depth,
                         pools.iso, pools.round_no, pools.stats, pools.eye, pools.tol_rad,
-                        pools.record)
+                        pools.record, pools.patch_side)
         pools.round_no += 1
     # (each chunk of rays has a memo of its own: its count is the same on any thread)
     pools.stats.micro_triangles += int(built.sum())

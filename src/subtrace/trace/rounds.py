@@ -79,10 +79,11 @@ class SharedTrace:
     built patches. A patch built for one window's rays is there for the next window's.
     ``finish()`` counts what was refined into the stats and returns the patches refined."""
 
-    def __init__(self, table, chosen, tiles, bvh, memos, iso, edge_depth, eye, tol_rad,
-                 stats, windows):
+    def __init__(self, table, chosen, tiles, bvh, memos, iso, edge_depth, patch_side, eye,
+                 tol_rad, stats, windows):
         self.table, self.chosen, self.tiles, self.bvh = table, chosen, tiles, bvh
         self.memos, self.iso, self.edge_depth, self.eye = memos, iso, edge_depth, eye
+        self.patch_side = patch_side  # (P,4) how finely each patch samples its sides
         self.tol_rad, self.stats, self.windows = tol_rad, stats, windows
         self.loop = table_loop_flag(table)  # (None: a kernel without the Loop descents)
         self.rounds = 0  # the most rounds a window took
@@ -160,7 +161,7 @@ def trace_setup(table, camera, tol_rad, stats, max_depth=None, compiling=None, a
         warmup.picture_while_tracing(compiling, tasks.thread_count())
     warmup.wait_traced(compiling)
     depths = chosen.depths
-    edge_depth, reg_side = edge_sampling(table, depths)
+    edge_depth, patch_side = edge_sampling(table, depths)
     iso = Pieces(table.n_patches)
     reg = np.nonzero(table.regular)[0]
     n_irr = int(np.count_nonzero(table.is_quad & ~table.regular))
@@ -169,11 +170,11 @@ def trace_setup(table, camera, tol_rad, stats, max_depth=None, compiling=None, a
     store = table.nets if table.nets.base is None else table.nets.base
     iso.adopt("nets", len(table.nets), nets=store)
     iso.reserve("nets", len(reg) + 16 * n_irr)
-    iso.append_regular(reg, depths[reg], reg_side, None, table.shell_min[reg],
+    iso.append_regular(reg, depths[reg], patch_side[reg], None, table.shell_min[reg],
                        table.shell_max[reg])
     build_loop_regular(table, depths, edge_depth, iso)
     return SharedTrace(table, chosen, tiles, bvh, Memos(n_threads, memo_bytes), iso,
-                       edge_depth, eye, tol_rad, stats, windows and whole is camera)
+                       edge_depth, patch_side, eye, tol_rad, stats, windows and whole is camera)
 
 
 def trace_window(shared, frame, width, height, progress=None, keep=None, hits=None):
@@ -220,7 +221,7 @@ def trace_window(shared, frame, width, height, progress=None, keep=None, hits=No
         new = np.nonzero(cands.wanted)[0]  # (kernels.py: requests and what they overlap)
         cands.wanted[:] = 0
         build_requested(table, new, depths, shared.edge_depth, iso, base + round_no, stats,
-                        shared.eye, shared.tol_rad, chosen.record)
+                        shared.eye, shared.tol_rad, chosen.record, shared.patch_side)
         # a built patch's shell shrinks to its items' boxes (all that rays test of it):
         # later rounds, and the secondary rays' BVH, enter it less often
         built = new[iso.patch_iso[new] >= 0]
@@ -234,7 +235,8 @@ def trace_window(shared, frame, width, height, progress=None, keep=None, hits=No
     shared.rounds = max(shared.rounds, round_no + 1)
     stats.micro_triangles += int(tested.sum())
     if keep is not None:  # for secondary rays (trace/rays.py)
-        keep.update(table=table, depths=depths, edge_depth=shared.edge_depth, iso=iso,
+        keep.update(table=table, depths=depths, edge_depth=shared.edge_depth,
+                    patch_side=shared.patch_side, iso=iso,
                     record=chosen.record, shell_min=chosen.shell_min,
                     shell_max=chosen.shell_max, bvh=keep.get("bvh", shared.bvh),
                     eye=shared.eye, tol_rad=shared.tol_rad, stats=stats,
