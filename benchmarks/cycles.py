@@ -27,6 +27,8 @@ in ``models/opensubdiv/`` (Modified Apache 2.0, ``models/README.md``), turned Y 
                vertices offset, the tags re-indexed
     car        the car body (1,575 quads, 314 semi-sharp creases of sharpness 6)
     helmet     the helmet shell (58 quads, 38 creases of sharpness 7, open, edge-and-corner)
+    helmet_fine  the helmet refined twice by Catmull-Clark's rules (928 quads, its creases of
+               sharpness 5, the same limit surface): a hard-surface cage of 500-2,000 faces
 
 Each scene's camera (eye, target, up, vertical fov, resolution) is resolved here and given to
 both renderers, subtrace on its command line: the two images frame the same view.
@@ -383,6 +385,34 @@ def cage_helmet() -> Cage:
     return _hard_surface("helmet")
 
 
+def cage_helmet_fine() -> Cage:
+    """The helmet shell refined twice by Catmull-Clark's rules (subtrace's own uniform
+    refinement, which matches OpenSubdiv's: tests/test_oracle.py): 928 quads with its
+    creases two levels down (sharpness 5 where the shell had 7, each crease now four
+    edges), the same limit surface: a helmet-like hard-surface cage of the size artists
+    model (500-2,000 faces). The refined level's sharpness is written as tags (boundary
+    edges and corners as infinitely sharp ones, which the boundary rule makes them anyway)."""
+    import numpy as np
+
+    import subtrace
+
+    coarse = _hard_surface("helmet")
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "helmet.obj"
+        path.write_text(coarse.to_obj("helmet, Y up"), encoding="utf-8")
+        cage = subtrace.load_cage(path)
+    level, mesh = cage.level_topology(2), cage.refine(2)
+    starts = np.r_[0, np.cumsum(mesh.face_sizes)[:-1]]
+    faces = [[int(v) for v in mesh.face_verts[a:a + n]]
+             for a, n in zip(starts, mesh.face_sizes)]
+    creases = [(int(a), int(b), min(float(s), INF_SHARP))
+               for (a, b), s in zip(level.edge_verts, level.edge_sharpness) if s > 0]
+    corners = [(int(v), min(float(s), INF_SHARP))
+               for v, s in enumerate(level.vert_sharpness) if s > 0]
+    return Cage([tuple(map(float, p)) for p in mesh.points], faces, creases, corners,
+                boundary=coarse.boundary, crease_method=coarse.crease_method)
+
+
 HARD_ORIGIN = ("OpenSubdiv regression shapes (models/opensubdiv), Modified Apache 2.0; "
                "turned Y up by benchmarks/cycles.py")
 
@@ -399,6 +429,7 @@ EXTRA_CAGES = [
     ("chess", cage_chess, (0.35, 0.55, 1.6), HARD_ORIGIN),
     ("car", cage_car, (1.6, 0.7, 0.9), HARD_ORIGIN),
     ("helmet", cage_helmet, (1.0, 0.6, 1.6), HARD_ORIGIN),
+    ("helmet_fine", cage_helmet_fine, (1.0, 0.6, 1.6), HARD_ORIGIN + ", refined twice"),
 ]
 
 
