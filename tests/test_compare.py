@@ -158,13 +158,40 @@ def test_two_renders_differing_only_in_ids(tmp_path, capsys):
     d, _ = read_exr(diff)
     assert not d["heat"].any()
     np.testing.assert_array_equal(d["ids"] > 0, changed)
+    rows = changed.shape[0]  # (the maps' rows; their colour keys follow)
     heat_png, _ = read_exr(tmp_path / "d.png")
-    assert not any(heat_png[c].any() for c in "RGB")
+    assert not any(heat_png[c][:rows].any() for c in "RGB")
     ids_png, _ = read_exr(tmp_path / "d_ids.png")
     magenta = srgb8(np.array([[IDS_COLOURS["changed"]]]))[0, 0] / 255.0
-    shown = np.all([np.isclose(ids_png[c], magenta[k], atol=1e-3) for k, c in
+    shown = np.all([np.isclose(ids_png[c][:rows], magenta[k], atol=1e-3) for k, c in
                     enumerate("RGB")], axis=0)
     np.testing.assert_array_equal(shown, changed)
+
+
+def test_the_maps_pngs_carry_their_colour_keys(tmp_path):
+    """The heat and ids maps' PNGs are their image's rows and then their colour keys: the
+    heat ramp's colours from black through red and yellow (at the fail threshold, half way
+    along) to white, with white labels; a swatch of each of the ids map's colours."""
+    from subtrace.compare import IDS_COLOURS, KEY_ROWS, heat_key, heat_map, ids_key
+
+    a, b = image(), image()
+    b["Z"] = b["Z"] + np.float32(0.5)
+    b["patch_id"] = b["patch_id"] + np.float32(1)
+    pngs = compare_images(a, b).write_diff(tmp_path / "d.exr", png_path=tmp_path / "d.png")
+    assert len(pngs) == 2
+    for path in pngs:
+        png, _ = read_exr(path)
+        assert png["R"].shape == (H + KEY_ROWS, W)
+    width = 201  # (the ramp: columns 4 .. 196, 0 to 2 in equal steps)
+    key = heat_key(width)
+    assert key.shape == (KEY_ROWS, width, 3)
+    for value, column in ((0.0, 4), (0.5, 52), (1.0, 100), (2.0, 196)):
+        np.testing.assert_allclose(key[9, column], heat_map(np.array([[value]]))[0, 0],
+                                   atol=1e-6)
+    assert (key[18:] > 0.9).all(axis=-1).sum() > 20  # the labels' white
+    key = ids_key(width)
+    for colour in IDS_COLOURS.values():
+        assert np.isclose(key[7:17], colour, atol=1e-6).all(axis=-1).sum() >= 64
 
 
 def test_nan_counts_as_a_failure():

@@ -208,17 +208,19 @@ class Comparison:
         """Write :meth:`diff_channels` as an EXR (verdict in the header) and optionally a PNG
         heat map of :meth:`heat` (black: equal, red: half the fail threshold, yellow:
         at the threshold, white: twice it or more) and, when the ids were compared, the ids
-        map beside it (``<png stem>_ids.png``, :func:`ids_map`). Returns the PNGs' paths."""
+        map beside it (``<png stem>_ids.png``, :func:`ids_map`), each with its colour key
+        drawn in ``KEY_ROWS`` rows under the image's (:func:`with_key`). Returns the PNGs'
+        paths."""
         attrs = {"compare_verdict": self.verdict}
         write_exr(path, self.diff_channels(), attrs)
         if png_path is None:
             return []
-        write_png(png_path, heat_map(self.heat()))
+        write_png(png_path, with_key(heat_map(self.heat()), heat_key))
         changed = self.ids_changed()
         if changed is None:
             return [png_path]
         stem, ext = os.path.splitext(os.fspath(png_path))
-        write_png(stem + "_ids" + ext, ids_map(changed, self.covered))
+        write_png(stem + "_ids" + ext, with_key(ids_map(changed, self.covered), ids_key))
         return [png_path, stem + "_ids" + ext]
 
 
@@ -244,6 +246,55 @@ def ids_map(changed: np.ndarray, covered: np.ndarray | None = None) -> np.ndarra
     out[covered] = IDS_COLOURS["same"]
     out[changed] = IDS_COLOURS["changed"]
     return out
+
+
+# the rows of the colour key under a heat or ids map's PNG (its image's rows come first)
+KEY_ROWS = 44
+KEY_BACKGROUND = 0.03  # linear grey: the key's black stands out from it
+KEY_TEXT = 11  # pixels
+
+
+def with_key(rgb: np.ndarray, key) -> np.ndarray:
+    """(H,W,3) map -> (H + KEY_ROWS, W, 3): the map, then ``key(W)``'s rows under it."""
+    return np.concatenate([rgb, key(rgb.shape[1])], axis=0)
+
+
+def _labelled(band: np.ndarray, labels) -> np.ndarray:
+    """``band`` (rows, W, 3) with the texts ``labels`` [(x, baseline y, text, "left" /
+    "center" / "right")] drawn in white by OpenImageIO (its own font)."""
+    buf = oiio.ImageBuf(np.ascontiguousarray(band, dtype=np.float32))
+    for x, y, text, align in labels:
+        oiio.ImageBufAlgo.render_text(buf, int(x), int(y), text, KEY_TEXT, "",
+                                      (1.0, 1.0, 1.0), align)
+    return np.asarray(buf.get_pixels(oiio.FLOAT), dtype=np.float64).reshape(band.shape)
+
+
+def heat_key(width: int) -> np.ndarray:
+    """(KEY_ROWS, width, 3) linear RGB: the heat map's key, its ramp from 0 to 2
+    (:func:`heat_map`) with the stops labelled, in units of each group's fail threshold."""
+    band = np.full((KEY_ROWS, width, 3), KEY_BACKGROUND)
+    x0, x1 = 4, max(width - 4, 5)
+    band[4:14, x0:x1] = heat_map(np.linspace(0.0, 2.0, x1 - x0)[None, :])
+    if width < 120:  # (too narrow for the labels: the ramp alone)
+        return band
+    at = lambda h: x0 + h / 2.0 * (x1 - x0 - 1)  # noqa: E731
+    return _labelled(band, [(at(0.0), 27, "0", "left"), (at(0.5), 27, "0.5", "center"),
+                            (at(1.0), 27, "1 fail", "center"), (at(2.0), 27, "2+", "right"),
+                            (x0, 40, "error / fail threshold", "left")])
+
+
+def ids_key(width: int) -> np.ndarray:
+    """(KEY_ROWS, width, 3) linear RGB: the ids map's key, a swatch of each of
+    :data:`IDS_COLOURS` with its name (the names left out where the map is too narrow)."""
+    band = np.full((KEY_ROWS, width, 3), KEY_BACKGROUND)
+    step = max(width // 3, 1)
+    labels = []
+    for k, (name, colour) in enumerate(IDS_COLOURS.items()):
+        x = k * step + 4
+        band[6:18, x:min(x + 12, width)] = 0.25  # (a frame, so that black shows)
+        band[7:17, x + 1:min(x + 11, width)] = colour
+        labels.append((x, 32, name, "left"))
+    return band if width < 180 else _labelled(band, labels)
 
 
 def compare_images(a, b, thresholds: dict | None = None, flip: bool = True,
