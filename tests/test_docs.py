@@ -93,6 +93,7 @@ COMPANIONS = {("camera", "target"): {"eye": [3.0, 2.0, 5.0]},
               ("light", "color"): {"direction": [0, -1, 0]},
               ("light", "intensity"): {"direction": [0, -1, 0]},
               ("light", "radius"): {"position": [0, 3, 0]},
+              ("light", "angle"): {"direction": [0, -1, 0]},
               ("light", "samples"): {"position": [0, 3, 0], "radius": 0.3}}
 
 

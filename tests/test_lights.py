@@ -25,14 +25,18 @@ H, R, A = 4.0, 0.8, 1.5
 
 
 def _visible_share(p, centre, radius):
-    """The share of the ball's solid angle that the point p sees past the half-plane:
-    the cap of the cone it subtends cut by the plane through p and the edge (a spherical
-    cap's segment: 2 (acos(sin b / sin a) - cos a acos(tan b / tan a)) of the smaller
-    side, b the axis's angle from the cutting plane, a the cone's half angle)."""
+    """The share of the ball's solid angle that the point p sees past the half-plane
+    (:func:`_cone_share` of the cone it subtends)."""
     v = centre - p
     dist = float(np.linalg.norm(v))
-    w = v / dist
-    a = math.asin(radius / dist)
+    return _cone_share(p, v / dist, math.asin(radius / dist))
+
+
+def _cone_share(p, w, a):
+    """The share of the cone of directions within ``a`` of the unit ``w`` that the point p
+    sees past the half-plane: the cone's cap cut by the plane through p and the edge (a
+    spherical cap's segment: 2 (acos(sin b / sin a) - cos a acos(tan b / tan a)) of the
+    smaller side, b the axis's angle from the cutting plane)."""
     # the plane holds p, the edge's direction (0, 0, 1) and its point (0, A, 0); its normal
     # (A, x, 0) points to the side the half-plane does not cover
     n = np.array([A, p[0], 0.0])
@@ -114,6 +118,35 @@ def test_the_penumbra_on_the_ground_is_the_share_of_the_ball_it_sees():
     assert err.max() < 0.03 and err.mean() < 0.006, (err.max(), err.mean())
 
 
+def test_a_soft_suns_penumbra_is_the_share_of_its_disc_it_sees():
+    """A directional light of angle 20 degrees (256 rays a point) over the half-plane:
+    each point's visibility is the share of the cone of 10 degrees around the direction
+    to the light that it sees past the edge, as for a sphere light; at angle 0 it is the
+    hard directional light, ray for ray."""
+    from subtrace.shade import shadow_visibility
+
+    points, frame, dirs, t = _plane_points()
+    normals = np.tile([0.0, 1.0, 0.0], (len(t), 1))
+    travel = np.array([0.15, -1.0, 0.1])
+    travel /= np.linalg.norm(travel)
+
+    def visibility(light):
+        return shadow_visibility(_half_plane, frame, 1, t, normals,
+                                 np.zeros(len(t), np.int32), light_array([light]), 0.0,
+                                 dirs, ray_keys(np.arange(len(t))))[0].astype(np.float64)
+
+    got = visibility(Light(direction=tuple(travel), angle=20.0, samples=256))
+    want = np.array([_cone_share(p, -travel, math.radians(10.0)) for p in points])
+    assert want.min() == 0.0 and want.max() == 1.0
+    assert np.count_nonzero((want > 0.05) & (want < 0.95)) > 100
+    err = np.abs(got - want)
+    assert err.max() < 0.03 and err.mean() < 0.006, (err.max(), err.mean())
+    hard = visibility(Light(direction=tuple(travel)))
+    np.testing.assert_array_equal(visibility(Light(direction=tuple(travel), angle=0.0)), hard)
+    # (the hard light: the edge's shadow line, all or nothing)
+    assert set(np.unique(hard)) == {0.0, 1.0}
+
+
 CUBE = ("v -1 -1 -1\nv 1 -1 -1\nv 1 1 -1\nv -1 1 -1\nv -1 -1 1\nv 1 -1 1\nv 1 1 1\n"
         "v -1 1 1\nf 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n")
 
@@ -147,11 +180,19 @@ def test_a_sphere_of_radius_0_is_the_point_light(tmp_path):
     assert np.count_nonzero(differ) <= 0.01 * differ.size
 
 
-def test_soft_shadows_do_not_depend_on_threads_or_tiles(tmp_path):
-    """A sphere light with adaptive anti-aliasing (its extra rays take further points of
-    each pixel's sequence): the same image on 1 and 2 threads, and a tile of it rendered
-    alone is its pixels bit for bit; the penumbra holds shares between 0 and 1."""
-    scene = _cube_scene(tmp_path, {"position": LAMP, "radius": 0.6, "samples": 4}, samples=4)
+SUN = [-0.3, -1.0, -0.2]
+
+
+@pytest.mark.parametrize("soft, hard_light", [
+    ({"position": LAMP, "radius": 0.6, "samples": 4}, {"position": LAMP}),
+    ({"direction": SUN, "angle": 12.0, "samples": 4}, {"direction": SUN}),
+])
+def test_soft_shadows_do_not_depend_on_threads_or_tiles(tmp_path, soft, hard_light):
+    """A sphere light, and a soft sun, with adaptive anti-aliasing (its extra rays take
+    further points of each pixel's sequence): the same image on 1 and 2 threads, and a
+    tile of it rendered alone is its pixels bit for bit; the penumbra holds shares between
+    0 and 1."""
+    scene = _cube_scene(tmp_path, soft, samples=4)
     one = render_scene(scene, threads=1).channels
     two = render_scene(scene, threads=2).channels
     for c in one:
@@ -159,7 +200,7 @@ def test_soft_shadows_do_not_depend_on_threads_or_tiles(tmp_path):
     tile = render_scene(scene, threads=2, crop=(16, 8, 48, 40)).channels
     for c in one:
         assert tile[c].tobytes() == np.ascontiguousarray(one[c][8:40, 16:48]).tobytes(), c
-    hard = render_scene(_cube_scene(tmp_path, {"position": LAMP}, samples=4)).channels
+    hard = render_scene(_cube_scene(tmp_path, hard_light, samples=4)).channels
     ground = ~np.isfinite(one["Z"])
     soft = ground & (np.abs(one["R"] - hard["R"]) > 1e-3)
     assert np.count_nonzero(soft) > 20  # (a penumbra where the hard shadow had an edge)
@@ -171,6 +212,9 @@ def test_soft_shadows_do_not_depend_on_threads_or_tiles(tmp_path):
     ("position = [0, 3, 0]\nradius = 0.5\nsamples = 0\n", "light[0].samples", "from 1 to"),
     ("position = [0, 3, 0]\nsamples = 4\n", "light[0].samples", "not a key of a point"),
     ("direction = [0, -1, 0]\nradius = 0.5\n", "light[0].direction", "not a key of a sphere"),
+    ("direction = [0, -1, 0]\nangle = -1\n", "light[0].angle", "from 0 to 90"),
+    ("direction = [0, -1, 0]\nangle = 120\n", "light[0].angle", "from 0 to 90"),
+    ("position = [0, 3, 0]\nangle = 2\n", "light[0].angle", "not a key of a point"),
 ])
 def test_bad_sphere_lights_are_one_clear_error(tmp_path, body, key, words):
     (tmp_path / "cube.obj").write_text(CUBE)

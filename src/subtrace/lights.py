@@ -10,7 +10,12 @@ kind is its entry in each.
 The kinds:
 
 * **directional** (``direction``: the unit direction the light travels): irradiance 1, one
-  shadow ray along ``-direction``, unbounded;
+  shadow ray along ``-direction``, unbounded; with ``angle`` > 0 (degrees: the angular
+  diameter of the sun it stands for, as USD's DistantLight and Blender's sun take it, the
+  real sun's 0.53) a disc of uniform radiance that far: ``samples`` shadow rays per
+  shading point, uniform in the cone of that diameter around ``-direction``, the share
+  that arrives unblocked the visibility (a penumbra as wide as the occluder's distance
+  times the angle); its shadows are not bounded for the cull to the view either;
 * **point** (``position``): irradiance 1 / distance^2, one shadow ray to the position;
 * **sphere** (``position``, ``radius`` >= 0, ``samples`` shadow rays per shading point): a
   ball of uniform radiance. Unshadowed, such a ball above a point's horizon lights it as a
@@ -25,7 +30,7 @@ Array layout (:func:`light_array`): (L, ROW) float64, one row per light: ``KIND`
 x, y, z (``AT``: a directional light's unit travel, else its position), the colour times
 the intensity (``RGB``), the shadow rays it takes per shading point (``SAMPLES``; 1 for a
 directional or point light) and one number of the kind's own (``PARAM``: a sphere's
-radius; 0 for the others).
+radius, a directional light's half angle in radians; 0 for a point light).
 
 A light of several shadow rays per shading point samples them per pixel: each ray that
 is shaded carries a key (:func:`ray_keys`: its image pixel times ``KEY_STRIDE`` plus its
@@ -34,7 +39,8 @@ nothing depends on the thread count or on how the image is cut into tiles or ban
 sphere's shadow ray ``s`` of sample ``a`` takes point ``a * samples + s`` of the R2
 low-discrepancy sequence turned by a hash of the pixel (a Cranley-Patterson rotation): the
 rays of a pixel's anti-aliasing samples together are the first ``rays * samples`` points of
-one stratified sequence, and the more rays an edge pixel gets, the finer its penumbra.
+one stratified sequence, and the more rays an edge pixel gets, the finer its penumbra. A
+soft sun's rays take the same points (:func:`_cone_ray`, the cone of its angle).
 """
 
 from __future__ import annotations
@@ -54,8 +60,9 @@ KIND, AT, RGB, SAMPLES, PARAM = 0, 1, 4, 7, 8  # columns of a row
 ROW = 9  # columns of a row
 
 DEFAULT_LIGHT_COLOR = (1.0, 1.0, 1.0)
-DEFAULT_SPHERE_SAMPLES = 8  # a sphere light's shadow rays per shading point
+DEFAULT_SPHERE_SAMPLES = 8  # a sphere light's (or soft sun's) shadow rays per shading point
 MAX_SPHERE_SAMPLES = 256
+MAX_SUN_ANGLE = 90.0  # degrees: a soft sun's angular diameter, at most
 # a ray's key: its image pixel times KEY_STRIDE plus its anti-aliasing sample (below
 # io.scene.MAX_SAMPLES)
 KEY_STRIDE = 64
@@ -63,10 +70,11 @@ KEY_STRIDE = 64
 
 @dataclass(frozen=True)
 class Light:
-    """A light: directional (unit ``direction`` the light travels, ``position`` None),
-    point (``position``) or sphere (``position`` its centre and ``radius``; ``samples`` its
-    shadow rays per shading point, None: DEFAULT_SPHERE_SAMPLES), with its colour and
-    intensity."""
+    """A light: directional (unit ``direction`` the light travels, ``position`` None;
+    ``angle`` its angular diameter in degrees, None or 0: a hard one), point (``position``)
+    or sphere (``position`` its centre and ``radius``), with its colour and intensity;
+    ``samples``: a sphere's or soft sun's shadow rays per shading point (None:
+    DEFAULT_SPHERE_SAMPLES)."""
 
     direction: tuple[float, float, float] | None = None
     color: tuple[float, float, float] = DEFAULT_LIGHT_COLOR
@@ -74,6 +82,7 @@ class Light:
     position: tuple[float, float, float] | None = None
     radius: float | None = None
     samples: int | None = None
+    angle: float | None = None
 
     @property
     def kind(self) -> int:
@@ -90,12 +99,12 @@ class Light:
 # every key of a [[light]] table (io.scene.SCENE_KEYS["light"]); per kind, in the order
 # they are told apart (the first whose marking keys a table has), its name, the keys that
 # mark it and its own keys (a table may add the common ones)
-LIGHT_KEYS = ("direction", "position", "radius", "samples", "color", "intensity")
+LIGHT_KEYS = ("direction", "angle", "position", "radius", "samples", "color", "intensity")
 _COMMON = ("color", "intensity")
 _KINDS = (
     ("sphere light", ("radius",), ("position", "radius", "samples")),
     ("point light", ("position",), ("position",)),
-    ("directional light", ("direction",), ("direction",)),
+    ("directional light", ("direction",), ("direction", "angle", "samples")),
 )
 _NEEDS = ("every [[light]] needs direction = [x, y, z] (the direction the light travels) "
           "or position = [x, y, z] (a point light, with radius = r a sphere light)")
@@ -130,6 +139,8 @@ def parse_light(table: dict, value, error) -> Light:
         values["position"] = value("position", check_vector, table["position"], "")
     if "radius" in table:
         values["radius"] = value("radius", _radius, table["radius"])
+    if "angle" in table:
+        values["angle"] = value("angle", _angle, table["angle"])
     if "samples" in table:
         values["samples"] = value("samples", _sphere_samples, table["samples"])
     if "color" in table:
@@ -163,6 +174,14 @@ def _radius(value) -> float:
     return value
 
 
+def _angle(value) -> float:
+    angle = _number(value)
+    if not 0.0 <= angle <= MAX_SUN_ANGLE:
+        raise SceneError(f"a sun's angle (its angular diameter, degrees) must be from 0 to "
+                         f"{MAX_SUN_ANGLE:g}, got {show_value(value)}")
+    return angle
+
+
 def _sphere_samples(value) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or not (
             1 <= value <= MAX_SPHERE_SAMPLES):
@@ -190,11 +209,12 @@ def light_array(lights) -> np.ndarray:
     for light in lights:
         kind = light.kind
         at = light.direction if kind == DIRECTIONAL else light.position
-        radius = light.radius if kind == SPHERE else 0.0
-        samples = 1 if not radius > 0.0 else (
+        param = (light.radius if kind == SPHERE else
+                 math.radians(light.angle or 0.0) / 2.0 if kind == DIRECTIONAL else 0.0)
+        samples = 1 if not param > 0.0 else (
             DEFAULT_SPHERE_SAMPLES if light.samples is None else light.samples)
         rows.append([kind, *at, *(np.asarray(light.color) * light.intensity), samples,
-                     radius])
+                     param])
     return np.array(rows, dtype=np.float64).reshape(-1, ROW)
 
 
@@ -223,11 +243,11 @@ def shadow_cast(light: Light):
     ``("parallel", unit travel)`` (rays along one direction), ``("point", position)`` (rays
     to one point), or None (not bounded: the scene is not culled)."""
     kind = light.kind
-    if kind == DIRECTIONAL:
+    if kind == DIRECTIONAL and not (light.angle or 0.0) > 0.0:
         return "parallel", np.asarray(light.direction, np.float64)
     if kind == POINT or (kind == SPHERE and not light.radius > 0.0):
         return "point", np.asarray(light.position, np.float64)
-    return None  # (a sphere's rays spread over its ball: no bound is made for them)
+    return None  # (a sphere's or soft sun's rays spread: no bound is made for them)
 
 
 # --------------------------------------------------------------------------------------
@@ -278,7 +298,12 @@ def shadow_target(lights, k, s, key, px, py, pz):
     direction x, y, z and the distance to where it meets the light (inf: directional)."""
     kind = lights[k, KIND]
     if kind == DIRECTIONAL:
-        return -lights[k, 1], -lights[k, 2], -lights[k, 3], np.inf
+        wx, wy, wz = -lights[k, 1], -lights[k, 2], -lights[k, 3]
+        m = np.int64(lights[k, SAMPLES])
+        if m <= 1:
+            return wx, wy, wz, np.inf
+        ox, oy, oz, _, _ = _cone_ray(wx, wy, wz, math.cos(lights[k, PARAM]), m, s, key)
+        return ox, oy, oz, np.inf
     vx, vy, vz = lights[k, 1] - px, lights[k, 2] - py, lights[k, 3] - pz
     dist = np.sqrt(vx * vx + vy * vy + vz * vz)
     wx, wy, wz = vx / dist, vy / dist, vz / dist
@@ -293,12 +318,23 @@ def _sphere_point(wx, wy, wz, dist, radius, m, s, key):
     """Shadow ray ``s`` of ``m`` towards a ball of ``radius`` whose centre lies ``dist``
     along the unit (wx, wy, wz): uniform in the cone the ball subtends, at the R2 point of
     the module comment; its direction and the distance to the ball's near side."""
+    sin_max = min(radius / dist, 1.0)  # (inside the ball: every direction)
+    cos_max = math.sqrt(max(0.0, 1.0 - sin_max * sin_max))
+    ox, oy, oz, c, sn = _cone_ray(wx, wy, wz, cos_max, m, s, key)
+    # where the ray meets the ball first (the cone's rim: where it touches it)
+    h = radius * radius - dist * dist * sn * sn
+    return ox, oy, oz, max(dist * c - math.sqrt(max(h, 0.0)), 0.0)
+
+
+@llvm_inline_njit
+def _cone_ray(wx, wy, wz, cos_max, m, s, key):
+    """Shadow ray ``s`` of ``m`` in the cone of directions within ``acos(cos_max)`` of the
+    unit (wx, wy, wz), uniform in solid angle, at the R2 point of the module comment: its
+    unit direction and the cosine and sine of its angle from the axis."""
     pixel = key // KEY_STRIDE
     i = (key - pixel * KEY_STRIDE) * m + s  # (the pixel's anti-aliasing sample, then s)
     u1 = (0.5 + i * R2_A1 + hash01(pixel, 3)) % 1.0
     u2 = (0.5 + i * R2_A2 + hash01(pixel, 4)) % 1.0
-    sin_max = min(radius / dist, 1.0)  # (inside the ball: every direction)
-    cos_max = math.sqrt(max(0.0, 1.0 - sin_max * sin_max))
     c = 1.0 - u1 * (1.0 - cos_max)  # uniform in solid angle: cos theta in [cos_max, 1]
     sn = math.sqrt(max(0.0, 1.0 - c * c))
     phi = 2.0 * math.pi * u2
@@ -310,9 +346,7 @@ def _sphere_point(wx, wy, wz, dist, radius, m, s, key):
     ox = a * (1.0 + sign * wx * wx * f) + b * g + c * wx
     oy = a * (sign * g) + b * (sign + wy * wy * f) + c * wy
     oz = a * (-sign * wx) + b * (-wy) + c * wz
-    # where the ray meets the ball first (the cone's rim: where it touches it)
-    h = radius * radius - dist * dist * sn * sn
-    return ox, oy, oz, max(dist * c - math.sqrt(max(h, 0.0)), 0.0)
+    return ox, oy, oz, c, sn
 
 
 # the R2 sequence's steps (the plastic number's powers): every sampled ray's (the
