@@ -161,7 +161,8 @@ def test_transform_orientation_visibility_and_purpose(tmp_path):
     assert cube.color == pytest.approx((0.1, 0.2, 0.3))
     first = lefty.face_verts[:4]
     assert list(first) == CUBE_FACES[0][::-1]
-    (direction, _, intensity), = content.lights
+    (direction, _, intensity, angle), = content.lights
+    assert angle is None  # (not authored: a hard light)
     np.testing.assert_allclose(direction, (0.0, -1.0, 0.0), atol=1e-12)
     assert intensity == pytest.approx(1.0)
 
@@ -358,5 +359,8 @@ def test_a_stage_without_lights_gets_the_picture_defaults(tmp_path):
     lit = tmp_path / "lit.usda"
     stage, _, _ = _cube_stage(lit)
     UsdLux.DistantLight.Define(stage, "/World/Sun")
+    UsdLux.DistantLight.Define(stage, "/World/SoftSun").CreateAngleAttr(4.5)
     stage.Save()
-    assert len(scene_for_meshes([str(lit)]).lights) == 1
+    lights = scene_for_meshes([str(lit)]).lights
+    # (an authored angle: a soft sun of that angular diameter; none: a hard light)
+    assert len(lights) == 2 and sorted(l.angle or 0.0 for l in lights) == [0.0, 4.5]

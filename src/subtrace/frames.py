@@ -97,7 +97,7 @@ def scene_at_time(scene, time: float):
     """``scene`` at a USD time code: its stages' meshes read at ``time``, and its camera
     and lights too where they came from a stage."""
     from subtrace.io.scene import Light
-    from subtrace.io.usd import is_usd, read_stage
+    from subtrace.io.usd import is_usd, light_table, read_stage
 
     out = dataclasses.replace(scene, objects=tuple(
         dataclasses.replace(o, time=float(time)) if is_usd(o.mesh) else o
@@ -112,9 +112,10 @@ def scene_at_time(scene, time: float):
         out = dataclasses.replace(out, camera=dataclasses.replace(
             scene.camera, eye=c.eye, target=c.target, up=c.up, fov_deg=c.fov_deg))
     if lights and content.lights:
+        tables = [light_table(light) for light in content.lights]
         out = dataclasses.replace(out, lights=tuple(
-            Light(tuple(float(x) for x in d), tuple(min(max(float(x), 0.0), 1.0) for x in col), float(i))
-            for d, col, i in content.lights))
+            Light(tuple(t["direction"]), tuple(t["color"]), t["intensity"],
+                  angle=t.get("angle")) for t in tables))
     return out
 
 

@@ -24,8 +24,10 @@ attribute has any, else the default values):
   visibility or a transform above them), so frames of a still stage share one cage;
 * ``UsdLuxDistantLight`` as a directional light (its -Z axis in world space, colour, and
   intensity times 2^exposure relative to the brightest: USD's units are physical, a sun's
-  default is 50,000, subtrace's are relative, 1 for a full light); other lights are
-  reported as ignored.
+  default is 50,000, subtrace's are relative, 1 for a full light; an authored
+  ``inputs:angle`` above 0 makes it a soft sun of that angular diameter, ``lights.py``,
+  its fallback of 0.53 degrees is not taken: a stage that says nothing gets hard shadows,
+  as before); other lights are reported as ignored.
 
 USD's sharpness scale is OpenSubdiv's (10 and above: infinitely sharp), as the OBJ tags'.
 Every problem is a :class:`subtrace.errors.SubtraceError` naming the file (and prim).
@@ -42,6 +44,7 @@ import numpy as np
 from subtrace.config import SHARPNESS_INFINITE
 from subtrace.errors import SubtraceError
 from subtrace.io.obj import BOUNDARY_EDGE_AND_CORNER, BOUNDARY_EDGE_ONLY, BOUNDARY_NONE
+from subtrace.lights import MAX_SUN_ANGLE
 
 USD_EXTENSIONS = (".usd", ".usda", ".usdc", ".usdz")
 BOUNDARY_TOKENS = {"none": BOUNDARY_NONE, "edgeOnly": BOUNDARY_EDGE_ONLY,
@@ -105,7 +108,8 @@ class UsdStageContent:
     path: str
     meshes: list[UsdMesh] = field(default_factory=list)
     cameras: list[UsdCamera] = field(default_factory=list)
-    lights: list[tuple] = field(default_factory=list)  # (direction, color, intensity)
+    # (direction, color, intensity, angle: an authored angular diameter in degrees or None)
+    lights: list[tuple] = field(default_factory=list)
     ignored: list[str] = field(default_factory=list)  # prims read but not rendered, said why
 
 
@@ -235,9 +239,9 @@ def _read_stage(path, time) -> UsdStageContent:
     if not out.meshes:
         raise SubtraceError(f"{path}: no visible UsdGeomMesh prims to render (subtrace renders "
                             "subdivision meshes)")
-    top = max((i for _, _, i in out.lights), default=0.0)
+    top = max((i for _, _, i, _ in out.lights), default=0.0)
     if top > 1.0:
-        out.lights = [(d, c, i / top) for d, c, i in out.lights]
+        out.lights = [(d, c, i / top, a) for d, c, i, a in out.lights]
     return out
 
 
@@ -435,7 +439,20 @@ def _distant_light(light, matrix, t):
     intensity = float(_get(light.GetIntensityAttr(), t, 1.0))
     exposure = float(_get(light.GetExposureAttr(), t, 0.0))
     color = tuple(float(c) for c in _get(light.GetColorAttr(), t, (1.0, 1.0, 1.0)))
-    return tuple(direction / np.linalg.norm(direction)), color, intensity * 2.0 ** exposure
+    attr = light.GetAngleAttr()
+    angle = float(_get(attr, t, 0.0)) if attr and attr.HasAuthoredValue() else None
+    return (tuple(direction / np.linalg.norm(direction)), color, intensity * 2.0 ** exposure,
+            angle if angle is not None and angle > 0.0 else None)
+
+
+def light_table(light) -> dict:
+    """A ``[[light]]`` table of a stage's light ``(direction, color, intensity, angle)``."""
+    d, col, i, angle = light
+    table = {"direction": [float(x) for x in d],
+             "color": [min(max(float(x), 0.0), 1.0) for x in col], "intensity": float(i)}
+    if angle is not None:
+        table["angle"] = min(float(angle), MAX_SUN_ANGLE)
+    return table
 
 
 __all__ = ["read_stage", "open_stage", "is_usd", "time_range", "is_animated", "combined_mesh", "UsdMesh", "UsdCamera", "UsdStageContent",
@@ -479,7 +496,5 @@ def usd_scene_table(objects: list[dict], camera: str | None, time=None) -> dict:
                                    "target": [float(x) for x in c.target],
                                    "up": [float(x) for x in c.up], "fov": float(c.fov_deg)}
             if content.lights:
-                table["light"] = [{"direction": [float(x) for x in d],
-                                   "color": [min(max(float(x), 0.0), 1.0) for x in col],
-                                   "intensity": float(i)} for d, col, i in content.lights]
+                table["light"] = [light_table(light) for light in content.lights]
     return table
