@@ -147,6 +147,27 @@ def test_a_soft_suns_penumbra_is_the_share_of_its_disc_it_sees():
     assert set(np.unique(hard)) == {0.0, 1.0}
 
 
+def test_one_ray_a_point_is_jittered_over_the_light():
+    """A sphere light (or soft sun) of one shadow ray per shading point sends each point's
+    ray to its own point of the ball: in the umbra and in full light every point gets the
+    analytic 0 or 1, in the penumbra both occur (not one hard edge), and their mean follows
+    the analytic share there (the rest is left to the anti-aliasing rays)."""
+    from subtrace.shade import shadow_visibility
+
+    points, frame, dirs, t = _plane_points()
+    centre = np.array([0.0, H, 0.0])
+    normals = np.tile([0.0, 1.0, 0.0], (len(t), 1))
+    got = shadow_visibility(_half_plane, frame, 1, t, normals, np.zeros(len(t), np.int32),
+                            light_array([Light(position=tuple(centre), radius=R, samples=1)]),
+                            0.0, dirs, ray_keys(np.arange(len(t))))[0].astype(np.float64)
+    want = np.array([_visible_share(p, centre, R) for p in points])
+    sure = (want == 0.0) | (want == 1.0)
+    np.testing.assert_array_equal(got[sure], want[sure])
+    mid = (want > 0.2) & (want < 0.8)
+    assert set(np.unique(got[mid])) == {0.0, 1.0}
+    assert abs(got[mid].mean() - want[mid].mean()) < 0.1
+
+
 CUBE = ("v -1 -1 -1\nv 1 -1 -1\nv 1 1 -1\nv -1 1 -1\nv -1 -1 1\nv 1 -1 1\nv 1 1 1\n"
         "v -1 1 1\nf 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n")
 

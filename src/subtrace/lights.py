@@ -226,9 +226,11 @@ def directional_rows(lights) -> np.ndarray:
 
 
 def sampled(rows) -> bool:
-    """Whether any light of ``rows`` (:func:`light_array`) sends more than one shadow ray
-    per shading point: then the shaded rays need their keys (:func:`ray_keys`)."""
-    return bool(len(rows)) and bool(np.any(np.asarray(rows)[:, SAMPLES] > 1))
+    """Whether any light of ``rows`` (:func:`light_array`) samples its shadow rays (a
+    sphere of radius > 0 or a soft sun, even with one ray a point: each shaded ray, the
+    anti-aliasing rays of an edge pixel too, takes its own): then the shaded rays need
+    their keys (:func:`ray_keys`)."""
+    return bool(len(rows)) and bool(np.any(np.asarray(rows)[:, PARAM] > 0.0))
 
 
 def ray_keys(pixels, samples=None) -> np.ndarray:
@@ -300,7 +302,7 @@ def shadow_target(lights, k, s, key, px, py, pz):
     if kind == DIRECTIONAL:
         wx, wy, wz = -lights[k, 1], -lights[k, 2], -lights[k, 3]
         m = np.int64(lights[k, SAMPLES])
-        if m <= 1:
+        if not lights[k, PARAM] > 0.0:
             return wx, wy, wz, np.inf
         ox, oy, oz, _, _ = _cone_ray(wx, wy, wz, math.cos(lights[k, PARAM]), m, s, key)
         return ox, oy, oz, np.inf
@@ -308,7 +310,7 @@ def shadow_target(lights, k, s, key, px, py, pz):
     dist = np.sqrt(vx * vx + vy * vy + vz * vz)
     wx, wy, wz = vx / dist, vy / dist, vz / dist
     m = np.int64(lights[k, SAMPLES])
-    if kind != SPHERE or m <= 1:
+    if kind != SPHERE or not lights[k, PARAM] > 0.0:
         return wx, wy, wz, dist
     return _sphere_point(wx, wy, wz, dist, lights[k, PARAM], m, s, key)
 

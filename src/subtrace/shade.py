@@ -31,7 +31,7 @@ from subtrace import config
 from subtrace.accel.bvh import slab_entry
 from subtrace.camera import window_offset
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material
-from subtrace.lights import (DIRECTIONAL, R2_A1, R2_A2, RGB, ROW, SAMPLES, hash01, incoming,
+from subtrace.lights import (DIRECTIONAL, PARAM, R2_A1, R2_A2, RGB, ROW, hash01, incoming,
                              irradiance_at, shadow_samples, shadow_target)
 from subtrace.patches.basis import bez_normal
 from subtrace.runtime.jit import callee_njit, inline_njit, leaf_njit, llvm_inline_njit, nb
@@ -906,7 +906,7 @@ def _ground_ray(lights, k, s, key, x, y, z, cull, lo, hi):
     lx, ly, lz, d = shadow_target(lights, k, s, key, x, y, z)
     ray = True
     if cull:
-        if lights[k, 0] == DIRECTIONAL and lights[k, SAMPLES] <= 1:  # (a soft sun's vary)
+        if lights[k, 0] == DIRECTIONAL and not lights[k, PARAM] > 0.0:  # (a soft sun's vary)
             ix, iy, iz = lights[k, ROW], lights[k, ROW + 1], lights[k, ROW + 2]
         else:
             ix, iy, iz = 1.0 / lx, 1.0 / ly, 1.0 / lz
