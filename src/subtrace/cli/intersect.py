@@ -17,7 +17,7 @@ import numpy as np
 from subtrace import config
 from subtrace.cli.common import boundary_code, set_up_numba
 from subtrace.errors import SubtraceError, SubtraceWarning
-from subtrace.io.atomic import write_text
+from subtrace.runtime.atomic import write_text
 from subtrace.io.limits import check_coordinates, check_valences
 from subtrace.io.lines_csv import read_lines_csv
 from subtrace.lines.api import intersect_lines

@@ -14,7 +14,7 @@ from subtrace.cli.common import set_up_numba
 from subtrace.data import default_scene_path
 from subtrace.errors import SceneError
 from subtrace.frames import frame_numbers, frame_path
-from subtrace.io.atomic import check_writable
+from subtrace.runtime.atomic import check_writable
 from subtrace.io.formats import DEEP, picture_format
 from subtrace.io.scene import DEFAULT_SAMPLES, apply_overrides, load_scene, scene_for_meshes
 from subtrace.runtime.progress import ProgressBar

@@ -34,7 +34,7 @@ import numpy as np
 from subtrace import config
 from subtrace.config import IRREGULAR_MARGIN
 from subtrace.errors import SubtraceError
-from subtrace.io.atomic import write_bytes
+from subtrace.runtime.atomic import write_bytes
 from subtrace.mesh.topology import Options, compact, gather_index
 from subtrace.patches.basis import bezier_nets_and_bounds
 from subtrace.patches.grids import levels_needed, refine_children, unit_normals

@@ -927,7 +927,7 @@ def _runtime_from_the_kernel_folder() -> bool:
         library.add_ir_module(module)
         library.finalize()
         from subtrace.errors import SubtraceError
-        from subtrace.io.atomic import write_bytes
+        from subtrace.runtime.atomic import write_bytes
 
         try:  # (atomically: processes storing it at once each write a whole file)
             data = pickle.dumps(library.serialize_using_object_code(), protocol=4)

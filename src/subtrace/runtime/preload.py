@@ -95,7 +95,7 @@ def _write_manifest(key: str, items: list) -> None:
     :data:`MANIFESTS_KEPT` most recent manifests. Failures are silent: it only speeds up
     the next render."""
     from subtrace.errors import SubtraceError
-    from subtrace.io.atomic import write_bytes
+    from subtrace.runtime.atomic import write_bytes
 
     path = _manifest_path(key)
     try:
