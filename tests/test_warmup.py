@@ -12,7 +12,7 @@ import pytest
 
 from subtrace.cli import main
 from subtrace.cli.warmup import progress_line
-from subtrace.runtime import warmup
+from subtrace.cli import warmup
 
 LINE = re.compile(r"warmup: (\d+)/(\d+) commands done, (\d+) kernels in the cache, (\d+) s")
 

@@ -11,7 +11,7 @@ error of the threads still running at /dev/null (the one line it prints at the e
 command's output), removes every
 temporary file still registered (:mod:`subtrace.runtime.atomic` registers each one when it
 creates it and forgets it when it moves it into place or removes it), ends the child
-processes registered here (the kernel compiler of :mod:`subtrace.runtime.warmup`) and
+processes registered here (the kernel compiler of :mod:`subtrace.startup.warmup`) and
 every descendant (a local Dask cluster's workers), waits until they are gone, runs the
 clean-ups registered here (:func:`register_cleanup`: a tiled Dask job's tiles, and what
 the killed workers were writing), prints ``subtrace: interrupted`` and ends the process
