@@ -299,7 +299,7 @@ def nurbs_grid(surface, n):
 
 
 def boundary_recipe(level, f, sharp_edge):
-    """Plain-Python oracle of ``lines.items._boundary_recipes`` for one triangle: the 12
+    """Plain-Python oracle of ``patches.boxspline._boundary_recipes`` for one triangle: the 12
     box-spline points of triangle ``f`` with corners on a boundary or an infinitely sharp
     crease, or None.
 
