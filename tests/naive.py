@@ -1,6 +1,6 @@
 """Slow reference implementations (oracles) of subtrace's fast paths, for the tests.
 
-Topology: the numpy / plain-Python relations of ``subtrace.mesh.topology`` as they were
+Topology: the numpy / plain-Python relations of ``subtrace.subdiv.topology`` as they were
 before the jitted kernels (``base_edges`` with lexsort + unique, CSR lists by stable sorts,
 vertex rings ordered by a plain loop).
 

@@ -14,12 +14,12 @@ from test_lines import check_random_lines
 import subtrace
 from subtrace.lines.api import intersect_lines
 from subtrace.lines.items import isolate_loop
-from subtrace.patches.boxspline import box_nets, loop_regular
-from subtrace.mesh.topology import INF_SHARP
 from subtrace.patches.basis import CHILD_ORIGIN, CHILD_SCALE, TRI_SPLIT
 from subtrace.patches.basis import tri_bernstein as bernstein
+from subtrace.patches.boxspline import box_nets, loop_regular
 from subtrace.patches.table import build_patch_table
 from subtrace.shapes import torus_cage
+from subtrace.subdiv.topology import INF_SHARP
 
 PREC = 1e-3
 

@@ -35,7 +35,6 @@ from subtrace.io.limits import check_coordinates
 from subtrace.io.meshes import is_mesh_file
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material, read_obj, read_obj_bytes
 from subtrace.io.usd import is_usd
-from subtrace.mesh.topology import compact
 from subtrace.nurbs.model import NurbsModel, build_model
 from subtrace.nurbs.trace import (
     NurbsHits,
@@ -49,6 +48,7 @@ from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
 from subtrace.shade import (C_A, C_LEVEL, C_N, C_OBJECT, C_P, C_PATCH, C_R, C_U, C_Z,
                             PatchShading, pixel_rays)
+from subtrace.subdiv.topology import compact
 from subtrace.trace.prims import ray_setup
 
 _LINE_START = re.compile(rb"[ \t]*")  # what may precede a statement's keyword on its line

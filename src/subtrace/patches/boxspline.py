@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from subtrace.mesh.topology import INF_SHARP
 from subtrace.patches.basis import BOX_POINTS, BOX_TO_TRI, LATTICE_DIRS, TRI_CORNER, TRI_LEAD
 from subtrace.runtime.jit import leaf_njit, nb
 from subtrace.subdiv.limit import CREASE, SMOOTH, classify
 from subtrace.subdiv.loop import REGULAR_VALENCE
+from subtrace.subdiv.topology import INF_SHARP
 
 
 def loop_regular(level, options, faces) -> np.ndarray:
