@@ -13,8 +13,8 @@ from shared_data import error_without_root_powers
 import subtrace
 from subtrace.errors import SubtraceError
 from subtrace.io import exr
-from subtrace.runtime.atomic import atomic_paths, write_bytes, write_text
 from subtrace.io.exr import CHANNEL_ORDER, read_exr, srgb8, write_exr, write_png
+from subtrace.runtime.atomic import atomic_paths, write_bytes, write_text
 
 H, W = 7, 9
 is_root = hasattr(os, "geteuid") and os.geteuid() == 0

@@ -14,9 +14,9 @@ from subtrace.cli.common import set_up_numba
 from subtrace.data import default_scene_path
 from subtrace.errors import SceneError
 from subtrace.frames import frame_numbers, frame_path
-from subtrace.runtime.atomic import check_writable
 from subtrace.io.formats import DEEP, picture_format
 from subtrace.io.scene import DEFAULT_SAMPLES, apply_overrides, load_scene, scene_for_meshes
+from subtrace.runtime.atomic import check_writable
 from subtrace.runtime.progress import ProgressBar
 from subtrace.tiles import check_crop, check_tile
 

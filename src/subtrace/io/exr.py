@@ -42,10 +42,10 @@ import OpenImageIO as oiio
 
 from subtrace import config
 from subtrace.errors import SubtraceError
+from subtrace.io.formats import DEEP, LINEAR, PICTURE_FORMATS, WITH_ALPHA, picture_format
 from subtrace.runtime.atomic import atomic_paths, check_writable, open_temp, path_str, reason
 from subtrace.runtime.signals import temp_lock
 from subtrace.runtime.threads import max_threads
-from subtrace.io.formats import DEEP, LINEAR, PICTURE_FORMATS, WITH_ALPHA, picture_format
 from subtrace.version import VERSION
 
 CHANNEL_ORDER = ("R", "G", "B", "A", "Z", "N.X", "N.Y", "N.Z", "level", "patch_id", "object_id")
