@@ -12,8 +12,9 @@ of render: :func:`render_key`), and the next render of that kind starts a thread
 them from the cache in that order while the render reads its cages and builds its tables.
 A kernel is still installed only where the render calls it: Numba's dispatcher asks its
 cache (``jit.trim_loader``'s loader, ``runtime.numba_patches``), which hands over what the
-thread read (``numba_patches.READ_AHEAD``) instead of reading it again; one the thread has not reached yet is read by the render as
-before (Numba's compiler lock keeps the two from reading at once). So the manifest lists
+thread read (``numba_patches.READ_AHEAD``) instead of reading it again; one the thread has
+not reached yet is read by the render as before (Numba's compiler lock keeps the two from
+reading at once). So the manifest lists
 what the render asked for, not what was read ahead, and a kernel a render no longer uses
 drops out of it. Reading holds Python's lock while it unpickles (about 60 % of a read), so
 the thread overlaps the render only where the render runs kernels that let go of that lock
@@ -113,7 +114,8 @@ def _dispatcher(module: str, qualname: str):
 def read_ahead(dispatcher, sig) -> bool:
     """Read ``dispatcher``'s compile result for the argument types ``sig`` from the cache
     and keep it for the loader to take (``numba_patches.READ_AHEAD``), unless the
-    dispatcher has that overload or it was read already; never compile. True when it is there afterwards."""
+    dispatcher has that overload or it was read already; never compile. True when it is
+    there afterwards."""
     sig = tuple(sig)
     func = dispatcher.py_func
     with numba_patches.LOADER["lock"]:

@@ -50,8 +50,8 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
                progress=None, max_memory=None, keep=None, seen=None):
     """Run the refinement rounds; returns (hits (:class:`~subtrace.trace.pools.Hits`), the
     built patches (:class:`~subtrace.trace.pools.Pieces`), every patch refined). ``compiling``: the
-    processes compiling the trace kernels (``startup.warmup.start``: its ``Helpers``), waited for before the first
-    round. ``accel``: how a ray finds the shells it enters, ``"projection"`` (the shells
+    processes compiling the trace kernels (``startup.warmup.start``: its ``Helpers``), waited
+    for before the first round. ``accel``: how a ray finds the shells it enters, ``"projection"`` (the shells
     binned into image tiles, ``accel/projection.py``) or ``"bvh"`` (``accel/bvh.py``);
     default ``config.PRIMARY_ACCEL``. Either structure is built here (preprocess time).
     ``progress(done, total, label)``: told after each round how many rays are final.
