@@ -85,7 +85,7 @@ def main():
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--spot", default=str(SPOT), help="Spot's low-resolution Loop cage")
     a = ap.parse_args()
-    from subtrace.lines.items import box_nets, loop_regular
+    from subtrace.patches.boxspline import box_nets, loop_regular
     from subtrace.patches.basis import net_flatness, tri_flatness
     from subtrace.patches.table import build_patch_table
 

@@ -1,6 +1,6 @@
 """Slow reference implementations (oracles) of subtrace's fast paths, for the tests.
 
-Topology: the numpy / plain-Python relations of ``subtrace.mesh.topology`` as they were
+Topology: the numpy / plain-Python relations of ``subtrace.subdiv.topology`` as they were
 before the jitted kernels (``base_edges`` with lexsort + unique, CSR lists by stable sorts,
 vertex rings ordered by a plain loop).
 
@@ -299,7 +299,7 @@ def nurbs_grid(surface, n):
 
 
 def boundary_recipe(level, f, sharp_edge):
-    """Plain-Python oracle of ``lines.items._boundary_recipes`` for one triangle: the 12
+    """Plain-Python oracle of ``patches.boxspline._boundary_recipes`` for one triangle: the 12
     box-spline points of triangle ``f`` with corners on a boundary or an infinitely sharp
     crease, or None.
 

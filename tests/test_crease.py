@@ -17,13 +17,13 @@ import pytest
 from shared_data import SHAPES, small_scene
 
 import subtrace
-from subtrace.mesh.topology import INF_SHARP
 from subtrace.patches import crease, isolate
 from subtrace.patches.basis import net_bounds
 from subtrace.patches.criterion import wanted_depths
 from subtrace.patches.isolate import build_isolated, isolated_depths, item_sides
 from subtrace.patches.table import build_patch_table
 from subtrace.render import render_scene
+from subtrace.subdiv.topology import INF_SHARP
 
 REPO = Path(__file__).resolve().parents[1]
 HARD = REPO / "models" / "opensubdiv"

@@ -13,8 +13,8 @@ from shared_data import error_without_root_powers
 import subtrace
 from subtrace.errors import SubtraceError
 from subtrace.io import exr
-from subtrace.io.atomic import atomic_paths, write_bytes, write_text
 from subtrace.io.exr import CHANNEL_ORDER, read_exr, srgb8, write_exr, write_png
+from subtrace.runtime.atomic import atomic_paths, write_bytes, write_text
 
 H, W = 7, 9
 is_root = hasattr(os, "geteuid") and os.geteuid() == 0
@@ -293,7 +293,7 @@ def test_failed_rename_leaves_existing_file_intact(tmp_path, monkeypatch):
 
 
 def test_interrupt_while_writing_leaves_existing_file_intact(tmp_path):
-    # io/atomic is the one writer of EXRs, PNGs, sweep tables and intersect hits: an
+    # runtime/atomic is the one writer of EXRs, PNGs, sweep tables and intersect hits: an
     # interrupt (any BaseException) removes the temporary and keeps the old file
     path = tmp_path / "hits.csv"
     path.write_text("old\n")

@@ -178,10 +178,11 @@ def reference_nurbs_mesh(path, camera) -> tuple[np.ndarray, np.ndarray]:
     brute-force even-odd rule over the loops sampled densely (naive.polygon_parity):
     kept inside the outer loops (all of the rectangle without them) and outside the holes."""
     from subtrace.io.obj import read_obj
+    from subtrace.nurbs.freeform import freeform_of
 
     eye = np.asarray(camera.eye)
     points, faces = [], []
-    for surface in read_obj(path).freeform.surfaces:
+    for surface in freeform_of(read_obj(path)).surfaces:
         n = 8
         while True:
             P, uv = naive.nurbs_grid(surface, n)

@@ -1,4 +1,4 @@
-"""Interrupts and concurrent writers (runtime/signals.py, io/atomic.py).
+"""Interrupts and concurrent writers (runtime/signals.py, runtime/atomic.py).
 
 A ``subtrace`` process that gets SIGINT or SIGTERM, whatever it is doing (starting, loading,
 tracing, writing), ends promptly with one line ``subtrace: interrupted``, exit code 130 /
@@ -233,7 +233,7 @@ def test_no_temporary_reappears_after_the_cleanup(tmp_path):
     the interrupt test, under load)."""
     import threading
 
-    from subtrace.io.atomic import open_temp
+    from subtrace.runtime.atomic import open_temp
     from subtrace.io.exr import _png_spec, _write_all
     from subtrace.runtime import signals
 

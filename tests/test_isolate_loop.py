@@ -11,7 +11,7 @@ import pytest
 from shared_data import MODELS, SHAPES, small_scene
 
 import subtrace
-from subtrace.lines.items import loop_regular
+from subtrace.patches.boxspline import loop_regular
 from subtrace.patches.isolate_loop import build_loop_isolated, corner_coords, side_samples
 from subtrace.patches.table import build_patch_table
 from subtrace.render import render_scene

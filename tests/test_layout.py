@@ -2,6 +2,9 @@
 (nothing of subtrace is imported, so a broken tree still gets a full report):
 
 * no import cycle between modules (module-level and function-local imports both count);
+* the rooms (the top-level folders and modules of the package) keep the order of
+  :data:`LAYERS`: a room imports only rooms below it (and itself), every import counted,
+  module-level or inside a function; so the rooms' graph has no cycle either;
 * no module imports another module's private (underscore) name;
 * no function longer than MAX_FUNCTION_LINES, except a Numba kernel whose docstring or the
   comment just above it says why it is "not split";
@@ -46,6 +49,43 @@ NUMBA_MODULES = (JIT_MODULE, PATCH_MODULE)  # the only modules that import numba
 NUMBA_ROOTS = ("numba", "llvmlite")  # whose objects only PATCH_MODULE changes
 CLI_ROOTS = ("subtrace", "subtrace.cli", "subtrace.cli.__main__")
 HEAVY = ("numba", "OpenImageIO")  # what importing the command line must not import
+
+# The rooms of src/subtrace (a top-level folder, or a top-level module), lowest first, in the
+# spirit of import-linter's "layers" contract: a room may import only the rooms of the layers
+# below its own, and itself; rooms of one layer are siblings, which import neither each
+# other. Every import counts, module-level or inside a function (a lazy import is still a
+# dependency). "subtrace" is the package's own __init__, the public API at the top.
+LAYERS = (
+    ("version", "errors", "config", "data"),  # the base: they import nothing of ours
+    ("runtime",),  # threads, Numba (jit, numba_patches), memory, signals, the atomic writer
+    ("camera",),
+    ("lights",),  # a light's scene keys are checked as the camera's are (check_vector)
+    ("io",),  # the scene parser builds the cameras and asks lights for their keys
+    ("subdiv",),  # the topology (Level, tags) and the subdivision core
+    ("patches",),
+    ("mesh",),  # the Cage API: its refine, limit, evaluate are subdiv's and patches' work
+    ("accel",),  # the cull asks patches for shells and lights for shadow rays' reach
+    ("trace",),
+    ("shade",),
+    ("nurbs",),  # the NURBS pass shades its hits with shade's kernels
+    ("picture",),
+    ("lines",),
+    ("startup",),  # the warm-up compiles trace and shade kernels; prepare, render start it
+    ("tiles", "results"),  # crops and tiles (prepare checks a crop); what a render returns
+    ("prepare",),
+    ("render",),
+    ("jobs",),
+    ("cluster",),
+    ("frames",),
+    ("compare",),
+    ("sweep",),
+    ("htmlreport",),
+    ("testing", "shapes"),  # the pytest plugin; small procedural cages (tests, benchmarks)
+    ("cli",),
+    (PACKAGE,),
+)
+# (importing module, imported module) -> the one-line reason it may go against LAYERS
+LAYER_EXCEPTIONS: dict[tuple[str, str], str] = {}
 
 
 # --------------------------------------------------------------------------------------
@@ -173,14 +213,9 @@ def where(mod: Module, line: int) -> str:
 # the checks (each returns its violations as lines of text)
 # --------------------------------------------------------------------------------------
 
-def import_cycles(modules: dict[str, Module]) -> list[str]:
-    """One entry per strongly connected component of the import graph with more than one
-    module: its modules, then every import between them (file:line)."""
-    graph: dict[str, set[str]] = {m: set() for m in modules}
-    for mod in modules.values():
-        for imp in mod.imports:
-            graph[mod.name].update(t for t in edges(imp, modules) if t != mod.name)
-    # Tarjan's algorithm, iterative (no recursion limit on deep graphs)
+def _components(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of ``graph`` with more than one node, each
+    sorted (Tarjan's algorithm, iterative: no recursion limit on deep graphs)."""
     index: dict[str, int] = {}
     low: dict[str, int] = {}
     stack: list[str] = []
@@ -221,6 +256,17 @@ def import_cycles(modules: dict[str, Module]) -> list[str]:
                             break
                     if len(component) > 1:
                         components.append(sorted(component))
+    return sorted(components)
+
+
+def import_cycles(modules: dict[str, Module]) -> list[str]:
+    """One entry per strongly connected component of the import graph with more than one
+    module: its modules, then every import between them (file:line)."""
+    graph: dict[str, set[str]] = {m: set() for m in modules}
+    for mod in modules.values():
+        for imp in mod.imports:
+            graph[mod.name].update(t for t in edges(imp, modules) if t != mod.name)
+    components = _components(graph)
     out = []
     for component in sorted(components):
         members = set(component)
@@ -233,6 +279,69 @@ def import_cycles(modules: dict[str, Module]) -> list[str]:
                         kind = "module level" if imp.module_level else "in a function"
                         out.append(f"    {where(mod, imp.line)}: {name} imports {target} "
                                    f"({kind}): {imp.text}")
+    return out
+
+
+def room(name: str) -> str:
+    """The room of the module ``name``: its top-level folder or module under the package
+    (``subtrace.io.obj``: io; ``subtrace.render``: render), or the package itself."""
+    parts = name.split(".")
+    return parts[1] if len(parts) > 1 else parts[0]
+
+
+def _room_imports(modules: dict[str, Module]):
+    """(module, import, target module) for every import of one room by another."""
+    for mod in modules.values():
+        for imp in mod.imports:
+            for target in edges(imp, modules):
+                if room(target) != room(mod.name):
+                    yield mod, imp, target
+
+
+def layer_violations(modules: dict[str, Module], layers=LAYERS,
+                     exceptions=LAYER_EXCEPTIONS) -> list[str]:
+    """Imports against ``layers`` (lowest first; see :data:`LAYERS`): of a room of a higher
+    layer, or of a sibling room of the same layer, module-level or inside a function, unless
+    ``exceptions`` names the pair of modules; rooms that no layer names; and exceptions that
+    no import needs any more."""
+    level = {r: k for k, layer in enumerate(layers) for r in layer}
+    out, used = [], set()
+    for name in sorted({room(m) for m in modules} - set(level)):
+        first = min((m for m in modules if room(m) == name), key=lambda m: str(modules[m].path))
+        out.append(f"{rel(modules[first].path)}:1: the room {name} is in no layer "
+                   f"(add it to LAYERS)")
+    for mod, imp, target in _room_imports(modules):
+        a, b = room(mod.name), room(target)
+        if a not in level or b not in level or level[b] < level[a]:
+            continue
+        if (mod.name, target) in exceptions:
+            used.add((mod.name, target))
+            continue
+        kind = "module level" if imp.module_level else "in a function"
+        what = "a sibling of its layer" if level[b] == level[a] else "above it"
+        out.append(f"{where(mod, imp.line)}: {mod.name} imports {target} ({kind}): the room "
+                   f"{b} is {what}, {a} may import only lower rooms: {imp.text}")
+    for pair in sorted(set(exceptions) - used):
+        out.append(f"tests/test_layout.py:1: the layer exception {pair[0]} -> {pair[1]} is "
+                   f"no longer needed: remove it")
+    return sorted(set(out), key=_sort_key)
+
+
+def room_cycles(modules: dict[str, Module]) -> list[str]:
+    """One entry per cycle of the rooms' graph (every import counted), with the imports
+    between its rooms (file:line)."""
+    graph: dict[str, set[str]] = {room(m): set() for m in modules}
+    for mod, _, target in _room_imports(modules):
+        graph[room(mod.name)].add(room(target))
+    out = []
+    for component in _components(graph):
+        members = set(component)
+        out.append("cycle among the rooms " + ", ".join(component) + ":")
+        for mod, imp, target in _room_imports(modules):
+            if room(mod.name) in members and room(target) in members:
+                kind = "module level" if imp.module_level else "in a function"
+                out.append(f"    {where(mod, imp.line)}: {mod.name} imports {target} "
+                           f"({kind}): {imp.text}")
     return out
 
 
@@ -468,6 +577,15 @@ def test_no_import_cycles(modules):
     report("import cycles between modules of src/subtrace", import_cycles(modules))
 
 
+def test_rooms_keep_their_layers(modules):
+    report("imports against the rooms' layers (tests/test_layout.py LAYERS)",
+           layer_violations(modules))
+
+
+def test_no_cycle_between_rooms(modules):
+    report("cycles between the rooms of src/subtrace", room_cycles(modules))
+
+
 def test_no_private_names_imported(modules):
     report("underscore names of other modules used", private_imports(modules))
 
@@ -553,6 +671,33 @@ def test_checker_finds_cycles_through_submodules_and_relative_imports(tmp_path):
     found = import_cycles(mods)
     assert found[0] == "import cycle among subtrace.a.x, subtrace.b.y:"
     assert len(found) == 3 and "subtrace/b/y.py:2" in found[2] and "in a function" in found[2]
+
+
+def test_checker_finds_imports_against_the_layers(tmp_path):
+    mods = make_package(tmp_path, {
+        "__init__.py": "",
+        "base.py": "X = 1\n",
+        "low/__init__.py": "",
+        "low/a.py": "from subtrace import base\n",  # down: allowed
+        "low/b.py": "def f():\n    from subtrace.high import c\n",  # up, in a function
+        "high/__init__.py": "",
+        "high/c.py": "from subtrace.low import a\nfrom subtrace import side\n",  # a sibling
+        "side.py": "import subtrace.high.c\n",  # up, module level
+        "stray.py": "",  # a room no layer names
+    })
+    layers = (("base",), ("low",), ("high", "side"), (PACKAGE,))
+    found = layer_violations(mods, layers, {})
+    assert [f.split(": ")[0].split("/subtrace/", 1)[1] for f in found] == [
+        "high/c.py:2", "low/b.py:2", "side.py:1", "stray.py:1"], found
+    assert "in a function" in found[1] and "above it" in found[1]
+    assert "sibling" in found[0] and "in no layer" in found[3]
+    cycles = room_cycles(mods)
+    assert cycles[0] == "cycle among the rooms high, low, side:" and len(cycles) == 5, cycles
+    # an exception lets one import through; one that no import needs is reported
+    excused = layer_violations(mods, layers, {("subtrace.low.b", "subtrace.high.c"): "why",
+                                              ("subtrace.base", "subtrace.low.a"): "stale"})
+    assert not any("low/b.py" in f for f in excused)
+    assert any("subtrace.base -> subtrace.low.a is no longer needed" in f for f in excused)
 
 
 def test_checker_ignores_acyclic_package_imports(tmp_path):

@@ -13,12 +13,13 @@ from test_lines import check_random_lines
 
 import subtrace
 from subtrace.lines.api import intersect_lines
-from subtrace.lines.items import box_nets, isolate_loop, loop_regular
-from subtrace.mesh.topology import INF_SHARP
+from subtrace.lines.items import isolate_loop
 from subtrace.patches.basis import CHILD_ORIGIN, CHILD_SCALE, TRI_SPLIT
 from subtrace.patches.basis import tri_bernstein as bernstein
+from subtrace.patches.boxspline import box_nets, loop_regular
 from subtrace.patches.table import build_patch_table
 from subtrace.shapes import torus_cage
+from subtrace.subdiv.topology import INF_SHARP
 
 PREC = 1e-3
 
@@ -348,12 +349,12 @@ def test_cli_intersect_loop_cage(tmp_path, icosahedron):
                                   "loop_cubes_infsharp", "loop_triangle_edgeonly",
                                   "loop_fvar_bound0"])
 def test_boundary_recipes_equal_the_plain_python_oracle(name):
-    """The jitted phantom-point recipes (lines.items._boundary_recipes) equal the plain
+    """The jitted phantom-point recipes (patches.boxspline._boundary_recipes) equal the plain
     Python oracle (tests/naive.py) triangle by triangle, regular or not, on cages with
     boundaries and infinitely sharp creases, at levels 0-2."""
     from naive import boundary_recipe
 
-    from subtrace.lines.items import _boundary_recipes
+    from subtrace.patches.boxspline import _boundary_recipes
 
     cage = subtrace.load_cage(ORACLE / "shapes" / f"{name}.obj")
     checked = made = 0

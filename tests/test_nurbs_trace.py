@@ -20,6 +20,7 @@ from hypothesis import strategies as st
 from subtrace.camera import Camera, camera_frame
 from subtrace.io.obj import read_obj
 from subtrace.io.scene import apply_overrides, load_scene
+from subtrace.nurbs.freeform import freeform_of
 from subtrace.nurbs.model import build_model
 from subtrace.nurbs.trace import hit_geometry, patch_bvh, trace_nurbs, trace_rays
 
@@ -28,7 +29,7 @@ MODELS = ROOT / "models" / "nurbs"
 
 
 def load(name):
-    surfaces = read_obj(MODELS / f"{name}.obj").freeform.surfaces
+    surfaces = freeform_of(read_obj(MODELS / f"{name}.obj")).surfaces
     model = build_model(surfaces)
     return surfaces, model, patch_bvh(model)
 

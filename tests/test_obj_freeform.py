@@ -1,9 +1,11 @@
-"""Tests of the OBJ reader's free-form geometry (subtrace.io.freeform): trimmed rational
+"""Tests of the OBJ reader's free-form geometry (subtrace.io.freeform, made into surfaces by
+subtrace.nurbs.freeform): trimmed rational
 B-spline and Bezier surfaces as CAD exporters write them, beside polygons, and one clear
 error (file, line, problem) for each kind of bad free-form input."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 
@@ -16,6 +18,7 @@ import naive
 from subtrace.errors import ObjError, SubtraceWarning
 from subtrace.io.obj import read_obj
 from subtrace.nurbs.bezier import evaluate
+from subtrace.nurbs.freeform import freeform_of
 from subtrace.nurbs.model import build_model
 from subtrace.nurbs.trim import signed_area
 
@@ -41,9 +44,11 @@ def write(tmp_path, text, name="model.obj"):
 
 
 def read_quiet(path):
+    """read_obj, with ``freeform`` its records made into surfaces (freeform_of)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SubtraceWarning)
-        return read_obj(path)
+        data = read_obj(path)
+    return dataclasses.replace(data, freeform=freeform_of(data))
 
 
 def expect_error(path, line, *words):
@@ -139,7 +144,7 @@ def test_polygons_beside_surfaces_read_as_without_them(tmp_path):
     assert np.array_equal(mixed.points, plain.points)
     assert [m.name for m in mixed.materials] == ["red", "blue"]
     assert mixed.face_material.tolist() == [0, 0, 1]
-    assert mixed.freeform.surfaces[0].material == 1
+    assert freeform_of(mixed).surfaces[0].material == 1
     messages = [str(w.message) for w in record]
     assert messages == list(mixed.warnings)
     messages = [m for m in messages if "free-form" in m]

@@ -10,8 +10,8 @@ from shared_data import MODELS, SHAPES, load_shape
 
 import subtrace
 from subtrace.patches.grids import build_grids
-from subtrace.mesh.topology import INF_SHARP
 from subtrace.patches.table import build_patch_table
+from subtrace.subdiv.topology import INF_SHARP
 
 PIECE_SHAPES = ["catmark_cube_creases1", "catmark_nonquads", "catmark_pole8",
                 "catmark_edgecorner", "catmark_chaikin1", "catmark_hole_test2"]
@@ -330,7 +330,7 @@ def test_valence_two_corners_follow_the_boundary_interpolation():
     """A boundary vertex of one face is a sharp corner (regular) under edge-and-corner
     interpolation or with an infinite ``t corner`` tag, but a smooth crease (irregular, as
     OpenSubdiv takes it) under edge only untagged; a semi-sharp corner tag is irregular."""
-    from subtrace.mesh.topology import BOUNDARY_EDGE_AND_CORNER, BOUNDARY_EDGE_ONLY
+    from subtrace.subdiv.topology import BOUNDARY_EDGE_AND_CORNER, BOUNDARY_EDGE_ONLY
     from subtrace.patches import bspline
 
     path = SHAPES / "catmark_edgeonly.obj"  # corners 16, 19, 36, 37 tagged 10, 38, 39 tagged 2

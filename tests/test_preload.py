@@ -1,4 +1,4 @@
-"""The render command's kernels read ahead (subtrace.runtime.preload): what a render asks
+"""The render command's kernels read ahead (subtrace.startup.preload): what a render asks
 for is remembered per kind of render, read from the cache on a thread of its own by the next
 render of that kind, handed over when the render asks, never compiled, and forgotten when no
 longer asked for; the images are the same bit for bit."""
@@ -18,7 +18,7 @@ import pytest
 
 from shared_data import COMPILE_LISTENER, MODELS
 from subtrace.io.scene import Light, load_scene
-from subtrace.runtime import preload
+from subtrace.startup import preload
 
 pytest.importorskip("OpenImageIO")
 import OpenImageIO as oiio  # noqa: E402
@@ -27,7 +27,7 @@ import OpenImageIO as oiio  # noqa: E402
 # reporting what the read-ahead did
 _PROBE = COMPILE_LISTENER + r"""
 import json, sys
-from subtrace.runtime import preload
+from subtrace.startup import preload
 
 seen = {}
 loading = preload.loading

@@ -320,18 +320,19 @@ def test_memo_and_threads_do_not_change_the_image(mesh, monkeypatch):
 
 def test_warmup_compiles_the_kernels_a_render_uses():
     """On a cold cache a second process compiles the trace and shade kernels from empty
-    inputs (``subtrace.runtime.warmup``); that only helps if it does compile (or load) them, with
+    inputs (``subtrace.startup.warmup``); that only helps if it does compile (or load) them, with
     exactly the types of a render: in a fresh process, the warm-up alone gives each kernel
     one specialisation, and a render after it adds none."""
     import subprocess
     import sys
 
     from subtrace.runtime import threads as tasks
-    from subtrace.runtime import warmup
+    from subtrace.startup import warmup
 
     code = f"""
 from subtrace import shade
-from subtrace.runtime import threads as tasks, warmup
+from subtrace.runtime import threads as tasks
+from subtrace.startup import warmup
 from subtrace.trace import kernels
 from subtrace.io.scene import scene_from_dict
 from subtrace.render import render_scene
@@ -391,7 +392,7 @@ def test_warmup_compiles_the_picture_kernels_a_render_uses():
 
     code = f"""
 from subtrace import shade
-from subtrace.runtime import warmup
+from subtrace.startup import warmup
 from subtrace.io.scene import scene_from_dict
 from subtrace.render import render_scene
 warmup.compile_picture(2)
@@ -419,7 +420,7 @@ def test_a_render_of_other_schemes_compiles_their_trace_kernel_in_a_helper(monke
     render whose cages' variant the cache lacks starts a helper for it (told the schemes at
     once), one whose variant is cached starts none; the cache's index is read for it."""
     from subtrace.runtime import threads as tasks
-    from subtrace.runtime import warmup
+    from subtrace.startup import warmup
 
     warmup.compile_kernels(tasks.max_threads(), ["catmark"])  # (loaded if cached)
     assert warmup._trace_variant_cached(None)
@@ -441,7 +442,7 @@ def test_the_picture_kernels_compile_here_only_while_the_trace_kernel_is_not_rea
     import subprocess
     import sys
 
-    from subtrace.runtime import warmup
+    from subtrace.startup import warmup
 
     said = "import sys, time; time.sleep({}); print('traced', flush=True); sys.stdin.read()"
     compiled = []
@@ -542,7 +543,7 @@ def test_a_few_micro_triangles_per_covered_pixel_at_every_tolerance(name):
 
 _SHADING_PROBE = COMPILE_LISTENER + """
 import json, sys
-from subtrace.runtime import warmup
+from subtrace.startup import warmup
 warmup.compile_shading(1, None if sys.argv[1] == "catmark" else True)
 print(json.dumps(compiled))
 """

@@ -77,12 +77,12 @@ print(f(np.array([1.0, 4.0, 9.0])), "scipy.linalg" in sys.modules)
 
 
 def test_the_warm_up_looks_for_the_index_files_numba_writes():
-    """runtime.warmup._index_files looks in the folder, and for the names, where Numba's
+    """startup.warmup._index_files looks in the folder, and for the names, where Numba's
     cache keeps each warm-up kernel's index (so a warm cache is recognised and no helper
     process starts)."""
     import fnmatch
 
-    from subtrace.runtime import warmup
+    from subtrace.startup import warmup
     from subtrace.shade import _shade_task
     from subtrace.trace.kernels import _trace_task
     from subtrace.trace.rays import _rays_task

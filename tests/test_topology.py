@@ -1,4 +1,4 @@
-"""subtrace.mesh.topology's jitted relations against the plain oracles of tests/naive.py, on
+"""subtrace.subdiv.topology's jitted relations against the plain oracles of tests/naive.py, on
 random face lists that repeat vertices, reuse edges within a face, leave vertices unused and
 glue faces non-manifoldly, and on every model and oracle shape."""
 
@@ -14,7 +14,7 @@ from shared_data import MODELS, SHAPES
 
 import naive
 from subtrace.errors import SubtraceWarning
-from subtrace.mesh.topology import base_edges, build_level
+from subtrace.subdiv.topology import base_edges, build_level
 
 # the ring oracle is plain Python: larger meshes (the sword, the Loop torus) take too long
 MAX_FACES = 3000
@@ -93,7 +93,7 @@ def test_relations_match_the_oracle_on_models_and_shapes(path):
 def _tags_with_the_kernel(level, boundary, edge_sharp, vert_sharp):
     """What tag_base_level makes of ``level`` tagged with these sharpnesses (per edge, per
     vertex), the tagging kernel always run."""
-    from subtrace.mesh.topology import _tag_kernel
+    from subtrace.subdiv.topology import _tag_kernel
 
     edge_sharp, vert_sharp = edge_sharp.copy(), vert_sharp.copy()
     face_hole = np.zeros(level.n_faces, bool)
@@ -115,7 +115,7 @@ def _untagged_level(n_verts, face_offsets, face_verts):
 def _check_tags(level, seed=0):
     """tag_base_level equals the kernel's tagging in every boundary mode, with crease and
     corner tags on random edges and vertices (boundary ones included)."""
-    from subtrace.mesh.topology import Options, tag_base_level
+    from subtrace.subdiv.topology import Options, tag_base_level
 
     rng = np.random.default_rng(seed)
     # (tags name an edge by its two vertices: only edges whose pair is their own)
@@ -156,7 +156,7 @@ def test_tags_of_closed_and_open_cages():
     taken there: the kernel does not run."""
     from unittest import mock
 
-    from subtrace.mesh import topology
+    from subtrace.subdiv import topology
 
     cube = np.array([[0, 1, 2, 3], [4, 7, 6, 5], [0, 4, 5, 1], [1, 5, 6, 2], [2, 6, 7, 3],
                      [3, 7, 4, 0]], np.int32)
@@ -188,7 +188,7 @@ def test_child_sharpness_without_semi_sharp_edges_is_the_kernels(mesh, data):
     rule; with a semi-sharp edge the kernel runs."""
     import dataclasses
 
-    from subtrace.mesh.topology import INF_SHARP
+    from subtrace.subdiv.topology import INF_SHARP
     from subtrace.subdiv.refine import _child_edge_sharpness, _child_edge_sharpness_kernel
 
     level = _untagged_level(*mesh)

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from shared_data import MODELS, small_scene
 
 import subtrace
-from subtrace.lines.items import box_nets, loop_regular
+from subtrace.patches.boxspline import box_nets, loop_regular
 from subtrace.patches.table import build_patch_table
 from subtrace.render import render_scene
 from subtrace.trace.tris import _level_deviation, tri_deviation, tri_normal, tri_point

@@ -11,8 +11,8 @@ import re
 import pytest
 
 from subtrace.cli import main
+from subtrace.cli import warmup
 from subtrace.cli.warmup import progress_line
-from subtrace.runtime import warmup
 
 LINE = re.compile(r"warmup: (\d+)/(\d+) commands done, (\d+) kernels in the cache, (\d+) s")
 

@@ -206,10 +206,10 @@ def run_jobs(dask, jobs, crop, tile, picture, bits, accel, report=None, wait=Tru
 def _remove(tiles, outputs) -> None:
     """Remove what a stopped job leaves: the files of its ``tiles`` (those there), and the
     temporaries of its tiles and ``outputs`` whose workers are gone
-    (``io.atomic.orphaned_temps``)."""
+    (``runtime.atomic.orphaned_temps``)."""
     import os
 
-    from subtrace.io.atomic import orphaned_temps
+    from subtrace.runtime.atomic import orphaned_temps
 
     for path in list(tiles) + [t for p in list(tiles) + list(outputs) for t in
                                orphaned_temps(p)]:

@@ -29,7 +29,7 @@ import zlib
 import numpy as np
 
 from subtrace.compare import format_value
-from subtrace.io.atomic import write_text
+from subtrace.runtime.atomic import write_text
 from subtrace.version import VERSION
 
 # images narrower than this are shown enlarged by a whole factor (pixels stay square and
@@ -327,7 +327,7 @@ def compare_page(entries, title: str = "subtrace compare") -> str:
 
 
 def write_page(path, text: str) -> None:
-    """Write a page (atomically, :mod:`subtrace.io.atomic`)."""
+    """Write a page (atomically, :mod:`subtrace.runtime.atomic`)."""
     write_text(path, text)
 
 

@@ -23,7 +23,7 @@ from subtrace.mesh.cage import load_cage, valence_bound, without_unused_vertices
 from subtrace.nurbs.scene import has_faces, has_surfaces
 from subtrace.patches.table import build_patch_table, cage_face_shells, restrict
 from subtrace.picture import ground_plane, ground_shadow_points
-from subtrace.runtime import warmup
+from subtrace.startup import warmup
 from subtrace.tiles import check_crop
 from subtrace.trace.budget import check_memory
 

@@ -45,10 +45,10 @@ from subtrace.prepare import (apron, cage_objects, check_extent, crop_window,  #
 # (what a render returns, which callers take from here too)
 from subtrace.results import RenderResult, RenderStats, result_attributes  # noqa: F401
 from subtrace.runtime import threads as tasks
-from subtrace.runtime import warmup
 from subtrace.runtime.memory import let_go, one_block
 from subtrace.shade import (C_OBJECT, C_R, CHANNELS, background_rows, deepest_level,
                             miss_values, patch_shading, shade)
+from subtrace.startup import warmup
 from subtrace.tiles import check_crop
 from subtrace.trace.pools import Hits, round_arrays
 # (the trace's rounds, which callers take from here too)

@@ -113,7 +113,7 @@ def tile_path(out: str, crop) -> str:
 
 def write_tile(path: str, channels: dict) -> None:
     """Write a tile's channels (float32) to ``path``, whole or not at all."""
-    from subtrace.io.atomic import atomic_paths, open_temp
+    from subtrace.runtime.atomic import atomic_paths, open_temp
 
     with atomic_paths([path]) as temps:
         with open_temp(temps[0], "wb") as f:

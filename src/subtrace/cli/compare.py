@@ -13,7 +13,7 @@ from subtrace.cli.parser import THRESHOLD_OPTIONS
 from subtrace.compare import (EXIT_MISMATCH, EXIT_UNREADABLE, GROUPS, ImageMismatchError,
                               UnreadableImageError, compare_images)
 from subtrace.errors import SubtraceError
-from subtrace.io.atomic import check_writable
+from subtrace.runtime.atomic import check_writable
 
 
 def execute(args) -> int:

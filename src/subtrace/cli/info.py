@@ -16,11 +16,12 @@ import numpy as np
 from subtrace.cli.common import boundary_code, set_up_numba
 from subtrace.config import SHARPNESS_INFINITE
 from subtrace.data import sample_cage_path
+from subtrace.io.meshes import is_mesh_file
 from subtrace.io.obj import read_obj
 from subtrace.io.scene import BOUNDARIES
-from subtrace.io.meshes import is_mesh_file
 from subtrace.io.usd import is_usd
 from subtrace.mesh.cage import cage_from_obj, load_cage
+from subtrace.nurbs.freeform import freeform_of
 
 BOUNDARY_NAMES = {code: name for name, code in BOUNDARIES.items()}  # Sdc code -> scene name
 SIZE_NAMES = {3: "triangles", 4: "quads", 5: "pentagons", 6: "hexagons"}
@@ -46,8 +47,9 @@ def execute(args) -> int:
                                               boundary=boundary_code(args)), args.level)
         else:
             rows.append(("faces", "0 (free-form surfaces only)"))
-        if data.freeform is not None:
-            rows += freeform_report(data.freeform)
+        freeform = freeform_of(data)
+        if freeform is not None:
+            rows += freeform_report(freeform)
     width = max(len(k) for k, _ in rows) + 1
     for key, value in rows:
         print(f"{key + ':':<{width}} {value}")
@@ -209,7 +211,7 @@ def _surface_vertices(lev):
 
 def freeform_report(freeform) -> list[tuple[str, str]]:
     """The rows ``subtrace info`` prints for a file's free-form content
-    (:class:`subtrace.io.freeform.FreeForm`)."""
+    (:class:`subtrace.nurbs.freeform.FreeForm`)."""
     from subtrace.nurbs.surface import bezier_patches
     from subtrace.nurbs.trim import monotone_units
 

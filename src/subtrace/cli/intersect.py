@@ -17,13 +17,15 @@ import numpy as np
 from subtrace import config
 from subtrace.cli.common import boundary_code, set_up_numba
 from subtrace.errors import SubtraceError, SubtraceWarning
-from subtrace.io.atomic import write_text
 from subtrace.io.limits import check_coordinates, check_valences
 from subtrace.io.lines_csv import read_lines_csv
+from subtrace.io.obj import read_obj
 from subtrace.lines.api import intersect_lines
-from subtrace.mesh.cage import load_cage
+from subtrace.mesh.cage import cage_from_obj, load_cage
+from subtrace.nurbs.freeform import freeform_of
 from subtrace.nurbs.model import load_model
 from subtrace.nurbs.scene import has_faces, has_surfaces
+from subtrace.runtime.atomic import write_text
 
 HIT_COLUMNS = "line,t,x,y,z,ptex,u,v,nx,ny,nz,tangent"
 
@@ -60,7 +62,12 @@ def _target(args):
         model = load_model(args.cage)
         check_coordinates(args.cage, model.nets[..., :3].reshape(-1, 3), config.MAX_COORDINATE)
         return model
-    cage = load_cage(args.cage, scheme=args.scheme, boundary=boundary_code(args))
+    if has_surfaces(args.cage):  # (an OBJ file) its surfaces checked, as a render checks them
+        data = read_obj(args.cage)
+        freeform_of(data)
+        cage = cage_from_obj(data, scheme=args.scheme, boundary=boundary_code(args))
+    else:
+        cage = load_cage(args.cage, scheme=args.scheme, boundary=boundary_code(args))
     check_coordinates(cage.path, cage.points, config.MAX_COORDINATE)
     check_valences(cage.path, cage.face_sizes, np.diff(cage.base.vert_edge_offsets),
                    config.MAX_VALENCE, cage.scheme == "catmark")

@@ -14,9 +14,9 @@ from subtrace.cli.common import set_up_numba
 from subtrace.data import default_scene_path
 from subtrace.errors import SceneError
 from subtrace.frames import frame_numbers, frame_path
-from subtrace.io.atomic import check_writable
 from subtrace.io.formats import DEEP, picture_format
 from subtrace.io.scene import DEFAULT_SAMPLES, apply_overrides, load_scene, scene_for_meshes
+from subtrace.runtime.atomic import check_writable
 from subtrace.runtime.progress import ProgressBar
 from subtrace.tiles import check_crop, check_tile
 
@@ -100,7 +100,7 @@ def execute(args) -> int:
     # from the moment the render starts)
     ahead = contextlib.nullcontext
     if getattr(args, "own_process", False):
-        from subtrace.runtime import preload
+        from subtrace.startup import preload
 
         key = preload.render_key(scene, args.accel, picture, crop is not None,
                                  numbers is not None, tile is not None, dask is not None)
@@ -113,7 +113,7 @@ def execute(args) -> int:
 def _render(args, scene, out, png, picture, bits, crop, tile, dask, resume, numbers,
             turntable, ahead) -> None:
     """The render(s) of :func:`execute`, their files written and summaries printed;
-    ``ahead()``: the context the renders run in (:func:`subtrace.runtime.preload.loading`,
+    ``ahead()``: the context the renders run in (:func:`subtrace.startup.preload.loading`,
     or none)."""
     from subtrace.render import render_scene
 

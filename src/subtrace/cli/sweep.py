@@ -10,7 +10,7 @@ import sys
 
 from subtrace.cli.common import set_up_numba
 from subtrace.cli.render import scene_from_inputs
-from subtrace.io.atomic import check_writable
+from subtrace.runtime.atomic import check_writable
 from subtrace.runtime.progress import ProgressBar
 from subtrace.sweep import check_reference, check_repeat, check_tolerances, format_table, sweep
 

@@ -15,7 +15,7 @@ bool (int 0/1); names starting with `oiio:` are OpenImageIO's own hints and are 
 The EXR goes through OpenEXR's binding because it takes each channel in its own pixel type:
 OpenImageIO converts a float buffer to mixed half / float channels value by value, which
 took 0.36 s of a 0.42 s write of a 1280x720 film with 16 channels (0.14 s this way).
-Every file is written through :mod:`subtrace.io.atomic` (a hidden temporary in the
+Every file is written through :mod:`subtrace.runtime.atomic` (a hidden temporary in the
 destination folder, then os.replace), so a failure never leaves a partial file and never
 touches an existing one; failures raise SubtraceError naming the path.
 
@@ -42,10 +42,10 @@ import OpenImageIO as oiio
 
 from subtrace import config
 from subtrace.errors import SubtraceError
-from subtrace.io.atomic import atomic_paths, check_writable, open_temp, path_str, reason
+from subtrace.io.formats import DEEP, LINEAR, PICTURE_FORMATS, WITH_ALPHA, picture_format
+from subtrace.runtime.atomic import atomic_paths, check_writable, open_temp, path_str, reason
 from subtrace.runtime.signals import temp_lock
 from subtrace.runtime.threads import max_threads
-from subtrace.io.formats import DEEP, LINEAR, PICTURE_FORMATS, WITH_ALPHA, picture_format
 from subtrace.version import VERSION
 
 CHANNEL_ORDER = ("R", "G", "B", "A", "Z", "N.X", "N.Y", "N.Z", "level", "patch_id", "object_id")
@@ -492,7 +492,7 @@ def _png_spec(width: int, height: int):
 
 def _write_all(jobs) -> None:
     """Write each (path, format, spec, pixels) to a temporary, then move all into place
-    (:func:`subtrace.io.atomic.atomic_paths`).
+    (:func:`subtrace.runtime.atomic.atomic_paths`).
 
     pixels: what _write_image takes for the format, or a function returning it. Every
     temporary is created first (so a bad folder fails before anything is written); the jobs

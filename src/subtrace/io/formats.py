@@ -24,7 +24,7 @@ LINEAR = ("hdr", "fits")
 # ("term"), depth alone ("zfile"); OpenEXR is the multi-channel output (".exr")
 _NOT_PICTURES = ("null", "term", "zfile", "openexr")
 # extensions whose writer takes the variant from the file name, which the temporary an
-# output is written to first (``io.atomic.make_temp``: ``.tmp``) does not have: JPEG 2000
+# output is written to first (``runtime.atomic.make_temp``: ``.tmp``) does not have: JPEG 2000
 # (its codestream or container: an empty file) and the bitmap, grey and float PNM files (a
 # colour PPM)
 _BY_NAME = (".j2c", ".j2k", ".jp2", ".jph", ".pbm", ".pgm", ".pfm")

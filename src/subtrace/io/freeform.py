@@ -5,9 +5,11 @@ Owns the text of ``vp``, ``cstype``, ``deg``, ``curv2``, ``surf``, their bodies 
 specification (version 3.0, "Free-form curve/surface attributes" and after) defines them;
 :class:`subtrace.io.obj.ObjReader` hands these statements over one by one
 (:meth:`FreeFormReader.statement`) and asks for the result once the file is read
-(:meth:`FreeFormReader.finish`). The geometry itself (knot checks, Bezier extraction, trim
-loops) is :mod:`subtrace.nurbs`; every problem it finds is raised here as an ObjError naming
-the statement's line.
+(:meth:`FreeFormReader.finish`): plain records (:class:`FreeFormRecords`: each element's
+numbers and indices as written, with its lines). The geometry itself (index ranges, knot
+checks, Bezier extraction, trim loops) is :mod:`subtrace.nurbs`, which makes the records
+into surfaces (:func:`subtrace.nurbs.freeform.freeform_of`) and raises every problem it
+finds as an ObjError naming the statement's line.
 
 What is read: ``cstype [rat] bezier|bspline`` (other types are an error naming the type),
 ``deg du [dv]``, ``surf s0 s1 t0 t1 v/vt/vn ...`` (control points u fastest; a rational
@@ -28,16 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from subtrace.errors import NurbsError
-from subtrace.nurbs.knots import (
-    bezier_knots,
-    check_bezier_params,
-    check_degree,
-    check_knots,
-    check_nondecreasing,
-)
-from subtrace.nurbs.surface import NurbsSurface, make_surface
-from subtrace.nurbs.trim import TrimCurve, make_curve, make_loop
+from subtrace.config import NURBS_MAX_DEGREE
 
 # statements this module reads (the OBJ reader sends them here)
 STATEMENTS = frozenset(
@@ -47,23 +40,9 @@ _OTHER_TYPES = ("bmatrix", "cardinal", "taylor")
 _IGNORED = ("scrv", "sp", "con", "bmat", "step")  # read and ignored (one warning each)
 
 
-@dataclass(frozen=True, eq=False)
-class FreeForm:
-    """The free-form content of an OBJ file.
-
-    surfaces: validated surfaces with their oriented trim loops, in file order;
-    surface_lines: the line of each ``surf``; curves: every ``curv2``, in file order;
-    param_points (P, 3) float64: the ``vp`` lines (u, v, w)."""
-
-    surfaces: tuple[NurbsSurface, ...]
-    surface_lines: tuple[int, ...]
-    curves: tuple[TrimCurve, ...]
-    param_points: np.ndarray
-
-
 @dataclass
-class _Element:
-    """An open ``curv2`` / ``surf`` / ``curv`` and its body, as read."""
+class Element:
+    """A ``curv2`` / ``surf`` / ``curv`` and its body, as read."""
 
     kind: str
     line: int
@@ -76,6 +55,27 @@ class _Element:
     material: str | None = None
     parms: dict = field(default_factory=dict)  # "u" / "v" -> (line, values)
     loops: list = field(default_factory=list)  # (line, hole, [(u0, u1, index)], curv2 known)
+
+
+@dataclass(frozen=True, eq=False)
+class FreeFormRecords:
+    """The free-form content of an OBJ file as read, for :mod:`subtrace.nurbs` to make into
+    surfaces (:func:`subtrace.nurbs.freeform.freeform_of`).
+
+    path: the file; elements: every ``curv2`` and ``surf``, in file order; param_points
+    (P, 3) float64: the ``vp`` lines (u, v, w; w 1 where not given), vp_lines their lines;
+    points (V, 3): the v coordinates, point_lines their lines; weight_tokens: v index
+    (0-based) -> the w token of v lines with one; material_ids: usemtl name -> material
+    index."""
+
+    path: str
+    elements: tuple[Element, ...]
+    param_points: np.ndarray
+    vp_lines: tuple[int, ...]
+    points: np.ndarray
+    point_lines: list
+    weight_tokens: dict
+    material_ids: dict
 
 
 class FreeFormReader:
@@ -92,8 +92,8 @@ class FreeFormReader:
         self.cstype = None  # (rational, basis, line)
         self.deg = None  # (degrees tuple, line)
         self.attributes: dict[str, list] = {}  # keyword -> [first line, count]
-        self.elements: list[_Element] = []
-        self.open: _Element | None = None
+        self.elements: list[Element] = []
+        self.open: Element | None = None
         self.num_curves = 0
 
     @property
@@ -162,10 +162,9 @@ class FreeFormReader:
                 value = int(token)
             except ValueError:
                 self.fail(number, f"deg: '{token}' is not a whole number")
-            try:
-                check_degree(value)
-            except NurbsError as err:
-                self.fail(number, f"deg: {err}")
+            if not 1 <= value <= NURBS_MAX_DEGREE:  # (nurbs.knots.check_degree's message)
+                self.fail(number, f"deg: degree {value} is not supported: degrees 1 to "
+                                  f"{NURBS_MAX_DEGREE} are")
             degrees.append(value)
         self.deg = (tuple(degrees), number)
         self._attribute("deg", number)
@@ -178,7 +177,7 @@ class FreeFormReader:
         self.open = None
         if keyword == "curv":
             self.ignored(keyword, number)
-            self.open = _Element("curv", number, False, "", (), [], 0)
+            self.open = Element("curv", number, False, "", (), [], 0)
             return
         if self.cstype is None:
             self.fail(number, f"{keyword} before any cstype: add `cstype bspline` (or "
@@ -197,14 +196,14 @@ class FreeFormReader:
             domain = tuple(self._number(number, "surf", token) for token in parts[1:5])
             refs = [self._index(number, "surf", "vertex", token.split("/")[0])
                     for token in parts[5:]]
-            self.open = _Element("surf", number, rational, basis, degrees, refs, num_points,
+            self.open = Element("surf", number, rational, basis, degrees, refs, num_points,
                                  domain, material)
         else:
             if len(parts) < 2:
                 self.fail(number, "curv2 needs control points vp1 vp2 ...")
             refs = [self._index(number, "curv2", "parameter vertex", token)
                     for token in parts[1:]]
-            self.open = _Element("curv2", number, rational, basis, degrees[:1], refs,
+            self.open = Element("curv2", number, rational, basis, degrees[:1], refs,
                                  len(self.vp_lines))
             self.num_curves += 1
 
@@ -258,12 +257,14 @@ class FreeFormReader:
 
     # -- the end of the file -------------------------------------------------------------
 
-    def finish(self, points, point_lines, weight_tokens, material_ids) -> FreeForm | None:
-        """Validate and convert everything read; None for a file without elements.
+    def finish(self, path, points, point_lines, weight_tokens,
+               material_ids) -> FreeFormRecords | None:
+        """The records of everything read (:class:`FreeFormRecords`); None for a file
+        without elements.
 
-        points (V, 3): the v coordinates, point_lines their lines; weight_tokens: v index
-        (0-based) -> the w token of v lines with one; material_ids: usemtl name -> material
-        index."""
+        path: the file; points (V, 3): the v coordinates, point_lines their lines;
+        weight_tokens: v index (0-based) -> the w token of v lines with one; material_ids:
+        usemtl name -> material index."""
         if self.open is not None and self.open.kind != "curv":
             self.fail(self.open.line, f"{self.open.kind} has no `end`")
         if not self.elements:
@@ -271,14 +272,9 @@ class FreeFormReader:
                 for _ in range(count):
                     self.ignored(keyword, line)
             return None
-        vp = self._param_points()
-        # every curv2 first (trim loops may name later ones), then the surfaces
-        curves = [self._curve(e, vp) for e in self.elements if e.kind == "curv2"]
-        surfaces = [e for e in self.elements if e.kind == "surf"]
-        return FreeForm(
-            tuple(self._surface(e, points, point_lines, weight_tokens, material_ids, curves)
-                  for e in surfaces),
-            tuple(e.line for e in surfaces), tuple(curves), vp)
+        return FreeFormRecords(str(path), tuple(self.elements), self._param_points(),
+                               tuple(self.vp_lines), points, point_lines, weight_tokens,
+                               material_ids)
 
     def _param_points(self) -> np.ndarray:
         vp = np.zeros((len(self.vp_tokens), 3))
@@ -287,103 +283,3 @@ class FreeFormReader:
             for col, token in enumerate(tokens):
                 vp[row, col] = self._number(line, "vp", token)
         return vp
-
-    def _resolve(self, element, total, what, keyword) -> np.ndarray:
-        """0-based indices of an element's control points; ObjError for one out of range."""
-        out = []
-        for index in element.refs:
-            resolved = index - 1 if index > 0 else element.known + index
-            if resolved < 0 or resolved >= total:
-                self.fail(element.line, f"{element.kind}: {what} index {index} out of range: "
-                                        f"the file has {total} {keyword} lines")
-            out.append(resolved)
-        return np.array(out, dtype=np.int64)
-
-    def _parm_values(self, element, direction):
-        """(line, values) of an element's ``parm`` in one direction, checked on its own: at
-        least 2 values, strictly increasing (Bezier joins) or non-decreasing (knots)."""
-        if direction not in element.parms:
-            self.fail(element.line, f"{element.kind} has no `parm {direction}` before its "
-                                    "`end`")
-        line, values = element.parms[direction]
-        try:
-            if element.basis == "bezier" or len(values) < 2:
-                check_bezier_params(values, direction)
-            check_nondecreasing(values, direction)
-        except NurbsError as err:
-            self.fail(line, f"{element.kind}: {err}")
-        return line, values
-
-    def _curve(self, element, vp) -> TrimCurve:
-        idx = self._resolve(element, len(vp), "parameter vertex", "vp")
-        line, values = self._parm_values(element, "u")
-        degree = element.degree[0]
-        if element.basis == "bezier":
-            need = (len(values) - 1) * degree + 1
-            if need != len(idx):
-                self.fail(line, f"curv2: parm u has {len(values)} values ({len(values) - 1} "
-                                f"segments), so a degree-{degree} Bezier curve needs {need} "
-                                f"control points (segments x degree + 1); the curv2 has "
-                                f"{len(idx)}")
-            knots = bezier_knots(values, degree)
-        else:
-            knots = np.array(values, dtype=np.float64)
-            try:
-                check_knots(knots, degree, len(idx), "u")
-            except NurbsError as err:
-                self.fail(line, f"curv2: {err}")
-        if element.rational:
-            self._check_weights(element, vp[idx, 2], idx, self.vp_lines, "vp", "curve")
-        try:
-            return make_curve(degree, knots, vp[idx, :2], vp[idx, 2] if element.rational
-                              else None)
-        except NurbsError as err:
-            self.fail(element.line, f"curv2: {err}")
-
-    def _check_weights(self, element, weights, idx, lines, keyword, what):
-        """ObjError at the element for the first weight that is not a positive number."""
-        bad = np.nonzero(~(weights > 0) | ~np.isfinite(weights))[0]
-        if len(bad):
-            k = int(bad[0])
-            self.fail(element.line, f"{element.kind}: control point {k + 1} (the {keyword} of "
-                                    f"line {lines[idx[k]]}) has weight {weights[k]:g}; weights "
-                                    f"of a rational {what} must be positive")
-
-    def _surface(self, element, points, point_lines, weight_tokens, material_ids, curves):
-        idx = self._resolve(element, len(points), "vertex", "v")
-        _, params_u = self._parm_values(element, "u")
-        _, params_v = self._parm_values(element, "v")
-        weights = None
-        if element.rational:
-            weights = np.ones(len(idx))
-            for k, index in enumerate(idx.tolist()):
-                token = weight_tokens.get(index)
-                if token is not None:
-                    try:
-                        weights[k] = float(token)
-                    except ValueError:
-                        weights[k] = math.nan
-            self._check_weights(element, weights, idx, point_lines, "v", "surface")
-        try:
-            surface = make_surface(element.degree, params_u, params_v, points[idx], weights,
-                                   element.domain, bezier=element.basis == "bezier")
-        except NurbsError as err:
-            self.fail(element.line, str(err) if str(err).startswith("surf ")
-                      else f"surf: {err}")
-        loops = []
-        for line, hole, pieces, known in element.loops:
-            keyword = "hole" if hole else "trim"
-            chain = []
-            for u0, u1, index in pieces:
-                resolved = index - 1 if index > 0 else known + index
-                if resolved < 0 or resolved >= len(curves):
-                    self.fail(line, f"{keyword}: curv2 index {index} out of range: the file "
-                                    f"has {len(curves)} curv2 statements")
-                chain.append((u0, u1, curves[resolved]))
-            try:
-                loops.append(make_loop(chain, hole, surface.domain))
-            except NurbsError as err:
-                self.fail(line, f"{keyword}: {err}")
-        material = -1 if element.material is None else material_ids[element.material]
-        return NurbsSurface(surface.degree, surface.knots_u, surface.knots_v, surface.control,
-                            surface.domain, surface.rational, tuple(loops), material)

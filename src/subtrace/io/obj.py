@@ -35,7 +35,7 @@ import numpy as np
 
 from subtrace.errors import ObjError, SubtraceWarning
 from subtrace.io.freeform import STATEMENTS as FREEFORM_STATEMENTS
-from subtrace.io.freeform import FreeForm, FreeFormReader
+from subtrace.io.freeform import FreeFormReader, FreeFormRecords
 from subtrace.io.obj_scan import MAX_INDEX, scan
 from subtrace.io.text import check_text, decode, read_bytes
 
@@ -98,7 +98,9 @@ class ObjData:
     crease_method: str | None  # "uniform" | "chaikin"; None without a creasemethod tag
     smooth_triangles: str | None  # "catmark" | "smooth"; None without a smoothtriangles tag
     warnings: tuple[str, ...]  # each "path:line: message"
-    freeform: FreeForm | None = None  # trimmed NURBS surfaces (subtrace.io.freeform)
+    # the free-form elements as read (subtrace.io.freeform), which subtrace.nurbs makes into
+    # trimmed NURBS surfaces (subtrace.nurbs.freeform.freeform_of)
+    freeform: FreeFormRecords | None = None
 
 
 def read_obj(path) -> ObjData:
@@ -823,7 +825,8 @@ class ObjReader:
                      self.mtl_shininess.get(name, DEFAULT_SHININESS))
             for name, rgb in diffuse.items())
         material_ids = {name: k for k, name in enumerate(diffuse)}
-        freeform = self.freeform.finish(points, self.point_lines, self.point_w, material_ids)
+        freeform = self.freeform.finish(self.path, points, self.point_lines, self.point_w,
+                                        material_ids)
         if local_ids:
             remap = np.array([material_ids[name] for name in local_ids], dtype=np.int32)
             face_material = np.where(face_material >= 0, remap[face_material], -1)

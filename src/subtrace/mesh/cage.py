@@ -5,7 +5,7 @@ A :class:`Cage` is immutable. ``refine(level)`` gives a uniformly refined :class
 ``evaluate(ptex_face, uv)`` the exact limit surface at parametric points (OpenSubdiv's ptex
 numbering and orientation). Refined levels are cached per cage.
 
-The topology of the cage itself (``base``, a :class:`~subtrace.mesh.topology.Level` with
+The topology of the cage itself (``base``, a :class:`~subtrace.subdiv.topology.Level` with
 its tags) is built when first asked for, not when the cage is read: a render that sees part
 of a large cage builds it only for :meth:`Cage.restricted`, the faces around those in view
 (``render.table_in_view``), so its memory and time follow what is seen. The limit surface
@@ -25,19 +25,20 @@ import numpy as np
 from subtrace import config
 from subtrace.errors import TopologyError
 from subtrace.io.obj import read_obj
-from subtrace.mesh.topology import (
-    BOUNDARY_EDGE_ONLY,
-    Level,
-    Options,
-    base_edges,
-    build_level,
-    tag_base_level,
-)
 from subtrace.patches.evaluate import evaluate, ptex_starts
 from subtrace.patches.shells import box_extent, face_star_boxes
 from subtrace.runtime.jit import nb
 from subtrace.subdiv.limit import limit_points
 from subtrace.subdiv.refine import refine_level, refine_points
+# (the restricted cages' rings, which callers take from here too)
+from subtrace.subdiv.topology import (  # noqa: F401
+    BOUNDARY_EDGE_ONLY,
+    RESTRICT_RINGS,
+    Level,
+    Options,
+    cage_level,
+    face_rings,
+)
 
 SCHEME_ALIASES = {
     "catmark": "catmark",
@@ -68,7 +69,7 @@ class Mesh:
 class Tags:
     """A cage's tags as given (OpenSubdiv's OBJ tags): creases as vertex pairs (k,2) int64
     with their sharpness (k,) float32, corners (m,) int64 with theirs (m,) float32, and the
-    hole faces (h,) int64. :func:`~subtrace.mesh.topology.tag_base_level` applies them."""
+    hole faces (h,) int64. :func:`~subtrace.subdiv.topology.tag_base_level` applies them."""
 
     crease_edges: np.ndarray
     crease_sharpness: np.ndarray
@@ -347,42 +348,10 @@ def make_cage(
 
 def _base_level(cage: Cage) -> Level:
     """The topology of ``cage``'s faces with its tags applied."""
-    offsets = cage.face_offsets
-    n_verts = len(cage.points)
-    edge_verts, face_edges, forward = base_edges(offsets, cage.face_verts, n_verts)
-    level = build_level(
-        n_verts,
-        offsets,
-        cage.face_verts,
-        edge_verts,
-        face_edges,
-        forward,
-        np.zeros(len(edge_verts), np.float32),
-        np.zeros(n_verts, np.float32),
-        np.zeros(len(cage.face_sizes), bool),
-    )
     t = cage.tags
-    return tag_base_level(level, cage.options, t.crease_edges, t.crease_sharpness,
-                          t.corner_verts, t.corner_sharpness, t.hole_faces)
-
-
-# rings of faces a restricted cage keeps around the faces it is for: the patch table's cut
-# (``patches/table.py``: config.GRID_RINGS + 1 rings, refined to the patch level) and one
-# more, so that every face of the cut has all the faces around its vertices, hence the whole
-# cage's topology and tags (the faces beyond see a boundary that is not the cage's)
-RESTRICT_RINGS = config.GRID_RINGS + 2
-
-
-def face_rings(cage: Cage, faces: np.ndarray, rings: int) -> np.ndarray:
-    """(F,) bool: the faces ``faces`` ((F,) bool) and every face within ``rings`` rings of
-    them (a ring: the faces sharing a vertex with those before), from the face lists alone
-    (no topology)."""
-    sel = np.array(faces, dtype=bool)
-    if not len(sel):
-        return sel
-    mark = np.zeros(len(cage.points), bool)
-    _grow_rings(cage.face_offsets, cage.face_verts, rings, sel, mark)
-    return sel
+    return cage_level(len(cage.points), cage.face_offsets, cage.face_verts, cage.options,
+                      (t.crease_edges, t.crease_sharpness, t.corner_verts, t.corner_sharpness,
+                       t.hole_faces))
 
 
 # points from which the box is one pass of a kernel: NumPy's reductions along the first
@@ -416,25 +385,6 @@ def _box_kernel(points, lo, hi):
             hi[k] = max(hi[k], x)
             nan |= x != x
     return nan
-
-
-@nb.njit(cache=True, nogil=True)
-def _grow_rings(offsets, verts, rings, sel, mark):
-    """Grow the faces ``sel`` ((F,) bool, in place) by ``rings`` rings: each ring marks the
-    vertices of the faces selected (``mark``, (V,) bool, all False on entry) and selects
-    every face with a marked vertex. (NumPy's repeat, gathers and reduceat over the face
-    lists took 29 ms for four rings on the sword refined twice.)"""
-    for _ in range(rings):
-        for f in range(len(sel)):
-            if sel[f]:
-                for k in range(offsets[f], offsets[f + 1]):
-                    mark[verts[k]] = True
-        for f in range(len(sel)):
-            if not sel[f]:
-                for k in range(offsets[f], offsets[f + 1]):
-                    if mark[verts[k]]:
-                        sel[f] = True
-                        break
 
 
 def lowest_limit(cage: Cage, up) -> float:

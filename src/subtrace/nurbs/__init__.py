@@ -1,5 +1,6 @@
 """Free-form surfaces: trimmed (rational) NURBS as OBJ files carry them (docs/seeds.md,
-section 4), read by :mod:`subtrace.io.freeform`, ray traced by :mod:`~subtrace.nurbs.trace`.
+section 4), read by :mod:`subtrace.io.freeform` into plain records, made into surfaces by
+:mod:`~subtrace.nurbs.freeform`, ray traced by :mod:`~subtrace.nurbs.trace`.
 
 Modules (importing this package imports none of them, and nothing here imports Numba
 until a kernel module is imported):
@@ -7,6 +8,8 @@ until a kernel module is imported):
 * :mod:`~subtrace.nurbs.knots`: knot vector checks, Boehm knot insertion, Bezier
   extraction, de Casteljau split and degree elevation (numpy, build time);
 * :mod:`~subtrace.nurbs.surface`: :class:`NurbsSurface` and its rational Bezier patches;
+* :mod:`~subtrace.nurbs.freeform`: an OBJ file's free-form records made into validated
+  surfaces and trim loops (``freeform_of``; ObjError naming the line of a problem);
 * :mod:`~subtrace.nurbs.bezier`: exact point and first derivatives of rational Bezier
   patches (homogeneous de Casteljau + quotient rule) and curves (Numba);
 * :mod:`~subtrace.nurbs.trim`: trimming curves, closed oriented loops, monotone units;

@@ -23,6 +23,7 @@ import numpy as np
 from subtrace.config import TRIM_CLOSURE_TOL
 from subtrace.errors import ObjError
 from subtrace.io.obj import read_obj
+from subtrace.nurbs.freeform import freeform_of
 from subtrace.nurbs.surface import bezier_patches
 from subtrace.nurbs.trim import Units, monotone_units, project
 from subtrace.nurbs.trimtree import TrimTree, build_tree, classify_kernel
@@ -75,9 +76,10 @@ def load_model(path) -> NurbsModel:
     """The :class:`NurbsModel` of the free-form surfaces of the OBJ file ``path`` (ObjError
     when it has none)."""
     data = read_obj(path)
-    if data.freeform is None or not data.freeform.surfaces:
+    freeform = freeform_of(data)
+    if freeform is None or not freeform.surfaces:
         raise ObjError(data.path, None, "no free-form surfaces (surf ... end) in the file")
-    return build_model(data.freeform.surfaces)
+    return build_model(freeform.surfaces)
 
 
 def on_rectangle(loop, domain) -> bool:

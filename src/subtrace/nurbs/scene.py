@@ -35,7 +35,7 @@ from subtrace.io.limits import check_coordinates
 from subtrace.io.meshes import is_mesh_file
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material, read_obj, read_obj_bytes
 from subtrace.io.usd import is_usd
-from subtrace.mesh.topology import compact
+from subtrace.nurbs.freeform import freeform_of
 from subtrace.nurbs.model import NurbsModel, build_model
 from subtrace.nurbs.trace import (
     NurbsHits,
@@ -49,6 +49,7 @@ from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
 from subtrace.shade import (C_A, C_LEVEL, C_N, C_OBJECT, C_P, C_PATCH, C_R, C_U, C_Z,
                             PatchShading, pixel_rays)
+from subtrace.subdiv.topology import compact
 from subtrace.trace.prims import ray_setup
 
 _LINE_START = re.compile(rb"[ \t]*")  # what may precede a statement's keyword on its line
@@ -131,12 +132,13 @@ def load_nurbs(scene, quiet: bool = False) -> NurbsScene | None:
             if quiet or has_faces(obj.mesh):  # the cage's load warns once already
                 warnings.simplefilter("ignore", SubtraceWarning)
             data = read_obj(obj.mesh)
-        if data.freeform is None:
+        freeform = freeform_of(data)
+        if freeform is None:
             continue
         check_coordinates(obj.mesh, data.points, config.MAX_COORDINATE)
         # the surface's usemtl material (the last row: none), the scene's keys over it
         table = [*data.materials, Material("", DEFAULT_DIFFUSE)]
-        for surface in data.freeform.surfaces:
+        for surface in freeform.surfaces:
             surfaces.append(surface)
             owner.append(k)
             mat = table[surface.material]

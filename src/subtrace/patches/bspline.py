@@ -29,8 +29,8 @@ import numpy as np
 from subtrace.patches.basis import B_CORNER, LEAD, TRAIL
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
-from subtrace.mesh.topology import INF_SHARP, compact
 from subtrace.subdiv.limit import CORNER, CREASE, SMOOTH, classify
+from subtrace.subdiv.topology import INF_SHARP, compact
 
 
 def regular_mask(level, options, faces) -> np.ndarray:

@@ -48,7 +48,7 @@ import math
 import numpy as np
 
 from subtrace.config import IRREGULAR_MARGIN
-from subtrace.mesh.topology import INF_SHARP, gather_index
+from subtrace.subdiv.topology import INF_SHARP, gather_index
 from subtrace.patches.basis import TO_BEZIER
 from subtrace.patches.bspline import control_grids
 from subtrace.patches.grids import unit_normals

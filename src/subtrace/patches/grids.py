@@ -27,10 +27,10 @@ from functools import lru_cache
 import numpy as np
 
 from subtrace import config
-from subtrace.mesh.topology import Level, Options, compact as _compact, gather as _gather
+from subtrace.patches.bspline import regular_mask
 from subtrace.subdiv.limit import extract, limit_points
 from subtrace.subdiv.refine import refine_level, refine_points
-from subtrace.patches.bspline import regular_mask
+from subtrace.subdiv.topology import Level, Options, compact as _compact, gather as _gather
 
 
 def grid_size(n: int, quad: bool) -> int:

@@ -5,8 +5,8 @@ not one polynomial. :func:`build_loop_isolated` refines its neighbourhood one le
 time with the subdivision core (every OpenSubdiv rule honoured), keeping Loop's child order
 (children 0, 1, 2 at the parent's corners, the middle child 3 turned half a turn), as
 :mod:`subtrace.patches.grids` and ``basis.TRI_SPLIT`` do. Children that are regular Loop
-patches (``lines.items.loop_regular``, regular boundaries included) become *pieces*: their
-quartic triangular Bezier nets, traced per ray by ``trace/tris.py`` like a regular patch's.
+patches (``patches.boxspline.loop_regular``, regular boundaries included) become *pieces*:
+their quartic triangular Bezier nets, traced per ray by ``trace/tris.py`` like a regular patch's.
 What is still irregular at the patch's grid depth ``D`` becomes *cells*: micro-triangles of
 exact limit points. The refinement follows only the irregular remainder (one corner child
 per level at an extraordinary vertex), so a patch costs O(D) work, not the 4^D of a grid.
@@ -27,8 +27,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from subtrace.lines.items import box_nets, loop_regular
 from subtrace.patches.basis import tri_bernstein
+from subtrace.patches.boxspline import box_nets, loop_regular
 from subtrace.patches.grids import cut_around
 from subtrace.patches.isolate import corner_limits
 from subtrace.subdiv.refine import refine_level, refine_points

@@ -34,11 +34,11 @@ import numpy as np
 from subtrace import config
 from subtrace.config import IRREGULAR_MARGIN
 from subtrace.errors import SubtraceError
-from subtrace.io.atomic import write_bytes
-from subtrace.mesh.topology import Options, compact, gather_index
 from subtrace.patches.basis import bezier_nets_and_bounds
 from subtrace.patches.grids import levels_needed, refine_children, unit_normals
 from subtrace.patches.shells import sight_distance
+from subtrace.runtime.atomic import write_bytes
+from subtrace.subdiv.topology import Level, Options, cage_level, compact, gather_index
 
 MAX_VALENCE = 32  # extraordinary vertices of higher valence take the topological path
 # the fewest levels below a patch for which the maps pay for their set-up (a patch isolated
@@ -233,12 +233,21 @@ def _unpacked(n: int, flat) -> Stencil:
     return Stencil(n, *out)
 
 
+def _cage_level(points, face_sizes, face_verts, options) -> Level:
+    """The topology of the synthetic cage's faces (as a :class:`subtrace.mesh.cage.Cage` of
+    them builds it: its ``base``)."""
+    sizes = np.ascontiguousarray(face_sizes, dtype=np.int32)
+    offsets = np.zeros(len(sizes) + 1, np.int64)
+    np.cumsum(sizes, out=offsets[1:])
+    return cage_level(len(points), offsets, np.ascontiguousarray(face_verts, dtype=np.int32),
+                      options)
+
+
 def derive_stencil(n: int) -> Stencil:
     """The maps of valence ``n``, derived on :func:`synthetic_cage` (module doc): the ring
     points as the columns of an identity, refined once (a column a point; once for each
     corner the extraordinary vertex may have, since the children's grids follow the
     patch's corners), and their limit masks at the patch's corners."""
-    from subtrace.mesh.cage import make_cage
     from subtrace.patches.bspline import control_grids
     from subtrace.subdiv.limit import limit_points
 
@@ -248,7 +257,7 @@ def derive_stencil(n: int) -> Stencil:
     grids = []
     for c in range(4):
         pts, sizes, fverts = synthetic_cage(n, c)
-        level = make_cage(pts, sizes, fverts, "catmark").level_topology(0)
+        level = _cage_level(pts, sizes, fverts, options)
         walk = _walk(level, zero, np.full(1, c), n)[0]
         first = np.sort(np.unique(walk, return_index=True)[1])
         if len(first) != K:

@@ -56,8 +56,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from subtrace import config
-from subtrace.mesh.cage import RESTRICT_RINGS, face_rings
-from subtrace.mesh.topology import compact, gather, gather_index
 from subtrace.patches.basis import NET_CHUNK, TO_BEZIER, bspline_nets
 from subtrace.patches.bspline import phantom_grids, regular_mask
 from subtrace.patches.criterion import subdominant
@@ -67,6 +65,8 @@ from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
 from subtrace.subdiv.limit import extract
 from subtrace.subdiv.refine import refine_level, refine_points
+from subtrace.subdiv.topology import (RESTRICT_RINGS, compact, face_rings, gather,
+                                      gather_index)
 
 # ptex offset of the child at corner j of a regular face (quads keep the parent's orientation)
 _QUAD_CHILD_UV0 = np.array([[0.0, 0.0], [0.5, 0.0], [0.5, 0.5], [0.0, 0.5]])
@@ -78,7 +78,7 @@ class ObjectPatches:
 
     cage: object
     level0: int
-    level: object  # mesh.topology.Level of L0
+    level: object  # subdiv.topology.Level of L0
     points: np.ndarray  # (V,3) float64 L0 points
     patch_faces: np.ndarray  # (p,) int64 faces of L0 that are patches (holes excluded)
     first_patch: int  # global id of this object's first patch

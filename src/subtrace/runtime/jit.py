@@ -316,7 +316,7 @@ def trim_loader() -> None:
 
 def trim_compiler() -> None:
     """Trim Numba's set-up for a process of its own that compiles kernels (the render's
-    helper, ``runtime.warmup``): Numba's hooks on LLVM's lock, which time it for Numba's
+    helper, ``startup.warmup``): Numba's hooks on LLVM's lock, which time it for Numba's
     compile events only, are removed (the ``"compiler"`` stage of
     :mod:`subtrace.runtime.numba_patches`; nothing where the patches are off)."""
     numba_patches.apply("compiler")

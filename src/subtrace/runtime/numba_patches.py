@@ -68,6 +68,16 @@ APPLIED: dict[str, bool] = {}  # patch name -> applied (True) or skipped (False)
 ENABLED = False  # whether the patches apply in this process (install)
 _PATCHES: dict[str, Callable[[], bool]] = {}
 _SETTINGS: dict = {}  # install's: the kernel folder, the sources' digests, the package root
+# The cached-kernel loader's ledger (_cached_kernel_loader), which the read-ahead of
+# subtrace.startup.preload reads and fills: the kernels this process's dispatchers took from
+# the cache, in order, as (module, qualname, signature), appended under Numba's compiler
+# lock; the compile results read ahead and not yet taken, (python function, signature) ->
+# result, each handed over once; and, where the loader is patched, "read" (its reader,
+# ``read(cache, sig, target_context)``: a compile result or None), "lock" (Numba's compiler
+# lock, which dispatchers load under) and "folder" (where the read-ahead's manifests go)
+LOADED: list = []
+READ_AHEAD: dict = {}
+LOADER: dict = {}
 
 
 def wanted(numba_version: str, environ: Mapping[str, str] = os.environ) -> bool:
@@ -826,9 +836,9 @@ def _cached_kernel_loader() -> bool:
       read the metadata of every installed distribution (3.7 ms of every render here, 132
       distributions);
     * each kernel loaded is listed, with its signature, in
-      :data:`subtrace.runtime.preload.LOADED`: what the next render of the same kind reads
-      ahead (:mod:`subtrace.runtime.preload`), and a kernel that was read ahead is taken
-      from there instead of the cache.
+      :data:`LOADED`: what the next render of the same kind reads ahead
+      (:mod:`subtrace.startup.preload`), and a kernel that was read ahead
+      (:data:`READ_AHEAD`) is taken from there instead of the cache.
 
     Numbas whose loader is organised differently are left alone (the command is then just
     slower); tests run the command in fresh processes on warm and cold caches. True when
@@ -843,8 +853,6 @@ def _cached_kernel_loader() -> bool:
                                                    "_guard_against_spurious_io_errors")) or \
             not hasattr(rtsys, "initialize"):
         return False
-    from subtrace.runtime import preload
-
     unimported = _NumbaEnvironmentsUnimported()
     context = cpu_target.target_context
 
@@ -870,13 +878,13 @@ def _cached_kernel_loader() -> bool:
 
     def load_overload(self, sig, target_context):
         func = getattr(self, "_py_func", None)
-        cres = preload.take(func, sig)  # (read ahead by the preload thread, if it was)
+        cres = _taken(func, sig)  # (read ahead by the preload thread, if it was)
         if cres is None:
             cres = read_overload(self, sig, target_context)
         if cres is not None and func is not None and not compiling_here():
             # (the next render's preload manifest: what Python called, not what a compile
             # linked in)
-            preload.LOADED.append((func.__module__, func.__qualname__, tuple(sig)))
+            LOADED.append((func.__module__, func.__qualname__, tuple(sig)))
         return cres
 
     full_refresh = context.refresh
@@ -888,9 +896,17 @@ def _cached_kernel_loader() -> bool:
 
     Cache.load_overload = load_overload
     context.refresh = refresh
-    preload.READ, preload.FOLDER = read_overload, _SETTINGS["kernel_dir"] / "preload"
-    preload.LOCK = global_compiler_lock
+    LOADER.update(read=read_overload, folder=_SETTINGS["kernel_dir"] / "preload",
+                  lock=global_compiler_lock)
     return True
+
+
+def _taken(func, sig):
+    """The compile result of ``func`` for the argument types ``sig`` if it was read ahead
+    (:data:`READ_AHEAD`: handed over once), else None. Called under Numba's compiler lock."""
+    if not READ_AHEAD or func is None:
+        return None
+    return READ_AHEAD.pop((func, tuple(sig)), None)
 
 
 @_patch
@@ -927,7 +943,7 @@ def _runtime_from_the_kernel_folder() -> bool:
         library.add_ir_module(module)
         library.finalize()
         from subtrace.errors import SubtraceError
-        from subtrace.io.atomic import write_bytes
+        from subtrace.runtime.atomic import write_bytes
 
         try:  # (atomically: processes storing it at once each write a whole file)
             data = pickle.dumps(library.serialize_using_object_code(), protocol=4)

@@ -9,9 +9,9 @@ every thread and leaves them to one watcher thread that waits for them with ``si
 On a signal the watcher takes the lock that guards the temporaries, points the standard
 error of the threads still running at /dev/null (the one line it prints at the end is the
 command's output), removes every
-temporary file still registered (:mod:`subtrace.io.atomic` registers each one when it
+temporary file still registered (:mod:`subtrace.runtime.atomic` registers each one when it
 creates it and forgets it when it moves it into place or removes it), ends the child
-processes registered here (the kernel compiler of :mod:`subtrace.runtime.warmup`) and
+processes registered here (the kernel compiler of :mod:`subtrace.startup.warmup`) and
 every descendant (a local Dask cluster's workers), waits until they are gone, runs the
 clean-ups registered here (:func:`register_cleanup`: a tiled Dask job's tiles, and what
 the killed workers were writing), prints ``subtrace: interrupted`` and ends the process
@@ -24,7 +24,7 @@ A signal that lands while the interpreter itself starts, before any subtrace cod
 
 In-process callers (tests, other programs calling :func:`subtrace.cli.main.main` or the
 API) keep Python's usual KeyboardInterrupt; nothing here is installed for them, and
-:mod:`subtrace.io.atomic` then removes its temporaries on the way out of its ``with``.
+:mod:`subtrace.runtime.atomic` then removes its temporaries on the way out of its ``with``.
 """
 
 from __future__ import annotations

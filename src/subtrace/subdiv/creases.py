@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from subtrace.mesh.topology import INF_SHARP
 from subtrace.runtime.jit import callee_njit, nb
+from subtrace.subdiv.topology import INF_SHARP
 
 RULE_SMOOTH = 1
 RULE_DART = 2

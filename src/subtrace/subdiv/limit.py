@@ -29,13 +29,13 @@ import math
 
 import numpy as np
 
-from subtrace.mesh.topology import (
-    INF_SHARP, Level, Options, build_level, compact, gather, gather_index,
-)
 from subtrace.runtime.jit import callee_njit, leaf_njit, nb
 from subtrace.subdiv import catmark, loop
 from subtrace.subdiv.creases import F0, RULE_CORNER, RULE_CREASE, RULE_SMOOTH, rule_of
 from subtrace.subdiv.refine import refine_level, refine_points, scheme_flag
+from subtrace.subdiv.topology import (
+    INF_SHARP, Level, Options, build_level, compact, gather, gather_index,
+)
 
 # vertex classes
 ISOLATED = 0

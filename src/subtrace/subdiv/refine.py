@@ -20,7 +20,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from subtrace.mesh.topology import INF_SHARP, Level, Options, build_level
 from subtrace.runtime.jit import callee_njit, nb
 from subtrace.subdiv import catmark, loop
 from subtrace.subdiv.creases import (
@@ -32,6 +31,7 @@ from subtrace.subdiv.creases import (
     fractional_weight,
     rule_of,
 )
+from subtrace.subdiv.topology import INF_SHARP, Level, Options, build_level
 
 
 @dataclass(frozen=True, eq=False)

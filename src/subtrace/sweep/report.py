@@ -1,6 +1,6 @@
 """The results of a sweep: :class:`SweepRecord` (one per scene and tolerance, the columns
 :data:`COLUMNS`), and their reports: a fixed-width text table (:func:`format_table`),
-``sweep.csv`` and ``sweep.json`` (written through :mod:`subtrace.io.atomic`).
+``sweep.csv`` and ``sweep.json`` (written through :mod:`subtrace.runtime.atomic`).
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import json
 import math
 from dataclasses import dataclass, fields
 
-from subtrace.io.atomic import write_text
+from subtrace.runtime.atomic import write_text
 from subtrace.sweep.plot import LEVEL_COLOURS, PLOTS
 from subtrace.version import VERSION
 

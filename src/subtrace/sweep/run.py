@@ -21,7 +21,7 @@ from dataclasses import replace
 import numpy as np
 
 from subtrace.errors import SceneError, SubtraceError
-from subtrace.io.atomic import check_writable
+from subtrace.runtime.atomic import check_writable
 from subtrace.sweep.plot import level_image, plot
 from subtrace.sweep.report import SweepRecord, write_csv, write_json
 

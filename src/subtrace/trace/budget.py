@@ -11,12 +11,12 @@ import numpy as np
 
 from subtrace import config
 from subtrace.errors import SceneError, SubtraceWarning
-from subtrace.lines.items import loop_regular
-from subtrace.mesh.topology import compact
+from subtrace.patches.boxspline import loop_regular
 from subtrace.patches.criterion import (choose_depths, depth_cap, memory_estimate,
                                         precision_depths, wanted_depths)
 from subtrace.patches.isolate import IsolationTooLarge
 from subtrace.runtime import threads as tasks
+from subtrace.subdiv.topology import compact
 
 
 def mib(n: int) -> str:

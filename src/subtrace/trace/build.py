@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from subtrace.lines.items import box_nets, loop_regular
-from subtrace.mesh.topology import compact
 from subtrace.patches.basis import BOX_PAD
+from subtrace.patches.boxspline import box_nets, loop_regular
 from subtrace.patches.isolate import isolated_parts
 from subtrace.patches.isolate_loop import build_loop_isolated
+from subtrace.subdiv.topology import compact
 from subtrace.trace.tris import tri_nets_as_pieces
 
 

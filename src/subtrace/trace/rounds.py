@@ -20,7 +20,6 @@ from subtrace.camera import whole_image, window_offset
 from subtrace.patches.criterion import edge_sampling
 from subtrace.patches.shells import Sight
 from subtrace.runtime import threads as tasks
-from subtrace.runtime import warmup
 from subtrace.subdiv.limit import limit_points
 from subtrace.trace.bezier import table_loop_flag
 from subtrace.trace.budget import choose_within_budget, warn_tiles
@@ -51,8 +50,8 @@ def trace_hits(table, camera, tol_rad, stats, max_depth=None, compiling=None, ac
                progress=None, max_memory=None, keep=None, seen=None):
     """Run the refinement rounds; returns (hits (:class:`~subtrace.trace.pools.Hits`), the
     built patches (:class:`~subtrace.trace.pools.Pieces`), every patch refined). ``compiling``: the
-    processes compiling the trace kernels (``warmup.start``), waited for before the first
-    round. ``accel``: how a ray finds the shells it enters, ``"projection"`` (the shells
+    processes compiling the trace kernels (``startup.warmup.start``: its ``Helpers``), waited
+    for before the first round. ``accel``: how a ray finds the shells it enters, ``"projection"`` (the shells
     binned into image tiles, ``accel/projection.py``) or ``"bvh"`` (``accel/bvh.py``);
     default ``config.PRIMARY_ACCEL``. Either structure is built here (preprocess time).
     ``progress(done, total, label)``: told after each round how many rays are final.
@@ -158,8 +157,8 @@ def trace_setup(table, camera, tol_rad, stats, max_depth=None, compiling=None, a
             # shadow and extra anti-aliasing rays
             compile_secondary([o.cage.scheme for o in table.objects])
         # the picture's lights, edge flags and background until the trace kernel is ready
-        warmup.picture_while_tracing(compiling, tasks.thread_count())
-    warmup.wait_traced(compiling)
+        compiling.picture_while_tracing(tasks.thread_count())
+        compiling.wait_traced()
     depths = chosen.depths
     edge_depth, patch_side = edge_sampling(table, depths)
     iso = Pieces(table.n_patches)

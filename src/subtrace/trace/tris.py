@@ -1,7 +1,7 @@
 """Ray / Loop-patch intersection by per-ray refinement of quartic triangular Bezier nets.
 
 A regular Loop triangle (three smooth valence-6 corners, or a regular boundary: see
-``lines.items.loop_regular``) is one quartic triangular Bezier net of 15 points
+``patches.boxspline.loop_regular``) is one quartic triangular Bezier net of 15 points
 (``patches/basis.py``: box spline -> net, ``BOX_TO_TRI``), stored in the pieces' net store
 as the first 15 of a (4,4,3) net's 16 points (item kind ``TRI``). Its grid depth ``d``
 comes from the angular criterion. A ray that enters the net's box descends the patch's

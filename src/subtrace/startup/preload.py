@@ -11,9 +11,10 @@ the order it asked (a *manifest*, kept beside the kernels in :data:`jit.KERNEL_D
 of render: :func:`render_key`), and the next render of that kind starts a thread that reads
 them from the cache in that order while the render reads its cages and builds its tables.
 A kernel is still installed only where the render calls it: Numba's dispatcher asks its
-cache (``jit.trim_loader``'s loader), which hands over what the thread read (:func:`take`)
-instead of reading it again; one the thread has not reached yet is read by the render as
-before (Numba's compiler lock keeps the two from reading at once). So the manifest lists
+cache (``jit.trim_loader``'s loader, ``runtime.numba_patches``), which hands over what the
+thread read (``numba_patches.READ_AHEAD``) instead of reading it again; one the thread has
+not reached yet is read by the render as before (Numba's compiler lock keeps the two from
+reading at once). So the manifest lists
 what the render asked for, not what was read ahead, and a kernel a render no longer uses
 drops out of it. Reading holds Python's lock while it unpickles (about 60 % of a read), so
 the thread overlaps the render only where the render runs kernels that let go of that lock
@@ -38,18 +39,17 @@ import sys
 import threading
 from contextlib import contextmanager
 
+from subtrace.runtime import numba_patches
+
 MANIFESTS_KEPT = 32  # manifests kept per cache folder (kinds of render), least recent removed
 
-# The kernels this process's dispatchers took from the cache, in order: (module, qualname,
-# signature), appended by jit.trim_loader's loader (under Numba's compiler lock)
-LOADED: list = []
-# ``READ(cache, sig, target_context)``: a kernel's compile result read from Numba's cache
-# (jit.trim_loader's reader), or None; None where trim_loader is not applied
-READ = None
-FOLDER = None  # where the manifests are kept (jit.KERNEL_DIR / "preload", set with READ)
-LOCK = None  # Numba's compiler lock (set with READ): what its dispatchers load under
-# compile results read ahead and not yet taken: (python function, signature) -> result
-_READ_AHEAD: dict = {}
+# The loader's ledger (``runtime.numba_patches``, which appends to the one and takes from the
+# other): the kernels this process's dispatchers took from the cache, in order, as (module,
+# qualname, signature); the compile results read ahead and not yet taken, (python function,
+# signature) -> result. Its reader, lock and the manifests' folder are
+# ``numba_patches.LOADER``'s, empty where ``jit.trim_loader`` is not applied.
+LOADED: list = numba_patches.LOADED
+_READ_AHEAD: dict = numba_patches.READ_AHEAD
 
 
 def render_key(scene, *options) -> str:
@@ -65,16 +65,8 @@ def render_key(scene, *options) -> str:
     return hashlib.blake2b(repr(what).encode(), digest_size=12).hexdigest()
 
 
-def take(func, sig):
-    """The compile result of ``func`` for the argument types ``sig`` if the thread read it
-    ahead (it is handed over once), else None. Called under Numba's compiler lock."""
-    if not _READ_AHEAD or func is None:
-        return None
-    return _READ_AHEAD.pop((func, tuple(sig)), None)
-
-
 def _manifest_path(key: str):
-    return FOLDER / f"{key}.pkl"
+    return numba_patches.LOADER["folder"] / f"{key}.pkl"
 
 
 def _read_manifest(key: str) -> list | None:
@@ -95,7 +87,7 @@ def _write_manifest(key: str, items: list) -> None:
     :data:`MANIFESTS_KEPT` most recent manifests. Failures are silent: it only speeds up
     the next render."""
     from subtrace.errors import SubtraceError
-    from subtrace.io.atomic import write_bytes
+    from subtrace.runtime.atomic import write_bytes
 
     path = _manifest_path(key)
     try:
@@ -121,14 +113,15 @@ def _dispatcher(module: str, qualname: str):
 
 def read_ahead(dispatcher, sig) -> bool:
     """Read ``dispatcher``'s compile result for the argument types ``sig`` from the cache
-    and keep it for :func:`take`, unless the dispatcher has that overload or it was read
-    already; never compile. True when it is there afterwards."""
+    and keep it for the loader to take (``numba_patches.READ_AHEAD``), unless the
+    dispatcher has that overload or it was read already; never compile. True when it is
+    there afterwards."""
     sig = tuple(sig)
     func = dispatcher.py_func
-    with LOCK:
+    with numba_patches.LOADER["lock"]:
         if dispatcher.overloads.get(sig) is not None or (func, sig) in _READ_AHEAD:
             return True
-        cres = READ(dispatcher._cache, sig, dispatcher.targetctx)
+        cres = numba_patches.LOADER["read"](dispatcher._cache, sig, dispatcher.targetctx)
         if cres is None:
             return False
         _READ_AHEAD[(func, sig)] = cres
@@ -172,7 +165,7 @@ class Preloader:
 def start(key: str) -> Preloader | None:
     """Start reading the kernels of ``key``'s manifest ahead on a thread of their own; None
     where ``jit.trim_loader`` is not applied (or ``SUBTRACE_NO_PRELOAD`` is set)."""
-    if READ is None or os.environ.get("SUBTRACE_NO_PRELOAD"):
+    if "read" not in numba_patches.LOADER or os.environ.get("SUBTRACE_NO_PRELOAD"):
         return None
     return Preloader(key)
 
