@@ -57,6 +57,7 @@ HEAVY = ("numba", "OpenImageIO")  # what importing the command line must not imp
 # dependency). "subtrace" is the package's own __init__, the public API at the top.
 LAYERS = (
     ("version", "errors", "config", "data"),  # the base: they import nothing of ours
+    ("geometry",),  # the kinds of items a ray can meet: the words every room below names them by
     ("runtime",),  # threads, Numba (jit, numba_patches), memory, signals, the atomic writer
     ("camera",),
     ("lights",),  # a light's scene keys are checked as the camera's are (check_vector)
@@ -584,6 +585,73 @@ def test_rooms_keep_their_layers(modules):
 
 def test_no_cycle_between_rooms(modules):
     report("cycles between the rooms of src/subtrace", room_cycles(modules))
+
+
+KINDS_ROOM = "subtrace.geometry"  # the one room that may spell an item kind as a number
+
+
+def kind_literals(modules) -> list[str]:
+    """``path:line: ...`` for every comparison of an item's kind with a number (``kind[i] ==
+    1``, ``x.kind[i] != 0``) and every kind column made of numbers (``kind=np.zeros(..)``,
+    ``np.ones``, ``np.full(n, 3, ..)``) outside :data:`KINDS_ROOM`: kinds are named by
+    ``subtrace.geometry.kinds``."""
+    out = []
+
+    def is_kind(node):  # kind[...], x.kind[...]
+        node = node.value
+        return (isinstance(node, ast.Name) and node.id == "kind") or (
+            isinstance(node, ast.Attribute) and node.attr == "kind")
+
+    def is_number(node):
+        return isinstance(node, ast.Constant) and type(node.value) is int
+
+    def numeric_column(node):
+        if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)):
+            return False
+        name = node.func.attr
+        return name in ("zeros", "ones", "zeros_like", "ones_like") or (
+            name == "full" and len(node.args) > 1 and is_number(node.args[1]))
+
+    for mod in modules.values():
+        if mod.name == KINDS_ROOM or mod.name.startswith(KINDS_ROOM + "."):
+            continue
+        for node in ast.walk(mod.tree):
+            if isinstance(node, ast.Compare):
+                sides = [node.left, *node.comparators]
+                if any(isinstance(a, ast.Subscript) and is_kind(a) for a in sides) and any(
+                        is_number(a) for a in sides):
+                    out.append(f"{mod.path}:{node.lineno}: an item kind compared with a number")
+            elif isinstance(node, ast.keyword) and node.arg == "kind":
+                if any(numeric_column(x) for x in ast.walk(node.value)):
+                    out.append(f"{mod.path}:{node.value.lineno}: a kind column of numbers")
+    return out
+
+
+def test_item_kinds_are_named_not_numbered(modules):
+    report("item kinds spelled as numbers outside subtrace.geometry (use geometry.kinds)",
+           kind_literals(modules))
+
+
+def test_checker_finds_kind_literals(tmp_path):
+    pkg = tmp_path / "subtrace"
+    (pkg / "geometry").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "geometry" / "__init__.py").write_text("")
+    (pkg / "geometry" / "kinds.py").write_text("CELL = 1\nok = [k for k in [1] if k == 1]\n")
+    (pkg / "a.py").write_text(
+        "import numpy as np\n"
+        "def f(kind, it, iso, put):\n"
+        "    if kind[it] == 1:\n"
+        "        pass\n"
+        "    if iso.kind[it] != 0:\n"
+        "        pass\n"
+        "    statement = 3\n"
+        "    if statement == 3:\n"
+        "        pass\n"
+        "    put(kind=np.r_[np.zeros(2, np.int8), np.ones(3, np.int8)][it])\n"
+        "    put(kind=np.full(2, 4, np.int8))\n")
+    found = kind_literals(load_modules(tmp_path))
+    assert [line.split(":")[1] for line in found] == ["3", "5", "10", "11"], found
 
 
 def test_no_private_names_imported(modules):

@@ -129,7 +129,7 @@ def test_isolated_pieces_tile_the_grid(name):
 def _walk(first, count, kind, ref, lo, hi, enters):
     """The items a ray reaches in rows ``first .. first + count - 1``, walked as
     ``bezier.intersect_patch`` does: a group whose box it misses is skipped whole."""
-    from subtrace.patches.groups import GROUP
+    from subtrace.geometry.kinds import GROUP
 
     seen, it = [], first
     while it < first + count:
@@ -149,7 +149,7 @@ def test_item_groups_skip_only_items_the_ray_misses(scheme):
     each group's box holds the boxes of the rows it spans, its span within its parent's;
     and a ray walking the rows with skips reaches exactly the items whose boxes it enters
     (random rays through the patches, against testing every item's box)."""
-    from subtrace.patches.groups import GROUP
+    from subtrace.geometry.kinds import GROUP
     from subtrace.patches.isolate import build_isolated
     from subtrace.patches.isolate_loop import build_loop_isolated
     from subtrace.trace.pools import Pieces

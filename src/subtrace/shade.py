@@ -30,6 +30,7 @@ import numpy as np
 from subtrace import config
 from subtrace.accel.bvh import slab_entry
 from subtrace.camera import window_offset
+from subtrace.geometry.kinds import BEZIER, LOOP_CELL, TRI
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material
 from subtrace.lights import (DIRECTIONAL, PARAM, R2_A1, R2_A2, RGB, ROW, hash01, incoming,
                              irradiance_at, shadow_samples, shadow_target)
@@ -38,7 +39,7 @@ from subtrace.runtime.jit import callee_njit, inline_njit, leaf_njit, llvm_inlin
 from subtrace.runtime.threads import run_tasks, thread_count
 from subtrace.trace.pools import Hits, PieceArrays
 from subtrace.trace.prims import ray_setup
-from subtrace.trace.tris import LOOP_CELL, TRI, tri_normal
+from subtrace.trace.tris import tri_normal
 
 
 # the planes the shading fills, in this order, and what a pixel whose ray missed holds
@@ -183,7 +184,7 @@ def _shade_task(task, n_tasks, frame, width, hits_t, iso_t, patches_t, miss, pla
             c = iso.ref[it]
             if iso.kind[it] == TRI or iso.kind[it] == LOOP_CELL:
                 nx = ny = nz = 0.0  # (a Loop item: its normal's pass, _loop_normals_task)
-            elif iso.kind[it] == 0:
+            elif iso.kind[it] == BEZIER:
                 # a Bezier piece over a dyadic square of the patch (the whole of a regular one)
                 sc = 1 << iso.level[it]
                 nx, ny, nz = bez_normal(iso.nets[c], u * sc - iso.i0[it], v * sc - iso.j0[it])

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import numpy as np
 
-GROUP = 4  # item kind of a group row (trace/pools.Pieces; kinds 0-3: trace/bezier, tris)
 # the fewest items a subtree below the patch's own needs for a group row: a ray entering a
 # group tests its box besides its items', so a small group saves nothing
 MIN_GROUP = 4

@@ -34,7 +34,9 @@ demand. Per patch, flat arrays (P = number of patches):
   control edges shrink per level near the patch's corners (1/2 for regular vertices, the
   subdominant eigenvalue near extraordinary ones); together they bound the size of a grid
   cell at depth n by ``edge_bound * rate^n`` (the refinement criterion);
-* ``regular`` (P,) bool and ``nets`` (R,4,4,3): the Bezier nets of the regular bicubic
+* ``patch_type`` (P,) int8, one code per patch (``geometry.kinds.Patch``: a regular
+  bicubic quad, another Catmull-Clark quad, a Loop triangle; ``regular`` and ``is_quad``
+  are its views), and ``nets`` (R,4,4,3): the Bezier nets of the regular bicubic
   patches, smooth or along boundaries and infinitely sharp creases (phantom points; see
   :mod:`subtrace.patches.bspline`, :mod:`subtrace.patches.basis`), in patch order. For
   those, the shell is the net's box, ``edge_bound`` the exact bound on the derivatives and
@@ -56,6 +58,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from subtrace import config
+from subtrace.geometry.kinds import CATMARK_REGULAR, LOOP, patch_types
 from subtrace.patches.basis import NET_CHUNK, TO_BEZIER, bspline_nets
 from subtrace.patches.bspline import phantom_grids, regular_mask
 from subtrace.patches.criterion import subdominant
@@ -119,11 +122,10 @@ class PatchTable:
     ray_max: np.ndarray  # (P,3) float64
     edge_bound: np.ndarray  # (P,) float64
     rate: np.ndarray  # (P,) float64
-    regular: np.ndarray  # (P,) bool: a regular bicubic patch
+    patch_type: np.ndarray  # (P,) int8: geometry.kinds.Patch (regular, irregular quad, Loop)
     nets: np.ndarray  # (R,4,4,3) float64 Bezier nets of the regular patches, in patch order
     edges: np.ndarray  # (P,4) int64 global edge ids (-1 pads a triangle's 4th side)
     side_shift: np.ndarray  # (P,4) int8: the patch's level less its side's edge's level
-    is_quad: np.ndarray  # (P,) bool: Catmull-Clark quad (else Loop triangle)
     n_edges: int
     level0: np.ndarray  # (P,) int8: L0 of the patch's object
     material: np.ndarray  # (P,) int32 material of the base face (-1 none)
@@ -131,6 +133,16 @@ class PatchTable:
     @property
     def n_patches(self) -> int:
         return len(self.face)
+
+    @property
+    def regular(self) -> np.ndarray:
+        """(P,) bool: a regular bicubic patch (``patch_type`` CATMARK_REGULAR)."""
+        return self.patch_type == CATMARK_REGULAR
+
+    @property
+    def is_quad(self) -> np.ndarray:
+        """(P,) bool: a Catmull-Clark quad (else a Loop triangle)."""
+        return self.patch_type != LOOP
 
 
 def patch_level(cage) -> int:
@@ -465,11 +477,10 @@ def _object_arrays(cage, L0, lev, pts, faces, F, j, oid, first_edge, quad, regul
         ray_max=ray_max,
         edge_bound=ebound,
         rate=rate,
-        regular=regular,
+        patch_type=patch_types(quad, regular),
         nets=nets,
         edges=edges,
         side_shift=np.zeros((n, 4), np.int8),
-        is_quad=np.full(n, quad, dtype=bool),
         level0=np.full(n, L0, np.int8),
         material=material,
     )

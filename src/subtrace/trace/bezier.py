@@ -32,10 +32,8 @@ from subtrace.trace.prims import (
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, M_CELLS, M_FULL, M_NETS, M_NODES, NOT_YET,
     new_node, push_sorted, ray_triangle,
 )
-from subtrace.patches.groups import GROUP
-from subtrace.trace.tris import (
-    LOOP_CELL, TRI, intersect_tri, intersect_tri_cell, slab_cut_entry,
-)
+from subtrace.geometry.kinds import CELL, GROUP, LOOP_CELL, TRI
+from subtrace.trace.tris import intersect_tri, intersect_tri_cell, slab_cut_entry
 
 # samples per cell side at most (2^(side depth - depth)): neighbours are kept within
 # config.FAN_LEVELS of each other (patches/criterion.py: edge_sampling, trace/pools.py)
@@ -664,7 +662,7 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop, stop):
                 intersect_tri_cell(ray, cells, ref[it], i0[it], j0[it],
                                    np.int64(iso.orient[it]), depth, slack, hit, code, it)
             continue
-        if kind[it] == 1:  # an irregular cell: its exact corners
+        if kind[it] == CELL:  # an irregular cell: its exact corners
             c = ref[it]
             _corner_params(lp, i0[it], j0[it], inv)
             tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, cells, 4 * c, 4 * c + 1, 4 * c + 2,

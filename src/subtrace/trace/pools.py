@@ -27,7 +27,8 @@ import numpy as np
 from subtrace import config
 from subtrace.accel.projection import TILE
 from subtrace.patches.basis import BOX_PAD, net_bounds
-from subtrace.patches.groups import GROUP, grouped_layout
+from subtrace.geometry.kinds import BEZIER, CELL, GROUP, LOOP_CELL, TRI
+from subtrace.patches.groups import grouped_layout
 from subtrace.patches.isolate import item_sides, packed_order, rows_in_order
 from subtrace.trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
 from subtrace.trace.prims import (
@@ -35,7 +36,7 @@ from subtrace.trace.prims import (
 )
 from subtrace.runtime.memory import one_block, small_pages
 from subtrace.patches.isolate_loop import sample_ranges, side_samples
-from subtrace.trace.tris import LOOP_CELL, TRI, tri_nets_as_pieces
+from subtrace.trace.tris import tri_nets_as_pieces
 
 CANDIDATES = 4  # unbuilt shells a ray remembers between rounds (more: it traverses again)
 
@@ -322,7 +323,7 @@ class Pieces(Growable):
         hi = np.concatenate([hi_s, c_hi])[order]
         i_start, first, count = self._put_grouped(
             root[order], None,
-            kind=np.r_[np.zeros(len(sr), np.int8), np.ones(len(cr), np.int8)][order],
+            kind=np.r_[np.full(len(sr), BEZIER, np.int8), np.full(len(cr), CELL, np.int8)][order],
             ref=np.r_[n0 + np.arange(len(sr)), c0 + np.arange(len(cr))][order],
             level=level, i0=i0, j0=j0, depth_i=depth_i, side=item_side, lo=lo, hi=hi,
             orient=np.ones(len(root), np.int8))
@@ -340,7 +341,7 @@ class Pieces(Growable):
         z = np.zeros(m, np.int64)
         ar = np.arange(m, dtype=np.int64)
         n0 = 0 if nets is None else self.put("nets", nets=nets)
-        i_start = self.put("items", kind=np.zeros(m, np.int8), ref=n0 + ar, level=z, i0=z,
+        i_start = self.put("items", kind=np.full(m, BEZIER, np.int8), ref=n0 + ar, level=z, i0=z,
                            j0=z, depth_i=depth, side=side, lo=lo, hi=hi,
                            orient=np.ones(m, np.int8))
         s0 = self.put("slots", patch=patches, first=i_start + ar, count=np.ones(m, np.int64),

@@ -27,7 +27,7 @@ from subtrace.trace.build import build_loop_regular, build_requested, cut_to_loo
 from subtrace.trace.kernels import trace_round
 from subtrace.trace.pools import Hits, Memos, Pieces, candidate_lists, round_arrays
 from subtrace.trace.rays import compile_kernel as compile_secondary
-from subtrace.trace.tris import TRI
+from subtrace.geometry.kinds import TRI
 
 
 def _shell_walk(chosen, frame, width, height, accel, max_memory, stats, image=None):

@@ -77,8 +77,6 @@ from subtrace.trace.prims import (
     new_node, push_sorted, ray_triangle,
 )
 
-TRI = 2  # item kind of a Loop net (a regular patch, or a piece) in ``trace.pools.Pieces``
-LOOP_CELL = 3  # item kind of a cell of exact limit points of an isolated Loop patch
 COUNTED = -3  # memo root of a one-cell patch whose triangle was counted (as bezier's)
 DEVIATION = 2.5  # a node's box: its corners' grown by this times its net's second differences
 SLAB_PAD = 1e-11  # a node's slab is widened by this much of its corners' largest coordinate
