@@ -19,7 +19,7 @@ from subtrace.accel.projection import TILE
 from subtrace.camera import CameraWindow
 from subtrace.errors import SceneError
 from subtrace.io.limits import check_coordinates, check_valences
-from subtrace.mesh.cage import load_cage, valence_bound, without_unused_vertices
+from subtrace.mesh.cage import load_cage, placed, valence_bound, without_unused_vertices
 from subtrace.nurbs.scene import has_faces, has_surfaces
 from subtrace.patches.table import build_patch_table, cage_face_shells, restrict
 from subtrace.picture import ground_plane, ground_shadow_points
@@ -42,8 +42,8 @@ def load_objects(scene):
     is the file's)."""
     cages = []
     for o in (scene.objects[k] for k in cage_objects(scene)):
-        c = load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code, prim=o.prim,
-                      time=o.time)
+        c = placed(load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code, prim=o.prim,
+                             time=o.time), o.transform)
         check_coordinates(c.path, c.points, config.MAX_COORDINATE, c.points_box)
         cages.append(without_unused_vertices(c))
     return cages

@@ -88,6 +88,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from subtrace.errors import SceneError, show_value
+from subtrace.io import placement
 from subtrace.io.text import decode, read_bytes
 from subtrace.io.obj import BOUNDARY_EDGE_AND_CORNER, BOUNDARY_EDGE_ONLY, BOUNDARY_NONE
 from subtrace.io.usd import is_usd, usd_scene_table
@@ -130,7 +131,8 @@ BOUNDARIES = {
 }
 
 _TOP_KEYS = ("object", "camera", "render", "light", "ground", "output", "preview")
-_OBJECT_KEYS = ("mesh", "prim", "scheme", "boundary", "color", "specular", "shininess")
+_OBJECT_KEYS = ("mesh", "prim", "scheme", "boundary", "color", "specular", "shininess",
+                *placement.KEYS)
 _CAMERA_KEYS = ("eye", "target", "up", "fov", "width", "height")
 _RENDER_KEYS = ("tolerance", "tolerance_deg", "background", "headlight", "headlight_intensity",
                 "max_memory", "shadows", "transparent", "samples", "ao")
@@ -168,6 +170,8 @@ class SceneObject:
     specular: tuple[float, float, float] | None = None  # Ks; None: OBJ materials
     shininess: float | None = None  # Ns; None: OBJ materials
     time: float | None = None  # a USD stage's time code; None: its still (io/usd.py)
+    # where it stands: a 4x4 affine matrix as rows (p' = M [p, 1]); None: as the file has it
+    transform: tuple | None = None
 
     @property
     def boundary_code(self) -> int | None:
@@ -437,8 +441,32 @@ def _objects(ctx, d: dict, base_dir: str) -> tuple[SceneObject, ...]:
         if "color" in table:
             color = ctx.color(where + ("color",), table["color"])
         objects.append(SceneObject(mesh=mesh, scheme=scheme, boundary=boundary, color=color,
-                                   prim=prim, specular=specular, shininess=shininess))
+                                   prim=prim, specular=specular, shininess=shininess,
+                                   transform=_placement(ctx, where, table)))
     return tuple(objects)
+
+
+def _placement(ctx, where, table):
+    """The object's 4x4 matrix of its placement keys (``io.placement``), as rows; None
+    without any."""
+    given = [k for k in placement.KEYS if k in table]
+    if not given:
+        return None
+    if "matrix" in given and len(given) > 1:
+        other = next(k for k in given if k != "matrix")
+        raise ctx.error(where + (other,), f"give an object either a matrix or "
+                        f"translate / rotate / orient / scale, not both ({other} and matrix)")
+    if "rotate" in given and "orient" in given:
+        raise ctx.error(where + ("orient",), "give an object either rotate (angles) or "
+                        "orient (a quaternion), not both")
+    checks = {"translate": placement.check_translate, "rotate": placement.check_rotate,
+              "orient": placement.check_orient, "scale": placement.check_scale,
+              "matrix": placement.check_matrix}
+    parts = {k: ctx.call(where + (k,), checks[k], table[k]) for k in given}
+    if "matrix" in parts:
+        return placement.as_tuple(parts["matrix"])
+    return placement.as_tuple(placement.compose(
+        parts.get("translate"), parts.get("rotate", parts.get("orient")), parts.get("scale")))
 
 
 def _prim_path(value, key):

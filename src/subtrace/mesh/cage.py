@@ -17,7 +17,7 @@ a restriction that keeps enough rings of faces around the faces it is for
 from __future__ import annotations
 
 import contextlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -432,6 +432,19 @@ def without_unused_vertices(cage: Cage) -> Cage:
     if used.all():
         return cage
     return cage.restricted(np.ones(cage.n_faces, bool))
+
+
+def placed(cage: Cage, matrix) -> Cage:
+    """``cage`` with its points mapped by the 4x4 affine ``matrix`` (``io.placement``; None:
+    ``cage`` itself): the same faces, tags and materials, so its limit surface is the
+    cage's own, mapped (subdivision commutes with affine maps). Its topology, built or
+    not, is shared."""
+    if matrix is None:
+        return cage
+    from subtrace.io.placement import place
+
+    keep = {k: v for k, v in cage._cache.items() if k == "base"}
+    return replace(cage, points=place(cage.points, matrix), _cache=keep)
 
 
 def valence_bound(cage: Cage) -> np.ndarray:

@@ -25,7 +25,7 @@ import os
 import re
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -33,6 +33,7 @@ from subtrace import config
 from subtrace.errors import SubtraceWarning
 from subtrace.io.limits import check_coordinates
 from subtrace.io.meshes import is_mesh_file
+from subtrace.io.placement import place
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material, read_obj, read_obj_bytes
 from subtrace.io.usd import is_usd
 from subtrace.nurbs.freeform import freeform_of
@@ -132,6 +133,8 @@ def load_nurbs(scene, quiet: bool = False) -> NurbsScene | None:
             if quiet or has_faces(obj.mesh):  # the cage's load warns once already
                 warnings.simplefilter("ignore", SubtraceWarning)
             data = read_obj(obj.mesh)
+        if obj.transform is not None:  # (the weights are apart from the points: affine)
+            data = replace(data, points=place(data.points, obj.transform))
         freeform = freeform_of(data)
         if freeform is None:
             continue
