@@ -150,9 +150,11 @@ def edge_sampling(table, depths):
       refined past its sharpness, :func:`~subtrace.patches.crease.cell_free_depths`) is
       made only of Bezier pieces, which fan as a regular patch does: a neighbour finer
       than it raises it to that depth at most (where it has no cell), then to within
-      ``config.FAN_LEVELS``. (Raising every irregular patch to its neighbours' depths
-      carried the deepest depth of a crease's corner along every patch of the crease: the
-      chess pieces' creased patches were refined to depth 7, their own needs 3 to 5.)
+      ``config.FAN_LEVELS``. (Raising it to its neighbours' depths carried a crease's
+      deepest patch along the crease; on OpenSubdiv's car body this rule makes 30k fewer
+      micro-triangles of 343k. The chess pieces' depths are still carried along by their
+      cell-bearing extraordinary, boundary and crossing-crease patches: 776 of their
+      2,823 irregular patches end at depth 7, most needing 3 to 4.)
     * A regular patch (intersected directly) samples a side shared with a finer neighbour at
       the neighbour's depth, fanning its cells there; it is raised to within
       ``config.FAN_LEVELS`` of its finest neighbour, so a cell side carries at most
