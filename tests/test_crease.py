@@ -367,8 +367,9 @@ def test_the_kernels_chunks_and_threads_change_nothing(name, tori, monkeypatch):
 
 
 def _pairwise_sides(first, count, level, i0, j0, depth, patch_side):
-    """item_sides' rule as it was first written: every pair of pieces sharing a stretch of
-    a line takes the deeper sampling of the two, until nothing changes."""
+    """item_sides' rule as it was first written: a piece's side on a side of its patch is
+    sampled as the patch samples it; inside, every pair of pieces sharing a stretch of a
+    line takes the deeper sampling of the two, until nothing changes."""
     out = np.zeros((len(level), 4), np.int64)
     for p in range(len(first)):
         items = range(first[p], first[p] + count[p])
@@ -379,8 +380,8 @@ def _pairwise_sides(first, count, level, i0, j0, depth, patch_side):
             u0, v0, sc = box[a]
             out[a] = depth[a]
             for k, on in enumerate((v0 == 0, u0 + sc == 1 << top, v0 + sc == 1 << top, u0 == 0)):
-                if on:
-                    out[a, k] = max(out[a, k], patch_side[p, k])
+                if on:  # (a patch side: as the patch samples it, finer or coarser)
+                    out[a, k] = patch_side[p, k]
         changed = True
         while changed:
             changed = False
@@ -447,10 +448,11 @@ def test_cell_free_depths_count_the_levels_until_the_creases_run_out(name, tori)
     np.testing.assert_array_equal(free[ok], np.ceil(s - 1e-6).astype(np.int64))
 
 
-def test_a_patch_past_its_creases_fans_instead_of_rising(tori):
-    """edge_sampling raises a patch along a crease to a finer neighbour's depth only while
-    its isolation leaves cells (below its cell-free depth, and never past it); past it, the
-    patch keeps its depth (within FAN_LEVELS) and samples that side at the neighbour's."""
+def test_a_patch_with_cells_keeps_its_depth_and_a_finer_neighbour_snaps(tori):
+    """edge_sampling never raises a patch along a crease while its isolation leaves cells
+    (below its cell-free depth): its finer neighbour samples their edge at its depth
+    (snapped, ``trace/snap.py``). Past its creases the patch fans: it keeps its depth
+    (within FAN_LEVELS) and samples that side at the neighbour's."""
     from subtrace import config
     from subtrace.patches.criterion import edge_sampling
 
@@ -460,22 +462,26 @@ def test_a_patch_past_its_creases_fans_instead_of_rising(tori):
     free = crease.cell_free_depths(o.level, o.cage.options, table.face[iso])
     p = int(iso[np.argmax(free < crease.CELLS_AT_ANY_DEPTH)])
     L = int(free[iso == p][0])
+    assert L >= 2
     k = int(np.nonzero(table.edges[p] >= 0)[0][0])
     share = (table.edges == table.edges[p, k])
     q = int(np.nonzero(share.any(axis=1) & (np.arange(table.n_patches) != p))[0][0])
-    deep = L + config.FAN_LEVELS - 1 + int(table.side_shift[p, k])
-    for start, expected in ((L, L), (L - 1, L)):  # past its creases; just before them
+    kq = int(np.nonzero(share[q])[0][0])
+    assert table.side_shift[p, k] == table.side_shift[q, kq] == 0
+    deep = L + config.FAN_LEVELS - 1
+    # past its creases: it fans
+    depths = np.zeros(table.n_patches, np.int32)
+    depths[p], depths[q] = L, deep
+    _, side = edge_sampling(table, depths)
+    assert depths[p] == L and depths[q] == deep
+    assert side[p, k] == side[q, kq] == deep
+    # with cells: it keeps its depth, the neighbour snaps onto it
+    for start in (L - 1, L - 2):
         depths = np.zeros(table.n_patches, np.int32)
         depths[p], depths[q] = start, deep
         _, side = edge_sampling(table, depths)
-        assert depths[p] == expected, (start, depths[p])
-        # (in the patch's units: the neighbour's depth in the edge's, less the side's shift)
-        assert side[p, k] >= deep + int(table.side_shift[q, np.nonzero(share[q])[0][0]]) \
-            - int(table.side_shift[p, k])
-    depths = np.zeros(table.n_patches, np.int32)
-    depths[p], depths[q] = L - 2, L - 1  # a neighbour finer, but before the creases end
-    edge_sampling(table, depths)
-    assert depths[p] >= L - 1
+        assert depths[p] == start and depths[q] == deep
+        assert side[p, k] == side[q, kq] == start
 
 
 # ------------------------------------------------------------------------------------------

@@ -142,27 +142,24 @@ def edge_sampling(table, depths):
     """Make both sides of every edge sample it alike (design invariant 4); raises ``depths``
     in place and returns ``(edge_depth, side)``.
 
-    * An irregular Catmull-Clark patch (built into pieces, ``patches/isolate.py``) whose
-      isolation leaves cells of exact limit points at its depth (which sample their sides
-      at that depth alone) is raised to the depth of every neighbour, repeatedly, so it is
-      never coarser than a neighbour and equal to its irregular neighbours of that kind.
-    * One whose isolation leaves no cell at its depth (a patch along semi-sharp creases
-      refined past its sharpness, :func:`~subtrace.patches.crease.cell_free_depths`) is
-      made only of Bezier pieces, which fan as a regular patch does: a neighbour finer
-      than it raises it to that depth at most (where it has no cell), then to within
-      ``config.FAN_LEVELS``. (Raising it to its neighbours' depths carried a crease's
-      deepest patch along the crease; on OpenSubdiv's car body this rule makes 30k fewer
-      micro-triangles of 343k. The chess pieces' depths are still carried along by their
-      cell-bearing extraordinary, boundary and crossing-crease patches: 776 of their
-      2,823 irregular patches end at depth 7, most needing 3 to 4.)
-    * A regular patch (intersected directly) samples a side shared with a finer neighbour at
-      the neighbour's depth, fanning its cells there; it is raised to within
-      ``config.FAN_LEVELS`` of its finest neighbour, so a cell side carries at most
-      ``2^FAN_LEVELS`` samples.
+    * An edge beside an irregular Catmull-Clark patch whose isolation leaves cells of exact
+      limit points at its depth (their sides have no points but their corners: they cannot
+      fan) is sampled at the coarsest such patch's depth on it; every patch beside it that
+      is finer snaps its side onto that polyline (``trace/snap.py``), every coarser one
+      (which fans) is raised to within ``config.FAN_LEVELS`` of it. Such patches are never
+      raised. (Raising them to the depth of every neighbour, repeatedly, carried a
+      crease's deepest patch along the crease: the chess pieces' cell-bearing
+      extraordinary, boundary and crossing-crease patches, 776 of 2,823 irregular ones,
+      ended at depth 7, most needing 3 to 4.)
+    * Any other edge is sampled at the finest patch's depth on it: a patch of Bezier pieces
+      alone (a regular patch, intersected directly, or an irregular one refined past its
+      semi-sharp creases, :func:`~subtrace.patches.crease.cell_free_depths`) fans its
+      cells there and is raised to within ``config.FAN_LEVELS`` of it, so a cell side
+      carries at most ``2^FAN_LEVELS`` samples.
     * Loop grids snap a side to the coarsest depth on its edge (``edge_depth``, per edge).
 
-    ``side`` (P,4): how finely each patch samples each of its sides, its own depth or its
-    deepest neighbour's there (the cell-bearing irregular ones: their depth).
+    ``side`` (P,4): the depth at which each patch samples each of its sides, in its own
+    units (its depth where the side has no neighbour).
 
     Depths compare in the units of the edge: a patch of level 1 whose side lies on a side
     of a cage quad patch (``table.side_shift`` 1) samples half of that cage edge, so its
@@ -170,11 +167,11 @@ def edge_sampling(table, depths):
     """
     n_e = max(table.n_edges, 1)
     iso = table.is_quad & ~table.regular
-    nb_max = np.empty(table.edges.shape, dtype=np.int64)
+    target = np.empty(table.edges.shape, dtype=np.int64)
     edge_depth = np.empty(n_e, dtype=np.int64)
     _sample_edges(table.edges, table.side_shift, depths, iso, table.regular,
-                  cell_free(table, iso), config.FAN_LEVELS, nb_max, edge_depth)
-    side = np.maximum(depths.astype(np.int64)[:, None], nb_max)
+                  cell_free(table, iso), config.FAN_LEVELS, target, edge_depth)
+    side = np.where(target >= 0, target, depths.astype(np.int64)[:, None])
     return edge_depth, np.ascontiguousarray(side, dtype=np.int64)
 
 
@@ -193,35 +190,55 @@ def cell_free(table, iso):
 
 
 @nb.njit(cache=True, nogil=True)
-def _sample_edges(edges, shift, depths, iso, regular, cell_free, fan_levels, nb_max,
+def _sample_edges(edges, shift, depths, iso, regular, cell_free, fan_levels, target,
                   edge_depth):
-    """Raise the ``iso`` patches to their neighbours' depths (but not past ``cell_free``,
-    from where they have no cells) and the ``regular`` ones and the iso ones at or past
-    ``cell_free`` to within ``fan_levels`` of them until none changes (in place); fill the
-    deepest patch on each side's edge (``nb_max``, in the patch's units) and the
-    shallowest per edge (in the edge's: a patch's depth plus its side's ``shift``)."""
+    """Raise the patches that fan (``regular`` ones, and ``iso`` ones at or past
+    ``cell_free``, from where they have no cells) to within ``fan_levels`` of their edges'
+    sampling until none changes (in place): an edge is sampled at the shallowest depth of
+    the ``iso`` patches on it that keep cells (never raised), or where there is none at the
+    deepest depth on it. Fill each side's sampling (``target``, in the patch's units; -1
+    where the side has no edge) and the shallowest depth per edge (``edge_depth``, in the
+    edge's: a patch's depth plus its side's ``shift``)."""
     # (np.empty and a fill, a constant for int32's largest: a cold render compiles neither
     # np.full nor np.iinfo for this kernel alone)
     best = np.empty(len(edge_depth), np.int64)
     best[:] = -1
+    cells = np.empty(len(edge_depth), np.int64)  # the shallowest cell-bearing patch
+    cells[:] = INT32_MAX
+    # a cell-bearing patch samples its edge at least as finely as the half side of a
+    # patch of level 1 beside it can (depth 0 there): the only time one is raised
     for p in range(len(depths)):
         for k in range(4):
             e = edges[p, k]
             if e >= 0:
+                best[e] = max(best[e], shift[p, k])
+    for p in range(len(depths)):
+        if iso[p] and depths[p] < cell_free[p]:
+            for k in range(4):
+                e = edges[p, k]
+                if e >= 0:
+                    depths[p] = max(depths[p], best[e] - shift[p, k])
+    best[:] = -1
+    for p in range(len(depths)):
+        keeps = iso[p] and depths[p] < cell_free[p]
+        for k in range(4):
+            e = edges[p, k]
+            if e >= 0:
                 best[e] = max(best[e], depths[p] + shift[p, k])
+                if keeps:
+                    cells[e] = min(cells[e], depths[p] + shift[p, k])
     changed = True
     while changed:
         changed = False
         for p in range(len(depths)):
-            if not (iso[p] or regular[p]):
+            if not (regular[p] or (iso[p] and depths[p] >= cell_free[p])):
                 continue
             m = depths[p]
-            fans = regular[p] or depths[p] >= cell_free[p]
             for k in range(4):
                 e = edges[p, k]
                 if e >= 0:
-                    b = best[e] - shift[p, k]
-                    m = max(m, b - fan_levels if fans else min(b, cell_free[p]))
+                    b = cells[e] if cells[e] < INT32_MAX else best[e]
+                    m = max(m, b - shift[p, k] - fan_levels)
             if m > depths[p]:
                 depths[p] = m
                 changed = True
@@ -233,6 +250,9 @@ def _sample_edges(edges, shift, depths, iso, regular, cell_free, fan_levels, nb_
     for p in range(len(depths)):
         for k in range(4):
             e = edges[p, k]
-            nb_max[p, k] = best[e] - shift[p, k] if e >= 0 else -1
             if e >= 0:
+                b = cells[e] if cells[e] < INT32_MAX else best[e]
+                target[p, k] = b - shift[p, k]
                 edge_depth[e] = min(edge_depth[e], depths[p] + shift[p, k])
+            else:
+                target[p, k] = -1

@@ -469,8 +469,9 @@ def _item_sides(task, n_tasks, first, count, level, i0, j0, depth, patch_side, o
     depths: patch ``p``'s pieces are ``first[p] .. first[p] + count[p] - 1`` (dyadic squares
     at ``level``, origin ``i0, j0``, grid ``depth``, all in the patch's units); ``out`` (n,4)
     receives, per side (0: v = v0, 1: u = u1, 2: v = v1, 3: u = u0), the deepest grid among
-    the pieces that share a stretch of it (itself included), and at least ``patch_side[p, k]``
-    on the patch's side k. A large piece's side spans several small pieces, which must then
+    the pieces that share a stretch of it (itself included), and ``patch_side[p, k]`` on
+    the patch's side k (finer than the piece's grid: a fan; coarser: a snapped side,
+    ``trace/snap.py``). A large piece's side spans several small pieces, which must then
     all sample their stretches as the large one does: so the sides along one line of the
     patch that overlap, directly or through others, all take the deepest of them. Per
     line, its sides in order along it (sorted: n log n a patch; comparing every pair of
@@ -489,14 +490,15 @@ def _item_sides(task, n_tasks, first, count, level, i0, j0, depth, patch_side, o
             u0, v0 = i0[a] * sc, j0[a] * sc
             for k in range(4):
                 out[a, k] = depth[a]
+            # (a patch side is sampled as the patch's: finer, a fan; coarser, snapped)
             if v0 == 0:
-                out[a, 0] = max(out[a, 0], patch_side[p, 0])
+                out[a, 0] = patch_side[p, 0]
             if u0 + sc == full:
-                out[a, 1] = max(out[a, 1], patch_side[p, 1])
+                out[a, 1] = patch_side[p, 1]
             if v0 + sc == full:
-                out[a, 2] = max(out[a, 2], patch_side[p, 2])
+                out[a, 2] = patch_side[p, 2]
             if u0 == 0:
-                out[a, 3] = max(out[a, 3], patch_side[p, 3])
+                out[a, 3] = patch_side[p, 3]
         if c == 0:
             continue
         line = np.empty(2 * c, np.int64)  # per side: its line, its stretch along it,

@@ -14,7 +14,10 @@ evaluated from the patch's net at the dyadic parameters ``(i/N, j/N)`` by one fu
 A cell on a side whose neighbour samples the shared edge more finely (``side_depth`` > d)
 also evaluates those samples and is cut into a fan around its centre, so both patches have
 the same points on the edge (no T-junction). The cell's points lie on the surface of the
-cell, inside its box; boxes are widened by a relative ``BOX_PAD`` for rounding.
+cell, inside its box; boxes are widened by a relative ``BOX_PAD`` for rounding. A side
+sampled more coarsely (beside cells of exact limit points, which cannot fan) is snapped: its
+vertices are moved onto the coarse polyline, and the nodes touching it widened
+(``trace/snap.py``).
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from subtrace.trace.prims import (
     new_node, push_sorted, ray_triangle,
 )
 from subtrace.geometry.kinds import CELL, GROUP, LOOP_CELL, TRI
+from subtrace.trace.snap import snapped_point, snaps, touches as _touches_snapped, widen_node
 from subtrace.trace.tris import intersect_tri, intersect_tri_cell, slab_cut_entry
 
 # samples per cell side at most (2^(side depth - depth)): neighbours are kept within
@@ -333,33 +337,59 @@ def _cell_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, box, slab, c, tmax):
 @leaf_njit
 def _fan_samples(i, j, depth, root_depth, sides, srow):
     """Whether cell (i, j) of a piece's depth-``depth`` grid (``root_depth`` in the patch's
-    units) lies on a side of the piece sampled more finely than its grid (``sides[srow]``,
-    where the piece beside it is finer): then it is cut into a fan."""
+    units) lies on a side of the piece sampled otherwise than its grid (``sides[srow]``):
+    more finely (the piece beside it is finer: the cell is cut into a fan) or more coarsely
+    (a snapped side, ``trace/snap.py``: its corners there are moved onto the polyline)."""
     N = 1 << depth
-    return ((j == 0 and sides[srow, 0] > root_depth)
-            or (i == N - 1 and sides[srow, 1] > root_depth)
-            or (j == N - 1 and sides[srow, 2] > root_depth)
-            or (i == 0 and sides[srow, 3] > root_depth))
+    return ((j == 0 and sides[srow, 0] != root_depth)
+            or (i == N - 1 and sides[srow, 1] != root_depth)
+            or (j == N - 1 and sides[srow, 2] != root_depth)
+            or (i == 0 and sides[srow, 3] != root_depth))
+
+
+@leaf_njit
+def _snapped_cells(ci, cj, pd, root_depth, sides, srow):
+    """The mask (bit ``a + 2 b``) of the cells (2 ci + a, 2 cj + b) of a block of a piece's
+    depth-``pd`` grid that lie on a side it snaps (``sides[srow, k] < root_depth``): their
+    triangles may leave the block's frame, so every ray that enters the block tests them."""
+    N = 1 << pd
+    mask = 0
+    for q in range(4):
+        i = 2 * ci + (q & 1)
+        j = 2 * cj + (q >> 1)
+        if ((j == 0 and sides[srow, 0] < root_depth)
+                or (i == N - 1 and sides[srow, 1] < root_depth)
+                or (j == N - 1 and sides[srow, 2] < root_depth)
+                or (i == 0 and sides[srow, 3] < root_depth)):
+            mask |= 1 << q
+    return mask
 
 
 @leaf_njit
 def _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, i, j, depth, oi, oj, root_depth,
-          sides, srow, slack, hit, code, item, lv, lp):
+          sides, srow, slack, hit, code, item, lv, lp, snap, samples):
     """Intersect cell (i, j) of the depth-``depth`` grid of Bezier net ``nets[nk]``, which
     covers the cells from (oi, oj) of its root patch's depth-``root_depth`` grid; update
     ``hit`` (H_SLOT = ``code``, H_TRI = ``item``, (H_B1, H_B2) = root parameter). ``lv``
-    (K,3) / ``lp`` (K,2): scratch for the cell's points and root parameters. Returns the
-    number of triangles tested."""
+    (K,3) / ``lp`` (K,2): scratch for the cell's points and root parameters. Its corners on
+    a side the piece snaps are the polyline's (``snap``, ``samples``: ``trace/snap.py``).
+    Returns the number of triangles tested."""
     N = 1 << depth
     inv = 1.0 / N
     rinv = 1.0 / (1 << root_depth)
     gi = oi + i
     gj = oj + j
+    snapping = snaps(sides, srow, root_depth)
     n = 0
     for corner in range(4):
         di = 1 if corner == 1 or corner == 2 else 0
         dj = 1 if corner >= 2 else 0
-        x, y, z = _bez_point(nets, nk, (i + di) * inv, (j + dj) * inv)
+        on = False
+        if snapping:
+            on, x, y, z = snapped_point(gi + di, gj + dj, root_depth, sides, srow, snap,
+                                        samples)
+        if not on:
+            x, y, z = _bez_point(nets, nk, (i + di) * inv, (j + dj) * inv)
         lv[n, 0], lv[n, 1], lv[n, 2] = x, y, z
         lp[n, 0], lp[n, 1] = (gi + di) * rinv, (gj + dj) * rinv
         n += 1
@@ -442,12 +472,15 @@ def tri_pair(ox, oy, oz, kx, ky, kz, sx, sy, sz, lv, v0, v1, v2, v3, lp, slack, 
 @leaf_njit
 def _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, src, s, lev0, ci0, cj0, nets, nk,
              depth, oi, oj, root_depth, sides, srow, slack, hit, code, item, work, st, st_t,
-             st0, tmp_t, order, lv, lp):
+             st0, tmp_t, order, lv, lp, snap, samples):
     """Closest hit on the sub-patch ``src[s]`` (cell (ci0, cj0) of level ``lev0`` of the
     Bezier patch ``nets[nk]``) refined down to level ``depth``, splitting per ray and storing
     nothing. ``work`` (>= 3*depth+7, 4,4,3) holds the stacked nets (the last six are
     scratch), rows ``st0 ..`` of ``st`` their cell coordinates and levels (columns 2, 3, 4)
-    and of ``st_t`` their entry distances. Returns the number of triangles tested."""
+    and of ``st_t`` their entry distances. A child on a side the piece snaps is entered
+    untested (its snapped points may leave its net's box). Returns the number of triangles
+    tested."""
+    snapping = snaps(sides, srow, root_depth)
     tested = 0
     _copy_net(work, 0, src, s)
     st[st0, 2] = ci0
@@ -463,13 +496,20 @@ def _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, src, s, lev0, ci0, 
         ci, cj, lev = st[st0 + sp, 2], st[st0 + sp, 3], st[st0 + sp, 4]
         if lev == depth:
             tested += _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, ci, cj, depth, oi, oj,
-                            root_depth, sides, srow, slack, hit, code, item, lv, lp)
+                            root_depth, sides, srow, slack, hit, code, item, lv, lp, snap,
+                            samples)
             continue
         _split(work, sp, work, base)
         # the children the ray enters, pushed far to near
         n = 0
+        h = 1 << (depth - lev - 1)
         for q in range(4):
-            te = _net_entry(ox, oy, oz, ix, iy, iz, work, base + q, hit[H_T])
+            if snapping and _touches_snapped(oi + (2 * ci + (q & 1)) * h,
+                                             oj + (2 * cj + (q >> 1)) * h, h, root_depth,
+                                             sides, srow):
+                te = st_t[st0 + sp]
+            else:
+                te = _net_entry(ox, oy, oz, ix, iy, iz, work, base + q, hit[H_T])
             if te < np.inf:
                 n = push_sorted(tmp_t, order, n, te, q)
         for e in range(n):
@@ -544,14 +584,16 @@ def _store_row(m_cells, r, nets, nk, bi, bj, b, depth):
 
 @leaf_njit
 def _expand(node, parent, ci, cj, lev, pd, child, box, slab, data, m_nets, m_cells, cnt, work,
-            bound):
+            bound, fr, sides, srow, snap, samples):
     """Split ``node`` (cell (ci, cj) of level ``lev`` < pd - 1 of a piece of depth ``pd``):
     get its net (stored, or the quadrant of its parent's) and create its four children with
     their boxes (and slabs, for blocks: level pd - 1); its net is kept if its children will
     be split in turn, else its blocks' frames (:func:`_store_frame`). ``bound``: keep the
     node's own :func:`_interpolation_bound` in its slab row (an inner node has no slab;
-    any-hit rays test its frame, :func:`_covers`). Returns the first child, or -1 when a
-    store is full."""
+    any-hit rays test its frame, :func:`_covers`). ``fr`` = (oi, oj, root_depth, snapping):
+    the piece's place in its patch's grid and whether it snaps a side; a child touching
+    one gets the box and slab of :func:`~subtrace.trace.snap.widen_node`. Returns the first
+    child, or -1 when a store is full."""
     if (cnt[M_NODES] + 4 > len(child) or cnt[M_NETS] + 1 > len(m_nets)
             or cnt[M_CELLS] + FRAME_UNITS > len(m_cells) // 4):
         cnt[M_FULL] = 1
@@ -570,11 +612,16 @@ def _expand(node, parent, ci, cj, lev, pd, child, box, slab, data, m_nets, m_cel
     if lev + 2 == pd:  # (its net is not needed again: its data holds the frames)
         data[node] = _store_frame(src, s, work, base, m_cells, cnt)
     first = cnt[M_NODES]
+    oi, oj, root_depth, snapping = fr
+    h = 1 << (pd - lev - 1)
     for q in range(4):
         lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(work, base + q)
         m = new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, NOT_YET)
         if lev + 2 == pd or bound:  # a block (or an any-hit ray's node): its slab too
             _cell_slab(work, base + q, slab, m)
+        if snapping:
+            widen_node(box, slab, m, oi + (2 * ci + (q & 1)) * h, oj + (2 * cj + (q >> 1)) * h,
+                       h, root_depth, sides, srow, snap, samples)
     child[node] = first
     return first
 
@@ -630,6 +677,7 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop, stop):
     i0, j0, lo, hi = iso.i0, iso.j0, iso.lo, iso.hi
     nets, cells = iso.nets, iso.cells
     first, count = iso.first[s], iso.count[s]
+    snap, samples = iso.snap[s], iso.samples  # (the slot's snapped sides: trace/snap.py)
     code = -2.0 - p
     tested = 0
     # (for _block_cells: the origin's coordinates in the ray's frame, and its rounding)
@@ -672,11 +720,12 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop, stop):
         pd = depth - level[it]  # the piece's own grid depth
         oi = i0[it] << pd
         oj = j0[it] << pd
+        snapping = snaps(item_side, it, depth)
         node = root_m[it]
         if node < 0:
             if pd == 0:  # a one-cell piece: its cell (counted once per thread)
                 n_t = _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, 0, 0, 0, oi, oj, depth,
-                            item_side, it, slack, hit, code, it, lv, lp)
+                            item_side, it, slack, hit, code, it, lv, lp, snap, samples)
                 if node == NOT_YET:
                     tested += n_t
                     root_m[it] = COUNTED
@@ -687,7 +736,7 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop, stop):
                 tested += _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, nets, nk,
                                    zero, zero, zero, nets, nk, pd, oi, oj, depth, item_side, it,
                                    slack, hit, code, it, work, st, st_t, zero, tmp_t, order, lv,
-                                   lp)
+                                   lp, snap, samples)
                 continue
             lo0, lo1, lo2, hi0, hi1, hi2 = _net_box(nets, nk)
             # (a root that is a block keeps no net: its corners come from nets[nk])
@@ -697,6 +746,8 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop, stop):
                 slab[node, 5] = _interpolation_bound(nets, nk, 1.0)  # bound)
             if stop > -np.inf:  # (an any-hit ray's nodes are cut by their slabs)
                 _cell_slab(nets, nk, slab, node)
+            if snapping:
+                widen_node(box, slab, node, oi, oj, 1 << pd, depth, item_side, it, snap, samples)
             root_m[it] = node
         if stop > -np.inf and _cell_entry(ox, oy, oz, ix, iy, iz, dx, dy, dz, box, slab, node,
                                           hit[H_T]) == np.inf:
@@ -735,6 +786,8 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop, stop):
                         return tested
                 near = _block_cells(px, py, pz, kx, ky, kz, sx, sy, c00, c10, c01, c11,
                                     dlt + pad_o)
+                if snapping:
+                    near |= _snapped_cells(ci, cj, pd, depth, item_side, it)
                 if near == 0:
                     continue
                 d = data[node]
@@ -753,7 +806,8 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop, stop):
                     if d < 0 or _fan_samples(gi, gj, pd, depth, item_side, it):
                         # evaluated on the spot (a fan's triangles count once per thread)
                         n_t = _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, gi, gj, pd,
-                                    oi, oj, depth, item_side, it, slack, hit, code, it, lv, lp)
+                                    oi, oj, depth, item_side, it, slack, hit, code, it, lv, lp,
+                                    snap, samples)
                     else:
                         for row in range(b, b + 2):
                             if not (d >> row) & 1:
@@ -778,12 +832,13 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop, stop):
             c = child[node]
             if c < 0:
                 c = _expand(node, parent, ci, cj, lev, pd, child, box, slab, data, m_nets,
-                            m_cells, cnt, work, stop > -np.inf)
+                            m_cells, cnt, work, stop > -np.inf, (oi, oj, depth, snapping),
+                            item_side, it, snap, samples)
                 if c < 0:  # a store is full: split per ray below this node
                     tested += _descend_node(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, node,
                                             parent, lev, ci, cj, nets, nk, pd, oi, oj, depth,
                                             item_side, it, slack, hit, code, it, mem, work, st,
-                                            st_t, sp + 1, tmp_t, order, lv, lp)
+                                            st_t, sp + 1, tmp_t, order, lv, lp, snap, samples)
                     if hit[H_T] < stop:
                         return tested
                     continue
@@ -827,15 +882,15 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop, stop):
 @leaf_njit
 def _descend_node(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, node, parent, lev, ci, cj,
                   nets, nk, pd, oi, oj, depth, sides, srow, slack, hit, code, it, mem, work, st,
-                  st_t, st0, tmp_t, order, lv, lp):
+                  st_t, st0, tmp_t, order, lv, lp, snap, samples):
     """:func:`_descend` below memo node ``node`` (whose net may not be stored: then the
     quadrant of its parent's)."""
     root_m, child, box, slab, data, m_nets, m_cells, cnt = mem
     if data[node] >= 0:
         return _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, m_nets, data[node], lev,
                         ci, cj, nets, nk, pd, oi, oj, depth, sides, srow, slack, hit, code, it,
-                        work, st, st_t, st0, tmp_t, order, lv, lp)
+                        work, st, st_t, st0, tmp_t, order, lv, lp, snap, samples)
     _quadrant(m_nets, data[parent], ci & 1, cj & 1, work, 1)  # (row 0 is _descend's)
     return _descend(ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, work, np.int64(1), lev, ci,
                     cj, nets, nk, pd, oi, oj, depth, sides, srow, slack, hit, code, it, work, st,
-                    st_t, st0, tmp_t, order, lv, lp)
+                    st_t, st0, tmp_t, order, lv, lp, snap, samples)

@@ -31,6 +31,7 @@ from subtrace.geometry.kinds import BEZIER, CELL, GROUP, LOOP_CELL, TRI
 from subtrace.patches.groups import grouped_layout
 from subtrace.patches.isolate import item_sides, packed_order, rows_in_order
 from subtrace.trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
+from subtrace.trace.snap import snap_items
 from subtrace.trace.prims import (
     M_COUNTS, M_MADE, M_PEAK_CELLS, M_PEAK_NETS, M_PEAK_NODES, memo_restart,
 )
@@ -48,6 +49,9 @@ class PieceArrays(NamedTuple):
     first: np.ndarray  # (S,) int64: first item of the slot
     count: np.ndarray  # (S,) int64: its item count
     round: np.ndarray  # (S,) int64: round it was built in (-1: from the start)
+    # (S,4) int64: first row in ``samples`` of each snapped side's samples, -1 where the
+    # side is not snapped (a Catmull-Clark patch's: ``trace/snap.py``)
+    snap: np.ndarray
     depth_i: np.ndarray  # (I,) int64: grid depth, in the patch's units
     side: np.ndarray  # (I,4) int64: sampling depth of each side, in the patch's units
     # (I,) int8: 0 Bezier piece, 1 cell, 2 (TRI) Loop triangular net, 3 (LOOP_CELL) Loop cell,
@@ -65,7 +69,9 @@ class PieceArrays(NamedTuple):
     cell_normals: np.ndarray  # (., 4, 3) float64: exact limit normals at the corners
     touched: np.ndarray  # (S,) uint8: set when a ray tests the slot
     orient: np.ndarray  # (I,) int8: a Loop item's orientation, +1 upright, -1 turned
-    samples: np.ndarray  # (., 3) float64: exact samples of isolated Loop patches' sides
+    # (., 3) float64: exact samples of snapped sides (isolated Loop patches', and the
+    # Catmull-Clark patches' of ``snap``)
+    samples: np.ndarray
     # (., 16, 3) float64: ``nets`` read as Loop items' triangular nets (trace/tris.py),
     # a view made once: a reshape in a kernel calls into Numba's runtime, and the shading
     # made one per Loop hit (1-2 % of a Loop render's samples in perf)
@@ -265,7 +271,7 @@ class Pieces(Growable):
 
     GROUPS = {
         "slots": {"patch": ((), np.int64), "first": ((), np.int64), "count": ((), np.int64),
-                  "round": ((), np.int64), "touched": ((), np.uint8)},
+                  "round": ((), np.int64), "snap": ((4,), np.int64), "touched": ((), np.uint8)},
         "items": {"kind": ((), np.int8), "ref": ((), np.int64), "level": ((), np.int64),
                   "i0": ((), np.int64), "j0": ((), np.int64), "depth_i": ((), np.int64),
                   "side": ((4,), np.int64), "lo": ((3,), np.float64),
@@ -321,14 +327,17 @@ class Pieces(Growable):
             c_hi = rows_in_order([a.max(axis=1) for a in cp], cell_at) if cp else _NO_BOX
         lo = np.concatenate([lo_s, c_lo])[order]
         hi = np.concatenate([hi_s, c_hi])[order]
+        is_cell = np.r_[np.zeros(len(sr), bool), np.ones(len(cr), bool)][order]
+        ref = np.r_[n0 + np.arange(len(sr)), c0 + np.arange(len(cr))][order]
+        # sides snapped onto a coarser neighbour's polyline (their cells' corners moved)
+        snap = self._snapped(first, count, is_cell, ref, level, i0, j0, depth_i, patch_side,
+                             lo, hi)
         i_start, first, count = self._put_grouped(
-            root[order], None,
-            kind=np.r_[np.full(len(sr), BEZIER, np.int8), np.full(len(cr), CELL, np.int8)][order],
-            ref=np.r_[n0 + np.arange(len(sr)), c0 + np.arange(len(cr))][order],
+            root[order], None, kind=np.where(is_cell, CELL, BEZIER).astype(np.int8), ref=ref,
             level=level, i0=i0, j0=j0, depth_i=depth_i, side=item_side, lo=lo, hi=hi,
             orient=np.ones(len(root), np.int8))
         s0 = self.put("slots", patch=patches, first=i_start + first, count=count,
-                      round=np.full(len(patches), round_no))
+                      round=np.full(len(patches), round_no), snap=snap)
         self.patch_iso[patches] = s0 + np.arange(len(patches))
         return len(sr), len(cr)
 
@@ -341,11 +350,16 @@ class Pieces(Growable):
         z = np.zeros(m, np.int64)
         ar = np.arange(m, dtype=np.int64)
         n0 = 0 if nets is None else self.put("nets", nets=nets)
+        side = np.ascontiguousarray(np.asarray(side).reshape(-1, 4), dtype=np.int64)
+        depth = np.asarray(depth, dtype=np.int64)
+        lo, hi = np.array(lo, dtype=np.float64), np.array(hi, dtype=np.float64)
+        snap = self._snapped(ar, np.ones(m, np.int64), np.zeros(m, bool), n0 + ar, z, z, z,
+                             depth, side, lo, hi)
         i_start = self.put("items", kind=np.full(m, BEZIER, np.int8), ref=n0 + ar, level=z, i0=z,
                            j0=z, depth_i=depth, side=side, lo=lo, hi=hi,
                            orient=np.ones(m, np.int8))
         s0 = self.put("slots", patch=patches, first=i_start + ar, count=np.ones(m, np.int64),
-                      round=np.full(m, -1))
+                      round=np.full(m, -1), snap=snap)
         self.patch_iso[patches] = s0 + ar
 
     def append_tris(self, patches, depth, side, nets, round_no):
@@ -364,7 +378,7 @@ class Pieces(Growable):
                            j0=z, depth_i=depth, side=side, lo=lo, hi=hi,
                            orient=np.ones(m, np.int8))
         s0 = self.put("slots", patch=patches, first=i_start + ar, count=np.ones(m, np.int64),
-                      round=np.full(m, round_no))
+                      round=np.full(m, round_no), snap=-1)
         self.patch_iso[patches] = s0 + ar
 
     def append_loop(self, patches, depth, side, subs, cells, round_no):
@@ -408,9 +422,22 @@ class Pieces(Growable):
             depth_i=depth[root], side=item_side, lo=lo, hi=hi,
             orient=np.r_[sg, cg].astype(np.int8))
         s0 = self.put("slots", patch=patches, first=i_start + first, count=count,
-                      round=np.full(len(patches), round_no))
+                      round=np.full(len(patches), round_no), snap=-1)
         self.patch_iso[patches] = s0 + np.arange(len(patches))
         return len(sr), len(cr)
+
+    def _snapped(self, first, count, is_cell, ref, level, i0, j0, depth_i, side, lo, hi):
+        """The ``snap`` rows (m,4) of a batch of Catmull-Clark slots whose items (rows of
+        ``first``, ``count``; their nets and cells in the stores at ``ref``) sample their
+        sides as ``side`` (m,4) says: the samples of the snapped ones go to the sample
+        store, the cells' corners there are moved onto the polylines and the items' boxes
+        ``lo``, ``hi`` set to hold what they test (:func:`~subtrace.trace.snap.snap_items`)."""
+        samples, offset = snap_items(first, count, is_cell, ref, level, i0, j0, depth_i, side,
+                                     self.a["nets"], self.a["cells"].reshape(-1, 3), lo, hi)
+        if not len(samples):
+            return np.full((len(first), 4), -1, np.int64)
+        s0 = self.put("samples", samples=samples)
+        return np.where(offset >= 0, offset + s0, -1)
 
     def _put_grouped(self, root, split_orient, **items):
         """Append the items of a batch of isolated patches (item k of patch ``root[k]``)
@@ -447,7 +474,8 @@ class Pieces(Growable):
 
     def view(self) -> PieceArrays:
         a = self.a
-        return PieceArrays(self.patch_iso, a["first"], a["count"], a["round"], a["depth_i"],
+        return PieceArrays(self.patch_iso, a["first"], a["count"], a["round"], a["snap"],
+                           a["depth_i"],
                            a["side"], a["kind"], a["ref"], a["level"], a["i0"], a["j0"],
                            a["lo"], a["hi"], a["nets"],
                            a["cells"].reshape(-1, 3), a["normals"], a["touched"], a["orient"],
