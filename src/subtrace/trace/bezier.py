@@ -777,7 +777,10 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop, stop):
                     c10 = (m_cells[f + 1, 0], m_cells[f + 1, 1], m_cells[f + 1, 2])
                     c01 = (m_cells[f + 3, 0], m_cells[f + 3, 1], m_cells[f + 3, 2])
                     c11 = (m_cells[f + 4, 0], m_cells[f + 4, 1], m_cells[f + 4, 2])
-                if stop > -np.inf:
+                # (not a block on a snapped side: its triangles there are not its surface's,
+                # and a shadow ray leaving them may cross the surface without meeting them)
+                if stop > -np.inf and not (snapping and _touches_snapped(
+                        oi + 2 * ci, oj + 2 * cj, 2, depth, item_side, it)):
                     te = _covers(px, py, pz, kx, ky, kz, sx, sy, sz, c00, c10, c01, c11,
                                  dlt + pad_o, box[node, kz], box[node, 3 + kz], hit[H_T])
                     if te < np.inf:
@@ -842,7 +845,10 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop, stop):
                     if hit[H_T] < stop:
                         return tested
                     continue
-            if stop > -np.inf:  # the node's own frame: its net's corners, or its 3 x 3's
+            hs = 1 << (pd - lev)  # (the node's side, in its grid's cells)
+            if stop > -np.inf and not (snapping and _touches_snapped(
+                    oi + ci * hs, oj + cj * hs, hs, depth, item_side, it)):
+                # the node's own frame: its net's corners, or its 3 x 3's
                 if lev == 0:
                     c00, c10, c01, c11 = _net_corners(nets, nk)
                 elif lev + 2 < pd:
