@@ -94,7 +94,11 @@ COMPANIONS = {("camera", "target"): {"eye": [3.0, 2.0, 5.0]},
               ("light", "intensity"): {"direction": [0, -1, 0]},
               ("light", "radius"): {"position": [0, 3, 0]},
               ("light", "angle"): {"direction": [0, -1, 0]},
-              ("light", "samples"): {"position": [0, 3, 0], "radius": 0.3}}
+              ("light", "samples"): {"position": [0, 3, 0], "radius": 0.3},
+              ("light", "kind"): {"position": [0, 3, 0], "normal": [0, -1, 0], "radius": 1},
+              ("light", "normal"): {"kind": "disk", "position": [0, 3, 0], "radius": 1},
+              ("light", "u"): {"kind": "quad", "position": [0, 3, 0], "v": [0, 0, -1]},
+              ("light", "v"): {"kind": "quad", "position": [0, 3, 0], "u": [1, 0, 0]}}
 
 
 def test_every_example_is_a_value_the_parser_takes(tables):

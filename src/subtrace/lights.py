@@ -24,13 +24,31 @@ The kinds:
   solid angle the point sees: its shadow rays go to points of the ball's near side,
   uniform in the cone of directions it subtends, and the share that arrives unblocked is
   the visibility (a penumbra). Radius 0 is a point light, ray for ray. The cull to the
-  view does not bound its rays: a scene with a sphere light of radius > 0 is not culled.
+  view does not bound its rays: a scene with a sphere light of radius > 0 is not culled;
+* **quad** (``kind = "quad"``: ``position`` its centre, ``u`` and ``v`` its half edges,
+  corners ``position`` ± u ± v) and **disk** (``kind = "disk"``: ``position``, unit
+  ``normal``, ``radius`` > 0): one-sided Lambertian emitters of uniform radiance (on the
+  side of u x v, or of the normal; nothing behind), of the power of a point light of the
+  same intensity (4 pi intensity from one side: radiance 4 intensity / area). Their
+  unshadowed light is the irradiance vector (:func:`_area_vector`: the integral of the
+  direction towards the light over the solid angle it subtends, times the radiance),
+  closed forms: Lambert's formula for the quad, the form factors of a differential area
+  to a disk for the disk; a surface of normal n receives n . vector, exact where the
+  light lies wholly above its horizon (where it straddles it the part below counts
+  against the rest; the shading keeps it at 0 or more), and the vector's direction and
+  length stand for a point light's direction and 1 / distance^2 in the shading (its
+  specular lobe takes that direction). ``samples`` shadow rays per shading point go to
+  points uniform over the area (the R2 points below, mapped to a quad's parameters or a
+  disk's polar coordinates), and the share that arrives unblocked is the visibility. The
+  cull to the view does not bound their rays: a scene with one is not culled.
 
 Array layout (:func:`light_array`): (L, ROW) float64, one row per light: ``KIND``, then
-x, y, z (``AT``: a directional light's unit travel, else its position), the colour times
-the intensity (``RGB``), the shadow rays it takes per shading point (``SAMPLES``; 1 for a
-directional or point light) and one number of the kind's own (``PARAM``: a sphere's
-radius, a directional light's half angle in radians; 0 for a point light).
+x, y, z (``AT``: a directional light's unit travel, else its position or centre), the
+colour times the intensity (``RGB``), the shadow rays it takes per shading point
+(``SAMPLES``; 1 for a directional or point light), one number of the kind's own
+(``PARAM``: a sphere's or disk's radius, a directional light's half angle in radians, 1
+for a quad; 0 for a point light) and two vectors (``EDGE_U``, ``EDGE_V``: a quad's u and
+v, a disk's unit normal and 0; 0 for the others).
 
 A light of several shadow rays per shading point samples them per pixel: each ray that
 is shaded carries a key (:func:`ray_keys`: its image pixel times ``KEY_STRIDE`` plus its
@@ -55,9 +73,10 @@ from subtrace.errors import SceneError, show_value
 from subtrace.runtime.jit import leaf_njit, llvm_inline_njit
 
 # kinds (column KIND of light_array)
-DIRECTIONAL, POINT, SPHERE = 0, 1, 2
-KIND, AT, RGB, SAMPLES, PARAM = 0, 1, 4, 7, 8  # columns of a row
-ROW = 9  # columns of a row
+DIRECTIONAL, POINT, SPHERE, QUAD, DISK = 0, 1, 2, 3, 4
+KIND, AT, RGB, SAMPLES, PARAM, EDGE_U, EDGE_V = 0, 1, 4, 7, 8, 9, 12  # columns of a row
+ROW = 15  # columns of a row
+AREA_KINDS = ("quad", "disk")  # the values of a [[light]] table's kind key
 
 DEFAULT_LIGHT_COLOR = (1.0, 1.0, 1.0)
 DEFAULT_SPHERE_SAMPLES = 8  # a sphere light's (or soft sun's) shadow rays per shading point
@@ -72,8 +91,10 @@ KEY_STRIDE = 64
 class Light:
     """A light: directional (unit ``direction`` the light travels, ``position`` None;
     ``angle`` its angular diameter in degrees, None or 0: a hard one), point (``position``)
-    or sphere (``position`` its centre and ``radius``), with its colour and intensity;
-    ``samples``: a sphere's or soft sun's shadow rays per shading point (None:
+    or sphere (``position`` its centre and ``radius``), or (``area`` "quad" or "disk") an
+    area light: ``position`` its centre and ``u``, ``v`` a quad's half-edge vectors or
+    ``normal`` (unit) and ``radius`` a disk's; with its colour and intensity; ``samples``:
+    a sphere's, soft sun's or area light's shadow rays per shading point (None:
     DEFAULT_SPHERE_SAMPLES)."""
 
     direction: tuple[float, float, float] | None = None
@@ -83,10 +104,16 @@ class Light:
     radius: float | None = None
     samples: int | None = None
     angle: float | None = None
+    area: str | None = None  # "quad" or "disk": an area light (AREA_KINDS)
+    u: tuple[float, float, float] | None = None  # a quad's half-edge vectors
+    v: tuple[float, float, float] | None = None
+    normal: tuple[float, float, float] | None = None  # a disk's unit normal
 
     @property
     def kind(self) -> int:
-        """DIRECTIONAL, POINT or SPHERE."""
+        """DIRECTIONAL, POINT, SPHERE, QUAD or DISK."""
+        if self.area is not None:
+            return QUAD if self.area == "quad" else DISK
         if self.position is None:
             return DIRECTIONAL
         return POINT if self.radius is None else SPHERE
@@ -99,8 +126,13 @@ class Light:
 # every key of a [[light]] table (io.scene.SCENE_KEYS["light"]); per kind, in the order
 # they are told apart (the first whose marking keys a table has), its name, the keys that
 # mark it and its own keys (a table may add the common ones)
-LIGHT_KEYS = ("direction", "angle", "position", "radius", "samples", "color", "intensity")
+LIGHT_KEYS = ("kind", "direction", "angle", "position", "radius", "samples", "u", "v",
+              "normal", "color", "intensity")
 _COMMON = ("color", "intensity")
+# the area kinds (kind = "quad" or "disk"): their names and own keys (each one needed but
+# samples)
+_AREA = {"quad": ("quad light", ("position", "u", "v", "samples")),
+         "disk": ("disk light", ("position", "normal", "radius", "samples"))}
 _KINDS = (
     ("sphere light", ("radius",), ("position", "radius", "samples")),
     ("point light", ("position",), ("position",)),
@@ -115,6 +147,8 @@ def parse_light(table: dict, value, error) -> Light:
     already). ``value(key, check, *args)``: ``check(table[key], *args)`` with a SceneError
     it raises put at the key's line; ``error(key, problem)``: a SceneError at the key's
     line (None: the table's)."""
+    if "kind" in table:
+        return _parse_area(table, value, error)
     if "direction" in table and "position" in table:
         raise error("position", "give a light either a direction (directional) or a "
                     "position (point light), not both")
@@ -148,6 +182,47 @@ def parse_light(table: dict, value, error) -> Light:
     if "intensity" in table:
         values["intensity"] = value("intensity", _non_negative, table["intensity"])
     return Light(**values)
+
+
+def _parse_area(table: dict, value, error) -> Light:
+    """The :class:`Light` of a ``[[light]]`` table with a ``kind`` key (an area light)."""
+    kind = table["kind"]
+    if not isinstance(kind, str) or kind not in _AREA:
+        raise error("kind", f"kind must be one of {', '.join(map(repr, AREA_KINDS))} (the "
+                    f"other lights are told by their keys), got {show_value(kind)}")
+    name, keys = _AREA[kind]
+    for key in table:
+        if key != "kind" and key not in keys and key not in _COMMON:
+            raise error(key, f"{key} is not a key of a {name} ({', '.join(keys + _COMMON)})")
+    for key in keys[:-1]:
+        if key not in table:
+            raise error(None, f"missing key {key}: a {name} needs {', '.join(keys[:-1])}")
+    values = {"area": kind, "position": value("position", check_vector, table["position"], "")}
+    if kind == "quad":
+        values["u"] = value("u", check_vector, table["u"], "")
+        values["v"] = value("v", check_vector, table["v"], "")
+        if not np.linalg.norm(np.cross(values["u"], values["v"])) > 0.0:
+            raise error("v", "a quad light's u and v (its half edges) must be non-zero and "
+                        "not parallel")
+    else:
+        normal = value("normal", check_vector, table["normal"], "")
+        norm = math.sqrt(sum(c * c for c in normal))
+        if not norm > 0.0:
+            raise error("normal", "the normal is zero; give a non-zero vector")
+        values["normal"] = tuple(c / norm for c in normal)
+        values["radius"] = value("radius", _disk_radius, table["radius"])
+    for key, check in (("samples", _sphere_samples), ("color", _color),
+                       ("intensity", _non_negative)):
+        if key in table:
+            values[key] = value(key, check, table[key])
+    return Light(**values)
+
+
+def _disk_radius(value) -> float:
+    value = _number(value)
+    if not value > 0.0:
+        raise SceneError(f"a disk light's radius must be more than 0, got {value:g}")
+    return value
 
 
 def _number(value) -> float:
@@ -209,12 +284,15 @@ def light_array(lights) -> np.ndarray:
     for light in lights:
         kind = light.kind
         at = light.direction if kind == DIRECTIONAL else light.position
-        param = (light.radius if kind == SPHERE else
-                 math.radians(light.angle or 0.0) / 2.0 if kind == DIRECTIONAL else 0.0)
+        param = (light.radius if kind in (SPHERE, DISK) else
+                 math.radians(light.angle or 0.0) / 2.0 if kind == DIRECTIONAL else
+                 1.0 if kind == QUAD else 0.0)
         samples = 1 if not param > 0.0 else (
             DEFAULT_SPHERE_SAMPLES if light.samples is None else light.samples)
+        edges = (*light.u, *light.v) if kind == QUAD else (
+            (*light.normal, 0.0, 0.0, 0.0) if kind == DISK else (0.0,) * 6)
         rows.append([kind, *at, *(np.asarray(light.color) * light.intensity), samples,
-                     param])
+                     param, *edges])
     return np.array(rows, dtype=np.float64).reshape(-1, ROW)
 
 
@@ -227,7 +305,7 @@ def directional_rows(lights) -> np.ndarray:
 
 def sampled(rows) -> bool:
     """Whether any light of ``rows`` (:func:`light_array`) samples its shadow rays (a
-    sphere of radius > 0 or a soft sun, even with one ray a point: each shaded ray, the
+    sphere of radius > 0, a soft sun or an area light (its PARAM > 0), even with one ray a point: each shaded ray, the
     anti-aliasing rays of an edge pixel too, takes its own): then the shaded rays need
     their keys (:func:`ray_keys`)."""
     return bool(len(rows)) and bool(np.any(np.asarray(rows)[:, PARAM] > 0.0))
@@ -249,7 +327,7 @@ def shadow_cast(light: Light):
         return "parallel", np.asarray(light.direction, np.float64)
     if kind == POINT or (kind == SPHERE and not light.radius > 0.0):
         return "point", np.asarray(light.position, np.float64)
-    return None  # (a sphere's or soft sun's rays spread: no bound is made for them)
+    return None  # (a sphere's, soft sun's or area light's rays spread: no bound is made)
 
 
 # --------------------------------------------------------------------------------------
@@ -261,9 +339,16 @@ def shadow_cast(light: Light):
 def incoming(lights, k, frame, t, dx, dy, dz):
     """Light ``k`` at the hit ``eye + t d``: the unit direction it travels there and its
     irradiance factor (1 for a directional light, 1 / distance^2 from a point light or a
-    sphere's centre)."""
+    sphere's centre, an area light's irradiance vector's length: :func:`_area_vector`)."""
     if lights[k, KIND] == DIRECTIONAL:
         return lights[k, 1], lights[k, 2], lights[k, 3], 1.0
+    if lights[k, KIND] >= QUAD:  # (an area light: its irradiance vector, reversed)
+        gx, gy, gz = _area_vector(lights, k, frame[0, 0] + t * dx, frame[0, 1] + t * dy,
+                                  frame[0, 2] + t * dz)
+        g = math.sqrt(gx * gx + gy * gy + gz * gz)
+        if not g > 0.0:
+            return 0.0, 0.0, 0.0, 0.0
+        return -gx / g, -gy / g, -gz / g, g
     lx = frame[0, 0] + t * dx - lights[k, 1]
     ly = frame[0, 1] + t * dy - lights[k, 2]
     lz = frame[0, 2] + t * dz - lights[k, 3]
@@ -277,10 +362,20 @@ def incoming(lights, k, frame, t, dx, dy, dz):
 @llvm_inline_njit
 def irradiance_at(lights, k, x, y, z):
     """Light ``k`` at the point (x, y, z): the unit direction towards it, its distance (inf:
-    directional) and its irradiance factor (1 for a directional light, 1 / distance^2 from
-    a point light or a sphere's centre, 0 at it)."""
+    directional; an area light's centre) and its irradiance factor (1 for a directional
+    light, 1 / distance^2 from a point light or a sphere's centre, 0 at it; an area
+    light's: the direction and length of its irradiance vector, :func:`_area_vector`, so
+    that the irradiance of a surface of unit normal n is n . direction times the factor)."""
     if lights[k, KIND] == DIRECTIONAL:
         return -lights[k, 1], -lights[k, 2], -lights[k, 3], np.inf, 1.0
+    if lights[k, KIND] >= QUAD:  # (an area light: its irradiance vector)
+        gx, gy, gz = _area_vector(lights, k, x, y, z)
+        g = math.sqrt(gx * gx + gy * gy + gz * gz)
+        lx, ly, lz = lights[k, 1] - x, lights[k, 2] - y, lights[k, 3] - z
+        d = math.sqrt(lx * lx + ly * ly + lz * lz)
+        if not g > 0.0:
+            return 0.0, 0.0, 0.0, d, 0.0
+        return gx / g, gy / g, gz / g, d, g
     lx, ly, lz = lights[k, 1] - x, lights[k, 2] - y, lights[k, 3] - z
     d2 = lx * lx + ly * ly + lz * lz
     d = np.sqrt(d2)
@@ -297,7 +392,8 @@ def shadow_samples(lights, k):
 def shadow_target(lights, k, s, key, px, py, pz):
     """Shadow ray ``s`` of the point (px, py, pz) towards light ``k``, for the shaded ray of
     ``key`` (:func:`ray_keys`; read only where the light takes several rays): its unit
-    direction x, y, z and the distance to where it meets the light (inf: directional)."""
+    direction x, y, z and the distance to where it meets the light (inf: directional; an
+    area light's: to its point of the ray, :func:`_area_point`)."""
     kind = lights[k, KIND]
     if kind == DIRECTIONAL:
         wx, wy, wz = -lights[k, 1], -lights[k, 2], -lights[k, 3]
@@ -306,6 +402,13 @@ def shadow_target(lights, k, s, key, px, py, pz):
             return wx, wy, wz, np.inf
         ox, oy, oz, _, _ = _cone_ray(wx, wy, wz, math.cos(lights[k, PARAM]), m, s, key)
         return ox, oy, oz, np.inf
+    if kind >= QUAD:
+        qx, qy, qz = _area_point(lights, k, np.int64(lights[k, SAMPLES]), s, key)
+        vx, vy, vz = qx - px, qy - py, qz - pz
+        dist = math.sqrt(vx * vx + vy * vy + vz * vz)
+        if not dist > 0.0:
+            return 0.0, 0.0, 1.0, 0.0
+        return vx / dist, vy / dist, vz / dist, dist
     vx, vy, vz = lights[k, 1] - px, lights[k, 2] - py, lights[k, 3] - pz
     dist = np.sqrt(vx * vx + vy * vy + vz * vz)
     wx, wy, wz = vx / dist, vy / dist, vz / dist
@@ -326,6 +429,110 @@ def _sphere_point(wx, wy, wz, dist, radius, m, s, key):
     # where the ray meets the ball first (the cone's rim: where it touches it)
     h = radius * radius - dist * dist * sn * sn
     return ox, oy, oz, max(dist * c - math.sqrt(max(h, 0.0)), 0.0)
+
+
+@llvm_inline_njit
+def _area_vector(lights, k, x, y, z):
+    """Area light ``k``'s irradiance vector at the point (x, y, z), per unit of its colour
+    times intensity: the integral of the unit direction towards the light over the solid
+    angle it subtends, times its radiance (4 / area: the power of a point light of the
+    same intensity, 4 pi, from one side of a Lambertian emitter, pi radiance area); 0 on
+    or behind the plane it faces away from. A surface of unit normal n there receives
+    n . vector, exactly where the light lies wholly above its horizon (Lambert's formula
+    for the quad, the form factors of a differential area to a disk for the disk)."""
+    cx, cy, cz = lights[k, 1], lights[k, 2], lights[k, 3]
+    wx, wy, wz = x - cx, y - cy, z - cz
+    if lights[k, KIND] == QUAD:
+        return _quad_vector(wx, wy, wz, lights[k, EDGE_U], lights[k, EDGE_U + 1],
+                            lights[k, EDGE_U + 2], lights[k, EDGE_V], lights[k, EDGE_V + 1],
+                            lights[k, EDGE_V + 2])
+    nx, ny, nz = lights[k, EDGE_U], lights[k, EDGE_U + 1], lights[k, EDGE_U + 2]
+    h = wx * nx + wy * ny + wz * nz  # (the height over the disk's plane)
+    if not h > 0.0:
+        return 0.0, 0.0, 0.0
+    radius = lights[k, PARAM]
+    rx, ry, rz = wx - h * nx, wy - h * ny, wz - h * nz  # (off the axis)
+    r = math.sqrt(rx * rx + ry * ry + rz * rz)
+    h2, rr = h * h, radius * radius
+    a = h2 + r * r - rr
+    # sqrt((h^2 + r^2 + R^2)^2 - 4 r^2 R^2), as a product (no cancellation)
+    sq = math.sqrt((h2 + (r - radius) ** 2) * (h2 + (r + radius) ** 2))
+    # the normal part: (1 - a / sq) / 2 of pi radiance (sq - a = 4 R^2 h^2 / (sq + a))
+    normal = (4.0 * rr * h2 / (sq + a) if a >= 0.0 else sq - a) / sq
+    # the radial part: h / (2 r) ((h^2 + r^2 + R^2) / sq - 1) of pi radiance
+    radial = 4.0 * rr * h / (sq * (h2 + r * r + rr + sq))
+    c = 2.0 / rr  # (pi radiance / 2: radiance 4 / (pi R^2))
+    return (-c * (normal * nx + radial * rx), -c * (normal * ny + radial * ry),
+            -c * (normal * nz + radial * rz))
+
+
+@llvm_inline_njit
+def _quad_vector(wx, wy, wz, ux, uy, uz, vx, vy, vz):
+    """:func:`_area_vector` of the quad of half edges u, v at the offset w from its centre
+    (Lambert: the sum over its edges of the angle each subtends times the unit normal of
+    the plane through it and the point, halved, times the radiance)."""
+    nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx  # (u x v)
+    if not wx * nx + wy * ny + wz * nz > 0.0:
+        return 0.0, 0.0, 0.0
+    # the corners -u-v, +u-v, +u+v, -u+v (counter-clockwise about u x v) less w
+    ax, ay, az = -ux - vx - wx, -uy - vy - wy, -uz - vz - wz
+    bx, by, bz = ux - vx - wx, uy - vy - wy, uz - vz - wz
+    cx, cy, cz = ux + vx - wx, uy + vy - wy, uz + vz - wz
+    dx, dy, dz = -ux + vx - wx, -uy + vy - wy, -uz + vz - wz
+    e1 = _edge_term(ax, ay, az, bx, by, bz)
+    e2 = _edge_term(bx, by, bz, cx, cy, cz)
+    e3 = _edge_term(cx, cy, cz, dx, dy, dz)
+    e4 = _edge_term(dx, dy, dz, ax, ay, az)
+    gx = e1[0] + e2[0] + e3[0] + e4[0]
+    gy = e1[1] + e2[1] + e3[1] + e4[1]
+    gz = e1[2] + e2[2] + e3[2] + e4[2]
+    c = -0.5 / math.sqrt(nx * nx + ny * ny + nz * nz)  # (radiance 4 / (4 |u x v|), halved)
+    return c * gx, c * gy, c * gz
+
+
+@llvm_inline_njit
+def _edge_term(ax, ay, az, bx, by, bz):
+    """The angle between a and b times the unit normal of a x b (0 for parallel a, b)."""
+    cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+    cn = math.sqrt(cx * cx + cy * cy + cz * cz)
+    if not cn > 0.0:
+        return 0.0, 0.0, 0.0
+    angle = math.atan2(cn, ax * bx + ay * by + az * bz) / cn
+    return angle * cx, angle * cy, angle * cz
+
+
+@llvm_inline_njit
+def _area_point(lights, k, m, s, key):
+    """Area light ``k``'s point for shadow ray ``s`` of ``m`` (the R2 point of the module
+    comment, mapped uniformly onto its area: a quad's parameters, a disk's polar
+    coordinates (radius sqrt(u1) R))."""
+    u1, u2 = _r2_point(m, s, key)
+    cx, cy, cz = lights[k, 1], lights[k, 2], lights[k, 3]
+    ex, ey, ez = lights[k, EDGE_U], lights[k, EDGE_U + 1], lights[k, EDGE_U + 2]
+    if lights[k, KIND] == QUAD:
+        a, b = 2.0 * u1 - 1.0, 2.0 * u2 - 1.0
+        fx, fy, fz = lights[k, EDGE_V], lights[k, EDGE_V + 1], lights[k, EDGE_V + 2]
+        return cx + a * ex + b * fx, cy + a * ey + b * fy, cz + a * ez + b * fz
+    rad = lights[k, PARAM] * math.sqrt(u1)
+    phi = 2.0 * math.pi * u2
+    a, b = rad * math.cos(phi), rad * math.sin(phi)
+    # an orthonormal basis of the disk's plane (as in _cone_ray)
+    sign = 1.0 if ez >= 0.0 else -1.0
+    f = -1.0 / (sign + ez)
+    g = ex * ey * f
+    return (cx + a * (1.0 + sign * ex * ex * f) + b * g,
+            cy + a * (sign * g) + b * (sign + ey * ey * f),
+            cz + a * (-sign * ex) + b * (-ey))
+
+
+@llvm_inline_njit
+def _r2_point(m, s, key):
+    """Point ``s`` of ``m`` of the shaded ray of ``key`` in the unit square: the R2 point
+    of the module comment (the pixel's anti-aliasing sample, then s), turned by the
+    pixel's hash."""
+    pixel = key // KEY_STRIDE
+    i = (key - pixel * KEY_STRIDE) * m + s
+    return (0.5 + i * R2_A1 + hash01(pixel, 3)) % 1.0, (0.5 + i * R2_A2 + hash01(pixel, 4)) % 1.0
 
 
 @llvm_inline_njit
