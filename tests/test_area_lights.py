@@ -72,7 +72,7 @@ def test_a_disks_irradiance_is_its_form_factor(h, r):
     F_perpendicular where the disk lies wholly in front of it (L = 4 intensity / area),
     within 1e-9 relative."""
     intensity = 2.5
-    light = Light(area="disk", position=tuple(DISK_CENTRE), normal=tuple(DISK_NORMAL),
+    light = Light(kind_key="disk", position=tuple(DISK_CENTRE), normal=tuple(DISK_NORMAL),
                   radius=DISK_RADIUS, intensity=intensity)
     radiance = 4.0 * intensity / (math.pi * DISK_RADIUS ** 2)
     for e in _disk_frame():
@@ -92,7 +92,7 @@ def _numeric(light, p, n, steps=1200):
     parameters; a disk's polar coordinates)."""
     c = np.asarray(light.position)
     mid = (np.arange(steps) + 0.5) / steps
-    if light.area == "quad":
+    if light.kind_key == "quad":
         u, v = np.asarray(light.u), np.asarray(light.v)
         a, b = np.meshgrid(2.0 * mid - 1.0, 2.0 * mid - 1.0)
         q = c + a.ravel()[:, None] * u + b.ravel()[:, None] * v
@@ -115,8 +115,8 @@ def _numeric(light, p, n, steps=1200):
     return float(np.sum(4.0 / area * cos_r * cos_l / d ** 2 * d_area))
 
 
-QUAD = Light(area="quad", position=(0.3, 3.0, -0.2), u=(0.6, 0.1, 0.0), v=(0.0, 0.05, 0.4))
-DISK = Light(area="disk", position=tuple(DISK_CENTRE), normal=tuple(DISK_NORMAL),
+QUAD = Light(kind_key="quad", position=(0.3, 3.0, -0.2), u=(0.6, 0.1, 0.0), v=(0.0, 0.05, 0.4))
+DISK = Light(kind_key="disk", position=tuple(DISK_CENTRE), normal=tuple(DISK_NORMAL),
              radius=DISK_RADIUS)
 POINTS = [((0.0, 0.0, 0.0), (0.0, 1.0, 0.0)), ((1.5, 0.5, 0.3), (0.0, 1.0, 0.0)),
           ((1.5, 0.5, 0.3), (-0.6, 0.8, 0.0)), ((0.2, 2.5, 0.1), (0.3, 0.9, -0.2)),
@@ -139,7 +139,7 @@ def test_an_area_light_is_one_sided_with_a_point_lights_power(light):
     as 4 point lights of its intensity do (its power, 4 pi intensity, sent from one side
     of a Lambertian emitter: radiance times area is 4 intensity), within 1e-6."""
     c = np.asarray(light.position)
-    axis = np.array(_unit(np.cross(light.u, light.v))) if light.area == "quad" else \
+    axis = np.array(_unit(np.cross(light.u, light.v))) if light.kind_key == "quad" else \
         np.asarray(light.normal)
     for s in (-0.5, -3.0, 0.0):
         assert _irradiance(light, c + s * axis, -axis) == 0.0
@@ -197,9 +197,9 @@ def _quad_share(x):
     return min(max((RADIUS - _cut(x)) / (2.0 * RADIUS), 0.0), 1.0)
 
 
-DOWN_DISK = Light(area="disk", position=(0.0, H, 0.0), normal=(0.0, -1.0, 0.0),
+DOWN_DISK = Light(kind_key="disk", position=(0.0, H, 0.0), normal=(0.0, -1.0, 0.0),
                   radius=RADIUS, samples=256)
-DOWN_QUAD = Light(area="quad", position=(0.0, H, 0.0), u=(RADIUS, 0.0, 0.0),
+DOWN_QUAD = Light(kind_key="quad", position=(0.0, H, 0.0), u=(RADIUS, 0.0, 0.0),
                   v=(0.0, 0.0, 0.5), samples=256)  # (u x v = (0, -0.4, 0): facing down)
 
 
@@ -234,7 +234,7 @@ def test_an_area_lights_penumbra_on_a_surface(light, share):
 
     points, frame, dirs, t = _plane_points()
     normals = np.tile([0.0, 1.0, 0.0], (len(t), 1))
-    assert light.area == "disk" or np.cross(light.u, light.v)[1] < 0.0  # (facing down)
+    assert light.kind_key == "disk" or np.cross(light.u, light.v)[1] < 0.0  # (facing down)
     visible = shadow_visibility(_half_plane, frame, 1, t, normals, np.zeros(len(t), np.int32),
                                 light_array([light]), 0.0, dirs, ray_keys(np.arange(len(t))))
     _check_penumbra(visible[0].astype(np.float64), points, share)
@@ -338,7 +338,7 @@ def test_a_good_area_light_table_loads(tmp_path):
                     'kind = "quad"\nposition = [0, 3, 0]\nu = [1, 0, 0]\nv = [0, 0, -1]\n'
                     'intensity = 2\n')
     disk, quad = load_scene(path).lights
-    assert disk == Light(area="disk", position=(0.0, 3.0, 0.0), normal=(0.0, -1.0, 0.0),
+    assert disk == Light(kind_key="disk", position=(0.0, 3.0, 0.0), normal=(0.0, -1.0, 0.0),
                          radius=0.5)
-    assert quad == Light(area="quad", position=(0.0, 3.0, 0.0), u=(1.0, 0.0, 0.0),
+    assert quad == Light(kind_key="quad", position=(0.0, 3.0, 0.0), u=(1.0, 0.0, 0.0),
                          v=(0.0, 0.0, -1.0), intensity=2.0)

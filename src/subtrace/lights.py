@@ -91,7 +91,7 @@ KEY_STRIDE = 64
 class Light:
     """A light: directional (unit ``direction`` the light travels, ``position`` None;
     ``angle`` its angular diameter in degrees, None or 0: a hard one), point (``position``)
-    or sphere (``position`` its centre and ``radius``), or (``area`` "quad" or "disk") an
+    or sphere (``position`` its centre and ``radius``), or (``kind_key`` "quad" or "disk") an
     area light: ``position`` its centre and ``u``, ``v`` a quad's half-edge vectors or
     ``normal`` (unit) and ``radius`` a disk's; with its colour and intensity; ``samples``:
     a sphere's, soft sun's or area light's shadow rays per shading point (None:
@@ -104,7 +104,7 @@ class Light:
     radius: float | None = None
     samples: int | None = None
     angle: float | None = None
-    area: str | None = None  # "quad" or "disk": an area light (AREA_KINDS)
+    kind_key: str | None = None  # the table's kind: "quad", "disk" or "environment"
     u: tuple[float, float, float] | None = None  # a quad's half-edge vectors
     v: tuple[float, float, float] | None = None
     normal: tuple[float, float, float] | None = None  # a disk's unit normal
@@ -112,8 +112,8 @@ class Light:
     @property
     def kind(self) -> int:
         """DIRECTIONAL, POINT, SPHERE, QUAD or DISK."""
-        if self.area is not None:
-            return QUAD if self.area == "quad" else DISK
+        if self.kind_key is not None:
+            return QUAD if self.kind_key == "quad" else DISK
         if self.position is None:
             return DIRECTIONAL
         return POINT if self.radius is None else SPHERE
@@ -184,6 +184,78 @@ def parse_light(table: dict, value, error) -> Light:
     return Light(**values)
 
 
+# --light KIND:KEY=VALUE,... (the render command's flag): each kind's name and what its
+# table takes besides the flag's keys (a quad or disk: its kind key)
+FLAG_KINDS = {"sun": {}, "directional": {}, "point": {}, "sphere": {},
+              "quad": {"kind": "quad"}, "disk": {"kind": "disk"}}
+
+
+def parse_light_flag(text: str) -> Light:
+    """The :class:`Light` of one ``--light`` value, ``KIND:KEY=VALUE,...`` (KIND of
+    FLAG_KINDS; the keys of a ``[[light]]`` table, a vector as 3 numbers: e.g.
+    ``sphere:position=1,2,3,radius=0.5,intensity=4``); a bad one raises one SceneError
+    naming the flag, its value and the key."""
+    kind, sep, rest = str(text).partition(":")
+    kind = kind.strip().lower()
+    if not sep or kind not in FLAG_KINDS:
+        raise SceneError(f"expected KIND:KEY=VALUE,... with KIND one of "
+                         f"{', '.join(FLAG_KINDS)}, got {text!r}", key="--light")
+    table = dict(FLAG_KINDS[kind])
+    key = None
+    for item in rest.split(","):
+        name, eq, item = item.partition("=")
+        if eq:
+            key = name.strip()
+            if not key or key in table or key not in LIGHT_KEYS or key == "kind":
+                raise SceneError(f"{text!r}: {key!r} is not a key of a light or is given "
+                                 f"twice (keys: {', '.join(LIGHT_KEYS[1:])})", key="--light")
+            table[key] = []
+        elif key is None:
+            raise SceneError(f"{text!r}: expected KEY=VALUE after {kind}:", key="--light")
+        else:
+            item = name
+        table[key].append(_flag_number(text, key, item))
+    for k in table:
+        if k != "kind" and len(table[k]) == 1:
+            table[k] = table[k][0]  # (one number; else a vector)
+
+    def value(key, check, *args):
+        try:
+            return check(*args)
+        except SceneError as err:
+            raise SceneError(f"{text!r}: {key}: {err.problem}", key="--light") from None
+
+    def error(key, problem):
+        return SceneError(f"{text!r}: {problem}" if key is None else
+                          f"{text!r}: {key}: {problem}", key="--light")
+
+    for need in _FLAG_NEEDS.get(kind, ()):
+        if need not in table:
+            raise error(None, f"missing key {need}: a {kind} light needs "
+                        f"{', '.join(_FLAG_NEEDS[kind])}")
+    if kind == "point" and "radius" in table:
+        raise error("radius", "a point light has no radius (sphere:position=...,radius=R)")
+    return parse_light(table, value, error)
+
+
+_FLAG_NEEDS = {"sun": ("direction",), "directional": ("direction",), "point": ("position",),
+               "sphere": ("position", "radius")}
+
+
+def _flag_number(text: str, key: str, item: str):
+    """One number of a ``--light`` value: an int where it reads as one, else a float."""
+    item = item.strip()
+    try:
+        return int(item)
+    except ValueError:
+        pass
+    try:
+        return float(item)
+    except ValueError:
+        raise SceneError(f"{text!r}: {key}: expected a number, got {item!r}",
+                         key="--light") from None
+
+
 def _parse_area(table: dict, value, error) -> Light:
     """The :class:`Light` of a ``[[light]]`` table with a ``kind`` key (an area light)."""
     kind = table["kind"]
@@ -197,7 +269,7 @@ def _parse_area(table: dict, value, error) -> Light:
     for key in keys[:-1]:
         if key not in table:
             raise error(None, f"missing key {key}: a {name} needs {', '.join(keys[:-1])}")
-    values = {"area": kind, "position": value("position", check_vector, table["position"], "")}
+    values = {"kind_key": kind, "position": value("position", check_vector, table["position"], "")}
     if kind == "quad":
         values["u"] = value("u", check_vector, table["u"], "")
         values["v"] = value("v", check_vector, table["v"], "")

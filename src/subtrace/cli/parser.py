@@ -138,6 +138,14 @@ def _add_render(sub) -> argparse.ArgumentParser:
     render.add_argument("--ao", metavar="SAMPLES",
                         help="ambient occlusion: SAMPLES cosine-weighted rays from every hit "
                              "(0: none; default: the scene's, else 0)")
+    render.add_argument("--light", action="append", metavar="KIND:KEY=VALUE,...",
+                        help="a light instead of the scene's (repeat it for more): KIND "
+                             "sun or directional (direction=X,Y,Z, angle), point "
+                             "(position), sphere (position, radius), quad (position, u, v) "
+                             "or disk (position, normal, radius), each with samples, "
+                             "color=R,G,B and intensity if wanted: the keys of a [[light]] "
+                             "table, a vector as 3 numbers, e.g. sun:direction=0,-1,-1 or "
+                             "sphere:position=1,2,3,radius=0.5,intensity=4")
     render.add_argument("--no-shadows", dest="shadows", action="store_false", default=None,
                         help="no shadow rays (on by default where the scene has lights)")
     render.add_argument("--transparent", action="store_true", default=None,

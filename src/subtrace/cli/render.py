@@ -16,6 +16,7 @@ from subtrace.errors import SceneError
 from subtrace.frames import frame_numbers, frame_path
 from subtrace.io.formats import DEEP, picture_format
 from subtrace.io.scene import DEFAULT_SAMPLES, apply_overrides, load_scene, scene_for_meshes
+from subtrace.lights import parse_light_flag
 from subtrace.runtime.atomic import check_writable
 from subtrace.runtime.progress import ProgressBar
 from subtrace.tiles import check_crop, check_tile
@@ -54,6 +55,8 @@ def execute(args) -> int:
                               color=args.color, background=args.background,
                               shadows=args.shadows, transparent=args.transparent,
                               samples=args.samples, ao=getattr(args, "ao", None))
+    if getattr(args, "light", None):  # (--light: these lights instead of the scene's)
+        scene = replace(scene, lights=tuple(parse_light_flag(t) for t in args.light))
     if scene.render.samples is None:  # neither the scene nor --samples: the default
         scene = replace(scene, render=replace(scene.render, samples=DEFAULT_SAMPLES))
     out = scene.output or "render.exr"
