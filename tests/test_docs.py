@@ -98,7 +98,8 @@ COMPANIONS = {("camera", "target"): {"eye": [3.0, 2.0, 5.0]},
               ("light", "kind"): {"position": [0, 3, 0], "normal": [0, -1, 0], "radius": 1},
               ("light", "normal"): {"kind": "disk", "position": [0, 3, 0], "radius": 1},
               ("light", "u"): {"kind": "quad", "position": [0, 3, 0], "v": [0, 0, -1]},
-              ("light", "v"): {"kind": "quad", "position": [0, 3, 0], "u": [1, 0, 0]}}
+              ("light", "v"): {"kind": "quad", "position": [0, 3, 0], "u": [1, 0, 0]},
+              ("light", "file"): {"kind": "environment"}}
 
 
 def test_every_example_is_a_value_the_parser_takes(tables):

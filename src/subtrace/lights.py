@@ -42,13 +42,29 @@ The kinds:
   disk's polar coordinates), and the share that arrives unblocked is the visibility. The
   cull to the view does not bound their rays: a scene with one is not culled.
 
+* **environment** (``kind = "environment"``: ``file`` a lat-long image OpenImageIO reads,
+  EXR or HDR (linear; an sRGB one is decoded), or none: a constant radiance; its
+  ``color`` times ``intensity`` scales it): light from every direction at infinity. Row 0
+  of the image looks up (+Y), the last row down (-Y), the middle column along -Z
+  (forward) and three quarters across along +X (:func:`environment_tail`). Its
+  unshadowed irradiance of a normal is the image's to the spherical harmonics of order
+  2 (:func:`environment_irradiance`, Ramamoorthi and Hanrahan: exact for a constant sky
+  and for one colour per hemisphere, within a few percent of the peak for others); its
+  ``samples`` shadow rays per shading point go to infinity in directions drawn by the
+  image's luminance (a 2-D piecewise-constant distribution over at most ENV_MAX_TABLE
+  cells: the rows' shares of luminance times solid angle, then each row's columns'),
+  and the share of them that arrives, each weighted by its cosine with the normal
+  (:func:`shadow_weight`; those below the horizon weigh 0), is the visibility. It has
+  no specular lobe, is not seen as the background, and is not bounded for the cull.
+
 Array layout (:func:`light_array`): (L, ROW) float64, one row per light: ``KIND``, then
 x, y, z (``AT``: a directional light's unit travel, else its position or centre), the
 colour times the intensity (``RGB``), the shadow rays it takes per shading point
 (``SAMPLES``; 1 for a directional or point light), one number of the kind's own
 (``PARAM``: a sphere's or disk's radius, a directional light's half angle in radians, 1
 for a quad; 0 for a point light) and two vectors (``EDGE_U``, ``EDGE_V``: a quad's u and
-v, a disk's unit normal and 0; 0 for the others).
+v, a disk's unit normal and 0; 0 for the others); an environment's row goes on (ENV)
+and the others are padded with 0 to its width.
 
 A light of several shadow rays per shading point samples them per pixel: each ray that
 is shaded carries a key (:func:`ray_keys`: its image pixel times ``KEY_STRIDE`` plus its
@@ -64,6 +80,7 @@ soft sun's rays take the same points (:func:`_cone_ray`, the cone of its angle).
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -73,10 +90,16 @@ from subtrace.errors import SceneError, show_value
 from subtrace.runtime.jit import leaf_njit, llvm_inline_njit
 
 # kinds (column KIND of light_array)
-DIRECTIONAL, POINT, SPHERE, QUAD, DISK = 0, 1, 2, 3, 4
+DIRECTIONAL, POINT, SPHERE, QUAD, DISK, ENVIRONMENT = 0, 1, 2, 3, 4, 5
 KIND, AT, RGB, SAMPLES, PARAM, EDGE_U, EDGE_V = 0, 1, 4, 7, 8, 9, 12  # columns of a row
 ROW = 15  # columns of a row
-AREA_KINDS = ("quad", "disk")  # the values of a [[light]] table's kind key
+AREA_KINDS = ("quad", "disk", "environment")  # the values of a [[light]] table's kind key
+ENV = ROW  # an environment's row goes on: its irradiance (27: per colour 9 coefficients of
+# E(n) = k0 + k1 y + k2 z + k3 x + k4 x z + k5 z y + k6 (3 y^2 - 1) + k7 x y + k8 (x^2 - z^2)),
+# then its sampling table's rows h and columns w, the rows' cos(theta) edges (h + 1), the
+# columns' phi edges (w + 1), the rows' cumulative shares (h + 1), each row's columns'
+# cumulative shares (h (w + 1))
+ENV_MAX_TABLE = (256, 128)  # the sampling table's columns and rows at most
 
 DEFAULT_LIGHT_COLOR = (1.0, 1.0, 1.0)
 DEFAULT_SPHERE_SAMPLES = 8  # a sphere light's (or soft sun's) shadow rays per shading point
@@ -108,12 +131,13 @@ class Light:
     u: tuple[float, float, float] | None = None  # a quad's half-edge vectors
     v: tuple[float, float, float] | None = None
     normal: tuple[float, float, float] | None = None  # a disk's unit normal
+    file: str | None = None  # an environment's lat-long image (None: its colour alone)
 
     @property
     def kind(self) -> int:
         """DIRECTIONAL, POINT, SPHERE, QUAD or DISK."""
         if self.kind_key is not None:
-            return QUAD if self.kind_key == "quad" else DISK
+            return {"quad": QUAD, "disk": DISK}.get(self.kind_key, ENVIRONMENT)
         if self.position is None:
             return DIRECTIONAL
         return POINT if self.radius is None else SPHERE
@@ -127,12 +151,13 @@ class Light:
 # they are told apart (the first whose marking keys a table has), its name, the keys that
 # mark it and its own keys (a table may add the common ones)
 LIGHT_KEYS = ("kind", "direction", "angle", "position", "radius", "samples", "u", "v",
-              "normal", "color", "intensity")
+              "normal", "file", "color", "intensity")
 _COMMON = ("color", "intensity")
 # the area kinds (kind = "quad" or "disk"): their names and own keys (each one needed but
 # samples)
 _AREA = {"quad": ("quad light", ("position", "u", "v", "samples")),
-         "disk": ("disk light", ("position", "normal", "radius", "samples"))}
+         "disk": ("disk light", ("position", "normal", "radius", "samples")),
+         "environment": ("environment light", ("samples",))}
 _KINDS = (
     ("sphere light", ("radius",), ("position", "radius", "samples")),
     ("point light", ("position",), ("position",)),
@@ -142,11 +167,14 @@ _NEEDS = ("every [[light]] needs direction = [x, y, z] (the direction the light 
           "or position = [x, y, z] (a point light, with radius = r a sphere light)")
 
 
-def parse_light(table: dict, value, error) -> Light:
+def parse_light(table: dict, value, error, base_dir=None) -> Light:
     """The :class:`Light` of one ``[[light]]`` table (its keys checked against LIGHT_KEYS
     already). ``value(key, check, *args)``: ``check(table[key], *args)`` with a SceneError
     it raises put at the key's line; ``error(key, problem)``: a SceneError at the key's
-    line (None: the table's)."""
+    line (None: the table's); ``base_dir``: the folder an environment's ``file`` is relative
+    to (None: the working directory)."""
+    if table.get("kind") == "environment":
+        return _parse_environment(table, value, error, base_dir)
     if "kind" in table:
         return _parse_area(table, value, error)
     if "direction" in table and "position" in table:
@@ -290,6 +318,69 @@ def _parse_area(table: dict, value, error) -> Light:
     return Light(**values)
 
 
+def _parse_environment(table: dict, value, error, base_dir) -> Light:
+    """The :class:`Light` of a ``kind = "environment"`` table: its image read (and kept,
+    :func:`_environment_image`) here, so that a bad one is the table's error."""
+    keys = ("file", "samples") + _COMMON
+    for key in table:
+        if key != "kind" and key not in keys:
+            raise error(key, f"{key} is not a key of an environment light ({', '.join(keys)})")
+    values = {"kind_key": "environment"}
+    if "file" in table:
+        if not isinstance(table["file"], str) or not table["file"]:
+            raise error("file", f"expected the path of a lat-long image, got "
+                        f"{show_value(table['file'])}")
+        path = os.path.normpath(os.path.join(base_dir or os.getcwd(),
+                                             os.path.expanduser(table["file"])))
+        problem = _environment_image(path)[1]
+        if problem:
+            raise error("file", f"{path}: {problem}")
+        values["file"] = path
+    for key, check in (("samples", _sphere_samples), ("color", _color),
+                       ("intensity", _non_negative)):
+        if key in table:
+            values[key] = value(key, check, table[key])
+    return Light(**values)
+
+
+_IMAGES: dict = {}  # path -> ((mtime, size), linear RGB (H, W, 3) float64)
+
+
+def _environment_image(path: str):
+    """(the image of ``path`` (H, W, 3) float64 linear RGB, None) or (None, the problem),
+    read through OpenImageIO once per version of the file."""
+    import OpenImageIO as oiio
+
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None, "no such file"
+    if os.path.isdir(path):
+        return None, "is a directory, expected a lat-long image"
+    stamp = (st.st_mtime_ns, st.st_size)
+    if path in _IMAGES and _IMAGES[path][0] == stamp:
+        return _IMAGES[path][1], None
+    inp = oiio.ImageInput.open(path)
+    if inp is None:
+        return None, f"cannot read the image: {oiio.geterror().strip() or 'unknown format'}"
+    try:
+        spec = inp.spec()
+        pixels = inp.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
+    finally:
+        inp.close()
+    if pixels is None or spec.width < 1 or spec.height < 1:
+        return None, "cannot read the pixels"
+    pixels = np.asarray(pixels, np.float64).reshape(spec.height, spec.width, -1)
+    rgb = pixels[..., :3] if pixels.shape[2] >= 3 else np.repeat(pixels[..., :1], 3, axis=2)
+    if "srgb" in str(spec.getattribute("oiio:ColorSpace") or "").lower():
+        rgb = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
+    rgb = np.ascontiguousarray(rgb)
+    if not np.all(np.isfinite(rgb)) or rgb.min() < 0.0:
+        return None, "its pixels must be finite and 0 or more (linear radiance)"
+    _IMAGES[path] = (stamp, rgb)
+    return rgb, None
+
+
 def _disk_radius(value) -> float:
     value = _number(value)
     if not value > 0.0:
@@ -351,21 +442,97 @@ def _color(value) -> tuple[float, float, float]:
 
 
 def light_array(lights) -> np.ndarray:
-    """(L, ROW) float64 rows of :class:`Light` s (the module comment's layout)."""
+    """(L, ROW) float64 rows of :class:`Light` s (the module comment's layout; wider where
+    an environment's row goes on, the others' padded with 0)."""
     rows = []
     for light in lights:
         kind = light.kind
-        at = light.direction if kind == DIRECTIONAL else light.position
+        at = light.direction if kind == DIRECTIONAL else light.position or (0.0, 0.0, 0.0)
         param = (light.radius if kind in (SPHERE, DISK) else
                  math.radians(light.angle or 0.0) / 2.0 if kind == DIRECTIONAL else
-                 1.0 if kind == QUAD else 0.0)
+                 1.0 if kind in (QUAD, ENVIRONMENT) else 0.0)
         samples = 1 if not param > 0.0 else (
             DEFAULT_SPHERE_SAMPLES if light.samples is None else light.samples)
         edges = (*light.u, *light.v) if kind == QUAD else (
             (*light.normal, 0.0, 0.0, 0.0) if kind == DISK else (0.0,) * 6)
-        rows.append([kind, *at, *(np.asarray(light.color) * light.intensity), samples,
-                     param, *edges])
-    return np.array(rows, dtype=np.float64).reshape(-1, ROW)
+        row = [kind, *at, *(np.asarray(light.color) * light.intensity), samples, param,
+               *edges]
+        rows.append(np.concatenate([row, environment_tail(light)]) if kind == ENVIRONMENT
+                    else np.asarray(row, np.float64))
+    out = np.zeros((len(rows), max([ROW] + [len(r) for r in rows])))
+    for k, row in enumerate(rows):
+        out[k, :len(row)] = row
+    return out
+
+
+def environment_tail(light) -> np.ndarray:
+    """The columns from ENV on of an environment's row (the layout at ENV): its image's
+    (or, without one, a constant radiance 1's) irradiance coefficients and sampling
+    table. The image is lat-long: row 0 looks up (+Y), the last row down, its middle
+    column along -Z and its columns turn to +X at three quarters of the width
+    (direction (sin t sin p, cos t, -sin t cos p), t = pi (row + 1/2) / height, p = 2 pi
+    ((column + 1/2) / width - 1/2))."""
+    image = np.ones((1, 1, 3)) if light.file is None else _environment_image(light.file)[0]
+    if image is None:
+        raise SceneError(f"{light.file}: {_environment_image(light.file)[1]}")
+    height, width = image.shape[:2]
+    mu = np.cos(np.pi * np.arange(height + 1) / height)  # (each row's edges: cos theta)
+    phi = 2.0 * np.pi * (np.arange(width + 1) / width - 0.5)
+    coeffs = _irradiance_coefficients(image, mu, phi)
+    # the sampling table: cells of the image summed to at most ENV_MAX_TABLE
+    w, h = min(width, ENV_MAX_TABLE[0]), min(height, ENV_MAX_TABLE[1])
+    cols = np.round(np.arange(w + 1) * width / w).astype(np.int64)
+    rows = np.round(np.arange(h + 1) * height / h).astype(np.int64)
+    lum = image @ np.array([0.2126, 0.7152, 0.0722])
+    solid = (mu[:-1] - mu[1:])[:, None] * np.diff(phi)[None, :] * lum  # (per pixel)
+    cells = np.add.reduceat(np.add.reduceat(solid, rows[:-1], axis=0), cols[:-1], axis=1)
+    if not cells.sum() > 0.0:  # (black: any directions, uniform)
+        cells = (mu[rows[:-1]] - mu[rows[1:]])[:, None] * np.diff(phi[cols])[None, :]
+    per_row = cells.sum(axis=1)
+    marginal = np.concatenate([[0.0], np.cumsum(per_row)]) / per_row.sum()
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cond = np.concatenate([np.zeros((h, 1)), np.cumsum(cells, axis=1)], axis=1) / \
+            per_row[:, None]
+    cond = np.where(per_row[:, None] > 0.0, cond, np.linspace(0.0, 1.0, w + 1)[None, :])
+    return np.concatenate([coeffs.ravel(), [h, w], mu[rows], phi[cols], marginal,
+                           cond.ravel()])
+
+
+def _irradiance_coefficients(image, mu, phi) -> np.ndarray:
+    """(3, 9): per colour the coefficients k of the module comment's E(n) (at ENV): the
+    irradiance of the piecewise-constant lat-long ``image`` (rows between the cos theta
+    edges ``mu``, columns between the ``phi`` edges) to its spherical harmonics of order 2
+    (Ramamoorthi and Hanrahan: exact for a radiance of those orders, as a constant or one
+    colour per hemisphere; within a few percent of the peak for any other), each term the
+    exact integral over each pixel."""
+    m0, m1 = mu[:-1], mu[1:]  # (a row from m0 down to m1: its integral is from m1 to m0)
+
+    def rows_of(f):  # the integral of f(mu) over each row
+        return f(m0) - f(m1)
+
+    sq = lambda m: np.sqrt(np.maximum(1.0 - m * m, 0.0))  # noqa: E731
+    by_mu = {  # the antiderivatives of the polar parts in mu (s = sin theta)
+        "1": lambda m: m, "mu": lambda m: m * m / 2.0, "s": lambda m: (m * sq(m) +
+                                                                       np.arcsin(m)) / 2.0,
+        "s2": lambda m: m - m ** 3 / 3.0, "smu": lambda m: -sq(m) ** 3 / 3.0,
+        "3mu2-1": lambda m: m ** 3 - m}
+    p0, p1 = phi[:-1], phi[1:]
+    by_phi = {  # the integrals of the azimuthal parts over each column
+        "1": p1 - p0, "sin": np.cos(p0) - np.cos(p1), "-cos": np.sin(p0) - np.sin(p1),
+        "-sincos": (np.cos(2 * p1) - np.cos(2 * p0)) / 4.0,
+        "-cos2": (np.sin(2 * p0) - np.sin(2 * p1)) / 2.0}
+    # the basis of the module comment: (polar, azimuthal, A_l c_lm^2)
+    c0, c1 = 1.0 / (4.0 * math.pi), 3.0 / (4.0 * math.pi)
+    c2, c20, c22 = 15.0 / (4.0 * math.pi), 5.0 / (16.0 * math.pi), 15.0 / (16.0 * math.pi)
+    a0, a1, a2 = math.pi, 2.0 * math.pi / 3.0, math.pi / 4.0
+    basis = [("1", "1", a0 * c0), ("mu", "1", a1 * c1), ("s", "-cos", a1 * c1),
+             ("s", "sin", a1 * c1), ("s2", "-sincos", a2 * c2), ("smu", "-cos", a2 * c2),
+             ("3mu2-1", "1", a2 * c20), ("smu", "sin", a2 * c2), ("s2", "-cos2", a2 * c22)]
+    out = np.empty((3, 9))
+    for i, (polar, azimuth, scale) in enumerate(basis):
+        weights = rows_of(by_mu[polar])[:, None] * by_phi[azimuth][None, :]
+        out[:, i] = scale * np.einsum("hw,hwc->c", weights, image)
+    return out
 
 
 def directional_rows(lights) -> np.ndarray:
@@ -414,6 +581,8 @@ def incoming(lights, k, frame, t, dx, dy, dz):
     sphere's centre, an area light's irradiance vector's length: :func:`_area_vector`)."""
     if lights[k, KIND] == DIRECTIONAL:
         return lights[k, 1], lights[k, 2], lights[k, 3], 1.0
+    if lights[k, KIND] == ENVIRONMENT:  # (lit by environment_irradiance)
+        return 0.0, 0.0, 0.0, 0.0
     if lights[k, KIND] >= QUAD:  # (an area light: its irradiance vector, reversed)
         gx, gy, gz = _area_vector(lights, k, frame[0, 0] + t * dx, frame[0, 1] + t * dy,
                                   frame[0, 2] + t * dz)
@@ -440,6 +609,8 @@ def irradiance_at(lights, k, x, y, z):
     that the irradiance of a surface of unit normal n is n . direction times the factor)."""
     if lights[k, KIND] == DIRECTIONAL:
         return -lights[k, 1], -lights[k, 2], -lights[k, 3], np.inf, 1.0
+    if lights[k, KIND] == ENVIRONMENT:  # (lit by environment_irradiance)
+        return 0.0, 0.0, 0.0, np.inf, 0.0
     if lights[k, KIND] >= QUAD:  # (an area light: its irradiance vector)
         gx, gy, gz = _area_vector(lights, k, x, y, z)
         g = math.sqrt(gx * gx + gy * gy + gz * gz)
@@ -474,6 +645,9 @@ def shadow_target(lights, k, s, key, px, py, pz):
             return wx, wy, wz, np.inf
         ox, oy, oz, _, _ = _cone_ray(wx, wy, wz, math.cos(lights[k, PARAM]), m, s, key)
         return ox, oy, oz, np.inf
+    if kind == ENVIRONMENT:
+        ox, oy, oz = _environment_ray(lights, k, np.int64(lights[k, SAMPLES]), s, key)
+        return ox, oy, oz, np.inf
     if kind >= QUAD:
         qx, qy, qz = _area_point(lights, k, np.int64(lights[k, SAMPLES]), s, key)
         vx, vy, vz = qx - px, qy - py, qz - pz
@@ -501,6 +675,81 @@ def _sphere_point(wx, wy, wz, dist, radius, m, s, key):
     # where the ray meets the ball first (the cone's rim: where it touches it)
     h = radius * radius - dist * dist * sn * sn
     return ox, oy, oz, max(dist * c - math.sqrt(max(h, 0.0)), 0.0)
+
+
+@leaf_njit
+def is_environment(lights, k):
+    """Whether light ``k`` is an environment (lit by :func:`environment_irradiance`, its
+    shadow rays weighted by :func:`shadow_weight`)."""
+    return lights[k, KIND] == ENVIRONMENT
+
+
+@llvm_inline_njit
+def environment_irradiance(lights, k, nx, ny, nz):
+    """Environment ``k``'s unshadowed irradiance R, G, B of a surface of unit normal n per
+    unit of its colour times intensity (the coefficients at ENV; 0 or more)."""
+    er = _sh_irradiance(lights, k, ENV, nx, ny, nz)
+    eg = _sh_irradiance(lights, k, ENV + 9, nx, ny, nz)
+    eb = _sh_irradiance(lights, k, ENV + 18, nx, ny, nz)
+    return max(er, 0.0), max(eg, 0.0), max(eb, 0.0)
+
+
+@llvm_inline_njit
+def _sh_irradiance(lights, k, a, nx, ny, nz):
+    """One colour's E(n) of the module comment from its 9 coefficients at column ``a``."""
+    return (lights[k, a] + lights[k, a + 1] * ny + lights[k, a + 2] * nz
+            + lights[k, a + 3] * nx + lights[k, a + 4] * nx * nz + lights[k, a + 5] * nz * ny
+            + lights[k, a + 6] * (3.0 * ny * ny - 1.0) + lights[k, a + 7] * nx * ny
+            + lights[k, a + 8] * (nx * nx - nz * nz))
+
+
+@leaf_njit
+def shadow_weight(lights, k, lx, ly, lz, nx, ny, nz):
+    """The weight of a shadow ray along the unit (lx, ly, lz) from a point of unit normal n
+    in the share of light ``k`` it sees: an environment's its cosine with n (0 below the
+    horizon: its rays, drawn by the image's brightness over every direction, are weighted
+    as the irradiance weighs them), 1 for the others."""
+    if lights[k, KIND] != ENVIRONMENT:
+        return 1.0
+    return max(lx * nx + ly * ny + lz * nz, 0.0)
+
+
+@llvm_inline_njit
+def _environment_ray(lights, k, m, s, key):
+    """Environment ``k``'s shadow ray ``s`` of ``m`` (the R2 point of the module comment):
+    a row of its sampling table by the rows' shares, a column by that row's, the point
+    uniform in cos theta and phi within the cell; its unit direction."""
+    u1, u2 = _r2_point(m, s, key)
+    h = np.int64(lights[k, ENV + 27])
+    w = np.int64(lights[k, ENV + 28])
+    mu0 = ENV + 29
+    phi0 = mu0 + h + 1
+    marg0 = phi0 + w + 1
+    cond0 = marg0 + h + 1
+    j, f1 = _cdf_pick(lights, k, marg0, h, u1)
+    c, f2 = _cdf_pick(lights, k, cond0 + j * (w + 1), w, u2)
+    mu = lights[k, mu0 + j] + f1 * (lights[k, mu0 + j + 1] - lights[k, mu0 + j])
+    phi = lights[k, phi0 + c] + f2 * (lights[k, phi0 + c + 1] - lights[k, phi0 + c])
+    sn = math.sqrt(max(0.0, 1.0 - mu * mu))
+    return sn * math.sin(phi), mu, -sn * math.cos(phi)
+
+
+@llvm_inline_njit
+def _cdf_pick(lights, k, at, n, u):
+    """The cell of ``u`` in [0, 1) in the ``n + 1`` cumulative shares from column ``at`` of
+    row ``k`` (the last whose share starts at or below it, of a share above 0) and
+    where in it u lies, 0..1."""
+    lo, hi = 0, n - 1
+    while lo < hi:  # (the last cell i with cdf[i] <= u)
+        mid = (lo + hi + 1) // 2
+        if lights[k, at + mid] <= u:
+            lo = mid
+        else:
+            hi = mid - 1
+    while lo > 0 and not lights[k, at + lo + 1] > lights[k, at + lo]:
+        lo -= 1  # (an empty cell: the one below)
+    a, b = lights[k, at + lo], lights[k, at + lo + 1]
+    return lo, min(max((u - a) / (b - a), 0.0), 1.0) if b > a else 0.5
 
 
 @llvm_inline_njit

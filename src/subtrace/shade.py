@@ -32,8 +32,9 @@ from subtrace.accel.bvh import slab_entry
 from subtrace.camera import window_offset
 from subtrace.geometry.kinds import BEZIER, LOOP_CELL, TRI
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material
-from subtrace.lights import (DIRECTIONAL, PARAM, R2_A1, R2_A2, RGB, ROW, hash01, incoming,
-                             irradiance_at, shadow_samples, shadow_target)
+from subtrace.lights import (DIRECTIONAL, PARAM, R2_A1, R2_A2, RGB, ROW, environment_irradiance,
+                             hash01, incoming, irradiance_at, is_environment, shadow_samples,
+                             shadow_target, shadow_weight)
 from subtrace.patches.basis import bez_normal
 from subtrace.runtime.jit import callee_njit, inline_njit, leaf_njit, llvm_inline_njit, nb
 from subtrace.runtime.threads import run_tasks, thread_count
@@ -251,6 +252,13 @@ def _colour_pixel(r, p, frame, width, t, normals, patches, lights, headlight, vi
             sg += h
             sb += h
     for k in range(lights.shape[0]):
+        if is_environment(lights, k):  # (its own irradiance of the normal; no lobe)
+            v = visible[k, r] if visible.shape[1] else 1.0
+            er, eg, eb = environment_irradiance(lights, k, fx, fy, fz)
+            lr += er * v * lights[k, RGB]
+            lg += eg * v * lights[k, RGB + 1]
+            lb += eb * v * lights[k, RGB + 2]
+            continue
         # (lx, ly, lz): the direction the light arrives along; e: its irradiance
         lx, ly, lz, e = incoming(lights, k, frame, t, dx, dy, dz)
         c = -(fx * lx + fy * ly + fz * lz) * e
@@ -497,7 +505,7 @@ def _shadow_point(frame, width, t, normals, dirs, r, lights, k, tol_rad):
     err = th * tol_rad + POINT_ROUNDING * max(max(abs(px), abs(py)), abs(pz))
     lx, ly, lz = irradiance_at(lights, k, px, py, pz)[:3]
     fx, fy, fz = normals[r, 0], normals[r, 1], normals[r, 2]
-    facing = fx * lx + fy * ly + fz * lz > 0.0
+    facing = fx * lx + fy * ly + fz * lz > 0.0 or is_environment(lights, k)
     return facing, px, py, pz, err
 
 
@@ -561,8 +569,15 @@ def _shadow_mark(task, n_tasks, frame, width, t, normals, pix_patch, lights, tol
         j = base[task, k]
         m = shadow_samples(lights, k)
         for r in range(a, b):
-            if pix_patch[r] >= 0 and _shadow_point(frame, width, t, normals, dirs, r, lights,
-                                                   k, tol_rad)[0]:
+            if pix_patch[r] < 0:
+                continue
+            facing, px, py, pz, err = _shadow_point(frame, width, t, normals, dirs, r, lights,
+                                                    k, tol_rad)
+            if facing and is_environment(lights, k):
+                visible[k, r] = _weighted_share(normals, r, lights, k, keys, px, py, pz, m,
+                                                blocked, j)
+                j += m
+            elif facing:
                 dark = 0
                 for s in range(m):
                     if blocked[j]:
@@ -570,6 +585,22 @@ def _shadow_mark(task, n_tasks, frame, width, t, normals, pix_patch, lights, tol
                     j += 1
                 if dark:
                     visible[k, r] = np.float32(m - dark) / np.float32(m)
+
+
+@llvm_inline_njit
+def _weighted_share(normals, r, lights, k, keys, px, py, pz, m, blocked, j):
+    """The share of pixel r's ``m`` shadow rays towards light k (from ``blocked[j]`` on)
+    that arrive, each weighted by ``lights.shadow_weight`` (an environment's: its cosine
+    with the normal); 1 where none has weight."""
+    key = keys[r] if len(keys) else np.int64(0)
+    total = dark = 0.0
+    for s in range(m):
+        lx, ly, lz, _ = shadow_target(lights, k, s, key, px, py, pz)
+        w = shadow_weight(lights, k, lx, ly, lz, normals[r, 0], normals[r, 1], normals[r, 2])
+        total += w
+        if blocked[j + s]:
+            dark += w
+    return np.float32((total - dark) / total) if total > 0.0 else np.float32(1.0)
 
 
 def ambient_occlusion(trace, frame, width, t, normals, pix_patch, samples, distance, tol_rad,
@@ -864,14 +895,16 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
 
 
 def _with_inverse(lights) -> np.ndarray:
-    """(L, ROW + 3) float64: the rows of ``lights.light_array`` and, for a directional
-    light, the inverse of each component of the direction towards it (the ground's slab
+    """(L, C + 3) float64: the C columns of ``lights.light_array``'s rows and, for a
+    directional light, the inverse of each component of the direction towards it (the ground's slab
     tests, made once instead of per pixel; the same IEEE quotients)."""
-    out = np.zeros((len(lights), ROW + 3))
-    out[:, :ROW] = lights
+    lights = np.asarray(lights, np.float64)
+    n, width = lights.shape
+    out = np.zeros((n, width + 3))
+    out[:, :width] = lights
     with np.errstate(divide="ignore"):
-        inv = 1.0 / -np.asarray(lights, np.float64).reshape(-1, ROW)[:, 1:4]
-    out[:, ROW:] = np.where(out[:, :1] == DIRECTIONAL, inv, 0.0)
+        inv = 1.0 / -lights[:, 1:4]
+    out[:, width:] = np.where(out[:, :1] == DIRECTIONAL, inv, 0.0)
     return out
 
 
@@ -893,6 +926,9 @@ def _ground_irradiance(lights, k, x, y, z, up):
     """Light k's irradiance at the ground point (x, y, z): the cosine with ``up`` of the
     direction towards it times its irradiance factor (``lights.irradiance_at``; 0 facing
     away)."""
+    if is_environment(lights, k):  # (its luminance: the rays' and the catcher's)
+        er, eg, eb = environment_irradiance(lights, k, up[0], up[1], up[2])
+        return 0.2126 * er + 0.7152 * eg + 0.0722 * eb
     lx, ly, lz, d, f = irradiance_at(lights, k, x, y, z)
     return max(lx * up[0] + ly * up[1] + lz * up[2], 0.0) * f
 
@@ -908,7 +944,8 @@ def _ground_ray(lights, k, s, key, x, y, z, cull, lo, hi):
     ray = True
     if cull:
         if lights[k, 0] == DIRECTIONAL and not lights[k, PARAM] > 0.0:  # (a soft sun's vary)
-            ix, iy, iz = lights[k, ROW], lights[k, ROW + 1], lights[k, ROW + 2]
+            c = lights.shape[1] - 3  # (_with_inverse's columns)
+            ix, iy, iz = lights[k, c], lights[k, c + 1], lights[k, c + 2]
         else:
             ix, iy, iz = 1.0 / lx, 1.0 / ly, 1.0 / lz
         ray = slab_entry(x, y, z, ix, iy, iz, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2], 0.0,
@@ -951,6 +988,15 @@ def _shade_ground(r, x, y, z, dn, frame, width, dirs, keys, up, lights, headligh
         ck = _ground_irradiance(lights, k, x, y, z, up)
         full += ck
         m = shadow_samples(lights, k)
+        if is_environment(lights, k):
+            share = _ground_share(lights, k, key, x, y, z, up, cull, lo, hi, blocked,
+                                  next_ray, traced and shadows and ck > 0.0)
+            er, eg, eb = environment_irradiance(lights, k, up[0], up[1], up[2])
+            lit += ck * share
+            cr += er * share * lights[k, RGB]
+            cg += eg * share * lights[k, RGB + 1]
+            cb += eb * share * lights[k, RGB + 2]
+            continue
         dark = 0
         if traced and shadows and ck > 0.0:
             for s in range(m):
@@ -978,6 +1024,26 @@ def _shade_ground(r, x, y, z, dn, frame, width, dirs, keys, up, lights, headligh
     planes[C_R, r] = cr
     planes[C_R + 1, r] = cg
     planes[C_R + 2, r] = cb
+
+
+@llvm_inline_njit
+def _ground_share(lights, k, key, x, y, z, up, cull, lo, hi, blocked, next_ray, traced):
+    """The share of light k's shadow rays from the ground point that arrive, each weighted
+    by ``lights.shadow_weight`` against ``up`` (for the rays :func:`_ground_ray` traces,
+    where ``traced``: those from ``next_ray[k]`` on of ``blocked``, which moves on); 1
+    where none is traced or none has weight."""
+    if not traced:
+        return 1.0
+    total = dark = 0.0
+    for s in range(shadow_samples(lights, k)):
+        lx, ly, lz, _, ray = _ground_ray(lights, k, s, key, x, y, z, cull, lo, hi)
+        w = shadow_weight(lights, k, lx, ly, lz, up[0], up[1], up[2])
+        total += w
+        if ray:
+            if blocked[next_ray[k]] != 0:
+                dark += w
+            next_ray[k] += 1
+    return (total - dark) / total if total > 0.0 else 1.0
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # (see _ground_ray)

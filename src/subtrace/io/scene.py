@@ -320,7 +320,7 @@ def scene_from_dict(d: dict, path=None, base_dir=None, *, text: str | None = Non
     objects = _objects(ctx, d, base_dir)
     camera = _camera(ctx, d.get("camera", {}))
     render = _render(ctx, d.get("render", {}))
-    lights = _lights(ctx, d["light"]) if "light" in d else DEFAULT_LIGHTS
+    lights = _lights(ctx, d["light"], base_dir) if "light" in d else DEFAULT_LIGHTS
     ground = _ground(ctx, d["ground"]) if "ground" in d else Ground()
     output = _out_path(ctx, d, "output", base_dir)
     preview = _out_path(ctx, d, "preview", base_dir)
@@ -544,7 +544,7 @@ def _render(ctx, table) -> RenderSettings:
     return RenderSettings(**values)
 
 
-def _lights(ctx, raw) -> tuple[Light, ...]:
+def _lights(ctx, raw, base_dir: str) -> tuple[Light, ...]:
     """The [[light]] tables: each kind's keys and checks are the lights room's
     (:func:`subtrace.lights.parse_light`); errors name the key's line here."""
     lights = []
@@ -555,7 +555,7 @@ def _lights(ctx, raw) -> tuple[Light, ...]:
         def error(key, problem, where=where):
             return ctx.error(where if key is None else where + (key,), problem)
 
-        lights.append(parse_light(table, value, error))
+        lights.append(parse_light(table, value, error, base_dir))
     return tuple(lights)
 
 
