@@ -17,7 +17,7 @@ from subtrace.errors import SceneError
 from subtrace.io.exr import write_exr
 from subtrace.io.scene import load_scene, scene_from_dict
 from subtrace.lights import (Light, environment_irradiance, light_array, ray_keys,
-                             shadow_target)
+                             shadow_cast, shadow_target)
 from subtrace.render import render_scene
 
 TOP, BOTTOM = np.array([0.75, 0.625, 0.375]), np.array([0.125, 0.25, 0.3125])  # (halfs)
@@ -43,6 +43,7 @@ def _normals(n=40):
 
 
 def test_a_constant_environments_irradiance_is_pi_l():
+    assert shadow_cast(Light(kind_key="environment")) is None  # (its rays: not bounded)
     rows = light_array([Light(kind_key="environment")])
     for n in _normals():
         got = environment_irradiance(rows, 0, *map(float, n))
