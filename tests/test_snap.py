@@ -79,6 +79,39 @@ def test_every_edge_is_sampled_alike_and_cells_are_not_raised(pawn):
     assert (side < depths[:, None])[fans].any()  # regular and cell-free patches snap too
 
 
+def test_cell_bearing_patches_deeper_than_the_snap_limit_are_raised(pawn, monkeypatch):
+    """Where every cell-bearing patch on an edge is deeper than ``SNAP_MAX_DEPTH`` (a snapped
+    side keeps all 2^d + 1 samples of its polyline), the edge is sampled at its finest
+    patch's depth as any other: below the pawn's shallowest cells nothing snaps, every edge
+    is sampled at the deepest depth on it, and the cell-bearing patches beside a finer one
+    are raised to it (their cell-free depth is above it). At the limit's default the table
+    is the one the other tests check."""
+    cage, (table, before, depths0, side0, _) = pawn
+    iso = table.is_quad & ~table.regular
+    free = cell_free(table, iso)
+    keeps = iso & (before < free)
+    limit = int(before[keeps].min()) - 1
+    assert limit >= 1
+    monkeypatch.setattr(config, "SNAP_MAX_DEPTH", limit)
+    depths = before.copy()
+    edge_depth, side = edge_sampling(table, depths)
+    e, shift = table.edges, table.side_shift
+    on = e >= 0
+    value = np.where(on, side + shift, -1)
+    deepest = np.full(table.n_edges, -1)
+    np.maximum.at(deepest, e[on], (depths[:, None] + shift)[on])
+    np.testing.assert_array_equal(value[on], deepest[e[on]])
+    assert not (on & (side < depths[:, None])).any()
+    raised = keeps & (depths > depths0)
+    assert raised.any()
+    assert (depths[keeps] <= np.maximum(free[keeps], before[keeps])).all()
+    monkeypatch.setattr(config, "SNAP_MAX_DEPTH", 12)
+    d2 = before.copy()
+    _, side2 = edge_sampling(table, d2)
+    np.testing.assert_array_equal(d2, depths0)
+    np.testing.assert_array_equal(side2, side0)
+
+
 def test_snapped_samples_are_limit_points(pawn):
     cage, (table, _, depths, side, iso) = pawn
     a = iso.a
@@ -161,11 +194,13 @@ def test_snapped_points_lie_on_the_polylines_and_in_the_boxes(pawn):
     assert moved > 20 and tested > moved
 
 
-@pytest.mark.parametrize("tolerance", [4.0, 1.0])
-def test_watertight_from_inside_where_patches_snap(tolerance, tmp_path, monkeypatch):
+@pytest.mark.parametrize("tolerance, limit", [(4.0, 12), (1.0, 12), (1.0, 5)])
+def test_watertight_from_inside_where_patches_snap(tolerance, limit, tmp_path, monkeypatch):
     """From inside the tube of a creased torus (a ring that ends, a ring across it, a ring
     whose sharpness changes), at 160 x 120 pixels four ways, every ray hits the surface,
-    and some of the patches it builds snap a side."""
+    and some of the patches it builds snap a side; also where a low ``SNAP_MAX_DEPTH``
+    has the deeper cell-bearing patches raised instead."""
+    monkeypatch.setattr(config, "SNAP_MAX_DEPTH", limit)
     from test_crease import torus_obj
     from shared_data import small_scene
     from subtrace.render import render_scene

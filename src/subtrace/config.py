@@ -76,6 +76,14 @@ LOOP_MAX_INSIDE_DEPTH = 14
 # only adds refinement where rays descend, never a cap.
 FAN_LEVELS = 8
 
+# A side snapped onto a coarser cell-bearing neighbour's polyline (trace/snap.py) keeps all
+# 2^d + 1 samples of that polyline, d its depth: an edge whose cell-bearing patches are all
+# deeper than SNAP_MAX_DEPTH is sampled at its finest patch's depth instead, its
+# cell-bearing patches raised to it (patches/criterion.py: edge_sampling). At most 4,097
+# samples (96 KiB) a side; reached only in close-ups and at absurd tolerances (1e-12 px
+# asks for depth 42, whose polyline would be 2^42 points).
+SNAP_MAX_DEPTH = 12
+
 # How primary rays find the patch shells they enter: "projection" (shells binned into image
 # tiles, accel/projection.py; measured faster on Spot and the sword, BENCHMARKS.md) or "bvh".
 PRIMARY_ACCEL = "projection"

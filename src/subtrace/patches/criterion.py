@@ -150,7 +150,10 @@ def edge_sampling(table, depths):
       raised. (Raising them to the depth of every neighbour, repeatedly, carried a
       crease's deepest patch along the crease: the chess pieces' cell-bearing
       extraordinary, boundary and crossing-crease patches, 776 of 2,823 irregular ones,
-      ended at depth 7, most needing 3 to 4.)
+      ended at depth 7, most needing 3 to 4.) Where all of them are deeper than
+      ``config.SNAP_MAX_DEPTH`` (a snapped side keeps every sample of the polyline), the
+      edge is sampled as any other and they are raised to it, but not past their
+      :func:`~subtrace.patches.crease.cell_free_depths`.
     * Any other edge is sampled at the finest patch's depth on it: a patch of Bezier pieces
       alone (a regular patch, intersected directly, or an irregular one refined past its
       semi-sharp creases, :func:`~subtrace.patches.crease.cell_free_depths`) fans its
@@ -170,7 +173,8 @@ def edge_sampling(table, depths):
     target = np.empty(table.edges.shape, dtype=np.int64)
     edge_depth = np.empty(n_e, dtype=np.int64)
     _sample_edges(table.edges, table.side_shift, depths, iso, table.regular,
-                  cell_free(table, iso), config.FAN_LEVELS, target, edge_depth)
+                  cell_free(table, iso), config.FAN_LEVELS, config.SNAP_MAX_DEPTH, target,
+                  edge_depth)
     side = np.where(target >= 0, target, depths.astype(np.int64)[:, None])
     return edge_depth, np.ascontiguousarray(side, dtype=np.int64)
 
@@ -190,23 +194,25 @@ def cell_free(table, iso):
 
 
 @nb.njit(cache=True, nogil=True)
-def _sample_edges(edges, shift, depths, iso, regular, cell_free, fan_levels, target,
-                  edge_depth):
+def _sample_edges(edges, shift, depths, iso, regular, cell_free, fan_levels, snap_max,
+                  target, edge_depth):
     """Raise the patches that fan (``regular`` ones, and ``iso`` ones at or past
     ``cell_free``, from where they have no cells) to within ``fan_levels`` of their edges'
     sampling until none changes (in place): an edge is sampled at the shallowest depth of
-    the ``iso`` patches on it that keep cells (never raised), or where there is none at the
-    deepest depth on it. Fill each side's sampling (``target``, in the patch's units; -1
-    where the side has no edge) and the shallowest depth per edge (``edge_depth``, in the
+    the ``iso`` patches on it that keep cells (never raised), or where there is none, or
+    all are deeper than ``snap_max`` (a snapped side keeps ``2^depth + 1`` samples), at the
+    deepest depth on it, to which its cell-bearing patches are raised (but not past
+    ``cell_free``). Fill each side's sampling (``target``, in the patch's units; -1 where
+    the side has no edge) and the shallowest depth per edge (``edge_depth``, in the
     edge's: a patch's depth plus its side's ``shift``)."""
     # (np.empty and a fill, a constant for int32's largest: a cold render compiles neither
     # np.full nor np.iinfo for this kernel alone)
     best = np.empty(len(edge_depth), np.int64)
     best[:] = -1
     cells = np.empty(len(edge_depth), np.int64)  # the shallowest cell-bearing patch
-    cells[:] = INT32_MAX
     # a cell-bearing patch samples its edge at least as finely as the half side of a
-    # patch of level 1 beside it can (depth 0 there): the only time one is raised
+    # patch of level 1 beside it can (depth 0 there): the only time one is raised below
+    # snap_max
     for p in range(len(depths)):
         for k in range(4):
             e = edges[p, k]
@@ -220,23 +226,27 @@ def _sample_edges(edges, shift, depths, iso, regular, cell_free, fan_levels, tar
                     depths[p] = max(depths[p], best[e] - shift[p, k])
     best[:] = -1
     for p in range(len(depths)):
-        keeps = iso[p] and depths[p] < cell_free[p]
         for k in range(4):
             e = edges[p, k]
             if e >= 0:
                 best[e] = max(best[e], depths[p] + shift[p, k])
-                if keeps:
-                    cells[e] = min(cells[e], depths[p] + shift[p, k])
     changed = True
     while changed:
         changed = False
+        _shallowest_cells(edges, shift, depths, iso, cell_free, snap_max, cells)
         for p in range(len(depths)):
-            if not (regular[p] or (iso[p] and depths[p] >= cell_free[p])):
+            keeps = iso[p] and depths[p] < cell_free[p]
+            if not (keeps or regular[p] or iso[p]):
                 continue
             m = depths[p]
             for k in range(4):
                 e = edges[p, k]
-                if e >= 0:
+                if e < 0:
+                    continue
+                if keeps:
+                    if cells[e] == INT32_MAX:  # sampled at the deepest: raised, no cells
+                        m = max(m, min(best[e] - shift[p, k], cell_free[p]))
+                else:
                     b = cells[e] if cells[e] < INT32_MAX else best[e]
                     m = max(m, b - shift[p, k] - fan_levels)
             if m > depths[p]:
@@ -256,3 +266,19 @@ def _sample_edges(edges, shift, depths, iso, regular, cell_free, fan_levels, tar
                 edge_depth[e] = min(edge_depth[e], depths[p] + shift[p, k])
             else:
                 target[p, k] = -1
+
+
+@nb.njit(cache=True, nogil=True)
+def _shallowest_cells(edges, shift, depths, iso, cell_free, snap_max, cells):
+    """Per edge, the shallowest depth (in the edge's units) of the cell-bearing patches on
+    it, ``INT32_MAX`` where there is none or it is deeper than ``snap_max``."""
+    cells[:] = INT32_MAX
+    for p in range(len(depths)):
+        if iso[p] and depths[p] < cell_free[p]:
+            for k in range(4):
+                e = edges[p, k]
+                if e >= 0:
+                    cells[e] = min(cells[e], depths[p] + shift[p, k])
+    for e in range(len(cells)):
+        if cells[e] > snap_max:
+            cells[e] = INT32_MAX
