@@ -84,6 +84,12 @@ FAN_LEVELS = 8
 # asks for depth 42, whose polyline would be 2^42 points).
 SNAP_MAX_DEPTH = 12
 
+# A hit on a cell (of an irregular patch) takes the blend of its corners' exact normals,
+# unless a corner's normal lies more than this far from that blend: then the exact limit
+# normal at the hit's parameter (shade.exact_cell_normals; a crease narrower than the cell
+# turns the normal within its fillet, the blend over the whole cell).
+CELL_NORMAL_SPREAD_DEG = 10.0
+
 # How primary rays find the patch shells they enter: "projection" (shells binned into image
 # tiles, accel/projection.py; measured faster on Spot and the sword, BENCHMARKS.md) or "bvh".
 PRIMARY_ACCEL = "projection"

@@ -244,7 +244,7 @@ def _closest(pools, nurbs, frame, width, patches, scene, tol_rad, offset):
             _, hits = trace_rays(pools, origins, dirs, np.full(n, np.inf), any_hit=False)
             covered = np.zeros(tasks.thread_count(), np.int64)
             shade(frame, width, hits, pools.iso.view(), patches, miss, sub, normals,
-                  pix_patch, covered, dirs, table_loop_flag(pools.table))
+                  pix_patch, covered, dirs, table_loop_flag(pools.table), table=pools.table)
             t = hits.t.copy()
         if nurbs is not None:
             shade_rays(nurbs, frame, dirs, tol_rad, offset, t, normals, pix_patch, sub)

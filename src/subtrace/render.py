@@ -196,7 +196,7 @@ def _paint_bands(job, bands):
             t = _background(scene, window, camera.height, miss, planes, pix_patch)
         else:
             _shade_hits(frame, w, hits, shared.iso, patches, miss, planes, normals, pix_patch,
-                        covered, job.owners, shared.loop, lit)
+                        covered, job.owners, shared.loop, lit, table)
             # each pixel's hit distance for the picture (the NURBS pass writes its nearer
             # hits into a copy); one band: the rest of the hit records (one block with the
             # rounds' requests, 40 bytes a ray) is given back before the picture's arrays
@@ -246,13 +246,13 @@ def _band_progress(job, y0, y1, h):
 
 
 def _shade_hits(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, covered,
-                owners, loop, lit=None):
+                owners, loop, lit=None, table=None):
     """``shade.shade`` the hits into ``planes`` (and ``normals``, ``pix_patch``,
     ``covered``; their colour too with ``lit``, ``picture.lit_in_shading``); the object ids
     made the scene's (``owners``: the scene index of each cage's object,
     :func:`cage_objects`)."""
     shade(frame, width, hits, iso.view(), patches, miss, planes, normals, pix_patch, covered,
-          loop=loop, lit=lit)
+          loop=loop, lit=lit, table=table)
     if owners != list(range(len(owners))):  # objects without a cage: scene indices
         hit = planes[C_OBJECT] >= 0
         index = planes[C_OBJECT][hit].astype(np.int64)

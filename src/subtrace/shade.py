@@ -4,8 +4,12 @@ intersection kernels return only t, the micro-face and its barycentrics).
 A hit on a Bezier piece or a Loop triangular net takes the exact normal of its net at the
 hit's parameter. On a cell (of an irregular patch) the normal interpolates the exact unit
 limit normals of the cell's corners (computed from the limit tangents of the subdivision
-core) with the hit's barycentrics, so it is within the tolerance's angle of the limit normal at that point; where the limit
-tangents leave a corner's normal undefined, the micro-triangle's own normal is used.
+core) with the hit's barycentrics; where the limit tangents leave a corner's normal
+undefined, the micro-triangle's own normal is used. Where a corner's normal lies more than
+``config.CELL_NORMAL_SPREAD_DEG`` from that blend (a semi-sharp crease narrower than the
+cell), the hit takes the exact limit normal at its parameter instead
+(:func:`exact_cell_normals`): every shading normal is then within about that angle of the
+limit normal (tests/test_cell_normals.py).
 Lighting (:func:`light`) is two-sided Lambert plus the material's Blinn-Phong lobe (MTL's
 ``Ks (N.H)^Ns``) under a headlight at the eye and directional and point lights, each scaled
 by its visibility (shadow rays: ``subtrace.picture``). Also here: the ground plane's colour
@@ -30,12 +34,13 @@ import numpy as np
 from subtrace import config
 from subtrace.accel.bvh import slab_entry
 from subtrace.camera import window_offset
-from subtrace.geometry.kinds import BEZIER, LOOP_CELL, TRI
+from subtrace.geometry.kinds import BEZIER, CELL, LOOP_CELL, TRI
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material
 from subtrace.lights import (DIRECTIONAL, PARAM, R2_A1, R2_A2, RGB, ROW, environment_irradiance,
                              hash01, incoming, irradiance_at, is_environment, shadow_samples,
                              shadow_target, shadow_weight)
 from subtrace.patches.basis import bez_normal
+from subtrace.patches.evaluate import evaluate
 from subtrace.runtime.jit import callee_njit, inline_njit, leaf_njit, llvm_inline_njit, nb
 from subtrace.runtime.threads import run_tasks, thread_count
 from subtrace.trace.pools import Hits, PieceArrays
@@ -56,7 +61,7 @@ MISS = (0.0, 0.0, 0.0, 0.0, np.inf, 0.0, 0.0, 0.0, -1.0, -1.0, -1.0, 0.0, 0.0, n
 
 
 def shade(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, covered,
-          dirs=None, loop=None, lit=None):
+          dirs=None, loop=None, lit=None, table=None):
     """Fill ``planes`` (len(CHANNELS), n_pixels) float32 from ``hits``
     (:class:`~subtrace.trace.pools.Hits`) on every thread (blocks of pixels in turn): every
     channel but the colour, which :func:`light` adds, or with ``lit`` = (lights (L,7),
@@ -74,7 +79,9 @@ def shade(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, co
     samples): then ``hits`` and the outputs are per ray. ``loop``: whether any cage is a
     Loop cage (``trace.bezier.loop_flag``: True or None); the normals of hits on Loop items
     are a second pass of their own (:func:`_loop_normals_task`), which a render of
-    Catmull-Clark cages neither runs nor compiles."""
+    Catmull-Clark cages neither runs nor compiles. ``table``: the patch table the items
+    were built from; given, the hits on cells whose corner normals spread take the exact
+    limit normal (:func:`exact_cell_normals`)."""
     dirs = _no_dirs() if dirs is None else dirs
     if lit is None:  # (the same types: one compiled kernel either way)
         lit = (np.zeros((0, ROW)), np.zeros(0))
@@ -88,6 +95,57 @@ def shade(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, co
               _NO_OCCLUSION)
     if loop is not None:
         run_tasks(_loop_normals_task, frame, width, hits, iso, planes, normals, dirs)
+    if table is not None:
+        exact_cell_normals(table, frame, width, hits, iso, patches, planes, normals, dirs, lit)
+
+
+def exact_cell_normals(table, frame, width, hits, iso, patches, planes, normals, dirs, lit):
+    """The hits on cells (of irregular patches) whose exact corner normals spread by more
+    than ``config.CELL_NORMAL_SPREAD_DEG`` from the blend at the hit take the exact limit
+    normal at their parameter instead (``patches.evaluate``, OpenSubdiv-checked), in the
+    N planes and ``normals`` (turned towards the eye), and are coloured again where the
+    shading pass coloured them (``lit``). A cell is exact at its corners only: across a
+    semi-sharp crease narrower than the cell (sharpness 6-8 at isolation depth 5) the
+    blend turns the normal over the whole cell where the surface turns within the
+    crease's fillet, and such pixels read as dots along the crease."""
+    r = np.nonzero(hits.t < np.inf)[0]
+    it = hits.item[r].astype(np.int64)
+    on = iso.kind[it] == CELL
+    r, it = r[on], it[on]
+    if not len(r):
+        return
+    blend = planes[C_N:C_N + 3, r].T.astype(np.float64)
+    corner = iso.cell_normals[iso.ref[it]]  # (m,4,3)
+    lowest = np.einsum("mkd,md->mk", corner, blend).min(axis=1)
+    far = lowest < math.cos(math.radians(config.CELL_NORMAL_SPREAD_DEG))
+    r = r[far]
+    if not len(r):
+        return
+    p = -hits.prim[r].astype(np.int64) - 2
+    uv = patches.uv0[p] + patches.scale[p][:, None] * np.stack([hits.a[r], hits.b[r]], axis=1)
+    uv = np.clip(uv, 0.0, 1.0)
+    n = np.full((len(r), 3), np.nan)
+    oid = table.object_id[p]
+    for o in np.unique(oid):
+        sel = np.nonzero(oid == o)[0]
+        _, du, dv = evaluate(table.objects[o].cage, patches.ptex[p[sel]], uv[sel])
+        n[sel] = np.cross(du, dv)
+    length = np.sqrt((n * n).sum(axis=1))
+    good = length > 0.0  # (NaN: a hole face; 0: an undefined normal)
+    r, p, n = r[good], p[good], n[good] / length[good][:, None]
+    if not len(r):
+        return
+    n *= np.where((n * blend[far][good]).sum(axis=1) < 0.0, -1.0, 1.0)[:, None]
+    planes[C_N:C_N + 3, r] = n.T
+    d = dirs[r] if len(dirs) else pixel_rays(frame, width, r)
+    facing = n * np.where((n * d).sum(axis=1) > 0.0, -1.0, 1.0)[:, None]
+    normals[r] = facing
+    lights, headlight = lit
+    if len(headlight):  # (the shading pass coloured them: again with the new normals)
+        sub = planes[:, r]
+        light(frame, width, hits.t[r], facing, p.astype(np.int32),
+              patches, lights, headlight, _all_lit(len(lights)), sub, dirs=d)
+        planes[C_R:C_R + 3, r] = sub[C_R:C_R + 3]
 
 
 def _no_dirs():

@@ -266,6 +266,35 @@ def _grid16(level, f):
     return G
 
 
+def _grids16(level, f):
+    """:func:`_grid16` of many regular quads ``f`` (n,) at once: (n,4,4) vertex ids."""
+    fo, fv = level.face_offsets, level.face_verts
+    n = len(f)
+    G = -np.ones((n, 4, 4), dtype=np.int64)
+    k4 = np.arange(4)
+    for i in range(4):
+        c = fv[fo[f] + i]
+        a = level.vert_face_offsets[c]
+        ring = level.vert_faces[a[:, None] + k4]
+        rc = level.vert_face_corner[a[:, None] + k4]
+        pos = np.argmax(ring == f[:, None], axis=1)
+        G[:, B_CORNER[i][0], B_CORNER[i][1]] = c
+        lead, trail = LEAD[i], TRAIL[i]
+        dirs = [trail, -lead, -trail, lead]
+        rows = np.arange(n)
+        for k in (1, 2, 3):
+            j = (pos + k) % 4
+            g, kk = ring[rows, j], rc[rows, j]
+            q = B_CORNER[i] + dirs[k - 1] + dirs[k]
+            G[:, q[0], q[1]] = fv[fo[g] + (kk + 2) % 4]
+            if k >= 2:
+                e = level.vert_edges[level.vert_edge_offsets[c] + j]
+                a0, b0 = level.edge_verts[e, 0], level.edge_verts[e, 1]
+                q = B_CORNER[i] + dirs[k - 1]
+                G[:, q[0], q[1]] = np.where(a0 == c, b0, a0)
+    return G
+
+
 def _grid12(level, f):
     """The 12 control points (vertex ids, in BOX_POINTS order) of a regular triangle ``f``."""
     fo, fv = level.face_offsets, level.face_verts
@@ -314,29 +343,34 @@ def _descend(cage, faces, subface, uv, want_derivs):
         val = np.diff(sub.vert_edge_offsets)
         sfo = sub.face_offsets
         reg_valence = 6 if is_loop else 4
-        for i, f in zip(ids, sf):
-            if sfo[f + 1] - sfo[f] != (3 if is_loop else 4):
-                continue
-            cv = sub.face_verts[sfo[f] : sfo[f + 1]]
-            if not (np.all(cls[cv] == SMOOTH) and np.all(val[cv] == reg_valence)):
-                continue
+        n_side = 3 if is_loop else 4
+        sized = (sfo[sf + 1] - sfo[sf]) == n_side
+        cv = sub.face_verts[np.minimum(sfo[sf][:, None] + np.arange(n_side),
+                                       len(sub.face_verts) - 1)]
+        regular = sized & np.all((cls[cv] == SMOOTH) & (val[cv] == reg_valence), axis=1)
+        done, f_done = ids[regular], sf[regular]
+        if len(done):
             if is_loop:
-                X = sub_pts[_grid12(sub, f)]  # (12,3)
-                b, bu, bv = box_spline_basis(loc[i, 0], loc[i, 1])
-                P[i] = b @ X
-                lu, lv = bu @ X, bv @ X
+                for i, f in zip(done, f_done):
+                    X = sub_pts[_grid12(sub, f)]  # (12,3)
+                    b, bu, bv = box_spline_basis(loc[i, 0], loc[i, 1])
+                    P[i] = b @ X
+                    lu, lv = bu @ X, bv @ X
+                    dU[i] = J[i, 0, 0] * lu + J[i, 1, 0] * lv
+                    dV[i] = J[i, 0, 1] * lu + J[i, 1, 1] * lv
             else:
-                X = sub_pts[_grid16(sub, f)]  # (4,4,3)
-                bu, du_ = bspline_basis(np.array([loc[i, 0]]))
-                bv, dv_ = bspline_basis(np.array([loc[i, 1]]))
-                P[i] = np.einsum("i,j,ijk->k", bu[0], bv[0], X)
-                lu = np.einsum("i,j,ijk->k", du_[0], bv[0], X)
-                lv = np.einsum("i,j,ijk->k", bu[0], dv_[0], X)
-            # chain rule: d/dptex = J^T d/dlocal
-            dU[i] = J[i, 0, 0] * lu + J[i, 1, 0] * lv
-            dV[i] = J[i, 0, 1] * lu + J[i, 1, 1] * lv
-            exact_d[i] = True
-            active[i] = False
+                X = sub_pts[_grids16(sub, f_done)]  # (n,4,4,3)
+                bu, du_ = bspline_basis(loc[done, 0])
+                bv, dv_ = bspline_basis(loc[done, 1])
+                P[done] = np.einsum("ni,nj,nijk->nk", bu, bv, X)
+                lu = np.einsum("ni,nj,nijk->nk", du_, bv, X)
+                lv = np.einsum("ni,nj,nijk->nk", bu, dv_, X)
+                # chain rule: d/dptex = J^T d/dlocal
+                Jd = J[done]
+                dU[done] = Jd[:, 0, 0, None] * lu + Jd[:, 1, 0, None] * lv
+                dV[done] = Jd[:, 0, 1, None] * lu + Jd[:, 1, 1, None] * lv
+            exact_d[done] = True
+            active[done] = False
         ids = np.nonzero(active)[0]
         sf = face_map[cur[ids]]
         if len(ids) == 0:
