@@ -413,3 +413,28 @@ def test_the_lowest_limit_point_is_not_taken_at_the_lowest_control_point(monkeyp
     assert low == float((subtrace.make_cage(points, [4] * len(quads),
                                             np.ravel(quads)).limit(1)[0] @ up).min())
     assert abs(low + 0.5) < 1e-12  # the valley's floor (the pulled point dips to -0.44)
+
+
+@pytest.mark.parametrize("name", ["pawn", "rook", "car", "helmet"])
+def test_the_lowest_limit_of_a_creased_cage_skips_no_lower_vertex(name, monkeypatch):
+    """On OpenSubdiv's hard-surface cages (semi-sharp creases of sharpness 6-8, whose
+    vertices' limits take repeated refinement), ``lowest_limit`` is the least of all level-1
+    limit points bit for bit in several directions, though it refines only the creased
+    vertices whose faces reach lower than the others' least (a flat bottom: none)."""
+    from subtrace.subdiv import limit
+
+    path = MODELS / "opensubdiv" / f"catmark_{name}.obj"
+    whole = subtrace.load_cage(path).limit(1)[0]
+    refined = []
+    real = limit._hard_limits
+    monkeypatch.setattr(limit, "_hard_limits",
+                        lambda lev, pts, opts, hard, *a, **k: (refined.append(len(hard)),
+                                                               real(lev, pts, opts, hard, *a,
+                                                                    **k)))
+    rng = np.random.default_rng(5)
+    for up in [(0.0, 1.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, 1.0), *rng.standard_normal((4, 3))]:
+        up = np.asarray(up) / np.linalg.norm(up)
+        assert lowest_limit(subtrace.load_cage(path), up) == float((whole @ up).min())
+    n_hard = int((limit.classify(subtrace.load_cage(path).level_topology(1),
+                                 subtrace.load_cage(path).options) < 0).sum())
+    assert n_hard > 0 and sum(refined) < 7 * n_hard / 4

@@ -40,7 +40,7 @@ from subtrace.lights import (DIRECTIONAL, PARAM, R2_A1, R2_A2, RGB, ROW, environ
                              hash01, incoming, irradiance_at, is_environment, shadow_samples,
                              shadow_target, shadow_weight)
 from subtrace.patches.basis import bez_normal
-from subtrace.patches.evaluate import evaluate
+from subtrace.patches.evaluate import evaluate, ptex_starts
 from subtrace.runtime.jit import callee_njit, inline_njit, leaf_njit, llvm_inline_njit, nb
 from subtrace.runtime.threads import run_tasks, thread_count
 from subtrace.trace.pools import Hits, PieceArrays
@@ -99,6 +99,18 @@ def shade(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, co
         exact_cell_normals(table, frame, width, hits, iso, patches, planes, normals, dirs, lit)
 
 
+def _own_ptex(cage, ptex):
+    """The ptex ids ``ptex`` of a cage's patches (the whole cage's numbering) in the cage's
+    own: a :meth:`~subtrace.mesh.cage.Cage.restricted` cut of a large cage keeps the whole
+    cage's ids (``ptex_first``, one per face, increasing)."""
+    ptex = np.asarray(ptex, np.int64)
+    if cage.ptex_first is None:
+        return ptex
+    first = np.asarray(cage.ptex_first, np.int64)
+    face = np.searchsorted(first, ptex, side="right") - 1
+    return ptex_starts(cage)[face] + (ptex - first[face])
+
+
 def exact_cell_normals(table, frame, width, hits, iso, patches, planes, normals, dirs, lit):
     """The hits on cells (of irregular patches) whose exact corner normals spread by more
     than ``config.CELL_NORMAL_SPREAD_DEG`` from the blend at the hit take the exact limit
@@ -128,7 +140,8 @@ def exact_cell_normals(table, frame, width, hits, iso, patches, planes, normals,
     oid = table.object_id[p]
     for o in np.unique(oid):
         sel = np.nonzero(oid == o)[0]
-        _, du, dv = evaluate(table.objects[o].cage, patches.ptex[p[sel]], uv[sel])
+        cage = table.objects[o].cage
+        _, du, dv = evaluate(cage, _own_ptex(cage, patches.ptex[p[sel]]), uv[sel])
         n[sel] = np.cross(du, dv)
     length = np.sqrt((n * n).sum(axis=1))
     good = length > 0.0  # (NaN: a hole face; 0: an undefined normal)

@@ -63,6 +63,46 @@ def limit_points(level: Level, points: np.ndarray, options: Options, which=None)
     return P, du, dv
 
 
+def least_limit_height(level: Level, points: np.ndarray, options: Options, up) -> float:
+    """The least ``P . up`` over the limit points of ``level``'s vertices: that of
+    :func:`limit_points` to rounding, its costly part (the vertices whose limit takes
+    repeated refinement: semi-sharp creases, ...) only for those that can lie lower than the
+    least of the others. A vertex's limit point is a convex combination of the points of
+    its incident faces (every Catmull-Clark and Loop mask, sharp, semi-sharp and
+    boundary ones included, has non-negative weights; not Chaikin's creases nor the smooth
+    triangle rule, which callers keep to :func:`limit_points`), so one whose faces' points
+    all lie no lower than that least does not lower it."""
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    up = np.asarray(up, np.float64)
+    n = level.n_verts
+    cls = classify(level, options)
+    easy = np.nonzero(cls >= 0)[0]
+    hard = np.nonzero(cls < 0)[0]
+    least = np.inf
+    if len(easy):
+        P = np.zeros((len(easy), 3))
+        du, dv = np.zeros_like(P), np.zeros_like(P)
+        _closed_form(level, points, options, cls, easy, np.arange(len(easy)), P, du, dv)
+        least = float((P @ up).min())
+    if len(hard):
+        h = points @ up
+        fo, vfo = level.face_offsets, level.vert_face_offsets
+        face_low = (np.minimum.reduceat(h[level.face_verts], fo[:-1]) if level.n_faces
+                    else np.zeros(0))
+        star_low = h.copy()
+        has = np.diff(vfo) > 0
+        if has.any() and len(level.vert_faces):
+            low = np.minimum.reduceat(face_low[level.vert_faces], vfo[:-1][has])
+            star_low[has] = np.minimum(star_low[has], low)
+        hard = hard[star_low[hard] < least]
+        if len(hard):
+            P = np.zeros((len(hard), 3))
+            du, dv = np.zeros_like(P), np.zeros_like(P)
+            _hard_limits(level, points, options, hard, P, du, dv, rows=np.arange(len(hard)))
+            least = min(least, float((P @ up).min()))
+    return least if n else float("inf")
+
+
 def classify(level: Level, options: Options, which=None) -> np.ndarray:
     """(V,) int8 vertex classes (see the constants above); with ``which``, only those
     vertices are classified (the others' entries are undefined)."""
