@@ -115,6 +115,9 @@ DEFAULT_UP = (0.0, 1.0, 0.0)
 DEFAULT_TOLERANCE_PX = 1.0
 DEFAULT_BACKGROUND = ((0.42, 0.47, 0.54), (0.09, 0.10, 0.12))  # (top, bottom)
 DEFAULT_LIGHT_RAYS = (((0.45, -1.0, -0.5), 0.75), ((-0.8, -1.0, 0.1), 0.25))  # key, fill
+# the fill is a small sun (its angular diameter, degrees, and shadow rays per point): a
+# hard fill drew its shadow's edge as a jagged seam across the objects it fell on
+DEFAULT_FILL_ANGLE, DEFAULT_FILL_SAMPLES = 6.0, 4
 DEFAULT_HEADLIGHT_INTENSITY = 0.2
 # rays per edge pixel at most where neither the scene nor --samples says: the command
 # line's default (subtrace.picture; chosen in BENCHMARKS.md); the API renders one ray per
@@ -180,8 +183,9 @@ class SceneObject:
 
 
 DEFAULT_LIGHTS = tuple(
-    Light(tuple(c / math.sqrt(sum(x * x for x in d)) for c in d), intensity=intensity)
-    for d, intensity in DEFAULT_LIGHT_RAYS)
+    Light(tuple(c / math.sqrt(sum(x * x for x in d)) for c in d), intensity=intensity,
+          **({} if k == 0 else {"angle": DEFAULT_FILL_ANGLE, "samples": DEFAULT_FILL_SAMPLES}))
+    for k, (d, intensity) in enumerate(DEFAULT_LIGHT_RAYS))
 
 
 @dataclass(frozen=True)
