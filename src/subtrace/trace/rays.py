@@ -139,16 +139,18 @@ def _runs(pools, dirs, any_hit):
     if not any_hit or n < least:
         return [(0, n, no_grid())]
     bounds = np.concatenate([[0], _direction_changes(dirs), [n]])
-    runs = []
-    for a, b in zip(bounds[:-1], bounds[1:]):
-        a, b = int(a), int(b)
-        if b - a >= least:
-            runs.append((a, b, _grid(pools, dirs[a])))
-        elif runs and runs[-1][2] is None:
-            runs[-1] = (runs[-1][0], b, None)
-        else:
-            runs.append((a, b, None))
-    return [(a, b, no_grid() if g is None else g) for a, b, g in runs]
+    # (the long runs alone are visited: a soft light's rays change direction at every ray,
+    # and a Python pass over the runs was 0.27 s of the default picture's 0.85)
+    runs, at = [], 0
+    for i in np.nonzero(np.diff(bounds) >= least)[0]:
+        a, b = int(bounds[i]), int(bounds[i + 1])
+        if a > at:  # (the short runs before it, together)
+            runs.append((at, a, no_grid()))
+        runs.append((a, b, _grid(pools, dirs[a])))
+        at = b
+    if at < n:
+        runs.append((at, n, no_grid()))
+    return runs
 
 
 @nb.njit(cache=True)
