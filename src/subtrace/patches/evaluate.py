@@ -240,34 +240,10 @@ def _fd_derivatives(cage, faces, subface, uv, P0):
 # --------------------------------------------------------------------------------------
 
 
-def _grid16(level, f):
-    """4x4 control points (vertex ids, [u index][v index]) of a regular quad ``f``."""
-    fo, fv = level.face_offsets, level.face_verts
-    G = -np.ones((4, 4), dtype=np.int64)
-    corners = fv[fo[f] : fo[f] + 4]
-    for i, c in enumerate(corners):
-        G[tuple(B_CORNER[i])] = c
-        a = level.vert_face_offsets[c]
-        ring = level.vert_faces[a : a + 4]
-        rc = level.vert_face_corner[a : a + 4]
-        pos = int(np.nonzero(ring == f)[0][0])
-        lead, trail = LEAD[i], TRAIL[i]
-        # the other three faces counter-clockwise: their diagonals and shared edge ends
-        dirs = [trail, -lead, -trail, lead]
-        for k in (1, 2, 3):
-            j = (pos + k) % 4
-            g, kk = ring[j], rc[j]
-            diag = fv[fo[g] + (kk + 2) % 4]
-            G[tuple(B_CORNER[i] + dirs[k - 1] + dirs[k])] = diag
-            if k >= 2:
-                e = level.vert_edges[level.vert_edge_offsets[c] + j]
-                a0, b0 = level.edge_verts[e]
-                G[tuple(B_CORNER[i] + dirs[k - 1])] = b0 if a0 == c else a0
-    return G
-
-
 def _grids16(level, f):
-    """:func:`_grid16` of many regular quads ``f`` (n,) at once: (n,4,4) vertex ids."""
+    """4x4 control points (vertex ids, [u index][v index]) of the regular quads ``f`` (n,):
+    (n,4,4). Around each corner, the three other faces of its valence-4 ring
+    counter-clockwise give their diagonals and shared edges' far ends."""
     fo, fv = level.face_offsets, level.face_verts
     n = len(f)
     G = -np.ones((n, 4, 4), dtype=np.int64)
