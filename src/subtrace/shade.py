@@ -40,6 +40,7 @@ from subtrace.lights import (DIRECTIONAL, PARAM, R2_A1, R2_A2, RGB, ROW, environ
                              hash01, incoming, irradiance_at, is_environment, shadow_samples,
                              shadow_target, shadow_weight)
 from subtrace.patches.basis import bez_normal
+from subtrace.patches.crease import crease_normals
 from subtrace.patches.evaluate import evaluate, ptex_starts
 from subtrace.runtime.jit import callee_njit, inline_njit, leaf_njit, llvm_inline_njit, nb
 from subtrace.runtime.threads import run_tasks, thread_count
@@ -114,7 +115,8 @@ def _own_ptex(cage, ptex):
 def exact_cell_normals(table, frame, width, hits, iso, patches, planes, normals, dirs, lit):
     """The hits on cells (of irregular patches) whose exact corner normals spread by more
     than ``config.CELL_NORMAL_SPREAD_DEG`` from the blend at the hit take the exact limit
-    normal at their parameter instead (``patches.evaluate``, OpenSubdiv-checked), in the
+    normal at their parameter instead (``patches.crease.crease_normals`` on a patch along
+    one crease of one sharpness, else ``patches.evaluate``; both OpenSubdiv-checked), in the
     N planes and ``normals`` (turned towards the eye), and are coloured again where the
     shading pass coloured them (``lit``). A cell is exact at its corners only: across a
     semi-sharp crease narrower than the cell (sharpness 6-8 at isolation depth 5) the
@@ -134,15 +136,22 @@ def exact_cell_normals(table, frame, width, hits, iso, patches, planes, normals,
     if not len(r):
         return
     p = -hits.prim[r].astype(np.int64) - 2
-    uv = patches.uv0[p] + patches.scale[p][:, None] * np.stack([hits.a[r], hits.b[r]], axis=1)
-    uv = np.clip(uv, 0.0, 1.0)
+    at = np.stack([hits.a[r], hits.b[r]], axis=1)  # (the patch's parameter)
+    uv = np.clip(patches.uv0[p] + patches.scale[p][:, None] * at, 0.0, 1.0)
     n = np.full((len(r), 3), np.nan)
     oid = table.object_id[p]
     for o in np.unique(oid):
         sel = np.nonzero(oid == o)[0]
-        cage = table.objects[o].cage
-        _, du, dv = evaluate(cage, _own_ptex(cage, patches.ptex[p[sel]]), uv[sel])
-        n[sel] = np.cross(du, dv)
+        obj = table.objects[o]
+        # a patch along one crease of one sharpness in closed form (patches/crease.py),
+        # any other by local refinement
+        ok, n[sel] = crease_normals(obj.level, obj.points, obj.cage.options,
+                                    table.face[p[sel]], np.clip(at[sel], 0.0, 1.0))
+        rest = sel[~ok]
+        if len(rest):
+            _, du, dv = evaluate(obj.cage, _own_ptex(obj.cage, patches.ptex[p[rest]]),
+                                 uv[rest])
+            n[rest] = np.cross(du, dv)
     length = np.sqrt((n * n).sum(axis=1))
     good = length > 0.0  # (NaN: a hole face; 0: an undefined normal)
     r, p, n = r[good], p[good], n[good] / length[good][:, None]

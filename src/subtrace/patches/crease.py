@@ -852,3 +852,113 @@ def _add_cells(cells, grids, lo, hi, side, root, i, j):
     if len(cells) > 5:
         cells[5].append(np.linalg.norm(grids.max(axis=(1, 2)) - grids.min(axis=(1, 2)), axis=1))
         cells[6].append(np.zeros(len(root), dtype=bool))
+
+
+# --------------------------------------------------------------------------------------
+# exact normals inside a patch the maps serve
+# --------------------------------------------------------------------------------------
+
+
+def crease_normals(level, points, options, faces, uv):
+    """The limit surface's normals (unnormalised, the patch's orientation) at the patch
+    parameters ``uv`` (m,2) of the quads ``faces`` (m,) of ``level``: ``(ok (m,), n
+    (m,3))``, ``ok`` where the maps serve the face (:func:`crease_faces`; elsewhere n is 0).
+    Such a patch is, along its crease, the uniform cubic B-spline of its grid's rows, and
+    across it the curve whose points 1 and 2 take the crease rule: the curve is split at
+    the parameter, the half holding it kept, until its sharpness has run out (as
+    :func:`_curve_masks` follows a point), then differentiated as a B-spline there."""
+    faces = np.asarray(faces, np.int64)
+    uv = np.asarray(uv, np.float64).reshape(-1, 2)
+    n = np.zeros((len(faces), 3))
+    ok, side, s_lo, s_hi = crease_faces(level, options, faces)
+    at = np.nonzero(ok)[0]
+    if len(at):
+        grids = _canonical(level, points, faces[at], side[at])
+        u, v = uv[at, 0], uv[at, 1]
+        s = side[at]
+        # the patch's (u, v) in the canonical frame (the inverse of _turns' maps)
+        cu = np.select([s == 0, s == 1, s == 2], [u, v, 1.0 - u], 1.0 - v)
+        cv = np.select([s == 0, s == 1, s == 2], [v, 1.0 - u, 1.0 - v], u)
+        out = np.zeros((len(at), 3))
+        _crease_normals(grids, s_lo[at], s_hi[at], cu, cv, HALVES, out)
+        n[at] = out
+    return ok, n
+
+
+@nb.njit(cache=True, nogil=True)
+def _crease_normals(grids, s_lo, s_hi, cu, cv, halves, out):
+    """:func:`crease_normals`' kernel: per sample, the curve across split at ``cv`` down
+    to where its sharpness has run out (its points as combinations ``mat`` of the grid's
+    four columns), then ``du x dv`` of the B-spline along (``cu``) and across."""
+    mat = np.empty((4, 4))
+    step = np.empty((4, 4))
+    nxt = np.empty((4, 4))
+    b_u, d_u, b_v, d_v = np.empty(4), np.empty(4), np.empty(4), np.empty(4)
+    wb, wd, du, dv = np.empty(4), np.empty(4), np.empty(3), np.empty(3)
+    f0, f1 = np.float32(0.0), np.float32(1.0)
+    for m in range(grids.shape[0]):
+        mat[:, :] = 0.0
+        for k in range(4):
+            mat[k, k] = 1.0
+        lo, hi = s_lo[m], s_hi[m]
+        t = cv[m]
+        for _ in range(64):
+            if not (lo > f0 or hi > f0):
+                break
+            half = 0 if t < 0.5 else 1
+            step[:, :] = halves[half]
+            # points 1 and 2 take the crease rule (_across): w the point, 1 - w smooth
+            for point in range(1, 3):
+                sh = lo if point == 1 else hi
+                w = 1.0 if sh >= f1 else (np.float64(sh) if sh > f0 else 0.0)
+                row = (2 * point - 1) if half == 0 else (2 * point - 2)
+                for c in range(4):
+                    step[row, c] = ((1.0 - w) * halves[0, 2 * point - 1, c]
+                                    + (w if c == point else 0.0))
+            for r in range(4):
+                for c in range(4):
+                    acc = 0.0
+                    for k in range(4):
+                        acc += step[r, k] * mat[k, c]
+                    nxt[r, c] = acc
+            mat[:, :] = nxt
+            t = 2.0 * t - half
+            if half == 0:
+                lo, hi = (lo - f1 if lo > f1 else f0), f0
+            else:
+                lo, hi = f0, (hi - f1 if hi > f1 else f0)
+        _cubic(t, b_v, d_v)
+        _cubic(cu[m], b_u, d_u)
+        # the masks across on the grid's columns
+        for c in range(4):
+            wb[c] = 0.0
+            wd[c] = 0.0
+            for k in range(4):
+                wb[c] += b_v[k] * mat[k, c]
+                wd[c] += d_v[k] * mat[k, c]
+        du[:] = 0.0
+        dv[:] = 0.0
+        for a in range(4):
+            for c in range(4):
+                for d in range(3):
+                    g = grids[m, a, c, d]
+                    du[d] += d_u[a] * wb[c] * g
+                    dv[d] += b_u[a] * wd[c] * g
+        out[m, 0] = du[1] * dv[2] - du[2] * dv[1]
+        out[m, 1] = du[2] * dv[0] - du[0] * dv[2]
+        out[m, 2] = du[0] * dv[1] - du[1] * dv[0]
+
+
+@leaf_njit
+def _cubic(t, b, d):
+    """The uniform cubic B-spline basis and its derivative at ``t`` into ``b``, ``d``
+    (4,)."""
+    s = 1.0 - t
+    b[0] = s * s * s / 6.0
+    b[1] = (3.0 * t * t * t - 6.0 * t * t + 4.0) / 6.0
+    b[2] = (-3.0 * t * t * t + 3.0 * t * t + 3.0 * t + 1.0) / 6.0
+    b[3] = t * t * t / 6.0
+    d[0] = -s * s / 2.0
+    d[1] = (3.0 * t * t - 4.0 * t) / 2.0
+    d[2] = (-3.0 * t * t + 2.0 * t + 1.0) / 2.0
+    d[3] = t * t / 2.0
