@@ -535,13 +535,6 @@ def _irradiance_coefficients(image, mu, phi) -> np.ndarray:
     return out
 
 
-def directional_rows(lights) -> np.ndarray:
-    """(D, 6) float64: the directional lights' unit travel and colour times intensity."""
-    return np.array([[*l.direction, *(np.asarray(l.color) * l.intensity)]
-                     for l in lights if l.kind == DIRECTIONAL],
-                    dtype=np.float64).reshape(-1, 6)
-
-
 def sampled(rows) -> bool:
     """Whether any light of ``rows`` (:func:`light_array`) samples its shadow rays (a
     sphere of radius > 0, a soft sun or an area light (its PARAM > 0), even with one ray a point: each shaded ray, the

@@ -35,7 +35,6 @@ import numpy as np
 
 from subtrace import config
 from subtrace.errors import SceneError
-from subtrace.lights import directional_rows
 from subtrace.nurbs.scene import load_nurbs, nurbs_pass, picture_hits, with_surfaces
 from subtrace.picture import ground_plane, lit_in_shading, paint
 # (the first stage's names, which callers take from here too)
@@ -287,12 +286,7 @@ def _nurbs_hits(scene, nurbs, frame, W, H, tol_rad, table, t, normals, pix_patch
     pixels where they are nearer than ``t``), handed to the picture as hits of their own
     rows of the patch shading (``nurbs.scene.picture_hits``): (t, patches, offset of the
     surfaces' rows)."""
-    # (its own Lambert colour is replaced by the picture's lighting)
-    lights = directional_rows(scene.lights)
-    headlight = np.array([scene.render.headlight_intensity if scene.render.headlight
-                          else 0.0])
-    nh = nurbs_pass(nurbs, frame, W, H, tol_rad, None if table is None else t, lights,
-                    headlight, planes, stats)
+    nh = nurbs_pass(nurbs, frame, W, H, tol_rad, None if table is None else t, planes, stats)
     patches, offset = with_surfaces(nurbs, patches)
     picture_hits(nurbs, nh, frame, W, offset, t, normals, pix_patch)
     return t, patches, offset

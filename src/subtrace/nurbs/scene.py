@@ -7,9 +7,9 @@ BVH over its patches' shells, and per surface its scene object and colour (the o
 colour, else its material's diffuse colour). An object's polygon faces, if its file has any,
 are its subdivision cage as before (:func:`has_faces`).
 
-:func:`nurbs_pass` traces the surfaces (:mod:`subtrace.nurbs.trace`) and shades the
+:func:`nurbs_pass` traces the surfaces (:mod:`subtrace.nurbs.trace`) and writes the
 pixels whose NURBS hit is nearer than what the subdivision pass found into the same channel
-planes (:data:`subtrace.shade.CHANNELS`), with the same two-sided Lambert lighting.
+planes (:data:`subtrace.shade.CHANNELS`), every one but the colour.
 :func:`picture_hits` then hands those pixels to the picture (``subtrace.picture``) as hits
 of extra patches (:func:`with_surfaces`: one per surface, past the cages' patches), so the
 picture lights them with ``shade.light`` (shadows, ambient occlusion, point lights) and
@@ -48,7 +48,7 @@ from subtrace.nurbs.trace import (
 )
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
-from subtrace.shade import (C_A, C_LEVEL, C_N, C_OBJECT, C_P, C_PATCH, C_R, C_U, C_Z,
+from subtrace.shade import (C_A, C_LEVEL, C_N, C_OBJECT, C_P, C_PATCH, C_U, C_Z,
                             PatchShading, pixel_rays)
 from subtrace.subdiv.topology import compact
 from subtrace.trace.prims import ray_setup
@@ -157,20 +157,19 @@ def load_nurbs(scene, quiet: bool = False) -> NurbsScene | None:
                       np.array(shininess, dtype=np.float64))
 
 
-def nurbs_pass(nurbs: NurbsScene, frame, width, height, tol_rad, other_t, lights, headlight,
-               planes, stats) -> NurbsHits:
-    """The render's NURBS pass: trace ``nurbs`` for every pixel and shade the hits nearer
-    than ``other_t`` (n,) (the subdivision hits' distances; None: none) into ``planes``
-    (len(CHANNELS), n) float32; ``lights`` (L, 6), ``headlight`` (1,) as
-    :func:`subtrace.shade.shade` takes them. Counts go into ``stats``
+def nurbs_pass(nurbs: NurbsScene, frame, width, height, tol_rad, other_t, planes,
+               stats) -> NurbsHits:
+    """The render's NURBS pass: trace ``nurbs`` for every pixel and write every channel but
+    the colour of the hits nearer than ``other_t`` (n,) (the subdivision hits' distances;
+    None: none) into ``planes`` (len(CHANNELS), n) float32 (the picture colours them with
+    the cages' hits, ``subtrace.picture``). Counts go into ``stats``
     (:class:`subtrace.render.RenderStats`): patches, the deepest split, the patches hit; a
     leaf held at NURBS_MAX_LEVEL above the tolerance is warned of and recorded as the
     ``precision`` cap. Returns the hits (those not shaded get patch -1)."""
     t0 = time.perf_counter()
     if other_t is None:
         other_t = np.full(width * height, np.inf)
-    hits = _shade_nearer(nurbs, frame, width, height, tol_rad, other_t, lights, headlight,
-                         planes)
+    hits = _shade_nearer(nurbs, frame, width, height, tol_rad, other_t, planes)
     stats.patches += nurbs.model.n_patches
     stats.max_depth = max(stats.max_depth, int(hits.level.max(initial=0)))
     # (per ray; np.unique would import numpy.ma)
@@ -185,7 +184,7 @@ def nurbs_pass(nurbs: NurbsScene, frame, width, height, tol_rad, other_t, lights
     return hits
 
 
-def _shade_nearer(nurbs, frame, width, height, tol_rad, other_t, lights, headlight, planes):
+def _shade_nearer(nurbs, frame, width, height, tol_rad, other_t, planes):
     """Trace and shade (see :func:`nurbs_pass`)."""
     hits = trace_nurbs(nurbs.model, nurbs.bvh, frame, width, height, tol_rad)
     near = np.nonzero(hits.t < other_t)[0]
@@ -198,7 +197,7 @@ def _shade_nearer(nurbs, frame, width, height, tol_rad, other_t, lights, headlig
     _, normals, uv = hit_geometry(nurbs.model, hits.patch[near], hits.st[near])
     surface = nurbs.model.patch_surface[hits.patch[near]]
     run_tasks(_shade_hits, frame, int(width), near, hits.t, hits.level, surface, normals, uv,
-              nurbs.surface_object, nurbs.surface_color, lights, headlight, planes)
+              nurbs.surface_object, planes)
     return hits
 
 
@@ -272,8 +271,9 @@ def blocked(nurbs: NurbsScene, origins, dirs, tmax, cone, tol_rad) -> np.ndarray
 
 @nb.njit(cache=True, nogil=True)
 def _shade_hits(task, n_tasks, frame, width, pixels, t, level, surface, normals, uv,
-                surface_object, surface_color, lights, headlight, planes):
-    """Shade every n_tasks-th of ``pixels`` (hit k at pixel ``pixels[k]``) into ``planes``."""
+                surface_object, planes):
+    """Every channel but the colour of every n_tasks-th of ``pixels`` (hit k at pixel
+    ``pixels[k]``) into ``planes``."""
     for k in range(task, len(pixels), n_tasks):
         r = pixels[k]
         row = r // width
@@ -293,22 +293,4 @@ def _shade_hits(task, n_tasks, frame, width, pixels, t, level, surface, normals,
         planes[C_LEVEL, r] = level[r]
         planes[C_PATCH, r] = s
         planes[C_OBJECT, r] = surface_object[s]
-        # two-sided Lambert: headlight plus directional lights
-        sgn = -1.0 if nx * dx + ny * dy + nz * dz > 0.0 else 1.0
-        fx, fy, fz = sgn * nx, sgn * ny, sgn * nz
-        lr = lg = lb = 0.0
-        if headlight[0] > 0.0:
-            c = -(fx * dx + fy * dy + fz * dz) * headlight[0]
-            lr += c
-            lg += c
-            lb += c
-        for j in range(lights.shape[0]):
-            c = -(fx * lights[j, 0] + fy * lights[j, 1] + fz * lights[j, 2])
-            if c > 0.0:
-                lr += c * lights[j, 3]
-                lg += c * lights[j, 4]
-                lb += c * lights[j, 5]
-        planes[C_R, r] = surface_color[s, 0] * lr
-        planes[C_R + 1, r] = surface_color[s, 1] * lg
-        planes[C_R + 2, r] = surface_color[s, 2] * lb
         planes[C_A, r] = 1.0
