@@ -222,3 +222,33 @@ def test_watertight_from_inside_where_patches_snap(tolerance, limit, tmp_path, m
                             height=120, tolerance=tolerance)
         assert np.count_nonzero(render_scene(scene, cages=[cage]).channels["A"] == 0) == 0
     assert sum(snapped) > 0
+
+
+@pytest.mark.parametrize("tolerance", [4.0, 1.0, 0.25])
+@pytest.mark.parametrize("name", ["pawn", "rook", "bishop"])
+def test_watertight_from_inside_the_chess_pieces(name, tolerance, monkeypatch):
+    """From the middle of OpenSubdiv's pawn, rook and bishop (creases of sharpness 6 and
+    7.9, cell-bearing patches beside finer ones that snap onto them), looking up and
+    sideways (their open bottoms out of view) at 160 x 120 pixels, every ray hits the
+    surface, and patches snap sides on the way."""
+    from shared_data import small_scene
+    from subtrace.render import render_scene
+
+    snapped = []
+    real = pools.Pieces._snapped
+
+    def spy(self, *args):
+        out = real(self, *args)
+        snapped.append(int((out >= 0).any(axis=1).sum()))
+        return out
+
+    monkeypatch.setattr(pools.Pieces, "_snapped", spy)
+    path = HARD / f"catmark_{name}.obj"
+    cage = subtrace.load_cage(path)
+    lo, hi = cage.bounds()
+    eye = 0.5 * (lo + hi)  # (z is up in these models)
+    for d in ([0.0, 0.0, 1.0], [0.6, 0.1, 1.0], [-0.2, -0.6, 1.0], [0.5, -0.5, 0.4]):
+        scene = small_scene([path], eye, eye + np.asarray(d), fov=60.0, width=160,
+                            height=120, tolerance=tolerance)
+        assert np.count_nonzero(render_scene(scene, cages=[cage]).channels["A"] == 0) == 0
+    assert sum(snapped) > 0
