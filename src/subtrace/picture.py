@@ -336,7 +336,9 @@ def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights,
     if r.background_bottom is not None or dirs is not None:
         miss = np.nonzero(pix_patch < 0)[0] if miss is None else miss
         background_pixels(miss, rows, width, planes, dirs)
-    if ground is not None:
+    # (a shadow catcher with no shadows and no occlusion to catch keeps the background)
+    if ground is not None and not (scene.ground.color is None and ground_ao is None
+                                   and not (len(lights) and r.shadows)):
         ground_pixels(frame, width, pix_patch, ground[0], ground[1],
                       trace_shadows if len(lights) and r.shadows else None, lights,
                       float(headlight[0]), scene.ground.color, rows, planes, dirs, miss,
