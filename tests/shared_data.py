@@ -92,3 +92,72 @@ def error_without_root_powers(code):
                           timeout=600)
     assert proc.returncode == 0, proc.stderr
     return proc.stdout
+
+
+# the renderer's shared checks (tests of several rooms use them)
+
+
+def check_watertight(mesh, eye, tolerance, monkeypatch):
+    """Renders from ``eye`` inside ``mesh`` (None: a point found inside) both ways at 48x36,
+    120 degrees: every pixel covered."""
+    import numpy as np
+
+    from subtrace.render import render_scene
+
+    cage = subtrace.load_cage(mesh)
+    if eye is None:
+        # a point inside: the middle of the limit surface along a ray through the centre
+        eye = inside_point(cage)
+    scene = small_scene([mesh], eye, np.asarray(eye) + [0.3, 0.1, 1.0], fov=120.0, width=48,
+                   height=36, tolerance=tolerance)
+    res = render_scene(scene, cages=[cage])
+    A = res.channels["A"]
+    assert np.count_nonzero(A == 0) == 0
+    # and looking the other way
+    scene = small_scene([mesh], eye, np.asarray(eye) - [0.3, 0.1, 1.0], fov=120.0, width=48,
+                   height=36, tolerance=tolerance)
+    assert np.count_nonzero(render_scene(scene, cages=[cage]).channels["A"] == 0) == 0
+
+
+def first_hit(cage, eye, direction):
+    """The first hit of the ray from ``eye`` along ``direction`` (a 1-pixel render)."""
+    import numpy as np
+
+    from subtrace.render import render_scene
+
+    eye = np.asarray(eye, dtype=np.float64)
+    scene = small_scene([cage.path], eye, eye + direction, width=1, height=1, fov=1.0)
+    t = float(render_scene(scene, cages=[cage]).channels["Z"][0, 0])
+    assert np.isfinite(t)
+    return eye + t * direction / np.linalg.norm(direction)
+
+
+def inside_point(cage):
+    """Midpoint between where a ray from outside enters the limit surface and where it
+    leaves it again (found by a second ray starting just past the entry)."""
+    import numpy as np
+
+    lo, hi = cage.bounds()
+    size = float(np.linalg.norm(hi - lo))
+    # aim at a point on the surface: the centre of the bounds may lie in a hole (torus)
+    d = np.array([0.0, 0.0, -1.0])
+    P, _, _ = cage.limit(1)
+    start = P[np.argmax(P[:, 2])] + np.array([0.0, 0.0, 2.0 * size])
+    start = start + 1e-3 * size * np.array([1.0, 1.0, 0.0])
+    p1 = first_hit(cage, start, d)
+    p2 = first_hit(cage, p1 + 1e-6 * size * d, d)
+    return tuple(0.5 * (p1 + p2))
+
+
+def write_plane(path, z, half):
+    """A 4x4-quad square in the plane z, normal +z, as an OBJ."""
+    import numpy as np
+
+    n = 5
+    xs = np.linspace(-half, half, n)
+    lines = [f"v {x} {y} {z}" for y in xs for x in xs]
+    for j in range(n - 1):
+        for i in range(n - 1):
+            a = j * n + i + 1
+            lines.append(f"f {a} {a + 1} {a + n + 1} {a + n}")
+    path.write_text("\n".join(lines) + "\n")

@@ -494,13 +494,13 @@ def test_a_patch_with_cells_keeps_its_depth_and_a_finer_neighbour_snaps(tori):
 def test_watertight_from_inside_creased_tori(name, tolerance, tori, monkeypatch):
     """From inside the tube of closed tori with creases of sharpness 3 to 7.5 (rings, their
     ends and crossings; both methods) every ray hits the surface."""
-    from test_render import _check_watertight
+    from shared_data import check_watertight
 
     starts = []
     real = crease.crease_pieces
     monkeypatch.setattr(isolate, "crease_pieces",
                         lambda *a, **k: starts.append(a[11]) or real(*a, **k))
-    _check_watertight(tori[name], (2.0, 0.0, 0.0), tolerance, monkeypatch)
+    check_watertight(tori[name], (2.0, 0.0, 0.0), tolerance, monkeypatch)
     assert starts
 
 

@@ -98,9 +98,9 @@ def test_snapped_sides_are_exact_samples_and_cells_lie_on_the_polyline():
 def test_watertight_from_inside_creased_loop_cages(name, tolerance, monkeypatch):
     """Invariant 4 inside closed Loop cages whose triangles are nearly all irregular:
     extraordinary vertices, infinitely sharp and semi-sharp creases (Chaikin too)."""
-    from test_render import _check_watertight
+    from shared_data import check_watertight
 
-    _check_watertight(SHAPES / f"{name}.obj", None, tolerance, monkeypatch)
+    check_watertight(SHAPES / f"{name}.obj", None, tolerance, monkeypatch)
 
 
 def _open_box(path):
@@ -159,10 +159,10 @@ def test_a_hidden_irregular_loop_object_is_not_refined(tmp_path):
     """Invariant 5 for irregular Loop patches: Spot's Loop cage (extraordinary vertices
     throughout) hidden behind a plane gets no piece, no cell; seen alone, its irregular
     patches are isolated (so the test can fail)."""
-    from test_render import _write_plane
+    from shared_data import write_plane
 
     plane = tmp_path / "plane.obj"
-    _write_plane(plane, 2.0, 8.0)
+    write_plane(plane, 2.0, 8.0)
     spot = MODELS / "spot_low_resolution.obj"
     cages = [subtrace.load_cage(plane), subtrace.load_cage(spot)]
     view = ((0.0, 0.3, 5.0), (0.0, 0.3, 0.0))

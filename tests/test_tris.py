@@ -132,10 +132,10 @@ def test_threads_do_not_change_the_image():
 def test_a_hidden_loop_object_is_not_refined(tmp_path):
     """Invariant 5 for the per-ray nets: a Loop torus hidden behind a plane gets no net and
     no piece; seen alone, it is refined (so the test can fail)."""
-    from test_render import _write_plane
+    from shared_data import write_plane
 
     plane = tmp_path / "plane.obj"
-    _write_plane(plane, 3.0, 8.0)
+    write_plane(plane, 3.0, 8.0)
     torus = MODELS / "torus.obj"
     cages = [subtrace.load_cage(plane), subtrace.load_cage(torus)]
     scene = small_scene([plane, torus], (0.0, 0.0, 6.0), (0.0, 0.0, 0.0), fov=40.0)

@@ -287,7 +287,7 @@ def compile_picture(threads: int, parts=PICTURE) -> None:
     the ground with and without shadow rays, the surfaces' shadow rays, the lights, the
     anti-aliasing's edge flags, the background), with the argument types of a render on
     ``threads`` threads, on a few pixels of a camera looking down at the ground
-    (tests/test_render.py checks that a render adds no signature to them). A cold render's helper compiles them all, the ground
+    (tests/test_kernel_compiles.py checks that a render adds no signature to them). A cold render's helper compiles them all, the ground
     first; the render's own process compiles the others while it waits for the trace
     kernel (``trace.rounds.trace_hits``, :func:`picture_while_tracing`), and the helper then
     finds them in the cache."""
