@@ -457,11 +457,12 @@ def extract(level: Level, verts: np.ndarray, rings: int = 2):
         fmask[gather(vf_off, vf, vs)] = True
         vmask[gather(fo, fv, np.nonzero(fmask)[0])] = True
     faces = np.nonzero(fmask)[0]
-    return _cut(level, faces)
+    return cut_level(level, faces)
 
 
-def _cut(level: Level, faces: np.ndarray):
-    """The sub-level made of ``faces`` (see :func:`extract`); also returns ``faces``."""
+def cut_level(level: Level, faces: np.ndarray):
+    """The sub-level made of ``faces`` (see :func:`extract`), with the same returns: the
+    face-varying channel (``subdiv.facevarying``) is cut by the faces its cage's level was."""
     fo, fv = level.face_offsets, level.face_verts
     corners = gather_index(fo, faces)
     sizes = np.diff(fo)[faces]
