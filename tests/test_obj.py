@@ -150,9 +150,11 @@ def test_oracle_tags_read_as_documented():
     cube = read_quiet(shapes / "catmark_cube.obj")
     assert cube.boundary is None and cube.crease_method is None
     assert cube.smooth_triangles is None and cube.warnings == ()
-    # A face-varying tag is read and ignored with a warning.
-    with pytest.warns(SubtraceWarning, match="facevaryinginterpolateboundary"):
-        read_obj(shapes / "catmark_cubes_semisharp.obj")
+    # The face-varying tag is read, without a warning (the shape has no vt to use it on);
+    # 1 is corners only (the oracle's sdc_options say so too).
+    semisharp = read_quiet(shapes / "catmark_cubes_semisharp.obj")
+    assert semisharp.fvar_interpolation == 1 and semisharp.warnings == ()
+    assert cube.fvar_interpolation is None
 
 
 def test_oracle_shape_with_missing_mtl_warns():

@@ -40,6 +40,7 @@ class TopologyKind(str, Enum):
     INDEX = "index"  # a face index out of range
     POINTS = "points"  # a vertex coordinate that is not finite
     SCHEME = "scheme"  # an unknown scheme, or a Loop cage with faces other than triangles
+    UV = "uv"  # UVs (face-varying data) that do not fit the faces, or an unknown mode
 
     def __str__(self) -> str:
         return self.value

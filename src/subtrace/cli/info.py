@@ -1,7 +1,7 @@
 """``subtrace info [CAGE.obj] [--scheme S] [--level N]``: the statistics of a control cage.
 
 Owns the cage report (:func:`cage_report`): scheme and options, counts, face sizes,
-boundary / non-manifold / isolated elements, creases and sharp vertices, holes, valences,
+boundary / non-manifold / isolated elements, creases and sharp vertices, holes, UVs, valences,
 extraordinary vertices, Euler characteristic, the cage's bounds and the bounds of the
 level-1 limit points, and optionally the counts after N uniform refinements; and the
 free-form report (:func:`freeform_report`) of a file's trimmed NURBS surfaces: surfaces and
@@ -69,6 +69,11 @@ def cage_report(cage, level: int | None = None) -> list[tuple[str, str]]:
         ("face sizes", ", ".join(f"{_size_name(int(s))} {int(c)}" for s, c in zip(sizes, counts)))
     )
     rows += _feature_rows(base)
+    if cage.uv is not None:
+        rows.append(("UVs", f"{len(cage.uv.values)} values, face-varying interpolation "
+                            f"{cage.uv.mode_name}"))
+    else:
+        rows.append(("UVs", "none"))
 
     has_faces = np.diff(base.vert_face_offsets) > 0
     valence = np.diff(base.vert_edge_offsets)

@@ -9,7 +9,8 @@ ObjData, every array C-contiguous:
   face_verts and hold -1 where a corner names no vt / vn.
   face_material / face_group / face_object (F,) i4 index the name tuples (-1: no material).
   Tags: crease_edges (k,2) i4 + crease_sharpness (k,) f4, corner_verts (c,) i4 +
-  corner_sharpness (c,) f4, hole_faces (h,) i4, all 0-based; sharpness >= 10 is infinite.
+  corner_sharpness (c,) f4, hole_faces (h,) i4, all 0-based; sharpness >= 10 is infinite;
+  fvar_interpolation, the face-varying (UV) mode of `t facevaryinginterpolateboundary`.
 Tags follow OpenSubdiv's regression reader (regression/common/shape_utils.cpp parses
 `t name nI/nF/nS ints floats strings`, far_utils.h interprets it); see ObjReader._tag.
 Speed: a jitted byte scanner (:mod:`subtrace.io.obj_scan`) reads the v / vt / vn / f lines
@@ -51,8 +52,12 @@ BOUNDARY_EDGE_ONLY = 2  # Sdc VTX_BOUNDARY_EDGE_ONLY (OpenSubdiv's default)
 _CREASE_METHODS = {"normal": "uniform", "chaikin": "chaikin"}
 _SMOOTH_TRIANGLES = ("catmark", "smooth")
 _TAGS = frozenset(
-    ("crease", "corner", "hole", "interpolateboundary", "creasemethod", "smoothtriangles")
+    ("crease", "corner", "hole", "interpolateboundary", "creasemethod", "smoothtriangles",
+     "facevaryinginterpolateboundary")
 )
+# `t facevaryinginterpolateboundary 1/0/0 k`: Sdc's FVarLinearInterpolation k, as
+# OpenSubdiv's regression/common/far_utils.h maps it (not RenderMan's numbering)
+FVAR_MODES = ("none", "corners only", "corners plus1", "corners plus2", "boundaries", "all")
 # Free-form statements: those read and ignored are warned about as such (the rest are
 # read by subtrace.io.freeform).
 _FREEFORM = frozenset(
@@ -98,6 +103,8 @@ class ObjData:
     crease_method: str | None  # "uniform" | "chaikin"; None without a creasemethod tag
     smooth_triangles: str | None  # "catmark" | "smooth"; None without a smoothtriangles tag
     warnings: tuple[str, ...]  # each "path:line: message"
+    # 0..5 (FVAR_MODES); None without a facevaryinginterpolateboundary tag
+    fvar_interpolation: int | None = None
     # the free-form elements as read (subtrace.io.freeform), which subtrace.nurbs makes into
     # trimmed NURBS surfaces (subtrace.nurbs.freeform.freeform_of)
     freeform: FreeFormRecords | None = None
@@ -299,6 +306,7 @@ class ObjReader:
         self.boundary = None
         self.crease_method = None
         self.smooth_triangles = None
+        self.fvar_interpolation = None
         # Free-form geometry (subtrace.io.freeform), and the w of v lines that have one
         # (v index -> token; the rational surfaces' weights).
         self.freeform = FreeFormReader(self.fail, self._ignored)
@@ -488,8 +496,9 @@ class ObjReader:
         if len(parts) < 2:
             self.fail(number, "t needs a tag name: t <name> <nInts>/<nFloats>/<nStrings> ...")
         name = parts[1]
-        if name.lower().startswith("facevarying"):
-            self.warn(number, f"tag '{name}' ignored: subtrace interpolates no face-varying data")
+        if name == "facevaryingpropagatecorners":
+            self.warn(number, f"tag '{name}' ignored: OpenSubdiv does not support it either "
+                              "(facevaryinginterpolateboundary 3 propagates corners)")
             return
         if name not in _TAGS:
             self.warn(number, f"unknown tag '{name}' ignored (known: {', '.join(sorted(_TAGS))})")
@@ -600,6 +609,15 @@ class ObjReader:
                     "1 (edge and corner) or 2 (edge only)",
                 )
             self.boundary = ints[0]
+        elif name == "facevaryinginterpolateboundary":
+            choices = ", ".join(f"{k} ({m})" for k, m in enumerate(FVAR_MODES))
+            if counts != (1, 0, 0):
+                self.fail(number, "tag 'facevaryinginterpolateboundary' expects 1/0/0 and one "
+                                  f"integer: {choices}; got {header}")
+            if not 0 <= ints[0] < len(FVAR_MODES):
+                self.fail(number, "tag 'facevaryinginterpolateboundary': unknown value "
+                                  f"{ints[0]}, expected {choices}")
+            self.fvar_interpolation = ints[0]
         elif name == "creasemethod":
             got = self._tag_string(number, name, counts, strings, header, _CREASE_METHODS,
                                    "'normal' or 'chaikin'")
@@ -874,6 +892,7 @@ class ObjReader:
             crease_method=self.crease_method,
             smooth_triangles=self.smooth_triangles,
             warnings=tuple(message for _, message in self.warnings),
+            fvar_interpolation=self.fvar_interpolation,
             freeform=freeform,
         )
 

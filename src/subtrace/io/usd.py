@@ -17,6 +17,13 @@ attribute has any, else the default values):
   (``creaseIndices`` in chains of ``creaseLengths`` vertices, ``creaseSharpnesses`` one per
   chain or one per edge), corners (``cornerIndices`` / ``cornerSharpnesses``) and holes
   (``holeIndices``); a constant ``primvars:displayColor`` as the object's colour;
+  ``primvars:st`` as the cage's UVs (``mesh.cage.FaceVarying``): ``faceVarying`` values
+  (with their indices where the primvar is indexed; unindexed, each corner is a value of its
+  own, as OpenSubdiv then sees it) interpolated by the mesh's
+  ``faceVaryingLinearInterpolation`` (``none``, ``cornersOnly``, ``cornersPlus1``, USD's
+  default, ``cornersPlus2``, ``boundaries``, ``all``), ``vertex`` values as the points are
+  (the face-varying rules of mode none on the vertices' own topology), ``varying``,
+  ``uniform`` and ``constant`` ones linearly;
 * ``UsdGeomCamera`` prims (focal length and vertical aperture as the vertical field of
   view, the transform as eye, target and up); :func:`read_stage` returns them by path;
 * time: :func:`time_range` gives the frames (time codes) a stage animates, and
@@ -50,6 +57,10 @@ USD_EXTENSIONS = (".usd", ".usda", ".usdc", ".usdz")
 BOUNDARY_TOKENS = {"none": BOUNDARY_NONE, "edgeOnly": BOUNDARY_EDGE_ONLY,
                    "edgeAndCorner": BOUNDARY_EDGE_AND_CORNER}
 SCHEME_TOKENS = {"catmullClark": "catmark", "loop": "loop", "bilinear": None, "none": None}
+# faceVaryingLinearInterpolation: Sdc's FVarLinearInterpolation, in its order
+FVAR_TOKENS = {"none": 0, "cornersOnly": 1, "cornersPlus1": 2, "cornersPlus2": 3,
+               "boundaries": 4, "all": 5}
+FVAR_NONE, FVAR_ALL = 0, 5
 
 
 def is_usd(path) -> bool:
@@ -74,6 +85,9 @@ class UsdMesh:
     corner_sharpness: np.ndarray
     hole_faces: np.ndarray
     color: tuple[float, float, float] | None = None
+    uvs: np.ndarray | None = None  # (T, 2) float64: primvars:st
+    face_uvs: np.ndarray | None = None  # (corners,) int32 into uvs
+    uv_mode: int | None = None  # FVAR_TOKENS' numbers
 
     def cage_arrays(self) -> dict:
         """Keyword arguments of ``make_cage`` (flat polygons as every edge and vertex
@@ -91,7 +105,10 @@ class UsdMesh:
                     scheme="catmark" if self.scheme is None else self.scheme,
                     boundary=self.boundary, smooth_triangles=self.smooth_triangles,
                     crease_edges=edges, crease_sharpness=sharp, corner_verts=corners,
-                    corner_sharpness=corner_sharp, hole_faces=self.hole_faces)
+                    corner_sharpness=corner_sharp, hole_faces=self.hole_faces,
+                    uvs=self.uvs, face_uvs=self.face_uvs,
+                    uv_mode=FVAR_ALL if self.scheme is None and self.uvs is not None
+                    else self.uv_mode)
 
 
 @dataclass
@@ -329,10 +346,15 @@ def combined_mesh(content: UsdStageContent, prim: str | None) -> UsdMesh:
     foff = np.cumsum([0] + [len(m.face_sizes) for m in ms])[:-1]
     cat = lambda f, shift=None: np.concatenate(  # noqa: E731
         [getattr(m, f) + (0 if shift is None else shift[k]) for k, m in enumerate(ms)])
+    uvs = face_uvs = mode = None
+    if all(m.uvs is not None for m in ms) and len({m.uv_mode for m in ms}) == 1:
+        # (the meshes' UVs side by side where every mesh has them, in one mode)
+        uoff = np.cumsum([0] + [len(m.uvs) for m in ms])[:-1]
+        uvs, face_uvs, mode = cat("uvs"), cat("face_uvs", uoff), ms[0].uv_mode
     return UsdMesh("", cat("points"), cat("face_sizes"), cat("face_verts", off), ms[0].scheme,
                    ms[0].boundary, ms[0].smooth_triangles, cat("crease_edges", off),
                    cat("crease_sharpness"), cat("corner_verts", off), cat("corner_sharpness"),
-                   cat("hole_faces", foff), ms[0].color)
+                   cat("hole_faces", foff), ms[0].color, uvs, face_uvs, mode)
 
 
 def _get(attr, t, default=None):
@@ -362,9 +384,12 @@ def _mesh(mesh, matrix, t, where) -> UsdMesh:
         raise SubtraceError(f"{where}: a face vertex index is outside the {len(pts)} points")
     if not np.all(np.isfinite(pts)):
         raise SubtraceError(f"{where}: a point coordinate is not finite")
+    uvs, face_uvs, uv_mode = _st(mesh, t, counts, idx, len(pts), where)
     if _get(mesh.GetOrientationAttr(), t, "rightHanded") == "leftHanded":
         starts = np.r_[0, np.cumsum(counts)[:-1]]
         idx = np.concatenate([idx[s:s + n][::-1] for s, n in zip(starts, counts)])
+        if face_uvs is not None:  # (each corner keeps its UV)
+            face_uvs = np.concatenate([face_uvs[s:s + n][::-1] for s, n in zip(starts, counts)])
     scheme_token = str(_get(mesh.GetSubdivisionSchemeAttr(), t, "catmullClark"))
     if scheme_token not in SCHEME_TOKENS:
         raise SubtraceError(f"{where}: subdivisionScheme {scheme_token!r}: subtrace renders "
@@ -391,7 +416,61 @@ def _mesh(mesh, matrix, t, where) -> UsdMesh:
         color = tuple(float(min(max(c, 0.0), 1.0)) for c in colors[0])
     return UsdMesh(str(mesh.GetPath()), _transform_points(pts, matrix), counts, idx,
                    SCHEME_TOKENS[scheme_token], BOUNDARY_TOKENS[boundary_token],
-                   rule == "smooth", edges, sharp, corners, corner_sharp, holes, color)
+                   rule == "smooth", edges, sharp, corners, corner_sharp, holes, color,
+                   uvs, face_uvs, uv_mode)
+
+
+def _st(mesh, t, counts, idx, n_points, where):
+    """(uvs (T,2) float64, face_uvs (corners,) int32, mode) of the mesh's ``primvars:st``
+    (module comment), or (None, None, None) without one."""
+    from pxr import UsdGeom
+
+    pv = UsdGeom.PrimvarsAPI(mesh.GetPrim()).GetPrimvar("st")
+    if not pv or not pv.HasAuthoredValue():
+        return None, None, None
+    values = np.asarray(pv.Get(t), dtype=np.float64)
+    if values.ndim != 2 or values.shape[1] != 2:
+        raise SubtraceError(f"{where}: primvars:st must hold 2-D texture coordinates, got "
+                            f"values of shape {values.shape}")
+    if not np.all(np.isfinite(values)):
+        raise SubtraceError(f"{where}: primvars:st has a value that is not finite")
+    interp = str(pv.GetInterpolation())
+    corners = len(idx)
+    element = {  # the element each corner takes its value from, and how many there are
+        "faceVarying": (np.arange(corners), corners),
+        "vertex": (idx, n_points), "varying": (idx, n_points),
+        "uniform": (np.repeat(np.arange(len(counts)), counts), len(counts)),
+        "constant": (np.zeros(corners, np.int64), 1),
+    }
+    if interp not in element:
+        raise SubtraceError(f"{where}: primvars:st has interpolation {interp!r}; expected "
+                            "faceVarying, vertex, varying, uniform or constant")
+    of, n_elements = element[interp]
+    indices = pv.GetIndices(t) if pv.IsIndexed() else None
+    if indices is not None:
+        indices = np.asarray(indices, dtype=np.int64)
+        what = f"{len(indices)} indices"
+        if len(indices) and (indices.min() < 0 or indices.max() >= len(values)):
+            raise SubtraceError(f"{where}: primvars:st has an index outside its "
+                                f"{len(values)} values")
+    else:
+        indices, what = np.arange(len(values)), f"{len(values)} values"
+    if len(indices) != n_elements:
+        raise SubtraceError(f"{where}: primvars:st ({interp}) has {what} for "
+                            f"{n_elements} {_ELEMENTS[interp]}")
+    if interp == "faceVarying":
+        token = str(_get(mesh.GetFaceVaryingLinearInterpolationAttr(), t, "cornersPlus1"))
+        if token not in FVAR_TOKENS:
+            raise SubtraceError(f"{where}: faceVaryingLinearInterpolation {token!r}: "
+                                "expected one of " + ", ".join(FVAR_TOKENS))
+        mode = FVAR_TOKENS[token]
+    else:
+        mode = FVAR_NONE if interp == "vertex" else FVAR_ALL
+    return values, indices[of].astype(np.int32), mode
+
+
+_ELEMENTS = {"faceVarying": "face corners", "vertex": "points", "varying": "points",
+             "uniform": "faces", "constant": "value (constant)"}
 
 
 def _creases(mesh, t, n_points, where):

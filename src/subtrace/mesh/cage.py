@@ -3,7 +3,9 @@
 A :class:`Cage` is immutable. ``refine(level)`` gives a uniformly refined :class:`Mesh`,
 ``limit(level)`` the exact limit positions and tangents of the level's vertices, and
 ``evaluate(ptex_face, uv)`` the exact limit surface at parametric points (OpenSubdiv's ptex
-numbering and orientation). Refined levels are cached per cage.
+numbering and orientation). Refined levels are cached per cage. A cage may carry UVs
+(:class:`FaceVarying`: an OBJ's ``vt``, a USD mesh's ``primvars:st``), refined and evaluated
+with OpenSubdiv's face-varying rules (``refine_uv``, ``evaluate_uv``); None without.
 
 The topology of the cage itself (``base``, a :class:`~subtrace.subdiv.topology.Level` with
 its tags) is built when first asked for, not when the cage is read: a render that sees part
@@ -25,9 +27,10 @@ import numpy as np
 from subtrace import config
 from subtrace.errors import TopologyError
 from subtrace.io.obj import read_obj
-from subtrace.patches.evaluate import evaluate, ptex_starts
+from subtrace.patches.evaluate import evaluate, evaluate_uv, ptex_starts
 from subtrace.patches.shells import box_extent, face_star_boxes
 from subtrace.runtime.jit import nb
+from subtrace.subdiv.facevarying import FVAR_ALL, FVAR_NAMES, channel_levels
 from subtrace.subdiv.limit import least_limit_height, limit_points
 from subtrace.subdiv.refine import refine_level, refine_points
 # (the restricted cages' rings, which callers take from here too)
@@ -88,11 +91,29 @@ class Tags:
 
 
 @dataclass(frozen=True, eq=False)
+class FaceVarying:
+    """A cage's UVs: ``values`` (T,2) float64, the value index of each face corner
+    ``face_values`` (sum of face sizes,) int32 (aligned with the cage's ``face_verts``), and
+    OpenSubdiv's face-varying linear-interpolation mode ``mode`` (``subdiv.facevarying``:
+    0 none, 1 corners only, 2 corners plus1, 3 corners plus2, 4 boundaries, 5 all; the
+    default is Sdc::Options' and OpenSubdiv's OBJ loaders', all)."""
+
+    values: np.ndarray
+    face_values: np.ndarray
+    mode: int = FVAR_ALL
+
+    @property
+    def mode_name(self) -> str:
+        return FVAR_NAMES[self.mode]
+
+
+@dataclass(frozen=True, eq=False)
 class Cage:
     """A control cage ready for subdivision (build it with :func:`subtrace.load_cage`).
 
     ``ptex_first``: None, or for a :meth:`restricted` cage the ptex id each of its faces has
-    in the cage it was cut from (so its patches keep the whole cage's ids)."""
+    in the cage it was cut from (so its patches keep the whole cage's ids). ``uv``: its
+    :class:`FaceVarying` UVs, or None."""
 
     points: np.ndarray  # (n,3) float64
     face_sizes: np.ndarray  # (F,) int32
@@ -103,6 +124,7 @@ class Cage:
     face_material: np.ndarray | None = None
     materials: tuple = ()
     ptex_first: np.ndarray | None = None
+    uv: FaceVarying | None = None
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -202,6 +224,8 @@ class Cage:
             np.asarray(self.face_material)[faces],
             materials=self.materials,
             ptex_first=first[faces],
+            uv=None if self.uv is None else replace(self.uv,
+                                                    face_values=self.uv.face_values[corners]),
         )
 
     @property
@@ -264,6 +288,24 @@ class Cage:
         """
         return evaluate(self, ptex_face, uv)
 
+    def evaluate_uv(self, ptex_face, uv):
+        """Limit UVs at parametric points: ``ptex_face`` (m,) int, ``uv`` (m,2) float as for
+        :meth:`evaluate`. Returns (m,2) float64 (NaN on holes), with OpenSubdiv's
+        face-varying rules for the cage's mode (``uv.mode``); ValueError without UVs."""
+        return evaluate_uv(self, ptex_face, uv)
+
+    def refine_uv(self, level: int):
+        """UVs of uniform refinement to ``level``: ``(values (n,2) float64, face_values
+        (corners of the level,) int64)``, the value of each face corner of
+        ``refine(level)`` (OpenSubdiv's InterpolateFaceVarying); ValueError without UVs."""
+        level = _check_level(level)
+        if self.uv is None:
+            raise ValueError("refine_uv: the cage has no UVs (an OBJ file's vt on every "
+                             "face corner, a USD mesh's primvars:st)")
+        ch, values = channel_levels(self.base, self.uv.face_values, self.uv.values,
+                                    self.uv.mode, self.options, level)[level]
+        return values, ch.level.face_verts.astype(np.int64)
+
     # ----------------------------------------------------------------------------------
 
     def bounds(self):
@@ -295,8 +337,15 @@ def make_cage(
     path=None,
     face_material=None,
     materials=(),
+    uvs=None,
+    face_uvs=None,
+    uv_mode: int | None = None,
 ) -> Cage:
-    """Build a :class:`Cage` from arrays (what :func:`subtrace.load_cage` does after parsing)."""
+    """Build a :class:`Cage` from arrays (what :func:`subtrace.load_cage` does after parsing).
+
+    ``uvs`` (T,2) and ``face_uvs`` (one index into ``uvs`` per corner, aligned with
+    ``face_verts``) give the cage UVs (:class:`FaceVarying`), ``uv_mode`` their
+    face-varying interpolation (default all, as :class:`FaceVarying`'s)."""
     points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     face_sizes = np.ascontiguousarray(face_sizes, dtype=np.int32)
     face_verts = np.ascontiguousarray(face_verts, dtype=np.int32)
@@ -327,6 +376,7 @@ def make_cage(
             f"{where}the Loop scheme needs an all-triangle cage, but face {bad} has "
             f"{int(face_sizes[bad])} vertices (use scheme 'catmark')",
         )
+    uv = _face_varying(uvs, face_uvs, uv_mode, len(face_verts), where)
     options = Options(
         scheme=scheme,
         boundary=BOUNDARY_EDGE_ONLY if boundary is None else int(boundary),
@@ -343,7 +393,34 @@ def make_cage(
         path=None if path is None else str(path),
         face_material=face_material,
         materials=tuple(materials),
+        uv=uv,
     )
+
+
+def _face_varying(uvs, face_uvs, mode, n_corners, where) -> FaceVarying | None:
+    """The :class:`FaceVarying` of :func:`make_cage`'s arguments (None without ``uvs``)."""
+    if uvs is None and face_uvs is None:
+        return None
+    if uvs is None or face_uvs is None:
+        raise TopologyError("uv", f"{where}UVs need both the values and a value per corner")
+    values = np.ascontiguousarray(uvs, dtype=np.float64)
+    if values.ndim != 2 or values.shape[1] != 2:
+        raise TopologyError("uv", f"{where}UVs must be (T, 2) values, got shape {values.shape}")
+    index = np.ascontiguousarray(face_uvs, dtype=np.int64)
+    if index.shape != (n_corners,):
+        raise TopologyError("uv", f"{where}{len(index)} UV indices for {n_corners} face "
+                                  "corners: give one per corner")
+    if len(index) and (index.min() < 0 or index.max() >= len(values)):
+        bad = int(index[(index < 0) | (index >= len(values))][0])
+        raise TopologyError("uv", f"{where}UV index {bad} is out of range: there are "
+                                  f"{len(values)} UVs")
+    if not np.all(np.isfinite(values)):
+        raise TopologyError("uv", f"{where}a UV coordinate is not finite")
+    mode = FVAR_ALL if mode is None else mode
+    if isinstance(mode, bool) or not isinstance(mode, (int, np.integer)) or not 0 <= mode <= 5:
+        raise TopologyError("uv", f"{where}unknown face-varying interpolation {mode!r}: use 0 "
+                                  "(none) .. 5 (all)")
+    return FaceVarying(values, index.astype(np.int32), int(mode))
 
 
 def _base_level(cage: Cage) -> Level:
@@ -491,7 +568,10 @@ def load_cage(path, scheme: str | None = None, boundary: int | None = None,
 
 def cage_from_obj(data, scheme: str | None = None, boundary: int | None = None) -> Cage:
     """The :class:`Cage` of an OBJ file already read (:func:`subtrace.io.obj.read_obj`);
-    ``scheme`` / ``boundary`` as :func:`load_cage` takes them."""
+    ``scheme`` / ``boundary`` as :func:`load_cage` takes them. Its UVs are the ``vt`` of the
+    corners where every corner names one (else it has none), their mode the
+    ``facevaryinginterpolateboundary`` tag's (without one all, as OpenSubdiv's loaders)."""
+    with_uvs = len(data.face_uvs) > 0 and bool((data.face_uvs >= 0).all())
     return make_cage(
         data.points,
         data.face_sizes,
@@ -508,4 +588,7 @@ def cage_from_obj(data, scheme: str | None = None, boundary: int | None = None) 
         path=Path(data.path),
         face_material=data.face_material,
         materials=data.materials,
+        uvs=data.uvs if with_uvs else None,
+        face_uvs=data.face_uvs if with_uvs else None,
+        uv_mode=data.fvar_interpolation,
     )

@@ -19,6 +19,12 @@ faces within two rings of the faces holding the samples are cut out and refined 
 
 Non-quad Catmull-Clark faces are split into their ptex sub-faces by the first level. Points
 on hole faces come back as NaN.
+
+UVs (:func:`evaluate_uv`) take the same descent with the cage's face-varying channel
+(``subdiv.facevarying``) refined in step, retiring a sample where its face of the channel
+is a regular patch, boundaries, creases and corners of the channel included (phantom
+points, as OpenSubdiv's regular face-varying patches), and linear mode as the bilinear
+interpolation of the face's corners.
 """
 
 from __future__ import annotations
@@ -28,8 +34,11 @@ import numpy as np
 from subtrace import config
 from subtrace.patches.basis import (
     B_CORNER, BOX_POINTS, LATTICE_DIRS, LEAD, TRAIL, TRI_CORNER, TRI_LEAD, box_spline_basis,
-    bspline_basis,
+    bspline_basis, tri_bernstein,
 )
+from subtrace.patches.boxspline import box_nets, loop_regular
+from subtrace.patches.bspline import control_points, regular_mask
+from subtrace.subdiv.facevarying import FVAR_ALL, base_channel, cut_channel, refine_channel
 from subtrace.subdiv.limit import SMOOTH, classify, extract, limit_points, smooth_edge_tangents
 from subtrace.subdiv.refine import refine_level, refine_points
 
@@ -56,26 +65,31 @@ def ptex_layout(cage):
     return base.astype(np.int32), sub.astype(np.int32), first
 
 
-def evaluate(cage, ptex_face, uv):
+def _samples(cage, ptex_face, uv, name):
+    """``ptex_face`` (m,) and ``uv`` (m,2) checked (ValueError naming ``name``), ``uv``
+    clipped to the domain, and the ptex layout (base face, sub-face of each ptex face)."""
     ptex_face = np.asarray(ptex_face)
     uv = np.asarray(uv, dtype=np.float64)
     if ptex_face.ndim != 1 or uv.shape != (len(ptex_face), 2):
-        raise ValueError("evaluate: ptex_face must have shape (m,) and uv shape (m, 2)")
+        raise ValueError(f"{name}: ptex_face must have shape (m,) and uv shape (m, 2)")
     if len(ptex_face) and not np.issubdtype(ptex_face.dtype, np.integer):
-        raise ValueError("evaluate: ptex_face must hold integers")
+        raise ValueError(f"{name}: ptex_face must hold integers")
     base, subface, first = ptex_layout(cage)
     n_ptex = len(base)
     if len(ptex_face) and (ptex_face.min() < 0 or ptex_face.max() >= n_ptex):
-        raise ValueError(f"evaluate: ptex face ids must lie in [0, {n_ptex})")
+        raise ValueError(f"{name}: ptex face ids must lie in [0, {n_ptex})")
     if not np.all(np.isfinite(uv)):
-        raise ValueError("evaluate: uv must be finite")
+        raise ValueError(f"{name}: uv must be finite")
     tol = 1e-12
     if np.any(uv < -tol) or np.any(uv > 1 + tol):
-        raise ValueError("evaluate: u and v must lie in [0, 1]")
+        raise ValueError(f"{name}: u and v must lie in [0, 1]")
     if cage.scheme == "loop" and np.any(uv.sum(axis=1) > 1 + tol):
-        raise ValueError("evaluate: Loop samples need u + v <= 1")
-    uv = np.clip(uv, 0.0, 1.0)
+        raise ValueError(f"{name}: Loop samples need u + v <= 1")
+    return ptex_face, np.clip(uv, 0.0, 1.0), base, subface
 
+
+def evaluate(cage, ptex_face, uv):
+    ptex_face, uv, base, subface = _samples(cage, ptex_face, uv, "evaluate")
     m = len(ptex_face)
     P = np.full((m, 3), np.nan)
     dPdu = np.full((m, 3), np.nan)
@@ -356,28 +370,34 @@ def _descend(cage, faces, subface, uv, want_derivs):
             break
         ref = refine_level(sub, opts)
         child_pts = refine_points(ref, sub_pts)
-        sfo = sub.face_offsets
-        n = sfo[sf + 1] - sfo[sf]
-        u = loc[ids, 0]
-        v = loc[ids, 1]
-        if is_loop:
-            j, nu, nv, A = _loop_child(u, v)
-        else:
-            quad = n == 4
-            j = np.where(quad, _quadrant(u, v), subface[ids])
-            if depth > 0:
-                j = np.where(quad, j, 0)
-            nu = np.where(quad, 2 * u - ((j == 1) | (j == 2)), u)
-            nv = np.where(quad, 2 * v - ((j == 2) | (j == 3)), v)
-            A = np.where(quad[:, None, None], 2.0 * np.eye(2), np.eye(2))
+        cur[ids], nu, nv, A = _step_down(sub, sf, loc[ids], subface[ids], depth, is_loop)
         loc[ids, 0] = nu
         loc[ids, 1] = nv
         J[ids] = A @ J[ids]
-        # child face j of a parent face is child number (first corner of the face) + j
-        cur[ids] = sfo[sf] + j if not is_loop else 4 * sf + j
         level, pts = ref.child, child_pts
         depth += 1
     return P, dU, dV, exact_d
+
+
+def _step_down(sub, sf, loc, subface, depth, is_loop):
+    """The child faces of ``sub``'s faces ``sf`` that hold the samples at local ``loc``
+    (k,2) (an n-gon's ptex sub-face ``subface`` at the first level), their local (u, v)
+    there and the Jacobians (k,2,2) of the step."""
+    sfo = sub.face_offsets
+    u = loc[:, 0]
+    v = loc[:, 1]
+    if is_loop:
+        j, nu, nv, A = _loop_child(u, v)
+    else:
+        quad = (sfo[sf + 1] - sfo[sf]) == 4
+        j = np.where(quad, _quadrant(u, v), subface)
+        if depth > 0:
+            j = np.where(quad, j, 0)
+        nu = np.where(quad, 2 * u - ((j == 1) | (j == 2)), u)
+        nv = np.where(quad, 2 * v - ((j == 2) | (j == 3)), v)
+        A = np.where(quad[:, None, None], 2.0 * np.eye(2), np.eye(2))
+    # child face j of a parent face is child number (first corner of the face) + j
+    return (sfo[sf] + j if not is_loop else 4 * sf + j), nu, nv, A
 
 
 def _quadrant(u, v):
@@ -416,3 +436,156 @@ def _interpolate_corners(level, pts, opts, faces, loc, ids, P, is_loop):
             P[ids[t]] = (1 - u - v) * c[0] + u * c[1] + v * c[2]
         else:
             P[ids[t]] = (1 - u) * (1 - v) * c[0] + u * (1 - v) * c[1] + u * v * c[2] + (1 - u) * v * c[3]
+
+
+# --------------------------------------------------------------------------------------
+# face-varying data (UVs)
+# --------------------------------------------------------------------------------------
+
+
+def uv_channel(cage):
+    """The base face-varying channel of ``cage``'s UVs (``subdiv.facevarying``) and its
+    values' UVs (n,3) float64 (third coordinate 0: the limit and patch code is 3-D), made
+    once per cage and UVs (a cage copied with other UVs, ``dataclasses.replace``, shares
+    the cache)."""
+    uvs = cage.uv
+    got = cage._cache.get("uv_channel")
+    if got is None or got[0] is not uvs:
+        ch, index = base_channel(cage.base, uvs.face_values, uvs.mode, cage.options)
+        pts = np.zeros((len(index), 3))
+        pts[:, :2] = uvs.values[index]
+        got = cage._cache["uv_channel"] = (uvs, ch, pts)
+    return got[1], got[2]
+
+
+def evaluate_uv(cage, ptex_face, uv):
+    """The limit UVs (m,2) float64 at the parametric points ``ptex_face`` (m,), ``uv``
+    (m,2) of ``cage`` (ptex convention as :func:`evaluate`; NaN on holes), with
+    OpenSubdiv's face-varying rules (``subdiv.facevarying``).
+
+    Linear mode (ALL) is the bilinear interpolation of the face's corners (the limit of
+    bilinear refinement; a ptex sub-face of an n-gon between its corner, edge midpoints and
+    centroid; a Loop triangle's linear one). Otherwise the samples descend as
+    :func:`evaluate`'s do, the channel refined in step with the cage, and a sample is
+    evaluated exactly where its face of the channel is a regular patch: a bicubic
+    B-spline (Loop: a quartic box spline), with phantom points beyond a regular boundary,
+    crease or corner of the channel (``patches.bspline`` / ``patches.boxspline``, as
+    OpenSubdiv's regular face-varying patches); values that follow a partner's sharpness
+    are not regular. What is left at ``config.EVAL_MAX_DEPTH`` is interpolated from the
+    exact limit values of its corners."""
+    if cage.uv is None:
+        raise ValueError("evaluate_uv: the cage has no UVs (an OBJ file's vt on every face "
+                         "corner, a USD mesh's primvars:st)")
+    ptex_face, uv, base, subface = _samples(cage, ptex_face, uv, "evaluate_uv")
+    out = np.full((len(ptex_face), 2), np.nan)
+    faces = base[ptex_face]
+    idx = np.nonzero(~cage.base.face_hole[faces])[0]
+    if len(idx) == 0:
+        return out
+    sub = subface[ptex_face[idx]]
+    if cage.uv.mode == FVAR_ALL:
+        out[idx] = _linear_uv(cage, faces[idx], sub, uv[idx])
+    else:
+        out[idx] = _descend_uv(cage, faces[idx], sub, uv[idx])[:, :2]
+    return out
+
+
+def _linear_uv(cage, faces, subface, uv):
+    """Bilinear (Loop: linear) interpolation of the faces' corner UVs (see
+    :func:`evaluate_uv`)."""
+    fo = cage.face_offsets
+    values, fvals = cage.uv.values, cage.uv.face_values
+    u, v = uv[:, 0:1], uv[:, 1:2]
+    n = (fo[faces + 1] - fo[faces])[:, None]
+    if cage.scheme == "loop":
+        c = values[fvals[fo[faces][:, None] + np.arange(3)]]
+        return (1 - u - v) * c[:, 0] + u * c[:, 1] + v * c[:, 2]
+    quad = subface < 0
+    k = np.where(quad, 0, subface)[:, None]
+    corner = lambda i: values[fvals[fo[faces][:, None] + (k + i) % n]][:, 0]  # noqa: E731
+    centroid = np.zeros((len(faces), 2))
+    for f in np.unique(faces[~quad]):
+        centroid[faces == f] = values[fvals[fo[f]:fo[f + 1]]].mean(axis=0)
+    c0, c1, c3 = corner(0), corner(1), corner(-1)
+    c2 = np.where(quad[:, None], corner(2), centroid)
+    c1 = np.where(quad[:, None], c1, 0.5 * (c0 + c1))
+    c3 = np.where(quad[:, None], c3, 0.5 * (c0 + c3))
+    return (1 - u) * (1 - v) * c0 + u * (1 - v) * c1 + u * v * c2 + (1 - u) * v * c3
+
+
+def _descend_uv(cage, faces, subface, uv):
+    """Walk the samples down the cage's and the channel's levels (see :func:`evaluate_uv`):
+    (m,3) UVs, third coordinate 0."""
+    opts = cage.options
+    is_loop = cage.scheme == "loop"
+    ch, pts = uv_channel(cage)
+    m = len(faces)
+    out = np.zeros((m, 3))
+    loc = uv.copy()
+    level = cage.base
+    cur = faces.astype(np.int64).copy()
+    active = np.ones(m, dtype=bool)
+    depth = 0
+    while active.any():
+        ids = np.nonzero(active)[0]
+        fo = level.face_offsets
+        verts = np.unique(np.concatenate([level.face_verts[fo[f]:fo[f + 1]]
+                                          for f in np.unique(cur[ids])]))
+        sub, _, c2s, sub_faces = extract(level, verts, rings=2)
+        sch, old_v = cut_channel(ch, sub_faces, c2s)
+        sub_pts = pts[old_v]
+        face_map = np.full(level.n_faces, -1, dtype=np.int64)
+        face_map[sub_faces] = np.arange(len(sub_faces))
+        sf = face_map[cur[ids]]
+        regular = _uv_regular(sch, opts, sf, is_loop)
+        done = ids[regular]
+        if len(done):
+            out[done] = _uv_patches(sch.level, sub_pts, sf[regular], loc[done], is_loop)
+            active[done] = False
+        ids, sf = ids[~regular], sf[~regular]
+        if len(ids) == 0:
+            break
+        if depth >= config.EVAL_MAX_DEPTH:
+            _interpolate_corners(sch.level, sub_pts, opts, sf, loc[ids], ids, out, is_loop)
+            break
+        ref = refine_level(sub, opts)
+        ch, pts = refine_channel(sch, ref, sub_pts)
+        cur[ids], nu, nv, _ = _step_down(sub, sf, loc[ids], subface[ids], depth, is_loop)
+        loc[ids, 0] = nu
+        loc[ids, 1] = nv
+        level = ref.child
+        depth += 1
+    return out
+
+
+def _uv_regular(ch, opts, faces, is_loop):
+    """(k,) bool: the channel's faces ``faces`` that are regular patches of it: none of
+    their corners a value that follows a partner's sharpness, or one with a face of
+    another size than the scheme's (on the cage's own level: ``regular_mask`` takes a
+    boundary corner's faces to be quads, as they are from level 1 on)."""
+    regular = loop_regular if is_loop else regular_mask
+    lev = ch.level
+    ok = regular(lev, opts, faces)
+    odd = np.diff(lev.face_offsets) != opts.regular_face_size
+    if ok.any() and ((ch.partner >= 0).any() or odd.any()):
+        n = opts.regular_face_size
+        fo = lev.face_offsets
+        corners = lev.face_verts[np.minimum(fo[faces][:, None] + np.arange(n),
+                                            len(lev.face_verts) - 1)]
+        bad = ch.partner >= 0
+        if odd.any():
+            at = np.repeat(np.arange(lev.n_verts), np.diff(lev.vert_face_offsets))
+            bad[at[odd[lev.vert_faces]]] = True
+        ok &= ~bad[corners].any(axis=1)
+    return ok
+
+
+def _uv_patches(level, pts, faces, loc, is_loop):
+    """Values (k,3) at local ``loc`` (k,2) of the regular faces ``faces`` of ``level``."""
+    if is_loop:
+        nets = box_nets(level, pts, faces)  # (k,15,3) triangular Bezier
+        return np.einsum("nk,nkd->nd", tri_bernstein(loc), nets)
+    X = control_points(level, faces, pts)  # (k,4,4,3) B-spline, phantoms beyond sides
+    bu, _ = bspline_basis(loc[:, 0])
+    bv, _ = bspline_basis(loc[:, 1])
+    return np.einsum("ni,nj,nijd->nd", bu, bv, X)

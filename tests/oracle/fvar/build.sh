@@ -32,5 +32,11 @@ tests/oracle/shapes/loop_fvar_bound0.obj loop 1 2
 tests/oracle/fvar/shapes/catmark_fvar_seams.obj catmark 1 2
 tests/oracle/fvar/shapes/catmark_fvar_chaikin.obj catmark 2 2
 tests/oracle/fvar/shapes/loop_fvar_seams.obj loop 2 2
+tests/oracle/shapes/catmark_val2_interior.obj catmark 2 1
+tests/oracle/shapes/catmark_nonman_edges.obj catmark 4 1
+tests/oracle/shapes/catmark_smoothtris1.obj catmark 8 1
+tests/oracle/shapes/catmark_hole_test3.obj catmark 2 1
+tests/oracle/shapes/catmark_edgenone.obj catmark 2 1
+tests/oracle/shapes/loop_cubes_semisharp.obj loop 4 1
 models/spot_control_mesh.obj catmark 3 1
 LIST
