@@ -208,6 +208,44 @@ def test_uvs_change_nothing_else():
         assert np.array_equal(a, b)
 
 
+@pytest.mark.parametrize("name", ["catmark_chaikin1", "catmark_cubes_semisharp",
+                                  "catmark_val2_interior", "catmark_nonquads",
+                                  "catmark_smoothtris1", "catmark_edgenone",
+                                  "loop_icos_semisharp", "loop_triangle_edgeonly"])
+def test_uvs_of_the_vertices_follow_the_points(name):
+    """UVs with the cage's own topology (a value per vertex: its x, y) in mode none are
+    vertex data: their limit is the limit position's x, y (``Cage.evaluate``, checked
+    against OpenSubdiv in test_oracle.py), on cages with semi-sharp and Chaikin creases,
+    darts, valence 2, n-gons, triangles, boundary "none" and Loop (seeded samples)."""
+    cage = subtrace.load_cage(ORACLE / "shapes" / f"{name}.obj", scheme=name.split("_")[0])
+    cage = replace(cage, uv=None, _cache={})
+    uvs = make_cage(cage.points, cage.face_sizes, cage.face_verts, cage.scheme,
+                    boundary=cage.options.boundary, chaikin=cage.options.chaikin,
+                    smooth_triangles=cage.options.smooth_triangles,
+                    crease_edges=cage.tags.crease_edges, crease_sharpness=cage.tags.crease_sharpness,
+                    corner_verts=cage.tags.corner_verts, corner_sharpness=cage.tags.corner_sharpness,
+                    hole_faces=cage.tags.hole_faces, uvs=cage.points[:, :2],
+                    face_uvs=cage.face_verts, uv_mode=0)
+    from subtrace.patches.evaluate import ptex_layout
+
+    n_ptex = len(ptex_layout(cage)[0])
+    rng = np.random.default_rng(7)
+    ptex = rng.integers(0, n_ptex, 300)
+    uv = rng.random((300, 2))
+    if cage.scheme == "loop":
+        uv = np.where(uv.sum(axis=1, keepdims=True) > 1, 1 - uv, uv)
+    corners = [[0, 0], [1, 0], [0, 1]] if cage.scheme == "loop" else [[0, 0], [1, 0], [1, 1],
+                                                                      [0, 1]]
+    uv[:20] = np.resize(np.array(corners, float), (20, 2))  # ptex corners
+    P, _, _ = cage.evaluate(ptex, uv)
+    got = uvs.evaluate_uv(ptex, uv)
+    live = ~np.isnan(P[:, 0])
+    np.testing.assert_array_equal(np.isnan(got[:, 0]), ~live)
+    scale = np.abs(cage.points).max()
+    # (positions at depth-24 cells are interpolated from exact corners: 1e-12 of the size)
+    np.testing.assert_allclose(got[live], P[live, :2], rtol=0, atol=1e-11 * scale)
+
+
 def test_restricted_cage_keeps_its_uvs(cages):
     z, _ = _oracle("catmark_fvar_seams")
     cage = cages("catmark_fvar_seams", 2)
