@@ -140,7 +140,7 @@ def exact_cell_normals(table, frame, width, hits, iso, patches, planes, normals,
     uv = np.clip(patches.uv0[p] + patches.scale[p][:, None] * at, 0.0, 1.0)
     n = np.full((len(r), 3), np.nan)
     oid = table.object_id[p]
-    for o in np.unique(oid):
+    for o in sorted(set(oid.tolist())):  # (np.unique would import numpy.ma)
         sel = np.nonzero(oid == o)[0]
         obj = table.objects[o]
         # a patch along one crease of one sharpness in closed form (patches/crease.py),

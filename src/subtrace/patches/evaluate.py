@@ -41,6 +41,7 @@ from subtrace.patches.bspline import control_points, regular_mask
 from subtrace.subdiv.facevarying import FVAR_ALL, base_channel, cut_channel, refine_channel
 from subtrace.subdiv.limit import SMOOTH, classify, extract, limit_points, smooth_edge_tangents
 from subtrace.subdiv.refine import refine_level, refine_points
+from subtrace.subdiv.topology import compact
 
 
 def ptex_starts(cage):
@@ -147,8 +148,9 @@ def _corner_derivatives(cage, faces, subface, uv, rows, dPdu, dPdv):
         return
     base = cage.base
     bfo = base.face_offsets
-    corners = [base.face_verts[bfo[f] : bfo[f + 1]] for f in np.unique(faces[sel])]
-    verts = np.unique(np.concatenate(corners))
+    corners = [base.face_verts[bfo[f] : bfo[f + 1]]
+               for f in compact(faces[sel], base.n_faces)[0]]
+    verts = compact(np.concatenate(corners), base.n_verts)[0]
     sub, s2c, _, sub_faces = extract(base, verts, rings=2)
     ref = refine_level(sub, cage.options)
     child = ref.child
@@ -322,7 +324,10 @@ def _descend(cage, faces, subface, uv, want_derivs):
         ids = np.nonzero(active)[0]
         fo = level.face_offsets
         # cut out the faces within two rings of the active samples' faces, and refine it
-        verts = np.unique(np.concatenate([level.face_verts[fo[f] : fo[f + 1]] for f in np.unique(cur[ids])]))
+        # (compact, not np.unique: that imports numpy.ma, which a render does not need)
+        verts = compact(np.concatenate([level.face_verts[fo[f] : fo[f + 1]]
+                                        for f in compact(cur[ids], level.n_faces)[0]]),
+                        level.n_verts)[0]
         sub, s2c, c2s, sub_faces = extract(level, verts, rings=2)
         face_map = np.full(level.n_faces, -1, dtype=np.int64)
         face_map[sub_faces] = np.arange(len(sub_faces))
