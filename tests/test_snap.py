@@ -205,15 +205,7 @@ def test_watertight_from_inside_where_patches_snap(tolerance, limit, tmp_path, m
     from shared_data import small_scene
     from subtrace.render import render_scene
 
-    snapped = []
-    real = pools.Pieces._snapped
-
-    def spy(self, *args):
-        out = real(self, *args)
-        snapped.append(int((out >= 0).any(axis=1).sum()))
-        return out
-
-    monkeypatch.setattr(pools.Pieces, "_snapped", spy)
+    snapped = _count_snapped(monkeypatch)
     path = torus_obj(tmp_path / "ends.obj", "ends")
     cage = subtrace.load_cage(path)
     eye = np.array([2.0, 0.0, 0.0])
@@ -234,15 +226,7 @@ def test_watertight_from_inside_the_chess_pieces(name, tolerance, monkeypatch):
     from shared_data import small_scene
     from subtrace.render import render_scene
 
-    snapped = []
-    real = pools.Pieces._snapped
-
-    def spy(self, *args):
-        out = real(self, *args)
-        snapped.append(int((out >= 0).any(axis=1).sum()))
-        return out
-
-    monkeypatch.setattr(pools.Pieces, "_snapped", spy)
+    snapped = _count_snapped(monkeypatch)
     path = HARD / f"catmark_{name}.obj"
     cage = subtrace.load_cage(path)
     lo, hi = cage.bounds()
@@ -252,3 +236,17 @@ def test_watertight_from_inside_the_chess_pieces(name, tolerance, monkeypatch):
                             height=120, tolerance=tolerance)
         assert np.count_nonzero(render_scene(scene, cages=[cage]).channels["A"] == 0) == 0
     assert sum(snapped) > 0
+
+
+def _count_snapped(monkeypatch):
+    """A list that receives, per batch of patches the pool builds, how many snap a side."""
+    snapped = []
+    real = pools.Pieces._snapped
+
+    def spy(self, *args):
+        out = real(self, *args)
+        snapped.append(int((out >= 0).any(axis=1).sum()))
+        return out
+
+    monkeypatch.setattr(pools.Pieces, "_snapped", spy)
+    return snapped
