@@ -303,7 +303,29 @@ def test_groups_objects_and_materials(tmp_path):
     assert data.face_group.tolist() == [0, 1, 2, 2, 0, 1]
     assert data.objects == ("default", "body", "lid")
     assert data.face_object.tolist() == [0, 1, 1, 1, 2, 2]
-    assert len(data.warnings) == 1 and f"{data.path}:15:" in data.warnings[0]
+    # the ghost material, and b.mtl's map_Kd whose file is missing (named, the colour kept)
+    assert len(data.warnings) == 2 and f"{data.path}:15:" in data.warnings[1]
+    assert "b.mtl:3: map_Kd texture 'blue.png' not found" in data.warnings[0]
+    assert "material 'blue' keeps its constant colours" in data.warnings[0]
+
+
+@pytest.mark.parametrize("statement", ["map_Kd spot.png", "map_Ks -s 2 2 1 spot.png",
+                                       "map_d spot.png", "map_Bump -bm 0.5 spot.png",
+                                       "bump spot.png", "norm spot.png", "MAP_KD spot.png"])
+def test_a_texture_map_is_one_warning_naming_its_file(tmp_path, statement):
+    """A texture map of an MTL material is one warning naming the MTL line and the file
+    (there, but not applied: subtrace maps no textures yet), and the material keeps its
+    colours; a map naming no file is a warning too."""
+    (tmp_path / "spot.png").write_bytes(b"\x89PNG\r\n\x1a\n")
+    (tmp_path / "t.mtl").write_text(
+        f"newmtl skin\nKd 0.2 0.3 0.4\n{statement}\n{statement.split()[0]}\n")
+    data = read_quiet(write(tmp_path, "mtllib t.mtl\nusemtl skin\n" + SQUARE + "f 1 2 3 4\n"))
+    assert data.materials == (Material("skin", (0.2, 0.3, 0.4)),)
+    assert len(data.warnings) == 2, data.warnings
+    key = statement.split()[0]
+    assert f"t.mtl:3: {key} texture 'spot.png' not applied" in data.warnings[0]
+    assert "material 'skin' keeps its constant colours" in data.warnings[0]
+    assert f"t.mtl:4: {key} names no file" in data.warnings[1]
 
 
 def test_missing_mtl_is_a_warning(tmp_path):

@@ -665,10 +665,14 @@ class ObjReader:
             self._parse_mtl(number, str(mtl_path), text)
 
     def _parse_mtl(self, obj_line, mtl_path: str, text: str):
-        """Read `newmtl`, `Kd`, `Ks` and `Ns` statements; other MTL statements do not
-        matter here."""
+        """Read `newmtl`, `Kd`, `Ks` and `Ns` statements; a texture map (`map_Kd`,
+        `map_Ks`, `map_d`, `map_Bump` / `bump`, `norm`, ...) is one warning naming its file
+        (whether it is missing, or there: subtrace applies no texture yet), the material
+        keeping its constant colours; other MTL statements do not matter here."""
         current = None
-        for number, line in enumerate(text.replace("\r", "\n").split("\n"), 1):
+        # (a CRLF line ending is one line end: the lines keep their numbers)
+        lines = text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
+        for number, line in enumerate(lines, 1):
             if "#" in line:
                 line = line[: line.index("#")]
             parts = line.split()
@@ -684,6 +688,9 @@ class ObjReader:
                     (obj_line, f"{mtl_path}:{number}: {parts[0]} before any newmtl ignored"))
             elif parts[0] == "Ns":
                 self.mtl_shininess[current] = _mtl_exponent(mtl_path, number, parts[1:])
+            elif parts[0].lower() in TEXTURE_MAPS:
+                self.warnings.append((obj_line, _texture_map_warning(
+                    mtl_path, number, parts, current)))
             elif parts[0] in ("Kd", "Ks"):
                 store = self.mtl_diffuse if parts[0] == "Kd" else self.mtl_specular
                 if parts[1:2] in (["spectral"], ["xyz"]):
@@ -940,3 +947,24 @@ def _mtl_exponent(mtl_path: str, number: int, tokens) -> float:
                        f"Ns needs one number >= 0 (the specular exponent), got "
                        f"'{' '.join(tokens)}'")
     return value
+
+
+# MTL's texture map statements (lower case: their keywords are matched so)
+TEXTURE_MAPS = ("map_kd", "map_ks", "map_ka", "map_ns", "map_d", "map_bump", "bump", "norm",
+                "disp", "decal", "refl", "map_pr", "map_pm", "map_ke")
+
+
+def _texture_map_warning(mtl_path: str, number: int, parts, material) -> str:
+    """The one warning of a texture map statement ``parts`` (its options, then the file:
+    the last token, relative to the MTL file's folder)."""
+    where = f"{mtl_path}:{number}: {parts[0]}"
+    whose = f"material '{material}'" if material is not None else "no material (before newmtl)"
+    if len(parts) < 2:
+        return f"{where} names no file; ignored"
+    name = parts[-1]
+    file = Path(mtl_path).parent / name
+    if not file.is_file():
+        return (f"{where} texture '{name}' not found ({file}); {whose} keeps its constant "
+                "colours")
+    return (f"{where} texture '{name}' not applied (subtrace maps no textures yet); {whose} "
+            "keeps its constant colours")
