@@ -490,8 +490,7 @@ def _lowest_limit(cage: Cage, up: np.ndarray) -> float:
     if cage.options.chaikin or cage.options.smooth_triangles:
         return float((cage.limit(1)[0] @ up).min())
     if cage.n_faces < config.LAZY_TOPOLOGY_FACES:
-        lev, pts, _ = cage._levels(1)[1]
-        return least_limit_height(lev, pts, cage.options, up)
+        return _least_level1_height(cage, up)
     # each face's range of heights from its star box (exact for an axis as ``up``, else
     # wider, which only keeps more faces)
     bottom, top = box_extent(up[None], *cage.star_boxes)
@@ -499,9 +498,13 @@ def _lowest_limit(cage: Cage, up: np.ndarray) -> float:
     # (a margin for the rounding of the limit masks' sums: far above it, far below a cell)
     top += 1e-9 * (np.abs(cage.points @ up).max() + 1.0)
     near = face_rings(cage, bottom <= top, RESTRICT_RINGS)
-    cut = cage.restricted(near)
-    lev, pts, _ = cut._levels(1)[1]
-    return least_limit_height(lev, pts, cut.options, up)
+    return _least_level1_height(cage.restricted(near), up)
+
+
+def _least_level1_height(cage: Cage, up: np.ndarray) -> float:
+    """``subdiv.limit.least_limit_height`` of ``cage``'s level-1 vertices."""
+    lev, pts, _ = cage._levels(1)[1]
+    return least_limit_height(lev, pts, cage.options, up)
 
 
 def without_unused_vertices(cage: Cage) -> Cage:

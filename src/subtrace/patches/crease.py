@@ -388,7 +388,28 @@ def _needed(bound, dist, tol_rad):
     return n if math.isfinite(n) else 1e9
 
 
-# _isolate_kernel (about 200 lines) is not split: its steps share the level's frontier,
+@leaf_njit
+def _crease_halves(halves, lo, hi, across):
+    """``across`` (2,4,4): the split ``halves`` of the curve across the crease, its points 1
+    and 2 taking the crease rule of sharpness ``lo``, ``hi`` (:func:`_across`, in a
+    kernel): rows 1 and 3 of the left half, 0 and 2 of the right are those rules."""
+    one, zero = np.float32(1.0), np.float32(0.0)
+    for g in range(2):
+        for b in range(4):
+            for q in range(4):
+                across[g, b, q] = halves[g, b, q]
+    for point in range(2):
+        s = lo if point == 0 else hi
+        w = 1.0 if s >= one else (np.float64(s) if s > zero else 0.0)
+        for q in range(4):
+            rule = (1.0 - w) * halves[0, 2 * point + 1, q]
+            if q == point + 1:
+                rule += w
+            across[0, 2 * point + 1, q] = rule
+            across[1, 2 * point, q] = rule
+
+
+# _isolate_kernel (about 190 lines) is not split: its steps share the level's frontier,
 # the scratch of a child and the counts of what it made; helpers would take a dozen of
 # those each, per child
 @nb.njit(cache=True, nogil=True)
@@ -508,21 +529,7 @@ def _isolate_kernel(grids, s_lo, s_hi, side, limit, eye, near, seen_min, seen_ma
             lo_s, hi_s = f_lo[a], f_hi[a]
             lo_d = lo_s - one if lo_s > one else zero  # the sharpness one level down
             hi_d = hi_s - one if hi_s > one else zero
-            # the halves across: rows 1 and 3 of the left, 0 and 2 of the right are the
-            # rules at points 1 and 2
-            for g in range(2):
-                for b in range(4):
-                    for q in range(4):
-                        across[g, b, q] = halves[g, b, q]
-            for point in range(2):
-                s = lo_s if point == 0 else hi_s
-                w = 1.0 if s >= one else (np.float64(s) if s > zero else 0.0)
-                for q in range(4):
-                    rule = (1.0 - w) * halves[0, 2 * point + 1, q]
-                    if q == point + 1:
-                        rule += w
-                    across[0, 2 * point + 1, q] = rule
-                    across[1, 2 * point, q] = rule
+            _crease_halves(halves, lo_s, hi_s, across)
             for h in range(2):
                 for u in range(4):  # the u half's rows
                     for q in range(4):
@@ -823,15 +830,12 @@ def _corner_limits(grids, lim1, slope1, lim2, slope2, P, du, dv):
                         g = grids[m, a, b, k]
                         lim = lim2[m, b] if y else lim1[m, b]
                         slope = slope2[m, b] if y else slope1[m, b]
-                        p += (_LIMIT[x, a] * lim) * g
-                        a_u += (_SLOPE[x, a] * lim) * g
-                        a_v += (_LIMIT[x, a] * slope) * g
+                        p += (LIMIT[x, a] * lim) * g
+                        a_u += (SLOPE[x, a] * lim) * g
+                        a_v += (LIMIT[x, a] * slope) * g
                 P[m, c, k] = p
                 du[m, c, k] = a_u
                 dv[m, c, k] = a_v
-
-
-_LIMIT, _SLOPE = LIMIT.copy(), SLOPE.copy()  # (the kernel's globals, frozen when compiled)
 
 
 def _add_cells(cells, grids, lo, hi, side, root, i, j):
@@ -891,7 +895,7 @@ def _crease_normals(grids, s_lo, s_hi, cu, cv, halves, out):
     to where its sharpness has run out (its points as combinations ``mat`` of the grid's
     four columns), then ``du x dv`` of the B-spline along (``cu``) and across."""
     mat = np.empty((4, 4))
-    step = np.empty((4, 4))
+    across = np.empty((2, 4, 4))
     nxt = np.empty((4, 4))
     b_u, d_u, b_v, d_v = np.empty(4), np.empty(4), np.empty(4), np.empty(4)
     wb, wd, du, dv = np.empty(4), np.empty(4), np.empty(3), np.empty(3)
@@ -906,20 +910,12 @@ def _crease_normals(grids, s_lo, s_hi, cu, cv, halves, out):
             if not (lo > f0 or hi > f0):
                 break
             half = 0 if t < 0.5 else 1
-            step[:, :] = halves[half]
-            # points 1 and 2 take the crease rule (_across): w the point, 1 - w smooth
-            for point in range(1, 3):
-                sh = lo if point == 1 else hi
-                w = 1.0 if sh >= f1 else (np.float64(sh) if sh > f0 else 0.0)
-                row = (2 * point - 1) if half == 0 else (2 * point - 2)
-                for c in range(4):
-                    step[row, c] = ((1.0 - w) * halves[0, 2 * point - 1, c]
-                                    + (w if c == point else 0.0))
+            _crease_halves(halves, lo, hi, across)
             for r in range(4):
                 for c in range(4):
                     acc = 0.0
                     for k in range(4):
-                        acc += step[r, k] * mat[k, c]
+                        acc += across[half, r, k] * mat[k, c]
                     nxt[r, c] = acc
             mat[:, :] = nxt
             t = 2.0 * t - half

@@ -74,7 +74,6 @@ def least_limit_height(level: Level, points: np.ndarray, options: Options, up) -
     all lie no lower than that least does not lower it."""
     points = np.ascontiguousarray(points, dtype=np.float64)
     up = np.asarray(up, np.float64)
-    n = level.n_verts
     cls = classify(level, options)
     easy = np.nonzero(cls >= 0)[0]
     hard = np.nonzero(cls < 0)[0]
@@ -100,7 +99,7 @@ def least_limit_height(level: Level, points: np.ndarray, options: Options, up) -
             du, dv = np.zeros_like(P), np.zeros_like(P)
             _hard_limits(level, points, options, hard, P, du, dv, rows=np.arange(len(hard)))
             least = min(least, float((P @ up).min()))
-    return least if n else float("inf")
+    return least
 
 
 def classify(level: Level, options: Options, which=None) -> np.ndarray:
