@@ -32,6 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from subtrace.runtime.jit import nb
+
 # the fewest items a subtree below the patch's own needs for a group row: a ray entering a
 # group tests its box besides its items', so a small group saves nothing
 MIN_GROUP = 4
@@ -83,53 +85,151 @@ def grouped_layout(root, level, i0, j0, orient, lo, hi):
     root = np.asarray(root, np.int64)
     n = len(root)
     m = int(root.max(initial=-1)) + 1
-    order, differs, top = _depth_first(root, level, i0, j0, orient)
+    level = np.asarray(level, np.int64)
+    top = int(level.max(initial=0))
+    if orient is None and top <= _KEY_LEVELS and m <= 1 << (62 - 3 * top):
+        # (sub-squares: their keys, order and splits in one kernel, 10 ms less on the
+        # chess pieces' largest build of 86,773 items than in NumPy)
+        order, split = _square_order(root, level, np.asarray(i0, np.int64),
+                                     np.asarray(j0, np.int64), top)
+    else:
+        order, differs, top = _depth_first(root, level, i0, j0, orient)
+        split = _splits(root[order], differs, top)
     root_s = root[order]
-    # subtree k of level l: the items whose patch and codes 1..l agree; a new subtree
-    # starts where its key changes
-    new = np.ones((top + 1, n), bool)  # new[l, r]: sorted item r starts a level-l subtree
-    if n:
-        new[0, 1:] = root_s[1:] != root_s[:-1]
-        for l in range(1, top + 1):
-            new[l, 1:] = new[l - 1, 1:] | differs(l)
-    starts, ends, levels = [], [], []
-    # (a subtree with the same items as a coarser kept group adds nothing: then it has the
-    # items of its parent, which was kept or had them too; held[s]: the end of the
-    # parent level's subtree from sorted row s that was kept or had a kept group's items,
-    # else -1)
-    held = np.full(n + 1, -1, np.int64)
-    for l in range(top + 1):
-        s = np.nonzero(new[l])[0]
-        e = np.r_[s[1:], n]
-        same = held[s] == e
-        keep = (e - s >= (2 if l == 0 else MIN_GROUP)) & ~same
-        starts.append(s[keep])
-        ends.append(e[keep])
-        levels.append(np.full(int(keep.sum()), l))
-        held = np.full(n + 1, -1, np.int64)
-        held[s[keep | same]] = e[keep | same]
-    g_s = np.concatenate(starts) if starts else np.zeros(0, np.int64)
-    g_e = np.concatenate(ends) if ends else np.zeros(0, np.int64)
-    g_l = np.concatenate(levels) if levels else np.zeros(0, np.int64)
-    # rows: a group goes before its first item, coarser groups first
-    n_g = len(g_s)
-    key_pos = np.r_[np.arange(n), g_s]
-    key_lev = np.r_[np.full(n, top + 1), g_l]
-    rows = np.lexsort((key_lev, key_pos))  # row r: sorted item rows[r] (< n) or group
-    where = np.empty(n + n_g, np.int64)
-    where[rows] = np.arange(n + n_g)
-    # a group spans from its row to the row after its last item
-    g_span = where[g_e - 1] + 1 - where[n:]
-    take = np.where(rows < n, order[np.minimum(rows, n - 1)], -1) if n else rows
-    g_rows = rows[rows >= n] - n  # the groups in row order
-    g_lo, g_hi = _group_boxes(np.asarray(lo)[order], np.asarray(hi)[order], g_s, g_e)
-    count = np.bincount(root, minlength=m) + np.bincount(root_s[g_s], minlength=m)
+    rows, g_level, g_lo, g_hi, g_span, g_root = _layout_kernel(
+        split, top, np.ascontiguousarray(np.asarray(lo, np.float64)[order]),
+        np.ascontiguousarray(np.asarray(hi, np.float64)[order]), MIN_GROUP)
+    take = np.where(rows >= 0, order[np.maximum(rows, 0)], -1) if n else rows
+    count = np.bincount(root, minlength=m) + np.bincount(root_s[g_root], minlength=m)
     first = np.cumsum(count) - count
-    return (take, g_l[g_rows], g_lo[g_rows], g_hi[g_rows], g_span[g_rows], first, count)
+    return take, g_level, g_lo, g_hi, g_span, first, count
+
+
+@nb.njit(cache=True, nogil=True)
+def _layout_kernel(split, top, lo, hi, min_group):
+    """:func:`grouped_layout`'s rows of items in depth-first order (``split`` there; boxes
+    ``lo``, ``hi`` in that order): ``(rows, g_level, g_lo, g_hi, g_span, g_first)``, row r
+    holding sorted item ``rows[r]`` or, where it is -1, the next group (in row order: its
+    level, box, span and first sorted item). The level-l subtrees are the runs of items
+    without a split at or below l; one is kept as a group with at least ``min_group`` items
+    (2 for a whole patch) unless it has the items of the parent level's subtree that was
+    kept or had a kept one's items (a chain keeps its coarsest group). A laminar family of
+    distinct sets of two or more items: fewer groups than items. A group row goes before
+    its first item, coarser groups first. (In NumPy, level by level, this took 42 ms of the
+    chess pieces' 6 builds, 92,000 items.)"""
+    n = len(split)
+    g_s = np.empty(max(n, 1), np.int64)
+    g_e = np.empty(max(n, 1), np.int64)
+    g_l = np.empty(max(n, 1), np.int64)
+    n_g = 0
+    held_end = np.full(n + 1, -1, np.int64)  # the end of the subtree from s kept or held
+    held_level = np.full(n + 1, -2, np.int64)  # at this level
+    for l in range(top + 1):
+        s = 0
+        while s < n:
+            e = s + 1
+            while e < n and split[e] > l:
+                e += 1
+            same = held_level[s] == l - 1 and held_end[s] == e
+            keep = e - s >= (2 if l == 0 else min_group) and not same
+            if keep:
+                g_s[n_g], g_e[n_g], g_l[n_g] = s, e, l
+                n_g += 1
+            if keep or same:
+                held_end[s], held_level[s] = e, l
+            s = e
+    # groups by first item, coarser first (made level by level: a stable bucket order)
+    at_start = np.zeros(n + 1, np.int64)
+    for g in range(n_g):
+        at_start[g_s[g] + 1] += 1
+    before = np.cumsum(at_start)  # groups that start before item s
+    slot = before[:-1].copy()
+    by_row = np.empty(n_g, np.int64)
+    for g in range(n_g):
+        by_row[slot[g_s[g]]] = g
+        slot[g_s[g]] += 1
+    rows = np.empty(n + n_g, np.int64)
+    item_row = np.empty(n, np.int64)
+    r = 0
+    k = 0
+    for s in range(n):
+        while k < n_g and g_s[by_row[k]] == s:
+            rows[r] = -1
+            r += 1
+            k += 1
+        rows[r] = s
+        item_row[s] = r
+        r += 1
+    g_level = np.empty(n_g, np.int64)
+    g_span = np.empty(n_g, np.int64)
+    g_first = np.empty(n_g, np.int64)
+    g_lo = np.empty((n_g, 3))
+    g_hi = np.empty((n_g, 3))
+    for k in range(n_g):
+        g = by_row[k]
+        s, e = g_s[g], g_e[g]
+        g_level[k], g_first[k] = g_l[g], s
+        # (its row: after the items before its first and the groups before it)
+        g_span[k] = item_row[e - 1] + 1 - (s + k)
+        for c in range(3):
+            a, b = lo[s, c], hi[s, c]
+            for t in range(s + 1, e):
+                a = min(a, lo[t, c])
+                b = max(b, hi[t, c])
+            g_lo[k, c], g_hi[k, c] = a, b
+    return rows, g_level, g_lo, g_hi, g_span, g_first
 
 
 # the most levels whose child codes (3 bits each with the deeper-item mark) one int64 holds
 _KEY_LEVELS = 20
+
+
+def _splits(root_s, differs, top):
+    """(n,) int64: for each item in depth-first order, the first level at which its subtree
+    is not the item's before it (0: another patch; top + 1: none; codes 1 .. l differ from
+    some l on: that l), from ``differs`` (:func:`_depth_first`)."""
+    n = len(root_s)
+    split = np.zeros(n, np.int64)
+    if n > 1:
+        same = root_s[1:] == root_s[:-1]
+        tail = np.where(same, top + 1, 0)
+        for l in range(top, 0, -1):
+            tail[same & differs(l)] = l
+        split[1:] = tail
+    return split
+
+
+@nb.njit(cache=True, nogil=True)
+def _square_order(root, level, i0, j0, top):
+    """:func:`_depth_first`'s order of sub-squares and :func:`_splits` of it: one key per
+    item, its patch above its codes (3 bits a level, level 1 highest: the child code, plus
+    4 where the item lies deeper), sorted stably."""
+    n = len(root)
+    key = np.empty(n, np.int64)
+    for r in range(n):
+        k = root[r]
+        for t in range(1, top + 1):
+            below = level[r] - t
+            code = 0
+            if below >= 0:
+                code = ((i0[r] >> below) & 1) + 2 * ((j0[r] >> below) & 1)
+                if below > 0:
+                    code += 4
+            k = (k << 3) | code
+        key[r] = k
+    order = np.argsort(key, kind="mergesort")
+    split = np.zeros(n, np.int64)
+    for r in range(1, n):
+        a, b = key[order[r - 1]], key[order[r]]
+        if (a >> (3 * top)) != (b >> (3 * top)):
+            continue  # (another patch: 0)
+        split[r] = top + 1
+        for t in range(1, top + 1):
+            shift = 3 * (top - t)
+            if (a >> shift) != (b >> shift):
+                split[r] = t
+                break
+    return order, split
 
 
 def _depth_first(root, level, i0, j0, orient):
@@ -161,13 +261,3 @@ def _depth_first(root, level, i0, j0, orient):
     order = np.lexsort(tuple(codes[:, l] for l in range(top, 0, -1)) + (root,))
     codes = codes[order]
     return order, lambda l: codes[1:, l] != codes[:-1, l], top
-
-
-def _group_boxes(lo, hi, s, e):
-    """The boxes of the sorted items' ranges [s, e) (s < e)."""
-    if not len(s):
-        return np.zeros((0, 3)), np.zeros((0, 3))
-    lo = np.concatenate([lo, lo[-1:]])  # (reduceat's last range needs a row past it)
-    hi = np.concatenate([hi, hi[-1:]])
-    idx = np.ravel(np.column_stack([s, e]))
-    return np.minimum.reduceat(lo, idx)[::2], np.maximum.reduceat(hi, idx)[::2]

@@ -35,6 +35,7 @@ from subtrace.trace.snap import snap_items
 from subtrace.trace.prims import (
     M_COUNTS, M_MADE, M_PEAK_CELLS, M_PEAK_NETS, M_PEAK_NODES, memo_restart,
 )
+from subtrace.runtime.jit import nb
 from subtrace.runtime.memory import one_block, small_pages
 from subtrace.patches.isolate_loop import sample_ranges, side_samples
 from subtrace.trace.tris import tri_nets_as_pieces
@@ -448,18 +449,17 @@ class Pieces(Growable):
         take, g_level, g_lo, g_hi, g_span, first, count = grouped_layout(
             root, items["level"], items["i0"], items["j0"], split_orient, items["lo"],
             items["hi"])
-        is_item = take >= 0
-        group = ~is_item
         # (straight into the store: no array of the rows first, copied in after)
         start = self.room("items", len(take))
-        at = np.nonzero(is_item)[0]
-        g_at = np.nonzero(group)[0]
         g_values = {"kind": GROUP, "ref": g_span, "level": g_level, "lo": g_lo, "hi": g_hi,
                     "side": -1, "orient": 1}
-        for name in self.GROUPS["items"]:
+        n_g = len(g_level)
+        for name, (shape, dtype) in self.GROUPS["items"].items():
             rows = self._store[name][start:start + len(take)]
-            rows[at] = np.asarray(items[name])[take[at]]
-            rows[g_at] = g_values.get(name, 0)
+            src = np.broadcast_to(np.asarray(items[name], dtype), (len(root),) + shape)
+            g_src = np.broadcast_to(np.asarray(g_values.get(name, 0), dtype), (n_g,) + shape)
+            _take_rows(_as_bytes(rows), _as_bytes(np.ascontiguousarray(src)),
+                       _as_bytes(np.ascontiguousarray(g_src)), take)
         return start, first, count
 
     def item_boxes(self, patches):
@@ -483,6 +483,30 @@ class Pieces(Growable):
 
 
 _NO_BOX = np.zeros((0, 3))
+
+
+def _as_bytes(a):
+    """The rows of ``a`` (n, ...) as bytes (n, row bytes): a view."""
+    return a.reshape(len(a), int(np.prod(a.shape[1:]))).view(np.uint8)
+
+
+@nb.njit(cache=True, nogil=True)
+def _take_rows(out, items, groups, take):
+    """Row r of ``out`` (rows as bytes, :func:`_as_bytes`) from row ``take[r]`` of
+    ``items``, or where that is negative from the next row of ``groups``: the gathers and
+    scatters of ``Pieces._put_grouped`` in one pass a field (in NumPy: 19 ms of the chess
+    pieces' 6 builds)."""
+    g = 0
+    width = out.shape[1]
+    for r in range(len(take)):
+        if take[r] >= 0:
+            k = take[r]
+            for b in range(width):
+                out[r, b] = items[k, b]
+        else:
+            for b in range(width):
+                out[r, b] = groups[g, b]
+            g += 1
 
 
 def _in_order(subs, cells):
