@@ -516,3 +516,45 @@ def test_the_same_image_on_one_and_two_threads(name, tori):
     assert one.stats.pixels_covered > 1000
     for key, channel in one.channels.items():
         assert channel.tobytes() == two.channels[key].tobytes(), key
+
+
+@pytest.mark.parametrize("name", ["catmark_rook.obj", "catmark_helmet.obj", "rings", "ends",
+                                  "chaikin", "pair"])
+def test_evaluate_takes_the_closed_form_along_creases(name, tori, monkeypatch):
+    """``Cage.evaluate`` retires a sample on a quad the maps serve in closed form
+    (``crease.crease_derivatives``) instead of refining it until the sharpness runs out:
+    at random points, a third of them within 0.1 % of a side, the same points and
+    derivatives as the descent through topology alone (``crease.ENABLED`` False, checked
+    against OpenSubdiv in tests/test_oracle.py) to rounding, and the closed form served
+    some of them."""
+    from subtrace.patches import evaluate as ev
+    from subtrace.patches.evaluate import ptex_starts
+
+    cage = _cage(name, tori)
+    rng = np.random.default_rng(11)
+    m = 600
+    ptex = rng.integers(0, ptex_starts(cage)[-1], m)
+    uv = rng.random((m, 2))
+    uv[: m // 3, 1] *= 1e-3
+    served = []
+    real = ev.crease_derivatives
+
+    def counted(*args):
+        out = real(*args)
+        served.append(int(out[0].sum()))
+        return out
+
+    monkeypatch.setattr(ev, "crease_derivatives", counted)
+    P1, du1, dv1 = cage.evaluate(ptex, uv)
+    assert sum(served) > 0
+    monkeypatch.setattr(crease, "ENABLED", False)
+    P0, du0, dv0 = cage.evaluate(ptex, uv)
+    live = ~np.isnan(P0[:, 0])
+    assert live.sum() > m // 2
+    scale = float(np.abs(cage.points).max())
+    np.testing.assert_allclose(P1[live], P0[live], rtol=0, atol=1e-13 * scale)
+    # (the descent's derivatives on creased faces at its last level are finite differences
+    # of exact points, good to about 1e-10 of their length)
+    for a, b in ((du1, du0), (dv1, dv0)):
+        size = np.linalg.norm(b[live], axis=1)
+        assert (np.linalg.norm(a[live] - b[live], axis=1) <= 1e-8 * size + 1e-12 * scale).all()

@@ -51,6 +51,7 @@ from subtrace.config import IRREGULAR_MARGIN
 from subtrace.subdiv.topology import INF_SHARP, gather_index
 from subtrace.patches.basis import TO_BEZIER
 from subtrace.patches.bspline import control_grids
+from subtrace.patches.facememo import FaceMemo
 from subtrace.patches.grids import unit_normals
 from subtrace.patches.shells import Sight
 from subtrace.runtime.jit import leaf_njit, nb
@@ -109,6 +110,16 @@ def crease_faces(level, options, faces):
     either three smooth edges or three edges of one semi-sharp sharpness, and the creased
     lines are one or two opposite ones; with Chaikin creases, the module doc's conditions."""
     faces = np.asarray(faces, dtype=np.int64)
+    if options.scheme != "catmark" or len(faces) == 0 or not ENABLED:
+        m = len(faces)
+        return np.zeros(m, bool), np.zeros(m, np.int64), np.zeros(m, np.float32), np.zeros(
+            m, np.float32)
+    return _CREASE_FACES(level, options, faces)
+
+
+def _crease_faces(level, options, faces):
+    """:func:`crease_faces` of each of ``faces`` (distinct), computed."""
+    faces = np.asarray(faces, dtype=np.int64)
     m = len(faces)
     ok = np.zeros(m, dtype=bool)
     side = np.zeros(m, np.int64)
@@ -140,6 +151,11 @@ def crease_faces(level, options, faces):
     side[at], s_lo[at], s_hi[at] = np.where(good, s, 0), np.where(good, lo, 0), np.where(
         good, hi, 0)
     return ok, side, s_lo, s_hi
+
+
+# each face of a level classified once (the depth choice, the build, the edge sampling and
+# the exact normals ask the same faces)
+_CREASE_FACES = FaceMemo(_crease_faces, (bool, np.int64, np.float32, np.float32))
 
 
 # cell_free_depths of a patch whose isolation leaves cells at every depth
@@ -789,7 +805,21 @@ def _curve_masks(s_lo, s_hi, point):
     the curves across the crease, at their point ``point`` (1 or 2), whose sharpness is
     ``s_lo`` (point 1) or ``s_hi`` (point 2): the curve refined, its half that keeps the
     point each time, until the point is smooth, then the smooth masks there (the derivative
-    up to a positive factor)."""
+    up to a positive factor). Made once for each distinct pair of sharpness (a crease's
+    cells share a few)."""
+    lo, hi = np.asarray(s_lo, np.float32), np.asarray(s_hi, np.float32)
+    key = (lo.view(np.uint32).astype(np.int64) << 32) | hi.view(np.uint32).astype(np.int64)
+    order = np.argsort(key, kind="stable")
+    first = np.ones(len(key), bool)
+    first[1:] = key[order[1:]] != key[order[:-1]]
+    which = np.empty(len(key), np.int64)  # each row's distinct pair
+    which[order] = np.cumsum(first) - 1
+    limit, slope = _pair_masks(lo[order[first]], hi[order[first]], point)
+    return limit[which], slope[which]
+
+
+def _pair_masks(s_lo, s_hi, point):
+    """:func:`_curve_masks` of each pair."""
     n = len(s_lo)
     mat = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
     lo, hi = s_lo.astype(np.float32), s_hi.astype(np.float32)
@@ -866,14 +896,31 @@ def _add_cells(cells, grids, lo, hi, side, root, i, j):
 def crease_normals(level, points, options, faces, uv):
     """The limit surface's normals (unnormalised, the patch's orientation) at the patch
     parameters ``uv`` (m,2) of the quads ``faces`` (m,) of ``level``: ``(ok (m,), n
-    (m,3))``, ``ok`` where the maps serve the face (:func:`crease_faces`; elsewhere n is 0).
-    Such a patch is, along its crease, the uniform cubic B-spline of its grid's rows, and
-    across it the curve whose points 1 and 2 take the crease rule: the curve is split at
-    the parameter, the half holding it kept, until its sharpness has run out (as
-    :func:`_curve_masks` follows a point), then differentiated as a B-spline there."""
+    (m,3))``, ``ok`` where the maps serve the face (:func:`crease_faces`; elsewhere n is 0),
+    ``du x dv`` of :func:`crease_derivatives`."""
+    ok, _, _, _, n = _crease_eval(level, points, options, faces, uv)
+    return ok, n
+
+
+def crease_derivatives(level, points, options, faces, uv):
+    """The limit surface at the patch parameters ``uv`` (m,2) of the quads ``faces`` (m,)
+    of ``level``: ``(ok (m,), P, dP/du, dP/dv (m,3) each)``, ``ok`` where the maps serve
+    the face (:func:`crease_faces`; elsewhere all 0). Such a patch is, along its crease,
+    the uniform cubic B-spline of its grid's rows, and across it the curve whose points 1
+    and 2 take the crease rule: the curve is split at the parameter, the half holding it
+    kept, until its sharpness has run out (as :func:`_curve_masks` follows a point), then
+    evaluated and differentiated as a B-spline there, the derivative across scaled back by
+    the halvings."""
+    return _crease_eval(level, points, options, faces, uv)[:4]
+
+
+def _crease_eval(level, points, options, faces, uv):
+    """:func:`crease_derivatives` and the normals of :func:`crease_normals` (m,3): ``du x
+    dv`` of the last split's parameter."""
     faces = np.asarray(faces, np.int64)
     uv = np.asarray(uv, np.float64).reshape(-1, 2)
-    n = np.zeros((len(faces), 3))
+    m = len(faces)
+    pos, du, dv, n = (np.zeros((m, 3)) for _ in range(4))
     ok, side, s_lo, s_hi = crease_faces(level, options, faces)
     at = np.nonzero(ok)[0]
     if len(at):
@@ -883,22 +930,31 @@ def crease_normals(level, points, options, faces, uv):
         # the patch's (u, v) in the canonical frame (the inverse of _turns' maps)
         cu = np.select([s == 0, s == 1, s == 2], [u, v, 1.0 - u], 1.0 - v)
         cv = np.select([s == 0, s == 1, s == 2], [v, 1.0 - u, 1.0 - v], u)
-        out = np.zeros((len(at), 3))
-        _crease_normals(grids, s_lo[at], s_hi[at], cu, cv, HALVES, out)
-        n[at] = out
-    return ok, n
+        out = np.zeros((4, len(at), 3))
+        _crease_derivatives(grids, s_lo[at], s_hi[at], cu, cv, HALVES, out)
+        c_u, c_v = out[1], out[2]
+        # back to the patch's frame: d/du and d/dv of the canonical (cu, cv) above
+        pos[at] = out[0]
+        s = s[:, None]
+        du[at] = np.select([s == 0, s == 1, s == 2], [c_u, -c_v, -c_u], c_v)
+        dv[at] = np.select([s == 0, s == 1, s == 2], [c_v, c_u, -c_v], -c_u)
+        n[at] = out[3]
+    return ok, pos, du, dv, n
 
 
 @nb.njit(cache=True, nogil=True)
-def _crease_normals(grids, s_lo, s_hi, cu, cv, halves, out):
-    """:func:`crease_normals`' kernel: per sample, the curve across split at ``cv`` down
-    to where its sharpness has run out (its points as combinations ``mat`` of the grid's
-    four columns), then ``du x dv`` of the B-spline along (``cu``) and across."""
+def _crease_derivatives(grids, s_lo, s_hi, cu, cv, halves, out):
+    """:func:`crease_derivatives`' kernel: per sample, the curve across split at ``cv``
+    down to where its sharpness has run out (its points as combinations ``mat`` of the
+    grid's four columns, ``scale`` the parameter's stretch), then the B-spline along
+    (``cu``) and across: ``out[0]`` the point, ``out[1]``, ``out[2]`` its derivatives in
+    ``cu`` and ``cv``, ``out[3]`` the normal ``out[1] x out[2]`` as the last split's
+    parameter has it (the scale left out)."""
     mat = np.empty((4, 4))
     across = np.empty((2, 4, 4))
     nxt = np.empty((4, 4))
     b_u, d_u, b_v, d_v = np.empty(4), np.empty(4), np.empty(4), np.empty(4)
-    wb, wd, du, dv = np.empty(4), np.empty(4), np.empty(3), np.empty(3)
+    wb, wd = np.empty(4), np.empty(4)
     f0, f1 = np.float32(0.0), np.float32(1.0)
     for m in range(grids.shape[0]):
         mat[:, :] = 0.0
@@ -906,6 +962,7 @@ def _crease_normals(grids, s_lo, s_hi, cu, cv, halves, out):
             mat[k, k] = 1.0
         lo, hi = s_lo[m], s_hi[m]
         t = cv[m]
+        scale = 1.0
         for _ in range(64):
             if not (lo > f0 or hi > f0):
                 break
@@ -919,6 +976,7 @@ def _crease_normals(grids, s_lo, s_hi, cu, cv, halves, out):
                     nxt[r, c] = acc
             mat[:, :] = nxt
             t = 2.0 * t - half
+            scale *= 2.0
             if half == 0:
                 lo, hi = (lo - f1 if lo > f1 else f0), f0
             else:
@@ -932,17 +990,24 @@ def _crease_normals(grids, s_lo, s_hi, cu, cv, halves, out):
             for k in range(4):
                 wb[c] += b_v[k] * mat[k, c]
                 wd[c] += d_v[k] * mat[k, c]
-        du[:] = 0.0
-        dv[:] = 0.0
+        for d in range(3):
+            out[0, m, d] = 0.0
+            out[1, m, d] = 0.0
+            out[2, m, d] = 0.0
         for a in range(4):
             for c in range(4):
                 for d in range(3):
                     g = grids[m, a, c, d]
-                    du[d] += d_u[a] * wb[c] * g
-                    dv[d] += b_u[a] * wd[c] * g
-        out[m, 0] = du[1] * dv[2] - du[2] * dv[1]
-        out[m, 1] = du[2] * dv[0] - du[0] * dv[2]
-        out[m, 2] = du[0] * dv[1] - du[1] * dv[0]
+                    out[0, m, d] += b_u[a] * wb[c] * g
+                    out[1, m, d] += d_u[a] * wb[c] * g
+                    out[2, m, d] += b_u[a] * wd[c] * g
+        du0, du1, du2 = out[1, m, 0], out[1, m, 1], out[1, m, 2]
+        dv0, dv1, dv2 = out[2, m, 0], out[2, m, 1], out[2, m, 2]
+        out[3, m, 0] = du1 * dv2 - du2 * dv1
+        out[3, m, 1] = du2 * dv0 - du0 * dv2
+        out[3, m, 2] = du0 * dv1 - du1 * dv0
+        for d in range(3):
+            out[2, m, d] *= scale
 
 
 @leaf_njit

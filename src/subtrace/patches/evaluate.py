@@ -9,6 +9,10 @@ faces within two rings of the faces holding the samples are cut out and refined 
   are smooth, valence-6 and crease-free a quartic box-spline patch of its 12 points: the
   sample is evaluated there exactly, with exact derivatives (the common case, reached after
   a few levels except next to an extraordinary vertex or a crease);
+* a Catmull-Clark quad along one semi-sharp crease of one sharpness (or two opposite ones),
+  with smooth valence-4 corners otherwise, is a B-spline along the crease and a crease curve
+  across it (:mod:`subtrace.patches.crease`): the sample is evaluated there in closed form,
+  derivatives exact, instead of refining it as many levels as the sharpness;
 * everything else keeps subdividing down to ``config.EVAL_MAX_DEPTH`` levels, where the face
   is 2^-depth of its ptex face: the position is interpolated from the exact limit points of
   its corners (error O(4^-depth), below double precision) and the derivatives are finite
@@ -37,6 +41,7 @@ from subtrace.patches.basis import (
     bspline_basis, tri_bernstein,
 )
 from subtrace.patches.boxspline import box_nets, loop_regular
+from subtrace.patches.crease import crease_derivatives
 from subtrace.patches.bspline import control_points, regular_mask
 from subtrace.subdiv.facevarying import FVAR_ALL, base_channel, cut_channel, refine_channel
 from subtrace.subdiv.limit import SMOOTH, classify, extract, limit_points, smooth_edge_tangents
@@ -366,6 +371,9 @@ def _descend(cage, faces, subface, uv, want_derivs):
                 dV[done] = Jd[:, 0, 1, None] * lu + Jd[:, 1, 1, None] * lv
             exact_d[done] = True
             active[done] = False
+        if not is_loop and want_derivs:
+            _retire_creased(sub, sub_pts, opts, face_map, cur, loc, J, active, P, dU, dV,
+                            exact_d)
         ids = np.nonzero(active)[0]
         sf = face_map[cur[ids]]
         if len(ids) == 0:
@@ -382,6 +390,28 @@ def _descend(cage, faces, subface, uv, want_derivs):
         level, pts = ref.child, child_pts
         depth += 1
     return P, dU, dV, exact_d
+
+
+def _retire_creased(sub, sub_pts, opts, face_map, cur, loc, J, active, P, dU, dV, exact_d):
+    """Retire the active samples on quads of ``sub`` along one semi-sharp crease of one
+    sharpness (or two opposite ones): the crease maps' closed form
+    (:func:`~subtrace.patches.crease.crease_derivatives`) gives their point and derivatives
+    there, where the descent would refine them until the sharpness has run out (as many
+    levels as the sharpness, each through local topology)."""
+    ids = np.nonzero(active)[0]
+    if not len(ids):
+        return
+    ok, pos, lu, lv = crease_derivatives(sub, sub_pts, opts, face_map[cur[ids]], loc[ids])
+    done = ids[ok]
+    if not len(done):
+        return
+    lu, lv = lu[ok], lv[ok]
+    P[done] = pos[ok]
+    Jd = J[done]
+    dU[done] = Jd[:, 0, 0, None] * lu + Jd[:, 1, 0, None] * lv
+    dV[done] = Jd[:, 0, 1, None] * lu + Jd[:, 1, 1, None] * lv
+    exact_d[done] = True
+    active[done] = False
 
 
 def _step_down(sub, sf, loc, subface, depth, is_loop):

@@ -35,6 +35,7 @@ from subtrace import config
 from subtrace.config import IRREGULAR_MARGIN
 from subtrace.errors import SubtraceError
 from subtrace.patches.basis import bezier_nets_and_bounds
+from subtrace.patches.facememo import FaceMemo
 from subtrace.patches.grids import levels_needed, refine_children, unit_normals
 from subtrace.patches.shells import sight_distance
 from subtrace.runtime.atomic import write_bytes
@@ -53,6 +54,15 @@ def stencil_faces(level, options, faces):
     exactly one of its corners has a valence other than 4 (at most ``MAX_VALENCE``), and
     every face around its corners is a quad, not a hole, with no sharp edge or vertex at
     those corners and each corner inside the mesh (as many faces as edges, one fan)."""
+    faces = np.asarray(faces, dtype=np.int64)
+    m = len(faces)
+    if options.scheme != "catmark" or m == 0 or not config.STENCIL_ISOLATION:
+        return np.zeros(m, dtype=bool), np.zeros(m, np.int64), np.zeros(m, np.int64)
+    return _STENCIL_FACES(level, options, faces)
+
+
+def _stencil_faces(level, options, faces):
+    """:func:`stencil_faces` of each of ``faces`` (distinct), computed."""
     faces = np.asarray(faces, dtype=np.int64)
     m = len(faces)
     if options.scheme != "catmark" or m == 0 or not config.STENCIL_ISOLATION:
@@ -81,6 +91,10 @@ def stencil_faces(level, options, faces):
         good &= np.add.reduceat(np.r_[hits, False].astype(np.int64), starts) == 0
     ok[at] = good.reshape(-1, 4).all(axis=1)
     return ok, np.where(ok, corner, 0), np.where(ok, valence, 0)
+
+
+# each face of a level classified once (as crease._CREASE_FACES)
+_STENCIL_FACES = FaceMemo(_stencil_faces, (bool, np.int64, np.int64))
 
 
 def stencil_where(level, options, faces, levels):
