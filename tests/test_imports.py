@@ -18,6 +18,7 @@ import subtrace
 # the subtrace this process imported (installed or the sources)
 SRC = Path(subtrace.__file__).resolve().parents[1]
 HEAVY = ("numba", "OpenImageIO", "numpy", "matplotlib")
+CUBE = Path(__file__).resolve().parents[1] / "models" / "chamfer_cube.obj"
 
 
 def _fresh(code: str) -> dict:
@@ -74,3 +75,24 @@ def test_sweep_package_loads_numpy_only():
     neither Numba nor OpenImageIO nor matplotlib: the sweep imports those when it runs."""
     answer = _fresh("from subtrace.sweep import PeakMemory, format_table\n" + REPORT)
     assert answer == {"heavy": ["numpy"], "numba_cache_dir": None}
+
+
+def test_a_render_to_exr_alone_loads_no_openimageio(tmp_path):
+    """``subtrace render`` of an untextured cage to an EXR file writes it through OpenEXR:
+    OpenImageIO (about 20 MB of the process and 50 ms to import) loads only where a picture
+    is written or an image read; with ``--png`` it does, and the picture is there."""
+    code = f"""
+import contextlib, io, sys
+from subtrace.cli import main
+with contextlib.redirect_stderr(io.StringIO()):
+    code = main(["render", {str(CUBE)!r}, "--width", "32", "--height", "18", "--quiet",
+                 "-o", {str(tmp_path / "a.exr")!r}])
+answer = {{"code": code, "oiio": "OpenImageIO" in sys.modules}}
+with contextlib.redirect_stderr(io.StringIO()):
+    answer["png_code"] = main(["render", {str(CUBE)!r}, "--width", "32", "--height", "18",
+                               "--quiet", "--png", "-o", {str(tmp_path / "b.exr")!r}])
+answer["png_oiio"] = "OpenImageIO" in sys.modules
+"""
+    answer = _fresh(code)
+    assert answer == {"code": 0, "oiio": False, "png_code": 0, "png_oiio": True}
+    assert (tmp_path / "a.exr").stat().st_size > 0 and (tmp_path / "b.png").stat().st_size > 0
