@@ -35,6 +35,7 @@ Array layout: ``texel`` (n,6) float32, per ray: diffuse R, G, B then specular R,
 from __future__ import annotations
 
 import hashlib
+import itertools
 import math
 import os
 import warnings
@@ -46,9 +47,11 @@ import numpy as np
 from subtrace.errors import SubtraceWarning
 from subtrace.geometry.kinds import BEZIER, CELL, LOOP_CELL, TRI
 from subtrace.patches.basis import bez_derivatives
-from subtrace.runtime.jit import cache_base, nb
+from subtrace.patches.evaluate import ptex_starts
+from subtrace.runtime.jit import cache_base, leaf_njit, nb
 from subtrace.runtime.threads import run_tasks
 from subtrace.shade import C_N, own_ptex, pixel_rays
+from subtrace.subdiv.facevarying import FVAR_ALL
 from subtrace.trace.pools import Hits, PieceArrays
 from subtrace.trace.tris import tri_derivatives
 
@@ -222,19 +225,75 @@ def hit_frames(table, hits, iso, patches, rays) -> HitFrames:
     for o in sorted(set(oid.tolist())):
         sel = np.nonzero(oid == o)[0]
         cage = table.objects[o].cage
-        face = own_ptex(cage, patches.ptex[p[sel]])
-        x = at[sel]
-        # a forward step inside the face ([0, 1]^2, a Loop triangle's u + v <= 1 too)
-        hu = np.where(x[:, 0] + x[:, 1] + UV_STEP <= 1.0 if cage.scheme == "loop"
-                      else x[:, 0] + UV_STEP <= 1.0, UV_STEP, -UV_STEP)
-        hv = np.where(x[:, 0] + x[:, 1] + UV_STEP <= 1.0 if cage.scheme == "loop"
-                      else x[:, 1] + UV_STEP <= 1.0, UV_STEP, -UV_STEP)
-        pts = np.concatenate([x, x + np.stack([hu, 0 * hu], 1), x + np.stack([0 * hv, hv], 1)])
-        uv = cage.evaluate_uv(np.tile(face, 3), pts).reshape(3, len(sel), 2)
-        st[sel] = uv[0]
-        jac[sel, :, 0] = (uv[1] - uv[0]) / hu[:, None]
-        jac[sel, :, 1] = (uv[2] - uv[0]) / hv[:, None]
+        st[sel], jac[sel] = cage_uvs(cage, own_ptex(cage, patches.ptex[p[sel]]), at[sel])
     return HitFrames(np.asarray(rays, np.int64), st, jac, tangents[:, :3], tangents[:, 3:])
+
+
+def cage_uvs(cage, face, x):
+    """The limit UVs (m,2) of ``cage`` at ptex points (``face`` (m,), ``x`` (m,2)) and their
+    Jacobians (m,2,2) over the ptex parameter. The linear mode (FVAR_ALL: the bilinear
+    interpolation of the face's corner values, a ptex sub-face of an n-gon's between its
+    corner, the edge midpoints and the centroid, a Loop triangle's linear one, as
+    ``Cage.evaluate_uv``) in closed form in :func:`_linear_uv_task`; the others by
+    ``Cage.evaluate_uv`` and a forward difference inside the face (``UV_STEP``)."""
+    m = len(face)
+    st, jac = np.full((m, 2), np.nan), np.zeros((m, 2, 2))
+    if cage.uv.mode == FVAR_ALL:
+        starts = ptex_starts(cage)
+        base = np.searchsorted(starts, face, side="right") - 1
+        fo = cage.face_offsets
+        sub = np.where(np.diff(fo)[base] == cage.options.regular_face_size, -1,
+                       face - starts[base])
+        run_tasks(_linear_uv_task, fo, cage.uv.values, cage.uv.face_values.astype(np.int64),
+                  base, sub, x, cage.scheme == "loop", cage.base.face_hole, st, jac)
+        return st, jac
+    loop = cage.scheme == "loop"
+    room = x[:, 0] + x[:, 1] + UV_STEP <= 1.0 if loop else None
+    hu = np.where(room if loop else x[:, 0] + UV_STEP <= 1.0, UV_STEP, -UV_STEP)
+    hv = np.where(room if loop else x[:, 1] + UV_STEP <= 1.0, UV_STEP, -UV_STEP)
+    pts = np.concatenate([x, x + np.stack([hu, 0 * hu], 1), x + np.stack([0 * hv, hv], 1)])
+    uv = cage.evaluate_uv(np.tile(face, 3), pts).reshape(3, m, 2)
+    st[:] = uv[0]
+    jac[:, :, 0] = (uv[1] - uv[0]) / hu[:, None]
+    jac[:, :, 1] = (uv[2] - uv[0]) / hv[:, None]
+    return st, jac
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _linear_uv_task(task, n_tasks, fo, values, fvals, base, sub, x, loop, hole, st, jac):
+    """The linear mode's UVs and Jacobians (see :func:`cage_uvs`) of samples ``task,
+    task + n_tasks, ...``: corners c0 .. c3 of the ptex face's bilinear map (c0, c1, c2 a
+    Loop triangle's), NaN on holes."""
+    for k in range(task, len(base), n_tasks):
+        f = base[k]
+        if hole[f]:
+            st[k, 0] = st[k, 1] = np.nan
+            continue
+        a, n = fo[f], fo[f + 1] - fo[f]
+        u, v = x[k, 0], x[k, 1]
+        for d in range(2):
+            if loop:
+                c0, c1, c2 = values[fvals[a], d], values[fvals[a + 1], d], values[fvals[a + 2], d]
+                st[k, d] = (1.0 - u - v) * c0 + u * c1 + v * c2
+                jac[k, d, 0] = c1 - c0
+                jac[k, d, 1] = c2 - c0
+                continue
+            if sub[k] < 0:
+                c0, c1 = values[fvals[a], d], values[fvals[a + 1], d]
+                c2, c3 = values[fvals[a + 2], d], values[fvals[a + 3], d]
+            else:  # (a sub-face of an n-gon: its corner, the midpoints, the centroid)
+                j = sub[k]
+                c0 = values[fvals[a + j], d]
+                c1 = 0.5 * (c0 + values[fvals[a + (j + 1) % n], d])
+                c3 = 0.5 * (c0 + values[fvals[a + (j + n - 1) % n], d])
+                c2 = 0.0
+                for i in range(n):
+                    c2 += values[fvals[a + i], d]
+                c2 /= n
+            st[k, d] = ((1 - u) * (1 - v) * c0 + u * (1 - v) * c1 + u * v * c2
+                        + (1 - u) * v * c3)
+            jac[k, d, 0] = (1 - v) * (c1 - c0) + v * (c2 - c3)
+            jac[k, d, 1] = (1 - u) * (c3 - c0) + u * (c2 - c1)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -289,32 +348,59 @@ def _tangents_task(task, n_tasks, hits_t, iso_t, scale, rays, out):
 def footprints(frames, t, dirs, pixel_angle):
     """The UV-space axes (m,2) and (m,2) of each ray's cone footprint at its hit (see the
     module comment): the major axis (along the ray's projection) and the minor one."""
-    pu, pv = frames.dpdu, frames.dpdv
-    n = np.cross(pu, pv)
-    n /= np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
-    d = dirs
-    width = t * pixel_angle
-    cos = np.abs((d * n).sum(axis=1))
-    across = np.cross(n, d)
-    length = np.linalg.norm(across, axis=1)
-    head_on = length < 1e-9  # (along the normal: any tangent)
-    across[head_on] = pu[head_on]
-    across /= np.maximum(np.linalg.norm(across, axis=1), 1e-300)[:, None]
-    along = np.cross(across, n)
-    e_minor = across * width[:, None]
-    e_major = along * (width / np.maximum(cos, FOOTPRINT_MIN_COS))[:, None]
-    # world tangent vector e -> ptex (least squares on [pu pv]) -> UV (the Jacobian)
-    g00, g01, g11 = (pu * pu).sum(1), (pu * pv).sum(1), (pv * pv).sum(1)
-    det = g00 * g11 - g01 * g01
-    det = np.where(np.abs(det) > 0.0, det, np.inf)
+    major, minor = np.empty((len(t), 2)), np.empty((len(t), 2))
+    run_tasks(_footprint_task, frames.dpdu, frames.dpdv, frames.jac, np.asarray(t, np.float64),
+              np.ascontiguousarray(dirs, np.float64), float(pixel_angle), major, minor)
+    return major, minor
 
-    def to_uv(e):
-        b0, b1 = (pu * e).sum(1), (pv * e).sum(1)
-        da = (g11 * b0 - g01 * b1) / det
-        db = (g00 * b1 - g01 * b0) / det
-        return np.einsum("mij,mj->mi", frames.jac, np.stack([da, db], axis=1))
 
-    return to_uv(e_major), to_uv(e_minor)
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _footprint_task(task, n_tasks, pu, pv, jac, t, d, pixel_angle, major, minor):
+    """:func:`footprints` of rays ``task, task + n_tasks, ...``: the cone's width
+    ``pixel_angle t`` across the ray and that over the incidence's cosine along its
+    projection on the tangent plane, each taken to the ptex parameter (least squares on
+    dP/du, dP/dv) and to UV space (the Jacobian)."""
+    for k in range(task, len(t), n_tasks):
+        a = (pu[k, 0], pu[k, 1], pu[k, 2])
+        b = (pv[k, 0], pv[k, 1], pv[k, 2])
+        n = _unit(_cross(a, b))
+        dk = (d[k, 0], d[k, 1], d[k, 2])
+        width = t[k] * pixel_angle
+        cos = abs(_dot(dk, n))
+        across = _cross(n, dk)
+        if _dot(across, across) < 1e-18:  # (along the normal: any tangent)
+            across = a
+        across = _unit(across)
+        along = _cross(across, n)
+        stretch = width / max(cos, FOOTPRINT_MIN_COS)
+        g00, g01, g11 = _dot(a, a), _dot(a, b), _dot(b, b)
+        det = g00 * g11 - g01 * g01
+        if not abs(det) > 0.0:
+            det = np.inf
+        for e, s, out in ((along, stretch, major), (across, width, minor)):
+            b0, b1 = _dot(a, e) * s, _dot(b, e) * s
+            da = (g11 * b0 - g01 * b1) / det
+            db = (g00 * b1 - g01 * b0) / det
+            out[k, 0] = jac[k, 0, 0] * da + jac[k, 0, 1] * db
+            out[k, 1] = jac[k, 1, 0] * da + jac[k, 1, 1] * db
+
+
+@leaf_njit
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@leaf_njit
+def _cross(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+@leaf_njit
+def _unit(a):
+    n = math.sqrt(_dot(a, a))
+    if not n > 0.0:
+        return a
+    return (a[0] / n, a[1] / n, a[2] / n)
 
 
 def lookup(prep, st, major, minor, channels):
@@ -338,7 +424,8 @@ def lookup(prep, st, major, minor, channels):
     out = [tex(f, opt, s0, t0, a0, -a1, b0, -b1, channels) for s0, t0, a0, a1, b0, b1 in
            zip(s.tolist(), t.tolist(), a[:, 0].tolist(), a[:, 1].tolist(), b[:, 0].tolist(),
                b[:, 1].tolist())]
-    return np.array(out, np.float32).reshape(len(st), channels)
+    flat = np.fromiter(itertools.chain.from_iterable(out), np.float32, len(st) * channels)
+    return flat.reshape(len(st), channels)
 
 
 # --------------------------------------------------------------------------------------
