@@ -418,6 +418,7 @@ def lookup(prep, st, major, minor, channels):
     wrap = oiio.Wrap.Clamp if tmap.clamp else oiio.Wrap.Periodic
     opt.swrap = opt.twrap = wrap
     opt.anisotropic = ANISOTROPY
+    opt.interpmode = oiio.InterpMode.Bilinear  # (half the time of the smart bicubic)
     opt.firstchannel = tmap.channel if tmap.slot == "bump" else 0
     tex = _system().texture
     f = prep.file
