@@ -518,7 +518,7 @@ def test_textured_default_golden_matches_reference_colour(tmp_path):
     pixel, and the spots' and eyes' edges fall a fraction of a pixel apart in the two (the
     reference's triangles are 2 px and its UVs linear across them, the renderer's cells
     1 px) and are filtered over different footprints (screen differences against ray
-    cones); a texture turned over or a wrong UV gives Delta E of 20-60 over whole areas."""
+    cones); the texture turned upside down gives a mean of 27."""
     scene = golden_scene("default")
     channels, _ = read_exr(golden_path("default"))
     plain = [dataclasses.replace(scene.objects[0], textures=(), color=c)
