@@ -14,7 +14,7 @@ import pytest
 
 import subtrace
 from subtrace.cli import main
-from subtrace.errors import SceneError, SubtraceWarning
+from subtrace.errors import SubtraceWarning
 from subtrace.io.scene import scene_from_dict
 from subtrace.render import render_scene
 
@@ -314,11 +314,18 @@ def test_bad_texture_key_is_one_line_exit_2(tmp_path, capsys, line, words):
     assert not (tmp_path / "o.exr").exists()
 
 
-def test_bump_scale_without_bump_texture_is_an_error(tmp_path):
-    mesh = _plane(tmp_path / "plane.obj")
-    with pytest.raises(SceneError, match="bump_scale scales a bump_texture"):
-        scene_from_dict({"object": [{"mesh": str(mesh), "bump_scale": 2.0}]},
-                        base_dir=tmp_path)
+def test_bump_scale_scales_the_mtl_bump_map_too(tmp_path):
+    """A scene's bump_scale without a bump_texture scales the materials' bump maps (their
+    -bm replaced): a ramp bump of the MTL turns the normal as the scene's own would."""
+    _uv_ramp(tmp_path / "ramp.exr", 256)
+    (tmp_path / "m.mtl").write_text("newmtl skin\nKd 1 1 1\nbump -bm 7 ramp.exr\n")
+    mesh = _plane(tmp_path / "plane.obj", repeat=1)
+    mesh.write_text("mtllib m.mtl\nusemtl skin\n" + mesh.read_text())
+    kw = dict(eye=(0.0, 60.0, 80.0), target=(0.0, 0.0, 0.0))
+    a = render_scene(_scene(tmp_path, mesh, bump_scale=150.0, **kw))
+    b = render_scene(_scene(tmp_path, mesh, bump_texture="ramp.exr", bump_scale=150.0,
+                            color=[1.0, 1.0, 1.0], **kw))
+    np.testing.assert_array_equal(_grey(a), _grey(b))
 
 
 def test_textures_are_made_once_into_the_cache(tmp_path, monkeypatch):

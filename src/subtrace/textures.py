@@ -39,6 +39,7 @@ import itertools
 import math
 import os
 import warnings
+from dataclasses import replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -99,6 +100,9 @@ def texture_sets(table, overrides) -> Textures | None:
         mat = table.material[sl]
         for k in sorted(set(mat.tolist())):
             maps = {m.slot: (m, True) for m in (mats[k].maps if 0 <= k < len(mats) else ())}
+            if "bump" in maps and over is not None and over.bump_scale is not None:
+                m, tinted = maps["bump"]
+                maps["bump"] = (replace(m, bump_scale=over.bump_scale), tinted)
             for slot, m in scene_maps.items():
                 base = over.color if slot == "diffuse" else over.specular
                 maps[slot] = (m, base is not None)

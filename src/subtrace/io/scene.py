@@ -184,6 +184,7 @@ class SceneObject:
     time: float | None = None  # a USD stage's time code; None: its still (io/usd.py)
     # image textures (subtrace.io.obj.TextureMap), replacing the cage's maps of their slots
     textures: tuple = ()
+    bump_scale: float | None = None  # the bump maps' scale (a scene's or the MTL's -bm)
     # where it stands: a 4x4 affine matrix as rows (p' = M [p, 1]); None: as the file has it
     transform: tuple | None = None
 
@@ -458,7 +459,9 @@ def _objects(ctx, d: dict, base_dir: str) -> tuple[SceneObject, ...]:
         objects.append(SceneObject(mesh=mesh, scheme=scheme, boundary=boundary, color=color,
                                    prim=prim, specular=specular, shininess=shininess,
                                    transform=_placement(ctx, where, table),
-                                   textures=_textures(ctx, where, table, base_dir)))
+                                   textures=_textures(ctx, where, table, base_dir),
+                                   bump_scale=(float(table["bump_scale"]) if "bump_scale"
+                                               in table else None)))
     return tuple(objects)
 
 
@@ -469,9 +472,6 @@ def _textures(ctx, where, table, base_dir) -> tuple:
     scale = 1.0
     if "bump_scale" in table:
         scale = ctx.call(where + ("bump_scale",), _number, table["bump_scale"], "bump_scale")
-        if "bump_texture" not in table:
-            raise ctx.error(where + ("bump_scale",), "bump_scale scales a bump_texture: give "
-                                                     "one, or leave bump_scale out")
     out = []
     for key, slot in TEXTURE_KEYS.items():
         if key not in table:
