@@ -68,6 +68,7 @@ LAYERS = (
     ("accel",),  # the cull asks patches for shells and lights for shadow rays' reach
     ("trace",),
     ("shade",),
+    ("textures",),  # image textures at the hits: UVs, footprints, OpenImageIO lookups
     ("nurbs",),  # the NURBS pass shades its hits with shade's kernels
     ("picture",),
     ("lines",),

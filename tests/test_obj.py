@@ -309,13 +309,12 @@ def test_groups_objects_and_materials(tmp_path):
     assert "material 'blue' keeps its constant colours" in data.warnings[0]
 
 
-@pytest.mark.parametrize("statement", ["map_Kd spot.png", "map_Ks -s 2 2 1 spot.png",
-                                       "map_d spot.png", "map_Bump -bm 0.5 spot.png",
-                                       "bump spot.png", "norm spot.png", "MAP_KD spot.png"])
-def test_a_texture_map_is_one_warning_naming_its_file(tmp_path, statement):
-    """A texture map of an MTL material is one warning naming the MTL line and the file
-    (there, but not applied: subtrace maps no textures yet), and the material keeps its
-    colours; a map naming no file is a warning too."""
+@pytest.mark.parametrize("statement", ["map_d spot.png", "map_Ka spot.png", "disp spot.png",
+                                       "MAP_PR -bm 2 spot.png"])
+def test_a_texture_map_not_applied_is_one_warning_naming_its_file(tmp_path, statement):
+    """A texture map subtrace does not apply is one warning naming the MTL line and the
+    file (there, but not applied), and the material keeps its colours; a map naming no file
+    is a warning too."""
     (tmp_path / "spot.png").write_bytes(b"\x89PNG\r\n\x1a\n")
     (tmp_path / "t.mtl").write_text(
         f"newmtl skin\nKd 0.2 0.3 0.4\n{statement}\n{statement.split()[0]}\n")
@@ -326,6 +325,47 @@ def test_a_texture_map_is_one_warning_naming_its_file(tmp_path, statement):
     assert f"t.mtl:3: {key} texture 'spot.png' not applied" in data.warnings[0]
     assert "material 'skin' keeps its constant colours" in data.warnings[0]
     assert f"t.mtl:4: {key} names no file" in data.warnings[1]
+
+
+@pytest.mark.parametrize("statement, slot, fields", [
+    ("map_Kd spot.png", "diffuse", {}),
+    ("MAP_KD spot.png", "diffuse", {}),
+    ("map_Ks -s 2 3 1 -o 0.5 spot.png", "specular", {"scale": (2.0, 3.0),
+                                                     "offset": (0.5, 0.0)}),
+    ("map_Bump -bm 0.25 -imfchan g spot.png", "bump", {"bump_scale": 0.25, "channel": 1}),
+    ("bump -clamp on spot.png", "bump", {"clamp": True}),
+    ("norm -blendu off spot.png", "normal", {})])
+def test_an_applied_texture_map_is_read_with_its_options(tmp_path, statement, slot, fields):
+    """map_Kd, map_Ks, map_Bump / bump and norm become the material's maps (the file
+    relative to the MTL, the MTL line kept for messages; -bm, -s, -o, -clamp, -imfchan
+    read, the other options skipped), without a warning; a missing file is one warning
+    naming it and the MTL line, and no map."""
+    (tmp_path / "spot.png").write_bytes(b"\x89PNG\r\n\x1a\n")
+    (tmp_path / "t.mtl").write_text(
+        f"newmtl skin\nKd 0.2 0.3 0.4\n{statement}\n{statement.replace('spot.png', 'no.png')}\n")
+    data = read_quiet(write(tmp_path, "mtllib t.mtl\nusemtl skin\n" + SQUARE + "f 1 2 3 4\n"))
+    (mat,) = data.materials
+    assert mat.diffuse == (0.2, 0.3, 0.4)
+    (tmap,) = mat.maps
+    assert tmap.slot == slot and tmap.path == str((tmp_path / "spot.png").resolve())
+    assert tmap.where.endswith("t.mtl:3")
+    for name, value in fields.items():
+        assert getattr(tmap, name) == value
+    assert len(data.warnings) == 1, data.warnings
+    assert "t.mtl:4:" in data.warnings[0] and "'no.png' not found" in data.warnings[0]
+
+
+@pytest.mark.parametrize("statement, problem", [
+    ("map_Kd -bm x spot.png", "option -bm needs a number"),
+    ("map_Kd -frob 1 spot.png", "unknown option '-frob'"),
+    ("bump -clamp maybe spot.png", "-clamp takes on or off")])
+def test_a_bad_texture_map_option_is_an_error_naming_the_mtl_line(tmp_path, statement,
+                                                                  problem):
+    (tmp_path / "spot.png").write_bytes(b"\x89PNG\r\n\x1a\n")
+    (tmp_path / "t.mtl").write_text(f"newmtl skin\n{statement}\n")
+    with pytest.raises(ObjError, match=problem) as err:
+        read_obj(write(tmp_path, "mtllib t.mtl\nusemtl skin\n" + SQUARE + "f 1 2 3 4\n"))
+    assert "t.mtl:2" in str(err.value)
 
 
 def test_missing_mtl_is_a_warning(tmp_path):

@@ -54,6 +54,7 @@ from subtrace.shade import (C_A, C_R, C_Z, CHANNELS, ambient_occlusion, backgrou
                             background_rows, edge_pixels, ground_occlusion, ground_pixels,
                             ground_points, light, miss_values, shade, shadow_visibility,
                             smooth_occlusion)
+from subtrace.textures import texture_hits
 from subtrace.trace.bezier import table_loop_flag
 from subtrace.trace.pools import Memos
 from subtrace.trace.rays import Pools, trace_rays
@@ -96,7 +97,7 @@ def _count_secondary(pools, stats) -> None:
 
 
 def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, stats,
-          nurbs=None, offset=0, ground=False, lit=False):
+          nurbs=None, offset=0, ground=False, lit=False, textures=None, texel=None):
     """Fill the colour (R, G, B) and, with anti-aliasing, filter colour and alpha of
     ``planes`` (len(CHANNELS), W*H) float32, whose other channels :func:`shade.shade` (and
     the NURBS pass) wrote; ``t`` (W*H,) float64 each pixel's hit distance (inf: none);
@@ -105,7 +106,9 @@ def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, st
     :class:`shade.PatchShading`; ``keep``: what ``trace.rounds.trace_hits`` kept for secondary
     rays (empty: no cage); ``nurbs``: the free-form surfaces (None: none), which cast
     shadows, occlude and take extra rays too. ``lit``: the shading pass coloured the hits
-    already (:func:`lit_in_shading`). Counts and times go to ``stats``."""
+    already (:func:`lit_in_shading`). ``textures``: the patches' textures
+    (``textures.texture_sets``; None: none) and ``texel`` the centre rays' colours of them
+    (``textures.texture_hits``). Counts and times go to ``stats``."""
     W, H = camera.width, camera.height
     frame = camera.frame()
     samples = scene.render.samples or 1
@@ -157,11 +160,14 @@ def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, st
     y0 = getattr(camera, "y0", 0)
     rows = background_rows(scene.render.background, scene.render.background_bottom,
                            image.height)[y0:y0 + H]
+    if texel is not None and offset:  # (the free-form surfaces' hits take no texture)
+        texel[pix_patch >= offset] = -1.0
     _colour(scene, frame, W, t, normals, pix_patch, patches, planes, lights, rows,
-            ground, trace_shadows, tol_rad, None, ao, ids, lit, keys)
+            ground, trace_shadows, tol_rad, None, ao, ids, lit, keys, texel)
     if samples > 1:
         t0 = time.perf_counter()
-        closest = _closest(pools, nurbs, frame, W, patches, scene, tol_rad, offset)
+        closest = _closest(pools, nurbs, frame, W, patches, scene, tol_rad, offset,
+                           (textures, image.pixel_angle()))
         _antialias(scene, frame, W, image.height, closest, patches, planes, lights, ground,
                    trace_shadows, samples, stats, tol_rad, ao, image.width, keys is not None)
         stats.time_aa += time.perf_counter() - t0
@@ -225,10 +231,11 @@ def _occluder_bounds(pools, nurbs):
     return lo - pad, hi + pad
 
 
-def _closest(pools, nurbs, frame, width, patches, scene, tol_rad, offset):
-    """``closest(dirs)`` -> (t (n,), normals (n,3), pix_patch (n,), planes): rays from the
-    eye along ``dirs`` (extra anti-aliasing rays) traced and shaded as centre rays are:
-    the cages' hits, then the free-form surfaces' where nearer."""
+def _closest(pools, nurbs, frame, width, patches, scene, tol_rad, offset, textured=(None, 0)):
+    """``closest(dirs)`` -> (t (n,), normals (n,3), pix_patch (n,), planes, texel): rays from
+    the eye along ``dirs`` (extra anti-aliasing rays) traced and shaded as centre rays are:
+    the cages' hits (textured: ``textured`` = (the textures, a pixel's angle)), then the
+    free-form surfaces' where nearer."""
 
     def closest(dirs):
         n = len(dirs)
@@ -236,6 +243,7 @@ def _closest(pools, nurbs, frame, width, patches, scene, tol_rad, offset):
         normals = np.empty((n, 3))
         pix_patch = np.full(n, -1, np.int32)
         miss = miss_values(scene.render.background)
+        texel = None
         if pools is None:
             sub[:] = miss[:, None]
             t = np.full(n, np.inf)
@@ -245,10 +253,14 @@ def _closest(pools, nurbs, frame, width, patches, scene, tol_rad, offset):
             covered = np.zeros(tasks.thread_count(), np.int64)
             shade(frame, width, hits, pools.iso.view(), patches, miss, sub, normals,
                   pix_patch, covered, dirs, table_loop_flag(pools.table), table=pools.table)
+            texel = texture_hits(textured[0], pools.table, hits, pools.iso.view(), patches,
+                                 frame, width, dirs, textured[1], normals, sub)
             t = hits.t.copy()
         if nurbs is not None:
             shade_rays(nurbs, frame, dirs, tol_rad, offset, t, normals, pix_patch, sub)
-        return t, normals, pix_patch, sub
+            if texel is not None:
+                texel[pix_patch >= offset] = -1.0
+        return t, normals, pix_patch, sub, texel
 
     return closest
 
@@ -297,13 +309,15 @@ def ground_shadow_points(scene, cages, points, nurbs=None) -> np.ndarray:
 
 
 def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights, rows,
-            ground, trace_shadows, tol_rad, dirs, ao=None, ids=None, lit=False, keys=None):
+            ground, trace_shadows, tol_rad, dirs, ao=None, ids=None, lit=False, keys=None,
+            texel=None):
     """The colour of rays from the eye (pixel centres, or ``dirs``): shadows, ambient
     occlusion (``ao``: None, or (trace, rays per hit, distance, the image's width); ``ids``:
     each ray's key for its AO pattern, :func:`shade.ambient_occlusion`), lighting (unless
     ``lit``: the shading pass coloured the hits), the background (``rows``: per image row,
     or per ray with ``dirs``) and the ground. ``keys``: None, or each ray's key for the
-    lights that sample their shadow rays (``lights.ray_keys``)."""
+    lights that sample their shadow rays (``lights.ray_keys``); ``texel``: the rays' texture
+    colours (``textures.texture_hits``; None: none)."""
     visible = np.ones((len(lights), 0), np.float32)  # (no columns: every pixel lit)
     if len(lights) and scene.render.shadows:
         visible = shadow_visibility(trace_shadows, frame, width, t, normals, pix_patch, lights,
@@ -332,7 +346,7 @@ def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights,
     headlight = headlight_of(scene)
     if not lit:
         light(frame, width, t, normals, pix_patch, patches, lights, headlight, visible, planes,
-              dirs, occlusion)
+              dirs, occlusion, texel)
     if r.background_bottom is not None or dirs is not None:
         miss = np.nonzero(pix_patch < 0)[0] if miss is None else miss
         background_pixels(miss, rows, width, planes, dirs)
@@ -404,7 +418,7 @@ def _antialias(scene, frame, W, H, closest, patches, planes, lights, ground, tra
     d = frame[3] + cc[:, None] * frame[1] + rr[:, None] * frame[2]
     dirs = np.ascontiguousarray(d / np.sqrt((d * d).sum(axis=1))[:, None])
     n = len(dirs)
-    t, normals, pix_patch, sub = closest(dirs)
+    t, normals, pix_patch, sub, texel = closest(dirs)
     # the background at each ray's own height (a gradient's blend at row rr)
     top = np.asarray(scene.render.background, np.float64)
     bottom = scene.render.background_bottom
@@ -418,7 +432,7 @@ def _antialias(scene, frame, W, H, closest, patches, planes, lights, ground, tra
         keys = ray_keys(np.repeat(row * image_width + col, m), np.tile(np.arange(1, m + 1),
                                                                         len(pix)))
     _colour(scene, frame, W, t, normals, pix_patch, patches, sub, lights, back, ground,
-            trace_shadows, tol_rad, dirs, ao, ids, False, keys)
+            trace_shadows, tol_rad, dirs, ao, ids, False, keys, texel)
     # box filter: the centre ray and the extra ones, equally weighted
     for k in (C_R, C_R + 1, C_R + 2, C_A):
         extra = sub[k].astype(np.float64).reshape(len(pix), m).sum(axis=1)

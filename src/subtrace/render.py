@@ -34,6 +34,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from subtrace import config
+from subtrace.camera import whole_image
 from subtrace.errors import SceneError
 from subtrace.nurbs.scene import load_nurbs, nurbs_pass, picture_hits, with_surfaces
 from subtrace.picture import ground_plane, lit_in_shading, paint
@@ -48,6 +49,7 @@ from subtrace.runtime.memory import let_go, one_block
 from subtrace.shade import (C_OBJECT, C_R, CHANNELS, background_rows, deepest_level,
                             miss_values, patch_shading, shade)
 from subtrace.startup import warmup
+from subtrace.textures import texture_hits, texture_sets
 from subtrace.tiles import check_crop
 from subtrace.trace.pools import Hits, round_arrays
 # (the trace's rounds, which callers take from here too)
@@ -160,7 +162,11 @@ def _paint_bands(job, bands):
     table = None if shared is None else shared.table
     patches = None if table is None else patch_shading(table, [scene.objects[k]
                                                                 for k in job.owners])
-    lit = None if table is None else lit_in_shading(scene, nurbs, shared.loop)
+    pixel_angle = whole_image(job.camera).pixel_angle()
+    textures = None if table is None else texture_sets(table, [scene.objects[k]
+                                                               for k in job.owners])
+    lit = (None if table is None or textures is not None
+           else lit_in_shading(scene, nurbs, shared.loop))
     miss = miss_values(scene.render.background)
     n_max = max(w.width * w.height for w, _ in bands)
     buffers = round_arrays(n_max) if shared is not None and shared.windows else None
@@ -181,7 +187,7 @@ def _paint_bands(job, bands):
     for b, (window, (x0, y0, x1, y1)) in enumerate(bands):
         w, h = window.width, window.height
         n, frame = w * h, window.frame()
-        hits = None
+        hits = texel = None
         if whole is not None:  # (the band's rows of the whole image's hits)
             a = 0 if window is job.view else window.y0 * w
             hits = whole if len(bands) == 1 else Hits(*(f[a:a + n] for f in whole))
@@ -196,6 +202,8 @@ def _paint_bands(job, bands):
         else:
             _shade_hits(frame, w, hits, shared.iso, patches, miss, planes, normals, pix_patch,
                         covered, job.owners, shared.loop, lit, table)
+            texel = texture_hits(textures, table, hits, shared.iso.view(), patches, frame, w,
+                                 None, pixel_angle, normals, planes)
             # each pixel's hit distance for the picture (the NURBS pass writes its nearer
             # hits into a copy); one band: the rest of the hit records (one block with the
             # rounds' requests, 40 bytes a ray) is given back before the picture's arrays
@@ -215,7 +223,8 @@ def _paint_bands(job, bands):
         if b == 0:
             _picture_kernels(job.compiling, keep)
         paint(scene, job.cages, window, keep, t, normals, pix_patch, band_patches, planes,
-              stats, nurbs, offset, ground=ground, lit=lit is not None)
+              stats, nurbs, offset, ground=ground, lit=lit is not None, textures=textures,
+              texel=texel)
         wx0, wy0 = getattr(window, "x0", 0), getattr(window, "y0", 0)
         band = planes.reshape(len(CHANNELS), h, w)[:, y0 - wy0:y1 - wy0, x0 - wx0:x1 - wx0]
         # (a pixel whose centre ray missed but an anti-aliasing ray hit is covered too)

@@ -93,14 +93,14 @@ def shade(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, co
     # (the bundles as plain tuples, named again inside: see trace.kernels.trace_round)
     run_tasks(_shade_task, frame, width, tuple(hits), tuple(iso), tuple(patches), miss, planes,
               normals, pix_patch, covered, dirs, lights, headlight, _all_lit(len(lights)),
-              _NO_OCCLUSION)
+              _NO_OCCLUSION, _NO_TEXEL)
     if loop is not None:
         run_tasks(_loop_normals_task, frame, width, hits, iso, planes, normals, dirs)
     if table is not None:
         exact_cell_normals(table, frame, width, hits, iso, patches, planes, normals, dirs, lit)
 
 
-def _own_ptex(cage, ptex):
+def own_ptex(cage, ptex):
     """The ptex ids ``ptex`` of a cage's patches (the whole cage's numbering) in the cage's
     own: a :meth:`~subtrace.mesh.cage.Cage.restricted` cut of a large cage keeps the whole
     cage's ids (``ptex_first``, one per face, increasing)."""
@@ -149,7 +149,7 @@ def exact_cell_normals(table, frame, width, hits, iso, patches, planes, normals,
                                     table.face[p[sel]], np.clip(at[sel], 0.0, 1.0))
         rest = sel[~ok]
         if len(rest):
-            _, du, dv = evaluate(obj.cage, _own_ptex(obj.cage, patches.ptex[p[rest]]),
+            _, du, dv = evaluate(obj.cage, own_ptex(obj.cage, patches.ptex[p[rest]]),
                                  uv[rest])
             n[rest] = np.cross(du, dv)
     length = np.sqrt((n * n).sum(axis=1))
@@ -181,10 +181,11 @@ def _all_lit(n_lights):
 
 
 _NO_OCCLUSION = np.zeros(0, np.float32)  # (light()'s ``occlusion``: none)
+_NO_TEXEL = np.zeros((0, 6), np.float32)  # (light()'s ``texel``: no ray textured)
 
 
 def light(frame, width, t, normals, pix_patch, patches, lights, headlight, visible, planes,
-          dirs=None, occlusion=None):
+          dirs=None, occlusion=None, texel=None):
     """The colour (R, G, B of ``planes``) of every hit pixel: two-sided Lambert plus the
     material's Blinn-Phong lobe (``Ks (N.H)^Ns``, MTL's) under a headlight at the eye
     (``headlight`` (1,): its intensity) and ``lights`` (L, ROW) (``lights.light_array``), each
@@ -192,11 +193,14 @@ def light(frame, width, t, normals, pix_patch, patches, lights, headlight, visib
     ``t`` (n_pixels,) float64: the hits' distances; ``normals``, ``pix_patch``, ``dirs``:
     as for :func:`shade`. ``occlusion``: None, or (n_pixels,) float32 ambient occlusion
     (:func:`ambient_occlusion`: the share of the hemisphere open) scaling the diffuse
-    (Lambert) part of every light; the specular lobe keeps its own visibility."""
+    (Lambert) part of every light; the specular lobe keeps its own visibility. ``texel``:
+    None, or (n_pixels,6) float32 per ray diffuse and specular colours of its textures
+    (``textures.texture_hits``), -1 where the patch's constant colours hold."""
     dirs = _no_dirs() if dirs is None else dirs
     occlusion = _NO_OCCLUSION if occlusion is None else occlusion
+    texel = _NO_TEXEL if texel is None else texel
     run_tasks(_light_task, frame, width, t, normals, pix_patch, patches, lights, headlight,
-              visible, planes, dirs, occlusion)
+              visible, planes, dirs, occlusion, texel)
 
 
 class PatchShading(NamedTuple):
@@ -231,7 +235,7 @@ SHADE_BLOCK = 1024  # consecutive pixels shaded together
 
 @nb.njit(cache=True, nogil=True, _nrt=False)
 def _shade_task(task, n_tasks, frame, width, hits_t, iso_t, patches_t, miss, planes, normals,
-                pix_patch, covered, dirs, lights, headlight, visible, occlusion):
+                pix_patch, covered, dirs, lights, headlight, visible, occlusion, texel):
     """Shade the blocks of pixels ``task, task + n_tasks, ...`` into ``planes`` (see
     :func:`shade`): each block is first filled with ``miss`` (contiguous stores), then its
     hits are shaded over it, and coloured where ``headlight`` is not empty (its other
@@ -290,13 +294,13 @@ def _shade_task(task, n_tasks, frame, width, hits_t, iso_t, patches_t, miss, pla
             pix_patch[r] = np.int32(p)
             if len(headlight):
                 _colour_pixel(r, p, frame, width, t, normals, patches, lights, headlight,
-                              visible, planes, dirs, occlusion)
+                              visible, planes, dirs, occlusion, texel)
     covered[task] = n_hit
 
 
 @nb.njit(cache=True, nogil=True, _nrt=False)
 def _light_task(task, n_tasks, frame, width, t, normals, pix_patch, patches, lights, headlight,
-                visible, planes, dirs, occlusion):
+                visible, planes, dirs, occlusion, texel):
     """The colour of the hit pixels of blocks ``task, task + n_tasks, ...`` (see
     :func:`light`)."""
     n_pix = len(pix_patch)
@@ -306,19 +310,24 @@ def _light_task(task, n_tasks, frame, width, t, normals, pix_patch, patches, lig
             p = pix_patch[r]
             if p >= 0:
                 _colour_pixel(r, np.int64(p), frame, width, t[r], normals, patches, lights,
-                              headlight, visible, planes, dirs, occlusion)
+                              headlight, visible, planes, dirs, occlusion, texel)
 
 
 @inline_njit
 def _colour_pixel(r, p, frame, width, t, normals, patches, lights, headlight, visible, planes,
-                  dirs, occlusion):
+                  dirs, occlusion, texel):
     """The colour (R, G, B of ``planes``) of hit pixel ``r`` on patch ``p`` at distance
     ``t``, its eye-facing normal in ``normals`` (:func:`light`: the lights, their
-    visibility and ambient occlusion)."""
+    visibility, ambient occlusion and the textures' colours)."""
     dx, dy, dz = _direction(frame, width, dirs, r)
     fx, fy, fz = normals[r, 0], normals[r, 1], normals[r, 2]
-    ks = patches.specular[p]
-    shiny = ks[0] > 0.0 or ks[1] > 0.0 or ks[2] > 0.0
+    kd0, kd1, kd2 = patches.color[p, 0], patches.color[p, 1], patches.color[p, 2]
+    ks0, ks1, ks2 = patches.specular[p, 0], patches.specular[p, 1], patches.specular[p, 2]
+    if len(texel) and texel[r, 0] >= 0.0:  # (a diffuse texture)
+        kd0, kd1, kd2 = texel[r, 0], texel[r, 1], texel[r, 2]
+    if len(texel) and texel[r, 3] >= 0.0:  # (a specular texture)
+        ks0, ks1, ks2 = texel[r, 3], texel[r, 4], texel[r, 5]
+    shiny = ks0 > 0.0 or ks1 > 0.0 or ks2 > 0.0
     lr = lg = lb = 0.0
     sr = sg = sb = 0.0
     if headlight[0] > 0.0:
@@ -358,13 +367,13 @@ def _colour_pixel(r, p, frame, width, t, normals, patches, lights, headlight, vi
         lr *= occlusion[r]
         lg *= occlusion[r]
         lb *= occlusion[r]
-    planes[C_R, r] = patches.color[p, 0] * lr
-    planes[C_R + 1, r] = patches.color[p, 1] * lg
-    planes[C_R + 2, r] = patches.color[p, 2] * lb
+    planes[C_R, r] = kd0 * lr
+    planes[C_R + 1, r] = kd1 * lg
+    planes[C_R + 2, r] = kd2 * lb
     if shiny:
-        planes[C_R, r] += ks[0] * sr
-        planes[C_R + 1, r] += ks[1] * sg
-        planes[C_R + 2, r] += ks[2] * sb
+        planes[C_R, r] += ks0 * sr
+        planes[C_R + 1, r] += ks1 * sg
+        planes[C_R + 2, r] += ks2 * sb
 
 
 @nb.njit(cache=True, nogil=True, _nrt=False)

@@ -5,6 +5,10 @@
 released into the public domain; copied unchanged. 188 vertices, 180 faces (160 quads,
 16 pentagons, 4 triangles), closed, genus 0. ``subtrace info`` uses it when no cage is given.
 
+``spot_texture.png``: Spot's texture by Keenan Crane (same repository, public domain), a
+1024x1024 PNG rasterised once from its vector original (``models/spot_texture.png``, whose
+``models/README.md`` entry says how); the default scene's diffuse texture.
+
 ``plate_holes.obj``: a trimmed bicubic B-spline plate with two holes (rational and Bezier
 trimming curves), a copy of ``models/nurbs/plate_holes.obj``: ``subtrace warmup`` renders
 and intersects it to compile the NURBS kernels.

@@ -66,14 +66,33 @@ _FREEFORM = frozenset(
 
 
 @dataclass(frozen=True)
+class TextureMap:
+    """An image texture of a material (``subtrace.textures`` applies it): the ``slot`` it
+    fills (``diffuse``: MTL's `map_Kd`, ``specular``: `map_Ks`, ``bump``: `map_Bump` /
+    `bump`, a height map, ``normal``: `norm`, a tangent-space normal map), the image's
+    absolute ``path``, and ``where`` it was given ("file:line", for messages)."""
+
+    slot: str
+    path: str
+    where: str
+    bump_scale: float = 1.0  # -bm: a bump map's height per unit of its value, scene units
+    offset: tuple[float, float] = (0.0, 0.0)  # -o u v: added to the texture coordinates
+    scale: tuple[float, float] = (1.0, 1.0)  # -s u v: multiplies them (before -o)
+    clamp: bool = False  # -clamp on: coordinates clamped to [0, 1] (default: repeated)
+    channel: int = 0  # -imfchan r|g|b|m|l: a bump map's channel (m, l: the first)
+
+
+@dataclass(frozen=True)
 class Material:
     """A material named by `usemtl`: its name, `Kd` diffuse and `Ks` specular colours
-    (linear RGB, 0..1) and `Ns` specular exponent (MTL's Blinn-Phong lobe)."""
+    (linear RGB, 0..1) and `Ns` specular exponent (MTL's Blinn-Phong lobe), and its image
+    textures (``maps``: :class:`TextureMap`, at most one per slot, MTL's last)."""
 
     name: str
     diffuse: tuple[float, float, float]
     specular: tuple[float, float, float] = DEFAULT_SPECULAR
     shininess: float = DEFAULT_SHININESS
+    maps: tuple = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -298,6 +317,7 @@ class ObjReader:
         self.mtl_diffuse: dict[str, tuple] = {}  # materials defined by MTL files, in order
         self.mtl_specular: dict[str, tuple] = {}  # their Ks, where given
         self.mtl_shininess: dict[str, float] = {}  # their Ns, where given
+        self.mtl_maps: dict[str, dict] = {}  # their texture maps: slot -> TextureMap
         self.unknown: dict[str, list] = {}  # keyword -> [first line, count]
         # Tags, already validated except for index ranges.
         self.creases: list = []  # (line, pairs (k,2), sharpness (k,))
@@ -665,10 +685,11 @@ class ObjReader:
             self._parse_mtl(number, str(mtl_path), text)
 
     def _parse_mtl(self, obj_line, mtl_path: str, text: str):
-        """Read `newmtl`, `Kd`, `Ks` and `Ns` statements; a texture map (`map_Kd`,
-        `map_Ks`, `map_d`, `map_Bump` / `bump`, `norm`, ...) is one warning naming its file
-        (whether it is missing, or there: subtrace applies no texture yet), the material
-        keeping its constant colours; other MTL statements do not matter here."""
+        """Read `newmtl`, `Kd`, `Ks` and `Ns` statements and the texture maps subtrace
+        applies (`map_Kd`, `map_Ks`, `map_Bump` / `bump`, `norm`: :data:`MAP_SLOTS`); a
+        missing map file is one warning naming it, the material keeping its constant
+        colours, as is any other map (`map_d`, `map_Ka`, `disp`, ...: not applied); other
+        MTL statements do not matter here."""
         current = None
         # (a CRLF line ending is one line end: the lines keep their numbers)
         lines = text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
@@ -688,6 +709,13 @@ class ObjReader:
                     (obj_line, f"{mtl_path}:{number}: {parts[0]} before any newmtl ignored"))
             elif parts[0] == "Ns":
                 self.mtl_shininess[current] = _mtl_exponent(mtl_path, number, parts[1:])
+            elif parts[0].lower() in MAP_SLOTS and current is not None:
+                found = _texture_map(mtl_path, number, parts)
+                if isinstance(found, str):
+                    self.warnings.append((obj_line, found + f"; material '{current}' keeps "
+                                                  "its constant colours"))
+                else:
+                    self.mtl_maps.setdefault(current, {})[found.slot] = found
             elif parts[0].lower() in TEXTURE_MAPS:
                 self.warnings.append((obj_line, _texture_map_warning(
                     mtl_path, number, parts, current)))
@@ -847,7 +875,8 @@ class ObjReader:
         materials = tuple(
             Material(name, tuple(float(c) for c in rgb),
                      self.mtl_specular.get(name, DEFAULT_SPECULAR),
-                     self.mtl_shininess.get(name, DEFAULT_SHININESS))
+                     self.mtl_shininess.get(name, DEFAULT_SHININESS),
+                     tuple(self.mtl_maps.get(name, {}).values()))
             for name, rgb in diffuse.items())
         material_ids = {name: k for k, name in enumerate(diffuse)}
         freeform = self.freeform.finish(self.path, points, self.point_lines, self.point_w,
@@ -954,6 +983,84 @@ TEXTURE_MAPS = ("map_kd", "map_ks", "map_ka", "map_ns", "map_d", "map_bump", "bu
                 "disp", "decal", "refl", "map_pr", "map_pm", "map_ke")
 
 
+# the texture maps subtrace applies (lower case) and the slot each fills
+MAP_SLOTS = {"map_kd": "diffuse", "map_ks": "specular", "map_bump": "bump", "bump": "bump",
+             "norm": "normal"}
+# a map statement's options and how many values each takes (MTL's; those of
+# _MAP_READ are applied, the others read and ignored)
+_MAP_OPTIONS = {"-blendu": 1, "-blendv": 1, "-boost": 1, "-cc": 1, "-clamp": 1,
+                "-imfchan": 1, "-mm": 2, "-o": 3, "-s": 3, "-t": 3, "-texres": 1, "-bm": 1,
+                "-type": 1}
+_CHANNELS = {"r": 0, "g": 1, "b": 2, "m": 0, "l": 0, "z": 0}
+
+
+def _texture_map(mtl_path: str, number: int, parts):
+    """A :class:`TextureMap` of an applied map statement ``parts`` (options, then the file:
+    the last token, relative to the MTL file's folder), or the warning's text where its file
+    is missing; ObjError for a bad option."""
+    where = f"{mtl_path}:{number}"
+    if len(parts) < 2:
+        return f"{where}: {parts[0]} names no file; ignored"
+    name = parts[-1]
+    file = Path(mtl_path).parent / name
+    if not file.is_file():
+        return f"{where}: {parts[0]} texture '{name}' not found ({file})"
+    values = {"bump_scale": 1.0, "offset": (0.0, 0.0), "scale": (1.0, 1.0), "clamp": False,
+              "channel": 0}
+    args, k = parts[1:-1], 0
+    while k < len(args):
+        option = args[k].lower()
+        if option not in _MAP_OPTIONS:
+            raise ObjError(mtl_path, number, f"{parts[0]}: unknown option '{args[k]}' (known: "
+                                             f"{' '.join(_MAP_OPTIONS)}), before the file name")
+        most = _MAP_OPTIONS[option]
+        # (-o, -s, -t take 1 to 3 numbers, -mm 2; the others one word or number)
+        given = args[k + 1:k + 2]
+        if most > 1:
+            while (len(given) < most and k + 1 + len(given) < len(args)
+                   and _is_number(args[k + 1 + len(given)])):
+                given.append(args[k + 1 + len(given)])
+        if not given:
+            raise ObjError(mtl_path, number, f"{parts[0]}: option {option} needs a value")
+        k += 1 + len(given)
+        if option == "-bm":
+            values["bump_scale"] = _map_number(mtl_path, number, parts[0], option, given[0])
+        elif option in ("-o", "-s"):
+            uv = [_map_number(mtl_path, number, parts[0], option, g) for g in given[:2]]
+            uv = uv + [0.0 if option == "-o" else 1.0] * (2 - len(uv))
+            values["offset" if option == "-o" else "scale"] = (uv[0], uv[1])
+        elif option == "-clamp":
+            if given[0].lower() not in ("on", "off"):
+                raise ObjError(mtl_path, number, f"{parts[0]}: -clamp takes on or off, got "
+                                                 f"'{given[0]}'")
+            values["clamp"] = given[0].lower() == "on"
+        elif option == "-imfchan":
+            if given[0].lower() not in _CHANNELS:
+                raise ObjError(mtl_path, number, f"{parts[0]}: -imfchan takes r, g, b, m, l "
+                                                 f"or z, got '{given[0]}'")
+            values["channel"] = _CHANNELS[given[0].lower()]
+    return TextureMap(MAP_SLOTS[parts[0].lower()], str(file.resolve()), where, **values)
+
+
+def _is_number(token: str) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
+def _map_number(mtl_path, number, keyword, option, token) -> float:
+    try:
+        value = float(token)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise ObjError(mtl_path, number, f"{keyword}: option {option} needs a number, got "
+                                         f"'{token}'")
+    return value
+
+
 def _texture_map_warning(mtl_path: str, number: int, parts, material) -> str:
     """The one warning of a texture map statement ``parts`` (its options, then the file:
     the last token, relative to the MTL file's folder)."""
@@ -966,5 +1073,5 @@ def _texture_map_warning(mtl_path: str, number: int, parts, material) -> str:
     if not file.is_file():
         return (f"{where} texture '{name}' not found ({file}); {whose} keeps its constant "
                 "colours")
-    return (f"{where} texture '{name}' not applied (subtrace maps no textures yet); {whose} "
-            "keeps its constant colours")
+    return (f"{where} texture '{name}' not applied (subtrace applies map_Kd, map_Ks, "
+            f"map_Bump / bump and norm); {whose} keeps its constant colours")

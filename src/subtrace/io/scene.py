@@ -24,6 +24,11 @@ Schema (every table and key optional unless marked *required*)::
     color    = [0.8, 0.6, 0.4]      # linear RGB in 0..1; overrides the OBJ's materials' Kd
     specular = [0.2, 0.2, 0.2]      # linear RGB in 0..1; overrides their Ks (default none)
     shininess = 40.0                # >= 0: Blinn-Phong exponent; overrides their Ns
+    diffuse_texture = "skin.png"    # image textures (subtrace.textures), relative to this
+    specular_texture = "spec.png"   #   file's folder; they replace the OBJ's maps of the
+    bump_texture = "height.png"     #   same slot; a diffuse / specular texture is
+    bump_scale = 0.01               #   multiplied by color / specular (default white);
+    normal_texture = "normal.png"   #   bump_scale: height per unit of the bump map's value
 
     [camera]                        # without eye and target: an automatic camera framing
     eye    = [3.0, 2.0, 5.0]        #   all objects (subtrace.camera.auto_camera); an eye
@@ -90,7 +95,8 @@ from pathlib import Path
 from subtrace.errors import SceneError, show_value
 from subtrace.io import placement
 from subtrace.io.text import decode, read_bytes
-from subtrace.io.obj import BOUNDARY_EDGE_AND_CORNER, BOUNDARY_EDGE_ONLY, BOUNDARY_NONE
+from subtrace.io.obj import (BOUNDARY_EDGE_AND_CORNER, BOUNDARY_EDGE_ONLY, BOUNDARY_NONE,
+                            TextureMap)
 from subtrace.io.usd import is_usd, usd_scene_table
 from subtrace.lights import LIGHT_KEYS, Light, parse_light
 from subtrace.camera import (
@@ -134,8 +140,11 @@ BOUNDARIES = {
 }
 
 _TOP_KEYS = ("object", "camera", "render", "light", "ground", "output", "preview")
+# an object's image texture keys and the slot of each (subtrace.io.obj.TextureMap)
+TEXTURE_KEYS = {"diffuse_texture": "diffuse", "specular_texture": "specular",
+                "bump_texture": "bump", "normal_texture": "normal"}
 _OBJECT_KEYS = ("mesh", "prim", "scheme", "boundary", "color", "specular", "shininess",
-                *placement.KEYS)
+                *TEXTURE_KEYS, "bump_scale", *placement.KEYS)
 _CAMERA_KEYS = ("eye", "target", "up", "fov", "width", "height")
 _RENDER_KEYS = ("tolerance", "tolerance_deg", "background", "headlight", "headlight_intensity",
                 "max_memory", "shadows", "transparent", "samples", "ao")
@@ -173,6 +182,9 @@ class SceneObject:
     specular: tuple[float, float, float] | None = None  # Ks; None: OBJ materials
     shininess: float | None = None  # Ns; None: OBJ materials
     time: float | None = None  # a USD stage's time code; None: its still (io/usd.py)
+    # image textures (subtrace.io.obj.TextureMap), replacing the cage's maps of their slots
+    textures: tuple = ()
+    bump_scale: float | None = None  # the bump maps' scale (a scene's or the MTL's -bm)
     # where it stands: a 4x4 affine matrix as rows (p' = M [p, 1]); None: as the file has it
     transform: tuple | None = None
 
@@ -446,8 +458,36 @@ def _objects(ctx, d: dict, base_dir: str) -> tuple[SceneObject, ...]:
             color = ctx.color(where + ("color",), table["color"])
         objects.append(SceneObject(mesh=mesh, scheme=scheme, boundary=boundary, color=color,
                                    prim=prim, specular=specular, shininess=shininess,
-                                   transform=_placement(ctx, where, table)))
+                                   transform=_placement(ctx, where, table),
+                                   textures=_textures(ctx, where, table, base_dir),
+                                   bump_scale=(float(table["bump_scale"]) if "bump_scale"
+                                               in table else None)))
     return tuple(objects)
+
+
+def _textures(ctx, where, table, base_dir) -> tuple:
+    """The object's image textures (``TEXTURE_KEYS``): a :class:`TextureMap` each, its path
+    relative to the scene file's folder (a missing file is the render's warning, not an
+    error: the constant colour is used)."""
+    scale = 1.0
+    if "bump_scale" in table:
+        scale = ctx.call(where + ("bump_scale",), _number, table["bump_scale"], "bump_scale")
+    out = []
+    for key, slot in TEXTURE_KEYS.items():
+        if key not in table:
+            continue
+        value = table[key]
+        if not isinstance(value, str) or not value.strip():
+            raise ctx.error(where + (key,), f"expected an image file name in quotes, got "
+                                            f"{show_value(value)}")
+        full = os.path.normpath(os.path.join(base_dir, os.path.expanduser(value)))
+        if os.path.isdir(full):
+            raise ctx.error(where + (key,), f"{full} is a directory, expected an image file")
+        line = ctx.lines.find(tuple(where + (key,))) if ctx.lines is not None else None
+        at = f"{ctx.path}:{line}" if line is not None else f"{ctx.path or 'scene'}"
+        out.append(TextureMap(slot, full, f"{at}: {_format_key(where + (key,))}",
+                              bump_scale=scale if slot == "bump" else 1.0))
+    return tuple(out)
 
 
 def _placement(ctx, where, table):
