@@ -69,6 +69,7 @@ LAYERS = (
     ("trace",),
     ("shade",),
     ("nurbs",),  # the NURBS pass shades its hits with shade's kernels
+    ("reflect",),  # reflected rays: traced (trace, nurbs) and shaded (shade) for the picture
     ("picture",),
     ("lines",),
     ("startup",),  # the warm-up compiles trace and shade kernels; prepare, render start it
