@@ -150,6 +150,9 @@ class _Context:
         direct, fres = _shade(self, q, f, d, none, none, np.zeros(len(t)), f0, alpha, vis,
                               False)
         colour = lit * (1.0 - fres) + direct
+        if self.depth == 0:  # (no reflected rays: what lies beyond along the mirror)
+            mirror = d - 2.0 * (d * f).sum(axis=1)[:, None] * f
+            return colour + fres * self.escape(mirror), 0
         length = t  # (the path from the eye: the cone's width at the hit is t tol_rad)
         m = np.where(glossy, self.samples, 1).astype(np.int64)
         n_rays = self._bounces(q, f, d, f0, alpha, key, m, length, np.ones((len(t), 3)),
