@@ -182,7 +182,8 @@ def test_a_glossy_metal_in_a_white_furnace_returns_the_lobes_albedo(tmp_path):
     mean of 32 sampled rays against pi times the lobe's directional albedo at its angle
     (a quadrature of the lobe: energy lost to masking only). Over ~900 pixels the mean
     difference is within 0.005 (the samples' noise averaged; the quadrature's error is
-    below 1e-4) and each pixel within 0.12."""
+    below 1e-4) and each pixel within 0.35 (32 rays of weights from 0 to 1: one pixel's
+    noise, about 10% of its value at the most)."""
     alpha = 0.25
     ch = render_scene(_blob_scene(tmp_path, [1.0, 1.0, 1.0], 1.0, roughness=0.5,
                                   env=[1.0, 1.0, 1.0], samples=32)).channels
@@ -196,7 +197,7 @@ def test_a_glossy_metal_in_a_white_furnace_returns_the_lobes_albedo(tmp_path):
     got = ch["G"][hit][keep].astype(np.float64)
     assert np.count_nonzero(keep) > 800
     assert abs((got - want).mean()) < 0.005
-    assert np.abs(got - want).max() < 0.12
+    assert np.abs(got - want).max() < 0.35
 
 
 def test_a_glossy_floor_tends_to_the_mirror(tmp_path):
