@@ -70,6 +70,7 @@ LAYERS = (
     ("shade",),
     ("textures",),  # image textures at the hits: UVs, footprints, OpenImageIO lookups
     ("nurbs",),  # the NURBS pass shades its hits with shade's kernels
+    ("reflect",),  # reflected rays: traced (trace, nurbs) and shaded (shade) for the picture
     ("picture",),
     ("lines",),
     ("startup",),  # the warm-up compiles trace and shade kernels; prepare, render start it

@@ -207,7 +207,8 @@ MOST = ("rounds", "memo_bytes")
 # work counted per tile: summed, at least the whole render's (a patch two tiles reach is
 # built by both, the pixels around a tile are traced again); times are sums too
 WORK = ("patches_refined", "micro_triangles", "pieces", "memo_nodes", "memo_full", "rays",
-        "shadow_rays", "aa_pixels", "aa_rays", "ao_rays", "secondary_patches_refined",
+        "shadow_rays", "aa_pixels", "aa_rays", "ao_rays", "reflection_rays",
+        "secondary_patches_refined",
         "secondary_micro_triangles")
 
 

@@ -498,6 +498,16 @@ def environment_tail(light) -> np.ndarray:
                            cond.ravel()])
 
 
+def environment_radiance(light) -> np.ndarray:
+    """(H, W, 3) float64: environment ``light``'s radiance per direction, its lat-long
+    image (the layout of :func:`environment_tail`; (1, 1, 3) without one) times its colour
+    times its intensity (what a reflected ray that escapes sees of it: ``subtrace.reflect``)."""
+    image = np.ones((1, 1, 3)) if light.file is None else _environment_image(light.file)[0]
+    if image is None:
+        raise SceneError(f"{light.file}: {_environment_image(light.file)[1]}")
+    return image * (np.asarray(light.color, np.float64) * light.intensity)
+
+
 def _irradiance_coefficients(image, mu, phi) -> np.ndarray:
     """(3, 9): per colour the coefficients k of the module comment's E(n) (at ENV): the
     irradiance of the piecewise-constant lat-long ``image`` (rows between the cos theta

@@ -45,6 +45,7 @@ from subtrace.accel.bvh import build_bvh
 from subtrace.accel.cull import casting_bounds
 from subtrace.camera import whole_image, window_offset
 from subtrace.mesh.cage import lowest_limit
+from subtrace.reflect import mirror_pass, reflects
 from subtrace.nurbs.scene import blocked as nurbs_blocked
 from subtrace.nurbs.scene import shade_rays
 from subtrace.runtime import threads as tasks
@@ -115,8 +116,9 @@ def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, st
     lights = light_array(scene.lights)
     shadows = bool(len(lights)) and scene.render.shadows
     tol_rad = keep["tol_rad"] if keep else scene.render.tolerance_rad(whole_image(camera))
-    pools = (_pools(keep, stats) if keep and (shadows or samples > 1 or scene.render.ao > 0)
-             else None)
+    mirror = reflects(patches)  # (a material reflects: subtrace.reflect)
+    pools = (_pools(keep, stats) if keep and (shadows or samples > 1 or scene.render.ao > 0
+                                              or mirror) else None)
     any_hit = _any_hit(pools, nurbs, frame[0], tol_rad)
 
     def trace_shadows(origins, dirs, tmax):
@@ -144,12 +146,13 @@ def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, st
     image = whole_image(camera)  # (a window's pixels are its image's: rows, AO patterns)
     lo, hi = casting_bounds(cages, nurbs)
     ao = ids = keys = None
-    if scene.render.ao > 0 or (shadows and sampled(lights)):
+    if scene.render.ao > 0 or (shadows and sampled(lights)) or mirror:
         col0, row0 = window_offset(frame)
         row, col = np.divmod(np.arange(W * H, dtype=np.int64), W)
         ids = (row + row0) * image.width + col + col0
-        # (the lights of several shadow rays per point sample them per pixel: lights.py)
-        keys = ray_keys(ids) if shadows and sampled(lights) else None
+        # (the lights of several shadow rays per point sample them per pixel: lights.py;
+        # a glossy reflection's rays too)
+        keys = ray_keys(ids) if (shadows and sampled(lights)) or mirror else None
     if scene.render.ao > 0:
         ao = (trace_ao, scene.render.ao, config.AO_DISTANCE * float(np.linalg.norm(hi - lo)),
               image.width, config.AO_SMOOTH_RADIUS, image.pixel_angle())
@@ -162,14 +165,18 @@ def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, st
                            image.height)[y0:y0 + H]
     if texel is not None and offset:  # (the free-form surfaces' hits take no texture)
         texel[pix_patch >= offset] = -1.0
+    if mirror:
+        mirror = mirror_pass(scene, image, frame, W, lights, headlight_of(scene)[0], pools,
+                             nurbs, patches, offset, tol_rad, ground, trace_shadows, stats)
     _colour(scene, frame, W, t, normals, pix_patch, patches, planes, lights, rows,
-            ground, trace_shadows, tol_rad, None, ao, ids, lit, keys, texel)
+            ground, trace_shadows, tol_rad, None, ao, ids, lit, keys, texel, mirror or None)
     if samples > 1:
         t0 = time.perf_counter()
         closest = _closest(pools, nurbs, frame, W, patches, scene, tol_rad, offset,
                            (textures, image.pixel_angle()))
         _antialias(scene, frame, W, image.height, closest, patches, planes, lights, ground,
-                   trace_shadows, samples, stats, tol_rad, ao, image.width, keys is not None)
+                   trace_shadows, samples, stats, tol_rad, ao, image.width, keys is not None,
+                   mirror or None)
         stats.time_aa += time.perf_counter() - t0
     _count_secondary(pools, stats)
 
@@ -310,14 +317,15 @@ def ground_shadow_points(scene, cages, points, nurbs=None) -> np.ndarray:
 
 def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights, rows,
             ground, trace_shadows, tol_rad, dirs, ao=None, ids=None, lit=False, keys=None,
-            texel=None):
+            texel=None, mirror=None):
     """The colour of rays from the eye (pixel centres, or ``dirs``): shadows, ambient
     occlusion (``ao``: None, or (trace, rays per hit, distance, the image's width); ``ids``:
     each ray's key for its AO pattern, :func:`shade.ambient_occlusion`), lighting (unless
     ``lit``: the shading pass coloured the hits), the background (``rows``: per image row,
     or per ray with ``dirs``) and the ground. ``keys``: None, or each ray's key for the
     lights that sample their shadow rays (``lights.ray_keys``); ``texel``: the rays' texture
-    colours (``textures.texture_hits``; None: none)."""
+    colours (``textures.texture_hits``; None: none). ``mirror``: None, or the reflections
+    (``reflect.mirror_pass``) added to the lit colour."""
     visible = np.ones((len(lights), 0), np.float32)  # (no columns: every pixel lit)
     if len(lights) and scene.render.shadows:
         visible = shadow_visibility(trace_shadows, frame, width, t, normals, pix_patch, lights,
@@ -347,6 +355,8 @@ def _colour(scene, frame, width, t, normals, pix_patch, patches, planes, lights,
     if not lit:
         light(frame, width, t, normals, pix_patch, patches, lights, headlight, visible, planes,
               dirs, occlusion, texel)
+    if mirror is not None:
+        mirror(t, normals, pix_patch, planes, dirs, keys, visible)
     if r.background_bottom is not None or dirs is not None:
         miss = np.nonzero(pix_patch < 0)[0] if miss is None else miss
         background_pixels(miss, rows, width, planes, dirs)
@@ -398,7 +408,7 @@ def _smooth(frame, width, t, normals, pix_patch, patches, occlusion, miss, groun
 
 
 def _antialias(scene, frame, W, H, closest, patches, planes, lights, ground, trace_shadows,
-               samples, stats, tol_rad, ao=None, image_width=None, keyed=False):
+               samples, stats, tol_rad, ao=None, image_width=None, keyed=False, mirror=None):
     """More rays for the pixels :func:`edge_pixels` marks (see the module comment); their
     colour and alpha become the mean of all their rays. ``W``: the width of ``planes``;
     ``H``: the height of the image (a window's rows are offset in it: ``frame``);
@@ -432,7 +442,7 @@ def _antialias(scene, frame, W, H, closest, patches, planes, lights, ground, tra
         keys = ray_keys(np.repeat(row * image_width + col, m), np.tile(np.arange(1, m + 1),
                                                                         len(pix)))
     _colour(scene, frame, W, t, normals, pix_patch, patches, sub, lights, back, ground,
-            trace_shadows, tol_rad, dirs, ao, ids, False, keys, texel)
+            trace_shadows, tol_rad, dirs, ao, ids, False, keys, texel, mirror)
     # box filter: the centre ray and the extra ones, equally weighted
     for k in (C_R, C_R + 1, C_R + 2, C_A):
         extra = sub[k].astype(np.float64).reshape(len(pix), m).sum(axis=1)

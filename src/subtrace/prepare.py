@@ -23,6 +23,7 @@ from subtrace.mesh.cage import load_cage, placed, valence_bound, without_unused_
 from subtrace.nurbs.scene import has_faces, has_surfaces
 from subtrace.patches.table import build_patch_table, cage_face_shells, restrict
 from subtrace.picture import ground_plane, ground_shadow_points
+from subtrace.reflect import scene_reflects
 from subtrace.startup import warmup
 from subtrace.tiles import check_crop
 from subtrace.trace.budget import check_memory
@@ -152,14 +153,16 @@ def prepare(scene, cages, stats, nurbs=None, crop=None, compiling=None):
     camera = scene.make_camera(lo, hi, points, [c.points_box for c in cages])
     # (shadow and ambient occlusion rays may meet what the camera does not see; the
     # ground's shadows are bounded by where the ground is)
-    secondary = bool(scene.lights and scene.render.shadows) or scene.render.ao > 0
+    # (so may reflected rays, and from a point in view anything: no cull)
+    mirror = scene_reflects(scene, cages, nurbs)
+    secondary = bool(scene.lights and scene.render.shadows) or scene.render.ao > 0 or mirror
     with contextlib.ExitStack() as stack:  # (the ground's height and the cull share them)
         for c in cages:
             stack.enter_context(c.sharing_star_boxes())
         ground = ground_plane(scene, cages, camera, nurbs) if secondary else None
         reach = secondary_reach(scene, casting_bounds(cages, nurbs), camera,
                                 ground if scene.lights and scene.render.shadows else None)
-        if config.CULL_TO_VIEW and reach is not None:
+        if config.CULL_TO_VIEW and reach is not None and not mirror:
             table, keep = table_in_view(cages, camera, reach)
             stats.faces_culled = int(sum(np.count_nonzero(~k) for k in keep))
         else:

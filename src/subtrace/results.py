@@ -52,6 +52,8 @@ class RenderStats:
     time_aa: float = 0.0  # of time_shade: tracing and shading the extra rays
     ao_rays: int = 0  # ambient occlusion rays traced ([render] ao per hit, extra rays too)
     time_ao: float = 0.0  # of time_shade: tracing them (building included)
+    reflection_rays: int = 0  # reflected rays traced (every bounce; subtrace.reflect)
+    time_reflections: float = 0.0  # of time_shade: tracing and shading them
     # built for secondary rays (shadow and anti-aliasing rays: patches no primary ray had
     # reached, micro-triangles they evaluated), not counted in the primary counts above
     secondary_patches_refined: int = 0

@@ -214,6 +214,8 @@ class PatchShading(NamedTuple):
     color: np.ndarray  # (P,3) float64: diffuse colour
     specular: np.ndarray  # (P,3) float64: specular colour (Ks; 0: none)
     shininess: np.ndarray  # (P,) float64: specular exponent (Ns)
+    reflect: np.ndarray  # (P,3) float64: reflectance at normal incidence (0: none)
+    roughness: np.ndarray  # (P,) float64: 0 a mirror .. 1 (GGX alpha = roughness^2)
 
 
 def miss_values(background) -> np.ndarray:
@@ -480,29 +482,51 @@ def _tri_cell_normal(pts, nrm, b, c):
 def patch_shading(table, overrides) -> PatchShading:
     """Per patch of ``table``: its ids, ptex placement and material: its object's
     ``overrides[object id]`` (a :class:`subtrace.io.scene.SceneObject`, or None) where that
-    gives a colour / specular colour / shininess, else its OBJ material's."""
-    colors = np.empty((table.n_patches, 3))
-    specular = np.empty((table.n_patches, 3))
-    shininess = np.empty(table.n_patches)
+    gives a colour / specular colour / shininess / metallic / roughness, else its OBJ
+    material's (:func:`material_of`)."""
+    fields = [np.empty((table.n_patches, 3)), np.empty((table.n_patches, 3)),
+              np.empty(table.n_patches), np.empty((table.n_patches, 3)),
+              np.empty(table.n_patches)]
     for oid, o in enumerate(table.objects):
         sl = slice(o.first_patch, o.first_patch + o.n_patches)
         mats = list(o.cage.materials) + [Material("", DEFAULT_DIFFUSE)]
         mat = table.material[sl]
         pick = np.where(mat >= 0, mat, len(mats) - 1)
-        colors[sl] = np.array([m.diffuse for m in mats], dtype=np.float64)[pick]
-        specular[sl] = np.array([m.specular for m in mats], dtype=np.float64)[pick]
-        shininess[sl] = np.array([m.shininess for m in mats], dtype=np.float64)[pick]
-        over = overrides[oid]
-        if over is None:
-            continue
-        if over.color is not None:
-            colors[sl] = over.color
-        if over.specular is not None:
-            specular[sl] = over.specular
-        if over.shininess is not None:
-            shininess[sl] = over.shininess
+        rows = [material_of(m, overrides[oid]) for m in mats]
+        for k, f in enumerate(fields):
+            f[sl] = np.array([r[k] for r in rows], dtype=np.float64)[pick]
     return PatchShading(table.object_id, table.ptex, table.ptex_uv0, table.ptex_scale,
-                        table.level0, colors, specular, shininess)
+                        table.level0, *fields)
+
+
+DIELECTRIC_REFLECTANCE = 0.04  # a dielectric's reflectance at normal incidence (n = 1.5)
+
+
+def material_of(mat, over=None):
+    """(diffuse (3,), specular (3,), shininess, reflectance (3,), roughness) of the OBJ
+    material ``mat`` (:class:`subtrace.io.obj.Material`) under the scene object ``over``'s
+    keys (None: none; its colour, specular, shininess, metallic, roughness replace the
+    material's where given). How it reflects: with a ``metallic`` m (the scene's keys, MTL's
+    ``Pm`` / ``Pr``) a reflectance of (1 - m) 0.04 + m colour and a diffuse colour of
+    (1 - m) colour; with ``metallic`` None and a ``roughness`` (MTL's ``illum`` 3..7) its
+    specular colour is the reflectance and its Blinn-Phong lobe the reflection's; with
+    neither, no reflection (reflectance 0)."""
+    def pick(key, own):
+        return own if over is None or getattr(over, key) is None else getattr(over, key)
+
+    color = pick("color", mat.diffuse)
+    specular, shininess = pick("specular", mat.specular), pick("shininess", mat.shininess)
+    metallic, roughness = mat.metallic, mat.roughness
+    if over is not None and over.roughness is not None:  # (the scene gives both)
+        metallic, roughness = over.metallic, over.roughness
+    color = np.asarray(color, np.float64)
+    none = np.zeros(3)
+    if roughness is None:
+        return color, specular, shininess, none, 0.0
+    if metallic is None:  # (MTL's illum 3..7: Ks reflects)
+        return color, none, shininess, np.asarray(specular, np.float64), roughness
+    f0 = (1.0 - metallic) * DIELECTRIC_REFLECTANCE + metallic * color
+    return (1.0 - metallic) * color, specular, shininess, f0, roughness
 
 
 # --------------------------------------------------------------------------------------

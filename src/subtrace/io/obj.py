@@ -85,14 +85,20 @@ class TextureMap:
 @dataclass(frozen=True)
 class Material:
     """A material named by `usemtl`: its name, `Kd` diffuse and `Ks` specular colours
-    (linear RGB, 0..1) and `Ns` specular exponent (MTL's Blinn-Phong lobe), and its image
-    textures (``maps``: :class:`TextureMap`, at most one per slot, MTL's last)."""
+    (linear RGB, 0..1) and `Ns` specular exponent (MTL's Blinn-Phong lobe), its image
+    textures (``maps``: :class:`TextureMap`, at most one per slot, MTL's last), and how it
+    reflects (``shade.reflection_of``): ``metallic`` and ``roughness`` 0..1 from the PBR
+    statements `Pm` / `Pr` (either given: both, the other 0), or ``metallic`` None and
+    ``roughness`` from `Ns` for `illum` 3..7 (ray-traced reflection of colour `Ks`); both
+    None: no reflection."""
 
     name: str
     diffuse: tuple[float, float, float]
     specular: tuple[float, float, float] = DEFAULT_SPECULAR
     shininess: float = DEFAULT_SHININESS
     maps: tuple = ()
+    metallic: float | None = None
+    roughness: float | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -318,6 +324,7 @@ class ObjReader:
         self.mtl_specular: dict[str, tuple] = {}  # their Ks, where given
         self.mtl_shininess: dict[str, float] = {}  # their Ns, where given
         self.mtl_maps: dict[str, dict] = {}  # their texture maps: slot -> TextureMap
+        self.mtl_pbr: dict[str, dict] = {}  # their Pm / Pr / illum ("Pm" -> value), given
         self.unknown: dict[str, list] = {}  # keyword -> [first line, count]
         # Tags, already validated except for index ranges.
         self.creases: list = []  # (line, pairs (k,2), sharpness (k,))
@@ -704,7 +711,7 @@ class ObjReader:
                 if not current:
                     raise ObjError(mtl_path, number, "newmtl needs a material name")
                 self.mtl_diffuse[current] = DEFAULT_DIFFUSE
-            elif parts[0] in ("Kd", "Ks", "Ns") and current is None:
+            elif parts[0] in ("Kd", "Ks", "Ns", *REFLECTION_KEYS) and current is None:
                 self.warnings.append(
                     (obj_line, f"{mtl_path}:{number}: {parts[0]} before any newmtl ignored"))
             elif parts[0] == "Ns":
@@ -716,6 +723,9 @@ class ObjReader:
                                                   "its constant colours"))
                 else:
                     self.mtl_maps.setdefault(current, {})[found.slot] = found
+            elif parts[0] in REFLECTION_KEYS:
+                self.mtl_pbr.setdefault(current, {})[parts[0]] = _mtl_reflection(
+                    mtl_path, number, parts[0], parts[1:])
             elif parts[0].lower() in TEXTURE_MAPS:
                 self.warnings.append((obj_line, _texture_map_warning(
                     mtl_path, number, parts, current)))
@@ -876,7 +886,9 @@ class ObjReader:
             Material(name, tuple(float(c) for c in rgb),
                      self.mtl_specular.get(name, DEFAULT_SPECULAR),
                      self.mtl_shininess.get(name, DEFAULT_SHININESS),
-                     tuple(self.mtl_maps.get(name, {}).values()))
+                     tuple(self.mtl_maps.get(name, {}).values()),
+                     *_reflection(self.mtl_pbr.get(name, {}),
+                                  self.mtl_shininess.get(name, DEFAULT_SHININESS)))
             for name, rgb in diffuse.items())
         material_ids = {name: k for k, name in enumerate(diffuse)}
         freeform = self.freeform.finish(self.path, points, self.point_lines, self.point_w,
@@ -976,6 +988,48 @@ def _mtl_exponent(mtl_path: str, number: int, tokens) -> float:
                        f"Ns needs one number >= 0 (the specular exponent), got "
                        f"'{' '.join(tokens)}'")
     return value
+
+
+# MTL's statements of reflection: the PBR extension's metallic and roughness, and the
+# illumination model (3..7: ray-traced reflection, of colour Ks)
+REFLECTION_KEYS = ("Pm", "Pr", "illum")
+REFLECTING_ILLUM = range(3, 8)
+
+
+def _mtl_reflection(mtl_path: str, number: int, key: str, tokens) -> float:
+    """An MTL ``Pm`` / ``Pr`` value (one number 0..1) or ``illum`` model (a whole number
+    0..10); ObjError otherwise."""
+    try:
+        value = float(tokens[0]) if len(tokens) == 1 else math.nan
+    except ValueError:
+        value = math.nan
+    if key == "illum":
+        if not (value in range(0, 11)):
+            raise ObjError(mtl_path, number, f"illum needs one whole number 0..10 (the "
+                           f"illumination model), got '{' '.join(tokens)}'")
+        return value
+    if not 0.0 <= value <= 1.0:
+        what = "metallic" if key == "Pm" else "roughness"
+        raise ObjError(mtl_path, number, f"{key} needs one number between 0 and 1 (the "
+                       f"{what}), got '{' '.join(tokens)}'")
+    return value
+
+
+def _reflection(given: dict, shininess: float) -> tuple:
+    """(metallic, roughness) of a material whose MTL gave ``given`` (:data:`REFLECTION_KEYS`
+    -> value) and exponent ``shininess`` (see :class:`Material`)."""
+    if "Pm" in given or "Pr" in given:
+        return given.get("Pm", 0.0), given.get("Pr", 0.0)
+    if given.get("illum") in REFLECTING_ILLUM:
+        return None, roughness_of_exponent(shininess)
+    return None, None
+
+
+def roughness_of_exponent(shininess: float) -> float:
+    """The roughness (GGX alpha = roughness^2) of a Blinn-Phong exponent ``Ns``: the
+    lobe of the same width, alpha^2 = 2 / (Ns + 2) (Walter et al. 2007: Beckmann's, which
+    GGX's alpha matches near the peak)."""
+    return (2.0 / (shininess + 2.0)) ** 0.25
 
 
 # MTL's texture map statements (lower case: their keywords are matched so)

@@ -29,6 +29,9 @@ Schema (every table and key optional unless marked *required*)::
     bump_texture = "height.png"     #   same slot; a diffuse / specular texture is
     bump_scale = 0.01               #   multiplied by color / specular (default white);
     normal_texture = "normal.png"   #   bump_scale: height per unit of the bump map's value
+    metallic = 1.0                  # 0..1: reflects as a metal (1) or a dielectric (0);
+    roughness = 0.2                 #   0..1: a mirror (0) to a broad gloss; either one
+                                    #   turns reflections on (the other default 0)
 
     [camera]                        # without eye and target: an automatic camera framing
     eye    = [3.0, 2.0, 5.0]        #   all objects (subtrace.camera.auto_camera); an eye
@@ -49,6 +52,8 @@ Schema (every table and key optional unless marked *required*)::
     samples = 4                     # rays per pixel at most (adaptive anti-aliasing: edge
                                     #   pixels only), 1..64; default: one ray per pixel in
                                     #   the API, DEFAULT_SAMPLES on the command line
+    reflection_depth = 1            # reflections of reflections, 0..8; default 1
+    reflection_samples = 8          # glossy reflection rays per shaded ray, 1..256
     ao = 16                         # ambient occlusion rays per hit pixel, 0..1024 (0:
                                     #   none, the default): the diffuse lighting scaled by
                                     #   the share of cosine-weighted rays that escape
@@ -131,6 +136,10 @@ DEFAULT_HEADLIGHT_INTENSITY = 0.2
 DEFAULT_SAMPLES = 4
 MAX_SAMPLES = 64
 MAX_AO_SAMPLES = 1024
+# reflections (subtrace.reflect): bounces after the first hit, and a glossy lobe's rays per
+# shaded ray (stratified per pixel, continued by its anti-aliasing rays)
+DEFAULT_REFLECTION_DEPTH, MAX_REFLECTION_DEPTH = 1, 8
+DEFAULT_REFLECTION_SAMPLES, MAX_REFLECTION_SAMPLES = 8, 256
 
 SCHEMES = {"catmark": "catmark", "catmull-clark": "catmark", "loop": "loop"}
 BOUNDARIES = {
@@ -144,10 +153,11 @@ _TOP_KEYS = ("object", "camera", "render", "light", "ground", "output", "preview
 TEXTURE_KEYS = {"diffuse_texture": "diffuse", "specular_texture": "specular",
                 "bump_texture": "bump", "normal_texture": "normal"}
 _OBJECT_KEYS = ("mesh", "prim", "scheme", "boundary", "color", "specular", "shininess",
-                *TEXTURE_KEYS, "bump_scale", *placement.KEYS)
+                *TEXTURE_KEYS, "bump_scale", "metallic", "roughness", *placement.KEYS)
 _CAMERA_KEYS = ("eye", "target", "up", "fov", "width", "height")
 _RENDER_KEYS = ("tolerance", "tolerance_deg", "background", "headlight", "headlight_intensity",
-                "max_memory", "shadows", "transparent", "samples", "ao")
+                "max_memory", "shadows", "transparent", "samples", "ao", "reflection_depth",
+                "reflection_samples")
 _LIGHT_KEYS = LIGHT_KEYS  # (the light kinds' keys: subtrace.lights)
 _GROUND_KEYS = ("height", "color")
 # Every key the parser accepts, by table ("": the top level); docs/guide/scene-format.md
@@ -181,6 +191,9 @@ class SceneObject:
     prim: str | None = None  # a USD stage's mesh prim ("/World/Body"); None: all its meshes
     specular: tuple[float, float, float] | None = None  # Ks; None: OBJ materials
     shininess: float | None = None  # Ns; None: OBJ materials
+    # reflection (shade.reflection_of): either given, the other is 0; None: OBJ materials
+    metallic: float | None = None
+    roughness: float | None = None
     time: float | None = None  # a USD stage's time code; None: its still (io/usd.py)
     # image textures (subtrace.io.obj.TextureMap), replacing the cage's maps of their slots
     textures: tuple = ()
@@ -264,6 +277,8 @@ class RenderSettings:
     transparent: bool = False
     samples: int | None = None  # None: not given (one ray; the command line: DEFAULT_SAMPLES)
     ao: int = 0  # ambient occlusion rays per hit pixel (0: none)
+    reflection_depth: int = DEFAULT_REFLECTION_DEPTH  # bounces of reflected rays at most
+    reflection_samples: int = DEFAULT_REFLECTION_SAMPLES  # a glossy lobe's rays per ray
 
     def tolerance_rad(self, camera: Camera) -> float:
         """The angular tolerance in radians (pixels times the camera's pixel angle)."""
@@ -443,13 +458,17 @@ def _objects(ctx, d: dict, base_dir: str) -> tuple[SceneObject, ...]:
     objects = []
     for where, table in tables:
         mesh = _mesh_path(ctx, where + ("mesh",), table["mesh"], base_dir)
-        scheme = boundary = color = prim = specular = shininess = None
+        scheme = boundary = color = prim = specular = shininess = metallic = roughness = None
         if "prim" in table:
             prim = ctx.call(where + ("prim",), _prim_path, table["prim"], "prim")
         if "specular" in table:
             specular = ctx.color(where + ("specular",), table["specular"])
         if "shininess" in table:
             shininess = ctx.call(where + ("shininess",), _non_negative, table["shininess"])
+        if "metallic" in table or "roughness" in table:
+            metallic, roughness = (
+                ctx.call(where + (key,), _unit_number, table[key], key) if key in table
+                else 0.0 for key in ("metallic", "roughness"))
         if "scheme" in table:
             scheme = _choice(ctx, where + ("scheme",), table["scheme"], SCHEMES)
         if "boundary" in table:
@@ -458,6 +477,7 @@ def _objects(ctx, d: dict, base_dir: str) -> tuple[SceneObject, ...]:
             color = ctx.color(where + ("color",), table["color"])
         objects.append(SceneObject(mesh=mesh, scheme=scheme, boundary=boundary, color=color,
                                    prim=prim, specular=specular, shininess=shininess,
+                                   metallic=metallic, roughness=roughness,
                                    transform=_placement(ctx, where, table),
                                    textures=_textures(ctx, where, table, base_dir),
                                    bump_scale=(float(table["bump_scale"]) if "bump_scale"
@@ -585,6 +605,11 @@ def _render(ctx, table) -> RenderSettings:
         values["samples"] = ctx.call(where + ("samples",), _samples, table["samples"])
     if "ao" in table:
         values["ao"] = ctx.call(where + ("ao",), _ao_samples, table["ao"])
+    for key, most in (("reflection_depth", MAX_REFLECTION_DEPTH),
+                      ("reflection_samples", MAX_REFLECTION_SAMPLES)):
+        if key in table:
+            values[key] = ctx.call(where + (key,), _whole, table[key], 0 if key ==
+                                   "reflection_depth" else 1, most)
     return RenderSettings(**values)
 
 
@@ -699,6 +724,22 @@ def _samples(value) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_SAMPLES:
         raise SceneError(f"expected a whole number of rays per pixel from 1 to {MAX_SAMPLES}, "
                          f"got {show_value(value)}")
+    return value
+
+
+def _unit_number(value, what) -> float:
+    """A ``metallic`` or ``roughness``: a number 0..1."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+            0.0 <= value <= 1.0):
+        raise SceneError(f"expected the {what}, a number from 0 to 1, got {show_value(value)}")
+    return float(value)
+
+
+def _whole(value, least, most) -> int:
+    """A whole number ``least``..``most``."""
+    if isinstance(value, bool) or not isinstance(value, int) or not least <= value <= most:
+        raise SceneError(f"expected a whole number from {least} to {most}, got "
+                         f"{show_value(value)}")
     return value
 
 

@@ -49,7 +49,7 @@ from subtrace.nurbs.trace import (
 from subtrace.runtime.jit import nb
 from subtrace.runtime.threads import run_tasks
 from subtrace.shade import (C_A, C_LEVEL, C_N, C_OBJECT, C_P, C_PATCH, C_U, C_Z,
-                            PatchShading, pixel_rays)
+                            PatchShading, material_of, pixel_rays)
 from subtrace.subdiv.topology import compact
 from subtrace.trace.prims import ray_setup
 
@@ -115,6 +115,8 @@ class NurbsScene:
     surface_color: np.ndarray  # (S, 3) float64 diffuse colour
     surface_specular: np.ndarray  # (S, 3) float64 specular colour (Ks; 0: none)
     surface_shininess: np.ndarray  # (S,) float64 specular exponent (Ns)
+    surface_reflect: np.ndarray  # (S, 3) float64 reflectance at normal incidence (0: none)
+    surface_roughness: np.ndarray  # (S,) float64 (shade.material_of)
 
     def bounds(self):
         """(lo (3,), hi (3,)): the box of every patch's projected control points."""
@@ -125,7 +127,7 @@ class NurbsScene:
 def load_nurbs(scene, quiet: bool = False) -> NurbsScene | None:
     """The free-form surfaces of ``scene``'s objects (None when no object has any).
     ``quiet``: the file's reading warnings are not repeated (the cage load gives them)."""
-    surfaces, owner, colors, speculars, shininess = [], [], [], [], []
+    surfaces, owner, rows = [], [], []
     for k, obj in enumerate(scene.objects):
         if not has_surfaces(obj.mesh):
             continue
@@ -144,17 +146,12 @@ def load_nurbs(scene, quiet: bool = False) -> NurbsScene | None:
         for surface in freeform.surfaces:
             surfaces.append(surface)
             owner.append(k)
-            mat = table[surface.material]
-            colors.append(obj.color if obj.color is not None else mat.diffuse)
-            speculars.append(obj.specular if obj.specular is not None else mat.specular)
-            shininess.append(obj.shininess if obj.shininess is not None else mat.shininess)
+            rows.append(material_of(table[surface.material], obj))
     if not surfaces:
         return None
     model = build_model(surfaces)
-    return NurbsScene(model, patch_bvh(model), np.array(owner, dtype=np.int32),
-                      np.array(colors, dtype=np.float64).reshape(-1, 3),
-                      np.array(speculars, dtype=np.float64).reshape(-1, 3),
-                      np.array(shininess, dtype=np.float64))
+    fields = [np.array([r[k] for r in rows], dtype=np.float64) for k in range(5)]
+    return NurbsScene(model, patch_bvh(model), np.array(owner, dtype=np.int32), *fields)
 
 
 def nurbs_pass(nurbs: NurbsScene, frame, width, height, tol_rad, other_t, planes,
@@ -210,7 +207,9 @@ def with_surfaces(nurbs: NurbsScene, patches: PatchShading | None):
                         np.zeros((s, 2)), np.ones(s), np.zeros(s, np.int8),
                         nurbs.surface_color.astype(np.float64),
                         nurbs.surface_specular.astype(np.float64),
-                        nurbs.surface_shininess.astype(np.float64))
+                        nurbs.surface_shininess.astype(np.float64),
+                        nurbs.surface_reflect.astype(np.float64),
+                        nurbs.surface_roughness.astype(np.float64))
     if patches is None:
         return rows, 0
     return PatchShading(*(np.concatenate([a, b]) for a, b in zip(patches, rows))), len(

@@ -374,7 +374,7 @@ def _no_patches():
 
     return PatchShading(np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros((0, 2)),
                         np.zeros(0), np.zeros(0, np.int8), np.zeros((0, 3)), np.zeros((0, 3)),
-                        np.zeros(0))
+                        np.zeros(0), np.zeros((0, 3)), np.zeros(0))
 
 
 def compile_secondary(threads: int) -> None:
