@@ -364,3 +364,146 @@ def test_a_stage_without_lights_gets_the_picture_defaults(tmp_path):
     lights = scene_for_meshes([str(lit)]).lights
     # (an authored angle: a soft sun of that angular diameter; none: a hard light)
     assert len(lights) == 2 and sorted(l.angle or 0.0 for l in lights) == [0.0, 4.5]
+
+
+# ------------------------------------------------------------------------------------------
+# UsdPreviewSurface materials
+# ------------------------------------------------------------------------------------------
+
+
+def _checker_png(path, n=64, k=8):
+    import OpenImageIO as oiio
+
+    y, x = np.mgrid[0:n, 0:n]
+    c = ((x // (n // k) + y // (n // k)) % 2).astype(np.float32)
+    img = np.stack([0.1 + 0.8 * c, 0.3 + 0.4 * c, 0.7 - 0.5 * c], axis=2)
+    assert oiio.ImageBuf(np.ascontiguousarray(img)).write(str(path), "uint8")
+    return path
+
+
+def _cube_uvs():
+    """One UV square per face (its corners in face order): (24, 2)."""
+    return [(a, b) for _ in CUBE_FACES for a, b in ((0, 0), (1, 0), (1, 1), (0, 1))]
+
+
+def _preview_material(stage, mesh, **inputs):
+    """A UsdPreviewSurface material bound to ``mesh`` with the authored ``inputs``
+    (name -> (Sdf type, value)); a value that is a path connects a UsdUVTexture of that
+    file, read at ``st``."""
+    from pxr import Sdf, UsdShade
+
+    material = UsdShade.Material.Define(stage, "/World/Looks/Mat")
+    surface = UsdShade.Shader.Define(stage, "/World/Looks/Mat/Surface")
+    surface.CreateIdAttr("UsdPreviewSurface")
+    material.CreateSurfaceOutput().ConnectToSource(surface.ConnectableAPI(), "surface")
+    reader = UsdShade.Shader.Define(stage, "/World/Looks/Mat/St")
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.Token).Set("st")
+    for name, (kind, value) in inputs.items():
+        put = surface.CreateInput(name, kind)
+        if isinstance(value, str):
+            tex = UsdShade.Shader.Define(stage, f"/World/Looks/Mat/{name}Texture")
+            tex.CreateIdAttr("UsdUVTexture")
+            tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(value)
+            tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(
+                reader.ConnectableAPI(), "result")
+            put.ConnectToSource(tex.ConnectableAPI(), "rgb")
+        else:
+            put.Set(value)
+    UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(material)
+
+
+def test_a_preview_surface_texture_renders_as_the_obj_with_its_map(tmp_path):
+    """A stage whose cube has face-varying ``st`` and a bound UsdPreviewSurface whose
+    diffuseColor is a UsdUVTexture renders the same colours as the OBJ with the same UVs
+    and an MTL ``map_Kd`` of the image (``Kd 1 1 1``), through the same camera; the
+    texture is there (the two checker colours)."""
+    from pxr import Sdf, UsdShade  # noqa: F401
+
+    png = _checker_png(tmp_path / "checker.png")
+    usd = tmp_path / "cube.usda"
+    stage, world, mesh = _cube_stage(usd, FaceVaryingLinearInterpolation="all")
+    UsdGeom.PrimvarsAPI(mesh.GetPrim()).CreatePrimvar(
+        "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying).Set(_cube_uvs())
+    _preview_material(stage, mesh, diffuseColor=(Sdf.ValueTypeNames.Color3f, "checker.png"))
+    cam = UsdGeom.Camera.Define(stage, "/World/Cam")
+    cam.AddRotateXYZOp().Set((-25.0, 35.0, 0.0))
+    cam.AddTranslateOp().Set((0.0, 0.0, 7.0))
+    stage.Save()
+    (tmp_path / "cube.mtl").write_text(f"newmtl skin\nKd 1 1 1\nmap_Kd {png.name}\n")
+    vt = "".join(f"vt {a} {b}\n" for a, b in ((0, 0), (1, 0), (1, 1), (0, 1)))
+    obj = tmp_path / "cube.obj"
+    obj.write_text("mtllib cube.mtl\nusemtl skin\n" + vt
+                   + "".join(f"v {x} {y} {z}\n" for x, y, z in CUBE_PTS)
+                   + "".join("f " + " ".join(f"{i + 1}/{k + 1}" for k, i in enumerate(f)) + "\n"
+                             for f in CUBE_FACES)
+                   + "t interpolateboundary 1/0/0 1\n")
+    from subtrace.io.usd import read_stage
+
+    content = read_stage(usd)
+    material = content.meshes[0].material
+    assert [m.slot for m in material.maps] == ["diffuse"] and material.metallic is None
+    assert material.maps[0].path == str(png)
+    c = content.cameras[0]
+    size = ["--width", "96", "--height", "72", "--quiet"]
+    assert main(["render", str(usd), "-o", str(tmp_path / "u.exr"), *size]) == 0
+    assert main(["render", str(obj), "-o", str(tmp_path / "o.exr"), *size,
+                 "--eye", *map(str, c.eye), "--target", *map(str, c.target),
+                 "--up", *map(str, c.up), "--fov", repr(c.fov_deg)]) == 0
+    u, _ = read_exr(tmp_path / "u.exr")
+    o, _ = read_exr(tmp_path / "o.exr")
+    assert np.count_nonzero(u["A"]) > 500
+    for name in ("A", "R", "G", "B"):
+        np.testing.assert_array_equal(u[name], o[name], err_msg=name)
+    lit = u["A"] > 0
+    blue = u["B"][lit] / np.maximum(u["R"][lit], 1e-6)  # (0.7 / 0.1 and 0.2 / 0.9)
+    assert (blue > 3).sum() > 50 and (blue < 0.5).sum() > 50
+
+
+def test_a_preview_surfaces_authored_inputs_only(tmp_path):
+    """Authored metallic / roughness turn reflections on (the other 0), authored colours
+    are taken (specularColor with useSpecularWorkflow 1 only); a surface that authors none
+    keeps the fallback grey and no reflection; a cube without a material has none."""
+    from pxr import Sdf
+
+    from subtrace.io.usd import SURFACE_DIFFUSE, read_stage
+
+    cases = [
+        ({"metallic": (Sdf.ValueTypeNames.Float, 1.0),
+          "diffuseColor": (Sdf.ValueTypeNames.Color3f, (0.9, 0.5, 0.1))},
+         ((0.9, 0.5, 0.1), (0.0, 0.0, 0.0), 1.0, 0.0)),
+        ({"roughness": (Sdf.ValueTypeNames.Float, 0.25),
+          "specularColor": (Sdf.ValueTypeNames.Color3f, (0.3, 0.3, 0.3))},
+         (SURFACE_DIFFUSE, (0.0, 0.0, 0.0), 0.0, 0.25)),
+        ({"useSpecularWorkflow": (Sdf.ValueTypeNames.Int, 1),
+          "specularColor": (Sdf.ValueTypeNames.Color3f, (0.3, 0.2, 0.1))},
+         (SURFACE_DIFFUSE, (0.3, 0.2, 0.1), None, None)),
+        ({}, (SURFACE_DIFFUSE, (0.0, 0.0, 0.0), None, None)),
+    ]
+    for k, (inputs, (diffuse, specular, metallic, roughness)) in enumerate(cases):
+        usd = tmp_path / f"m{k}.usda"
+        stage, _, mesh = _cube_stage(usd)
+        _preview_material(stage, mesh, **inputs)
+        stage.Save()
+        m = read_stage(usd).meshes[0].material
+        np.testing.assert_allclose(m.diffuse, diffuse, rtol=1e-6)
+        np.testing.assert_allclose(m.specular, specular, rtol=1e-6)
+        assert (m.metallic, m.roughness) == (metallic, roughness) and m.maps == ()
+    usd = tmp_path / "bare.usda"
+    stage, _, _ = _cube_stage(usd)
+    stage.Save()
+    assert read_stage(usd).meshes[0].material is None
+
+
+def test_a_preview_surface_input_out_of_range_is_one_line(tmp_path, capsys):
+    from pxr import Sdf
+
+    usd = tmp_path / "bad.usda"
+    stage, _, mesh = _cube_stage(usd)
+    _preview_material(stage, mesh, roughness=(Sdf.ValueTypeNames.Float, 1.5))
+    stage.Save()
+    assert main(["render", str(usd), "-o", str(tmp_path / "x.exr")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "bad.usda" in err and "/World/Looks/Mat" in err and \
+        "roughness" in err and "1.5" in err, err
+    assert not (tmp_path / "x.exr").exists()

@@ -17,6 +17,10 @@ attribute has any, else the default values):
   (``creaseIndices`` in chains of ``creaseLengths`` vertices, ``creaseSharpnesses`` one per
   chain or one per edge), corners (``cornerIndices`` / ``cornerSharpnesses``) and holes
   (``holeIndices``); a constant ``primvars:displayColor`` as the object's colour;
+  the ``UsdPreviewSurface`` of its bound material as the cage's material (before its
+  displayColor): its authored ``diffuseColor``, ``specularColor`` (with
+  ``useSpecularWorkflow`` 1), ``metallic`` and ``roughness``, and ``UsdUVTexture`` images
+  connected to the colours or ``normal`` (:func:`_material`);
   ``primvars:st`` as the cage's UVs (``mesh.cage.FaceVarying``): ``faceVarying`` values
   (with their indices where the primvar is indexed; unindexed, each corner is a value of its
   own, as OpenSubdiv then sees it) interpolated by the mesh's
@@ -88,6 +92,9 @@ class UsdMesh:
     uvs: np.ndarray | None = None  # (T, 2) float64: primvars:st
     face_uvs: np.ndarray | None = None  # (corners,) int32 into uvs
     uv_mode: int | None = None  # FVAR_TOKENS' numbers
+    # the bound material's UsdPreviewSurface (subtrace.io.obj.Material, _material), or None;
+    # a combined mesh's: (face_material, materials) (_combined_materials)
+    material: object = None
 
     def cage_arrays(self) -> dict:
         """Keyword arguments of ``make_cage`` (flat polygons as every edge and vertex
@@ -108,7 +115,18 @@ class UsdMesh:
                     corner_sharpness=corner_sharp, hole_faces=self.hole_faces,
                     uvs=self.uvs, face_uvs=self.face_uvs,
                     uv_mode=FVAR_ALL if self.scheme is None and self.uvs is not None
-                    else self.uv_mode)
+                    else self.uv_mode, **self._materials())
+
+    def _materials(self) -> dict:
+        """``make_cage``'s face_material and materials: the bound material on every face
+        (a combined mesh's: each mesh's own, ``face_material`` set by
+        :func:`combined_mesh`), none without one."""
+        if isinstance(self.material, tuple):  # (combined: (face_material, materials))
+            return dict(face_material=self.material[0], materials=self.material[1])
+        if self.material is None:
+            return {}
+        return dict(face_material=np.zeros(len(self.face_sizes), np.int32),
+                    materials=(self.material,))
 
 
 @dataclass
@@ -354,7 +372,21 @@ def combined_mesh(content: UsdStageContent, prim: str | None) -> UsdMesh:
     return UsdMesh("", cat("points"), cat("face_sizes"), cat("face_verts", off), ms[0].scheme,
                    ms[0].boundary, ms[0].smooth_triangles, cat("crease_edges", off),
                    cat("crease_sharpness"), cat("corner_verts", off), cat("corner_sharpness"),
-                   cat("hole_faces", foff), ms[0].color, uvs, face_uvs, mode)
+                   cat("hole_faces", foff), ms[0].color, uvs, face_uvs, mode,
+                   _combined_materials(ms))
+
+
+def _combined_materials(ms):
+    """The bound materials of meshes ``ms`` side by side: ``(face_material (F,) int32,
+    materials)`` (-1 on the faces of a mesh without one), or None where none has one."""
+    if all(m.material is None for m in ms):
+        return None
+    materials = tuple(m.material for m in ms if m.material is not None)
+    face, k = [], 0
+    for m in ms:
+        face.append(np.full(len(m.face_sizes), -1 if m.material is None else k, np.int32))
+        k += m.material is not None
+    return np.concatenate(face), materials
 
 
 def _get(attr, t, default=None):
@@ -417,7 +449,105 @@ def _mesh(mesh, matrix, t, where) -> UsdMesh:
     return UsdMesh(str(mesh.GetPath()), _transform_points(pts, matrix), counts, idx,
                    SCHEME_TOKENS[scheme_token], BOUNDARY_TOKENS[boundary_token],
                    rule == "smooth", edges, sharp, corners, corner_sharp, holes, color,
-                   uvs, face_uvs, uv_mode)
+                   uvs, face_uvs, uv_mode, _material(mesh.GetPrim(), t, where))
+
+
+# UsdPreviewSurface's fallbacks that matter here (its specification's)
+SURFACE_DIFFUSE = (0.18, 0.18, 0.18)
+# a UsdUVTexture connected to one of these inputs: the texture slot it fills
+_SURFACE_TEXTURES = {"diffuseColor": "diffuse", "specularColor": "specular",
+                     "normal": "normal"}
+
+
+def _material(prim, t, where):
+    """The :class:`subtrace.io.obj.Material` of the UsdPreviewSurface of the material bound
+    to ``prim`` (its full render binding, ``UsdShadeMaterialBindingAPI``), from its authored
+    inputs: ``diffuseColor`` (else the surface's fallback, 0.18 grey; white where a texture
+    gives it), with ``useSpecularWorkflow`` 1 ``specularColor`` as the Blinn-Phong
+    specular colour, ``metallic`` and ``roughness`` (0..1; either authored turns reflections
+    on, ``subtrace.reflect``, the other 0: a fallback such as roughness 0.5 turns nothing
+    on), and the image of a ``UsdUVTexture`` connected to ``diffuseColor``, ``specularColor``
+    or ``normal`` as that slot's texture (``inputs:file`` as the stage resolves it; sampled
+    at the mesh's ``primvars:st``). None without such a material."""
+    from pxr import UsdShade
+
+    from subtrace.io.obj import DEFAULT_SPECULAR, Material, TextureMap
+
+    bound = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()[0]
+    if not bound:
+        return None
+    shader = bound.ComputeSurfaceSource()[0]
+    if not shader or shader.GetIdAttr().Get() != "UsdPreviewSurface":
+        return None
+    at = f"{where}: material {bound.GetPath()}"
+    specular_flow = _input_value(shader, "useSpecularWorkflow", t) == 1
+    maps = []
+    for name, slot in _SURFACE_TEXTURES.items():
+        put = shader.GetInput(name)
+        file = _connected_texture(put, t, f"{at}: inputs:{name}") if put else None
+        if file is not None and (name != "specularColor" or specular_flow):
+            maps.append(TextureMap(slot, file, f"{at}: inputs:{name}"))
+    colours = {}
+    for name in ("diffuseColor", "specularColor"):
+        value = _input_value(shader, name, t)
+        if value is None:
+            continue
+        rgb = [float(x) for x in value]
+        if len(rgb) != 3 or not all(math.isfinite(x) for x in rgb):
+            raise SubtraceError(f"{at}: inputs:{name} is not a finite colour")
+        colours[name] = tuple(min(max(x, 0.0), 1.0) for x in rgb)
+    numbers = {}
+    for name in ("metallic", "roughness"):
+        value = _input_value(shader, name, t)
+        if value is None:
+            continue
+        x = float(value)
+        if not 0.0 <= x <= 1.0:
+            raise SubtraceError(f"{at}: inputs:{name} is {x:g}; expected a number from 0 "
+                                "to 1")
+        numbers[name] = x
+    textured = {m.slot for m in maps}
+    diffuse = colours.get("diffuseColor",
+                          (1.0, 1.0, 1.0) if "diffuse" in textured else SURFACE_DIFFUSE)
+    specular = colours.get("specularColor", DEFAULT_SPECULAR) if specular_flow else \
+        DEFAULT_SPECULAR
+    reflect = (numbers.get("metallic", 0.0), numbers.get("roughness", 0.0)) if numbers else \
+        (None, None)
+    return Material(str(bound.GetPath()), diffuse, specular, maps=tuple(maps),
+                    metallic=reflect[0], roughness=reflect[1])
+
+
+def _input_value(shader, name, t):
+    """The authored value of the shader's input ``name`` at ``t``, or None."""
+    put = shader.GetInput(name)
+    if not put:
+        return None
+    attr = put.GetAttr()
+    return attr.Get(t) if attr.HasAuthoredValue() else None
+
+
+def _connected_texture(put, t, where):
+    """The image file (an absolute path) of the UsdUVTexture whose output the shader input
+    ``put`` is connected to, or None where it is not connected to one."""
+    from pxr import UsdShade
+
+    if not put.HasConnectedSource():
+        return None
+    source = put.GetConnectedSources()[0][0].source
+    texture = UsdShade.Shader(source.GetPrim())
+    if not texture or texture.GetIdAttr().Get() != "UsdUVTexture":
+        return None
+    file = texture.GetInput("file")
+    asset = file.GetAttr().Get(t) if file else None
+    if asset is None:
+        raise SubtraceError(f"{where}: its UsdUVTexture {texture.GetPath()} has no inputs:file")
+    path = asset.resolvedPath or asset.path
+    if not path:
+        raise SubtraceError(f"{where}: its UsdUVTexture {texture.GetPath()} names no file")
+    if not os.path.isabs(path):  # (not found by the resolver: relative to the layer)
+        layer = file.GetAttr().GetStage().GetRootLayer().realPath
+        path = os.path.join(os.path.dirname(layer), path)
+    return path
 
 
 def _st(mesh, t, counts, idx, n_points, where):
@@ -555,7 +685,7 @@ def usd_scene_table(objects: list[dict], camera: str | None, time=None) -> dict:
         content = read_stage(obj["mesh"], time)
         for m in content.meshes:
             item = {"mesh": obj["mesh"], "prim": m.prim}
-            if m.color is not None:
+            if m.color is not None and m.material is None:  # (a bound material's first)
                 item["color"] = list(m.color)
             out.append(item)
         if first:
