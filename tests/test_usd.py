@@ -507,3 +507,41 @@ def test_a_preview_surface_input_out_of_range_is_one_line(tmp_path, capsys):
     assert err.count("\n") == 1 and "bad.usda" in err and "/World/Looks/Mat" in err and \
         "roughness" in err and "1.5" in err, err
     assert not (tmp_path / "x.exr").exists()
+
+
+def test_a_metallic_preview_surface_reflects_as_the_mtls_pbr_material(tmp_path):
+    """metallic 1, roughness 0.2 on a stage's cube: the same colours bit for bit as the OBJ
+    whose MTL says ``Kd 0.9 0.6 0.2``, ``Pm 1``, ``Pr 0.2``, through the same camera, and
+    not those of the cube without them (it reflects)."""
+    from pxr import Sdf
+
+    usd = tmp_path / "cube.usda"
+    stage, world, mesh = _cube_stage(usd)
+    _preview_material(stage, mesh, metallic=(Sdf.ValueTypeNames.Float, 1.0),
+                      roughness=(Sdf.ValueTypeNames.Float, 0.2),
+                      diffuseColor=(Sdf.ValueTypeNames.Color3f, (0.9, 0.6, 0.2)))
+    cam = UsdGeom.Camera.Define(stage, "/World/Cam")
+    cam.AddRotateXYZOp().Set((-25.0, 35.0, 0.0))
+    cam.AddTranslateOp().Set((0.0, 0.0, 7.0))
+    stage.Save()
+    from subtrace.io.usd import read_stage
+
+    c = read_stage(usd).cameras[0]
+    view = ["--width", "64", "--height", "48", "--quiet", "--eye", *map(str, c.eye),
+            "--target", *map(str, c.target), "--up", *map(str, c.up), "--fov", repr(c.fov_deg)]
+    images = {}
+    for name, mtl in (("pbr", "Kd 0.9 0.6 0.2\nPm 1\nPr 0.2\n"), ("plain", "Kd 0.9 0.6 0.2\n")):
+        (tmp_path / f"{name}.mtl").write_text(f"newmtl m\n{mtl}")
+        obj = tmp_path / f"{name}.obj"
+        obj.write_text(f"mtllib {name}.mtl\nusemtl m\n"
+                       + "".join(f"v {x} {y} {z}\n" for x, y, z in CUBE_PTS)
+                       + "".join("f " + " ".join(str(i + 1) for i in f) + "\n"
+                                 for f in CUBE_FACES) + "t interpolateboundary 1/0/0 1\n")
+        assert main(["render", str(obj), "-o", str(tmp_path / f"{name}.exr"), *view]) == 0
+        images[name] = read_exr(tmp_path / f"{name}.exr")[0]
+    assert main(["render", str(usd), "-o", str(tmp_path / "u.exr"), *view[:5]]) == 0
+    u = read_exr(tmp_path / "u.exr")[0]
+    assert np.count_nonzero(u["A"]) > 300
+    for name in ("A", "R", "G", "B"):
+        np.testing.assert_array_equal(u[name], images["pbr"][name], err_msg=name)
+    assert not np.array_equal(u["R"], images["plain"]["R"])
