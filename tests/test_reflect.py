@@ -337,3 +337,50 @@ def test_bad_mtl_values_are_one_clear_error(tmp_path, capsys, line, words):
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in err, err
     assert f"{tmp_path / 'm.mtl'}:3" in lines[0] and words in lines[0], err
+
+
+def test_a_mirror_shows_the_objects_image_texture(tmp_path):
+    """A blob with a checker image texture (one UV square per cage face) over the mirror
+    floor: where the floor shows it, the reflection has the texture's two colours where
+    the blob mirrored through the floor, rendered alone, has them (the hue of each pixel,
+    its blue over its red, on the same side of 1 at 80 % of the pixels well inside a
+    square of the lone blob's, at 96x72: the reflection's lighting and cone blur the
+    squares' edges there)."""
+    import OpenImageIO as oiio
+
+    n, k = 64, 4
+    y, x = np.mgrid[0:n, 0:n]
+    c = ((x // (n // k) + y // (n // k)) % 2).astype(np.float32)
+    img = np.stack([0.1 + 0.8 * c, 0.1 + 0.1 * c, 0.9 - 0.8 * c], axis=2)
+    assert oiio.ImageBuf(np.ascontiguousarray(img)).write(str(tmp_path / "chk.png"), "uint8")
+    scenes = []
+    for mirrored in (False, True):
+        scene = _floor_scene(tmp_path, mirrored_only=mirrored)
+        faces = CUBE.splitlines()[8:]
+        vt = "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+        (tmp_path / "cube.obj").write_text(
+            "\n".join(CUBE.splitlines()[:8]) + "\n" + vt + "".join(
+                "f " + " ".join(f"{v}/{j + 1}" for j, v in enumerate(f.split()[1:])) + "\n"
+                for f in faces))
+        obj = scene.objects[0]
+        from dataclasses import replace
+
+        from subtrace.io.obj import TextureMap
+
+        tex = TextureMap("diffuse", str(tmp_path / "chk.png"), "test")
+        scenes.append(replace(scene, objects=(replace(obj, color=None, textures=(tex,)),
+                                              *scene.objects[1:])))
+    a = render_scene(scenes[0]).channels
+    b = render_scene(scenes[1]).channels
+    floor = a["object_id"] == 1
+    seen = b["A"] > 0.0
+    inside = floor & seen & ~_grow(_grow(~seen)) & ~_grow(a["object_id"] == 0)
+    assert np.count_nonzero(inside) > 150
+    ra, ba, rb, bb = (ch[k][inside].astype(np.float64) for ch in (a, b) for k in ("R", "B"))
+    # (the pixels well inside a square of the checker in the lone blob's picture: the
+    # reflection, lit from another side and looked up over a wider cone, blurs its edges)
+    sure = np.abs(bb - rb) > 0.5 * (bb + rb)
+    assert sure.sum() > 80 and 0.2 < (bb > rb)[sure].mean() < 0.8  # (both colours)
+    assert 0.2 < (ba > ra)[sure].mean() < 0.8  # (the reflection has both too)
+    # (the blob's constant colour in the mirror would agree at about half of them)
+    assert ((ba > ra) == (bb > rb))[sure].mean() >= 0.8

@@ -167,7 +167,8 @@ def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, st
         texel[pix_patch >= offset] = -1.0
     if mirror:
         mirror = mirror_pass(scene, image, frame, W, lights, headlight_of(scene)[0], pools,
-                             nurbs, patches, offset, tol_rad, ground, trace_shadows, stats)
+                             nurbs, patches, offset, tol_rad, ground, trace_shadows, stats,
+                             textures, image.pixel_angle())
     _colour(scene, frame, W, t, normals, pix_patch, patches, planes, lights, rows,
             ground, trace_shadows, tol_rad, None, ao, ids, lit, keys, texel, mirror or None)
     if samples > 1:

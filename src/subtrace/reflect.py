@@ -61,6 +61,7 @@ from subtrace.nurbs.trace import trace_rays as nurbs_trace_rays
 from subtrace.runtime.jit import leaf_njit, nb
 from subtrace.runtime.threads import thread_count
 from subtrace.shade import CHANNELS, C_R, POINT_ROUNDING, miss_values, pixel_rays, shade
+from subtrace.textures import texture_hits
 from subtrace.trace.bezier import table_loop_flag
 from subtrace.trace.rays import trace_rays
 
@@ -86,7 +87,7 @@ def scene_reflects(scene, cages, nurbs=None) -> bool:
 
 
 def mirror_pass(scene, camera, frame, width, lights, headlight, pools, nurbs, patches, offset,
-                tol_rad, ground, trace_shadows, stats):
+                tol_rad, ground, trace_shadows, stats, textures=None, pixel_angle=0.0):
     """``reflect(t, normals, pix_patch, planes, dirs, keys, visible)``: the reflections of
     the rays from the eye (pixel centres, or ``dirs``) whose hits reflect, added to their
     colour in ``planes`` (see the module comment); ``visible``: the lamps' visibility the
@@ -94,9 +95,11 @@ def mirror_pass(scene, camera, frame, width, lights, headlight, pools, nurbs, pa
     (``lights.ray_keys``). ``camera``: the whole image's (the background's gradient);
     ``width``: the picture's (its pixels' rays);
     ``ground``: (unit up, height) or None; ``trace_shadows``: the picture's any-hit
-    shadow rays (blocked)."""
+    shadow rays (blocked); ``textures``: the patches' image textures
+    (``textures.texture_sets``; None: none), looked up at the reflected rays' hits over
+    their cones (``pixel_angle`` a pixel's angle, widened along the path from the eye)."""
     ctx = _Context(scene, camera, frame, lights, headlight, pools, nurbs, patches, offset,
-                   tol_rad, ground, trace_shadows)
+                   tol_rad, ground, trace_shadows, textures, pixel_angle)
 
     def reflect(t, normals, pix_patch, planes, dirs, keys, visible):
         t0 = time.perf_counter()
@@ -121,8 +124,9 @@ class _Context:
     """What the reflected rays need of the picture (see :func:`mirror_pass`)."""
 
     def __init__(self, scene, camera, frame, lights, headlight, pools, nurbs, patches, offset,
-                 tol_rad, ground, trace_shadows):
+                 tol_rad, ground, trace_shadows, textures=None, pixel_angle=0.0):
         r = scene.render
+        self.textures, self.pixel_angle = textures, float(pixel_angle)
         self.frame, self.lights, self.headlight = frame, lights, float(headlight)
         self.pools, self.nurbs, self.patches, self.offset = pools, nurbs, patches, offset
         self.tol_rad, self.ground, self.blocked = float(tol_rad), ground, trace_shadows
@@ -176,7 +180,7 @@ class _Context:
         src, dirs, w = src[keep], dirs[keep], w[keep] * weight[src[keep]]
         o, ray_root, ray_key = origin[src], root[src], key[src]
         start = length[src]
-        s, fn, patch = self._closest(o, dirs, start)
+        s, fn, patch, texel = self._closest(o, dirs, start)
         hit_ground, sg = self._ground(o, dirs, s)
         # misses (and a shadow catcher): what lies beyond
         miss = np.nonzero(~(s < np.inf) & ~hit_ground)[0]
@@ -198,6 +202,10 @@ class _Context:
         gc = self.ground_color if g else np.zeros(3)
         colour = np.concatenate([p.color[ph], np.repeat(gc[None], g, axis=0)])
         spec = np.concatenate([p.specular[ph], np.zeros((g, 3))])
+        if texel is not None:  # (the image textures' colours where they cover the hit)
+            tx = texel[hit].astype(np.float64)
+            colour[:len(hit)] = np.where(tx[:, :1] >= 0.0, tx[:, :3], colour[:len(hit)])
+            spec[:len(hit)] = np.where(tx[:, 3:4] >= 0.0, tx[:, 3:], spec[:len(hit)])
         shin = np.concatenate([p.shininess[ph], np.zeros(g)])
         rf = np.concatenate([p.reflect[ph], np.zeros((g, 3))])
         al = np.concatenate([p.roughness[ph] ** 2, np.zeros(g)])
@@ -226,12 +234,15 @@ class _Context:
 
     def _closest(self, origins, dirs, length):
         """The closest hits of the rays (distance (n,), inf: none; normal (n,3) towards the
-        ray's origin; patch (n,) int32, -1: none) on the cages and the free-form surfaces
-        (``length``: each ray's path from the eye, its cone)."""
+        ray's origin, turned by the bump and normal maps; patch (n,) int32, -1: none) on
+        the cages and the free-form surfaces (``length``: each ray's path from the eye, its
+        cone), and their image textures' colours (``textures.texture_hits``' texel, or
+        None)."""
         n = len(dirs)
         s = np.full(n, np.inf)
         normals = np.zeros((n, 3))
         patch = np.full(n, -1, np.int32)
+        texel = None
         if self.pools is not None and n:
             pools = self.pools
             _, hits = trace_rays(pools, origins, dirs, np.full(n, np.inf), any_hit=False)
@@ -240,12 +251,18 @@ class _Context:
             shade(self.frame, 1, hits, pools.iso.view(), self.patches, self.miss, sub, normals,
                   patch, covered, dirs, table_loop_flag(pools.table), table=pools.table)
             s = hits.t.copy()
+            # (the cone at a hit: as wide as the path from the eye makes it)
+            texel = texture_hits(self.textures, pools.table, hits._replace(t=hits.t + length),
+                                 pools.iso.view(), self.patches, self.frame, 1, dirs,
+                                 self.pixel_angle, normals, sub)
         if self.nurbs is not None and n:
             nh = nurbs_trace_rays(self.nurbs.model, self.nurbs.bvh, origins, dirs, self.tol_rad,
                                   cone=length * self.tol_rad)
             nh.patch[~(nh.t < s)] = -1
             picture_hits(self.nurbs, nh, self.frame, 0, self.offset, s, normals, patch, dirs)
-        return s, normals, patch
+            if texel is not None and self.offset:  # (a free-form surface's: none)
+                texel[patch >= self.offset] = -1.0
+        return s, normals, patch, texel
 
     def _ground(self, origins, dirs, s):
         """Which rays meet an opaque ground nearer than ``s`` (n,) bool, and where (n,)."""
