@@ -182,3 +182,30 @@ def test_the_shading_of_catmull_clark_cages_compiles_no_loop_normals(tmp_path, s
     assert "_shade_task" in names, compiled
     loop = {"_loop_normals_task", "tri_normal"} & names
     assert loop == (set() if scheme == "catmark" else {"_loop_normals_task", "tri_normal"})
+
+
+def test_the_texture_kernels_compile_with_the_types_of_a_render():
+    """The picture's warm-up compiles the image textures' kernels (the hits' tangents, the
+    linear mode's UVs, the footprints) on no hits (``warmup.compile_picture``'s
+    "textures"): in a fresh process it gives each one specialisation, and a render of
+    the textured default scene adds none."""
+    import subprocess
+    import sys
+
+    code = """
+from subtrace import textures
+from subtrace.startup import warmup
+from subtrace.data import default_scene_path
+from subtrace.io.scene import apply_overrides, load_scene
+from subtrace.render import render_scene
+warmup.compile_picture(2, ["textures"])
+ks = (textures._tangents_task, textures._linear_uv_task, textures._footprint_task)
+sigs = lambda: tuple(len(k.signatures) for k in ks)
+before = sigs()
+scene = apply_overrides(load_scene(default_scene_path()), width=48, height=27, samples=1)
+assert render_scene(scene).stats.pixels_covered > 50
+print(before, sigs())
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.split()
+    assert "".join(out) == "(1,1,1)(1,1,1)", out

@@ -279,13 +279,14 @@ def compile_shading(threads: int, loop) -> None:
         tasks.set_threads(None)
 
 
-PICTURE = ("ground", "shadows", "light", "edges", "background")  # compile_picture's kernel groups
+# compile_picture's kernel groups
+PICTURE = ("ground", "shadows", "light", "edges", "background", "textures")
 
 
 def compile_picture(threads: int, parts=PICTURE) -> None:
     """Compile the kernels that colour a picture, by group (``parts``, of :data:`PICTURE`:
     the ground with and without shadow rays, the surfaces' shadow rays, the lights, the
-    anti-aliasing's edge flags, the background), with the argument types of a render on
+    anti-aliasing's edge flags, the background, the image textures), with the argument types of a render on
     ``threads`` threads, on a few pixels of a camera looking down at the ground
     (tests/test_kernel_compiles.py checks that a render adds no signature to them). A cold render's helper compiles them all, the ground
     first; the render's own process compiles the others while it waits for the trace
@@ -325,10 +326,41 @@ def compile_picture(threads: int, parts=PICTURE) -> None:
                       lights, np.array([0.5]), np.ones((1, n), np.float32), planes)
             elif part == "edges":
                 edge_pixels(planes, width, n // width)
+            elif part == "textures":
+                _compile_textures()
             else:
                 background_pixels(np.arange(n), rows, width, planes)
     finally:
         tasks.set_threads(None)
+
+
+def _compile_textures() -> None:
+    """The image textures' kernels (``subtrace.textures``: the hits' tangents, the linear
+    mode's UVs, the footprints) with the argument types of a render, on no hits of a one-
+    quad cage with UVs."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from subtrace.mesh.cage import make_cage
+    from subtrace.subdiv.facevarying import FVAR_ALL
+    from subtrace.textures import HitFrames, cage_uvs, footprints, hit_frames
+    from subtrace.trace.pools import Pieces, hit_arrays
+
+    quad = make_cage(np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]),
+                     np.array([4]), np.array([0, 1, 2, 3]),
+                     uvs=np.array([[0.0, 0], [1, 0], [1, 1], [0, 1]]),
+                     face_uvs=np.array([0, 1, 2, 3]), uv_mode=FVAR_ALL)
+    cage_uvs(quad, np.zeros(1, np.int64), np.full((1, 2), 0.5))
+    none = np.zeros(0, np.int64)
+    no_table = SimpleNamespace(object_id=np.zeros(0, np.int32), objects=())
+    hit_frames(no_table, hit_arrays(0), Pieces(0).view(), _no_patches(), none)
+    # (hit_frames' tangents are views of one array, of layout A: two rows, as NumPy counts
+    # an empty or one-row view contiguous)
+    tangents = np.tile([1.0, 0, 0, 0, 1, 0], (2, 1))
+    footprints(HitFrames(np.zeros(2, np.int64), np.zeros((2, 2)), np.zeros((2, 2, 2)),
+                         tangents[:, :3], tangents[:, 3:]), np.ones(2),
+               np.tile([0.0, 0.0, -1.0], (2, 1)), 1e-3)
 
 
 def picture_while_tracing(helpers, threads: int) -> None:
