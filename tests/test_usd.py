@@ -123,7 +123,14 @@ def test_stage_renders_as_the_equivalent_obj(tmp_path, capsys):
                    + "t corner 1/1/0 7 3.0\nt interpolateboundary 1/0/0 1\n")
     from subtrace.io.usd import read_stage
 
-    c = read_stage(usd).cameras[0]
+    _renders_as(tmp_path, usd, obj, read_stage(usd).cameras[0],
+                ("A", "Z", "N.X", "N.Y", "N.Z", "u", "v", "patch_id"))
+
+
+def _renders_as(tmp_path, usd, obj, c, channels):
+    """Render the stage ``usd`` and the OBJ ``obj`` through the stage's camera ``c`` at
+    96x72: the stage's channels ``channels`` the same as the OBJ's bit for bit; returns the
+    stage's image."""
     size = ["--width", "96", "--height", "72", "--quiet"]
     assert main(["render", str(usd), "-o", str(tmp_path / "u.exr"), *size]) == 0
     assert main(["render", str(obj), "-o", str(tmp_path / "o.exr"), *size,
@@ -132,8 +139,9 @@ def test_stage_renders_as_the_equivalent_obj(tmp_path, capsys):
     u, _ = read_exr(tmp_path / "u.exr")
     o, _ = read_exr(tmp_path / "o.exr")
     assert np.count_nonzero(u["A"]) > 500
-    for name in ("A", "Z", "N.X", "N.Y", "N.Z", "u", "v", "patch_id"):
+    for name in channels:
         np.testing.assert_array_equal(u[name], o[name], err_msg=name)
+    return u
 
 
 def test_transform_orientation_visibility_and_purpose(tmp_path):
@@ -444,17 +452,7 @@ def test_a_preview_surface_texture_renders_as_the_obj_with_its_map(tmp_path):
     material = content.meshes[0].material
     assert [m.slot for m in material.maps] == ["diffuse"] and material.metallic is None
     assert material.maps[0].path == str(png)
-    c = content.cameras[0]
-    size = ["--width", "96", "--height", "72", "--quiet"]
-    assert main(["render", str(usd), "-o", str(tmp_path / "u.exr"), *size]) == 0
-    assert main(["render", str(obj), "-o", str(tmp_path / "o.exr"), *size,
-                 "--eye", *map(str, c.eye), "--target", *map(str, c.target),
-                 "--up", *map(str, c.up), "--fov", repr(c.fov_deg)]) == 0
-    u, _ = read_exr(tmp_path / "u.exr")
-    o, _ = read_exr(tmp_path / "o.exr")
-    assert np.count_nonzero(u["A"]) > 500
-    for name in ("A", "R", "G", "B"):
-        np.testing.assert_array_equal(u[name], o[name], err_msg=name)
+    u = _renders_as(tmp_path, usd, obj, content.cameras[0], ("A", "R", "G", "B"))
     lit = u["A"] > 0
     blue = u["B"][lit] / np.maximum(u["R"][lit], 1e-6)  # (0.7 / 0.1 and 0.2 / 0.9)
     assert (blue > 3).sum() > 50 and (blue < 0.5).sum() > 50
