@@ -489,8 +489,13 @@ def _hard_limits(level, points, options, hard, P, du, dv, rows):
     cur_level, cur_pts = level, points
     ids = hard.astype(np.int64)  # vertex ids in the current level
     owners = np.asarray(rows, dtype=np.int64)  # rows of P they fill
+    # A vertex's next one-ring (its vertex point, its edges' and faces' points) and its
+    # edges' next sharpness are made from its one-ring alone under uniform creases, so a cut
+    # of one ring refines it exactly (the same sums, so the same bits); Chaikin's sharpness
+    # averages the edges at the ring's far ends too, which need the second ring.
+    rings = 2 if options.chaikin else 1
     for _ in range(64):
-        sub, sub_to_cur, cur_to_sub, _ = extract(cur_level, ids, rings=2)
+        sub, sub_to_cur, cur_to_sub, _ = extract(cur_level, ids, rings=rings)
         sub_pts = cur_pts[sub_to_cur]
         sid = cur_to_sub[ids]
         cls = classify(sub, options)
