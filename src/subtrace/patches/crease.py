@@ -805,17 +805,25 @@ def _curve_masks(s_lo, s_hi, point):
     the curves across the crease, at their point ``point`` (1 or 2), whose sharpness is
     ``s_lo`` (point 1) or ``s_hi`` (point 2): the curve refined, its half that keeps the
     point each time, until the point is smooth, then the smooth masks there (the derivative
-    up to a positive factor). Made once for each distinct pair of sharpness (a crease's
-    cells share a few)."""
+    up to a positive factor). Made once in the process for each distinct pair of sharpness
+    and point (a cage's creases have a few; :data:`_MASKS`)."""
     lo, hi = np.asarray(s_lo, np.float32), np.asarray(s_hi, np.float32)
     key = (lo.view(np.uint32).astype(np.int64) << 32) | hi.view(np.uint32).astype(np.int64)
-    order = np.argsort(key, kind="stable")
-    first = np.ones(len(key), bool)
-    first[1:] = key[order[1:]] != key[order[:-1]]
-    which = np.empty(len(key), np.int64)  # each row's distinct pair
-    which[order] = np.cumsum(first) - 1
-    limit, slope = _pair_masks(lo[order[first]], hi[order[first]], point)
-    return limit[which], slope[which]
+    pairs, first, which = np.unique(key, return_index=True, return_inverse=True)
+    new = [k for k, p in enumerate(pairs.tolist()) if (p, point) not in _MASKS]
+    if new:
+        at = first[new]
+        limit, slope = _pair_masks(lo[at], hi[at], point)
+        for r, k in enumerate(new):
+            _MASKS[(int(pairs[k]), point)] = (limit[r], slope[r])
+    got = [_MASKS[(p, point)] for p in pairs.tolist()]
+    limit = np.array([g[0] for g in got]).reshape(-1, 4)
+    slope = np.array([g[1] for g in got]).reshape(-1, 4)
+    return limit[which.ravel()], slope[which.ravel()]
+
+
+# (the float32 bits of s_lo << 32 | those of s_hi, point 1 or 2) -> (limit (4,), slope (4,))
+_MASKS: dict = {}
 
 
 def _pair_masks(s_lo, s_hi, point):
