@@ -126,13 +126,14 @@ def _crease_faces(level, options, faces):
     s_lo, s_hi = np.zeros(m, np.float32), np.zeros(m, np.float32)
     if options.scheme != "catmark" or m == 0 or not ENABLED:
         return ok, side, s_lo, s_hi
-    # (first the quads with a semi-sharp side: the others, most of a frontier around
-    # extraordinary vertices, cost one look at their sides)
-    fo = level.face_offsets
-    sides = level.edge_sharpness[level.face_edges[np.minimum(
-        fo[faces][:, None] + np.arange(4), len(level.face_edges) - 1)]]
-    at = np.nonzero(((sides > 0) & (sides < INF_SHARP)).any(axis=1))[0]
-    at = at[_plain_corners(level, faces[at])]
+    # (first the quads with a semi-sharp side and plain corners: the others, most of a
+    # frontier around extraordinary vertices, cost one look at their sides)
+    at = np.empty(m, np.int64)
+    n = _candidates(faces, level.face_offsets, level.face_verts, level.face_edges,
+                    level.edge_sharpness, level.vert_face_offsets, level.vert_faces,
+                    level.vert_edge_offsets, level.vert_manifold, level.vert_sharpness,
+                    level.face_hole, np.float32(INF_SHARP), at)
+    at = at[:n]
     if not len(at):
         return ok, side, s_lo, s_hi
     grid = control_grids(level, faces[at]).reshape(-1, 16)
@@ -151,6 +152,43 @@ def _crease_faces(level, options, faces):
     side[at], s_lo[at], s_hi[at] = np.where(good, s, 0), np.where(good, lo, 0), np.where(
         good, hi, 0)
     return ok, side, s_lo, s_hi
+
+
+@nb.njit(cache=True, nogil=True)
+def _candidates(faces, fo, fv, fe, es, vfo, vf, veo, manifold, vsharp, hole, inf_sharp, out):
+    """The rows of ``faces`` that may be crease patches, into ``out``; returns their count:
+    quads with a semi-sharp side whose corners are inside the mesh (one fan of four faces
+    and four edges), without vertex sharpness, every face around them a quad and not a hole
+    (the maps' conditions on the corners, module doc), in one pass."""
+    n = 0
+    for r in range(len(faces)):
+        f = faces[r]
+        if fo[f + 1] - fo[f] != 4:
+            continue
+        semi = False
+        for k in range(4):
+            x = es[fe[fo[f] + k]]
+            if x > 0 and x < inf_sharp:
+                semi = True
+        if not semi:
+            continue
+        good = True
+        for k in range(4):
+            v = fv[fo[f] + k]
+            if (not manifold[v] or vfo[v + 1] - vfo[v] != 4 or veo[v + 1] - veo[v] != 4
+                    or vsharp[v] != 0):
+                good = False
+                break
+            for a in range(vfo[v], vfo[v + 1]):
+                g = vf[a]
+                if fo[g + 1] - fo[g] != 4 or hole[g]:
+                    good = False
+            if not good:
+                break
+        if good:
+            out[n] = r
+            n += 1
+    return n
 
 
 # each face of a level classified once (the depth choice, the build, the edge sampling and
@@ -195,39 +233,47 @@ def crease_where(level, options, faces, levels):
     return ok, side, s_lo, s_hi
 
 
-def _plain_corners(level, faces):
-    """(m,) bool: quads whose corners are inside the mesh (one fan of four faces and four
-    edges), without vertex sharpness, every face around them a quad and not a hole."""
-    fo, vfo, veo = level.face_offsets, level.vert_face_offsets, level.vert_edge_offsets
-    quad = np.diff(fo)[faces] == 4
-    corners = level.face_verts[np.minimum(fo[faces][:, None] + np.arange(4),
-                                          len(level.face_verts) - 1)]
-    good = level.vert_manifold[corners] & (vfo[corners + 1] - vfo[corners] == 4)
-    good &= (veo[corners + 1] - veo[corners] == 4) & (level.vert_sharpness[corners] == 0)
-    ok = quad & good.all(axis=1)
-    c = corners[ok]
-    around = level.vert_faces[vfo[c][..., None] + np.arange(4)]  # (n,4,4)
-    plain = (np.diff(fo)[around] == 4) & ~level.face_hole[around]
-    ok[ok] = plain.reshape(len(c), 16).all(axis=1)
-    return ok
-
-
 def _line_sharpness(level, grid):
     """(n,4,3) float32: the sharpness of the edges of each line (``LINES``) of the grids
     ``grid`` (n,16) (point ids, ``[u][v]`` flat), found among the edges of the line's corner
     end of each edge (every edge of a line has one end at a corner of the patch)."""
-    veo, ev = level.vert_edge_offsets, level.edge_verts
-    pos = LINES[..., 0] * 4 + LINES[..., 1]  # (4,3,2) flat grid positions
-    # the end at a corner: the second of the first edge, the first of the others
-    at_corner = np.where(np.arange(3)[None, :, None] == 0, pos[:, :, 1:2], pos[:, :, 0:1])[..., 0]
-    other = np.where(np.arange(3)[None, :] == 0, pos[:, :, 0], pos[:, :, 1])
-    c, o = grid[:, at_corner], grid[:, other]  # (n,4,3)
-    edges = level.vert_edges[veo[c][..., None] + np.arange(4)]  # (n,4,3,4)
-    ends = ev[edges]
-    far = np.where(ends[..., 0] == c[..., None], ends[..., 1], ends[..., 0])
-    hit = np.argmax(far == o[..., None], axis=-1)
-    e = np.take_along_axis(edges, hit[..., None], axis=-1)[..., 0]
-    return level.edge_sharpness[e]
+    out = np.empty((len(grid), 4, 3), np.float32)
+    _lines(np.ascontiguousarray(grid, dtype=np.int64), _AT_CORNER, _OTHER,
+           level.vert_edge_offsets, level.vert_edges, level.edge_verts, level.edge_sharpness,
+           out)
+    return out
+
+
+def _line_ends():
+    """(4,3) ``at_corner``, ``other``: the flat grid positions of each line edge's end at
+    a patch corner (the second of the first edge, the first of the others) and its other
+    end."""
+    pos = LINES[..., 0] * 4 + LINES[..., 1]  # (4,3,2)
+    first = np.arange(3)[None, :] == 0
+    return (np.ascontiguousarray(np.where(first, pos[:, :, 1], pos[:, :, 0])),
+            np.ascontiguousarray(np.where(first, pos[:, :, 0], pos[:, :, 1])))
+
+
+_AT_CORNER, _OTHER = _line_ends()
+
+
+@nb.njit(cache=True, nogil=True)
+def _lines(grid, at_corner, other, veo, ve, ev, es, out):
+    """:func:`_line_sharpness` into ``out``: each line edge found among the edges of its
+    end at a corner by its other end."""
+    for r in range(len(grid)):
+        for k in range(4):
+            for j in range(3):
+                c = grid[r, at_corner[k, j]]
+                o = grid[r, other[k, j]]
+                e = ve[veo[c]]  # (a corner's edges always hold it: the grid's own)
+                for a in range(veo[c], veo[c + 1]):
+                    g = ve[a]
+                    far = ev[g, 1] if ev[g, 0] == c else ev[g, 0]
+                    if far == o:
+                        e = g
+                        break
+                out[r, k, j] = es[e]
 
 
 def _chaikin_even(level, grid, creased, sharp):
