@@ -28,6 +28,7 @@ import numpy as np
 
 from subtrace import config
 from subtrace.patches.bspline import regular_mask
+from subtrace.runtime.jit import nb
 from subtrace.subdiv.limit import extract, limit_points
 from subtrace.subdiv.refine import refine_level, refine_points
 from subtrace.subdiv.topology import Level, Options, compact as _compact, gather as _gather
@@ -128,11 +129,26 @@ def build_grids(level: Level, points: np.ndarray, options: Options, faces, depth
 
 
 def unit_normals(du, dv):
-    """The unit normals ``du x dv`` (..., 3) of limit tangents, NaN where undefined."""
-    nrm = np.cross(du, dv)
-    length = np.linalg.norm(nrm, axis=-1, keepdims=True)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(length > 0, nrm / length, np.nan)
+    """The unit normals ``du x dv`` (..., 3) of limit tangents, NaN where undefined (in one
+    kernel: ``np.cross``, the norm and the division, each one NumPy pass, in this order)."""
+    du = np.ascontiguousarray(du, dtype=np.float64)
+    dv = np.ascontiguousarray(np.broadcast_to(dv, du.shape), dtype=np.float64)
+    out = np.empty(du.shape)
+    _unit_normals(du.reshape(-1, 3), dv.reshape(-1, 3), out.reshape(-1, 3))
+    return out
+
+
+@nb.njit(cache=True, nogil=True)
+def _unit_normals(du, dv, out):
+    for r in range(len(du)):
+        x = du[r, 1] * dv[r, 2] - du[r, 2] * dv[r, 1]
+        y = du[r, 2] * dv[r, 0] - du[r, 0] * dv[r, 2]
+        z = du[r, 0] * dv[r, 1] - du[r, 1] * dv[r, 0]
+        length = np.sqrt(x * x + y * y + z * z)
+        if length > 0:
+            out[r, 0], out[r, 1], out[r, 2] = x / length, y / length, z / length
+        else:
+            out[r, 0] = out[r, 1] = out[r, 2] = np.nan
 
 
 def cut_around(level: Level, points: np.ndarray, start: np.ndarray, m: int):

@@ -25,6 +25,8 @@ span the true tangent plane, oriented from the topology alone (see :func:`_eigen
 
 from __future__ import annotations
 
+import functools
+
 import math
 
 import numpy as np
@@ -184,14 +186,7 @@ def _closed_form(level, points, options, cls, which, dest, P, du, dv):
     """Closed-form limits of vertices ``which`` of ``level`` into rows ``dest`` of P, du, dv."""
     is_loop = options.scheme == "loop"
     max_val = int(np.max(np.diff(level.vert_edge_offsets), initial=0)) + 2
-    tw = np.zeros((max_val + 1, max_val), dtype=np.float64)  # smooth tangent edge weights
-    fw = np.zeros((max_val + 1, max_val), dtype=np.float64)  # smooth tangent diagonal weights
-    for n in range(3, max_val + 1):
-        scheme = loop if is_loop else catmark
-        e, f = scheme.smooth_tangent_weights(n)
-        tw[n, :n] = e
-        if f is not None:
-            fw[n, :n] = f
+    tw, fw = _tangent_tables(is_loop, max_val)
     which = np.ascontiguousarray(which, dtype=np.int64)
     # (None: no crease vertex among them, whose rule the kernel then compiles without)
     crease = True if np.any(np.asarray(cls)[which] == CREASE) else None
@@ -217,6 +212,23 @@ def _closed_form(level, points, options, cls, which, dest, P, du, dv):
         du,
         dv,
     )
+
+
+@functools.lru_cache(maxsize=16)
+def _tangent_tables(is_loop: bool, max_val: int):
+    """(edge, diagonal) weights (max_val + 1, max_val) float64 of the smooth limit tangent
+    of each valence from 3 to ``max_val`` (row n, its first n columns), made once a process
+    for each scheme and largest valence (shared: the kernels only read them; left writable,
+    as Numba types a read-only array apart and would compile the kernel again)."""
+    tw = np.zeros((max_val + 1, max_val), dtype=np.float64)  # smooth tangent edge weights
+    fw = np.zeros((max_val + 1, max_val), dtype=np.float64)  # smooth tangent diagonal weights
+    scheme = loop if is_loop else catmark
+    for n in range(3, max_val + 1):
+        e, f = scheme.smooth_tangent_weights(n)
+        tw[n, :n] = e
+        if f is not None:
+            fw[n, :n] = f
+    return tw, fw
 
 
 def smooth_edge_tangents(level: Level, points: np.ndarray, options: Options, verts, slots):
