@@ -46,6 +46,44 @@ def small_scene(meshes, eye, target, width=64, height=48, fov=60.0, tolerance=1.
     )
 
 
+def lathe_cage(path, n=8):
+    """A closed lathe cage modelled as hard surfaces are: ``n`` segments around, triangle
+    fans at the poles (extraordinary vertices of valence ``n``), three rings of semi-sharp
+    creases of sharpness 7.2, 6.9 (fractional) and 8 (the first beside the top pole's
+    triangles), and a crease of sharpness 6 down one meridian from the first ring to the
+    third, crossing the second (a junction of four sharp edges) and ending on both (where
+    sharpness changes along a line). Returns the path."""
+    import numpy as np
+
+    profile = [(0.0, 2.0), (0.6, 1.9), (0.8, 1.4), (0.55, 1.0), (0.7, 0.4), (0.75, 0.0)]
+    rings = profile[1:]  # (radius, height) of the rings; the poles on the axis
+    lines = ["v 0 2.05 0"]
+    for r, y in rings:
+        for k in range(n):
+            a = 2.0 * np.pi * k / n
+            lines.append(f"v {r * np.cos(a):.6f} {y:.6f} {r * np.sin(a):.6f}")
+    lines.append("v 0 -0.05 0")
+    top, bottom = 1, 2 + len(rings) * n
+
+    def at(ring, k):
+        return 2 + ring * n + k % n
+
+    for k in range(n):
+        lines.append(f"f {top} {at(0, k + 1)} {at(0, k)}")
+        for ring in range(len(rings) - 1):
+            lines.append(f"f {at(ring, k)} {at(ring, k + 1)} {at(ring + 1, k + 1)} "
+                         f"{at(ring + 1, k)}")
+        last = len(rings) - 1
+        lines.append(f"f {bottom} {at(last, k)} {at(last, k + 1)}")
+    for ring, s in ((0, 7.2), (2, 6.9), (3, 8.0)):
+        for k in range(n):
+            lines.append(f"t crease 2/1/0 {at(ring, k) - 1} {at(ring, k + 1) - 1} {s}")
+    for ring in range(3):
+        lines.append(f"t crease 2/1/0 {at(ring, 0) - 1} {at(ring + 1, 0) - 1} 6.0")
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
 # The start of a program for :func:`run_fresh`: from then on the list ``compiled`` receives
 # the name (``module.qualname``) of every function Numba compiles (not what it loads)
 COMPILE_LISTENER = """

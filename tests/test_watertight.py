@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from shared_data import MODELS, SHAPES, check_watertight, small_scene
+from shared_data import MODELS, SHAPES, check_watertight, lathe_cage, small_scene
 
 import subtrace
 from subtrace.patches.table import build_patch_table
@@ -79,49 +79,13 @@ def test_watertight_from_inside_creased_box(tmp_path, tolerance, monkeypatch):
     check_watertight(mesh, (0.5 * n, 0.45 * n, 0.55 * n), tolerance, monkeypatch)
 
 
-def _lathe_cage(path, n=8):
-    """A closed lathe cage modelled as hard surfaces are: ``n`` segments around, triangle
-    fans at the poles (extraordinary vertices of valence ``n``), three rings of semi-sharp
-    creases of sharpness 7.2, 6.9 (fractional) and 8 (the first beside the top pole's
-    triangles), and a crease of sharpness 6 down one meridian from the first ring to the
-    third, crossing the second (a junction of four sharp edges) and ending on both (where
-    sharpness changes along a line). Returns the path."""
-    profile = [(0.0, 2.0), (0.6, 1.9), (0.8, 1.4), (0.55, 1.0), (0.7, 0.4), (0.75, 0.0)]
-    rings = profile[1:]  # (radius, height) of the rings; the poles on the axis
-    lines = ["v 0 2.05 0"]
-    for r, y in rings:
-        for k in range(n):
-            a = 2.0 * np.pi * k / n
-            lines.append(f"v {r * np.cos(a):.6f} {y:.6f} {r * np.sin(a):.6f}")
-    lines.append("v 0 -0.05 0")
-    top, bottom = 1, 2 + len(rings) * n
-
-    def at(ring, k):
-        return 2 + ring * n + k % n
-
-    for k in range(n):
-        lines.append(f"f {top} {at(0, k + 1)} {at(0, k)}")
-        for ring in range(len(rings) - 1):
-            lines.append(f"f {at(ring, k)} {at(ring, k + 1)} {at(ring + 1, k + 1)} "
-                         f"{at(ring + 1, k)}")
-        last = len(rings) - 1
-        lines.append(f"f {bottom} {at(last, k)} {at(last, k + 1)}")
-    for ring, s in ((0, 7.2), (2, 6.9), (3, 8.0)):
-        for k in range(n):
-            lines.append(f"t crease 2/1/0 {at(ring, k) - 1} {at(ring, k + 1) - 1} {s}")
-    for ring in range(3):
-        lines.append(f"t crease 2/1/0 {at(ring, 0) - 1} {at(ring + 1, 0) - 1} 6.0")
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
 @pytest.mark.parametrize("tolerance", [4.0, 1.0, 0.25])
 def test_watertight_from_inside_a_hard_surface_cage(tmp_path, tolerance, monkeypatch):
-    """The same inside a lathe cage with creases of sharpness 6 to 8 (``_lathe_cage``): its
-    patches go through every path of the isolation (the crease maps, the stencils at the
+    """The same inside a lathe cage with creases of sharpness 6 to 8
+    (``shared_data.lathe_cage``): its patches go through every path of the isolation (the crease maps, the stencils at the
     poles, local topology at the crease ends, the junction and beside the poles' triangles),
     and their sides are sampled and snapped across all of them."""
-    mesh = _lathe_cage(tmp_path / "lathe.obj")
+    mesh = lathe_cage(tmp_path / "lathe.obj")
     cage = subtrace.load_cage(mesh)
     from subtrace.patches.crease import crease_faces
 
