@@ -186,9 +186,9 @@ def test_the_shading_of_catmull_clark_cages_compiles_no_loop_normals(tmp_path, s
 
 def test_the_texture_kernels_compile_with_the_types_of_a_render():
     """The picture's warm-up compiles the image textures' kernels (the hits' tangents, the
-    linear mode's UVs, the footprints) on no hits (``warmup.compile_picture``'s
-    "textures"): in a fresh process it gives each one specialisation, and a render of
-    the textured default scene adds none."""
+    linear mode's UVs, the footprints, the MIP-map filter) on no hits and a one-texel
+    texture (``warmup.compile_picture``'s "textures"): in a fresh process it gives each
+    one specialisation, and a render of the textured default scene adds none."""
     import subprocess
     import sys
 
@@ -199,7 +199,8 @@ from subtrace.data import default_scene_path
 from subtrace.io.scene import apply_overrides, load_scene
 from subtrace.render import render_scene
 warmup.compile_picture(2, ["textures"])
-ks = (textures._tangents_task, textures._linear_uv_task, textures._footprint_task)
+ks = (textures._tangents_task, textures._linear_uv_task, textures._footprint_task,
+      textures._lookup_task)
 sigs = lambda: tuple(len(k.signatures) for k in ks)
 before = sigs()
 scene = apply_overrides(load_scene(default_scene_path()), width=48, height=27, samples=1)
@@ -208,4 +209,4 @@ print(before, sigs())
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.split()
-    assert "".join(out) == "(1,1,1)(1,1,1)", out
+    assert "".join(out) == "(1,1,1,1)(1,1,1,1)", out

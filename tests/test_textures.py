@@ -348,3 +348,101 @@ def test_textures_are_made_once_into_the_cache(tmp_path, monkeypatch):
     _checker(src, 128)
     c = prepare(tmap)
     assert c.file != a.file and (c.width, c.height) == (128, 128)
+
+
+# --------------------------------------------------------------------------------------
+# the MIP-map filter against OpenImageIO's TextureSystem
+# --------------------------------------------------------------------------------------
+
+
+def _texture_system_lookup(ts, prep, st, major, minor, channels):
+    """The lookups of ``textures.lookup`` made one by one through OpenImageIO's
+    TextureSystem ``ts`` (its default MIP mode, bilinear, the map's wrap, -s / -o and
+    channel, ``gray_to_rgb`` on): the reference the Numba filter follows."""
+    import OpenImageIO as oiio
+
+    from subtrace.textures import ANISOTROPY
+
+    tmap = prep.map
+    sc = np.asarray(tmap.scale)
+    s = st[:, 0] * sc[0] + tmap.offset[0]
+    t = 1.0 - (st[:, 1] * sc[1] + tmap.offset[1])  # (OpenImageIO's t: down from the top)
+    a, b = major * sc, minor * sc
+    opt = oiio.TextureOpt()
+    opt.swrap = opt.twrap = oiio.Wrap.Clamp if tmap.clamp else oiio.Wrap.Periodic
+    opt.anisotropic = ANISOTROPY
+    opt.interpmode = oiio.InterpMode.Bilinear
+    opt.firstchannel = tmap.channel if tmap.slot == "bump" else 0
+    rows = zip(s.tolist(), t.tolist(), a[:, 0].tolist(), a[:, 1].tolist(), b[:, 0].tolist(),
+               b[:, 1].tolist())
+    return np.array([ts.texture(prep.file, opt, s0, t0, a0, -a1, b0, -b1, channels)
+                     for s0, t0, a0, a1, b0, b1 in rows], np.float32).reshape(len(st), channels)
+
+
+def _random_footprints(rng, m):
+    """``m`` UVs in [-0.5, 1.5]^2 (both wraps at work) and footprints of any orientation, a
+    minor axis from 1e-5 (far under a texel: near) to 2 (past the whole texture: far),
+    an aspect from 1 to 316 (past ANISOTROPY) and axes up to 27 degrees off orthogonal."""
+    st = rng.uniform(-0.5, 1.5, (m, 2))
+    ang = rng.uniform(0.0, np.pi, m)
+    size = 10.0 ** rng.uniform(-5.0, 0.3, m)
+    aspect = 10.0 ** rng.uniform(0.0, 2.5, m)
+    skew = rng.uniform(-0.5, 0.5, m)
+    d = np.stack([np.cos(ang), np.sin(ang)], 1)
+    major = d * (size * aspect)[:, None]
+    minor = (np.stack([-d[:, 1], d[:, 0]], 1) + skew[:, None] * d) * size[:, None]
+    return st, major, minor
+
+
+@pytest.mark.parametrize("case", ["checker", "checker-clamp", "spot", "bump-channel", "grey"])
+def test_lookup_matches_the_texture_system(tmp_path, case):
+    """``textures.lookup`` (the Numba MIP-map filter) against OpenImageIO's TextureSystem
+    on the same tiled file over 20,000 random UVs and footprints (near and far, isotropic
+    to 316:1, both wraps, -s / -o, a bump map's channel, a grey map's one channel spread
+    over R, G, B): the mean absolute difference under 1e-4 of the texture's range (0..1)
+    and the largest under 1 % of it (measured: means 0.3-1.1e-6, largest 0.6-3e-4; what
+    is left is the TextureSystem's float32 arithmetic and its fast exp and atan2)."""
+    import OpenImageIO as oiio
+
+    from subtrace.data import sample_cage_path
+    from subtrace.io.obj import TextureMap
+    from subtrace.textures import lookup, prepare
+
+    rng = np.random.default_rng(11)
+    check = str(_checker(tmp_path / "check.png"))
+    tmap, channels = {
+        "checker": (TextureMap("diffuse", check, "t", scale=(1.5, 0.75), offset=(0.1, -0.3)),
+                    3),
+        "checker-clamp": (TextureMap("diffuse", check, "t", clamp=True), 3),
+        "spot": (TextureMap("diffuse", str(sample_cage_path().parent / "spot_texture.png"),
+                            "t"), 3),
+        "bump-channel": (TextureMap("bump", str(_image(
+            tmp_path / "rgb.exr", rng.uniform(0, 1, (64, 48, 3)).astype(np.float32))), "t",
+            channel=1), 1),
+        "grey": (TextureMap("diffuse", str(_image(
+            tmp_path / "grey.png", rng.uniform(0, 1, (40, 40, 1)).astype(np.float32))), "t"),
+            3),
+    }[case]
+    prep = prepare(tmap)
+    st, major, minor = _random_footprints(rng, 20000)
+    got = lookup(prep, st, major, minor, channels)
+    ts = oiio.TextureSystem(shared=False)
+    ts.attribute("gray_to_rgb", 1)
+    want = _texture_system_lookup(ts, prep, st, major, minor, channels)
+    err = np.abs(got.astype(np.float64) - want)
+    assert err.mean() < 1e-4 and err.max() < 1e-2, (err.mean(), err.max())
+    if case == "grey":
+        np.testing.assert_array_equal(got[:, 1], got[:, 0])
+        np.testing.assert_array_equal(got[:, 2], got[:, 0])
+
+
+def test_lookups_are_the_same_on_any_thread_count():
+    """The filter runs on the render's threads, each ray's texel from its own inputs: the
+    textured default scene renders the same bit for bit with 1 and 2 threads."""
+    from subtrace.data import default_scene_path
+    from subtrace.io.scene import apply_overrides, load_scene
+
+    scene = apply_overrides(load_scene(default_scene_path()), width=160, height=90)
+    one, two = (render_scene(scene, threads=n).channels for n in (1, 2))
+    for c in one:
+        np.testing.assert_array_equal(one[c], two[c], err_msg=c)

@@ -1,12 +1,13 @@
 """Image textures at the hits: a material's maps (MTL `map_Kd`, `map_Ks`, `map_Bump` /
-`bump`, `norm`; a scene object's ``*_texture`` keys) looked up through OpenImageIO's
-TextureSystem at each hit's exact UV, filtered over the hit's ray-cone footprint.
+`bump`, `norm`; a scene object's ``*_texture`` keys) looked up at each hit's exact UV,
+filtered over the hit's ray-cone footprint from the texture's MIP levels.
 
 * Each image is made once into a tiled, MIP-mapped texture (OpenImageIO's make_texture)
   in the kernel cache's base folder (``runtime.jit.cache_base()/textures``), under a name
   keyed by the file's path, modification time and size; colour maps (diffuse, specular)
   of 8- or 16-bit images are decoded from sRGB to linear there, float images and the
-  bump and normal maps are taken as they are. A file that is missing or that OpenImageIO
+  bump and normal maps are taken as they are. Its MIP levels are read from that file once
+  per process, as float32 (:func:`pyramid`). A file that is missing or that OpenImageIO
   cannot read is one warning naming it and where it was given (the MTL or scene line),
   and the material keeps its constant colour.
 * A hit's UV is the cage's exact face-varying limit UV at its ptex point
@@ -18,8 +19,12 @@ TextureSystem at each hit's exact UV, filtered over the hit's ray-cone footprint
   stretch). Its two axes are taken to the ptex parameter through the surface's tangents
   dP/du, dP/dv at the hit (:func:`_tangents_task`: the exact derivatives of a Bezier
   piece's or a Loop net's polynomial, a cell's bilinear ones) and to UV space through the
-  UV Jacobian: they are the derivatives OpenImageIO's anisotropic MIP-map filter takes.
-  Far texture is averaged over its footprint (no shimmer), near texture stays sharp.
+  UV Jacobian. A Numba kernel filters the MIP levels over them as OpenImageIO's
+  TextureSystem's anisotropic MIP-map filter does (:func:`_lookup_task`: the level from
+  the minor axis, up to ``ANISOTROPY`` bilinear probes along the major one, two levels
+  mixed), on the render's threads; tests/test_textures.py checks it against the
+  TextureSystem. Far texture is averaged over its footprint (no shimmer), near texture
+  stays sharp.
 * Lighting takes per ray the diffuse colour (the map, times the material's Kd where the
   MTL says so, or the scene's ``color`` where given) and the specular colour alike
   (``shade.light``'s ``texel``); bump maps (a height of ``bump_scale`` per unit of the
@@ -35,9 +40,9 @@ Array layout: ``texel`` (n,6) float32, per ray: diffuse R, G, B then specular R,
 from __future__ import annotations
 
 import hashlib
-import itertools
 import math
 import os
+import threading
 import warnings
 from dataclasses import replace
 from pathlib import Path
@@ -176,8 +181,11 @@ def prepare(tmap) -> Prepared | None:
             _warn_once((tmap.where, tmap.path), fail.format(_oiio_error(oiio)))
             return None
         os.replace(tmp, out)
-    spec = _system().imagespec(str(out))
-    return Prepared(tmap, str(out), spec.width, spec.height, spec.nchannels)
+    pyr = pyramid(str(out))
+    if pyr is None:
+        _warn_once((tmap.where, tmap.path), fail.format(_oiio_error(oiio)))
+        return None
+    return Prepared(tmap, str(out), int(pyr.levels[0, 1]), int(pyr.levels[0, 2]), pyr.channels)
 
 
 def _oiio_error(oiio) -> str:
@@ -185,18 +193,57 @@ def _oiio_error(oiio) -> str:
     return message[0] if message else "OpenImageIO cannot read it"
 
 
-_SYSTEM = []  # the process's one TextureSystem
+class Pyramid(NamedTuple):
+    """A texture's MIP levels as its tiled file holds them, in float32 (8- and 16-bit
+    files' values over 255 / 65535, as OpenImageIO's TextureSystem reads them): ``texels``
+    (N,) every level's texels one after the other, each level row by row from the top
+    (OpenImageIO's t = 0) and channels interleaved; ``levels`` (L,3) int64 each level's
+    first texel's index in ``texels``, its width and height, the finest first;
+    ``channels`` the file's channel count."""
+
+    texels: np.ndarray
+    levels: np.ndarray
+    channels: int
 
 
-def _system():
+_PYRAMIDS: dict = {}  # tiled file -> its Pyramid, read once per process
+_PYRAMIDS_LOCK = threading.Lock()
+
+
+def pyramid(file: str) -> Pyramid | None:
+    """The MIP levels of the tiled MIP-mapped ``file`` (:func:`prepare`'s), read once per
+    process (OpenImageIO's ImageInput, each MIP level of subimage 0); None where OpenImageIO
+    cannot read it."""
+    with _PYRAMIDS_LOCK:
+        if file not in _PYRAMIDS:
+            _PYRAMIDS[file] = _read_pyramid(file)
+        return _PYRAMIDS[file]
+
+
+def _read_pyramid(file: str) -> Pyramid | None:
     import OpenImageIO as oiio
 
-    if not _SYSTEM:
-        ts = oiio.TextureSystem(shared=True)
-        ts.attribute("max_memory_MB", 512.0)
-        ts.attribute("gray_to_rgb", 1)  # (a grey colour map lights all three channels)
-        _SYSTEM.append(ts)
-    return _SYSTEM[0]
+    inp = oiio.ImageInput.open(file)
+    if inp is None:
+        return None
+    try:
+        chunks, levels, channels = [], [], inp.spec().nchannels
+        start, m = 0, 0
+        while inp.seek_subimage(0, m):
+            spec = inp.spec()
+            pixels = inp.read_image(0, m, 0, channels, oiio.FLOAT)
+            if pixels is None or spec.nchannels != channels:
+                return None
+            pixels = np.asarray(pixels, np.float32).reshape(spec.height, spec.width, channels)
+            chunks.append(pixels.ravel())
+            levels.append((start, spec.width, spec.height))
+            start += pixels.size
+            m += 1
+    finally:
+        inp.close()
+    if not levels:
+        return None
+    return Pyramid(np.concatenate(chunks), np.array(levels, np.int64), channels)
 
 
 # --------------------------------------------------------------------------------------
@@ -410,27 +457,172 @@ def _unit(a):
 def lookup(prep, st, major, minor, channels):
     """(m, channels) float32: texture ``prep`` filtered over the footprints (``major``,
     ``minor``: UV axes (m,2)) at the UVs ``st`` (m,2) (OBJ's v up; the map's -s, -o and
-    -clamp applied), through OpenImageIO's TextureSystem."""
-    import OpenImageIO as oiio
+    -clamp applied), from its MIP levels (:func:`pyramid`) by :func:`filter_levels`."""
+    return filter_levels(pyramid(prep.file), prep.map, st, major, minor, channels)
 
-    tmap = prep.map
-    sc = np.asarray(tmap.scale)
-    s = st[:, 0] * sc[0] + tmap.offset[0]
-    t = 1.0 - (st[:, 1] * sc[1] + tmap.offset[1])  # (OpenImageIO's t: down from the top)
-    a, b = major * sc, minor * sc
-    opt = oiio.TextureOpt()
-    wrap = oiio.Wrap.Clamp if tmap.clamp else oiio.Wrap.Periodic
-    opt.swrap = opt.twrap = wrap
-    opt.anisotropic = ANISOTROPY
-    opt.interpmode = oiio.InterpMode.Bilinear  # (half the time of the smart bicubic)
-    opt.firstchannel = tmap.channel if tmap.slot == "bump" else 0
-    tex = _system().texture
-    f = prep.file
-    out = [tex(f, opt, s0, t0, a0, -a1, b0, -b1, channels) for s0, t0, a0, a1, b0, b1 in
-           zip(s.tolist(), t.tolist(), a[:, 0].tolist(), a[:, 1].tolist(), b[:, 0].tolist(),
-               b[:, 1].tolist())]
-    flat = np.fromiter(itertools.chain.from_iterable(out), np.float32, len(st) * channels)
-    return flat.reshape(len(st), channels)
+
+def filter_levels(pyr, tmap, st, major, minor, channels):
+    """:func:`lookup` on the MIP levels ``pyr`` (a :class:`Pyramid`) of map ``tmap``: the
+    footprints' axes and the UVs taken by the map's -s and -o to OpenImageIO's (s, t) (t
+    down from the top), then :func:`_lookup_task` on the render's threads. The channels
+    read are ``tmap.channel`` on for a bump map, 0 on for the others; past the file's
+    channels they are 0, but a grey file's one channel fills R, G and B (OpenImageIO's
+    ``gray_to_rgb``)."""
+    first = tmap.channel if tmap.slot == "bump" else 0
+    gray = pyr.channels == 1 and first == 0 and channels >= 3
+    chan = np.array([0 if gray and c < 3 else (first + c if first + c < pyr.channels else -1)
+                     for c in range(channels)], np.int64)
+    xform = np.array([tmap.scale[0], tmap.scale[1], tmap.offset[0], tmap.offset[1]],
+                     np.float64)
+    out = np.empty((len(st), channels), np.float32)
+    c64 = lambda a: np.ascontiguousarray(a, np.float64)  # noqa: E731
+    run_tasks(_lookup_task, pyr.texels, pyr.levels, np.int64(pyr.channels), chan, c64(st),
+              c64(major), c64(minor), xform, not tmap.clamp, np.int64(ANISOTROPY), out)
+    return out
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _lookup_task(task, n_tasks, texels, levels, nch, chan, st, major, minor, xform,
+                 periodic, anisotropy, out):
+    """The filtered texture of rays ``task, task + n_tasks, ...`` into ``out`` (m, channels),
+    as OpenImageIO's TextureSystem filters a MIP-mapped texture (its default MIP mode,
+    bilinear within a level, ``conservative_filter``):
+
+    * the footprint's axes (``major``, ``minor``: UV, the map's -s / -o applied here, t
+      down) give the ellipse they span (the lengths ``lmaj`` >= ``lmin`` of its principal
+      axes, from its quadratic form as in Greene's and Heckbert's EWA; for orthogonal axes
+      their own lengths), ``anisotropy`` the most its aspect may be: past it the major
+      axis is the mean of itself and ``anisotropy`` times the minor one, and the minor that
+      over ``anisotropy`` (a little blur across, a little aliasing along);
+    * the MIP level: the first whose smaller side makes the minor axis at most a texel
+      (``f = lmin * min(width, height) <= 1``) and the one before it, mixed
+      ``2 f - 1`` : ``2 - 2 f`` (clamped); the finest alone where even it is too coarse
+      (then a minor axis under half its texel takes the aspect from the major axis alone),
+      the coarsest alone where it still is too fine;
+    * along the major axis ``max(1, int(2 aspect - 1))`` bilinear probes at ``p_i (lmaj -
+      lmin)`` from the centre, ``p_i = 2 (i + 0.5) / n - 1``, weighted ``exp(-2 x_i^2)``,
+      ``x_i = p_i lmaj / (2 (lmaj - lmin))`` and normalised (1 or 2 probes: equal weights);
+    * a bilinear probe at (s, t) reads the texels around (s width - 1/2, t height - 1/2),
+      their indices repeated periodically (``periodic``) or clamped to the edge.
+
+    Each ray's texel depends on its own inputs alone: any thread count gives the same
+    bits. A ray whose UV is not finite gets 0."""
+    n_levels = len(levels)
+    nout = len(chan)
+    acc = np.zeros(nout)
+    pos = np.zeros(2 * anisotropy)
+    wts = np.zeros(2 * anisotropy)
+    for k in range(task, len(st), n_tasks):
+        s = st[k, 0] * xform[0] + xform[2]
+        t = 1.0 - (st[k, 1] * xform[1] + xform[3])
+        for c in range(nout):
+            out[k, c] = 0.0
+        if not (math.isfinite(s) and math.isfinite(t)):
+            continue
+        dsdx, dtdx = major[k, 0] * xform[0], -major[k, 1] * xform[1]
+        dsdy, dtdy = minor[k, 0] * xform[0], -minor[k, 1] * xform[1]
+        # (degenerate axes: a tiny one orthogonal to the other, or a tiny round footprint)
+        eps = 1e-8
+        dx2, dy2 = dsdx * dsdx + dtdx * dtdx, dsdy * dsdy + dtdy * dtdy
+        if not dx2 >= eps * eps:
+            if not dy2 >= eps * eps:
+                dsdx, dtdx, dsdy, dtdy = eps, 0.0, 0.0, eps
+            else:
+                f = eps / math.sqrt(dy2)
+                dsdx, dtdx = dtdy * f, -dsdy * f
+        elif not dy2 >= eps * eps:
+            f = eps / math.sqrt(dx2)
+            dsdy, dtdy = -dtdx * f, dsdx * f
+        # the ellipse's half-axes and the major one's direction
+        qa = dtdx * dtdx + dtdy * dtdy
+        qb = -2.0 * (dsdx * dtdx + dsdy * dtdy)
+        qc = dsdx * dsdx + dsdy * dsdy
+        root = math.hypot(qa - qc, qb)
+        big, small = 0.5 * (qa + qc + root), 0.5 * (qa + qc - root)
+        lmaj = min(math.sqrt(big) if big > 0.0 else 0.0, 1000.0)
+        lmin = min(math.sqrt(small) if small > 0.0 else 0.0, 1000.0)
+        theta = 0.5 * math.atan2(qb, qa - qc) + 0.5 * math.pi
+        aspect = lmaj / lmin
+        if not aspect >= 1.0:
+            aspect = 1.0
+        aspect = min(aspect, 1e6)
+        if aspect > anisotropy:
+            aspect = np.float64(anisotropy)
+            lmaj = 0.5 * (lmaj + lmin * anisotropy)
+            lmin = lmaj / anisotropy
+        # the two MIP levels and their weights
+        lev0, lev1, blend = -1, -1, 0.0
+        for m in range(n_levels):
+            f = lmin * min(levels[m, 1], levels[m, 2])
+            if f <= 1.0:
+                lev0, lev1, blend = m - 1, m, min(max(2.0 * f - 1.0, 0.0), 1.0)
+                break
+        if lev1 < 0:
+            lev0 = lev1 = n_levels - 1
+            blend = 0.0
+        elif lev0 < 0:
+            lev0 = lev1 = 0
+            blend = 0.0
+            r = max(levels[0, 1], levels[0, 2])
+            if lmin * r < 0.5:
+                aspect = min(max(lmaj * r * 2.0, 1.0), np.float64(anisotropy))
+        # the probes along the major axis
+        span = 2.0 * (lmaj - lmin)
+        sm, tm = math.cos(theta) * span * 0.5, math.sin(theta) * span * 0.5
+        n = max(1, int(2.0 * aspect - 1.0))
+        if n == 1:
+            pos[0], wts[0] = 0.0, 1.0
+        elif n == 2:
+            pos[0], pos[1], wts[0], wts[1] = -0.5, 0.5, 0.5, 0.5
+        else:
+            scale = lmaj / span
+            total = 0.0
+            for i in range(n):
+                p = 2.0 * (i + 0.5) / n - 1.0
+                x = p * scale
+                pos[i], wts[i] = p, math.exp(-2.0 * x * x)
+                total += wts[i]
+            for i in range(n):
+                wts[i] /= total
+        for c in range(nout):
+            acc[c] = 0.0
+        for side in range(2):
+            lev = lev0 if side == 0 else lev1
+            weight = 1.0 - blend if side == 0 else blend
+            if weight == 0.0:
+                continue
+            base, w, h = levels[lev, 0], levels[lev, 1], levels[lev, 2]
+            for i in range(n):
+                _bilinear(texels, base, w, h, nch, chan, s + pos[i] * sm, t + pos[i] * tm,
+                          periodic, weight * wts[i], acc)
+        for c in range(nout):
+            out[k, c] = acc[c]
+
+
+@leaf_njit
+def _bilinear(texels, base, w, h, nch, chan, s, t, periodic, weight, acc):
+    """Add ``weight`` times the bilinear lookup at (s, t) of the level at ``base`` (w x h
+    texels of ``nch`` channels) to ``acc`` (channels ``chan``, -1: none)."""
+    x, y = s * w - 0.5, t * h - 0.5
+    fx, fy = math.floor(x), math.floor(y)
+    ax, ay = x - fx, y - fy
+    i0, j0 = np.int64(fx), np.int64(fy)
+    i1, j1 = i0 + 1, j0 + 1
+    if periodic:
+        i0, i1, j0, j1 = i0 % w, i1 % w, j0 % h, j1 % h
+    else:
+        i0, i1 = min(max(i0, 0), w - 1), min(max(i1, 0), w - 1)
+        j0, j1 = min(max(j0, 0), h - 1), min(max(j1, 0), h - 1)
+    r0, r1 = base + j0 * w * nch, base + j1 * w * nch
+    a00, a01 = r0 + i0 * nch, r0 + i1 * nch
+    a10, a11 = r1 + i0 * nch, r1 + i1 * nch
+    for c in range(len(chan)):
+        q = chan[c]
+        if q < 0:
+            continue
+        top = texels[a00 + q] + ax * (texels[a01 + q] - texels[a00 + q])
+        bottom = texels[a10 + q] + ax * (texels[a11 + q] - texels[a10 + q])
+        acc[c] += weight * (top + ay * (bottom - top))
 
 
 # --------------------------------------------------------------------------------------

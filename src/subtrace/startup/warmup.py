@@ -336,15 +336,17 @@ def compile_picture(threads: int, parts=PICTURE) -> None:
 
 def _compile_textures() -> None:
     """The image textures' kernels (``subtrace.textures``: the hits' tangents, the linear
-    mode's UVs, the footprints) with the argument types of a render, on no hits of a one-
-    quad cage with UVs."""
+    mode's UVs, the footprints, the MIP-map filter) with the argument types of a render, on
+    no hits of a one-quad cage with UVs and one lookup of a one-texel texture."""
     from types import SimpleNamespace
 
     import numpy as np
 
+    from subtrace.io.obj import TextureMap
     from subtrace.mesh.cage import make_cage
     from subtrace.subdiv.facevarying import FVAR_ALL
-    from subtrace.textures import HitFrames, cage_uvs, footprints, hit_frames
+    from subtrace.textures import (HitFrames, Pyramid, cage_uvs, filter_levels, footprints,
+                                   hit_frames)
     from subtrace.trace.pools import Pieces, hit_arrays
 
     quad = make_cage(np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]),
@@ -361,6 +363,9 @@ def _compile_textures() -> None:
     footprints(HitFrames(np.zeros(2, np.int64), np.zeros((2, 2)), np.zeros((2, 2, 2)),
                          tangents[:, :3], tangents[:, 3:]), np.ones(2),
                np.tile([0.0, 0.0, -1.0], (2, 1)), 1e-3)
+    texel = Pyramid(np.ones(3, np.float32), np.array([[0, 1, 1]], np.int64), 3)
+    filter_levels(texel, TextureMap("diffuse", "", "warm-up"), np.full((1, 2), 0.5),
+                  np.full((1, 2), 0.1), np.full((1, 2), 0.1), 3)
 
 
 def picture_while_tracing(helpers, threads: int) -> None:
