@@ -54,7 +54,7 @@ from subtrace.errors import SubtraceWarning
 from subtrace.geometry.kinds import BEZIER, CELL, LOOP_CELL, TRI
 from subtrace.patches.basis import bez_derivatives
 from subtrace.patches.evaluate import ptex_starts
-from subtrace.runtime.jit import cache_base, leaf_njit, nb
+from subtrace.runtime.jit import cache_base, leaf_njit, llvm_inline_njit, nb
 from subtrace.runtime.threads import run_tasks
 from subtrace.shade import C_N, own_ptex, pixel_rays
 from subtrace.subdiv.facevarying import FVAR_ALL
@@ -537,11 +537,20 @@ def _lookup_task(task, n_tasks, texels, levels, nch, chan, st, major, minor, xfo
         qa = dtdx * dtdx + dtdy * dtdy
         qb = -2.0 * (dsdx * dtdx + dsdy * dtdy)
         qc = dsdx * dsdx + dsdy * dsdy
-        root = math.hypot(qa - qc, qb)
+        root = math.sqrt((qa - qc) * (qa - qc) + qb * qb)
         big, small = 0.5 * (qa + qc + root), 0.5 * (qa + qc - root)
         lmaj = min(math.sqrt(big) if big > 0.0 else 0.0, 1000.0)
         lmin = min(math.sqrt(small) if small > 0.0 else 0.0, 1000.0)
-        theta = 0.5 * math.atan2(qb, qa - qc) + 0.5 * math.pi
+        # (the major axis's direction, up to its sign, which neither the probes nor their
+        # weights see: the angle atan2(qb, qa - qc) / 2 + pi / 2 by the half-angle rules)
+        if root > 0.0:
+            cos2 = (qa - qc) / root
+            dir_s = math.sqrt(max(0.5 - 0.5 * cos2, 0.0))
+            dir_t = math.sqrt(max(0.5 + 0.5 * cos2, 0.0))
+            if qb > 0.0:
+                dir_s = -dir_s
+        else:
+            dir_s, dir_t = 0.0, 1.0
         aspect = lmaj / lmin
         if not aspect >= 1.0:
             aspect = 1.0
@@ -568,20 +577,27 @@ def _lookup_task(task, n_tasks, texels, levels, nch, chan, st, major, minor, xfo
                 aspect = min(max(lmaj * r * 2.0, 1.0), np.float64(anisotropy))
         # the probes along the major axis
         span = 2.0 * (lmaj - lmin)
-        sm, tm = math.cos(theta) * span * 0.5, math.sin(theta) * span * 0.5
+        sm, tm = dir_s * span * 0.5, dir_t * span * 0.5
         n = max(1, int(2.0 * aspect - 1.0))
         if n == 1:
             pos[0], wts[0] = 0.0, 1.0
         elif n == 2:
             pos[0], pos[1], wts[0], wts[1] = -0.5, 0.5, 0.5, 0.5
         else:
+            # (exp(-2 x_i^2) over that of the first probe: x_i is linear in i, so each
+            # ratio to the one before is the one before's times a constant)
             scale = lmaj / span
-            total = 0.0
+            step = 2.0 / n
+            g = -2.0 * scale * scale * step
+            p = step * 0.5 - 1.0
+            ratio = math.exp(g * (2.0 * p + step))
+            turn = math.exp(2.0 * g * step)
+            wt, total = 1.0, 0.0
             for i in range(n):
-                p = 2.0 * (i + 0.5) / n - 1.0
-                x = p * scale
-                pos[i], wts[i] = p, math.exp(-2.0 * x * x)
-                total += wts[i]
+                pos[i], wts[i] = p + i * step, wt
+                total += wt
+                wt *= ratio
+                ratio *= turn
             for i in range(n):
                 wts[i] /= total
         for c in range(nout):
@@ -599,7 +615,7 @@ def _lookup_task(task, n_tasks, texels, levels, nch, chan, st, major, minor, xfo
             out[k, c] = acc[c]
 
 
-@leaf_njit
+@llvm_inline_njit
 def _bilinear(texels, base, w, h, nch, chan, s, t, periodic, weight, acc):
     """Add ``weight`` times the bilinear lookup at (s, t) of the level at ``base`` (w x h
     texels of ``nch`` channels) to ``acc`` (channels ``chan``, -1: none)."""
@@ -608,8 +624,11 @@ def _bilinear(texels, base, w, h, nch, chan, s, t, periodic, weight, acc):
     ax, ay = x - fx, y - fy
     i0, j0 = np.int64(fx), np.int64(fy)
     i1, j1 = i0 + 1, j0 + 1
-    if periodic:
-        i0, i1, j0, j1 = i0 % w, i1 % w, j0 % h, j1 % h
+    if periodic:  # (a power of two's remainder by a mask: no division)
+        i0 = i0 & (w - 1) if w & (w - 1) == 0 else i0 % w
+        j0 = j0 & (h - 1) if h & (h - 1) == 0 else j0 % h
+        i1 = i0 + 1 if i0 + 1 < w else 0
+        j1 = j0 + 1 if j0 + 1 < h else 0
     else:
         i0, i1 = min(max(i0, 0), w - 1), min(max(i1, 0), w - 1)
         j0, j1 = min(max(j0, 0), h - 1), min(max(j1, 0), h - 1)
