@@ -68,7 +68,7 @@ LAYERS = (
     ("accel",),  # the cull asks patches for shells and lights for shadow rays' reach
     ("trace",),
     ("shade",),
-    ("textures",),  # image textures at the hits: UVs, footprints, OpenImageIO lookups
+    ("textures",),  # image textures at the hits: UVs, footprints, MIP-map lookups
     ("nurbs",),  # the NURBS pass shades its hits with shade's kernels
     ("reflect",),  # reflected rays: traced (trace, nurbs) and shaded (shade) for the picture
     ("picture",),
