@@ -12,8 +12,11 @@ One untimed render of each fills the caches; then ``--rounds`` rounds run every 
 scene) as a fresh process, the trees in turn forwards in even rounds and backwards in odd
 ones, textured first in even rounds (the machine's speed drifts: alternating spreads it).
 
-The table: medians of the renderer's own ``time_total`` (its EXR header) and of the whole
-command's wall time, textured and untextured, and their ratio.
+The table: per tree, medians of the renderer's own ``time_total`` (its EXR header), of
+the whole command's wall time and of its CPU time (user and system, every thread: on a
+machine shared with other work it drifts less than wall time), textured and untextured,
+with the ratio of the medians and, in brackets, the median of the rounds' own ratios (the
+two renders of a round run back to back).
 """
 
 from __future__ import annotations
@@ -48,9 +51,9 @@ def untextured_copy(tree: Path, out: Path) -> Path:
     return out
 
 
-def render(tree: Path, cache: Path, scene: Path | None, out: Path) -> tuple[float, float]:
+def render(tree: Path, cache: Path, scene: Path | None, out: Path) -> tuple:
     """One ``subtrace render [scene] -o out`` from ``tree``: (wall s, the header's
-    ``subtrace:time_total``)."""
+    ``subtrace:time_total``, the process's CPU s: user and system, all threads)."""
     import OpenImageIO as oiio
 
     env = dict(os.environ, SUBTRACE_CACHE_DIR=str(cache), NUMBA_CACHE_DIR=str(cache),
@@ -59,14 +62,17 @@ def render(tree: Path, cache: Path, scene: Path | None, out: Path) -> tuple[floa
     cmd = [sys.executable, "-m", "subtrace.cli", "render", *([str(scene)] if scene else []),
            "-o", str(out), "--quiet"]
     t0 = time.perf_counter()
-    proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
-    if proc.returncode != 0:
-        raise SystemExit(f"texture_cost: {' '.join(cmd)} failed:\n{proc.stderr}")
+    err = proc.stderr.read().decode(errors="replace")
+    proc.stderr.close()
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise SystemExit(f"texture_cost: {' '.join(cmd)} failed:\n{err}")
     inp = oiio.ImageInput.open(str(out))
     total = float(inp.spec().getattribute("subtrace:time_total"))
     inp.close()
-    return wall, total
+    return wall, total, usage.ru_utime + usage.ru_stime
 
 
 def parse_tree(text: str) -> tuple[str, Path, Path]:
@@ -111,15 +117,16 @@ def main(argv=None) -> int:
     print(f"the default scene textured against untextured: medians of {args.rounds} "
           f"alternated rounds, {time.strftime('%Y-%m-%d %H:%M')}, {os.cpu_count()} CPUs, "
           f"load {load_before} before, {load()} after\n")
-    print("| tree | render textured | render untextured | ratio | command textured | "
-          "command untextured | ratio |")
-    print("|---|---:|---:|---:|---:|---:|---:|")
+    print("| tree | what | textured | untextured | ratio (rounds' median) |")
+    print("|---|---|---:|---:|---:|")
     for name, tree, _ in trees:
-        med = {kind: [statistics.median(x[i] for x in runs[(name, kind)]) for i in (0, 1)]
-               for kind in ("textured", "untextured")}
-        (wt, rt), (wu, ru) = med["textured"], med["untextured"]
-        print(f"| {name} ({tree}) | {rt:.3f} s | {ru:.3f} s | {rt / ru:.2f}x | {wt:.3f} s | "
-              f"{wu:.3f} s | {wt / wu:.2f}x |")
+        tex, plain = runs[(name, "textured")], runs[(name, "untextured")]
+        for i, what in ((1, "render (time_total)"), (0, "command, wall"), (2, "command, CPU")):
+            a = statistics.median(x[i] for x in tex)
+            b = statistics.median(x[i] for x in plain)
+            paired = statistics.median(x[i] / y[i] for x, y in zip(tex, plain))
+            print(f"| {name} ({tree}) | {what} | {a:.3f} s | {b:.3f} s | {a / b:.2f}x "
+                  f"({paired:.2f}x) |")
     return 0
 
 
