@@ -1,0 +1,205 @@
+"""One level of Catmull-Clark refinement of a patch's 4x4 control grid under any pattern
+of semi-sharp edges, in a kernel (a building block, not yet used by the isolation).
+
+A quad whose four corners are inside the mesh, of valence 4 with quads around them,
+refines from its 4x4 control grid alone: its four children's control grids are a window
+each of the inner 5x5 points of the child level's 7x7 lattice over the grid, and those are
+the corners' vertex points (their one-rings are in the grid), the edge points of the edges
+with both faces in the grid and the nine face points. Every rule that makes them reads the
+sharpness of the grid's 24 edges and its corners' vertex sharpness only, and (with uniform
+creases, not Chaikin's) so does the children's sharpness. So whatever the creases do along
+and across the patch (a crease that ends inside it, two that cross, sharpness changing
+along a line), the patch's descendants follow from its grid and those 28 numbers level by
+level, as ``patches/crease.py``'s maps do for one crease of constant sharpness along a
+side, without the local topology that ``patches/isolate.py`` builds for the rest.
+
+The rules are subtrace's own (``subdiv/refine.py`` and ``subdiv/creases.py``'s helpers:
+the crease and smooth edge points and their blend, the smooth, crease and corner vertex
+rules and the fractional weight between a parent's and a child's rule); the sums run in
+another order than the topological refinement's, so the points equal its to rounding
+(tests/test_gridrefine.py compares them).
+
+The grid: point (i, j) at row ``4 i + j`` (``i`` along ``u``), as
+``bspline.control_grids`` lays it. Its edges: ``H(i, j)`` from (i, j) to (i + 1, j) in
+rows 0 .. 11 (``i * 4 + j``, i < 3), ``V(i, j)`` from (i, j) to (i, j + 1) in rows
+12 .. 23 (``12 + i * 3 + j``, j < 3). The corners' vertex sharpness: (1,1), (2,1),
+(2,2), (1,2) (the patch's corners 0 .. 3).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from subtrace.runtime.jit import nb
+from subtrace.subdiv.creases import (
+    F0, RULE_CORNER, RULE_CREASE, RULE_DART, RULE_SMOOTH, decrement, fractional_weight,
+    rule_of,
+)
+
+# the children in the patch's corner order, each as the lower-left lattice point of its
+# 4x4 window of the inner lattice (child q at corner q of the patch)
+CHILD_AT = np.array([[1, 1], [2, 1], [2, 2], [1, 2]], dtype=np.int64)
+# the patch's corners (grid points) in corner order
+CORNERS = np.array([[1, 1], [2, 1], [2, 2], [1, 2]], dtype=np.int64)
+
+# the smooth rules at valence 4 (catmark.smooth_vertex_weights(4), smooth_edge_weights for
+# an edge between two quads): vertex, each edge end, each face point; endpoint, face point
+_VW, _EW, _FW = (4.0 - 2.0) / 4.0, 1.0 / 16.0, 1.0 / 16.0
+_EDGE_VW, _EDGE_FW = 0.25, 0.25
+
+
+@nb.njit(cache=True, inline="always")
+def _h(i, j):
+    return i * 4 + j
+
+
+@nb.njit(cache=True, inline="always")
+def _v(i, j):
+    return 12 + i * 3 + j
+
+
+@nb.njit(cache=True, nogil=True)
+def refine_grids(P, es, vs, out_P, out_es, out_vs):
+    """Refine the grids ``P`` (m,16,3) with edge sharpness ``es`` (m,24) float32 and corner
+    vertex sharpness ``vs`` (m,4) float32 once: the children's grids into ``out_P``
+    (m,4,16,3), their edges' sharpness into ``out_es`` (m,4,24) and their corners' into
+    ``out_vs`` (m,4,4) (module doc's layouts; child q at the patch's corner q, in the
+    patch's orientation)."""
+    L = np.empty((7, 7, 3))
+    for r in range(len(P)):
+        _lattice(P[r], es[r], vs[r], L)
+        for q in range(4):
+            a0, b0 = CHILD_AT[q, 0], CHILD_AT[q, 1]
+            for i in range(4):
+                for j in range(4):
+                    for c in range(3):
+                        out_P[r, q, 4 * i + j, c] = L[a0 + i, b0 + j, c]
+            _child_sharpness(es[r], vs[r], a0, b0, out_es[r, q], out_vs[r, q])
+
+
+@nb.njit(cache=True)
+def _edge_sharpness(es, a, b, c, d):
+    """The sharpness of the lattice edge from (a, b) to (c, d) (neighbours: one of the two
+    steps is 1), a half of a grid edge (its decrement) or inside a face (0)."""
+    if a == c:  # along v
+        a, b, d = a, min(b, d), max(b, d)
+        if a % 2 == 1:  # between a face point and an edge point
+            return F0
+        return decrement(es[_v(a // 2, b // 2)])
+    a, c = min(a, c), max(a, c)
+    if b % 2 == 1:
+        return F0
+    return decrement(es[_h(a // 2, b // 2)])
+
+
+@nb.njit(cache=True)
+def _child_sharpness(es, vs, a0, b0, out_es, out_vs):
+    """The 24 edges' and 4 corners' sharpness of the child whose window of the lattice
+    starts at (a0, b0)."""
+    for i in range(3):
+        for j in range(4):
+            out_es[_h(i, j)] = _edge_sharpness(es, a0 + i, b0 + j, a0 + i + 1, b0 + j)
+    for i in range(4):
+        for j in range(3):
+            out_es[_v(i, j)] = _edge_sharpness(es, a0 + i, b0 + j, a0 + i, b0 + j + 1)
+    for k in range(4):
+        a, b = a0 + CORNERS[k, 0], b0 + CORNERS[k, 1]
+        s = F0
+        if a % 2 == 0 and b % 2 == 0:  # a vertex point: of a patch corner, the inner ones
+            for m in range(4):
+                if 2 * CORNERS[m, 0] == a and 2 * CORNERS[m, 1] == b:
+                    s = decrement(vs[m])
+        out_vs[k] = s
+
+
+@nb.njit(cache=True)
+def _lattice(G, es, vs, L):
+    """The inner 5x5 points (rows and columns 1 .. 5) of the child lattice ``L`` (7,7,3)
+    over grid ``G`` (16,3): face points, then edge points, then the corners' vertex
+    points."""
+    for i in range(3):
+        for j in range(3):
+            for c in range(3):
+                L[2 * i + 1, 2 * j + 1, c] = 0.25 * (G[4 * i + j, c] + G[4 * i + 4 + j, c]
+                                                     + G[4 * i + 5 + j, c] + G[4 * i + j + 1, c])
+    # edge points of the edges with both faces in the grid
+    for i in range(3):
+        for j in range(1, 3):  # H(i, j): faces (i, j - 1) and (i, j)
+            _edge_point(G, L, es[_h(i, j)], 4 * i + j, 4 * i + 4 + j, 2 * i + 1, 2 * j - 1,
+                        2 * i + 1, 2 * j + 1, 2 * i + 1, 2 * j)
+    for i in range(1, 3):
+        for j in range(3):  # V(i, j): faces (i - 1, j) and (i, j)
+            _edge_point(G, L, es[_v(i, j)], 4 * i + j, 4 * i + j + 1, 2 * i - 1, 2 * j + 1,
+                        2 * i + 1, 2 * j + 1, 2 * i, 2 * j + 1)
+    for k in range(4):
+        _vertex_point(G, L, es, vs[k], CORNERS[k, 0], CORNERS[k, 1])
+
+
+@nb.njit(cache=True)
+def _edge_point(G, L, s, p0, p1, fa, fb, ga, gb, a, b):
+    """The point of the edge from grid point ``p0`` to ``p1`` of sharpness ``s``, whose
+    faces' points are ``L[fa, fb]`` and ``L[ga, gb]``, into ``L[a, b]``."""
+    if s > F0 and decrement(s) > F0:
+        for c in range(3):
+            L[a, b, c] = 0.5 * (G[p0, c] + G[p1, c])
+        return
+    vw, fw = _EDGE_VW, _EDGE_FW
+    if s > F0:
+        pw = np.float64(s)
+        vw = pw * 0.5 + (1.0 - pw) * vw
+        fw = fw * (1.0 - pw)
+    for c in range(3):
+        L[a, b, c] = vw * (G[p0, c] + G[p1, c]) + fw * L[fa, fb, c] + fw * L[ga, gb, c]
+
+
+@nb.njit(cache=True)
+def _vertex_point(G, L, es, vsharp, i, j):
+    """The vertex point of grid point (i, j) (a corner of the patch: its four faces and
+    edges in the grid) into ``L[2 i, 2 j]``."""
+    # its edges: +u, +v, -u, -v, their far ends, and the faces between them
+    edges = np.empty(4, np.float32)
+    edges[0], edges[1] = es[_h(i, j)], es[_v(i, j)]
+    edges[2], edges[3] = es[_h(i - 1, j)], es[_v(i, j - 1)]
+    far = (4 * (i + 1) + j, 4 * i + j + 1, 4 * (i - 1) + j, 4 * i + j - 1)
+    child = np.empty(4, np.float32)
+    for k in range(4):
+        child[k] = decrement(edges[k])
+    c_vert = decrement(vsharp)
+    p_rule = rule_of(vsharp, edges)
+    c_rule = p_rule
+    if p_rule != RULE_SMOOTH and p_rule != RULE_DART:
+        c_rule = rule_of(c_vert, child)
+    pw = 1.0
+    if c_rule != p_rule:
+        pw = np.float64(fractional_weight(vsharp, c_vert, edges, child, False))
+    v = 4 * i + j
+    out = np.zeros(3)
+    for which in range(2):
+        rule = p_rule if which == 0 else c_rule
+        w = pw if which == 0 else 1.0 - pw
+        if which == 1 and c_rule == p_rule:
+            break
+        if rule == RULE_SMOOTH or rule == RULE_DART:
+            for c in range(3):
+                acc = _VW * G[v, c]
+                for k in range(4):
+                    acc += _EW * G[far[k], c]
+                for da in (-1, 1):
+                    for db in (-1, 1):
+                        acc += _FW * L[2 * i + da, 2 * j + db, c]
+                out[c] += w * acc
+        elif rule == RULE_CREASE:
+            sharp = edges if which == 0 else child
+            k0 = 0
+            while sharp[k0] <= F0:
+                k0 += 1
+            k1 = 3
+            while sharp[k1] <= F0:
+                k1 -= 1
+            for c in range(3):
+                out[c] += w * (0.75 * G[v, c] + 0.125 * (G[far[k0], c] + G[far[k1], c]))
+        else:
+            for c in range(3):
+                out[c] += w * G[v, c]
+    for c in range(3):
+        L[2 * i, 2 * j, c] = out[c]
