@@ -57,3 +57,26 @@ def timed(argv: list[str], cwd: Path, env: dict, script: str) -> float:
         tail = (proc.stderr.strip().splitlines() or ["no message"])[-1]
         raise SystemExit(f"{script}: {' '.join(argv)} failed ({proc.returncode}): {tail}")
     return seconds
+
+
+def render_from_tree(tree: Path, cache: Path, args: list[str], script: str):
+    """One ``subtrace render ARGS --quiet`` run from source tree ``tree`` (its ``src`` on
+    the path) with kernel cache ``cache``, bytecode cached as an installed package's;
+    returns (wall s, the process's ``os.wait4`` resource usage: peak RSS, CPU s of every
+    thread). Stops ``script`` (its name, for the message) with the command's error output
+    if the render fails."""
+    # (SUBTRACE_CACHE_DIR too: where it is set, subtrace takes it before NUMBA_CACHE_DIR, and
+    # two trees would share one cache)
+    env = dict(os.environ, SUBTRACE_CACHE_DIR=str(cache), NUMBA_CACHE_DIR=str(cache),
+               PYTHONPATH=str(tree / "src"))
+    env.pop("PYTHONDONTWRITEBYTECODE", None)  # as installed: bytecode cached
+    cmd = [sys.executable, "-m", "subtrace.cli", "render", *args, "--quiet"]
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    err = proc.stderr.read().decode(errors="replace")
+    proc.stderr.close()
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise SystemExit(f"{script}: {tree.name}: {' '.join(cmd)} failed:\n{err}")
+    return wall, usage

@@ -34,31 +34,16 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
-from _common import REPO, bench_cache, split_extra  # benchmarks/ is on sys.path when run as a script
+from _common import REPO, bench_cache, render_from_tree, split_extra  # benchmarks/ is on sys.path when run as a script
 
 TIMES = ("total", "refine", "trace", "shade", "shadows", "ao")
 
 
 def run_render(tree: Path, cache: Path, scene: str, out: Path, options: list[str]):
     """One ``subtrace render`` of ``scene`` from source tree ``tree``; (wall s, peak MiB)."""
-    # (SUBTRACE_CACHE_DIR too: where it is set, subtrace takes it before NUMBA_CACHE_DIR, and
-    # both sides would share one cache)
-    env = dict(os.environ, SUBTRACE_CACHE_DIR=str(cache), NUMBA_CACHE_DIR=str(cache),
-               PYTHONPATH=str(tree / "src"))
-    env.pop("PYTHONDONTWRITEBYTECODE", None)  # as installed: bytecode cached
-    cmd = [sys.executable, "-m", "subtrace.cli", "render", scene, "-o", str(out), "--quiet",
-           *options]
-    t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(proc.pid, 0)
-    wall = time.perf_counter() - t0
-    err = proc.stderr.read().decode(errors="replace")
-    proc.stderr.close()
-    if os.waitstatus_to_exitcode(status) != 0:
-        raise SystemExit(f"ab: {tree.name}: render {scene} failed:\n{err}")
+    wall, usage = render_from_tree(tree, cache, [scene, "-o", str(out), *options], "ab")
     return wall, usage.ru_maxrss / 1024.0
 
 

@@ -25,13 +25,12 @@ import argparse
 import hashlib
 import os
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from _common import REPO, bench_cache, load  # benchmarks/ is on sys.path when run as a script
+from _common import REPO, bench_cache, load, render_from_tree  # benchmarks/ is on sys.path when run as a script
 
 
 def untextured_copy(tree: Path, out: Path) -> Path:
@@ -56,19 +55,8 @@ def render(tree: Path, cache: Path, scene: Path | None, out: Path) -> tuple:
     ``subtrace:time_total``, the process's CPU s: user and system, all threads)."""
     import OpenImageIO as oiio
 
-    env = dict(os.environ, SUBTRACE_CACHE_DIR=str(cache), NUMBA_CACHE_DIR=str(cache),
-               PYTHONPATH=str(tree / "src"))
-    env.pop("PYTHONDONTWRITEBYTECODE", None)  # as installed: bytecode cached
-    cmd = [sys.executable, "-m", "subtrace.cli", "render", *([str(scene)] if scene else []),
-           "-o", str(out), "--quiet"]
-    t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(proc.pid, 0)
-    wall = time.perf_counter() - t0
-    err = proc.stderr.read().decode(errors="replace")
-    proc.stderr.close()
-    if os.waitstatus_to_exitcode(status) != 0:
-        raise SystemExit(f"texture_cost: {' '.join(cmd)} failed:\n{err}")
+    wall, usage = render_from_tree(tree, cache, [*([str(scene)] if scene else []), "-o",
+                                                 str(out)], "texture_cost")
     inp = oiio.ImageInput.open(str(out))
     total = float(inp.spec().getattribute("subtrace:time_total"))
     inp.close()
