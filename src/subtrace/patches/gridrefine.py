@@ -17,7 +17,9 @@ The rules are subtrace's own (``subdiv/refine.py`` and ``subdiv/creases.py``'s h
 the crease and smooth edge points and their blend, the smooth, crease and corner vertex
 rules and the fractional weight between a parent's and a child's rule); the sums run in
 another order than the topological refinement's, so the points equal its to rounding
-(tests/test_gridrefine.py compares them).
+(tests/test_gridrefine.py compares them): float64's, but float32's at a vertex whose rule
+changes, as its fractional weight is a float32 mean of its edges' sharpness (as
+OpenSubdiv's), summed in the order each visits the edges.
 
 The grid: point (i, j) at row ``4 i + j`` (``i`` along ``u``), as
 ``bspline.control_grids`` lays it. Its edges: ``H(i, j)`` from (i, j) to (i + 1, j) in
