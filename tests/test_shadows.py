@@ -2,7 +2,9 @@
 shadow's outline is the projection of the limit surface along the light, checked against
 the line / surface intersection module (an independent code path); a convex closed
 surface never shadows itself (no speckle); shadow rays build the patches no primary ray
-reached; and the image does not depend on the thread count."""
+reached; the image does not depend on the thread count; and ``shade.visibility_at``, the
+shadow rays from any points (the reflected rays' hits too), answers as the geometry of an
+analytic ball does, and is what the pixels' shadows are."""
 
 from __future__ import annotations
 
@@ -171,3 +173,167 @@ def test_a_cage_with_no_patch_renders_its_ground_without_hanging(tmp_path):
     channels, attrs = read_exr(out)
     assert attrs["subtrace:patches"] == 0
     assert not (channels["A"] > 0).any()
+
+
+# -- shade.visibility_at: shadow rays from arbitrary points ----------------------------
+
+BALL, BALL_R = np.array([0.2, 1.0, -0.3]), 0.7  # an analytic occluder: a ball
+
+
+def _ball_blocks(origins, dirs, tmax):
+    """Any-hit rays against the ball: blocked (n,) uint8 (the segment [0, tmax] meets it)."""
+    v = origins - BALL
+    b = (v * dirs).sum(axis=1)
+    c = (v * v).sum(axis=1) - BALL_R ** 2
+    disc = b * b - c
+    root = np.sqrt(np.maximum(disc, 0.0))
+    near, far = -b - root, -b + root
+    return ((disc > 0.0) & (far > 0.0) & (near < tmax)).astype(np.uint8)
+
+
+def _ball_points(rng, n):
+    """``n`` points around the ball, most below it, none within 0.05 of its surface, unit
+    normals."""
+    p = rng.uniform((-1.5, -3.5, -1.5), (1.5, 1.5, 1.5), size=(n, 3)) + BALL
+    p = p[np.abs(np.linalg.norm(p - BALL, axis=1) - BALL_R) > 0.05]
+    normals = rng.normal(size=p.shape)
+    return p, normals / np.linalg.norm(normals, axis=1)[:, None]
+
+
+def _segment_clear(p, to, dist):
+    """Whether the segment p + s to, 0 <= s <= dist, misses the ball, and by what margin
+    (the distance of its nearest point from the ball's surface)."""
+    v = BALL - p
+    s = np.clip((v * to).sum(axis=1), 0.0, dist)
+    gap = np.linalg.norm(p + s[:, None] * to - BALL, axis=1) - BALL_R
+    return gap > 0.0, np.abs(gap)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_shadow_rays_from_points_see_past_a_ball_as_geometry_says(threads):
+    """``shade.visibility_at`` from points scattered around a ball (not pixels' hits), a
+    directional and a point light, the ball the only occluder: a point whose normal faces
+    a light sees it exactly where the segment to it misses the ball (0 or 1; the points
+    that graze the ball's outline are left out), one that faces away sees it (1: its
+    lighting is 0 anyway); the rays leave each point along its normal by its error bound
+    and end that much short of the point light."""
+    from subtrace.lights import Light, light_array
+    from subtrace.runtime import threads as tasks
+    from subtrace.shade import visibility_at
+
+    rng = np.random.default_rng(11)
+    p, normals = _ball_points(rng, 3000)
+    err = rng.uniform(0.0, 0.01, len(p))
+    lamp = np.array([0.5, 4.0, 0.8])
+    travel = np.array([0.3, -1.0, 0.2]) / np.linalg.norm([0.3, -1.0, 0.2])
+    lights = light_array([Light(direction=tuple(travel)), Light(position=tuple(lamp))])
+    seen = []
+
+    def trace(origins, dirs, tmax):
+        seen.append((origins.copy(), dirs.copy(), tmax.copy()))
+        return _ball_blocks(origins, dirs, tmax)
+
+    tasks.set_threads(threads)
+    try:
+        vis = visibility_at(trace, p, normals, err, lights)
+    finally:
+        tasks.set_threads(None)
+    assert vis.shape == (2, len(p)) and vis.dtype == np.float32
+    to_lamp = lamp - p
+    dist = np.linalg.norm(to_lamp, axis=1)
+    to_lamp /= dist[:, None]
+    (origins, dirs, tmax), = seen
+    j = 0
+    for k, (to, far) in enumerate(((np.repeat(-travel[None], len(p), axis=0),
+                                     np.full(len(p), 1e9)), (to_lamp, dist))):
+        facing = (normals * to).sum(axis=1) > 0.0
+        clear, margin = _segment_clear(p, to, far)
+        sure = margin > 0.02
+        assert np.all(vis[k][~facing] == 1.0)
+        want = clear.astype(np.float32)
+        assert np.array_equal(vis[k][facing & sure], want[facing & sure])
+        assert 100 < np.count_nonzero(facing & sure & ~clear) < np.count_nonzero(facing) - 100
+        # the rays of the facing points, in point order: from p + err n towards the light
+        f = np.nonzero(facing)[0]
+        part = slice(j, j + len(f))
+        np.testing.assert_allclose(origins[part], p[f] + err[f, None] * normals[f],
+                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(dirs[part], to[f], rtol=0, atol=1e-12)
+        if k == 1:
+            np.testing.assert_allclose(tmax[part], dist[f] - err[f], rtol=1e-12)
+        else:
+            assert np.all(tmax[part] == np.inf)
+        j += len(f)
+    assert j == len(tmax)
+
+
+def test_a_surface_point_does_not_shadow_itself_past_its_error_bound():
+    """Points on the ball's surface (normals outward) under a light from straight above:
+    the rays leave along the normal by the error bound, so every point whose normal faces
+    the light is lit (nothing else lies between); with no offset at all the rounding of the points lets the ball's own
+    surface hold back some of them (the speckle the offset prevents)."""
+    from subtrace.lights import Light, light_array
+    from subtrace.shade import visibility_at
+
+    rng = np.random.default_rng(5)
+    n = rng.normal(size=(2000, 3))
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    p = BALL + BALL_R * n
+    travel = np.array([0.0, -1.0, 0.0])
+    lights = light_array([Light(direction=tuple(travel))])
+    facing = n[:, 1] > 0.05  # (well within the lit half: nothing else in the way)
+    vis = visibility_at(_ball_blocks, p, n, np.full(len(p), 1e-6), lights)[0]
+    assert facing.sum() > 500 and np.all(vis[facing] == 1.0)
+    assert np.all(vis[n[:, 1] <= 0.0] == 1.0)  # facing away: 1 (unlit anyway)
+    speckle = visibility_at(_ball_blocks, p, n, np.zeros(len(p)), lights)[0]
+    assert np.count_nonzero(speckle[facing] == 0.0) > 10
+
+
+def test_the_pixels_shadows_are_the_points_shadows_of_their_hits():
+    """``shade.shadow_visibility`` (the pixels' hits: a window of an image, the centre
+    rays' or given directions) is ``visibility_at`` of ``hit_points``: the same rays bit
+    for bit, the same visibility at the hit pixels, 1 at the others; with lights of
+    several rays per point (a sphere light, a soft sun, an environment) and their keys."""
+    from subtrace.camera import Camera, CameraWindow
+    from subtrace.lights import Light, light_array, ray_keys
+    from subtrace.shade import hit_points, shadow_visibility, visibility_at
+
+    rng = np.random.default_rng(8)
+    camera = Camera(eye=(0.3, 1.5, 4.0), target=(0.0, 0.2, 0.0), up=(0.0, 1.0, 0.0),
+                    fov_deg=40.0, width=41, height=29)
+    lights = light_array([Light(position=(1.0, 3.0, 1.0), radius=0.5, samples=8),
+                          Light(direction=(0.2, -1.0, 0.1), angle=10.0, samples=3),
+                          Light(kind_key="environment", samples=5),
+                          Light(direction=(-0.6, -0.2, -0.7))])
+    for view in (camera, CameraWindow(camera, 4, 6, 30, 15)):
+        frame, width = view.frame(), view.width
+        n = view.width * view.height
+        for dirs in (None, rng.normal(size=(n, 3))):
+            if dirs is not None:
+                dirs /= np.linalg.norm(dirs, axis=1)[:, None]
+            t = rng.uniform(2.0, 6.0, n)
+            normals = rng.normal(size=(n, 3))
+            normals /= np.linalg.norm(normals, axis=1)[:, None]
+            pix_patch = np.where(rng.random(n) < 0.6, 3, -1).astype(np.int32)
+            keys = ray_keys(np.arange(n, dtype=np.int64))
+            rays = []
+
+            def trace(origins, to, tmax):
+                rays.append((origins.copy(), to.copy(), tmax.copy()))
+                return _ball_blocks(origins, to, tmax)
+
+            pixels = shadow_visibility(trace, frame, width, t, normals, pix_patch, lights,
+                                       1e-3, dirs, keys)
+            hit = np.nonzero(pix_patch >= 0)[0]
+            points, err = hit_points(frame, width, t, hit, 1e-3, dirs)
+            at = visibility_at(trace, points, normals[hit], err, lights, keys[hit])
+            assert np.array_equal(pixels[:, hit], at)
+            assert np.all(np.delete(pixels, hit, axis=1) == 1.0)
+            assert 0.0 < at.mean() < 1.0 and len(np.unique(at)) > 3  # (shadows, penumbrae)
+            (o1, d1, m1), (o2, d2, m2) = rays
+            assert o1.tobytes() == o2.tobytes() and d1.tobytes() == d2.tobytes()
+            assert m1.tobytes() == m2.tobytes()
+            # the hit points are the pixels' rays' (shade.pixel_rays, or dirs) at t
+            from subtrace.shade import pixel_rays
+            d = pixel_rays(frame, width, hit) if dirs is None else dirs[hit]
+            np.testing.assert_array_equal(points, frame[0] + t[hit, None] * d)

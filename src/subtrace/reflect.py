@@ -34,13 +34,13 @@ height the direction would have in the picture: its elevation over the view's ho
 plane, top above the picture, bottom below).
 
 A reflected ray leaves its hit displaced along the normal by the hit's error bound (as a
-shadow ray: ``shade.shadow_visibility``) and finds its closest hit among the cages (the
+shadow ray: ``shade.error_bound``) and finds its closest hit among the cages (the
 BVH of the shells, ``trace.rays.trace_rays``, which refines what it meets by the
 narrowest cone that can reach it, ``patches.shells.Sight``), the free-form surfaces (with
 its own cone: its path's length from the eye times the tolerance, as ``picture._any_hit``'s
 shadow rays) and an opaque ground (a shadow catcher is the background: a miss). There it
 is shaded as a camera ray would be (Lambert and Blinn-Phong under every lamp, with shadow
-rays, the headlight along the ray; no ambient occlusion), and a reflective hit reflects
+rays: ``shade.visibility_at``, the headlight along the ray; no ambient occlusion), and a reflective hit reflects
 again, one ray, up to ``[render] reflection_depth`` bounces (default 1); past the last its
 reflection is what a ray along its mirror direction would meet beyond everything (the
 environment or the background).
@@ -54,13 +54,13 @@ import time
 import numpy as np
 
 from subtrace.lights import ENVIRONMENT, KEY_STRIDE, R2_A1, R2_A2, RGB, environment_radiance
-from subtrace.lights import (environment_irradiance, hash01, irradiance_at, is_environment,
-                             shadow_samples, shadow_target, shadow_weight)
+from subtrace.lights import environment_irradiance, hash01, irradiance_at, is_environment
 from subtrace.nurbs.scene import picture_hits
 from subtrace.nurbs.trace import trace_rays as nurbs_trace_rays
 from subtrace.runtime.jit import leaf_njit, nb
 from subtrace.runtime.threads import thread_count
-from subtrace.shade import CHANNELS, C_R, POINT_ROUNDING, miss_values, pixel_rays, shade
+from subtrace.shade import (CHANNELS, C_R, error_bound, miss_values, pixel_rays, shade,
+                            visibility_at)
 from subtrace.textures import texture_hits
 from subtrace.trace.bezier import table_loop_flag
 from subtrace.trace.rays import trace_rays
@@ -279,30 +279,15 @@ class _Context:
     def _visibility(self, q, f, length, key):
         """(L, n) float32: the share of each lamp's shadow rays from the points ``q``
         (normals ``f`` towards the viewer; ``length`` their paths from the eye: the error
-        bound) that arrive (1 where none is traced)."""
-        n_l = len(self.lights)
-        vis = np.ones((n_l, len(q)), np.float32)
-        if not n_l or not len(q):
-            return vis
-        err = length * self.tol_rad + POINT_ROUNDING * np.abs(q).max(axis=1)
-        counts = np.zeros(n_l, np.int64)
-        _shadow_count(self.lights, q, f, counts)
-        n = int(counts.sum())
-        if not n:
-            return vis
-        base = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-        origins, to_light, tmax = np.empty((n, 3)), np.empty((n, 3)), np.empty(n)
-        _shadow_make(self.lights, q, f, err, key, base.copy(), origins, to_light, tmax)
-        blocked = np.ascontiguousarray(self.blocked(origins, to_light, tmax), np.uint8)
-        _shadow_share(self.lights, q, f, key, base.copy(), blocked, vis)
-        return vis
+        bound) that arrive (1 where none is traced): ``shade.visibility_at``."""
+        return visibility_at(self.blocked, q, f, error_bound(q, length, self.tol_rad),
+                             self.lights, key)
 
 
 def _offset(q, f, length, tol_rad):
     """The points ``q`` moved along their normals ``f`` by their error bound (the cell's
     size seen from the eye over the path ``length``, and the point's rounding)."""
-    err = length * tol_rad + POINT_ROUNDING * np.abs(q).max(axis=1)
-    return q + err[:, None] * f
+    return q + error_bound(q, length, tol_rad)[:, None] * f
 
 
 def _shade(ctx, q, f, d, colour, spec, shin, f0, alpha, vis, diffuse):
@@ -560,67 +545,3 @@ def _lobe_rays(v, f, f0, alpha, key, m, first, level, dirs, w):
                 g = 0.0
             for c in range(3):
                 w[j, c] = schlick(f0[i, c], vh) * g / m[i]
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _shadow_count(lights, q, f, counts):
-    """Each lamp's shadow rays from the points ``q`` whose normals ``f`` face it."""
-    for k in range(lights.shape[0]):
-        m = shadow_samples(lights, k)
-        for i in range(len(q)):
-            if _faces(lights, k, q, f, i):
-                counts[k] += m
-
-
-@leaf_njit
-def _faces(lights, k, q, f, i):
-    """Whether point i's normal faces lamp k (an environment: always)."""
-    if is_environment(lights, k):
-        return True
-    lx, ly, lz = irradiance_at(lights, k, q[i, 0], q[i, 1], q[i, 2])[:3]
-    return f[i, 0] * lx + f[i, 1] * ly + f[i, 2] * lz > 0.0
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _shadow_make(lights, q, f, err, key, base, origins, to_light, tmax):
-    """The shadow rays of :func:`_shadow_count`, lamp k's from ``base[k]`` on in point
-    order, each leaving its point displaced along the normal by ``err``."""
-    for k in range(lights.shape[0]):
-        m = shadow_samples(lights, k)
-        j = base[k]
-        for i in range(len(q)):
-            if not _faces(lights, k, q, f, i):
-                continue
-            for s in range(m):
-                lx, ly, lz, dist = shadow_target(lights, k, s, key[i], q[i, 0], q[i, 1],
-                                                 q[i, 2])
-                origins[j, 0] = q[i, 0] + err[i] * f[i, 0]
-                origins[j, 1] = q[i, 1] + err[i] * f[i, 1]
-                origins[j, 2] = q[i, 2] + err[i] * f[i, 2]
-                to_light[j, 0], to_light[j, 1], to_light[j, 2] = lx, ly, lz
-                tmax[j] = dist - err[i]
-                j += 1
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _shadow_share(lights, q, f, key, base, blocked, vis):
-    """``vis[k, i]``: the share of point i's shadow rays towards lamp k that arrive (an
-    environment's weighted by their cosine with the normal)."""
-    for k in range(lights.shape[0]):
-        m = shadow_samples(lights, k)
-        j = base[k]
-        for i in range(len(q)):
-            if not _faces(lights, k, q, f, i):
-                continue
-            total = dark = 0.0
-            for s in range(m):
-                wt = 1.0
-                if is_environment(lights, k):
-                    lx, ly, lz, _ = shadow_target(lights, k, s, key[i], q[i, 0], q[i, 1],
-                                                  q[i, 2])
-                    wt = shadow_weight(lights, k, lx, ly, lz, f[i, 0], f[i, 1], f[i, 2])
-                total += wt
-                if blocked[j]:
-                    dark += wt
-                j += 1
-            vis[k, i] = np.float32((total - dark) / total) if total > 0.0 else np.float32(1.0)

@@ -548,45 +548,78 @@ def pixel_rays(frame, width, pixels) -> np.ndarray:
 POINT_ROUNDING = 2.0 ** -40
 
 
+def error_bound(points, length, tol_rad) -> np.ndarray:
+    """(n,) float64: how far the micro-surface may lie from the hit ``points`` (n,3) whose
+    paths from the eye are ``length`` (n,) long: a cell subtends at most the angular
+    tolerance ``tol_rad`` from the eye, so it lies within ``length * tol_rad`` of the hit,
+    plus the rounding of the point itself. A ray that leaves a hit displaced along its
+    normal by this much leaves the cell it hit (:func:`visibility_at`)."""
+    return length * tol_rad + POINT_ROUNDING * np.abs(points).max(axis=1)
+
+
+def hit_points(frame, width, t, pixels, tol_rad, dirs=None):
+    """(points (n,3), err (n,)): the hits ``eye + t d`` of the rays of ``pixels`` (flat
+    indices; their centres' rays, :func:`pixel_rays`, or ``dirs[pixels]``) and their error
+    bounds (:func:`error_bound` over the paths ``t``)."""
+    th = t[pixels]
+    d = pixel_rays(frame, width, pixels) if dirs is None else dirs[pixels]
+    points = frame[0] + th[:, None] * d
+    return points, error_bound(points, th, tol_rad)
+
+
 def shadow_visibility(trace, frame, width, t, normals, pix_patch, lights, tol_rad, dirs=None,
                       keys=None):
-    """(L, n_pixels) float32: the share of light k a hit pixel sees, 1 where all its shadow
-    rays towards it arrive (or where it faces away from it: then its lighting is 0 anyway),
-    0 in shadow. ``trace(origins, dirs, tmax)``: an any-hit trace returning blocked
-    (``trace.rays.trace_rays``). ``dirs``: as for :func:`shade`. ``keys``: None, or (n,)
-    int64 each ray's key (``lights.ray_keys``), which the lights of several shadow rays per
-    point need (``lights.sampled``).
-
-    A shadow ray leaves the hit displaced along its (eye-facing) normal by the hit's error
-    bound: the micro-surface lies within a cell of the limit surface, and a cell subtends
-    at most the angular tolerance from the eye, so within ``t * tol_rad`` of the hit; plus
-    the rounding of the hit point itself. Rays then leave the cell they hit and never
-    speckle a lit surface with its own shadow.
-
-    The rays are made on every thread (:func:`_shadow_ray`: the hit point as
-    :func:`pixel_rays` makes it, the light's rays as ``lights.shadow_target`` gives them),
-    light after light, each light's in pixel order (a pixel's rays towards one light in
-    turn), and traced in one call."""
-    n_lights = len(lights)
-    visible = np.ones((n_lights, len(pix_patch)), np.float32)
-    if not n_lights:
+    """(L, n_pixels) float32: :func:`visibility_at` of the hit pixels' points
+    (:func:`hit_points`; ``dirs``: as for :func:`shade`), with their (eye-facing)
+    ``normals`` and ``keys`` (None, or (n_pixels,) int64: ``lights.ray_keys``); 1 where a
+    pixel's ray missed."""
+    visible = np.ones((len(lights), len(pix_patch)), np.float32)
+    hit = np.nonzero(pix_patch >= 0)[0]
+    if not len(lights) or not len(hit):
         return visible
-    dirs = _no_dirs() if dirs is None else dirs
-    keys = _NO_KEYS if keys is None else keys
+    points, err = hit_points(frame, width, t, hit, tol_rad, dirs)
+    visible[:, hit] = visibility_at(trace, points, normals[hit], err, lights,
+                                    None if keys is None else keys[hit])
+    return visible
+
+
+def visibility_at(trace, points, normals, err, lights, keys=None):
+    """(L, n) float32: the share of light k that point i of ``points`` (n,3) sees, 1 where
+    all its shadow rays towards it arrive (or where its normal faces away from it: then its
+    lighting is 0 anyway), 0 in shadow; an environment's rays weighted by their cosine with
+    the normal (``lights.shadow_weight``). ``normals`` (n,3): unit, on the side the rays
+    leave from (towards the viewer); ``err`` (n,): each point's error bound
+    (:func:`error_bound`); ``trace(origins, dirs, tmax)``: an any-hit trace returning
+    blocked (``trace.rays.trace_rays``); ``keys``: None, or (n,) int64 each point's ray key
+    (``lights.ray_keys``), which the lights of several shadow rays per point need
+    (``lights.sampled``). The pixels' shadows (:func:`shadow_visibility`) and the reflected
+    rays' (``reflect``) are this.
+
+    A shadow ray leaves its point displaced along the normal by the error bound, so it
+    leaves the cell it hit and never speckles a lit surface with its own shadow; it ends at
+    the light less that much. The rays are made on every thread, in three passes (count,
+    make, mark), light after light, each light's in point order (a point's rays towards one
+    light in turn, as ``lights.shadow_target`` gives them), and traced in one call."""
+    n_lights = len(lights)
+    visible = np.ones((n_lights, len(points)), np.float32)
+    if not n_lights or not len(points):
+        return visible
+    at = (np.ascontiguousarray(points, np.float64), np.ascontiguousarray(normals, np.float64),
+          np.ascontiguousarray(err, np.float64), lights,
+          _NO_KEYS if keys is None else np.ascontiguousarray(keys, np.int64))
     n_tasks = thread_count()
     counts = np.zeros((n_tasks, n_lights), np.int64)  # per thread and light: its rays
-    shading = (frame, width, t, normals, pix_patch, lights, float(tol_rad), dirs, keys)
-    run_tasks(_shadow_count, *shading, counts, n=n_tasks)
+    run_tasks(_shadow_count, *at, counts, n=n_tasks)
     n_rays = int(counts.sum())
     if not n_rays:
         return visible
-    # thread task's rays towards light k from base[task, k]: light by light, in pixel order
+    # thread task's rays towards light k from base[task, k]: light by light, in point order
     flat = counts.T.ravel()
     base = np.ascontiguousarray((np.cumsum(flat) - flat).reshape(n_lights, n_tasks).T)
     origins, to_light, tmax = np.empty((n_rays, 3)), np.empty((n_rays, 3)), np.empty(n_rays)
-    run_tasks(_shadow_make, *shading, base, origins, to_light, tmax, n=n_tasks)
+    run_tasks(_shadow_make, *at, base, origins, to_light, tmax, n=n_tasks)
     blocked = np.ascontiguousarray(trace(origins, to_light, tmax), np.uint8)
-    run_tasks(_shadow_mark, *shading, base, blocked, visible, n=n_tasks)
+    run_tasks(_shadow_mark, *at, base, blocked, visible, n=n_tasks)
     return visible
 
 
@@ -594,122 +627,87 @@ _NO_KEYS = np.zeros(0, np.int64)  # (no ray keys: every light takes one ray per 
 
 
 @llvm_inline_njit
-def _shadow_point(frame, width, t, normals, dirs, r, lights, k, tol_rad):
-    """Pixel r's hit point for shadow rays towards light k: (whether its normal faces the
-    light, the hit point x, y, z displaced along the normal by its error bound ``err``,
-    and ``err``). The arithmetic of :func:`pixel_rays` (a division by the length) and the
-    error bound of :func:`shadow_visibility`, operation for operation, so the rays are
-    those numpy made."""
-    if len(dirs):
-        dx, dy, dz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
-    else:
-        row = r // width
-        col = r - row * width
-        if frame.shape[0] > 4:  # (a window's pixels: their image's rays)
-            col += np.int64(frame[4, 0])
-            row += np.int64(frame[4, 1])
-        ax = frame[3, 0] + col * frame[1, 0] + row * frame[2, 0]
-        ay = frame[3, 1] + col * frame[1, 1] + row * frame[2, 1]
-        az = frame[3, 2] + col * frame[1, 2] + row * frame[2, 2]
-        n = np.sqrt(ax * ax + ay * ay + az * az)
-        dx, dy, dz = ax / n, ay / n, az / n
-    th = t[r]
-    px, py, pz = frame[0, 0] + th * dx, frame[0, 1] + th * dy, frame[0, 2] + th * dz
-    err = th * tol_rad + POINT_ROUNDING * max(max(abs(px), abs(py)), abs(pz))
-    lx, ly, lz = irradiance_at(lights, k, px, py, pz)[:3]
-    fx, fy, fz = normals[r, 0], normals[r, 1], normals[r, 2]
-    facing = fx * lx + fy * ly + fz * lz > 0.0 or is_environment(lights, k)
-    return facing, px, py, pz, err
-
-
-@llvm_inline_njit
-def _shadow_ray(normals, r, lights, k, s, keys, px, py, pz, err):
-    """Shadow ray ``s`` of pixel r's point (:func:`_shadow_point`) towards light k: origin
-    x, y, z (displaced along the normal by ``err``), unit direction x, y, z, tmax."""
-    key = keys[r] if len(keys) else np.int64(0)
-    lx, ly, lz, dist = shadow_target(lights, k, s, key, px, py, pz)
-    fx, fy, fz = normals[r, 0], normals[r, 1], normals[r, 2]
-    return px + err * fx, py + err * fy, pz + err * fz, lx, ly, lz, dist - err
+def _faces(points, normals, i, lights, k):
+    """Whether point i's normal faces light k (an environment: always)."""
+    lx, ly, lz = irradiance_at(lights, k, points[i, 0], points[i, 1], points[i, 2])[:3]
+    return (normals[i, 0] * lx + normals[i, 1] * ly + normals[i, 2] * lz > 0.0
+            or is_environment(lights, k))
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def _shadow_count(task, n_tasks, frame, width, t, normals, pix_patch, lights, tol_rad, dirs,
-                  keys, counts):
-    """Pass 1 of :func:`shadow_visibility`: the shadow rays of thread ``task``'s pixels
+def _shadow_count(task, n_tasks, points, normals, err, lights, keys, counts):
+    """Pass 1 of :func:`visibility_at`: the shadow rays of thread ``task``'s points
     (:func:`_segment`), per light, into ``counts[task]``."""
-    a, b = _segment(task, n_tasks, len(pix_patch))
+    a, b = _segment(task, n_tasks, len(points))
     for k in range(lights.shape[0]):
         n = 0  # (counted here: threads adding to ``counts`` share a cache line)
         m = shadow_samples(lights, k)
-        for r in range(a, b):
-            if pix_patch[r] >= 0 and _shadow_point(frame, width, t, normals, dirs, r, lights,
-                                                   k, tol_rad)[0]:
+        for i in range(a, b):
+            if _faces(points, normals, i, lights, k):
                 n += m
         counts[task, k] = n
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def _shadow_make(task, n_tasks, frame, width, t, normals, pix_patch, lights, tol_rad, dirs,
-                 keys, base, origins, to_light, tmax):
-    """Pass 2: the shadow rays of thread ``task``'s pixels, light k's from ``base[task, k]``."""
-    a, b = _segment(task, n_tasks, len(pix_patch))
+def _shadow_make(task, n_tasks, points, normals, err, lights, keys, base, origins, to_light,
+                 tmax):
+    """Pass 2: the shadow rays of thread ``task``'s points, light k's from ``base[task, k]``:
+    origin the point displaced along its normal by ``err``, unit direction, tmax."""
+    a, b = _segment(task, n_tasks, len(points))
     for k in range(lights.shape[0]):
         j = base[task, k]
         m = shadow_samples(lights, k)
-        for r in range(a, b):
-            if pix_patch[r] < 0:
+        for i in range(a, b):
+            if not _faces(points, normals, i, lights, k):
                 continue
-            facing, px, py, pz, err = _shadow_point(frame, width, t, normals, dirs, r, lights,
-                                                    k, tol_rad)
-            if not facing:
-                continue
+            key = keys[i] if len(keys) else np.int64(0)
+            px, py, pz, e = points[i, 0], points[i, 1], points[i, 2], err[i]
             for s in range(m):
-                ox, oy, oz, lx, ly, lz, tm = _shadow_ray(normals, r, lights, k, s, keys, px,
-                                                         py, pz, err)
-                origins[j, 0], origins[j, 1], origins[j, 2] = ox, oy, oz
+                lx, ly, lz, dist = shadow_target(lights, k, s, key, px, py, pz)
+                origins[j, 0] = px + e * normals[i, 0]
+                origins[j, 1] = py + e * normals[i, 1]
+                origins[j, 2] = pz + e * normals[i, 2]
                 to_light[j, 0], to_light[j, 1], to_light[j, 2] = lx, ly, lz
-                tmax[j] = tm
+                tmax[j] = dist - e
                 j += 1
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def _shadow_mark(task, n_tasks, frame, width, t, normals, pix_patch, lights, tol_rad, dirs,
-                 keys, base, blocked, visible):
+def _shadow_mark(task, n_tasks, points, normals, err, lights, keys, base, blocked, visible):
     """Pass 3: in ``visible``, the share of thread ``task``'s rays not ``blocked`` (0 or
     1 for a light of one ray)."""
-    a, b = _segment(task, n_tasks, len(pix_patch))
+    a, b = _segment(task, n_tasks, len(points))
     for k in range(lights.shape[0]):
         j = base[task, k]
         m = shadow_samples(lights, k)
-        for r in range(a, b):
-            if pix_patch[r] < 0:
+        for i in range(a, b):
+            if not _faces(points, normals, i, lights, k):
                 continue
-            facing, px, py, pz, err = _shadow_point(frame, width, t, normals, dirs, r, lights,
-                                                    k, tol_rad)
-            if facing and is_environment(lights, k):
-                visible[k, r] = _weighted_share(normals, r, lights, k, keys, px, py, pz, m,
+            if is_environment(lights, k):
+                visible[k, i] = _weighted_share(points, normals, i, lights, k, keys, m,
                                                 blocked, j)
                 j += m
-            elif facing:
+            else:
                 dark = 0
                 for s in range(m):
                     if blocked[j]:
                         dark += 1
                     j += 1
                 if dark:
-                    visible[k, r] = np.float32(m - dark) / np.float32(m)
+                    visible[k, i] = np.float32(m - dark) / np.float32(m)
 
 
 @llvm_inline_njit
-def _weighted_share(normals, r, lights, k, keys, px, py, pz, m, blocked, j):
-    """The share of pixel r's ``m`` shadow rays towards light k (from ``blocked[j]`` on)
+def _weighted_share(points, normals, i, lights, k, keys, m, blocked, j):
+    """The share of point i's ``m`` shadow rays towards light k (from ``blocked[j]`` on)
     that arrive, each weighted by ``lights.shadow_weight`` (an environment's: its cosine
     with the normal); 1 where none has weight."""
-    key = keys[r] if len(keys) else np.int64(0)
+    key = keys[i] if len(keys) else np.int64(0)
+    px, py, pz = points[i, 0], points[i, 1], points[i, 2]
     total = dark = 0.0
     for s in range(m):
         lx, ly, lz, _ = shadow_target(lights, k, s, key, px, py, pz)
-        w = shadow_weight(lights, k, lx, ly, lz, normals[r, 0], normals[r, 1], normals[r, 2])
+        w = shadow_weight(lights, k, lx, ly, lz, normals[i, 0], normals[i, 1], normals[i, 2])
         total += w
         if blocked[j + s]:
             dark += w
@@ -720,7 +718,7 @@ def ambient_occlusion(trace, frame, width, t, normals, pix_patch, samples, dista
                       dirs=None, ids=None):
     """(n_pixels,) float32: the share of ``samples`` ambient occlusion rays per hit pixel
     that meet no surface within ``distance`` (1 where nothing was hit). ``trace(origins,
-    dirs, tmax)``: an any-hit trace returning blocked, as for :func:`shadow_visibility`;
+    dirs, tmax)``: an any-hit trace returning blocked, as for :func:`visibility_at`;
     ``dirs``: as for :func:`shade`.
 
     The rays are cosine-weighted over the hemisphere of the hit's eye-facing normal: points
@@ -728,9 +726,9 @@ def ambient_occlusion(trace, frame, width, t, normals, pix_patch, samples, dista
     of each ray's key (``ids`` (n,) int64: by default its index; a window passes its
     image's pixel indices and the extra anti-aliasing rays keys of their own), so
     neighbours see different patterns (noise, not bands) and the result depends on the
-    pixel alone, never on the threads or the window. They leave the hit displaced along its normal by
-    the hit's error bound, as shadow rays do (:func:`shadow_visibility`). Traced in chunks
-    of config.AO_CHUNK_RAYS rays."""
+    pixel alone, never on the threads or the window. They leave the hit displaced along its
+    normal by the hit's error bound (:func:`hit_points`), as shadow rays do
+    (:func:`visibility_at`). Traced in chunks of config.AO_CHUNK_RAYS rays."""
     open_ = np.ones(len(pix_patch), np.float32)
     pix = np.nonzero(pix_patch >= 0)[0]
     if samples <= 0 or not len(pix):
@@ -738,11 +736,8 @@ def ambient_occlusion(trace, frame, width, t, normals, pix_patch, samples, dista
     per = max(1, config.AO_CHUNK_RAYS // samples)
     for a in range(0, len(pix), per):
         px = pix[a:a + per]
-        th = t[px]
-        d = pixel_rays(frame, width, px) if dirs is None else dirs[px]
-        points = frame[0] + th[:, None] * d
+        points, err = hit_points(frame, width, t, px, tol_rad, dirs)
         f = np.ascontiguousarray(normals[px])
-        err = th * tol_rad + POINT_ROUNDING * np.abs(points).max(axis=1)
         origins = np.repeat(points + err[:, None] * f, samples, axis=0)
         rays = ao_directions(f, px if ids is None else ids[px], samples)
         blocked = trace(origins, rays, np.full(len(rays), float(distance)))
@@ -956,7 +951,7 @@ def ground_pixels(frame, width, pix_patch, up, height, trace, lights, headlight,
     opaque Lambertian ``color`` under ``lights`` with shadows and the ``headlight`` (its
     intensity), or (``color`` None) a shadow catcher: the background ``rows`` darkened by
     the fraction of the light (the headlight's included: it casts no shadow) the objects
-    hold back (``trace``: as for :func:`shadow_visibility`; None: no shadows). The ground
+    hold back (``trace``: as for :func:`visibility_at`; None: no shadows). The ground
     is part of the background: alpha and the other channels keep
     saying "no hit" (the EXR's coverage is the surface's). Returns the number of ground
     pixels. ``dirs``: as for :func:`shade` (then ``rows`` (n,3): each ray's background);
