@@ -70,6 +70,7 @@ LAYERS = (
     ("shade",),
     ("textures",),  # image textures at the hits: UVs, footprints, MIP-map lookups
     ("nurbs",),  # the NURBS pass shades its hits with shade's kernels
+    ("aggregate",),  # secondary rays meet the cages (trace) and free-form surfaces (nurbs)
     ("reflect",),  # reflected rays: traced (trace, nurbs) and shaded (shade) for the picture
     ("picture",),
     ("lines",),

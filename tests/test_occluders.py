@@ -168,7 +168,7 @@ def test_any_hit_rays_answer_as_closest_hits(monkeypatch):
     nearest triangle) meets a surface before its end; and the shortcuts are taken: the
     directional lights' rays walked grids, and most blocked rays report a distance nearer
     than the closest hit's (a covering node's box), which no triangle of theirs could."""
-    from subtrace import picture
+    from subtrace import aggregate
     from subtrace.render import render_scene
     from subtrace.trace import rays
 
@@ -182,7 +182,7 @@ def test_any_hit_rays_answer_as_closest_hits(monkeypatch):
                           blocked.copy(), hits.t.copy()))
         return blocked, hits
 
-    monkeypatch.setattr(picture, "trace_rays", recording)
+    monkeypatch.setattr(aggregate, "trace_rays", recording)
     render_scene(_scene(), threads=2)
     monkeypatch.undo()
     tasks.set_threads(2)

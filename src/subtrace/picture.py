@@ -1,12 +1,16 @@
 """The picture: the colour of every pixel once the primary hits are shaded (orchestration
-over ``shade.py`` and ``trace/rays.py``; no kernels here).
+over ``shade.py`` and ``aggregate.py``; no kernels here).
 
+Every secondary ray (shadow, ambient occlusion, extra anti-aliasing and reflected rays)
+meets the scene through one aggregate of the cages and the free-form surfaces
+(``aggregate.SceneAggregate``: ``occluded`` for any-hit rays, ``closest`` for the others).
 ``paint`` adds to the planes of ``shade.shade`` (which hold every channel but the colour):
 
-* shadow rays from every hit towards each light (``[render] shadows``, on by default), as
-  any-hit rays through the BVH of the shells (``trace/rays.py``) and then, for those no
-  cage blocks, through the free-form surfaces' (``nurbs.scene.blocked``, with the ray's
-  cone: its pixel's footprint at the hit it leaves);
+* shadow rays from every hit towards each light (``[render] shadows``, on by default;
+  ``shade.shadow_visibility``), as any-hit rays through the BVH of the shells
+  (``trace/rays.py``) and then, for those no cage blocks, through the free-form surfaces'
+  (``nurbs.scene.blocked``, with the ray's cone: its pixel's footprint at the hit it
+  leaves);
 * ambient occlusion (``[render] ao`` / ``--ao N``, off by default): N cosine-weighted
   any-hit rays from every hit (``shade.ambient_occlusion``) reaching ``config.AO_DISTANCE``
   of the diagonal of the scene's control points; the share that escapes scales the
@@ -28,7 +32,7 @@ over ``shade.py`` and ``trace/rays.py``; no kernels here).
 
 The free-form (NURBS) surfaces' pixels take part in every step as the cages' do: they are
 hits of their own rows of the patch shading (``nurbs.scene.with_surfaces``), and the extra
-anti-aliasing rays trace them too (``nurbs.scene.shade_rays``).
+anti-aliasing rays trace them too (the aggregate's ``closest``: ``nurbs.scene.shade_rays``).
 
 Every step writes disjoint pixels or rays in a fixed order, so the picture does not depend
 on the thread count.
@@ -42,23 +46,20 @@ from types import SimpleNamespace
 import numpy as np
 
 from subtrace.accel.bvh import build_bvh
+from subtrace.aggregate import SceneAggregate
 from subtrace.accel.cull import casting_bounds
 from subtrace.camera import whole_image, window_offset
 from subtrace.mesh.cage import lowest_limit
 from subtrace.reflect import mirror_pass, reflects
-from subtrace.nurbs.scene import blocked as nurbs_blocked
-from subtrace.nurbs.scene import shade_rays
 from subtrace.runtime import threads as tasks
 from subtrace import config
 from subtrace.lights import DIRECTIONAL, R2_A1, R2_A2, light_array, ray_keys, sampled
-from subtrace.shade import (C_A, C_R, C_Z, CHANNELS, ambient_occlusion, background_pixels,
+from subtrace.shade import (C_A, C_R, C_Z, ambient_occlusion, background_pixels,
                             background_rows, edge_pixels, ground_occlusion, ground_pixels,
-                            ground_points, light, miss_values, shade, shadow_visibility,
+                            ground_points, light, miss_values, shadow_visibility,
                             smooth_occlusion)
-from subtrace.textures import texture_hits
-from subtrace.trace.bezier import table_loop_flag
 from subtrace.trace.pools import Memos
-from subtrace.trace.rays import Pools, trace_rays
+from subtrace.trace.rays import Pools
 
 # the R2 sequence's steps (the plastic number's powers): well-spread points in a square
 _R2 = (R2_A1, R2_A2)
@@ -119,31 +120,33 @@ def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, st
     mirror = reflects(patches)  # (a material reflects: subtrace.reflect)
     pools = (_pools(keep, stats) if keep and (shadows or samples > 1 or scene.render.ao > 0
                                               or mirror) else None)
-    any_hit = _any_hit(pools, nurbs, frame[0], tol_rad)
+    image = whole_image(camera)  # (a window's pixels are its image's: rows, AO patterns)
+    world = SceneAggregate(pools, nurbs, frame, tol_rad, patches, offset,
+                           miss_values(scene.render.background), textures,
+                           image.pixel_angle())
 
     def trace_shadows(origins, dirs, tmax):
         """Any-hit shadow rays: blocked (n,) uint8 (none without shadows)."""
         if not shadows:
             return np.zeros(len(tmax), np.uint8)
         t0 = time.perf_counter()
-        blocked = any_hit(origins, dirs, tmax)
+        blocked = world.occluded(origins, dirs, tmax)
         stats.time_shadows += time.perf_counter() - t0
         stats.shadow_rays += len(tmax)
         return blocked
 
-    trace_shadows.bounds = any_hit.bounds  # (for the ground: :func:`shade.ground_pixels`)
+    trace_shadows.bounds = world.bounds  # (for the ground: :func:`shade.ground_pixels`)
 
     def trace_ao(origins, dirs, tmax):
         """Any-hit ambient occlusion rays: blocked (n,) uint8."""
         t0 = time.perf_counter()
-        blocked = any_hit(origins, dirs, tmax)
+        blocked = world.occluded(origins, dirs, tmax)
         stats.time_ao += time.perf_counter() - t0
         stats.ao_rays += len(tmax)
         return blocked
 
-    trace_ao.bounds = any_hit.bounds  # (for the ground: :func:`shade.ground_occlusion`)
+    trace_ao.bounds = world.bounds  # (for the ground: :func:`shade.ground_occlusion`)
 
-    image = whole_image(camera)  # (a window's pixels are its image's: rows, AO patterns)
     lo, hi = casting_bounds(cages, nurbs)
     ao = ids = keys = None
     if scene.render.ao > 0 or (shadows and sampled(lights)) or mirror:
@@ -166,18 +169,15 @@ def paint(scene, cages, camera, keep, t, normals, pix_patch, patches, planes, st
     if texel is not None and offset:  # (the free-form surfaces' hits take no texture)
         texel[pix_patch >= offset] = -1.0
     if mirror:
-        mirror = mirror_pass(scene, image, frame, W, lights, headlight_of(scene)[0], pools,
-                             nurbs, patches, offset, tol_rad, ground, trace_shadows, stats,
-                             textures, image.pixel_angle())
+        mirror = mirror_pass(scene, image, frame, W, lights, headlight_of(scene)[0], world,
+                             patches, tol_rad, ground, trace_shadows, stats)
     _colour(scene, frame, W, t, normals, pix_patch, patches, planes, lights, rows,
             ground, trace_shadows, tol_rad, None, ao, ids, lit, keys, texel, mirror or None)
     if samples > 1:
         t0 = time.perf_counter()
-        closest = _closest(pools, nurbs, frame, W, patches, scene, tol_rad, offset,
-                           (textures, image.pixel_angle()))
-        _antialias(scene, frame, W, image.height, closest, patches, planes, lights, ground,
-                   trace_shadows, samples, stats, tol_rad, ao, image.width, keys is not None,
-                   mirror or None)
+        _antialias(scene, frame, W, image.height, world.closest, patches, planes, lights,
+                   ground, trace_shadows, samples, stats, tol_rad, ao, image.width,
+                   keys is not None, mirror or None)
         stats.time_aa += time.perf_counter() - t0
     _count_secondary(pools, stats)
 
@@ -198,79 +198,6 @@ def lit_in_shading(scene, nurbs=None, loop=None):
             or loop is not None):
         return None
     return light_array(scene.lights), headlight_of(scene)
-
-
-def _any_hit(pools, nurbs, eye, tol_rad):
-    """``blocked(origins, dirs, tmax)`` -> (n,) uint8: any-hit rays against the cages (the
-    pools' BVH of shells, ``trace.rays``) and then, for the rays no cage blocks, the
-    free-form surfaces, each ray with its cone (width ``|origin - eye| * tol_rad`` at its
-    origin: the footprint of the hit it leaves)."""
-
-    def blocked(origins, dirs, tmax):
-        out = np.zeros(len(tmax), np.uint8)
-        if pools is not None:
-            out = trace_rays(pools, origins, dirs, tmax, any_hit=True)[0]
-        if nurbs is not None:
-            rest = np.nonzero(out == 0)[0]
-            if len(rest):
-                o = np.asarray(origins)[rest]
-                cone = np.sqrt(((o - eye) ** 2).sum(axis=1)) * tol_rad
-                out[rest] = nurbs_blocked(nurbs, o, np.asarray(dirs)[rest],
-                                          np.asarray(tmax)[rest], cone, tol_rad)
-        return out
-
-    blocked.bounds = _occluder_bounds(pools, nurbs)
-    return blocked
-
-
-def _occluder_bounds(pools, nurbs):
-    """(lo, hi) of a box that holds everything an any-hit ray can meet: the roots of the
-    shells' BVH and of the free-form surfaces' BVH, grown by a relative 1e-9 (a ray whose
-    segment misses it is unblocked, and need not be traced); None where there is nothing
-    to hit (then nothing is left out: there is nothing to trace either)."""
-    roots = [b for b in ((None if pools is None else pools.bvh),
-                         (None if nurbs is None else nurbs.bvh))
-             if b is not None and len(b.node_count)]
-    if not roots:
-        return None
-    lo = np.min([b.node_min[0] for b in roots], axis=0)
-    hi = np.max([b.node_max[0] for b in roots], axis=0)
-    pad = 1e-9 * (float(np.max(hi - lo)) + float(np.max(np.abs(np.concatenate([lo, hi])))))
-    return lo - pad, hi + pad
-
-
-def _closest(pools, nurbs, frame, width, patches, scene, tol_rad, offset, textured=(None, 0)):
-    """``closest(dirs)`` -> (t (n,), normals (n,3), pix_patch (n,), planes, texel): rays from
-    the eye along ``dirs`` (extra anti-aliasing rays) traced and shaded as centre rays are:
-    the cages' hits (textured: ``textured`` = (the textures, a pixel's angle)), then the
-    free-form surfaces' where nearer."""
-
-    def closest(dirs):
-        n = len(dirs)
-        sub = np.empty((len(CHANNELS), n), np.float32)
-        normals = np.empty((n, 3))
-        pix_patch = np.full(n, -1, np.int32)
-        miss = miss_values(scene.render.background)
-        texel = None
-        if pools is None:
-            sub[:] = miss[:, None]
-            t = np.full(n, np.inf)
-        else:
-            origins = np.repeat(frame[0][None], n, axis=0)
-            _, hits = trace_rays(pools, origins, dirs, np.full(n, np.inf), any_hit=False)
-            covered = np.zeros(tasks.thread_count(), np.int64)
-            shade(frame, width, hits, pools.iso.view(), patches, miss, sub, normals,
-                  pix_patch, covered, dirs, table_loop_flag(pools.table), table=pools.table)
-            texel = texture_hits(textured[0], pools.table, hits, pools.iso.view(), patches,
-                                 frame, width, dirs, textured[1], normals, sub)
-            t = hits.t.copy()
-        if nurbs is not None:
-            shade_rays(nurbs, frame, dirs, tol_rad, offset, t, normals, pix_patch, sub)
-            if texel is not None:
-                texel[pix_patch >= offset] = -1.0
-        return t, normals, pix_patch, sub, texel
-
-    return closest
 
 
 def ground_plane(scene, cages, camera, nurbs=None):

@@ -34,16 +34,17 @@ height the direction would have in the picture: its elevation over the view's ho
 plane, top above the picture, bottom below).
 
 A reflected ray leaves its hit displaced along the normal by the hit's error bound (as a
-shadow ray: ``shade.error_bound``) and finds its closest hit among the cages (the
-BVH of the shells, ``trace.rays.trace_rays``, which refines what it meets by the
-narrowest cone that can reach it, ``patches.shells.Sight``), the free-form surfaces (with
-its own cone: its path's length from the eye times the tolerance, as ``picture._any_hit``'s
-shadow rays) and an opaque ground (a shadow catcher is the background: a miss). There it
-is shaded as a camera ray would be (Lambert and Blinn-Phong under every lamp, with shadow
-rays: ``shade.visibility_at``, the headlight along the ray; no ambient occlusion), and a reflective hit reflects
-again, one ray, up to ``[render] reflection_depth`` bounces (default 1); past the last its
-reflection is what a ray along its mirror direction would meet beyond everything (the
-environment or the background).
+shadow ray: ``shade.error_bound``) and finds its closest hit in the scene's aggregate
+(``aggregate.SceneAggregate.closest``): among the cages (the BVH of the shells,
+``trace.rays.trace_rays``, which refines what it meets by the narrowest cone that can
+reach it, ``patches.shells.Sight``) and the free-form surfaces (with its own cone: its
+path's length from the eye times the tolerance, as the aggregate's shadow rays carry
+theirs), and an opaque ground (a shadow catcher is the background: a miss). There it is
+shaded as a camera ray would be (Lambert and Blinn-Phong under every lamp, with shadow
+rays: ``shade.visibility_at``; the headlight along the ray; no ambient occlusion), and a
+reflective hit reflects again, one ray, up to ``[render] reflection_depth`` bounces
+(default 1); past the last its reflection is what a ray along its mirror direction would
+meet beyond everything (the environment or the background).
 """
 
 from __future__ import annotations
@@ -55,15 +56,8 @@ import numpy as np
 
 from subtrace.lights import ENVIRONMENT, KEY_STRIDE, R2_A1, R2_A2, RGB, environment_radiance
 from subtrace.lights import environment_irradiance, hash01, irradiance_at, is_environment
-from subtrace.nurbs.scene import picture_hits
-from subtrace.nurbs.trace import trace_rays as nurbs_trace_rays
 from subtrace.runtime.jit import leaf_njit, nb
-from subtrace.runtime.threads import thread_count
-from subtrace.shade import (CHANNELS, C_R, error_bound, miss_values, pixel_rays, shade,
-                            visibility_at)
-from subtrace.textures import texture_hits
-from subtrace.trace.bezier import table_loop_flag
-from subtrace.trace.rays import trace_rays
+from subtrace.shade import C_R, error_bound, pixel_rays, visibility_at
 
 MIN_ALPHA = 1e-4  # GGX alpha at least (roughness 0.01): a narrower lobe is a mirror
 
@@ -86,20 +80,20 @@ def scene_reflects(scene, cages, nurbs=None) -> bool:
     return nurbs is not None and bool(nurbs.surface_reflect.max(initial=0.0) > 0.0)
 
 
-def mirror_pass(scene, camera, frame, width, lights, headlight, pools, nurbs, patches, offset,
-                tol_rad, ground, trace_shadows, stats, textures=None, pixel_angle=0.0):
+def mirror_pass(scene, camera, frame, width, lights, headlight, world, patches, tol_rad,
+                ground, trace_shadows, stats):
     """``reflect(t, normals, pix_patch, planes, dirs, keys, visible)``: the reflections of
     the rays from the eye (pixel centres, or ``dirs``) whose hits reflect, added to their
     colour in ``planes`` (see the module comment); ``visible``: the lamps' visibility the
     lighting used (``shade.shadow_visibility``), ``keys``: each ray's key
     (``lights.ray_keys``). ``camera``: the whole image's (the background's gradient);
-    ``width``: the picture's (its pixels' rays);
+    ``width``: the picture's (its pixels' rays); ``world``: the scene's cages and free-form
+    surfaces (``aggregate.SceneAggregate``), where the reflected rays find their closest
+    hits (and their image textures, over their cones widened along the path from the eye);
     ``ground``: (unit up, height) or None; ``trace_shadows``: the picture's any-hit
-    shadow rays (blocked); ``textures``: the patches' image textures
-    (``textures.texture_sets``; None: none), looked up at the reflected rays' hits over
-    their cones (``pixel_angle`` a pixel's angle, widened along the path from the eye)."""
-    ctx = _Context(scene, camera, frame, lights, headlight, pools, nurbs, patches, offset,
-                   tol_rad, ground, trace_shadows, textures, pixel_angle)
+    shadow rays (blocked)."""
+    ctx = _Context(scene, camera, lights, headlight, world, patches, tol_rad, ground,
+                   trace_shadows)
 
     def reflect(t, normals, pix_patch, planes, dirs, keys, visible):
         t0 = time.perf_counter()
@@ -123,17 +117,15 @@ def mirror_pass(scene, camera, frame, width, lights, headlight, pools, nurbs, pa
 class _Context:
     """What the reflected rays need of the picture (see :func:`mirror_pass`)."""
 
-    def __init__(self, scene, camera, frame, lights, headlight, pools, nurbs, patches, offset,
-                 tol_rad, ground, trace_shadows, textures=None, pixel_angle=0.0):
+    def __init__(self, scene, camera, lights, headlight, world, patches, tol_rad, ground,
+                 trace_shadows):
         r = scene.render
-        self.textures, self.pixel_angle = textures, float(pixel_angle)
-        self.frame, self.lights, self.headlight = frame, lights, float(headlight)
-        self.pools, self.nurbs, self.patches, self.offset = pools, nurbs, patches, offset
-        self.tol_rad, self.ground, self.blocked = float(tol_rad), ground, trace_shadows
+        self.lights, self.headlight, self.world = lights, float(headlight), world
+        self.patches, self.tol_rad = patches, float(tol_rad)
+        self.ground, self.blocked = ground, trace_shadows
         self.depth, self.samples = int(r.reflection_depth), int(r.reflection_samples)
         self.ground_color = None if ground is None or scene.ground.color is None else \
             np.asarray(scene.ground.color, np.float64)
-        self.miss = miss_values(r.background)
         self.escape = _escape(scene, camera)
 
     # -- the rays from the eye ----------------------------------------------------------
@@ -180,7 +172,7 @@ class _Context:
         src, dirs, w = src[keep], dirs[keep], w[keep] * weight[src[keep]]
         o, ray_root, ray_key = origin[src], root[src], key[src]
         start = length[src]
-        s, fn, patch, texel = self._closest(o, dirs, start)
+        s, fn, patch, _, texel = self.world.closest(dirs, o, start)
         hit_ground, sg = self._ground(o, dirs, s)
         # misses (and a shadow catcher): what lies beyond
         miss = np.nonzero(~(s < np.inf) & ~hit_ground)[0]
@@ -231,38 +223,6 @@ class _Context:
                 normal[more]
             np.add.at(out, ray_root[idx][more], w[idx][more] * fres[more] * self.escape(mirror))
         return n_rays
-
-    def _closest(self, origins, dirs, length):
-        """The closest hits of the rays (distance (n,), inf: none; normal (n,3) towards the
-        ray's origin, turned by the bump and normal maps; patch (n,) int32, -1: none) on
-        the cages and the free-form surfaces (``length``: each ray's path from the eye, its
-        cone), and their image textures' colours (``textures.texture_hits``' texel, or
-        None)."""
-        n = len(dirs)
-        s = np.full(n, np.inf)
-        normals = np.zeros((n, 3))
-        patch = np.full(n, -1, np.int32)
-        texel = None
-        if self.pools is not None and n:
-            pools = self.pools
-            _, hits = trace_rays(pools, origins, dirs, np.full(n, np.inf), any_hit=False)
-            sub = np.empty((len(CHANNELS), n), np.float32)
-            covered = np.zeros(thread_count(), np.int64)
-            shade(self.frame, 1, hits, pools.iso.view(), self.patches, self.miss, sub, normals,
-                  patch, covered, dirs, table_loop_flag(pools.table), table=pools.table)
-            s = hits.t.copy()
-            # (the cone at a hit: as wide as the path from the eye makes it)
-            texel = texture_hits(self.textures, pools.table, hits._replace(t=hits.t + length),
-                                 pools.iso.view(), self.patches, self.frame, 1, dirs,
-                                 self.pixel_angle, normals, sub)
-        if self.nurbs is not None and n:
-            nh = nurbs_trace_rays(self.nurbs.model, self.nurbs.bvh, origins, dirs, self.tol_rad,
-                                  cone=length * self.tol_rad)
-            nh.patch[~(nh.t < s)] = -1
-            picture_hits(self.nurbs, nh, self.frame, 0, self.offset, s, normals, patch, dirs)
-            if texel is not None and self.offset:  # (a free-form surface's: none)
-                texel[patch >= self.offset] = -1.0
-        return s, normals, patch, texel
 
     def _ground(self, origins, dirs, s):
         """Which rays meet an opaque ground nearer than ``s`` (n,) bool, and where (n,)."""

@@ -236,22 +236,27 @@ def picture_hits(nurbs: NurbsScene, hits, frame, width, offset, t, normals, pix_
 
 
 def shade_rays(nurbs: NurbsScene, frame, dirs, tol_rad, offset, t, normals, pix_patch,
-               planes) -> None:
-    """Rays from the eye along ``dirs`` (n,3) (extra anti-aliasing rays) whose NURBS hit
-    is nearer than ``t`` (n,) (their subdivision hits): ``t``, ``normals``, ``pix_patch``
-    as :func:`picture_hits` writes them, and in ``planes`` (len(CHANNELS), n) every channel
-    but the colour, as the pixels' pass writes them (A, Z, N, level, patch_id (the
-    surface), object_id, u, v, P: a pixel whose centre ray missed takes them from its
-    nearest extra ray that hit, ``picture._nearest_hit``)."""
-    eye = np.repeat(frame[0][None], len(dirs), axis=0)
-    hits = trace_rays(nurbs.model, nurbs.bvh, eye, dirs, tol_rad)
+               planes, origins=None, cone=None) -> None:
+    """Rays along ``dirs`` (n,3) from the eye (extra anti-aliasing rays; ``origins`` None) or
+    from ``origins`` (n,3) (reflected rays; ``cone``: None, or (n,) each ray's width at its
+    origin, ``trace.trace_rays``) whose NURBS hit is nearer than ``t`` (n,) (their
+    subdivision hits): ``t``, ``normals``, ``pix_patch`` as :func:`picture_hits` writes
+    them, and in ``planes`` (len(CHANNELS), n; None: none) every channel but the colour, as
+    the pixels' pass writes them (A, Z, N, level, patch_id (the surface), object_id, u, v,
+    P: a pixel whose centre ray missed takes them from its nearest extra ray that hit,
+    ``picture._nearest_hit``)."""
+    if origins is None:
+        origins = np.repeat(frame[0][None], len(dirs), axis=0)
+    hits = trace_rays(nurbs.model, nurbs.bvh, origins, dirs, tol_rad, cone=cone)
     hits.patch[~(hits.t < t)] = -1
     near = picture_hits(nurbs, hits, frame, 0, offset, t, normals, pix_patch, dirs)
+    if planes is None:
+        return
     planes[C_A, near] = 1.0
     planes[C_Z, near] = t[near]
     for k in range(3):
         planes[C_N + k, near] = normals[near, k]
-        planes[C_P + k, near] = frame[0, k] + t[near] * dirs[near, k]
+        planes[C_P + k, near] = origins[near, k] + t[near] * dirs[near, k]
     surface = pix_patch[near] - offset
     planes[C_OBJECT, near] = nurbs.surface_object[surface]
     planes[C_PATCH, near] = surface
