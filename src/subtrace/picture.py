@@ -7,10 +7,10 @@ meets the scene through one aggregate of the cages and the free-form surfaces
 ``paint`` adds to the planes of ``shade.shade`` (which hold every channel but the colour):
 
 * shadow rays from every hit towards each light (``[render] shadows``, on by default;
-  ``shade.shadow_visibility``), as any-hit rays through the BVH of the shells
-  (``trace/rays.py``) and then, for those no cage blocks, through the free-form surfaces'
-  (``nurbs.scene.blocked``, with the ray's cone: its pixel's footprint at the hit it
-  leaves);
+  ``shade.shadow_visibility``), as any-hit rays (the aggregate's ``occluded``) through the
+  BVH of the shells (``trace/rays.py``) and then, for those no cage blocks, through the
+  free-form surfaces' (``nurbs.scene.blocked``, with the ray's cone: its pixel's footprint
+  at the hit it leaves);
 * ambient occlusion (``[render] ao`` / ``--ao N``, off by default): N cosine-weighted
   any-hit rays from every hit (``shade.ambient_occlusion``) reaching ``config.AO_DISTANCE``
   of the diagonal of the scene's control points; the share that escapes scales the
@@ -46,8 +46,8 @@ from types import SimpleNamespace
 import numpy as np
 
 from subtrace.accel.bvh import build_bvh
-from subtrace.aggregate import SceneAggregate
 from subtrace.accel.cull import casting_bounds
+from subtrace.aggregate import SceneAggregate
 from subtrace.camera import whole_image, window_offset
 from subtrace.mesh.cage import lowest_limit
 from subtrace.reflect import mirror_pass, reflects
