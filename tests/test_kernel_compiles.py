@@ -87,8 +87,9 @@ from subtrace.io.scene import scene_from_dict
 from subtrace.render import render_scene
 warmup.compile_picture(2)
 kernels = (shade._light_task, shade._background_task, shade._ground_first, shade._ground_rays,
-           shade._ground_last, shade._shadow_count, shade._shadow_make, shade._shadow_mark,
-           shade._luminance_rows, shade._pair_rows, shade._flag_rows)
+           shade._ground_last, shade._hit_points_task, shade._shadow_count,
+           shade._shadow_make, shade._shadow_mark, shade._luminance_rows, shade._pair_rows,
+           shade._flag_rows)
 sigs = lambda: [len(k.signatures) for k in kernels]
 before = sigs()
 scene = scene_from_dict({{"object": [{{"mesh": {str(MODELS / "spot_control_mesh.obj")!r}}}],
@@ -102,7 +103,7 @@ print(before, sigs())
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()
-    assert out == " ".join([str([1] * 11)] * 2), out
+    assert out == " ".join([str([1] * 12)] * 2), out
 
 
 def test_a_render_of_other_schemes_compiles_their_trace_kernel_in_a_helper(monkeypatch):

@@ -559,12 +559,41 @@ def error_bound(points, length, tol_rad) -> np.ndarray:
 
 def hit_points(frame, width, t, pixels, tol_rad, dirs=None):
     """(points (n,3), err (n,)): the hits ``eye + t d`` of the rays of ``pixels`` (flat
-    indices; their centres' rays, :func:`pixel_rays`, or ``dirs[pixels]``) and their error
-    bounds (:func:`error_bound` over the paths ``t``)."""
-    th = t[pixels]
-    d = pixel_rays(frame, width, pixels) if dirs is None else dirs[pixels]
-    points = frame[0] + th[:, None] * d
-    return points, error_bound(points, th, tol_rad)
+    indices, int64; their centres' rays, :func:`pixel_rays`, or ``dirs[pixels]``) and their
+    error bounds (:func:`error_bound` over the paths ``t``), on every thread
+    (:func:`_hit_points_task`: numpy's arithmetic, operation for operation)."""
+    pixels = np.ascontiguousarray(pixels, np.int64)
+    points, err = np.empty((len(pixels), 3)), np.empty(len(pixels))
+    run_tasks(_hit_points_task, frame, int(width), t, _no_dirs() if dirs is None else dirs,
+              pixels, float(tol_rad), points, err)
+    return points, err
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def _hit_points_task(task, n_tasks, frame, width, t, dirs, pixels, tol_rad, points, err):
+    """:func:`hit_points` of thread ``task``'s share of ``pixels`` (:func:`_segment`): the
+    arithmetic of :func:`pixel_rays` (a division by the length) and of :func:`error_bound`,
+    so the points are those numpy makes."""
+    a, b = _segment(task, n_tasks, len(pixels))
+    for i in range(a, b):
+        r = pixels[i]
+        if len(dirs):
+            dx, dy, dz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
+        else:
+            row = r // width
+            col = r - row * width
+            if frame.shape[0] > 4:  # (a window's pixels: their image's rays)
+                col += np.int64(frame[4, 0])
+                row += np.int64(frame[4, 1])
+            ax = frame[3, 0] + col * frame[1, 0] + row * frame[2, 0]
+            ay = frame[3, 1] + col * frame[1, 1] + row * frame[2, 1]
+            az = frame[3, 2] + col * frame[1, 2] + row * frame[2, 2]
+            n = np.sqrt(ax * ax + ay * ay + az * az)
+            dx, dy, dz = ax / n, ay / n, az / n
+        th = t[r]
+        px, py, pz = frame[0, 0] + th * dx, frame[0, 1] + th * dy, frame[0, 2] + th * dz
+        points[i, 0], points[i, 1], points[i, 2] = px, py, pz
+        err[i] = th * tol_rad + POINT_ROUNDING * max(max(abs(px), abs(py)), abs(pz))
 
 
 def shadow_visibility(trace, frame, width, t, normals, pix_patch, lights, tol_rad, dirs=None,
