@@ -600,19 +600,18 @@ def shadow_visibility(trace, frame, width, t, normals, pix_patch, lights, tol_ra
                       keys=None):
     """(L, n_pixels) float32: :func:`visibility_at` of the hit pixels' points
     (:func:`hit_points`; ``dirs``: as for :func:`shade`), with their (eye-facing)
-    ``normals`` and ``keys`` (None, or (n_pixels,) int64: ``lights.ray_keys``); 1 where a
-    pixel's ray missed."""
+    ``normals`` and ``keys`` (None, or (n_pixels,) int64: ``lights.ray_keys``), read in
+    place (``rows``); 1 where a pixel's ray missed."""
     visible = np.ones((len(lights), len(pix_patch)), np.float32)
     hit = np.nonzero(pix_patch >= 0)[0]
     if not len(lights) or not len(hit):
         return visible
     points, err = hit_points(frame, width, t, hit, tol_rad, dirs)
-    visible[:, hit] = visibility_at(trace, points, normals[hit], err, lights,
-                                    None if keys is None else keys[hit])
+    visible[:, hit] = visibility_at(trace, points, normals, err, lights, keys, rows=hit)
     return visible
 
 
-def visibility_at(trace, points, normals, err, lights, keys=None):
+def visibility_at(trace, points, normals, err, lights, keys=None, rows=None):
     """(L, n) float32: the share of light k that point i of ``points`` (n,3) sees, 1 where
     all its shadow rays towards it arrive (or where its normal faces away from it: then its
     lighting is 0 anyway), 0 in shadow; an environment's rays weighted by their cosine with
@@ -621,7 +620,9 @@ def visibility_at(trace, points, normals, err, lights, keys=None):
     (:func:`error_bound`); ``trace(origins, dirs, tmax)``: an any-hit trace returning
     blocked (``trace.rays.trace_rays``); ``keys``: None, or (n,) int64 each point's ray key
     (``lights.ray_keys``), which the lights of several shadow rays per point need
-    (``lights.sampled``). The pixels' shadows (:func:`shadow_visibility`) and the reflected
+    (``lights.sampled``); ``rows``: None, or (n,) int64: point i's normal and key are row
+    ``rows[i]`` of ``normals`` and ``keys`` (arrays of more rows, read in place). The
+    pixels' shadows (:func:`shadow_visibility`) and the reflected
     rays' (``reflect``) are this.
 
     A shadow ray leaves its point displaced along the normal by the error bound, so it
@@ -635,7 +636,8 @@ def visibility_at(trace, points, normals, err, lights, keys=None):
         return visible
     at = (np.ascontiguousarray(points, np.float64), np.ascontiguousarray(normals, np.float64),
           np.ascontiguousarray(err, np.float64), lights,
-          _NO_KEYS if keys is None else np.ascontiguousarray(keys, np.int64))
+          _NO_KEYS if keys is None else np.ascontiguousarray(keys, np.int64),
+          _NO_KEYS if rows is None else np.ascontiguousarray(rows, np.int64))
     n_tasks = thread_count()
     counts = np.zeros((n_tasks, n_lights), np.int64)  # per thread and light: its rays
     run_tasks(_shadow_count, *at, counts, n=n_tasks)
@@ -653,18 +655,20 @@ def visibility_at(trace, points, normals, err, lights, keys=None):
 
 
 _NO_KEYS = np.zeros(0, np.int64)  # (no ray keys: every light takes one ray per point)
+# (and no rows: point i's normal and key are row i's)
 
 
 @llvm_inline_njit
-def _faces(points, normals, i, lights, k):
-    """Whether point i's normal faces light k (an environment: always)."""
+def _faces(points, normals, i, q, lights, k):
+    """Whether point i's normal (row q of ``normals``) faces light k (an environment:
+    always)."""
     lx, ly, lz = irradiance_at(lights, k, points[i, 0], points[i, 1], points[i, 2])[:3]
-    return (normals[i, 0] * lx + normals[i, 1] * ly + normals[i, 2] * lz > 0.0
+    return (normals[q, 0] * lx + normals[q, 1] * ly + normals[q, 2] * lz > 0.0
             or is_environment(lights, k))
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def _shadow_count(task, n_tasks, points, normals, err, lights, keys, counts):
+def _shadow_count(task, n_tasks, points, normals, err, lights, keys, rows, counts):
     """Pass 1 of :func:`visibility_at`: the shadow rays of thread ``task``'s points
     (:func:`_segment`), per light, into ``counts[task]``."""
     a, b = _segment(task, n_tasks, len(points))
@@ -672,14 +676,14 @@ def _shadow_count(task, n_tasks, points, normals, err, lights, keys, counts):
         n = 0  # (counted here: threads adding to ``counts`` share a cache line)
         m = shadow_samples(lights, k)
         for i in range(a, b):
-            if _faces(points, normals, i, lights, k):
+            if _faces(points, normals, i, rows[i] if len(rows) else i, lights, k):
                 n += m
         counts[task, k] = n
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def _shadow_make(task, n_tasks, points, normals, err, lights, keys, base, origins, to_light,
-                 tmax):
+def _shadow_make(task, n_tasks, points, normals, err, lights, keys, rows, base, origins,
+                 to_light, tmax):
     """Pass 2: the shadow rays of thread ``task``'s points, light k's from ``base[task, k]``:
     origin the point displaced along its normal by ``err``, unit direction, tmax."""
     a, b = _segment(task, n_tasks, len(points))
@@ -687,22 +691,24 @@ def _shadow_make(task, n_tasks, points, normals, err, lights, keys, base, origin
         j = base[task, k]
         m = shadow_samples(lights, k)
         for i in range(a, b):
-            if not _faces(points, normals, i, lights, k):
+            q = rows[i] if len(rows) else i
+            if not _faces(points, normals, i, q, lights, k):
                 continue
-            key = keys[i] if len(keys) else np.int64(0)
+            key = keys[q] if len(keys) else np.int64(0)
             px, py, pz, e = points[i, 0], points[i, 1], points[i, 2], err[i]
             for s in range(m):
                 lx, ly, lz, dist = shadow_target(lights, k, s, key, px, py, pz)
-                origins[j, 0] = px + e * normals[i, 0]
-                origins[j, 1] = py + e * normals[i, 1]
-                origins[j, 2] = pz + e * normals[i, 2]
+                origins[j, 0] = px + e * normals[q, 0]
+                origins[j, 1] = py + e * normals[q, 1]
+                origins[j, 2] = pz + e * normals[q, 2]
                 to_light[j, 0], to_light[j, 1], to_light[j, 2] = lx, ly, lz
                 tmax[j] = dist - e
                 j += 1
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def _shadow_mark(task, n_tasks, points, normals, err, lights, keys, base, blocked, visible):
+def _shadow_mark(task, n_tasks, points, normals, err, lights, keys, rows, base, blocked,
+                 visible):
     """Pass 3: in ``visible``, the share of thread ``task``'s rays not ``blocked`` (0 or
     1 for a light of one ray)."""
     a, b = _segment(task, n_tasks, len(points))
@@ -710,10 +716,11 @@ def _shadow_mark(task, n_tasks, points, normals, err, lights, keys, base, blocke
         j = base[task, k]
         m = shadow_samples(lights, k)
         for i in range(a, b):
-            if not _faces(points, normals, i, lights, k):
+            q = rows[i] if len(rows) else i
+            if not _faces(points, normals, i, q, lights, k):
                 continue
             if is_environment(lights, k):
-                visible[k, i] = _weighted_share(points, normals, i, lights, k, keys, m,
+                visible[k, i] = _weighted_share(points, normals, i, q, lights, k, keys, m,
                                                 blocked, j)
                 j += m
             else:
@@ -727,16 +734,16 @@ def _shadow_mark(task, n_tasks, points, normals, err, lights, keys, base, blocke
 
 
 @llvm_inline_njit
-def _weighted_share(points, normals, i, lights, k, keys, m, blocked, j):
+def _weighted_share(points, normals, i, q, lights, k, keys, m, blocked, j):
     """The share of point i's ``m`` shadow rays towards light k (from ``blocked[j]`` on)
     that arrive, each weighted by ``lights.shadow_weight`` (an environment's: its cosine
-    with the normal); 1 where none has weight."""
-    key = keys[i] if len(keys) else np.int64(0)
+    with the normal, row q of ``normals``); 1 where none has weight."""
+    key = keys[q] if len(keys) else np.int64(0)
     px, py, pz = points[i, 0], points[i, 1], points[i, 2]
     total = dark = 0.0
     for s in range(m):
         lx, ly, lz, _ = shadow_target(lights, k, s, key, px, py, pz)
-        w = shadow_weight(lights, k, lx, ly, lz, normals[i, 0], normals[i, 1], normals[i, 2])
+        w = shadow_weight(lights, k, lx, ly, lz, normals[q, 0], normals[q, 1], normals[q, 2])
         total += w
         if blocked[j + s]:
             dark += w
