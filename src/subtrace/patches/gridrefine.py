@@ -34,8 +34,7 @@ import numpy as np
 
 from subtrace.runtime.jit import nb
 from subtrace.subdiv.creases import (
-    F0, RULE_CORNER, RULE_CREASE, RULE_DART, RULE_SMOOTH, decrement, fractional_weight,
-    rule_of,
+    F0, RULE_CREASE, RULE_DART, RULE_SMOOTH, decrement, vertex_rules,
 )
 
 # the children in the patch's corner order, each as the lower-left lattice point of its
@@ -166,14 +165,7 @@ def _vertex_point(G, L, es, vsharp, i, j):
     child = np.empty(4, np.float32)
     for k in range(4):
         child[k] = decrement(edges[k])
-    c_vert = decrement(vsharp)
-    p_rule = rule_of(vsharp, edges)
-    c_rule = p_rule
-    if p_rule != RULE_SMOOTH and p_rule != RULE_DART:
-        c_rule = rule_of(c_vert, child)
-    pw = 1.0
-    if c_rule != p_rule:
-        pw = np.float64(fractional_weight(vsharp, c_vert, edges, child, False))
+    p_rule, c_rule, pw = vertex_rules(vsharp, decrement(vsharp), edges, child, False)
     v = 4 * i + j
     out = np.zeros(3)
     for which in range(2):

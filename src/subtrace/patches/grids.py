@@ -129,8 +129,9 @@ def build_grids(level: Level, points: np.ndarray, options: Options, faces, depth
 
 
 def unit_normals(du, dv):
-    """The unit normals ``du x dv`` (..., 3) of limit tangents, NaN where undefined (in one
-    kernel: ``np.cross``, the norm and the division, each one NumPy pass, in this order)."""
+    """The unit normals ``du x dv`` (..., 3) of limit tangents, NaN where undefined: the
+    products, the norm and the division of ``np.cross`` and ``np.linalg.norm``, in their
+    order (so the same bits), in one kernel instead of a NumPy pass each."""
     du = np.ascontiguousarray(du, dtype=np.float64)
     dv = np.ascontiguousarray(np.broadcast_to(dv, du.shape), dtype=np.float64)
     out = np.empty(du.shape)

@@ -100,3 +100,19 @@ def fractional_weight(p_vert, c_vert, p_edges, c_edges, chaikin):
     if w > F1:
         return F1
     return w
+
+
+@callee_njit
+def vertex_rules(p_vert, c_vert, p_edges, c_edges, chaikin):
+    """``(parent rule, child rule, weight of the parent's)`` of a vertex point: the rule of
+    the vertex's sharpness ``p_vert`` and its edges' ``p_edges``, the child's (from
+    ``c_vert``, ``c_edges``) where the parent's is a crease or a corner, and where the two
+    differ the fractional weight between them (else 1)."""
+    p_rule = rule_of(p_vert, p_edges)
+    c_rule = p_rule
+    if p_rule != RULE_SMOOTH and p_rule != RULE_DART:
+        c_rule = rule_of(c_vert, c_edges)
+    pw = 1.0
+    if c_rule != p_rule:
+        pw = np.float64(fractional_weight(p_vert, c_vert, p_edges, c_edges, chaikin))
+    return p_rule, c_rule, pw

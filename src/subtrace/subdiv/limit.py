@@ -26,7 +26,6 @@ span the true tangent plane, oriented from the topology alone (see :func:`_eigen
 from __future__ import annotations
 
 import functools
-
 import math
 
 import numpy as np

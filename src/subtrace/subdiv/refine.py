@@ -28,8 +28,7 @@ from subtrace.subdiv.creases import (
     RULE_DART,
     RULE_SMOOTH,
     child_edge_sharpness_at_vertex,
-    fractional_weight,
-    rule_of,
+    vertex_rules,
 )
 from subtrace.subdiv.topology import INF_SHARP, Level, Options, build_level
 
@@ -417,15 +416,8 @@ def _vertex_points(is_loop, chaikin, edge_verts, edge_sharp, edge_child_sharp,
             e = vert_edges[ea + i]
             p_es[i] = edge_sharp[e]
             c_es[i] = edge_child_sharp[e, 0] if edge_verts[e, 0] == v else edge_child_sharp[e, 1]
-        p_rule = rule_of(vert_sharp[v], p_es)
-        c_rule = p_rule
-        if p_rule != RULE_SMOOTH and p_rule != RULE_DART:
-            c_rule = rule_of(vert_child_sharp[v], c_es)
-        pw = 1.0
-        if c_rule != p_rule:
-            pw = np.float64(
-                fractional_weight(vert_sharp[v], vert_child_sharp[v], p_es, c_es, chaikin)
-            )
+        p_rule, c_rule, pw = vertex_rules(vert_sharp[v], vert_child_sharp[v], p_es, c_es,
+                                          chaikin)
         for c in range(d):
             Q[v, c] = 0.0
         for which in range(2):
