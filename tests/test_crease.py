@@ -17,7 +17,7 @@ import pytest
 from shared_data import SHAPES, small_scene
 
 import subtrace
-from subtrace.patches import crease, isolate
+from subtrace.patches import crease, gridmaps, isolate
 from subtrace.patches.basis import net_bounds
 from subtrace.patches.criterion import wanted_depths
 from subtrace.patches.isolate import build_isolated, isolated_depths, item_sides
@@ -93,7 +93,8 @@ def _cage(name, tori):
 
 def _isolate(o, faces, cap, eye, tol, maps, monkeypatch):
     """Depths, boxes and pieces of ``faces`` with the crease maps on or off; the levels the
-    maps started at."""
+    maps started at. (The grid maps, patches/gridmaps.py, stay off: what the crease maps
+    leave goes through topology, the reference, on both paths.)"""
     starts = []
     real = crease.crease_pieces
 
@@ -102,6 +103,7 @@ def _isolate(o, faces, cap, eye, tol, maps, monkeypatch):
         return real(*args, **kw)
 
     monkeypatch.setattr(crease, "ENABLED", maps)
+    monkeypatch.setattr(gridmaps, "ENABLED", False)
     monkeypatch.setattr(isolate, "crease_pieces", counted)
     boxes = (np.full((len(faces), 3), np.inf), np.full((len(faces), 3), -np.inf))
     record = {}

@@ -43,8 +43,6 @@ topology.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from subtrace.config import IRREGULAR_MARGIN
@@ -53,7 +51,9 @@ from subtrace.patches.basis import TO_BEZIER
 from subtrace.patches.bspline import control_grids
 from subtrace.patches.facememo import FaceMemo
 from subtrace.patches.grids import unit_normals
-from subtrace.patches.shells import Sight
+from subtrace.patches.squares import (
+    bezier, distance, nan_max, nan_min, needed, net_bounds, sight, square_shell,
+)
 from subtrace.runtime.jit import leaf_njit, nb
 from subtrace.runtime.threads import run_chunks, thread_count
 
@@ -334,21 +334,6 @@ def _across(s_lo, s_hi):
     return out
 
 
-def _sight(eye):
-    """The eye as the kernel takes it: ``(eye (3,), near, seen_min (3,), seen_max (3,),
-    cone)``, ``cone`` whether ``eye`` is a :class:`~subtrace.patches.shells.Sight` (else the
-    other three are unused); ``eye`` None: zeros (the pieces then take their patch's
-    depth)."""
-    if eye is None:
-        z = np.zeros(3)
-        return z, 0.0, z, z, False
-    if isinstance(eye, Sight):
-        return (np.asarray(eye.eye, np.float64), float(eye.near),
-                np.asarray(eye.seen_min, np.float64), np.asarray(eye.seen_max, np.float64),
-                True)
-    z = np.zeros(3)
-    return np.asarray(eye, np.float64), 0.0, z, z, False
-
 
 # squares of one call of the kernel at most where there are more (a chunk of the thread
 # pool's: the chess pieces' creased patches make some 100-500 pieces each)
@@ -370,7 +355,7 @@ def _isolate(grids, s_lo, s_hi, side, limit, eye, tol_rad, pieces, k0=0, i0=None
     depend on the chunks or the threads."""
     m = len(grids)
     z = np.zeros(m, np.int64)
-    eye_p, near, seen_min, seen_max, cone = _sight(eye)
+    eye_p, near, seen_min, seen_max, cone = sight(eye)
     lo, hi = (np.full((m, 3), np.inf), np.full((m, 3), -np.inf)) if boxes is None else boxes
     per = (np.ascontiguousarray(grids, dtype=np.float64), np.ascontiguousarray(s_lo, np.float32),
            np.ascontiguousarray(s_hi, np.float32), np.ascontiguousarray(side, np.int64),
@@ -403,51 +388,8 @@ def _isolate(grids, s_lo, s_hi, side, limit, eye, tol_rad, pieces, k0=0, i0=None
     return tuple(out)
 
 
-@leaf_njit
-def _nan_max(a, b):
-    """``np.maximum(a, b)`` of two floats (a NaN wins)."""
-    if a != a:
-        return a
-    if b != b:
-        return b
-    return a if a >= b else b
 
 
-@leaf_njit
-def _nan_min(a, b):
-    """``np.minimum(a, b)`` of two floats (a NaN wins)."""
-    if a != a:
-        return a
-    if b != b:
-        return b
-    return a if a <= b else b
-
-
-@leaf_njit
-def _distance(lo, hi, r, eye, near, seen_min, seen_max, cone):
-    """``shells.sight_distance`` of box row ``r`` of ``lo``, ``hi``, in its sums' order."""
-    d = 0.0
-    for k in range(3):
-        q = _nan_max(_nan_max(lo[r, k] - eye[k], 0.0), eye[k] - hi[r, k])
-        d += q * q
-    d = math.sqrt(d)
-    if not cone:
-        return d
-    g = 0.0
-    for k in range(3):
-        q = _nan_max(_nan_max(lo[r, k] - seen_max[k], seen_min[k] - hi[r, k]), 0.0)
-        g += q * q
-    return _nan_max(d, near + math.sqrt(g))
-
-
-@leaf_njit
-def _needed(bound, dist, tol_rad):
-    """``grids.levels_needed`` of one bound (a float: 1e9 where it is not finite)."""
-    allowed = tol_rad * dist
-    if bound <= allowed:
-        return 0.0
-    n = math.ceil(math.log2(bound / allowed) - 1e-9)
-    return n if math.isfinite(n) else 1e9
 
 
 @leaf_njit
@@ -616,15 +558,15 @@ def _isolate_kernel(grids, s_lo, s_hi, side, limit, eye, near, seen_min, seen_ma
                 ki, kj = 2 * f_i[a] + h, 2 * f_j[a] + g
                 if kid_lo > zero or kid_hi > zero:  # irregular: refined further
                     if not pieces:
-                        _square_shell(child, 0, b_lo, b_hi, b_bound)
+                        square_shell(child, 0, b_lo, b_hi, b_bound)
                         need[r] = max(need[r], k)
-                        dist = _distance(b_lo, b_hi, 0, eye, near, seen_min, seen_max, cone)
+                        dist = distance(b_lo, b_hi, 0, eye, near, seen_min, seen_max, cone)
                         if not (margin * b_bound[0] <= tol_rad * dist) and k < limit[r]:
                             pass
                         else:  # (refined no further)
                             for c3 in range(3):
-                                box_lo[r, c3] = _nan_min(box_lo[r, c3], b_lo[0, c3])
-                                box_hi[r, c3] = _nan_max(box_hi[r, c3], b_hi[0, c3])
+                                box_lo[r, c3] = nan_min(box_lo[r, c3], b_lo[0, c3])
+                                box_hi[r, c3] = nan_max(box_hi[r, c3], b_hi[0, c3])
                             continue
                     x_root[n_next], x_grid[n_next] = r, child[0]
                     x_lo[n_next], x_hi[n_next] = kid_lo, kid_hi
@@ -635,15 +577,15 @@ def _isolate_kernel(grids, s_lo, s_hi, side, limit, eye, near, seen_min, seen_ma
                     t = from_canon[sd, f]
                     for c3 in range(3):
                         turned[f // 4, f % 4, c3] = child[0, t // 4, t % 4, c3]
-                _bezier(turned, to_bez, tmp, bez)
-                _net_bounds(bez, 0, b_lo, b_hi, b_bound)
-                n = _needed(b_bound[0], _distance(b_lo, b_hi, 0, eye, near, seen_min,
+                bezier(turned, to_bez, tmp, bez)
+                net_bounds(bez, 0, b_lo, b_hi, b_bound)
+                n = needed(b_bound[0], distance(b_lo, b_hi, 0, eye, near, seen_min,
                                                   seen_max, cone), tol_rad)
                 if not pieces:
                     need[r] = max(need[r], k + np.int64(n))
                     for c3 in range(3):
-                        box_lo[r, c3] = _nan_min(box_lo[r, c3], b_lo[0, c3])
-                        box_hi[r, c3] = _nan_max(box_hi[r, c3], b_hi[0, c3])
+                        box_lo[r, c3] = nan_min(box_lo[r, c3], b_lo[0, c3])
+                        box_hi[r, c3] = nan_max(box_hi[r, c3], b_hi[0, c3])
                     continue
                 if n_p == len(p_root):  # (never: _counts is exact)
                     raise ValueError("crease maps: more pieces than counted")
@@ -720,80 +662,7 @@ def _counts(s_lo, s_hi, depth, k0, mult, lo, hi):
     return n_p, n_c
 
 
-@leaf_njit
-def _bezier(cv, M, tmp, out):
-    """The Bezier net ``out`` (4,4,3) of the B-spline grid ``cv`` (4,4,3), ``M`` =
-    ``basis.TO_BEZIER``: ``basis.to_bezier``'s sums in its order (so the same bits), with
-    its scratch ``tmp`` (4,4,3) given (``to_bezier`` allocates its own per call: half the
-    time of the maps' kernel)."""
-    for a in range(4):
-        for j in range(4):
-            for k in range(3):
-                tmp[a, j, k] = (M[a, 0] * cv[0, j, k] + M[a, 1] * cv[1, j, k]
-                                + M[a, 2] * cv[2, j, k] + M[a, 3] * cv[3, j, k])
-    for a in range(4):
-        for b in range(4):
-            for k in range(3):
-                out[a, b, k] = (M[b, 0] * tmp[a, 0, k] + M[b, 1] * tmp[a, 1, k]
-                                + M[b, 2] * tmp[a, 2, k] + M[b, 3] * tmp[a, 3, k])
 
-
-@leaf_njit
-def _net_bounds(bez, s, lo, hi, bound):
-    """Row ``s`` of the box ``lo``, ``hi`` and derivative bound ``bound`` of the net
-    ``bez`` (4,4,3), as ``basis.net_summary`` makes them."""
-    for k in range(3):
-        lo[s, k] = np.inf
-        hi[s, k] = -np.inf
-    best = 0.0
-    for a in range(4):
-        for b in range(4):
-            for k in range(3):
-                lo[s, k] = min(lo[s, k], bez[a, b, k])
-                hi[s, k] = max(hi[s, k], bez[a, b, k])
-            if a < 3:
-                dx = bez[a + 1, b, 0] - bez[a, b, 0]
-                dy = bez[a + 1, b, 1] - bez[a, b, 1]
-                dz = bez[a + 1, b, 2] - bez[a, b, 2]
-                best = max(best, dx * dx + dy * dy + dz * dz)
-            if b < 3:
-                dx = bez[a, b + 1, 0] - bez[a, b, 0]
-                dy = bez[a, b + 1, 1] - bez[a, b, 1]
-                dz = bez[a, b + 1, 2] - bez[a, b, 2]
-                best = max(best, dx * dx + dy * dy + dz * dz)
-    # (the root of the longest square: a correctly rounded root never decreases, so it is
-    # the longest of the roots, bit for bit, at one root a net instead of 24)
-    bound[s] = 3.0 * math.sqrt(best)
-
-
-@leaf_njit
-def _square_shell(grids, m, lo, hi, bound):
-    """Box and length bound of the one-ring of square ``m`` whose one-ring is its grid
-    ``grids[m]`` (4,4,3), as ``shells.one_ring_shells`` makes them: the grid's box, and
-    ``(4 own + 5 most) / 9`` of the longest of its own sides and of every edge of the
-    grid."""
-    for k in range(3):
-        lo[m, k], hi[m, k] = np.inf, -np.inf
-    own = 0.0
-    most = 0.0
-    for a in range(4):
-        for b in range(4):
-            for k in range(3):
-                lo[m, k] = min(lo[m, k], grids[m, a, b, k])
-                hi[m, k] = max(hi[m, k], grids[m, a, b, k])
-            for da, db in ((1, 0), (0, 1)):
-                if a + da > 3 or b + db > 3:
-                    continue
-                d = 0.0
-                for k in range(3):
-                    x = grids[m, a + da, b + db, k] - grids[m, a, b, k]
-                    d += x * x
-                most = max(most, d)
-                # the square's own sides: between its corners, points 1 and 2
-                if 1 <= a <= 2 and 1 <= b <= 2 and a + da <= 2 and b + db <= 2:
-                    own = max(own, d)
-    # (roots of the longest squares: the longest roots, as in _net_bounds)
-    bound[m] = (4.0 * math.sqrt(own) + 5.0 * math.sqrt(most)) / 9.0
 
 
 def _canonical(level, points, faces, side):

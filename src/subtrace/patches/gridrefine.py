@@ -1,5 +1,5 @@
 """One level of Catmull-Clark refinement of a patch's 4x4 control grid under any pattern
-of semi-sharp edges, in a kernel (a building block, not yet used by the isolation).
+of semi-sharp edges, in a kernel (the refinement step of ``patches/gridmaps.py``).
 
 A quad whose four corners are inside the mesh, of valence 4 with quads around them,
 refines from its 4x4 control grid alone: its four children's control grids are a window
@@ -43,6 +43,16 @@ CHILD_AT = np.array([[1, 1], [2, 1], [2, 2], [1, 2]], dtype=np.int64)
 # the patch's corners (grid points) in corner order
 CORNERS = np.array([[1, 1], [2, 1], [2, 2], [1, 2]], dtype=np.int64)
 
+def _corner_edges():
+    """(4,4) the edge rows of each patch corner's four edges (+u, +v, -u, -v)."""
+    out = np.empty((4, 4), np.int64)
+    for q, (i, j) in enumerate(CORNERS):
+        out[q] = (i * 4 + j, 12 + i * 3 + j, (i - 1) * 4 + j, 12 + i * 3 + j - 1)
+    return out
+
+
+CORNER_EDGES = _corner_edges()
+
 # the smooth rules at valence 4 (catmark.smooth_vertex_weights(4), smooth_edge_weights for
 # an edge between two quads): vertex, each edge end, each face point; endpoint, face point
 _VW, _EW, _FW = (4.0 - 2.0) / 4.0, 1.0 / 16.0, 1.0 / 16.0
@@ -68,14 +78,74 @@ def refine_grids(P, es, vs, out_P, out_es, out_vs):
     patch's orientation)."""
     L = np.empty((7, 7, 3))
     for r in range(len(P)):
-        _lattice(P[r], es[r], vs[r], L)
-        for q in range(4):
-            a0, b0 = CHILD_AT[q, 0], CHILD_AT[q, 1]
-            for i in range(4):
-                for j in range(4):
-                    for c in range(3):
-                        out_P[r, q, 4 * i + j, c] = L[a0 + i, b0 + j, c]
-            _child_sharpness(es[r], vs[r], a0, b0, out_es[r, q], out_vs[r, q])
+        refine_grid(P[r], es[r], vs[r], L, out_P[r], out_es[r], out_vs[r])
+
+
+@nb.njit(cache=True, nogil=True)
+def refine_grid(G, es, vs, L, out_P, out_es, out_vs):
+    """:func:`refine_grids` of one grid ``G`` (16,3), ``es`` (24,), ``vs`` (4,) into
+    ``out_P`` (4,16,3), ``out_es`` (4,24), ``out_vs`` (4,4); ``L`` (7,7,3) scratch."""
+    _lattice(G, es, vs, L)
+    for q in range(4):
+        a0, b0 = CHILD_AT[q, 0], CHILD_AT[q, 1]
+        for i in range(4):
+            for j in range(4):
+                for c in range(3):
+                    out_P[q, 4 * i + j, c] = L[a0 + i, b0 + j, c]
+        _child_sharpness(es, vs, a0, b0, out_es[q], out_vs[q])
+
+
+# a corner's own edges in a neighbourhood grid (its point at (1, 1)): +u, +v, -u, -v
+NEIGHBOUR_EDGES = np.array([4 + 1, 12 + 3 + 1, 1, 12 + 3], dtype=np.int64)
+
+
+@nb.njit(cache=True, nogil=True)
+def refine_corner(G, es, vs, L):
+    """One level of the neighbourhood of a grid point in place: ``G`` (16,3) holds the
+    point at row 5 (grid position (1, 1)) and its eight neighbours at rows ``4 x + y``
+    (x, y < 3), ``es`` (24,) the sharpness of its four edges at ``NEIGHBOUR_EDGES`` (the
+    others unread), ``vs[0]`` its own; they become the child level's (the vertex point,
+    its edges' points and its faces' points, as :func:`refine_grid` makes them) and its
+    edges' and its own sharpness one level down. ``L`` (7,7,3) scratch."""
+    for i in range(2):
+        for j in range(2):
+            for c in range(3):
+                L[2 * i + 1, 2 * j + 1, c] = 0.25 * (G[4 * i + j, c] + G[4 * i + 4 + j, c]
+                                                     + G[4 * i + 5 + j, c] + G[4 * i + j + 1, c])
+    _edge_point(G, L, es[_h(1, 1)], 5, 9, 3, 1, 3, 3, 3, 2)
+    _edge_point(G, L, es[_h(0, 1)], 1, 5, 1, 1, 1, 3, 1, 2)
+    _edge_point(G, L, es[_v(1, 1)], 5, 6, 1, 3, 3, 3, 2, 3)
+    _edge_point(G, L, es[_v(1, 0)], 4, 5, 1, 1, 3, 1, 2, 1)
+    _vertex_point(G, L, es, vs[0], 1, 1)
+    for x in range(3):
+        for y in range(3):
+            for c in range(3):
+                G[4 * x + y, c] = L[1 + x, 1 + y, c]
+    for k in range(4):
+        es[NEIGHBOUR_EDGES[k]] = decrement(es[NEIGHBOUR_EDGES[k]])
+    vs[0] = decrement(vs[0])
+
+
+@nb.njit(cache=True)
+def corner_smooth(es, vs, q):
+    """Whether corner ``q`` of a grid of edge sharpness ``es`` (24,) and corner sharpness
+    ``vs`` (4,) is smooth (no sharpness on it or its four edges: ``CORNER_EDGES``)."""
+    if vs[q] > F0:
+        return False
+    for k in range(4):
+        if es[CORNER_EDGES[q, k]] > F0:
+            return False
+    return True
+
+
+@nb.njit(cache=True)
+def grid_regular(es, vs):
+    """Whether a grid's patch is a regular bicubic one: its four corners smooth
+    (:func:`corner_smooth`; the rules its descendants use read no other edge)."""
+    for q in range(4):
+        if not corner_smooth(es, vs, q):
+            return False
+    return True
 
 
 @nb.njit(cache=True)

@@ -34,6 +34,7 @@ from subtrace.config import IRREGULAR_MARGIN
 from subtrace.patches.basis import bezier_nets_and_bounds
 from subtrace.patches.bspline import control_points
 from subtrace.patches.crease import crease_depths, crease_pieces, crease_where
+from subtrace.patches.gridmaps import grid_depths, grid_pieces, grid_where
 from subtrace.patches.grids import levels_needed, refine_children, unit_normals
 from subtrace.patches.shells import one_ring_shells, sight_distance
 from subtrace.patches.stencil import stencil_depths, stencil_pieces, stencil_where
@@ -158,19 +159,25 @@ class _Maps:
     :func:`~subtrace.patches.stencil.stencil_where`'s ``(ok, corner, valence)``, ``crease``
     = :func:`~subtrace.patches.crease.crease_where`'s ``(ok, side, s_lo, s_hi)`` (disjoint:
     a stencil patch has no sharp edge at its corners, a crease patch no extraordinary
-    one), ``ok`` either."""
+    one), ``grid`` = :func:`~subtrace.patches.gridmaps.grid_where`'s ``(ok, es, vs)`` for
+    the others (any creases at valence-4 corners), ``ok`` any."""
 
     def __init__(self, level, options, faces, levels):
         self.stencil = stencil_where(level, options, faces, levels)
         self.crease = crease_where(level, options, faces, levels)
         self.ok = self.stencil[0] | self.crease[0]
+        rest = np.where(self.ok, -1, levels)
+        self.grid = grid_where(level, options, faces, rest)
+        self.ok = self.ok | self.grid[0]
 
     def parts(self):
         """``(ok, depths, pieces, args)`` of each kind: its faces, its modules' functions
         and their per-face arguments."""
         (st, corner, valence), (cr, side, s_lo, s_hi) = self.stencil, self.crease
+        gr, es, vs = self.grid
         return ((st, stencil_depths, stencil_pieces, (corner, valence)),
-                (cr, crease_depths, crease_pieces, (side, s_lo, s_hi)))
+                (cr, crease_depths, crease_pieces, (side, s_lo, s_hi)),
+                (gr, grid_depths, grid_pieces, (es, vs)))
 
 
 def _map_depths(maps, level, points, faces, cap, eye, tol_rad, boxes):
