@@ -321,11 +321,10 @@ class Pieces(Growable):
         # (the nets and corners as made go to their places in order: each patch's together)
         n0 = self.put("nets", net_at, nets=nets)
         c0 = self.put("cells", cell_at, cells=cp, normals=cn)
-        if cell_at is None:
-            c_lo, c_hi = cp.min(axis=1), cp.max(axis=1)
-        else:
-            c_lo = rows_in_order([a.min(axis=1) for a in cp], cell_at) if cp else _NO_BOX
-            c_hi = rows_in_order([a.max(axis=1) for a in cp], cell_at) if cp else _NO_BOX
+        # (the cells' boxes from the store, where their corners lie in order now: one
+        # reduction, not one per array as made and a scatter of the results)
+        placed = self.a["cells"][c0:c0 + len(cr)]
+        c_lo, c_hi = placed.min(axis=1, initial=np.inf), placed.max(axis=1, initial=-np.inf)
         lo = np.concatenate([lo_s, c_lo])[order]
         hi = np.concatenate([hi_s, c_hi])[order]
         is_cell = np.r_[np.zeros(len(sr), bool), np.ones(len(cr), bool)][order]
