@@ -199,3 +199,45 @@ def write_plane(path, z, half):
             a = j * n + i + 1
             lines.append(f"f {a} {a + 1} {a + n + 1} {a + n}")
     path.write_text("\n".join(lines) + "\n")
+
+
+def _sorted_rows(arrays, keys):
+    import numpy as np
+
+    order = np.lexsort(tuple(arrays[k] for k in reversed(keys)))
+    return [a[order] for a in arrays]
+
+
+def assert_same_isolation(ref, got, scale, atol=1e-13, normal_atol=1e-9, ring_rtol=None):
+    """Two isolations of the same faces, ``(depths, boxes, (subs, cells))`` each (the
+    fixed maps' against local topology, ``patches/isolate.py``): the same depths, the same
+    pieces at the same places with the same own depths, the boxes of the pieces their
+    nets' exactly, and the boxes, nets, cell corners (``atol`` of ``scale``), unit normals
+    (``normal_atol``) and cells' one-ring diagonals (``atol`` of ``scale``, or relative
+    ``ring_rtol``) to rounding. Returns the numbers of pieces and cells."""
+    import numpy as np
+
+    from subtrace.patches.basis import net_bounds
+
+    (d0, b0, (s0, c0)), (d1, b1, (s1, c1)) = ref, got
+    np.testing.assert_array_equal(d0, d1)
+    for a, b in zip(b0, b1):
+        np.testing.assert_allclose(a, b, rtol=0, atol=atol * scale)
+    s0, s1 = _sorted_rows(list(s0), (0, 1, 2, 3)), _sorted_rows(list(s1), (0, 1, 2, 3))
+    for k in (0, 1, 2, 3, 5):  # the same pieces at the same places, the same own depths
+        np.testing.assert_array_equal(s0[k], s1[k])
+    for s in (s0, s1):  # the boxes that travel with the pieces: their nets', exactly
+        lo, hi, _ = net_bounds(s[4])
+        np.testing.assert_array_equal(s[6], lo)
+        np.testing.assert_array_equal(s[7], hi)
+    np.testing.assert_allclose(s0[4], s1[4], rtol=0, atol=atol * scale)
+    c0, c1 = _sorted_rows(list(c0), (0, 1, 2)), _sorted_rows(list(c1), (0, 1, 2))
+    for k in (0, 1, 2, 6):
+        np.testing.assert_array_equal(c0[k], c1[k])
+    np.testing.assert_allclose(c0[3], c1[3], rtol=0, atol=atol * scale)
+    np.testing.assert_allclose(c0[4], c1[4], rtol=0, atol=normal_atol)
+    if ring_rtol is None:
+        np.testing.assert_allclose(c0[5], c1[5], rtol=0, atol=atol * scale)
+    else:
+        np.testing.assert_allclose(c0[5], c1[5], rtol=ring_rtol)
+    return len(s0[0]), len(c0[0])

@@ -14,11 +14,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from shared_data import SHAPES, small_scene
+from shared_data import SHAPES, assert_same_isolation, small_scene
 
 import subtrace
 from subtrace.patches import crease, gridmaps, isolate
-from subtrace.patches.basis import net_bounds
 from subtrace.patches.criterion import wanted_depths
 from subtrace.patches.isolate import build_isolated, isolated_depths, item_sides
 from subtrace.patches.table import build_patch_table
@@ -113,38 +112,17 @@ def _isolate(o, faces, cap, eye, tol, maps, monkeypatch):
     return depths, boxes, out, starts
 
 
-def _sorted(arrays, keys):
-    order = np.lexsort(tuple(arrays[k] for k in reversed(keys)))
-    return [a[order] for a in arrays]
-
-
 def _compare(o, faces, cap, eye, tol, monkeypatch):
-    """Both paths on ``faces``: the same depths, boxes, pieces and cells to rounding;
-    returns the levels the maps started at and the two paths' counts."""
-    d0, b0, (s0, c0), none = _isolate(o, faces, cap, eye, tol, False, monkeypatch)
-    d1, b1, (s1, c1), starts = _isolate(o, faces, cap, eye, tol, True, monkeypatch)
+    """Both paths on ``faces``: the same depths, boxes, pieces and cells to rounding (the
+    maps sum the same weights in another order, a few levels deep; a crease's sharp side
+    makes short tangents across it at its corners: unit normals to 1e-9); returns the
+    levels the maps started at and the two paths' counts."""
+    d0, b0, out0, none = _isolate(o, faces, cap, eye, tol, False, monkeypatch)
+    d1, b1, out1, starts = _isolate(o, faces, cap, eye, tol, True, monkeypatch)
     assert not none
-    np.testing.assert_array_equal(d0, d1)
-    # rounding: the maps sum the same weights in another order, a few levels deep
-    scale = float(np.abs(o.points).max())
-    for a, b in zip(b0, b1):
-        np.testing.assert_allclose(a, b, rtol=0, atol=1e-13 * scale)
-    s0, s1 = _sorted(list(s0), (0, 1, 2, 3)), _sorted(list(s1), (0, 1, 2, 3))
-    for k in (0, 1, 2, 3, 5):  # the same pieces at the same places, the same own depths
-        np.testing.assert_array_equal(s0[k], s1[k])
-    for s in (s0, s1):  # the boxes that travel with the pieces: their nets', exactly
-        lo, hi, _ = net_bounds(s[4])
-        np.testing.assert_array_equal(s[6], lo)
-        np.testing.assert_array_equal(s[7], hi)
-    np.testing.assert_allclose(s0[4], s1[4], rtol=0, atol=1e-13 * scale)
-    c0, c1 = _sorted(list(c0), (0, 1, 2)), _sorted(list(c1), (0, 1, 2))
-    for k in (0, 1, 2, 6):
-        np.testing.assert_array_equal(c0[k], c1[k])
-    np.testing.assert_allclose(c0[3], c1[3], rtol=0, atol=1e-13 * scale)
-    # unit normals: a crease's sharp side makes short tangents across it at its corners
-    np.testing.assert_allclose(c0[4], c1[4], rtol=0, atol=1e-9)
-    np.testing.assert_allclose(c0[5], c1[5], rtol=0, atol=1e-13 * scale)
-    return starts, len(s0[0]), len(c0[0])
+    pieces, cells = assert_same_isolation((d0, b0, out0), (d1, b1, out1),
+                                          float(np.abs(o.points).max()))
+    return starts, pieces, cells
 
 
 # the cages whose creases end or meet: the maps take over below the root there
@@ -308,6 +286,55 @@ def test_the_pieces_are_opensubdivs_limit_surface(name, monkeypatch):
                         lambda *a, **k: starts.append(a[11]) or real(*a, **k))
     (root, level, i0, j0, nets, *_), _ = build_isolated(o, table.face[sel], 10)
     assert starts  # the maps took part
+    checked, worst = oracle_distances(table, sel, root, level, i0, j0, nets, z)
+    assert checked > 30
+    # both exact: rounding in the levels of refinement (a sharp rule's weight off by 1e-3
+    # moves points by 1e-4 of the diagonal)
+    assert worst <= 1e-13 * meta["bbox_diag"]
+
+
+@pytest.mark.parametrize("name", ["catmark_helmet.obj", "catmark_rook.obj", "rings"])
+def test_the_kernels_chunks_and_threads_change_nothing(name, tori, monkeypatch):
+    """The maps' kernel takes its squares in chunks on the thread pool: depths, boxes,
+    pieces and cells are the same bit for bit in one call on one thread and in chunks of
+    three squares on two."""
+    same_in_chunks_and_threads(_cage(name, tori), crease, _isolate, monkeypatch)
+
+
+def same_in_chunks_and_threads(cage, maps, isolate_with, monkeypatch):
+    """The isolation of ``cage``'s irregular quads by ``isolate_with(o, faces, cap, eye,
+    tol, True, monkeypatch)`` (depths, boxes, (pieces, cells), the levels the maps started
+    at) the same bit for bit in one call on one thread and, with the map kernel of module
+    ``maps`` in chunks of three squares, on two."""
+    from subtrace.runtime import threads
+
+    table = build_patch_table([cage])
+    o = table.objects[0]
+    sel = np.nonzero(table.is_quad & ~table.regular)[0]
+    lo, hi = table.shell_min.min(axis=0), table.shell_max.max(axis=0)
+    eye = lo + 1.5 * (hi - lo) + np.array([0.1, 0.2, 0.3])
+    tol = np.radians(30.0) / 720
+    cap = np.clip(wanted_depths(table, eye, tol)[sel], 0, 9).astype(np.int64)
+    got = []
+    for n, chunk in ((1, 10 ** 9), (2, 3)):
+        monkeypatch.setattr(maps, "_SQUARES_PER_CHUNK", chunk)
+        threads.set_threads(n)
+        try:
+            got.append(isolate_with(o, table.face[sel], cap, eye, tol, True, monkeypatch))
+        finally:
+            threads.set_threads(None)
+    (d0, b0, (s0, c0), starts), (d1, b1, (s1, c1), _) = got
+    assert starts and len(s0[0]) > 0
+    np.testing.assert_array_equal(d0, d1)
+    for a, b in zip((*b0, *s0, *c0), (*b1, *s1, *c1)):
+        np.testing.assert_array_equal(a, b)
+
+
+def oracle_distances(table, sel, root, level, i0, j0, nets, z):
+    """(samples checked, the largest distance): the pieces (``build_isolated``'s of the
+    patches ``sel``) evaluated at the oracle's exact samples (``z``, an oracle npz) on the
+    patches they cover, against OpenSubdiv's limit points (samples in cells left at an
+    extraordinary vertex are not checked)."""
     checked = 0
     worst = 0.0
     for q, uv, P in zip(*(z[k][z["sample_exact_P"] == 1] for k in
@@ -327,40 +354,7 @@ def test_the_pieces_are_opensubdivs_limit_surface(name, monkeypatch):
                 worst = max(worst, float(np.linalg.norm(X - P)))
                 checked += 1
             break
-    assert checked > 30
-    # both exact: rounding in the levels of refinement (a sharp rule's weight off by 1e-3
-    # moves points by 1e-4 of the diagonal)
-    assert worst <= 1e-13 * meta["bbox_diag"]
-
-
-@pytest.mark.parametrize("name", ["catmark_helmet.obj", "catmark_rook.obj", "rings"])
-def test_the_kernels_chunks_and_threads_change_nothing(name, tori, monkeypatch):
-    """The maps' kernel takes its squares in chunks on the thread pool: depths, boxes,
-    pieces and cells are the same bit for bit in one call on one thread and in chunks of
-    three squares on two."""
-    from subtrace.runtime import threads
-
-    cage = _cage(name, tori)
-    table = build_patch_table([cage])
-    o = table.objects[0]
-    sel = np.nonzero(table.is_quad & ~table.regular)[0]
-    lo, hi = table.shell_min.min(axis=0), table.shell_max.max(axis=0)
-    eye = lo + 1.5 * (hi - lo) + np.array([0.1, 0.2, 0.3])
-    tol = np.radians(30.0) / 720
-    cap = np.clip(wanted_depths(table, eye, tol)[sel], 0, 9).astype(np.int64)
-    got = []
-    for n, chunk in ((1, 10 ** 9), (2, 3)):
-        monkeypatch.setattr(crease, "_SQUARES_PER_CHUNK", chunk)
-        threads.set_threads(n)
-        try:
-            got.append(_isolate(o, table.face[sel], cap, eye, tol, True, monkeypatch))
-        finally:
-            threads.set_threads(None)
-    (d0, b0, (s0, c0), starts), (d1, b1, (s1, c1), _) = got
-    assert starts and len(s0[0]) > 0
-    np.testing.assert_array_equal(d0, d1)
-    for a, b in zip((*b0, *s0, *c0), (*b1, *s1, *c1)):
-        np.testing.assert_array_equal(a, b)
+    return checked, worst
 
 
 # ------------------------------------------------------------------------------------------

@@ -14,12 +14,11 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from shared_data import SHAPES, lathe_cage
-from test_crease import HARD, TORI, torus_obj
+from shared_data import SHAPES, assert_same_isolation, lathe_cage
+from test_crease import HARD, oracle_distances, same_in_chunks_and_threads, torus_obj
 
 import subtrace
 from subtrace.patches import gridmaps, isolate
-from subtrace.patches.basis import net_bounds
 from subtrace.patches.criterion import wanted_depths
 from subtrace.patches.isolate import build_isolated, isolated_depths
 from subtrace.patches.table import build_patch_table
@@ -58,38 +57,18 @@ def _isolate(o, faces, cap, eye, tol, maps, monkeypatch):
     return depths, boxes, out, starts
 
 
-def _sorted(arrays, keys):
-    order = np.lexsort(tuple(arrays[k] for k in reversed(keys)))
-    return [a[order] for a in arrays]
-
-
 def _compare(o, faces, cap, eye, tol, monkeypatch):
-    """Both paths on ``faces``: the same depths, boxes, pieces and cells to rounding;
-    returns the levels the maps started at and the counts."""
-    d0, b0, (s0, c0), none = _isolate(o, faces, cap, eye, tol, False, monkeypatch)
-    d1, b1, (s1, c1), starts = _isolate(o, faces, cap, eye, tol, True, monkeypatch)
+    """Both paths on ``faces``: the same depths, boxes, pieces and cells to rounding (a
+    vertex blending two rules takes the mean of its edges' sharpness in float32, summed in
+    another order than the topology's: float32 rounding of that weight, 1e-7 of the
+    scale); returns the levels the maps started at and the counts."""
+    d0, b0, out0, none = _isolate(o, faces, cap, eye, tol, False, monkeypatch)
+    d1, b1, out1, starts = _isolate(o, faces, cap, eye, tol, True, monkeypatch)
     assert not none
-    np.testing.assert_array_equal(d0, d1)
-    scale = float(np.abs(o.points).max())
-    for a, b in zip(b0, b1):
-        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12 * scale)
-    s0, s1 = _sorted(list(s0), (0, 1, 2, 3)), _sorted(list(s1), (0, 1, 2, 3))
-    for k in (0, 1, 2, 3, 5):  # the same pieces at the same places, the same own depths
-        np.testing.assert_array_equal(s0[k], s1[k])
-    for s in (s0, s1):  # the boxes that travel with the pieces: their nets', exactly
-        lo, hi, _ = net_bounds(s[4])
-        np.testing.assert_array_equal(s[6], lo)
-        np.testing.assert_array_equal(s[7], hi)
-    # (a vertex blending two rules takes the mean of its edges' sharpness in float32,
-    # summed in another order than the topology's: float32 rounding of that weight)
-    np.testing.assert_allclose(s0[4], s1[4], rtol=0, atol=1e-7 * scale)
-    c0, c1 = _sorted(list(c0), (0, 1, 2)), _sorted(list(c1), (0, 1, 2))
-    for k in (0, 1, 2, 6):
-        np.testing.assert_array_equal(c0[k], c1[k])
-    np.testing.assert_allclose(c0[3], c1[3], rtol=0, atol=1e-7 * scale)
-    np.testing.assert_allclose(c0[4], c1[4], rtol=0, atol=1e-6)
-    np.testing.assert_allclose(c0[5], c1[5], rtol=0, atol=1e-7 * scale)
-    return starts, len(s0[0]), len(c0[0])
+    pieces, cells = assert_same_isolation((d0, b0, out0), (d1, b1, out1),
+                                          float(np.abs(o.points).max()), atol=1e-7,
+                                          normal_atol=1e-6)
+    return starts, pieces, cells
 
 
 CAGES = ["catmark_pawn.obj", "catmark_helmet.obj", "catmark_car.obj", "catmark_rook.obj",
@@ -190,10 +169,6 @@ def test_chaikin_cages_go_through_topology():
     assert not gridmaps.grid_faces(cage.base, cage.options, faces)[0].any()
 
 
-def _bernstein(t):
-    return np.array([(1 - t) ** 3, 3 * t * (1 - t) ** 2, 3 * t * t * (1 - t), t ** 3])
-
-
 @pytest.mark.parametrize("name", ["catmark_tent_creases0", "catmark_chaikin0",
                                   "catmark_dart_edgeonly"])
 def test_the_pieces_are_opensubdivs_limit_surface(name, monkeypatch):
@@ -211,25 +186,7 @@ def test_the_pieces_are_opensubdivs_limit_surface(name, monkeypatch):
                         lambda *a, **k: starts.append(a[10]) or real(*a, **k))
     (root, level, i0, j0, nets, *_), _ = build_isolated(o, table.face[sel], 9)
     assert starts  # the grid maps took part
-    checked = 0
-    worst = 0.0
-    for q, uv, P in zip(*(z[k][z["sample_exact_P"] == 1] for k in
-                          ("sample_ptex_face", "sample_uv", "sample_P"))):
-        for r in np.nonzero(table.ptex[sel] == q)[0]:
-            st = (uv - table.ptex_uv0[sel[r]]) / table.ptex_scale[sel[r]]
-            if (st < 0).any() or (st > 1).any():
-                continue
-            mine = np.nonzero(root == r)[0]
-            n = np.exp2(level[mine])
-            inside = ((i0[mine] <= st[0] * n) & (st[0] * n <= i0[mine] + 1)
-                      & (j0[mine] <= st[1] * n) & (st[1] * n <= j0[mine] + 1))
-            if inside.any():
-                a = mine[np.argmax(inside)]
-                s, t = st * np.exp2(level[a]) - (i0[a], j0[a])
-                X = np.einsum("i,j,ijk->k", _bernstein(s), _bernstein(t), nets[a])
-                worst = max(worst, float(np.linalg.norm(X - P)))
-                checked += 1
-            break
+    checked, worst = oracle_distances(table, sel, root, level, i0, j0, nets, z)
     assert checked > 30
     assert worst <= 1e-7 * meta["bbox_diag"]
 
@@ -238,26 +195,4 @@ def test_the_pieces_are_opensubdivs_limit_surface(name, monkeypatch):
 def test_the_kernels_chunks_and_threads_change_nothing(name, cages, monkeypatch):
     """Depths, boxes, pieces and cells are the same bit for bit in one call on one thread
     and in chunks of three squares on two."""
-    from subtrace.runtime import threads
-
-    cage = _cage(name, cages)
-    table = build_patch_table([cage])
-    o = table.objects[0]
-    sel = np.nonzero(table.is_quad & ~table.regular)[0]
-    lo, hi = table.shell_min.min(axis=0), table.shell_max.max(axis=0)
-    eye = lo + 1.5 * (hi - lo) + np.array([0.1, 0.2, 0.3])
-    tol = np.radians(30.0) / 720
-    cap = np.clip(wanted_depths(table, eye, tol)[sel], 0, 9).astype(np.int64)
-    got = []
-    for n, chunk in ((1, 10 ** 9), (2, 3)):
-        monkeypatch.setattr(gridmaps, "_SQUARES_PER_CHUNK", chunk)
-        threads.set_threads(n)
-        try:
-            got.append(_isolate(o, table.face[sel], cap, eye, tol, True, monkeypatch))
-        finally:
-            threads.set_threads(None)
-    (d0, b0, (s0, c0), starts), (d1, b1, (s1, c1), _) = got
-    assert starts and len(s0[0]) > 0
-    np.testing.assert_array_equal(d0, d1)
-    for a, b in zip((*b0, *s0, *c0), (*b1, *s1, *c1)):
-        np.testing.assert_array_equal(a, b)
+    same_in_chunks_and_threads(_cage(name, cages), gridmaps, _isolate, monkeypatch)

@@ -12,7 +12,6 @@ import pytest
 from subtrace import config
 from subtrace.mesh.cage import load_cage
 from subtrace.patches import gridmaps
-from subtrace.patches.basis import net_bounds
 from subtrace.patches.criterion import wanted_depths
 from subtrace.patches.isolate import build_isolated, isolated_depths
 from subtrace.patches.stencil import (
@@ -20,7 +19,7 @@ from subtrace.patches.stencil import (
 )
 from subtrace.patches.table import build_patch_table
 
-from shared_data import MODELS, SHAPES
+from shared_data import MODELS, SHAPES, assert_same_isolation
 
 CAGES = ["spot_control_mesh.obj", "blub_control_mesh.obj", "catmark_pole8.obj",
          "catmark_cubes_semisharp.obj", "catmark_nonquads.obj", "catmark_gregory_test4.obj"]
@@ -46,11 +45,6 @@ def _isolate(o, faces, cap, eye, tol, stencils):
         config.STENCIL_ISOLATION, gridmaps.ENABLED = old, old_grid
 
 
-def _sorted(arrays, keys):
-    order = np.lexsort(tuple(arrays[k] for k in reversed(keys)))
-    return [a[order] for a in arrays]
-
-
 @pytest.mark.parametrize("name", CAGES)
 def test_maps_isolate_as_the_mesh_does(name):
     table, o, sel = _irregular(name)
@@ -60,27 +54,11 @@ def test_maps_isolate_as_the_mesh_does(name):
     tol = np.radians(30.0) / 720
     cap = np.clip(wanted_depths(table, eye, tol)[sel], 0, 9).astype(np.int64)
     faces = table.face[sel]
-    d0, b0, (s0, c0) = _isolate(o, faces, cap, eye, tol, False)
-    d1, b1, (s1, c1) = _isolate(o, faces, cap, eye, tol, True)
+    d0, b0, out0 = _isolate(o, faces, cap, eye, tol, False)
+    d1, b1, out1 = _isolate(o, faces, cap, eye, tol, True)
     assert d1.max() >= 3  # deep enough for the maps to be used
-    np.testing.assert_array_equal(d0, d1)
-    scale = float(np.abs(o.points).max())
-    for a, b in zip(b0, b1):
-        np.testing.assert_allclose(a, b, rtol=0, atol=1e-13 * scale)
-    s0, s1 = _sorted(list(s0), (0, 1, 2, 3)), _sorted(list(s1), (0, 1, 2, 3))
-    for k in (0, 1, 2, 3, 5):  # the same pieces at the same places, the same own depths
-        np.testing.assert_array_equal(s0[k], s1[k])
-    for s in (s0, s1):  # the boxes that travel with the pieces: their nets', exactly
-        lo, hi, _ = net_bounds(s[4])
-        np.testing.assert_array_equal(s[6], lo)
-        np.testing.assert_array_equal(s[7], hi)
-    np.testing.assert_allclose(s0[4], s1[4], rtol=0, atol=1e-13 * scale)
-    c0, c1 = _sorted(list(c0), (0, 1, 2)), _sorted(list(c1), (0, 1, 2))
-    for k in (0, 1, 2, 6):
-        np.testing.assert_array_equal(c0[k], c1[k])
-    np.testing.assert_allclose(c0[3], c1[3], rtol=0, atol=1e-13 * scale)
-    np.testing.assert_allclose(c0[4], c1[4], rtol=0, atol=1e-9)  # unit normals
-    np.testing.assert_allclose(c0[5], c1[5], rtol=1e-12)
+    assert_same_isolation((d0, b0, out0), (d1, b1, out1), float(np.abs(o.points).max()),
+                          ring_rtol=1e-12)
 
 
 def _qualifies(level, f):

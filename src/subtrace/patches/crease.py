@@ -52,10 +52,10 @@ from subtrace.patches.bspline import control_grids
 from subtrace.patches.facememo import FaceMemo
 from subtrace.patches.grids import unit_normals
 from subtrace.patches.squares import (
-    bezier, distance, nan_max, nan_min, needed, net_bounds, sight, square_shell,
+    bezier, distance, in_chunks, nan_max, nan_min, needed, net_bounds, sight,
+    square_shell,
 )
 from subtrace.runtime.jit import leaf_njit, nb
-from subtrace.runtime.threads import run_chunks, thread_count
 
 ENABLED = True  # False: every creased patch through local topology (tests compare the two)
 
@@ -370,22 +370,7 @@ def _isolate(grids, s_lo, s_hi, side, limit, eye, tol_rad, pieces, k0=0, i0=None
         return _isolate_kernel(*(x[a:b] for x in per), *rest, *(x[a:b] for x in at),
                                *tables, lo[a:b], hi[a:b])
 
-    if m <= _SQUARES_PER_CHUNK or thread_count() == 1:
-        return call(0, m)
-    parts = {}
-
-    def work(t, a, b):
-        parts[a] = call(a, b)
-
-    run_chunks(work, m, _SQUARES_PER_CHUNK)
-    starts = sorted(parts)
-    got = [parts[a] for a in starts]
-    out = [np.concatenate([g[0] for g in got])]
-    for k in range(1, len(got[0])):
-        # (the square rows of the pieces and cells: the chunk's, from its first)
-        out.append(np.concatenate([g[k] + a if k in (1, 9) else g[k]
-                                   for a, g in zip(starts, got)]))
-    return tuple(out)
+    return in_chunks(call, m, _SQUARES_PER_CHUNK, (1, 9))
 
 
 

@@ -40,10 +40,10 @@ from subtrace.patches.gridrefine import (
 )
 from subtrace.patches.grids import unit_normals
 from subtrace.patches.squares import (
-    bezier, distance, nan_max, nan_min, needed, net_bounds, sight, square_shell,
+    bezier, distance, in_chunks, nan_max, nan_min, needed, net_bounds, sight,
+    square_shell,
 )
 from subtrace.runtime.jit import nb
-from subtrace.runtime.threads import run_chunks, thread_count
 from subtrace.subdiv.topology import INF_SHARP
 
 ENABLED = True  # False: these patches through local topology (tests compare the two)
@@ -193,22 +193,7 @@ def _isolate(grids, es, vs, limit, eye, tol_rad, pieces, k0=0, i0=None, j0=None,
     def call(a, b):
         return _isolate_kernel(*(x[a:b] for x in per), *rest, lo[a:b], hi[a:b])
 
-    if m <= _SQUARES_PER_CHUNK or thread_count() == 1:
-        return call(0, m)
-    parts = {}
-
-    def work(t, a, b):
-        parts[a] = call(a, b)
-
-    run_chunks(work, m, _SQUARES_PER_CHUNK)
-    starts = sorted(parts)
-    got = [parts[a] for a in starts]
-    out = [np.concatenate([g[0] for g in got])]
-    for k in range(1, len(got[0])):
-        # (the square rows of the pieces and cells: the chunk's, from its first)
-        out.append(np.concatenate([g[k] + a if k in (1, 9) else g[k]
-                                   for a, g in zip(starts, got)]))
-    return tuple(out)
+    return in_chunks(call, m, _SQUARES_PER_CHUNK, (1, 9))
 
 
 @nb.njit(cache=True)
@@ -301,13 +286,15 @@ def _isolate_kernel(grids, es, vs, limit, i0, j0, eye, near, seen_min, seen_max,
             k += 1
             if 4 * n_f > len(x_i):
                 size = 8 * n_f
-                x_grid, x_es, x_vs = _grown(x_grid, size), _grown(x_es, size), _grown(x_vs, size)
+                x_grid, x_es = _grown(x_grid, size), _grown(x_es, size)
+                x_vs = _grown(x_vs, size)
                 x_i, x_j = _grown(x_i, size), _grown(x_j, size)
             if pieces and n_p + 4 * n_f > len(p_root):
                 size = 2 * (n_p + 4 * n_f)
                 p_root, p_level = _grown(p_root, size), _grown(p_level, size)
                 p_i = _grown(p_i, size)
-                p_j, p_own, p_nets = _grown(p_j, size), _grown(p_own, size), _grown(p_nets, size)
+                p_j, p_own = _grown(p_j, size), _grown(p_own, size)
+                p_nets = _grown(p_nets, size)
                 p_lo, p_hi = _grown(p_lo, size), _grown(p_hi, size)
             n_x = 0
             for a in range(n_f):

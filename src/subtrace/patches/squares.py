@@ -15,6 +15,31 @@ import numpy as np
 
 from subtrace.patches.shells import Sight
 from subtrace.runtime.jit import leaf_njit
+from subtrace.runtime.threads import run_chunks, thread_count
+
+
+def in_chunks(call, m, per_chunk, square_rows):
+    """``call(a, b)`` (a map kernel's results for its squares ``a .. b - 1``) for all ``m``
+    squares: in one call, or in chunks of ``per_chunk`` squares on the thread pool, the
+    chunks' results one after another and the results at ``square_rows`` (square numbers
+    within the chunk) offset by the chunk's first. A square's own results come in the order
+    of one call, and every caller orders them by square first, so the result does not
+    depend on the chunks or the threads."""
+    if m <= per_chunk or thread_count() == 1:
+        return call(0, m)
+    parts = {}
+
+    def work(t, a, b):
+        parts[a] = call(a, b)
+
+    run_chunks(work, m, per_chunk)
+    starts = sorted(parts)
+    got = [parts[a] for a in starts]
+    out = [np.concatenate([g[0] for g in got])]
+    for k in range(1, len(got[0])):
+        out.append(np.concatenate([g[k] + a if k in square_rows else g[k]
+                                   for a, g in zip(starts, got)]))
+    return tuple(out)
 
 
 def sight(eye):
