@@ -20,6 +20,7 @@ from test_crease import HARD, oracle_distances, same_in_chunks_and_threads, toru
 import subtrace
 from subtrace.patches import gridmaps, isolate
 from subtrace.patches.criterion import wanted_depths
+from subtrace.patches.grids import unit_normals
 from subtrace.patches.isolate import build_isolated, isolated_depths
 from subtrace.patches.table import build_patch_table
 from subtrace.subdiv.topology import INF_SHARP
@@ -196,3 +197,34 @@ def test_the_kernels_chunks_and_threads_change_nothing(name, cages, monkeypatch)
     """Depths, boxes, pieces and cells are the same bit for bit in one call on one thread
     and in chunks of three squares on two."""
     same_in_chunks_and_threads(_cage(name, cages), gridmaps, _isolate, monkeypatch)
+
+
+@pytest.mark.parametrize("name", ["catmark_car.obj", "catmark_helmet.obj", "catmark_rook.obj",
+                                  "ends", "lathe"])
+def test_hard_vertices_limits_by_their_neighbourhoods(name, cages, monkeypatch):
+    """The limits of the semi-sharp valence-4 vertices by their 3x3 neighbourhoods
+    (subdiv/limit.py's grid path) against one-ring cuts refined through topology: the same
+    points to rounding, the same unit normals, on the cage and one level down."""
+    from subtrace.subdiv import limit
+
+    cage = _cage(name, cages)
+    for level in (0, 1):
+        lev, pts = cage.level_topology(level), cage.refine(level).points
+        cls = limit.classify(lev, cage.options)
+        hard = np.nonzero(cls == limit.HARD_SHARP)[0]
+        assert len(hard)
+        taken = limit._grid_limits(lev, np.ascontiguousarray(pts, np.float64), hard,
+                                   *(np.zeros((len(hard), 3)) for _ in range(3)),
+                                   np.arange(len(hard)))
+        assert taken.mean() > 0.5
+        got = limit.limit_points(lev, pts, cage.options, which=hard)
+        monkeypatch.setattr(limit, "GRID_LIMITS", False)
+        ref = limit.limit_points(lev, pts, cage.options, which=hard)
+        monkeypatch.setattr(limit, "GRID_LIMITS", True)
+        scale = float(np.abs(pts).max())
+        np.testing.assert_allclose(got[0], ref[0], rtol=0, atol=1e-7 * scale)
+        for a, b in ((got[1], ref[1]), (got[2], ref[2])):  # along the same edges
+            cos = (a * b).sum(axis=1) / np.linalg.norm(a, axis=1) / np.linalg.norm(b, axis=1)
+            assert cos.min() > 1 - 1e-9
+        np.testing.assert_allclose(unit_normals(*got[1:]), unit_normals(*ref[1:]), rtol=0,
+                                   atol=1e-6)

@@ -1,4 +1,4 @@
-"""patches/gridrefine.py: one level of a 4x4 grid's refinement under any sharpness pattern
+"""subdiv/gridrefine.py: one level of a 4x4 grid's refinement under any sharpness pattern
 against subtrace's own topological refinement (subdiv/refine.py) of the 3x3 quads the grid
 spans: the inner 5x5 points of the child lattice to rounding (float32's where a vertex
 blends two rules by the mean of its edges' sharpness, float64's elsewhere), and the
@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from subtrace.patches.gridrefine import CHILD_AT, CORNERS, refine_grids
+from subtrace.subdiv.gridrefine import CHILD_AT, CORNERS, refine_grids
 from subtrace.subdiv.refine import refine_level, refine_points
 from subtrace.subdiv.topology import INF_SHARP, Options, cage_level
 

@@ -4,7 +4,7 @@
 A Catmull-Clark quad whose four corners are inside the mesh, of valence 4 with quads
 around them, refines from its 4x4 control grid and the sharpness of the twelve edges at its
 corners (and the corners' own), whatever those are: a crease that ends inside it, two that
-cross or meet, sharpness changing along a line (``patches/gridrefine.py``: one level, in a
+cross or meet, sharpness changing along a line (``subdiv/gridrefine.py``: one level, in a
 kernel). Its children are such quads again, so the patch's whole isolation follows from
 its grid level by level, as ``patches/crease.py``'s maps do for one crease of constant
 sharpness along a side, without the local topology that ``patches/isolate.py`` builds for
@@ -35,8 +35,8 @@ from subtrace.config import IRREGULAR_MARGIN
 from subtrace.patches.basis import TO_BEZIER
 from subtrace.patches.bspline import control_grids
 from subtrace.patches.facememo import FaceMemo
-from subtrace.patches.gridrefine import (
-    CORNER_EDGES, CORNERS, NEIGHBOUR_EDGES, grid_regular, refine_corner, refine_grid,
+from subtrace.subdiv.gridrefine import (
+    CORNER_EDGES, CORNERS, NEIGHBOUR_EDGES, grid_regular, neighbourhood_limit, refine_grid,
 )
 from subtrace.patches.grids import unit_normals
 from subtrace.patches.squares import (
@@ -53,7 +53,7 @@ def grid_faces(level, options, faces):
     """Which of the irregular quads ``faces`` of ``level`` the grid maps serve: ``(ok (m,)
     bool, es (m,24) float32, vs (m,4) float32)``, the sharpness of the grid's edges (the
     twelve at its corners; the outer lines', which no rule of its descendants reads, 0) and
-    of its corners (``patches/gridrefine.py``'s layouts). A face qualifies when it is a
+    of its corners (``subdiv/gridrefine.py``'s layouts). A face qualifies when it is a
     quad whose corners are inside the mesh (one fan of four faces and four edges), the
     faces around them all quads and none a hole, with some semi-sharp sharpness at its
     corners and none infinite there; Catmull-Clark with uniform creases only."""
@@ -392,19 +392,12 @@ def grid_pieces(level, points, options, faces, es, vs, depth, eye=None, tol_rad=
     return subs, cells
 
 
-# the smooth valence-4 limit masks along one direction (the cubic B-spline's at a knot):
-# position and derivative over a point and its two neighbours
-_LIMIT3 = np.array([1.0, 4.0, 1.0]) / 6.0
-_SLOPE3 = np.array([-1.0, 0.0, 1.0]) / 2.0
-
-
 @nb.njit(cache=True, nogil=True)
 def _corner_limits(grids, es, vs, P, du, dv):
     """The exact limit points and tangents (along u and v, up to a positive factor) of the
     four corners of the squares of grids ``grids`` (m,16,3), sharpness ``es`` (m,24), ``vs``
     (m,4), into ``P``, ``du``, ``dv`` (m,4,3): each corner's neighbourhood (its 3x3 points)
-    refined (``gridrefine.refine_corner``) until the corner and its four edges are smooth,
-    then the tensor product of the smooth masks on those points."""
+    by ``gridrefine.neighbourhood_limit``."""
     L = np.empty((7, 7, 3))
     G = np.zeros((16, 3))
     e = np.zeros(24, np.float32)
@@ -416,28 +409,7 @@ def _corner_limits(grids, es, vs, P, du, dv):
                 for y in range(3):
                     for c in range(3):
                         G[4 * x + y, c] = grids[m, 4 * (a + x - 1) + b + y - 1, c]
-            smooth = vs[m, q] <= 0
             for k in range(4):
                 e[NEIGHBOUR_EDGES[k]] = es[m, CORNER_EDGES[q, k]]
-                smooth = smooth and es[m, CORNER_EDGES[q, k]] <= 0
             v[0] = vs[m, q]
-            for _ in range(64):  # (semi-sharpness runs out: one level a unit)
-                if smooth:
-                    break
-                refine_corner(G, e, v, L)
-                smooth = v[0] <= 0
-                for k in range(4):
-                    smooth = smooth and e[NEIGHBOUR_EDGES[k]] <= 0
-            for c in range(3):
-                p = 0.0
-                s_u = 0.0
-                s_v = 0.0
-                for x in range(3):
-                    for y in range(3):
-                        g = G[4 * x + y, c]
-                        p += (_LIMIT3[x] * _LIMIT3[y]) * g
-                        s_u += (_SLOPE3[x] * _LIMIT3[y]) * g
-                        s_v += (_LIMIT3[x] * _SLOPE3[y]) * g
-                P[m, q, c] = p
-                du[m, q, c] = s_u
-                dv[m, q, c] = s_v
+            neighbourhood_limit(G, e, v, L, P[m, q], du[m, q], dv[m, q])

@@ -126,6 +126,40 @@ def refine_corner(G, es, vs, L):
     vs[0] = decrement(vs[0])
 
 
+# the cubic B-spline's limit and derivative masks at a knot over it and its two neighbours
+_LIMIT3 = np.array([1.0, 4.0, 1.0]) / 6.0
+_SLOPE3 = np.array([-1.0, 0.0, 1.0]) / 2.0
+
+
+@nb.njit(cache=True, nogil=True)
+def neighbourhood_limit(G, es, vs, L, P, du, dv):
+    """The exact limit point and tangents (along u and v, up to a positive factor) of a
+    valence-4 vertex whose neighbourhood is ``G``, ``es``, ``vs`` (:func:`refine_corner`'s
+    layout), into ``P``, ``du``, ``dv`` (3,): the neighbourhood refined (in place) until
+    the vertex and its four edges are smooth, then the tensor product of the smooth masks
+    on its 3x3 points. ``L`` (7,7,3) scratch."""
+    for _ in range(64):  # (semi-sharpness runs out: one level a unit)
+        smooth = vs[0] <= F0
+        for k in range(4):
+            smooth = smooth and es[NEIGHBOUR_EDGES[k]] <= F0
+        if smooth:
+            break
+        refine_corner(G, es, vs, L)
+    for c in range(3):
+        p = 0.0
+        a = 0.0
+        b = 0.0
+        for x in range(3):
+            for y in range(3):
+                g = G[4 * x + y, c]
+                p += (_LIMIT3[x] * _LIMIT3[y]) * g
+                a += (_SLOPE3[x] * _LIMIT3[y]) * g
+                b += (_LIMIT3[x] * _SLOPE3[y]) * g
+        P[c] = p
+        du[c] = a
+        dv[c] = b
+
+
 @nb.njit(cache=True)
 def corner_smooth(es, vs, q):
     """Whether corner ``q`` of a grid of edge sharpness ``es`` (24,) and corner sharpness
