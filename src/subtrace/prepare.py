@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+from collections import Counter
 
 import numpy as np
 
@@ -40,14 +41,29 @@ def load_objects(scene):
     """Cages of the scene's objects (scheme / boundary overrides applied), in the order of
     :func:`cage_objects`, their coordinates checked and the vertices no face uses left out
     (``mesh.cage.without_unused_vertices``: checked first, so a message's vertex number
-    is the file's)."""
+    is the file's). Objects that name one file with the same reading options (placed
+    copies: ``[[object]]`` tables that differ in their placement alone) read it once, and
+    their cages share its face lists, tags, materials and topology
+    (``mesh.cage.placed``); each has its own points."""
+    objects = [scene.objects[k] for k in cage_objects(scene)]
+    keys = [_cage_key(o) for o in objects]
+    uses = Counter(keys)
+    loaded = {}
     cages = []
-    for o in (scene.objects[k] for k in cage_objects(scene)):
-        c = placed(load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code, prim=o.prim,
-                             time=o.time), o.transform)
+    for o, key in zip(objects, keys):
+        if key not in loaded:
+            loaded[key] = load_cage(o.mesh, scheme=o.scheme, boundary=o.boundary_code,
+                                    prim=o.prim, time=o.time)
+        c = placed(loaded[key], o.transform, shared=uses[key] > 1)
         check_coordinates(c.path, c.points, config.MAX_COORDINATE, c.points_box)
         cages.append(without_unused_vertices(c))
     return cages
+
+
+def _cage_key(o):
+    """What makes two objects' cages one cage as loaded (before their placements): the
+    file and what its reading takes (scheme, boundary, a USD prim and time code)."""
+    return (o.mesh, o.scheme, o.boundary_code, o.prim, o.time)
 
 
 def scene_bounds(cages, nurbs=None):

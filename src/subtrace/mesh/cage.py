@@ -520,13 +520,21 @@ def without_unused_vertices(cage: Cage) -> Cage:
     return cage.restricted(np.ones(cage.n_faces, bool))
 
 
-def placed(cage: Cage, matrix) -> Cage:
+def placed(cage: Cage, matrix, shared: bool = False) -> Cage:
     """``cage`` with its points mapped by the 4x4 affine ``matrix`` (``io.placement``; None:
     ``cage`` itself): the same faces, tags and materials, so its limit surface is the
     cage's own, mapped (subdivision commutes with affine maps). Its topology, built or
-    not, is shared."""
+    not, is shared. ``shared``: ``cage`` is placed more than once (copies of one file in a
+    scene): its topology is built now, once, for every copy (a cage of
+    ``config.LAZY_TOPOLOGY_FACES`` faces or more keeps it unbuilt: the render cuts such a
+    cage to the faces in view first), and a copy without a matrix is a cage of its own
+    (its caches its own) over the same arrays."""
+    if shared and cage.n_faces < config.LAZY_TOPOLOGY_FACES:
+        cage.base  # noqa: B018 (built once, for every copy)
     if matrix is None:
-        return cage
+        if not shared:
+            return cage
+        return replace(cage, _cache={k: v for k, v in cage._cache.items() if k == "base"})
     from subtrace.io.placement import place
 
     keep = {k: v for k, v in cage._cache.items() if k == "base"}
