@@ -10,6 +10,7 @@ The interpreter, Numba and the loaded kernels are outside the figures (a 16x12 r
 one Spot warms them first).
 
     python benchmarks/instances.py [--counts 1 10 100 1000] [--width 640 --height 360]
+                                   [--src another/checkout/src]
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from subtrace.io.scene import apply_overrides, scene_from_dict
 from subtrace.render import render_scene
 from subtrace.sweep import PeakMemory
 
-spec = json.loads(sys.argv[1])
+spec = json.loads(sys.stdin.read())
 warm = scene_from_dict(dict(spec, object=spec["object"][:1]))
 render_scene(apply_overrides(warm, width="16", height="12"))  # the kernels loaded
 scene = scene_from_dict(spec)
@@ -66,10 +67,10 @@ def field(n: int, width: int, height: int) -> dict:
             "light": [{"direction": [-0.4, -1.0, -0.5], "intensity": 0.8}]}
 
 
-def run(n: int, width: int, height: int) -> dict:
+def run(n: int, width: int, height: int, src: str) -> dict:
     spec = field(n, width, height)
-    env = dict(os.environ, PYTHONPATH=os.path.join(ROOT, "src"))
-    out = subprocess.run([sys.executable, "-c", CHILD, json.dumps(spec)], env=env,
+    env = dict(os.environ, PYTHONPATH=src)
+    out = subprocess.run([sys.executable, "-c", CHILD], input=json.dumps(spec), env=env,
                          capture_output=True, text=True, check=False)
     if out.returncode:
         raise SystemExit(f"N={n}: the render failed:\n{out.stderr}")
@@ -81,8 +82,10 @@ def main(argv=None):
     ap.add_argument("--counts", type=int, nargs="+", default=[1, 10, 100, 1000])
     ap.add_argument("--width", type=int, default=640)
     ap.add_argument("--height", type=int, default=360)
+    ap.add_argument("--src", default=os.path.join(ROOT, "src"),
+                    help="the subtrace sources to measure (default: this tree's)")
     args = ap.parse_args(argv)
-    rows = [(n, run(n, args.width, args.height)) for n in args.counts]
+    rows = [(n, run(n, args.width, args.height, args.src)) for n in args.counts]
     one = next((r["peak"] for n, r in rows if n == 1), None)
     print(f"| Spots | peak RSS growth MiB | per copy beyond one KiB | patches | refined "
           f"| seconds |")

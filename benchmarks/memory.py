@@ -10,6 +10,9 @@ Numba and the loaded kernels (about 200-300 MB before the render starts) are out
 budget.
 
     python benchmarks/memory.py [--width 640 --height 360]
+
+The memory of many placed copies of one cage against the cage once (a field of 1,000
+Spots) is ``benchmarks/instances.py``'s.
 """
 
 from __future__ import annotations
