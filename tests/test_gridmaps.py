@@ -201,8 +201,8 @@ def test_the_kernels_chunks_and_threads_change_nothing(name, cages, monkeypatch)
 
 @pytest.mark.parametrize("name", ["catmark_car.obj", "catmark_helmet.obj", "catmark_rook.obj",
                                   "ends", "lathe"])
-def test_hard_vertices_limits_by_their_neighbourhoods(name, cages, monkeypatch):
-    """The limits of the semi-sharp valence-4 vertices by their 3x3 neighbourhoods
+def test_hard_vertices_limits_by_their_rings(name, cages, monkeypatch):
+    """The limits of the semi-sharp vertices with quads around by their rings
     (subdiv/limit.py's grid path) against one-ring cuts refined through topology: the same
     points to rounding, the same unit normals, on the cage and one level down."""
     from subtrace.subdiv import limit

@@ -18,8 +18,8 @@ sharpness left is a regular bicubic patch (its Bezier net, box and derivative bo
 ``basis.bezier_nets_and_bounds`` make them, its need from the eye); the others are refined
 further, the depth choice stopping where the one-ring shell (the grid) is within the
 tolerance; the squares left at a patch's depth are cells, whose corners' exact limit points
-come from refining each corner's neighbourhood, level by level, until the corner and its
-four edges are smooth, and the valence-4 smooth limit masks there, as ``subdiv/limit.py``
+come from refining each corner's ring, level by level, until the corner and its four
+edges are smooth, and the smooth limit masks there, as ``subdiv/limit.py``
 does through topology. The sums run in another order, so the results
 equal the topological path's to rounding (tests/test_gridmaps.py compares them, and the
 pieces with OpenSubdiv's limit surface). Chaikin's crease method averages a vertex's other
@@ -36,7 +36,7 @@ from subtrace.patches.basis import TO_BEZIER
 from subtrace.patches.bspline import control_grids
 from subtrace.patches.facememo import FaceMemo
 from subtrace.subdiv.gridrefine import (
-    CORNER_EDGES, CORNERS, NEIGHBOUR_EDGES, grid_regular, neighbourhood_limit, refine_grid,
+    CORNER_EDGES, CORNERS, grid_regular, refine_grid, ring_limit,
 )
 from subtrace.patches.grids import unit_normals
 from subtrace.patches.squares import (
@@ -44,6 +44,7 @@ from subtrace.patches.squares import (
     square_shell,
 )
 from subtrace.runtime.jit import nb
+from subtrace.subdiv.limit import tangent_tables
 from subtrace.subdiv.topology import INF_SHARP
 
 ENABLED = True  # False: these patches through local topology (tests compare the two)
@@ -383,7 +384,8 @@ def grid_pieces(level, points, options, faces, es, vs, depth, eye=None, tol_rad=
     c_root, c_grid, c_es, c_vs, c_i, c_j = got[9:]
     if len(c_root):
         P, du, dv = (np.empty((len(c_root), 4, 3)) for _ in range(3))
-        _corner_limits(c_grid, c_es, c_vs, P, du, dv)
+        tw, fw = tangent_tables(False, 4)
+        _corner_limits(c_grid, c_es, c_vs, tw[4], fw[4], P, du, dv)
         for lst, a in zip(cells, (c_root, c_i, c_j, P, unit_normals(du, dv))):
             lst.append(a)
         if ring:  # (a grid is its square's one-ring; no corner on the mesh's boundary)
@@ -393,23 +395,31 @@ def grid_pieces(level, points, options, faces, es, vs, depth, eye=None, tol_rad=
 
 
 @nb.njit(cache=True, nogil=True)
-def _corner_limits(grids, es, vs, P, du, dv):
+def _corner_limits(grids, es, vs, tw, fw, P, du, dv):
     """The exact limit points and tangents (along u and v, up to a positive factor) of the
     four corners of the squares of grids ``grids`` (m,16,3), sharpness ``es`` (m,24), ``vs``
-    (m,4), into ``P``, ``du``, ``dv`` (m,4,3): each corner's neighbourhood (its 3x3 points)
-    by ``gridrefine.neighbourhood_limit``."""
-    L = np.empty((7, 7, 3))
-    G = np.zeros((16, 3))
-    e = np.zeros(24, np.float32)
-    v = np.zeros(4, np.float32)
+    (m,4), into ``P``, ``du``, ``dv`` (m,4,3): each corner's ring (+u, +v, -u, -v) by
+    ``gridrefine.ring_limit`` (``tw``, ``fw``: the valence-4 rows of
+    ``limit.tangent_tables``)."""
+    c = np.empty(3)
+    E = np.empty((4, 3))
+    D = np.empty((4, 3))
+    F = np.empty((4, 3))
+    M = np.empty((4, 3))
+    s = np.empty(4, np.float32)
     for m in range(grids.shape[0]):
         for q in range(4):
             a, b = CORNERS[q, 0], CORNERS[q, 1]
-            for x in range(3):
-                for y in range(3):
-                    for c in range(3):
-                        G[4 * x + y, c] = grids[m, 4 * (a + x - 1) + b + y - 1, c]
-            for k in range(4):
-                e[NEIGHBOUR_EDGES[k]] = es[m, CORNER_EDGES[q, k]]
-            v[0] = vs[m, q]
-            neighbourhood_limit(G, e, v, L, P[m, q], du[m, q], dv[m, q])
+            for i in range(4):
+                # edge i's far end and face i's (between edges i and i + 1) opposite corner
+                ea = a + (1 if i == 0 else (-1 if i == 2 else 0))
+                eb = b + (1 if i == 1 else (-1 if i == 3 else 0))
+                da = a + (1 if i == 0 or i == 3 else -1)
+                db = b + (1 if i <= 1 else -1)
+                for k in range(3):
+                    E[i, k] = grids[m, 4 * ea + eb, k]
+                    D[i, k] = grids[m, 4 * da + db, k]
+                s[i] = es[m, CORNER_EDGES[q, i]]
+            for k in range(3):
+                c[k] = grids[m, 4 * a + b, k]
+            ring_limit(c, E, D, s, vs[m, q], 4, tw, fw, F, M, P[m, q], du[m, q], dv[m, q])

@@ -33,6 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from subtrace.runtime.jit import nb
+from subtrace.subdiv.catmark import smooth_limit_weights, smooth_vertex_weights
 from subtrace.subdiv.creases import (
     F0, RULE_CREASE, RULE_DART, RULE_SMOOTH, decrement, vertex_rules,
 )
@@ -95,69 +96,92 @@ def refine_grid(G, es, vs, L, out_P, out_es, out_vs):
         _child_sharpness(es, vs, a0, b0, out_es[q], out_vs[q])
 
 
-# a corner's own edges in a neighbourhood grid (its point at (1, 1)): +u, +v, -u, -v
-NEIGHBOUR_EDGES = np.array([4 + 1, 12 + 3 + 1, 1, 12 + 3], dtype=np.int64)
-
-
 @nb.njit(cache=True, nogil=True)
-def refine_corner(G, es, vs, L):
-    """One level of the neighbourhood of a grid point in place: ``G`` (16,3) holds the
-    point at row 5 (grid position (1, 1)) and its eight neighbours at rows ``4 x + y``
-    (x, y < 3), ``es`` (24,) the sharpness of its four edges at ``NEIGHBOUR_EDGES`` (the
-    others unread), ``vs[0]`` its own; they become the child level's (the vertex point,
-    its edges' points and its faces' points, as :func:`refine_grid` makes them) and its
-    edges' and its own sharpness one level down. ``L`` (7,7,3) scratch."""
-    for i in range(2):
-        for j in range(2):
-            for c in range(3):
-                L[2 * i + 1, 2 * j + 1, c] = 0.25 * (G[4 * i + j, c] + G[4 * i + 4 + j, c]
-                                                     + G[4 * i + 5 + j, c] + G[4 * i + j + 1, c])
-    _edge_point(G, L, es[_h(1, 1)], 5, 9, 3, 1, 3, 3, 3, 2)
-    _edge_point(G, L, es[_h(0, 1)], 1, 5, 1, 1, 1, 3, 1, 2)
-    _edge_point(G, L, es[_v(1, 1)], 5, 6, 1, 3, 3, 3, 2, 3)
-    _edge_point(G, L, es[_v(1, 0)], 4, 5, 1, 1, 3, 1, 2, 1)
-    _vertex_point(G, L, es, vs[0], 1, 1)
-    for x in range(3):
-        for y in range(3):
-            for c in range(3):
-                G[4 * x + y, c] = L[1 + x, 1 + y, c]
-    for k in range(4):
-        es[NEIGHBOUR_EDGES[k]] = decrement(es[NEIGHBOUR_EDGES[k]])
-    vs[0] = decrement(vs[0])
-
-
-# the cubic B-spline's limit and derivative masks at a knot over it and its two neighbours
-_LIMIT3 = np.array([1.0, 4.0, 1.0]) / 6.0
-_SLOPE3 = np.array([-1.0, 0.0, 1.0]) / 2.0
-
-
-@nb.njit(cache=True, nogil=True)
-def neighbourhood_limit(G, es, vs, L, P, du, dv):
-    """The exact limit point and tangents (along u and v, up to a positive factor) of a
-    valence-4 vertex whose neighbourhood is ``G``, ``es``, ``vs`` (:func:`refine_corner`'s
-    layout), into ``P``, ``du``, ``dv`` (3,): the neighbourhood refined (in place) until
-    the vertex and its four edges are smooth, then the tensor product of the smooth masks
-    on its 3x3 points. ``L`` (7,7,3) scratch."""
+def ring_limit(c, E, D, s, vs, n, tw, fw, F, M, P, du, dv):
+    """The exact limit point and tangents (up to a positive factor, du along edge 0, dv
+    along edge 1) of a vertex of valence ``n`` inside the mesh with quads around, into
+    ``P``, ``du``, ``dv`` (3,): its ring (point ``c`` (3,), its edges' far ends ``E``
+    (n,3), its faces' opposite corners ``D`` (n,3), face i between edges i and i + 1, the
+    edges' sharpness ``s`` (n,) float32, its own ``vs``) refined in place (the vertex
+    point, its edges' and faces' points, as ``subdiv/refine.py``'s rules make them, and the
+    sharpness one level down: a vertex's next ring is made from its ring alone) until the
+    vertex and its edges are smooth, then the smooth limit masks there (``tw``, ``fw``:
+    ``limit.tangent_tables``' rows; position: ``catmark.smooth_limit_weights``). ``F``,
+    ``M`` (n,3) scratch."""
     for _ in range(64):  # (semi-sharpness runs out: one level a unit)
-        smooth = vs[0] <= F0
-        for k in range(4):
-            smooth = smooth and es[NEIGHBOUR_EDGES[k]] <= F0
+        smooth = vs <= F0
+        for i in range(n):
+            smooth = smooth and s[i] <= F0
         if smooth:
             break
-        refine_corner(G, es, vs, L)
-    for c in range(3):
-        p = 0.0
-        a = 0.0
-        b = 0.0
-        for x in range(3):
-            for y in range(3):
-                g = G[4 * x + y, c]
-                p += (_LIMIT3[x] * _LIMIT3[y]) * g
-                a += (_SLOPE3[x] * _LIMIT3[y]) * g
-                b += (_LIMIT3[x] * _SLOPE3[y]) * g
-        P[c] = p
-        du[c] = a
-        dv[c] = b
+        for i in range(n):
+            j = (i + 1) % n
+            for k in range(3):
+                F[i, k] = 0.25 * (c[k] + E[i, k] + D[i, k] + E[j, k])
+        for i in range(n):
+            h = (i - 1 + n) % n
+            if s[i] > F0 and decrement(s[i]) > F0:
+                for k in range(3):
+                    M[i, k] = 0.5 * (c[k] + E[i, k])
+                continue
+            vw, ew = _EDGE_VW, _EDGE_FW
+            if s[i] > F0:
+                pw = np.float64(s[i])
+                vw = pw * 0.5 + (1.0 - pw) * vw
+                ew = ew * (1.0 - pw)
+            for k in range(3):
+                M[i, k] = vw * (c[k] + E[i, k]) + ew * F[h, k] + ew * F[i, k]
+        child = np.empty(n, np.float32)
+        for i in range(n):
+            child[i] = decrement(s[i])
+        p_rule, c_rule, pw = vertex_rules(vs, decrement(vs), s[:n], child, False)
+        out = np.zeros(3)
+        for which in range(2):
+            rule = p_rule if which == 0 else c_rule
+            w = pw if which == 0 else 1.0 - pw
+            if which == 1 and c_rule == p_rule:
+                break
+            if rule == RULE_SMOOTH or rule == RULE_DART:
+                a, b, f = smooth_vertex_weights(n)
+                for k in range(3):
+                    acc = a * c[k]
+                    for i in range(n):
+                        acc += b * E[i, k]
+                    for i in range(n):
+                        acc += f * F[i, k]
+                    out[k] += w * acc
+            elif rule == RULE_CREASE:
+                sharp = s if which == 0 else child
+                k0 = 0
+                while sharp[k0] <= F0:
+                    k0 += 1
+                k1 = n - 1
+                while sharp[k1] <= F0:
+                    k1 -= 1
+                for k in range(3):
+                    out[k] += w * (0.75 * c[k] + 0.125 * (E[k0, k] + E[k1, k]))
+            else:
+                for k in range(3):
+                    out[k] += w * c[k]
+        for k in range(3):
+            c[k] = out[k]
+        for i in range(n):
+            for k in range(3):
+                E[i, k] = M[i, k]
+                D[i, k] = F[i, k]
+            s[i] = child[i]
+        vs = decrement(vs)
+    a, b, f = smooth_limit_weights(n)
+    for k in range(3):
+        P[k] = a * c[k]
+        du[k] = 0.0
+        dv[k] = 0.0
+    for i in range(n):
+        h = (i - 1 + n) % n
+        for k in range(3):
+            P[k] += b * E[i, k] + f * D[i, k]
+            du[k] += tw[i] * E[i, k] + fw[i] * D[i, k]
+            dv[k] += tw[h] * E[i, k] + fw[h] * D[i, k]
 
 
 @nb.njit(cache=True)

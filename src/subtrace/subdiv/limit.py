@@ -33,7 +33,7 @@ import numpy as np
 from subtrace.runtime.jit import callee_njit, leaf_njit, nb
 from subtrace.subdiv import catmark, loop
 from subtrace.subdiv.creases import F0, RULE_CORNER, RULE_CREASE, RULE_SMOOTH, rule_of
-from subtrace.subdiv.gridrefine import NEIGHBOUR_EDGES, neighbourhood_limit
+from subtrace.subdiv.gridrefine import ring_limit
 from subtrace.subdiv.refine import refine_level, refine_points, scheme_flag
 from subtrace.subdiv.topology import (
     INF_SHARP, Level, Options, build_level, compact, gather, gather_index,
@@ -188,7 +188,7 @@ def _closed_form(level, points, options, cls, which, dest, P, du, dv):
     """Closed-form limits of vertices ``which`` of ``level`` into rows ``dest`` of P, du, dv."""
     is_loop = options.scheme == "loop"
     max_val = int(np.max(np.diff(level.vert_edge_offsets), initial=0)) + 2
-    tw, fw = _tangent_tables(is_loop, max_val)
+    tw, fw = tangent_tables(is_loop, max_val)
     which = np.ascontiguousarray(which, dtype=np.int64)
     # (None: no crease vertex among them, whose rule the kernel then compiles without)
     crease = True if np.any(np.asarray(cls)[which] == CREASE) else None
@@ -217,7 +217,7 @@ def _closed_form(level, points, options, cls, which, dest, P, du, dv):
 
 
 @functools.lru_cache(maxsize=16)
-def _tangent_tables(is_loop: bool, max_val: int):
+def tangent_tables(is_loop: bool, max_val: int):
     """(edge, diagonal) weights (max_val + 1, max_val) float64 of the smooth limit tangent
     of each valence from 3 to ``max_val`` (row n, its first n columns), made once a process
     for each scheme and largest valence (shared: the kernels only read them; left writable,
@@ -501,9 +501,9 @@ def cut_level(level: Level, faces: np.ndarray):
 
 def _hard_limits(level, points, options, hard, P, du, dv, rows):
     """The limits of the vertices ``hard`` of ``level`` whose semi-sharp features need
-    refinement (or eigen-analysis), into rows ``rows`` of P, du, dv: inside the mesh at
-    valence 4 with quads around, by their 3x3 neighbourhoods alone (:func:`_grid_limits`),
-    the others by refining one-ring cuts through topology."""
+    refinement (or eigen-analysis), into rows ``rows`` of P, du, dv: inside the mesh with
+    quads around, by their rings alone (:func:`_grid_limits`), the others by refining
+    one-ring cuts through topology."""
     if options.scheme == "catmark" and not options.chaikin and GRID_LIMITS:
         done = _grid_limits(level, points, hard, P, du, dv, rows)
         hard, rows = hard[~done], np.asarray(rows)[~done]
@@ -541,64 +541,62 @@ def _hard_limits(level, points, options, hard, P, du, dv, rows):
 
 def _grid_limits(level, points, hard, P, du, dv, rows):
     """(len(hard),) bool: which of the vertices ``hard`` of ``level`` (Catmull-Clark,
-    uniform creases) are inside the mesh with four edges and four quads around, none a
-    hole, and no infinite sharpness on them or their edges; their limit points and
-    tangents go to rows ``rows`` of P, du, dv: their 3x3 neighbourhoods (the vertex, its
-    edges' far ends and its faces' opposite corners, edge 0 along u and edge 1 along v)
-    refined by ``gridrefine.refine_corner`` (a valence-4 vertex's next neighbourhood and
-    its edges' next sharpness come from its own: the one-ring cut below does the same
-    sums through topology) until the vertex and its edges are smooth, then the smooth
-    valence-4 masks there. Tangents up to a positive factor, du along the first edge of
-    the ring (OpenSubdiv's convention: du x dv the outward normal)."""
+    uniform creases) are inside the mesh with quads around, none a hole, and no infinite
+    sharpness on them or their edges; their limit points and tangents go to rows ``rows``
+    of P, du, dv: their rings (the vertex, its edges' far ends and its faces' opposite
+    corners, in ring order) refined in a kernel (``gridrefine.ring_limit``: a vertex's
+    next ring and its edges' next sharpness come from its own ring, as the one-ring cut
+    below makes them through topology) until the vertex and its edges are smooth, then
+    the smooth limit masks there (OpenSubdiv's convention: du along the first edge of the
+    ring, du x dv the outward normal)."""
     ok = np.zeros(len(hard), dtype=bool)
+    n_max = int(np.diff(level.vert_edge_offsets).max(initial=0))
+    tw, fw = tangent_tables(False, max(n_max, 3))
     _grid_limits_kernel(level.face_offsets, level.face_verts, level.edge_verts,
                         level.vert_face_offsets, level.vert_faces, level.vert_face_corner,
                         level.vert_edge_offsets, level.vert_edges, level.vert_manifold,
                         level.edge_sharpness, level.vert_sharpness, level.face_hole,
                         np.float32(INF_SHARP), np.ascontiguousarray(hard, dtype=np.int64),
-                        np.ascontiguousarray(rows, dtype=np.int64), points, NEIGHBOUR_EDGES,
+                        np.ascontiguousarray(rows, dtype=np.int64), points, tw, fw, n_max,
                         P, du, dv, ok)
     return ok
 
 
-# the rows of a neighbourhood grid (the vertex at row 5, ``gridrefine.refine_corner``) of a
-# ring's four edges' far ends (+u, +v, -u, -v) and of its four faces' opposite corners
-# (face i between edges i and i + 1)
-_EDGE_ROWS = np.array([9, 6, 1, 4], dtype=np.int64)
-_DIAGONAL_ROWS = np.array([10, 2, 0, 8], dtype=np.int64)
 @nb.njit(cache=True, nogil=True)
 def _grid_limits_kernel(fo, fv, ev, vfo, vf, vfc, veo, ve, manifold, es, vsharp, hole,
-                        inf_sharp, which, rows, X, nbr, P, du, dv, ok):
+                        inf_sharp, which, rows, X, tw, fw, n_max, P, du, dv, ok):
     """:func:`_grid_limits`' kernel: ``ok[t]`` set for each vertex ``which[t]`` it takes."""
-    G = np.zeros((16, 3))
-    e = np.zeros(24, np.float32)
-    v = np.zeros(4, np.float32)
-    L = np.empty((7, 7, 3))
+    c = np.empty(3)
+    E = np.empty((n_max, 3))
+    D = np.empty((n_max, 3))
+    F = np.empty((n_max, 3))
+    M = np.empty((n_max, 3))
+    s = np.empty(n_max, np.float32)
     for t in range(len(which)):
         p = which[t]
-        if (not manifold[p] or veo[p + 1] - veo[p] != 4 or vfo[p + 1] - vfo[p] != 4
-                or vsharp[p] >= inf_sharp):
+        n = veo[p + 1] - veo[p]
+        if not manifold[p] or n < 3 or vfo[p + 1] - vfo[p] != n or vsharp[p] >= inf_sharp:
             continue
         good = True
-        for i in range(4):
+        for i in range(n):
             f = vf[vfo[p] + i]
             if fo[f + 1] - fo[f] != 4 or hole[f] or es[ve[veo[p] + i]] >= inf_sharp:
                 good = False
         if not good:
             continue
-        for c in range(3):
-            G[5, c] = X[p, c]
-        for i in range(4):
+        for k in range(3):
+            c[k] = X[p, k]
+        for i in range(n):
             g = ve[veo[p] + i]
             far = ev[g, 1] if ev[g, 0] == p else ev[g, 0]
             f = vf[vfo[p] + i]
             diag = fv[fo[f] + (vfc[vfo[p] + i] + 2) % 4]
-            for c in range(3):
-                G[_EDGE_ROWS[i], c] = X[far, c]
-                G[_DIAGONAL_ROWS[i], c] = X[diag, c]
-            e[nbr[i]] = es[g]
-        v[0] = vsharp[p]
-        neighbourhood_limit(G, e, v, L, P[rows[t]], du[rows[t]], dv[rows[t]])
+            for k in range(3):
+                E[i, k] = X[far, k]
+                D[i, k] = X[diag, k]
+            s[i] = es[g]
+        r = rows[t]
+        ring_limit(c, E, D, s, vsharp[p], n, tw[n], fw[n], F, M, P[r], du[r], dv[r])
         ok[t] = True
 
 
