@@ -21,6 +21,12 @@ another order than the topological refinement's, so the points equal its to roun
 changes, as its fractional weight is a float32 mean of its edges' sharpness (as
 OpenSubdiv's), summed in the order each visits the edges.
 
+:func:`ring_limit` does the same for one vertex of any valence with quads around: its
+ring (its edges' far ends, its faces' opposite corners, the edges' sharpness) refines from
+itself alone until the vertex and its edges are smooth, and the smooth limit masks there
+give its exact limit point and tangents (``subdiv/limit.py``'s semi-sharp vertices, the
+corners of ``patches/gridmaps.py``'s cells).
+
 The grid: point (i, j) at row ``4 i + j`` (``i`` along ``u``), as
 ``bspline.control_grids`` lays it. Its edges: ``H(i, j)`` from (i, j) to (i + 1, j) in
 rows 0 .. 11 (``i * 4 + j``, i < 3), ``V(i, j)`` from (i, j) to (i, j + 1) in rows
