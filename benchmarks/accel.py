@@ -55,7 +55,7 @@ from subtrace.accel.bvh import (box_entry, bvh_next_leaf, bvh_start,  # noqa: E4
                                 traversal_stack)
 from subtrace.accel.projection import TILE  # noqa: E402
 from subtrace.runtime.jit import nb  # noqa: E402
-from subtrace.trace.prims import ray_setup  # noqa: E402
+from subtrace.geometry.prims import ray_setup  # noqa: E402
 
 DEFAULT_SIZES = ["640x360", "1280x720", "1920x1080"]
 

@@ -1,4 +1,4 @@
-"""The per-ray Bezier descent's bounds (``trace/bezier.py``): a cell's box cut by its slab
+"""The per-ray Bezier descent's bounds (``geometry/bezier.py``): a cell's box cut by its slab
 must let through every ray that meets the cell's surface or its two micro-triangles, and a
 block's frame must keep every cell whose triangles a ray meets."""
 
@@ -10,10 +10,10 @@ from hypothesis import strategies as st
 
 from subtrace import config
 from subtrace.patches.basis import bez_point, net_box, split_net
-from subtrace.trace.bezier import (
+from subtrace.geometry.bezier import (
     LOCATE_PAD, _block_cells, _cell_entry, _cell_slab, _interpolation_bound,
 )
-from subtrace.trace.prims import ray_triangle, shear
+from subtrace.geometry.prims import ray_triangle, shear
 
 
 def _sub_net(root, depth, i, j):

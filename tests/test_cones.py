@@ -156,7 +156,7 @@ def test_a_caster_near_the_eye_is_refined_for_the_cones_that_reach_it(tmp_path, 
     assert np.all(depths >= need)
     assert np.all(cone > 4.0 * box_distance(table.shell_min, table.shell_max, eye))
     # the render: a shallower deepest grid for the shadow rays (the micro-triangles they
-    # test are a few per ray at either depth: trace/bezier.py places a ray among a
+    # test are a few per ray at either depth: geometry/bezier.py places a ray among a
     # block's cells)
     _by_the_eye(monkeypatch)
     eyes = render.render_scene(scene)

@@ -447,7 +447,7 @@ def test_cell_free_depths_count_the_levels_until_the_creases_run_out(name, tori)
 def test_a_patch_with_cells_keeps_its_depth_and_a_finer_neighbour_snaps(tori):
     """edge_sampling never raises a patch along a crease while its isolation leaves cells
     (below its cell-free depth): its finer neighbour samples their edge at its depth
-    (snapped, ``trace/snap.py``). Past its creases the patch fans: it keeps its depth
+    (snapped, ``geometry/snap.py``). Past its creases the patch fans: it keeps its depth
     (within FAN_LEVELS) and samples that side at the neighbour's."""
     from subtrace import config
     from subtrace.patches.criterion import edge_sampling

@@ -74,7 +74,7 @@ def test_hard_surface_cage_the_same_whatever_the_threads(tmp_path):
 def test_counts_whatever_the_threads_and_the_run(name):
     """Micro-triangles and the other counts of the header are the same with 1 and 2 threads
     and across runs: each chunk of rays has a memo of its own, so a chunk counts the same
-    cells on any thread (trace/prims.memo_restart). Full resolution, so that rays of one
+    cells on any thread (geometry/prims.memo_restart). Full resolution, so that rays of one
     patch land in several chunks and the threads share patches (the memos must not run
     out: the count would then include cells evaluated per ray)."""
     scene = load_scene(SCENES / f"{name}.toml")

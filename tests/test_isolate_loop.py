@@ -1,5 +1,5 @@
 """Irregular Loop triangles isolated into per-ray pieces and cells (patches/isolate_loop.py,
-trace/tris.py): the pieces and cells are the exact limit surface (the evaluator, checked
+geometry/tris.py): the pieces and cells are the exact limit surface (the evaluator, checked
 against OpenSubdiv) and tile the patch; snapped sides' samples are exact; renders are
 watertight from inside creased Loop cages and at an open boundary, build a few
 micro-triangles per covered pixel, and never refine a hidden irregular patch."""
@@ -15,7 +15,7 @@ from subtrace.patches.boxspline import loop_regular
 from subtrace.patches.isolate_loop import build_loop_isolated, corner_coords, side_samples
 from subtrace.patches.table import build_patch_table
 from subtrace.render import render_scene
-from subtrace.trace.tris import tri_point
+from subtrace.geometry.tris import tri_point
 
 CREASED = ["loop_cube_creases1", "loop_icos_semisharp", "loop_chaikin1"]
 

@@ -55,10 +55,10 @@ def test_the_key_follows_the_bytes_not_the_times_or_the_folder(tmp_path):
     da, db = jit.source_digests(a), jit.source_digests(b)
     assert da == db and len(da) == len(list(jit.ROOT.rglob("*.py")))
     assert jit.cache_key(da, "0.60.0", CPU) == jit.cache_key(db, "0.60.0", CPU)
-    helper = b / "trace" / "prims.py"
+    helper = b / "geometry" / "prims.py"
     helper.write_bytes(helper.read_bytes().replace(b"    ", b"   \t", 1))  # still valid
     db2 = jit.source_digests(b)
-    assert {k for k in da if da[k] != db2[k]} == {"trace/prims.py"}
+    assert {k for k in da if da[k] != db2[k]} == {"geometry/prims.py"}
     assert jit.cache_key(da, "0.60.0", CPU) != jit.cache_key(db2, "0.60.0", CPU)
     # and the Numba version and the CPU are part of the key
     key = jit.cache_key(da, "0.60.0", CPU)
@@ -105,7 +105,7 @@ def test_a_reinstall_elsewhere_loads_the_kernels_and_an_edit_compiles_them(tmp_p
     assert (second["folder"], second["path"], second["stamp"]) == (
         first["folder"], first["path"], first["stamp"])
     assert Path(first["path"]).relative_to(first["folder"]).as_posix() == "subtrace/accel"
-    helper = b / "trace" / "prims.py"
+    helper = b / "geometry" / "prims.py"
     helper.write_bytes(helper.read_bytes() + b"# an edit\n")
     third = _probe(b.parent, cache)
     assert third["folder"] != first["folder"] and (third["hits"], third["misses"]) == (0, 1)

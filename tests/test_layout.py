@@ -57,7 +57,6 @@ HEAVY = ("numba", "OpenImageIO")  # what importing the command line must not imp
 # dependency). "subtrace" is the package's own __init__, the public API at the top.
 LAYERS = (
     ("version", "errors", "config", "data"),  # the base: they import nothing of ours
-    ("geometry",),  # the kinds of items a ray can meet: the words every room below names them by
     ("runtime",),  # threads, Numba (jit, numba_patches), memory, signals, the atomic writer
     ("camera",),
     ("lights",),  # a light's scene keys are checked as the camera's are (check_vector)
@@ -66,6 +65,11 @@ LAYERS = (
     ("patches",),
     ("mesh",),  # the Cage API: its refine, limit, evaluate are subdiv's and patches' work
     ("accel",),  # the cull asks patches for shells and lights for shadow rays' reach
+    # the kinds of items a ray can meet (the words every room above names them by) and each
+    # kind's operations: its intersectors split patches' Bezier nets and enter boxes by
+    # accel's slab tests, so the room sits above both (the patch table's own type codes are
+    # patches.table.Patch, below it)
+    ("geometry",),
     ("trace",),
     ("shade",),
     ("textures",),  # image textures at the hits: UVs, footprints, MIP-map lookups

@@ -86,7 +86,7 @@ locators = list(caching.CacheImpl._locator_classes)
 post_lowering = cpu.CPUContext.post_lowering
 from subtrace.runtime import jit, numba_patches
 jit.trim_loader()
-from subtrace.trace.prims import shear  # a leaf_njit helper, cached
+from subtrace.geometry.prims import shear  # a leaf_njit helper, cached
 got = list(shear(0.3, -2.0, 0.5))
 import numba
 print(json.dumps({"applied": numba_patches.APPLIED, "enabled": numba_patches.ENABLED,
@@ -603,12 +603,12 @@ def test_llvm_inlined_helpers_leave_no_call_in_their_callers(tmp_path, monkeypat
 
     import numpy as np
 
-    import subtrace.trace.prims  # noqa: F401  (its import marks ray_triangle)
+    import subtrace.geometry.prims  # noqa: F401  (its import marks ray_triangle)
 
-    assert numba_patches._mangled_prefix("subtrace.trace.prims", "ray_triangle") == \
-        "_ZN8subtrace5trace5prims12ray_triangle"
-    assert numba_patches._marked("_ZN8subtrace5trace5prims12ray_triangleB2v2B38xyzE")
-    assert not numba_patches._marked("_ZN8subtrace5trace5prims14ray_triangle_xB2v2E")  # another name
+    assert numba_patches._mangled_prefix("subtrace.geometry.prims", "ray_triangle") == \
+        "_ZN8subtrace8geometry5prims12ray_triangle"
+    assert numba_patches._marked("_ZN8subtrace8geometry5prims12ray_triangleB2v2B38xyzE")
+    assert not numba_patches._marked("_ZN8subtrace8geometry5prims14ray_triangle_xB2v2E")  # another name
     (tmp_path / "llvm_inline_probe.py").write_text(LLVM_INLINE_MODULE)
     monkeypatch.syspath_prepend(str(tmp_path))
     probe = importlib.import_module("llvm_inline_probe")
@@ -630,7 +630,7 @@ if sys.argv[1] == "trimmed":
     jit.trim_loader()
 """ + COMPILE_LISTENER + """
 import numba
-from subtrace.trace.prims import shear  # a leaf_njit helper: no wrapper, cached
+from subtrace.geometry.prims import shear  # a leaf_njit helper: no wrapper, cached
 
 caller = numba.njit(cache=False)(lambda x, y, z: shear(x, y, z))
 got = [list(caller(*d)) for d in ((0.3, -2.0, 0.5), (1.0, 0.2, -0.1), (-0.1, 0.2, -3.0))]
@@ -639,7 +639,7 @@ want = [list(shear.py_func(*d)) for d in ((0.3, -2.0, 0.5), (1.0, 0.2, -0.1), (-
 lib = shear.overloads[sig].library
 name = shear.overloads[sig].fndesc.mangled_name
 engine = lib.codegen._engine
-index = list((jit.KERNEL_DIR / "subtrace" / "trace").glob("prims.shear-*.nbi"))
+index = list((jit.KERNEL_DIR / "subtrace" / "geometry").glob("prims.shear-*.nbi"))
 print(json.dumps({"got": got, "want": want, "compiled": compiled,
                   "linked_only": bool(getattr(lib, "_subtrace_linked_only", False)),
                   "code": bool(engine.is_symbol_defined(name)), "cached": len(index),

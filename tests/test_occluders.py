@@ -1,5 +1,5 @@
 """Any-hit rays and the picture's passes around them: an occluder certainly met ends a
-shadow ray's descent (``trace.bezier._covers``), parallel rays find their shells in a grid
+shadow ray's descent (``geometry.bezier._covers``), parallel rays find their shells in a grid
 along their direction (``accel/parallel.py``), and the answers stay those of the closest
 hit through the BVH; the shadow rays made by kernels are those numpy made
 (``naive.shadow_rays``); the anti-aliasing's edge marks on every thread are numpy's
@@ -94,11 +94,11 @@ def test_a_grid_lists_every_box_a_parallel_ray_enters(seed, n_boxes):
 
 
 def _covers(net, origin, d, thi):
-    """trace.bezier._covers for the whole patch of ``net`` (its corners, its bound and its
+    """geometry.bezier._covers for the whole patch of ``net`` (its corners, its bound and its
     box, as a piece's root node gives them to an any-hit ray)."""
     from subtrace.patches.basis import net_box
-    from subtrace.trace.bezier import LOCATE_PAD, _covers as covers, _interpolation_bound
-    from subtrace.trace.prims import shear
+    from subtrace.geometry.bezier import LOCATE_PAD, _covers as covers, _interpolation_bound
+    from subtrace.geometry.prims import shear
 
     nets = np.ascontiguousarray(net[None])
     kx, ky, kz, sx, sy, sz = shear(*d)

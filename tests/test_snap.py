@@ -1,4 +1,4 @@
-"""Snapped sides (``trace/snap.py``): an edge beside a patch whose isolation keeps cells of
+"""Snapped sides (``geometry/snap.py``): an edge beside a patch whose isolation keeps cells of
 exact limit points is sampled at the coarsest such patch's depth, its finer neighbours
 snapping their sides onto that polyline. Checked: the edge rule (both sides alike, the
 cell-bearing patches never raised), the samples against the limit surface

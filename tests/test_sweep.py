@@ -100,7 +100,7 @@ def test_catmark_micro_triangles_are_bounded_by_the_pixels_covered(spot_sweep):
     _, _, recs = spot_sweep
     for r in recs:
         # each ray builds the triangles of the cells it may hit in the blocks it enters
-        # (trace/bezier.py), plus fan triangles beside finer neighbours: measured 3.8,
+        # (geometry/bezier.py), plus fan triangles beside finer neighbours: measured 3.8,
         # 10.1 and 4.9 per pixel at 4, 1 and 0.25 px on this 64x48 image (its patches
         # are a pixel or two, their frames coarse; 2-3 per pixel at 1280x720)
         assert r["micro_triangles"] <= 16 * r["pixels_covered"]

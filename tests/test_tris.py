@@ -1,4 +1,4 @@
-"""Loop patches traced per ray through quartic Bezier nets (trace/tris.py): the net's
+"""Loop patches traced per ray through quartic Bezier nets (geometry/tris.py): the net's
 points and normals are the exact limit surface's, the per-ray descent meets the
 micro-triangles of the exact whole grids, builds a few per covered pixel, and the image does
 not depend on the thread count."""
@@ -15,7 +15,7 @@ import subtrace
 from subtrace.patches.boxspline import box_nets, loop_regular
 from subtrace.patches.table import build_patch_table
 from subtrace.render import render_scene
-from subtrace.trace.tris import _level_deviation, tri_deviation, tri_normal, tri_point
+from subtrace.geometry.tris import _level_deviation, tri_deviation, tri_normal, tri_point
 
 TORUS_VIEW = ((1.226, 4.085, 4.902), (0.0, 0.0, 0.0))  # scenes/torus_loop.toml's camera
 SPOT_VIEW = ((2.0, 0.8, 2.4), (0.0, 0.1, 0.2))

@@ -27,7 +27,7 @@ from subtrace.nurbs.scene import shade_rays
 from subtrace.runtime.threads import thread_count
 from subtrace.shade import CHANNELS, shade
 from subtrace.textures import texture_hits
-from subtrace.trace.bezier import table_loop_flag
+from subtrace.geometry.bezier import table_loop_flag
 from subtrace.trace.rays import trace_rays
 
 

@@ -16,7 +16,7 @@
 # same order, so both give the same bits.
 # A window of the image (`CameraWindow`: a tile, ``render --crop``) is traced as an image of
 # its own size whose frame has a fifth row, the window's offset (col0, row0, 0) in its
-# image: `trace.prims.ray_setup` adds it to the window's (row, col) before the arithmetic
+# image: `geometry.prims.ray_setup` adds it to the window's (row, col) before the arithmetic
 # above, so a window pixel's ray is its image pixel's, bit for bit (an integer offset added
 # to an integer is exact; p00 moved by the offset would not be).
 

@@ -48,7 +48,7 @@ MAX_VALENCE = 1024
 # magnitude the ray test works at (the patch's shell and the eye):
 # patches/criterion.py: precision_depths. Below that the descent resolves nothing more: net
 # boxes are padded by BOX_PAD = 1e-12 (about 2^-40) and cell slabs by 1e-11 of that
-# magnitude (patches/basis.py, trace/bezier.py), so a finer cell's box is mostly padding,
+# magnitude (patches/basis.py, geometry/bezier.py), so a finer cell's box is mostly padding,
 # while a cell of 2^-40 still spans 4096 ulps (2^-52), far above the few ulps of rounding
 # in its corners and the ray / triangle test. Since a patch's extent is at most 2*sqrt(3)
 # times that magnitude, no depth exceeds PRECISION_BITS + 2 = 42: dyadic parameters
@@ -71,12 +71,12 @@ LOOP_MAX_ISOLATED_DEPTH = 20
 LOOP_MAX_INSIDE_DEPTH = 14
 
 # A cell side carries at most 2^FAN_LEVELS samples (a regular patch or piece beside a finer
-# one fans its cells, trace/bezier.py): a coarser neighbour is raised to within FAN_LEVELS
+# one fans its cells, geometry/bezier.py): a coarser neighbour is raised to within FAN_LEVELS
 # of the finer one (patches/criterion.py: edge_sampling; trace/pools.py: Pieces), which
 # only adds refinement where rays descend, never a cap.
 FAN_LEVELS = 8
 
-# A side snapped onto a coarser cell-bearing neighbour's polyline (trace/snap.py) keeps all
+# A side snapped onto a coarser cell-bearing neighbour's polyline (geometry/snap.py) keeps all
 # 2^d + 1 samples of that polyline, d its depth: an edge whose cell-bearing patches are all
 # deeper than SNAP_MAX_DEPTH is sampled at its finest patch's depth instead, its
 # cell-bearing patches raised to it (patches/criterion.py: edge_sampling). At most 4,097
@@ -212,7 +212,7 @@ ISOLATION_FACES_PER_PATCH_LEVEL = 64
 ISOLATION_MIN_FACES = 1 << 16
 # per exact side sample of an isolated Loop patch (a point, and its share of the sorting)
 MEMORY_BYTES_PER_SIDE_SAMPLE = 64
-# a thread's memo of split Bezier nets (trace/bezier.py) is kept within what the budget
+# a thread's memo of split Bezier nets (geometry/bezier.py) is kept within what the budget
 # leaves over, but not below this (below it rays split on the spot: slower, same image)
 MEMORY_MEMO_MIN_BYTES = 8 << 20
 # scanlines in one of an EXR's ZIP blocks (OpenEXR): a streamed render's bands (but the

@@ -34,7 +34,10 @@ import numpy as np
 from subtrace import config
 from subtrace.accel.bvh import slab_entry
 from subtrace.camera import window_offset
+from subtrace.geometry.bezier import cell_normal
 from subtrace.geometry.kinds import BEZIER, CELL, LOOP_CELL, TRI
+from subtrace.geometry.prims import ray_setup
+from subtrace.geometry.tris import tri_cell_normal, tri_normal
 from subtrace.io.obj import DEFAULT_DIFFUSE, Material
 from subtrace.lights import (DIRECTIONAL, PARAM, R2_A1, R2_A2, RGB, ROW, environment_irradiance,
                              hash01, incoming, irradiance_at, is_environment, shadow_samples,
@@ -45,8 +48,6 @@ from subtrace.patches.evaluate import evaluate, ptex_starts
 from subtrace.runtime.jit import callee_njit, inline_njit, leaf_njit, llvm_inline_njit, nb
 from subtrace.runtime.threads import run_tasks, thread_count
 from subtrace.trace.pools import Hits, PieceArrays
-from subtrace.trace.prims import ray_setup
-from subtrace.trace.tris import tri_normal
 
 
 # the planes the shading fills, in this order, and what a pixel whose ray missed holds
@@ -78,7 +79,7 @@ def shade(frame, width, hits, iso, patches, miss, planes, normals, pix_patch, co
     ``covered`` (threads,) int64 receives the hits each thread shaded. ``dirs``: None (ray
     r is pixel r's centre ray), or the (n,3) unit directions of rays from the eye (extra
     samples): then ``hits`` and the outputs are per ray. ``loop``: whether any cage is a
-    Loop cage (``trace.bezier.loop_flag``: True or None); the normals of hits on Loop items
+    Loop cage (``geometry.bezier.loop_flag``: True or None); the normals of hits on Loop items
     are a second pass of their own (:func:`_loop_normals_task`), which a render of
     Catmull-Clark cages neither runs nor compiles. ``table``: the patch table the items
     were built from; given, the hits on cells whose corner normals spread take the exact
@@ -276,7 +277,7 @@ def _shade_task(task, n_tasks, frame, width, hits_t, iso_t, patches_t, miss, pla
                 sc = 1 << iso.level[it]
                 nx, ny, nz = bez_normal(iso.nets[c], u * sc - iso.i0[it], v * sc - iso.j0[it])
             else:
-                nx, ny, nz = _cell_normal(iso.cells[4 * c:4 * c + 4], iso.cell_normals[c],
+                nx, ny, nz = cell_normal(iso.cells[4 * c:4 * c + 4], iso.cell_normals[c],
                                           u * (1 << depth) - iso.i0[it],
                                           v * (1 << depth) - iso.j0[it])
             planes[C_N, r] = nx
@@ -398,13 +399,13 @@ def _loop_normals_task(task, n_tasks, frame, width, hits, iso, planes, normals, 
             g = np.float64(iso.orient[it])
             if iso.kind[it] == TRI:
                 # a Loop patch or piece: the normal of its triangular net at its own
-                # (s, t) (trace/tris.py: the patch's (u, v) = (A + g (s, t)) 2^-level)
+                # (s, t) (geometry/tris.py: the patch's (u, v) = (A + g (s, t)) 2^-level)
                 sc = 1 << iso.level[it]
                 nx, ny, nz = tri_normal(iso.tri_nets, c,
                                         g * (u * sc - iso.i0[it]), g * (v * sc - iso.j0[it]))
             else:
                 depth = np.int64(hits.leaf[r])  # (1 << depth: in 64 bits)
-                nx, ny, nz = _tri_cell_normal(iso.cells[4 * c:4 * c + 3],
+                nx, ny, nz = tri_cell_normal(iso.cells[4 * c:4 * c + 3],
                                               iso.cell_normals[c],
                                               g * (u * (1 << depth) - iso.i0[it]),
                                               g * (v * (1 << depth) - iso.j0[it]))
@@ -438,45 +439,6 @@ def _blinn(fx, fy, fz, lx, ly, lz, dx, dy, dz, shininess):
         return 0.0
     c = (fx * hx + fy * hy + fz * hz) / n
     return c ** shininess if c > 0.0 else 0.0
-
-
-@leaf_njit
-def _cell_normal(pts, nrm, a, b):
-    """Bilinear blend of a cell's exact corner normals at (a, b) in [0,1]^2 (corner order
-    (0,0), (1,0), (1,1), (0,1)); the cell's own normal where a corner's is undefined."""
-    w0, w1, w2, w3 = (1 - a) * (1 - b), a * (1 - b), a * b, (1 - a) * b
-    nx = w0 * nrm[0, 0] + w1 * nrm[1, 0] + w2 * nrm[2, 0] + w3 * nrm[3, 0]
-    ny = w0 * nrm[0, 1] + w1 * nrm[1, 1] + w2 * nrm[2, 1] + w3 * nrm[3, 1]
-    nz = w0 * nrm[0, 2] + w1 * nrm[1, 2] + w2 * nrm[2, 2] + w3 * nrm[3, 2]
-    ln = math.sqrt(nx * nx + ny * ny + nz * nz)
-    if not (ln > 0.0):
-        # diagonals' cross product
-        ax, ay, az = pts[2, 0] - pts[0, 0], pts[2, 1] - pts[0, 1], pts[2, 2] - pts[0, 2]
-        bx, by, bz = pts[3, 0] - pts[1, 0], pts[3, 1] - pts[1, 1], pts[3, 2] - pts[1, 2]
-        nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
-    if ln > 0.0:
-        return nx / ln, ny / ln, nz / ln
-    return 0.0, 0.0, 0.0
-
-
-@leaf_njit
-def _tri_cell_normal(pts, nrm, b, c):
-    """Blend of a Loop cell's exact corner normals at barycentrics (1 - b - c, b, c); the
-    cell's own normal where a corner's is undefined."""
-    a = 1.0 - b - c
-    nx = a * nrm[0, 0] + b * nrm[1, 0] + c * nrm[2, 0]
-    ny = a * nrm[0, 1] + b * nrm[1, 1] + c * nrm[2, 1]
-    nz = a * nrm[0, 2] + b * nrm[1, 2] + c * nrm[2, 2]
-    ln = math.sqrt(nx * nx + ny * ny + nz * nz)
-    if not (ln > 0.0):
-        ax, ay, az = pts[1, 0] - pts[0, 0], pts[1, 1] - pts[0, 1], pts[1, 2] - pts[0, 2]
-        bx, by, bz = pts[2, 0] - pts[0, 0], pts[2, 1] - pts[0, 1], pts[2, 2] - pts[0, 2]
-        nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
-    if ln > 0.0:
-        return nx / ln, ny / ln, nz / ln
-    return 0.0, 0.0, 0.0
 
 
 def patch_shading(table, overrides) -> PatchShading:
@@ -536,7 +498,7 @@ def material_of(mat, over=None):
 
 def pixel_rays(frame, width, pixels) -> np.ndarray:
     """(n,3) float64 unit directions of the rays through the centres of ``pixels`` (flat
-    indices), the arithmetic of ``trace.prims.ray_setup``."""
+    indices), the arithmetic of ``geometry.prims.ray_setup``."""
     row, col = np.divmod(np.asarray(pixels, np.int64), width)
     col0, row0 = window_offset(frame)  # (a window's pixels: their image's rays)
     row, col = row + row0, col + col0

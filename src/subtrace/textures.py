@@ -59,7 +59,7 @@ from subtrace.runtime.threads import run_tasks
 from subtrace.shade import C_N, own_ptex, pixel_rays
 from subtrace.subdiv.facevarying import FVAR_ALL
 from subtrace.trace.pools import Hits, PieceArrays
-from subtrace.trace.tris import tri_derivatives
+from subtrace.geometry.tris import tri_derivatives
 
 SLOTS = ("diffuse", "specular", "bump", "normal")
 UV_STEP = 2.0 ** -16  # the ptex step of the UV Jacobian's forward difference

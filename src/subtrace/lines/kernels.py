@@ -58,7 +58,7 @@ from subtrace.patches.basis import (
     split_net as _split, tri_box, tri_flatness, tri_mono_eval, tri_monomials, tri_split,
 )
 from subtrace.runtime.jit import leaf_njit, nb
-from subtrace.trace.prims import push_sorted, ray_triangle, shear
+from subtrace.geometry.prims import push_sorted, ray_triangle, shear
 
 # Deepest halving of an item: the renderer's floating-point limit (config.PRECISION_BITS:
 # 2^-40 of its side is below what the descent's padded boxes resolve).

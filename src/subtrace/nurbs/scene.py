@@ -51,7 +51,7 @@ from subtrace.runtime.threads import run_tasks
 from subtrace.shade import (C_A, C_LEVEL, C_N, C_OBJECT, C_P, C_PATCH, C_U, C_Z,
                             PatchShading, material_of, pixel_rays)
 from subtrace.subdiv.topology import compact
-from subtrace.trace.prims import ray_setup
+from subtrace.geometry.prims import ray_setup
 
 _LINE_START = re.compile(rb"[ \t]*")  # what may precede a statement's keyword on its line
 

@@ -55,7 +55,7 @@ from subtrace.nurbs.trimtree import trim_inside
 from subtrace.patches.basis import BOX_PAD, pad_box
 from subtrace.runtime.jit import inline_njit, leaf_njit, nb
 from subtrace.runtime.threads import run_tasks, thread_count
-from subtrace.trace.prims import ray_setup
+from subtrace.geometry.prims import ray_setup
 
 MAX_LEVEL = config.NURBS_MAX_LEVEL
 NEWTON_STEPS = config.NURBS_NEWTON_STEPS

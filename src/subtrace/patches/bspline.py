@@ -19,7 +19,7 @@ the exact evaluator keeps its own path for those, and agrees). For such a patch:
   ``|dP/du|`` and ``|dP/dv|`` over the whole patch: a grid cell at depth ``n`` has sides no
   longer than ``bound * 2^-n`` (the refinement criterion, design invariant 3).
 
-The renderer evaluates the nets themselves (``trace/bezier.py``).
+The renderer evaluates the nets themselves (``geometry/bezier.py``).
 """
 
 from __future__ import annotations

@@ -109,7 +109,7 @@ def memory_estimate(table, depths, n_pixels: int, isolated=None) -> int:
     ``patches/isolate_loop.py``), so it costs per level, not per cell, plus an isolated Loop
     patch's exact side samples (2^depth a side at most). ``isolated`` (P,)
     bool: the patches isolated so (None: the irregular Catmull-Clark ones); the others are
-    Bezier nets split per ray (``trace/bezier.py``, ``trace/tris.py``), one net and item
+    Bezier nets split per ray (``geometry/bezier.py``, ``geometry/tris.py``), one net and item
     each (in the per-patch figure): what rays split of them lives in the per-thread memos,
     which are kept within what is left (``trace.pools.Memos``), so their depth costs
     nothing here. The constants are ``config.MEMORY_*``."""
@@ -145,7 +145,7 @@ def edge_sampling(table, depths):
     * An edge beside an irregular Catmull-Clark patch whose isolation leaves cells of exact
       limit points at its depth (their sides have no points but their corners: they cannot
       fan) is sampled at the coarsest such patch's depth on it; every patch beside it that
-      is finer snaps its side onto that polyline (``trace/snap.py``), every coarser one
+      is finer snaps its side onto that polyline (``geometry/snap.py``), every coarser one
       (which fans) is raised to within ``config.FAN_LEVELS`` of it. Such patches are never
       raised. (Raising them to the depth of every neighbour, repeatedly, carried a
       crease's deepest patch along the crease: the chess pieces' cell-bearing

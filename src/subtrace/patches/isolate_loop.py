@@ -6,7 +6,7 @@ time with the subdivision core (every OpenSubdiv rule honoured), keeping Loop's 
 (children 0, 1, 2 at the parent's corners, the middle child 3 turned half a turn), as
 :mod:`subtrace.patches.grids` and ``basis.TRI_SPLIT`` do. Children that are regular Loop
 patches (``patches.boxspline.loop_regular``, regular boundaries included) become *pieces*:
-their quartic triangular Bezier nets, traced per ray by ``trace/tris.py`` like a regular patch's.
+their quartic triangular Bezier nets, traced per ray by ``geometry/tris.py`` like a regular patch's.
 What is still irregular at the patch's grid depth ``D`` becomes *cells*: micro-triangles of
 exact limit points. The refinement follows only the irregular remainder (one corner child
 per level at an extraordinary vertex), so a patch costs O(D) work, not the 4^D of a grid.
@@ -113,7 +113,7 @@ def corner_coords(level, i0, j0, g, depth):
 def _side_position(c, N, k):
     """Whether the root grid vertices ``c`` (..., 2) lie on side ``k`` (0: j = 0, 1:
     i + j = N, 2: i = 0, each from its corner k to corner k + 1) and their position along
-    it (as ``trace.tris``)."""
+    it (as ``geometry.tris``)."""
     i, j = c[..., 0], c[..., 1]
     if k == 0:
         return j == 0, i
@@ -140,7 +140,7 @@ def side_samples(depth, side_depth, subs, cells):
     Returns ``(samples (n,3), offset (m,))``: patch r's samples start at ``offset[r]``
     (-1: none), side after side (snapped ones only). The cells' corners on snapped sides are
     moved onto the polylines in place (``cells[4]``; a corner on two snapped sides by the
-    first, as ``trace.tris.grid_point``)."""
+    first, as ``geometry.tris.grid_point``)."""
     depth = np.asarray(depth, dtype=np.int64)
     croot, ci, cj, cg, cP = cells[0], cells[1], cells[2], cells[3], cells[4]
     sroot, slev, si, sj, sg, nets = subs
@@ -212,7 +212,7 @@ def sample_ranges(subs, cells, depth, side_depth, offset, samples):
     """(items, 3) lo and hi: per item (the pieces, then the cells), the box of the samples
     whose polyline segments its vertices on snapped sides may be moved onto (+inf / -inf
     where it has none): its box must contain them, since the descent enters the nodes
-    touching a snapped side without testing their own boxes (``trace/tris.py``)."""
+    touching a snapped side without testing their own boxes (``geometry/tris.py``)."""
     depth = np.asarray(depth, dtype=np.int64)
     sroot, slev, si, sj, sg, _ = subs
     croot, ci, cj, cg = cells[:4]

@@ -34,7 +34,7 @@ demand. Per patch, flat arrays (P = number of patches):
   control edges shrink per level near the patch's corners (1/2 for regular vertices, the
   subdominant eigenvalue near extraordinary ones); together they bound the size of a grid
   cell at depth n by ``edge_bound * rate^n`` (the refinement criterion);
-* ``patch_type`` (P,) int8, one code per patch (``geometry.kinds.Patch``: a regular
+* ``patch_type`` (P,) int8, one code per patch (:class:`Patch`: a regular
   bicubic quad, another Catmull-Clark quad, a Loop triangle; ``regular`` and ``is_quad``
   are its views), and ``nets`` (R,4,4,3): the Bezier nets of the regular bicubic
   patches, smooth or along boundaries and infinitely sharp creases (phantom points; see
@@ -52,13 +52,13 @@ demand. Per patch, flat arrays (P = number of patches):
 
 from __future__ import annotations
 
+import enum
 import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from subtrace import config
-from subtrace.geometry.kinds import CATMARK_REGULAR, LOOP, patch_types
 from subtrace.patches.basis import NET_CHUNK, TO_BEZIER, bspline_nets
 from subtrace.patches.bspline import phantom_grids, regular_mask
 from subtrace.patches.criterion import subdominant
@@ -73,6 +73,36 @@ from subtrace.subdiv.topology import (RESTRICT_RINGS, compact, face_rings, gathe
 
 # ptex offset of the child at corner j of a regular face (quads keep the parent's orientation)
 _QUAD_CHILD_UV0 = np.array([[0.0, 0.0], [0.5, 0.0], [0.5, 0.5], [0.0, 0.5]])
+
+
+class Patch(enum.IntEnum):
+    """The patch types of the table's ``patch_type`` column (one code per patch; the item
+    kinds a ray meets inside a patch are ``geometry.kinds.Item``):
+
+    * ``CATMARK_REGULAR``: a regular bicubic Catmull-Clark patch (one Bezier net, the table's);
+    * ``CATMARK_IRREGULAR``: any other Catmull-Clark quad of the patch level (isolated into
+      pieces and cells when a ray first asks for it);
+    * ``LOOP``: a Loop triangle (a regular one becomes one triangular net, the others are
+      isolated, both when the trace starts or a ray asks: ``patches.boxspline.loop_regular``).
+    """
+
+    CATMARK_REGULAR = 0
+    CATMARK_IRREGULAR = 1
+    LOOP = 2
+
+
+CATMARK_REGULAR = int(Patch.CATMARK_REGULAR)
+CATMARK_IRREGULAR = int(Patch.CATMARK_IRREGULAR)
+LOOP = int(Patch.LOOP)
+
+
+def patch_types(quad: bool, regular) -> np.ndarray:
+    """(n,) int8 patch types of an object's patches: Loop triangles, or Catmull-Clark quads
+    regular where ``regular`` (n,) bool says."""
+    regular = np.asarray(regular, dtype=bool)
+    if not quad:
+        return np.full(len(regular), LOOP, np.int8)
+    return np.where(regular, CATMARK_REGULAR, CATMARK_IRREGULAR).astype(np.int8)
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,7 +152,7 @@ class PatchTable:
     ray_max: np.ndarray  # (P,3) float64
     edge_bound: np.ndarray  # (P,) float64
     rate: np.ndarray  # (P,) float64
-    patch_type: np.ndarray  # (P,) int8: geometry.kinds.Patch (regular, irregular quad, Loop)
+    patch_type: np.ndarray  # (P,) int8: Patch (regular, irregular quad, Loop)
     nets: np.ndarray  # (R,4,4,3) float64 Bezier nets of the regular patches, in patch order
     edges: np.ndarray  # (P,4) int64 global edge ids (-1 pads a triangle's 4th side)
     side_shift: np.ndarray  # (P,4) int8: the patch's level less its side's edge's level

@@ -95,7 +95,7 @@ def start(threads: int, check: bool = True):
     secondary-ray kernels in a third; returns the :class:`Helpers` (or None). The helpers
     import what they compile at once, then wait for the cages' schemes (:func:`tell`): the
     kernels of a render without Loop cages are compiled without the Loop descents
-    (``trace.bezier.loop_flag``)."""
+    (``geometry.bezier.loop_flag``)."""
     if check and _cached("_trace_task") and _cached("_shade_task"):
         return None
     from subtrace.runtime.jit import compiling
@@ -120,8 +120,8 @@ def start(threads: int, check: bool = True):
 def start_for(threads: int, schemes):
     """:func:`start`, told these ``schemes`` at once, where the cache holds the trace kernel
     but not for these schemes (a Loop render after Catmull-Clark ones compiles the kernel
-    with the Loop descents: ``trace.bezier.loop_flag``); else None."""
-    from subtrace.trace.bezier import loop_flag
+    with the Loop descents: ``geometry.bezier.loop_flag``); else None."""
+    from subtrace.geometry.bezier import loop_flag
 
     if not _cached("_trace_task") or _trace_variant_cached(loop_flag(schemes)):
         return None
@@ -234,7 +234,7 @@ def compile_kernels(threads: int, schemes=None) -> None:
     from subtrace.accel.bvh import no_bvh
     from subtrace.accel.projection import no_tiles
     from subtrace.runtime import threads as tasks
-    from subtrace.trace.bezier import loop_flag
+    from subtrace.geometry.bezier import loop_flag
     from subtrace.trace.kernels import trace_round
     from subtrace.trace.pools import Memos, Pieces, candidate_lists, hit_arrays
 

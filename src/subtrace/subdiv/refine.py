@@ -59,7 +59,7 @@ def scheme_flag(scheme: str):
     """The scheme as the subdivision kernels take it: True for Loop, None for Catmull-Clark.
     Not a bool: Numba prunes a branch on an argument that is None before typing it, so a
     Catmull-Clark render compiles these kernels without Loop's masks (as
-    ``trace.bezier.loop_flag`` does for the trace kernel); a Loop render compiles both."""
+    ``geometry.bezier.loop_flag`` does for the trace kernel); a Loop render compiles both."""
     return True if scheme == "loop" else None
 
 

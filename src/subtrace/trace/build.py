@@ -10,7 +10,7 @@ from subtrace.patches.boxspline import box_nets, loop_regular
 from subtrace.patches.isolate import isolated_parts
 from subtrace.patches.isolate_loop import build_loop_isolated
 from subtrace.subdiv.topology import compact
-from subtrace.trace.tris import tri_nets_as_pieces
+from subtrace.geometry.tris import tri_nets_as_pieces
 
 
 def build_requested(table, requested, depths, edge_depth, iso, round_no, stats, eye, tol_rad,
@@ -58,7 +58,7 @@ def build_requested(table, requested, depths, edge_depth, iso, round_no, stats, 
 
 def _loop_nets(o, table, ids, depth, edge_depth, iso, round_no):
     """Put the regular Loop triangles ``ids`` (object ``o``, grid depths ``depth``) into
-    ``iso`` as triangular Bezier nets traced per ray (``trace/tris.py``), each side sampled
+    ``iso`` as triangular Bezier nets traced per ray (``geometry/tris.py``), each side sampled
     at its edge's depth."""
     if len(ids):
         nets = tri_nets_as_pieces(box_nets(o.level, o.points, table.face[ids]))

@@ -4,7 +4,7 @@ One ray per pixel from a pinhole camera ``frame`` = [eye, dx, dy, p00] (see
 ``trace.camera.camera_frame``); ``t`` is the distance from the eye along the unit direction.
 
 Built patches live in the pieces' pool (``trace/pools.py``), Catmull-Clark and Loop alike:
-a slot per patch, its items intersected per ray (``trace/bezier.py``, ``trace/tris.py``).
+a slot per patch, its items intersected per ray (``geometry/bezier.py``, ``geometry/tris.py``).
 
 A round (:func:`trace_round`) takes each active ray through the patch shells it enters,
 from its image tile's list (``accel/projection.py``, nearest box first) or the BVH of the
@@ -34,9 +34,9 @@ from subtrace.accel.projection import TILE, Tiles
 from subtrace.runtime.jit import inline_njit, nb
 from subtrace.runtime.memory import one_block
 from subtrace.runtime.threads import run_chunks
-from subtrace.trace.bezier import MAX_SIDE_SAMPLES, intersect_patch
+from subtrace.geometry.bezier import MAX_SIDE_SAMPLES, intersect_patch
 from subtrace.trace.pools import CANDIDATES, Candidates, Hits, Memo, PieceArrays
-from subtrace.trace.prims import (
+from subtrace.geometry.prims import (
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, memo_restart, ray_setup, shear,
 )
 

@@ -5,12 +5,12 @@
   tested it) and its *items* (contiguous): regular Bezier pieces over dyadic squares of the
   patch, and cells of exact limit points, each with its grid depth and how its four sides
   are sampled; for Loop patches, quartic triangular nets over dyadic sub-triangles and
-  triangular cells (``trace/tris.py``). A regular Catmull-Clark patch is one item, ready
+  triangular cells (``geometry/tris.py``). A regular Catmull-Clark patch is one item, ready
   from the start (round -1); a regular Loop patch is one net, an irregular patch of either
   scheme several items (``patches/isolate.py``, ``patches/isolate_loop.py``), built on
   request. Kernel view: :class:`PieceArrays`.
 * :class:`Memos`: each thread's memo of the Bezier nets its rays split
-  (``trace/bezier.py``); kernel view: one :class:`Memo` per thread.
+  (``geometry/bezier.py``); kernel view: one :class:`Memo` per thread.
 * :class:`Candidates`: per ray, the unbuilt shells it entered before its best hit.
 * :class:`Hits`: per ray, the closest hit (see its fields).
 
@@ -30,15 +30,15 @@ from subtrace.patches.basis import BOX_PAD, net_bounds
 from subtrace.geometry.kinds import BEZIER, CELL, GROUP, LOOP_CELL, TRI
 from subtrace.patches.groups import grouped_layout
 from subtrace.patches.isolate import item_sides, packed_order, rows_in_order
-from subtrace.trace.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
-from subtrace.trace.snap import snap_items
-from subtrace.trace.prims import (
+from subtrace.geometry.bezier import M_CELLS, M_FULL, M_NETS, M_NODES
+from subtrace.geometry.snap import snap_items
+from subtrace.geometry.prims import (
     M_COUNTS, M_MADE, M_PEAK_CELLS, M_PEAK_NETS, M_PEAK_NODES, memo_restart,
 )
 from subtrace.runtime.jit import nb
 from subtrace.runtime.memory import one_block, small_pages
 from subtrace.patches.isolate_loop import sample_ranges, side_samples
-from subtrace.trace.tris import tri_nets_as_pieces
+from subtrace.geometry.tris import tri_nets_as_pieces
 
 CANDIDATES = 4  # unbuilt shells a ray remembers between rounds (more: it traverses again)
 
@@ -51,7 +51,7 @@ class PieceArrays(NamedTuple):
     count: np.ndarray  # (S,) int64: its item count
     round: np.ndarray  # (S,) int64: round it was built in (-1: from the start)
     # (S,4) int64: first row in ``samples`` of each snapped side's samples, -1 where the
-    # side is not snapped (a Catmull-Clark patch's: ``trace/snap.py``)
+    # side is not snapped (a Catmull-Clark patch's: ``geometry/snap.py``)
     snap: np.ndarray
     depth_i: np.ndarray  # (I,) int64: grid depth, in the patch's units
     side: np.ndarray  # (I,4) int64: sampling depth of each side, in the patch's units
@@ -73,14 +73,14 @@ class PieceArrays(NamedTuple):
     # (., 3) float64: exact samples of snapped sides (isolated Loop patches', and the
     # Catmull-Clark patches' of ``snap``)
     samples: np.ndarray
-    # (., 16, 3) float64: ``nets`` read as Loop items' triangular nets (trace/tris.py),
+    # (., 16, 3) float64: ``nets`` read as Loop items' triangular nets (geometry/tris.py),
     # a view made once: a reshape in a kernel calls into Numba's runtime, and the shading
     # made one per Loop hit (1-2 % of a Loop render's samples in perf)
     tri_nets: np.ndarray
 
 
 class Memo(NamedTuple):
-    """One thread's memo of split Bezier nets (``trace/bezier.py`` says what it holds)."""
+    """One thread's memo of split Bezier nets (``geometry/bezier.py`` says what it holds)."""
 
     root: np.ndarray  # (I,) int64: root node of each item or -1
     child: np.ndarray  # (N,) int64: first of the four children of each node, or -1
@@ -364,8 +364,8 @@ class Pieces(Growable):
 
     def append_tris(self, patches, depth, side, nets, round_no):
         """Slots for regular Loop patches built in round ``round_no``, one triangular net
-        each (item kind ``trace.tris.TRI``; ``nets`` (m,4,4,3) from
-        :func:`~subtrace.trace.tris.tri_nets_as_pieces`), grid depths ``depth`` (m,) and
+        each (item kind ``geometry.tris.TRI``; ``nets`` (m,4,4,3) from
+        :func:`~subtrace.geometry.tris.tri_nets_as_pieces`), grid depths ``depth`` (m,) and
         the sampling depth of each side's edge ``side`` (m,4) (-1: none)."""
         m = len(patches)
         z = np.zeros(m, np.int64)
@@ -431,7 +431,7 @@ class Pieces(Growable):
         ``first``, ``count``; their nets and cells in the stores at ``ref``) sample their
         sides as ``side`` (m,4) says: the samples of the snapped ones go to the sample
         store, the cells' corners there are moved onto the polylines and the items' boxes
-        ``lo``, ``hi`` set to hold what they test (:func:`~subtrace.trace.snap.snap_items`)."""
+        ``lo``, ``hi`` set to hold what they test (:func:`~subtrace.geometry.snap.snap_items`)."""
         samples, offset = snap_items(first, count, is_cell, ref, level, i0, j0, depth_i, side,
                                      self.a["nets"], self.a["cells"].reshape(-1, 3), lo, hi)
         if not len(samples):
@@ -523,15 +523,15 @@ def _in_order(subs, cells):
 
 
 class Memos:
-    """Each thread's memo of the Bezier nets its rays split (``trace.bezier``: item roots,
+    """Each thread's memo of the Bezier nets its rays split (``geometry.bezier``: item roots,
     node children, boxes and rows, the net store, the cell-corner store, counts). The stores
     are allocated lazily by the OS (``np.empty``); one that ran out during a round (its rays
     went on without storing) is doubled before the next."""
 
     # virtual: touched as used. A Catmull-Clark memo keeps the net of every node its rays
     # split but those whose children are blocks (their blocks' frames instead) and the
-    # corners of its blocks of 2 x 2 cells (trace/bezier.py); a Loop memo
-    # the six points of every node split (two cells' room in the cell store, trace/tris.py)
+    # corners of its blocks of 2 x 2 cells (geometry/bezier.py); a Loop memo
+    # the six points of every node split (two cells' room in the cell store, geometry/tris.py)
     START = {"child": 1 << 22, "nets": 1 << 21, "cells": 1 << 20}
     # rows per unit of START (a cell has 4 corner rows) and bytes per row: a node (child,
     # box, slab, data), a net, a cell corner

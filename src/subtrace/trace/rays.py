@@ -44,11 +44,11 @@ from subtrace.accel.bvh import BVH, box_entry, bvh_next_leaf, bvh_start
 from subtrace.accel.parallel import ParallelGrid, grid_cell, no_grid, parallel_grid
 from subtrace.runtime import threads as tasks
 from subtrace.runtime.jit import nb
-from subtrace.trace.bezier import intersect_patch, table_loop_flag
+from subtrace.geometry.bezier import intersect_patch, table_loop_flag
 from subtrace.trace.build import build_requested
 from subtrace.trace.kernels import scratch_buffers
 from subtrace.trace.pools import CANDIDATES, Hits, Memo, Memos, PieceArrays, hit_arrays
-from subtrace.trace.prims import (H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, memo_restart,
+from subtrace.geometry.prims import (H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, HIT_FIELDS, memo_restart,
                                   shear)
 
 RAY_CHUNK = 4096  # rays a thread takes at a time
@@ -283,7 +283,7 @@ def _rays_task(task, a, b, rays, origins, dirs, tmax, any_hit, bvh_t, grid_t, sh
     bvh, grid = BVH(*bvh_t), ParallelGrid(*grid_t)
     iso, hits = PieceArrays(*iso_t), Hits(*hits_t)
     mem = Memo(*mems_t[task])
-    memo_restart(mem.root, mem.cnt)  # one chunk of rays: a memo of its own (trace/prims.py)
+    memo_restart(mem.root, mem.cnt)  # one chunk of rays: a memo of its own (geometry/prims.py)
     stack, stack_t, work, st, st_t, ent_t, ent_i, lv, lp, hit = scratches[task]
     scratch = (work, st, st_t, ent_t, ent_i, lv, lp)
     req_t = req_ts[task]

@@ -21,7 +21,7 @@ from subtrace.patches.criterion import edge_sampling
 from subtrace.patches.shells import Sight
 from subtrace.runtime import threads as tasks
 from subtrace.subdiv.limit import limit_points
-from subtrace.trace.bezier import table_loop_flag
+from subtrace.geometry.bezier import table_loop_flag
 from subtrace.trace.budget import choose_within_budget, warn_tiles
 from subtrace.trace.build import build_loop_regular, build_requested, cut_to_loop_nets
 from subtrace.trace.kernels import trace_round

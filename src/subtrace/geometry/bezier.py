@@ -17,10 +17,18 @@ the same points on the edge (no T-junction). The cell's points lie on the surfac
 cell, inside its box; boxes are widened by a relative ``BOX_PAD`` for rounding. A side
 sampled more coarsely (beside cells of exact limit points, which cannot fan) is snapped: its
 vertices are moved onto the coarse polyline, and the nodes touching it widened
-(``trace/snap.py``).
+(``geometry/snap.py``).
+
+The module holds the Catmull-Clark kinds of ``geometry.kinds``: Bezier pieces (a regular
+patch, or a piece of an isolated one) and cells of exact limit points (two triangles of
+their corners; their shading normal, :func:`cell_normal`), and :func:`intersect_patch`,
+the walk over one patch's items (group rows skipped whole), which hands the Loop kinds to
+``geometry/tris.py``.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -31,13 +39,13 @@ from subtrace.patches.basis import (
     bez_across as _bez_across, bez_point as _bez_point, bez_rows as _bez_rows,
     copy_net as _copy_net, net_box as _net_box, quadrant as _quadrant, split_net as _split,
 )
-from subtrace.trace.prims import (
+from subtrace.geometry.prims import (
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, M_CELLS, M_FULL, M_NETS, M_NODES, NOT_YET,
     new_node, push_sorted, ray_triangle,
 )
 from subtrace.geometry.kinds import CELL, GROUP, LOOP_CELL, TRI
-from subtrace.trace.snap import snapped_point, snaps, touches as _touches_snapped, widen_node
-from subtrace.trace.tris import intersect_tri, intersect_tri_cell, slab_cut_entry
+from subtrace.geometry.snap import snapped_point, snaps, touches as _touches_snapped, widen_node
+from subtrace.geometry.tris import intersect_tri, intersect_tri_cell, slab_cut_entry
 
 # samples per cell side at most (2^(side depth - depth)): neighbours are kept within
 # config.FAN_LEVELS of each other (patches/criterion.py: edge_sampling, trace/pools.py)
@@ -339,7 +347,7 @@ def _fan_samples(i, j, depth, root_depth, sides, srow):
     """Whether cell (i, j) of a piece's depth-``depth`` grid (``root_depth`` in the patch's
     units) lies on a side of the piece sampled otherwise than its grid (``sides[srow]``):
     more finely (the piece beside it is finer: the cell is cut into a fan) or more coarsely
-    (a snapped side, ``trace/snap.py``: its corners there are moved onto the polyline)."""
+    (a snapped side, ``geometry/snap.py``: its corners there are moved onto the polyline)."""
     N = 1 << depth
     return ((j == 0 and sides[srow, 0] != root_depth)
             or (i == N - 1 and sides[srow, 1] != root_depth)
@@ -372,7 +380,7 @@ def _leaf(ox, oy, oz, kx, ky, kz, sx, sy, sz, nets, nk, i, j, depth, oi, oj, roo
     covers the cells from (oi, oj) of its root patch's depth-``root_depth`` grid; update
     ``hit`` (H_SLOT = ``code``, H_TRI = ``item``, (H_B1, H_B2) = root parameter). ``lv``
     (K,3) / ``lp`` (K,2): scratch for the cell's points and root parameters. Its corners on
-    a side the piece snaps are the polyline's (``snap``, ``samples``: ``trace/snap.py``).
+    a side the piece snaps are the polyline's (``snap``, ``samples``: ``geometry/snap.py``).
     Returns the number of triangles tested."""
     N = 1 << depth
     inv = 1.0 / N
@@ -592,7 +600,7 @@ def _expand(node, parent, ci, cj, lev, pd, child, box, slab, data, m_nets, m_cel
     node's own :func:`_interpolation_bound` in its slab row (an inner node has no slab;
     any-hit rays test its frame, :func:`_covers`). ``fr`` = (oi, oj, root_depth, snapping):
     the piece's place in its patch's grid and whether it snaps a side; a child touching
-    one gets the box and slab of :func:`~subtrace.trace.snap.widen_node`. Returns the first
+    one gets the box and slab of :func:`~subtrace.geometry.snap.widen_node`. Returns the first
     child, or -1 when a store is full."""
     if (cnt[M_NODES] + 4 > len(child) or cnt[M_NETS] + 1 > len(m_nets)
             or cnt[M_CELLS] + FRAME_UNITS > len(m_cells) // 4):
@@ -624,6 +632,26 @@ def _expand(node, parent, ci, cj, lev, pd, child, box, slab, data, m_nets, m_cel
                        h, root_depth, sides, srow, snap, samples)
     child[node] = first
     return first
+
+
+@leaf_njit
+def cell_normal(pts, nrm, a, b):
+    """Bilinear blend of a cell's exact corner normals at (a, b) in [0,1]^2 (corner order
+    (0,0), (1,0), (1,1), (0,1)); the cell's own normal where a corner's is undefined."""
+    w0, w1, w2, w3 = (1 - a) * (1 - b), a * (1 - b), a * b, (1 - a) * b
+    nx = w0 * nrm[0, 0] + w1 * nrm[1, 0] + w2 * nrm[2, 0] + w3 * nrm[3, 0]
+    ny = w0 * nrm[0, 1] + w1 * nrm[1, 1] + w2 * nrm[2, 1] + w3 * nrm[3, 1]
+    nz = w0 * nrm[0, 2] + w1 * nrm[1, 2] + w2 * nrm[2, 2] + w3 * nrm[3, 2]
+    ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if not (ln > 0.0):
+        # diagonals' cross product
+        ax, ay, az = pts[2, 0] - pts[0, 0], pts[2, 1] - pts[0, 1], pts[2, 2] - pts[0, 2]
+        bx, by, bz = pts[3, 0] - pts[1, 0], pts[3, 1] - pts[1, 1], pts[3, 2] - pts[1, 2]
+        nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if ln > 0.0:
+        return nx / ln, ny / ln, nz / ln
+    return 0.0, 0.0, 0.0
 
 
 def loop_flag(schemes) -> bool | None:
@@ -677,7 +705,7 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop, stop):
     i0, j0, lo, hi = iso.i0, iso.j0, iso.lo, iso.hi
     nets, cells = iso.nets, iso.cells
     first, count = iso.first[s], iso.count[s]
-    snap, samples = iso.snap[s], iso.samples  # (the slot's snapped sides: trace/snap.py)
+    snap, samples = iso.snap[s], iso.samples  # (the slot's snapped sides: geometry/snap.py)
     code = -2.0 - p
     tested = 0
     # (for _block_cells: the origin's coordinates in the ray's frame, and its rounding)
@@ -698,7 +726,7 @@ def intersect_patch(ray, p, s, iso, mem, slack, hit, scratch, loop, stop):
             continue
         depth = item_depth[it]  # its grid, in the patch's units
         inv = 1.0 / (1 << depth)
-        if kind[it] == TRI:  # a Loop patch or piece: its triangular net (trace/tris.py)
+        if kind[it] == TRI:  # a Loop patch or piece: its triangular net (geometry/tris.py)
             if loop is not None:
                 sh = depth - level[it]
                 fr = (np.int64(iso.orient[it]), i0[it] << sh, j0[it] << sh, sh)

@@ -16,7 +16,7 @@ from subtrace.runtime.jit import leaf_njit, llvm_inline_njit
 H_T, H_SLOT, H_LEAF, H_TRI, H_B1, H_B2 = range(6)
 HIT_FIELDS = 6
 
-# a thread's memo of split nets (``trace/bezier.py`` says what it holds): the rows of its
+# a thread's memo of split nets (``geometry/bezier.py`` says what it holds): the rows of its
 # counts (nodes, nets and cells in use; a flag set when a store ran out; then, over every
 # chunk of rays the memo served, the nodes it made and the most rows of each store it held
 # at once), and the state of a node not yet evaluated
@@ -44,7 +44,7 @@ def memo_restart(root, cnt):
 
 @leaf_njit
 def new_node(child, box, data, cnt, lo0, lo1, lo2, hi0, hi1, hi2, row):
-    """A new leaf node of a memo (``trace/bezier.py``): its box and data row; returns it."""
+    """A new leaf node of a memo (``geometry/bezier.py``): its box and data row; returns it."""
     m = cnt[M_NODES]
     cnt[M_NODES] = m + 1
     child[m] = -1

@@ -12,7 +12,7 @@ limit points evaluated from the item's own net, and its box is theirs grown by a
 how far the patch strays from the plane of its corners (below). Splitting a node evaluates
 its three side midpoints; a node of level ``d - 1`` evaluates its six grid points and tests
 its four cells in place, each boxed by its own micro-triangle. Each thread keeps what its
-rays split in its memo (the quads' memo, ``trace/bezier.py``: node boxes and children; a
+rays split in its memo (the quads' memo, ``geometry/bezier.py``: node boxes and children; a
 split node's six points in the cell store, a block of 8 rows, the last two a cells'
 parent's flags of cells tested), so a node is split once per thread
 (:func:`intersect_tri`); a full store makes the ray split on the spot (:func:`descend_tri`,
@@ -65,6 +65,8 @@ its pieces and cells take them from there.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from subtrace.accel.bvh import slab_entry, slab_range
@@ -72,7 +74,7 @@ from subtrace.patches.basis import (
     DEGREE, N_TRI, NORMAL_STEP, NORMAL_TRIES, pad_box, tri_box, unit_normal,
 )
 from subtrace.runtime.jit import inline_njit, leaf_njit, llvm_inline_njit
-from subtrace.trace.prims import (
+from subtrace.geometry.prims import (
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, M_CELLS, M_FULL, M_NODES, NOT_YET,
     new_node, push_sorted, ray_triangle,
 )
@@ -150,6 +152,25 @@ def tri_normal(net, q, s, t):
         s += (third - s) * NORMAL_STEP
         t += (third - t) * NORMAL_STEP
     return nx, ny, nz
+
+
+@leaf_njit
+def tri_cell_normal(pts, nrm, b, c):
+    """Blend of a Loop cell's exact corner normals at barycentrics (1 - b - c, b, c); the
+    cell's own normal where a corner's is undefined."""
+    a = 1.0 - b - c
+    nx = a * nrm[0, 0] + b * nrm[1, 0] + c * nrm[2, 0]
+    ny = a * nrm[0, 1] + b * nrm[1, 1] + c * nrm[2, 1]
+    nz = a * nrm[0, 2] + b * nrm[1, 2] + c * nrm[2, 2]
+    ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if not (ln > 0.0):
+        ax, ay, az = pts[1, 0] - pts[0, 0], pts[1, 1] - pts[0, 1], pts[1, 2] - pts[0, 2]
+        bx, by, bz = pts[2, 0] - pts[0, 0], pts[2, 1] - pts[0, 1], pts[2, 2] - pts[0, 2]
+        nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if ln > 0.0:
+        return nx / ln, ny / ln, nz / ln
+    return 0.0, 0.0, 0.0
 
 
 @leaf_njit
@@ -656,7 +677,7 @@ def intersect_tri(ray, it, nets, nk, depth, fr, sides, samples, slack, hit, code
     hit[H_T]; updates ``hit``.
     The ray descends the patch's 1-to-4 splits nearest first into the nodes whose boxes it
     enters; a node is split (its six points, its children's boxes and slabs stored) once per
-    thread, in the thread's memo ``mem`` (``trace/bezier.py``); when a store is full the ray
+    thread, in the thread's memo ``mem`` (``geometry/bezier.py``); when a store is full the ray
     goes on splitting per ray (:func:`descend_tri`). Returns the micro-triangles built:
     cells this ray was the first of its thread to test, and those it tested per ray."""
     ox, oy, oz, ix, iy, iz, kx, ky, kz, sx, sy, sz, dx, dy, dz = ray
