@@ -634,6 +634,54 @@ def kind_literals(modules) -> list[str]:
     return out
 
 
+PATCH_TYPES_MODULE = "subtrace.patches.table"  # the one that may spell a patch type as a number
+
+
+def patch_type_literals(modules) -> list[str]:
+    """``path:line: ...`` for every comparison of the patch table's ``patch_type`` column
+    (``table.patch_type == 0``, ``patch_type[p] != 2``) with a number outside
+    :data:`PATCH_TYPES_MODULE`: the types are named by ``patches.table.Patch``."""
+    out = []
+
+    def is_type(node):  # patch_type, x.patch_type, either subscripted
+        if isinstance(node, ast.Subscript):
+            node = node.value
+        return (isinstance(node, ast.Name) and node.id == "patch_type") or (
+            isinstance(node, ast.Attribute) and node.attr == "patch_type")
+
+    for mod in modules.values():
+        if mod.name == PATCH_TYPES_MODULE:
+            continue
+        for node in ast.walk(mod.tree):
+            if isinstance(node, ast.Compare):
+                sides = [node.left, *node.comparators]
+                if any(is_type(a) for a in sides) and any(
+                        isinstance(a, ast.Constant) and type(a.value) is int for a in sides):
+                    out.append(f"{mod.path}:{node.lineno}: a patch type compared with a number")
+    return out
+
+
+def test_patch_types_are_named_not_numbered(modules):
+    report("patch types spelled as numbers outside subtrace.patches.table (use "
+           "patches.table.Patch)", patch_type_literals(modules))
+
+
+def test_checker_finds_patch_type_literals(tmp_path):
+    mods = make_package(tmp_path, {
+        "__init__.py": "",
+        "patches/__init__.py": "",
+        "patches/table.py": "def f(self):\n    return self.patch_type == 0\n",
+        "a.py": ("def f(table, patch_type, p, LOOP):\n"
+                 "    if table.patch_type[p] == 2:\n"
+                 "        pass\n"
+                 "    if 1 != patch_type[p]:\n"
+                 "        pass\n"
+                 "    return table.patch_type == LOOP\n"),
+    })
+    found = patch_type_literals(mods)
+    assert [line.split(":")[1] for line in found] == ["2", "4"], found
+
+
 def test_item_kinds_are_named_not_numbered(modules):
     report("item kinds spelled as numbers outside subtrace.geometry (use geometry.kinds)",
            kind_literals(modules))
