@@ -28,8 +28,6 @@ the walk over one patch's items (group rows skipped whole), which hands the Loop
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from subtrace import config
@@ -41,7 +39,7 @@ from subtrace.patches.basis import (
 )
 from subtrace.geometry.prims import (
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, M_CELLS, M_FULL, M_NETS, M_NODES, NOT_YET,
-    new_node, push_sorted, ray_triangle,
+    new_node, push_sorted, ray_triangle, unit_or_cross,
 )
 from subtrace.geometry.kinds import CELL, GROUP, LOOP_CELL, TRI
 from subtrace.geometry.snap import snapped_point, snaps, touches as _touches_snapped, widen_node
@@ -642,16 +640,7 @@ def cell_normal(pts, nrm, a, b):
     nx = w0 * nrm[0, 0] + w1 * nrm[1, 0] + w2 * nrm[2, 0] + w3 * nrm[3, 0]
     ny = w0 * nrm[0, 1] + w1 * nrm[1, 1] + w2 * nrm[2, 1] + w3 * nrm[3, 1]
     nz = w0 * nrm[0, 2] + w1 * nrm[1, 2] + w2 * nrm[2, 2] + w3 * nrm[3, 2]
-    ln = math.sqrt(nx * nx + ny * ny + nz * nz)
-    if not (ln > 0.0):
-        # diagonals' cross product
-        ax, ay, az = pts[2, 0] - pts[0, 0], pts[2, 1] - pts[0, 1], pts[2, 2] - pts[0, 2]
-        bx, by, bz = pts[3, 0] - pts[1, 0], pts[3, 1] - pts[1, 1], pts[3, 2] - pts[1, 2]
-        nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
-    if ln > 0.0:
-        return nx / ln, ny / ln, nz / ln
-    return 0.0, 0.0, 0.0
+    return unit_or_cross(nx, ny, nz, pts, 0, 2, 1, 3)  # (the diagonals' cross product)
 
 
 def loop_flag(schemes) -> bool | None:

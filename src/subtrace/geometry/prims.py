@@ -136,3 +136,19 @@ def shear(dx, dy, dz):
     if dkz < 0.0:
         kx, ky = ky, kx
     return kx, ky, kz, d[kx] / dkz, d[ky] / dkz, 1.0 / dkz
+
+
+@llvm_inline_njit
+def unit_or_cross(nx, ny, nz, pts, a0, a1, b0, b1):
+    """The unit of (nx, ny, nz), a blend of a cell's corner normals; where it vanishes (a
+    corner's normal undefined), the unit of the cell's own normal ``(pts[a1] - pts[a0]) x
+    (pts[b1] - pts[b0])`` (``pts`` (k,3) its corners); (0, 0, 0) where both vanish."""
+    ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if not (ln > 0.0):
+        ax, ay, az = pts[a1, 0] - pts[a0, 0], pts[a1, 1] - pts[a0, 1], pts[a1, 2] - pts[a0, 2]
+        bx, by, bz = pts[b1, 0] - pts[b0, 0], pts[b1, 1] - pts[b0, 1], pts[b1, 2] - pts[b0, 2]
+        nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if ln > 0.0:
+        return nx / ln, ny / ln, nz / ln
+    return 0.0, 0.0, 0.0

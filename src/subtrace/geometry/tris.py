@@ -65,8 +65,6 @@ its pieces and cells take them from there.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from subtrace.accel.bvh import slab_entry, slab_range
@@ -76,7 +74,7 @@ from subtrace.patches.basis import (
 from subtrace.runtime.jit import inline_njit, leaf_njit, llvm_inline_njit
 from subtrace.geometry.prims import (
     H_B1, H_B2, H_LEAF, H_SLOT, H_T, H_TRI, M_CELLS, M_FULL, M_NODES, NOT_YET,
-    new_node, push_sorted, ray_triangle,
+    new_node, push_sorted, ray_triangle, unit_or_cross,
 )
 
 COUNTED = -3  # memo root of a one-cell patch whose triangle was counted (as bezier's)
@@ -162,15 +160,7 @@ def tri_cell_normal(pts, nrm, b, c):
     nx = a * nrm[0, 0] + b * nrm[1, 0] + c * nrm[2, 0]
     ny = a * nrm[0, 1] + b * nrm[1, 1] + c * nrm[2, 1]
     nz = a * nrm[0, 2] + b * nrm[1, 2] + c * nrm[2, 2]
-    ln = math.sqrt(nx * nx + ny * ny + nz * nz)
-    if not (ln > 0.0):
-        ax, ay, az = pts[1, 0] - pts[0, 0], pts[1, 1] - pts[0, 1], pts[1, 2] - pts[0, 2]
-        bx, by, bz = pts[2, 0] - pts[0, 0], pts[2, 1] - pts[0, 1], pts[2, 2] - pts[0, 2]
-        nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
-    if ln > 0.0:
-        return nx / ln, ny / ln, nz / ln
-    return 0.0, 0.0, 0.0
+    return unit_or_cross(nx, ny, nz, pts, 0, 1, 0, 2)
 
 
 @leaf_njit
