@@ -478,7 +478,7 @@ def _item_sides(task, n_tasks, first, count, level, i0, j0, depth, patch_side, o
     receives, per side (0: v = v0, 1: u = u1, 2: v = v1, 3: u = u0), the deepest grid among
     the pieces that share a stretch of it (itself included), and ``patch_side[p, k]`` on
     the patch's side k (finer than the piece's grid: a fan; coarser: a snapped side,
-    ``trace/snap.py``). A large piece's side spans several small pieces, which must then
+    ``geometry/snap.py``). A large piece's side spans several small pieces, which must then
     all sample their stretches as the large one does: so the sides along one line of the
     patch that overlap, directly or through others, all take the deepest of them. Per
     line, its sides in order along it (sorted: n log n a patch; comparing every pair of
