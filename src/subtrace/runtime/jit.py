@@ -195,12 +195,11 @@ numba_patches.install(PATCHED, KERNEL_DIR, DIGESTS, ROOT)
 
 
 # What the first-run notice says the compile takes: the first render of the default scene on
-# an empty cache as benchmarks/first_run.py measured it (2026-12-04 evening, the textures
-# filtered by subtrace's own kernel, 2 cores, a quiet machine, load 0.6: 17.7 s; 23.0 s the
-# day before on a machine 1.4x slower; 103 s with it busy at load 4); the README and
-# BENCHMARKS.md quote the same run. Rerun the script (on a quiet machine) when the compile
-# changes, and update the three together.
-COLD_COMPILE_S = 18
+# an empty cache as benchmarks/first_run.py measured it (2026-12-05, with the grid maps'
+# kernels, 2 cores, a quiet machine, load 0.6: 18.6 s; 17.7 s the evening before; 103 s with
+# the machine busy at load 4); the README and BENCHMARKS.md quote the same run. Rerun the
+# script (on a quiet machine) when the compile changes, and update the three together.
+COLD_COMPILE_S = 19
 COLD_COMPILE = f"about {COLD_COMPILE_S} s on 2 idle cores"
 _notice = {"stream": None, "said": False, "listening": False}
 
