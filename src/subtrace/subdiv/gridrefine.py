@@ -60,9 +60,7 @@ def _corner_edges():
 
 CORNER_EDGES = _corner_edges()
 
-# the smooth rules at valence 4 (catmark.smooth_vertex_weights(4), smooth_edge_weights for
-# an edge between two quads): vertex, each edge end, each face point; endpoint, face point
-_VW, _EW, _FW = (4.0 - 2.0) / 4.0, 1.0 / 16.0, 1.0 / 16.0
+# the smooth edge rule between two quads (catmark.smooth_edge_weights): endpoint, face point
 _EDGE_VW, _EDGE_FW = 0.25, 0.25
 
 
@@ -140,35 +138,8 @@ def ring_limit(c, E, D, s, vs, n, tw, fw, F, M, P, du, dv):
         child = np.empty(n, np.float32)
         for i in range(n):
             child[i] = decrement(s[i])
-        p_rule, c_rule, pw = vertex_rules(vs, decrement(vs), s[:n], child, False)
         out = np.zeros(3)
-        for which in range(2):
-            rule = p_rule if which == 0 else c_rule
-            w = pw if which == 0 else 1.0 - pw
-            if which == 1 and c_rule == p_rule:
-                break
-            if rule == RULE_SMOOTH or rule == RULE_DART:
-                a, b, f = smooth_vertex_weights(n)
-                for k in range(3):
-                    acc = a * c[k]
-                    for i in range(n):
-                        acc += b * E[i, k]
-                    for i in range(n):
-                        acc += f * F[i, k]
-                    out[k] += w * acc
-            elif rule == RULE_CREASE:
-                sharp = s if which == 0 else child
-                k0 = 0
-                while sharp[k0] <= F0:
-                    k0 += 1
-                k1 = n - 1
-                while sharp[k1] <= F0:
-                    k1 -= 1
-                for k in range(3):
-                    out[k] += w * (0.75 * c[k] + 0.125 * (E[k0, k] + E[k1, k]))
-            else:
-                for k in range(3):
-                    out[k] += w * c[k]
+        _ring_vertex_point(c, E, F, s[:n], child, vs, n, out)
         for k in range(3):
             c[k] = out[k]
         for i in range(n):
@@ -290,44 +261,59 @@ def _edge_point(G, L, s, p0, p1, fa, fb, ga, gb, a, b):
 @nb.njit(cache=True)
 def _vertex_point(G, L, es, vsharp, i, j):
     """The vertex point of grid point (i, j) (a corner of the patch: its four faces and
-    edges in the grid) into ``L[2 i, 2 j]``."""
-    # its edges: +u, +v, -u, -v, their far ends, and the faces between them
+    edges in the grid) into ``L[2 i, 2 j]``: :func:`_ring_vertex_point` of its ring (edges
+    +u, +v, -u, -v; face k between edges k and k + 1)."""
     edges = np.empty(4, np.float32)
     edges[0], edges[1] = es[_h(i, j)], es[_v(i, j)]
     edges[2], edges[3] = es[_h(i - 1, j)], es[_v(i, j - 1)]
     far = (4 * (i + 1) + j, 4 * i + j + 1, 4 * (i - 1) + j, 4 * i + j - 1)
+    faces = ((1, 1), (-1, 1), (-1, -1), (1, -1))
+    E = np.empty((4, 3))
+    F = np.empty((4, 3))
     child = np.empty(4, np.float32)
     for k in range(4):
         child[k] = decrement(edges[k])
-    p_rule, c_rule, pw = vertex_rules(vsharp, decrement(vsharp), edges, child, False)
-    v = 4 * i + j
+        for c in range(3):
+            E[k, c] = G[far[k], c]
+            F[k, c] = L[2 * i + faces[k][0], 2 * j + faces[k][1], c]
     out = np.zeros(3)
+    _ring_vertex_point(G[4 * i + j], E, F, edges, child, vsharp, 4, out)
+    for c in range(3):
+        L[2 * i, 2 * j, c] = out[c]
+
+
+@nb.njit(cache=True)
+def _ring_vertex_point(c, E, F, s, child, vs, n, out):
+    """The vertex point (into ``out`` (3,), zeros) of a vertex of valence ``n`` with quads
+    around: point ``c`` (3,), its edges' far ends ``E`` (n,3) and its faces' points ``F``
+    (n,3) of the child level, in ring order, its edges' sharpness ``s`` (n,) and one level
+    down ``child``, its own ``vs``: the parent's rule, and the child's blended in by the
+    fractional weight where they differ (``creases.vertex_rules``)."""
+    p_rule, c_rule, pw = vertex_rules(vs, decrement(vs), s, child, False)
     for which in range(2):
         rule = p_rule if which == 0 else c_rule
         w = pw if which == 0 else 1.0 - pw
         if which == 1 and c_rule == p_rule:
             break
         if rule == RULE_SMOOTH or rule == RULE_DART:
-            for c in range(3):
-                acc = _VW * G[v, c]
-                for k in range(4):
-                    acc += _EW * G[far[k], c]
-                for da in (-1, 1):
-                    for db in (-1, 1):
-                        acc += _FW * L[2 * i + da, 2 * j + db, c]
-                out[c] += w * acc
+            a, b, f = smooth_vertex_weights(n)
+            for k in range(3):
+                acc = a * c[k]
+                for i in range(n):
+                    acc += b * E[i, k]
+                for i in range(n):
+                    acc += f * F[i, k]
+                out[k] += w * acc
         elif rule == RULE_CREASE:
-            sharp = edges if which == 0 else child
+            sharp = s if which == 0 else child
             k0 = 0
             while sharp[k0] <= F0:
                 k0 += 1
-            k1 = 3
+            k1 = n - 1
             while sharp[k1] <= F0:
                 k1 -= 1
-            for c in range(3):
-                out[c] += w * (0.75 * G[v, c] + 0.125 * (G[far[k0], c] + G[far[k1], c]))
+            for k in range(3):
+                out[k] += w * (0.75 * c[k] + 0.125 * (E[k0, k] + E[k1, k]))
         else:
-            for c in range(3):
-                out[c] += w * G[v, c]
-    for c in range(3):
-        L[2 * i, 2 * j, c] = out[c]
+            for k in range(3):
+                out[k] += w * c[k]
